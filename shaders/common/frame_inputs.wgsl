@@ -1,0 +1,20 @@
+// Group 0 of every screen-space compute pass (E0, methods, composite): the frame constants,
+// the eye-space G-buffer and the light-space shadow map. Declared once here so that every
+// pass reads the same targets with the same bindings (`render::FrameInputs`).
+
+#import common/frame.wgsl
+#import common/light.wgsl
+
+@group(0) @binding(0) var<uniform> frame: Frame;
+@group(0) @binding(1) var gbuf_position: texture_2d<f32>; // xyz world position, w view depth (0: background)
+@group(0) @binding(2) var gbuf_normal: texture_2d<f32>;   // xyz unit normal facing the eye, w 1 where covered
+@group(0) @binding(3) var gbuf_albedo: texture_2d<f32>;   // rgb linear albedo
+@group(0) @binding(4) var gbuf_id: texture_2d<u32>;       // object id
+@group(0) @binding(5) var shadow_depth: texture_2d<f32>;  // linear depth along the light normal
+@group(0) @binding(6) var shadow_id: texture_2d<u32>;     // object id seen from the light centre
+@group(0) @binding(7) var<storage, read> light_cells: array<LightCell>;
+
+// True where the G-buffer holds a surface (not background) and the pixel is on screen.
+fn covered(pixel: vec2<u32>) -> bool {
+    return all(pixel < frame.sizes.xy) && textureLoad(gbuf_normal, pixel, 0).w > 0.5;
+}

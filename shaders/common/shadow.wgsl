@@ -1,0 +1,38 @@
+// Light-space lookups shared by the shadow methods: where a world point falls in the shadow
+// map, its linear depth from the light, and the depth bias that keeps lit surfaces from
+// shadowing themselves. Needs `frame` (common/frame_inputs.wgsl).
+
+struct LightSpace {
+    uv: vec2<f32>,   // [0,1]² in the shadow map, v down (texel row 0 at the top)
+    depth: f32,      // distance from the light plane along n, in metres
+    inside: bool,    // in front of the light and inside the shadow frustum
+}
+
+fn to_light_space(p: vec3<f32>) -> LightSpace {
+    var out: LightSpace;
+    let clip = frame.light_view_proj * vec4<f32>(p, 1.0);
+    out.depth = dot(p - frame.light_center.xyz, frame.light_n.xyz);
+    let ndc = clip.xy / clip.w;
+    out.uv = vec2<f32>(ndc.x * 0.5 + 0.5, 0.5 - ndc.y * 0.5);
+    out.inside = clip.w > 0.0 && out.depth > frame.light_proj.z && all(out.uv >= vec2<f32>(0.0)) && all(out.uv < vec2<f32>(1.0));
+    return out;
+}
+
+// World-space size of one shadow-map texel at linear depth `depth`.
+fn texel_size_m(depth: f32) -> f32 {
+    return 2.0 * depth * frame.light_proj.x / f32(frame.sizes.z);
+}
+
+// Constant plus slope-scaled bias, both in texels: a surface tilted by θ from the light
+// direction spans tanθ texel-depths across one texel, so that much must be forgiven.
+fn depth_bias(p: vec3<f32>, n: vec3<f32>, depth: f32, constant_texels: f32, slope_texels: f32) -> f32 {
+    let to_light = normalize(frame.light_center.xyz - p);
+    let cos_theta = clamp(abs(dot(n, to_light)), 0.05, 1.0);
+    let tan_theta = min(sqrt(1.0 - cos_theta * cos_theta) / cos_theta, 10.0);
+    return texel_size_m(depth) * (constant_texels + slope_texels * tan_theta);
+}
+
+fn shadow_texel(uv: vec2<f32>) -> vec2<i32> {
+    let res = i32(frame.sizes.z);
+    return clamp(vec2<i32>(floor(uv * f32(res))), vec2<i32>(0), vec2<i32>(res - 1));
+}

@@ -1,0 +1,64 @@
+// Eye-space G-buffer: world position and view depth, the normal turned towards the eye
+// (every triangle receives light on the side we see), linear albedo, object id.
+
+#import common/frame.wgsl
+
+struct Material {
+    base_color: vec4<f32>,
+}
+
+@group(0) @binding(0) var<uniform> frame: Frame;
+@group(0) @binding(1) var<storage, read> materials: array<Material>;
+@group(1) @binding(0) var base_color_texture: texture_2d<f32>;
+@group(1) @binding(1) var base_color_sampler: sampler;
+
+struct VsIn {
+    @location(0) position: vec3<f32>,
+    @location(1) normal: vec3<f32>,
+    @location(2) uv: vec2<f32>,
+    @location(3) object_id: u32,
+    @location(4) material: u32,
+}
+
+struct VsOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) world: vec3<f32>,
+    @location(1) normal: vec3<f32>,
+    @location(2) uv: vec2<f32>,
+    @location(3) @interpolate(flat) object_id: u32,
+    @location(4) @interpolate(flat) material: u32,
+}
+
+@vertex
+fn vs_main(in: VsIn) -> VsOut {
+    var out: VsOut;
+    out.clip = frame.view_proj * vec4<f32>(in.position, 1.0);
+    out.world = in.position;
+    out.normal = in.normal;
+    out.uv = in.uv;
+    out.object_id = in.object_id;
+    out.material = in.material;
+    return out;
+}
+
+struct GBuffer {
+    @location(0) position: vec4<f32>,
+    @location(1) normal: vec4<f32>,
+    @location(2) albedo: vec4<f32>,
+    @location(3) object_id: u32,
+}
+
+@fragment
+fn fs_main(in: VsOut) -> GBuffer {
+    var n = normalize(in.normal);
+    if dot(n, frame.eye.xyz - in.world) < 0.0 {
+        n = -n;
+    }
+    let albedo = materials[in.material].base_color * textureSample(base_color_texture, base_color_sampler, in.uv);
+    var out: GBuffer;
+    out.position = vec4<f32>(in.world, dot(in.world - frame.eye.xyz, frame.view_dir.xyz));
+    out.normal = vec4<f32>(n, 1.0);
+    out.albedo = vec4<f32>(albedo.rgb, 1.0);
+    out.object_id = in.object_id;
+    return out;
+}

@@ -1,0 +1,85 @@
+//! Configuration: command-line flags, each with an environment variable, parsed once by
+//! clap at start-up and passed down. No globals.
+
+use std::net::SocketAddr;
+use std::path::PathBuf;
+
+use clap::Args;
+
+use crate::gpu::AdapterChoice;
+use crate::job::Limits;
+
+/// Options shared by every command that renders.
+#[derive(Debug, Clone, Args)]
+pub struct RenderOptions {
+    /// Which Vulkan adapter to use: a hardware GPU when present (auto), or force one kind.
+    #[arg(long, env = "PENUMBRA_ADAPTER", default_value_t = AdapterChoice::Auto)]
+    pub adapter: AdapterChoice,
+
+    #[command(flatten)]
+    pub limits: LimitArgs,
+}
+
+/// Limits on what one job may ask for (see `job::Limits`).
+#[derive(Debug, Clone, Args)]
+pub struct LimitArgs {
+    /// Largest output width or height, pixels.
+    #[arg(long, env = "PENUMBRA_MAX_OUTPUT_DIM", default_value_t = Limits::default().max_output_dim)]
+    pub max_output_dim: u32,
+    /// Largest output image, pixels (width × height).
+    #[arg(long, env = "PENUMBRA_MAX_OUTPUT_PIXELS", default_value_t = Limits::default().max_output_pixels)]
+    pub max_output_pixels: u64,
+    /// Largest shadow-map resolution, texels per side.
+    #[arg(long, env = "PENUMBRA_MAX_SHADOW_MAP", default_value_t = Limits::default().max_shadow_map_resolution)]
+    pub max_shadow_map: u32,
+    /// Most triangles per scene.
+    #[arg(long, env = "PENUMBRA_MAX_TRIANGLES", default_value_t = Limits::default().max_triangles)]
+    pub max_triangles: u64,
+    /// Largest light image, texels per side.
+    #[arg(long, env = "PENUMBRA_MAX_LIGHT_IMAGE_DIM", default_value_t = Limits::default().max_light_image_dim)]
+    pub max_light_image_dim: u32,
+    /// Largest scene texture, texels per side.
+    #[arg(long, env = "PENUMBRA_MAX_TEXTURE_DIM", default_value_t = Limits::default().max_texture_dim)]
+    pub max_texture_dim: u32,
+    /// Largest request body (and scene or image file), bytes.
+    #[arg(long, env = "PENUMBRA_MAX_BODY_BYTES", default_value_t = Limits::default().max_body_bytes)]
+    pub max_body_bytes: usize,
+}
+
+impl LimitArgs {
+    pub fn limits(&self) -> Limits {
+        Limits {
+            max_output_dim: self.max_output_dim,
+            max_output_pixels: self.max_output_pixels,
+            max_shadow_map_resolution: self.max_shadow_map,
+            max_triangles: self.max_triangles,
+            max_light_image_dim: self.max_light_image_dim,
+            max_texture_dim: self.max_texture_dim,
+            max_body_bytes: self.max_body_bytes,
+        }
+    }
+}
+
+/// `penumbra serve`.
+#[derive(Debug, Clone, Args)]
+pub struct ServeConfig {
+    /// Address and port to listen on.
+    #[arg(long, env = "PENUMBRA_LISTEN", default_value = "127.0.0.1:8080")]
+    pub listen: SocketAddr,
+
+    /// The only directory from which `{"path": ...}` scenes and light images are read.
+    /// Without it the server reads no paths at all.
+    #[arg(long, env = "PENUMBRA_SCENE_DIR")]
+    pub scene_dir: Option<PathBuf>,
+
+    /// Finished renders kept in memory for `GET /v1/jobs/{id}/image`.
+    #[arg(long, env = "PENUMBRA_RESULTS_KEPT", default_value_t = 64)]
+    pub results_kept: usize,
+
+    /// Skip compiling pipelines and uploading the default scene before accepting jobs.
+    #[arg(long, env = "PENUMBRA_NO_WARM_UP")]
+    pub no_warm_up: bool,
+
+    #[command(flatten)]
+    pub render: RenderOptions,
+}

@@ -1,0 +1,257 @@
+//! The engine: the warm state behind every interface. It owns the renderer (device,
+//! pipelines, target pool) and the caches of uploaded scenes and decoded light images, turns
+//! a `Job` into an encoded image with its timing breakdown, and is shared by the CLI
+//! (`penumbra render`) and the HTTP server alike, so both take exactly the same path.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
+
+use serde::Serialize;
+
+use crate::error::{ErrorCode, JobError, JobResult};
+use crate::gpu::scene::GpuScene;
+use crate::gpu::GpuContext;
+use crate::job::{AssetRef, Job, Limits, OutputFormat};
+use crate::light::LightImage;
+use crate::methods::Counters;
+use crate::render::{FrameOutput, FrameSpec, Renderer};
+use crate::scene::{self, builtin};
+use crate::timing::Timings;
+
+/// Where `{"path": ...}` assets may be read from.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum PathPolicy {
+    /// Any path (the CLI: the user reads their own files).
+    Any,
+    /// Only files inside this directory, after resolving symlinks (`serve --scene-dir`).
+    Under(PathBuf),
+    /// No paths at all (`serve` without `--scene-dir`).
+    Deny,
+}
+
+/// A finished render: the encoded image and what it cost.
+#[derive(Debug, Clone)]
+pub struct Rendered {
+    pub bytes: Vec<u8>,
+    pub format: OutputFormat,
+    pub width: u32,
+    pub height: u32,
+    pub timings: Timings,
+    pub counters: Counters,
+}
+
+/// Counts for `/v1/stats` and logs.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct EngineStats {
+    pub scenes_cached: usize,
+    pub scene_cache_hits: u64,
+    pub scene_cache_misses: u64,
+    pub pipelines: usize,
+    pub pipelines_compiled: u64,
+    pub targets_created: u64,
+    pub targets_reused: u64,
+}
+
+/// Most scenes kept on the GPU at once (least recently used ones are dropped first).
+const SCENE_CACHE_ENTRIES: usize = 16;
+
+struct CachedScene {
+    scene: Arc<GpuScene>,
+    last_used: u64,
+}
+
+struct State {
+    renderer: Renderer,
+    scenes: HashMap<String, CachedScene>,
+    lights: HashMap<String, Arc<LightImage>>,
+    clock: u64,
+    hits: u64,
+    misses: u64,
+}
+
+pub struct Engine {
+    gpu: Arc<GpuContext>,
+    limits: Limits,
+    paths: PathPolicy,
+    // One frame at a time on the device: the renderer's targets and timer are per frame.
+    state: Mutex<State>,
+}
+
+impl Engine {
+    pub fn new(gpu: Arc<GpuContext>, limits: Limits, paths: PathPolicy) -> Self {
+        let renderer = Renderer::new(gpu.clone());
+        let state = State { renderer, scenes: HashMap::new(), lights: HashMap::new(), clock: 0, hits: 0, misses: 0 };
+        Self { gpu, limits, paths, state: Mutex::new(state) }
+    }
+
+    pub fn gpu(&self) -> &GpuContext {
+        &self.gpu
+    }
+
+    pub fn limits(&self) -> &Limits {
+        &self.limits
+    }
+
+    /// Renders a tiny frame with every method so that the first real job finds its
+    /// pipelines compiled and the default scene uploaded.
+    pub fn warm_up(&self) -> JobResult<()> {
+        for method in crate::methods::REGISTRY {
+            let mut job = Job::embedded_default();
+            job.method.name = method.name().into();
+            job.output.width = 8;
+            job.output.height = 8;
+            job.shadow_map.resolution = 64;
+            self.render(&job)?;
+        }
+        Ok(())
+    }
+
+    /// Validates, renders and encodes one job.
+    pub fn render(&self, job: &Job) -> JobResult<Rendered> {
+        let started = Instant::now();
+        job.validate(&self.limits)?;
+        let mut timings = Timings::default();
+        let frame = {
+            let mut state = self.state.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+            let start = Instant::now();
+            let scene = self.scene(&mut state, &job.scene, &mut timings)?;
+            let image_ref = job.light.image.clone().unwrap_or_else(|| scene.defaults.light_image.clone());
+            let light_image = self.light_image(&mut state, &image_ref)?;
+            let spec = FrameSpec::resolve(job, &scene, &light_image)?;
+            timings.phase("scene", start);
+            self.render_frame(&mut state, &scene, &spec, &mut timings)?
+        };
+        let start = Instant::now();
+        let bytes = crate::output::encode(&frame, job.output.format, job.output.exposure)?;
+        timings.phase("encode", start);
+        timings.total_ms = started.elapsed().as_secs_f64() * 1e3;
+        Ok(Rendered { bytes, format: job.output.format, width: frame.width, height: frame.height, timings, counters: frame.counters })
+    }
+
+    fn render_frame(&self, state: &mut State, scene: &GpuScene, spec: &FrameSpec, timings: &mut Timings) -> JobResult<FrameOutput> {
+        // Validation errors inside wgpu are bugs in penumbra, never the client's fault; they
+        // fail this job alone with a generic message and are logged in full.
+        let scope = self.gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let frame = state.renderer.render(scene, spec, timings);
+        if let Some(error) = pollster::block_on(scope.pop()) {
+            tracing::error!(%error, "GPU validation error while rendering");
+            return Err(JobError::internal("the renderer failed on the GPU"));
+        }
+        Ok(frame)
+    }
+
+    pub fn stats(&self) -> EngineStats {
+        let state = self.state.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+        let r = &state.renderer;
+        EngineStats {
+            scenes_cached: state.scenes.len(),
+            scene_cache_hits: state.hits,
+            scene_cache_misses: state.misses,
+            pipelines: r.pipelines.len(),
+            pipelines_compiled: r.pipelines.stats.created,
+            targets_created: r.textures.stats.created,
+            targets_reused: r.textures.stats.reused,
+        }
+    }
+
+    /// Finds a scene in the cache or loads and uploads it.
+    fn scene(&self, state: &mut State, asset: &AssetRef, timings: &mut Timings) -> JobResult<Arc<GpuScene>> {
+        let key = self.asset_key(asset, "scene")?;
+        state.clock += 1;
+        let clock = state.clock;
+        if let Some(cached) = state.scenes.get_mut(&key) {
+            cached.last_used = clock;
+            state.hits += 1;
+            timings.scene_cached = true;
+            return Ok(cached.scene.clone());
+        }
+        state.misses += 1;
+        let loaded = match asset {
+            AssetRef::Builtin { name, params } => builtin::build(name, params, "scene", &self.limits)?,
+            AssetRef::Path(path) => {
+                let bytes = self.read_path(path, "scene.path")?;
+                scene::gltf::load(&bytes, &self.limits, "scene")?
+            }
+            AssetRef::Id(_) => unreachable!("asset_key refuses ids"),
+        };
+        let uploaded = Arc::new(GpuScene::upload(&self.gpu, &loaded, state.renderer.material_layout()));
+        timings.scene_upload_bytes = uploaded.bytes;
+        if state.scenes.len() >= SCENE_CACHE_ENTRIES {
+            if let Some(oldest) = state.scenes.iter().min_by_key(|(_, c)| c.last_used).map(|(k, _)| k.clone()) {
+                state.scenes.remove(&oldest);
+            }
+        }
+        state.scenes.insert(key, CachedScene { scene: uploaded.clone(), last_used: clock });
+        Ok(uploaded)
+    }
+
+    fn light_image(&self, state: &mut State, asset: &AssetRef) -> JobResult<Arc<LightImage>> {
+        let key = self.asset_key(asset, "light.image")?;
+        if let Some(image) = state.lights.get(&key) {
+            return Ok(image.clone());
+        }
+        let image = Arc::new(match asset {
+            AssetRef::Builtin { name, params } => LightImage::builtin(name, params, "light.image")?,
+            AssetRef::Path(path) => {
+                let bytes = self.read_path(path, "light.image.path")?;
+                LightImage::decode(&bytes, self.limits.max_light_image_dim, "light.image")?
+            }
+            AssetRef::Id(_) => unreachable!("asset_key refuses ids"),
+        });
+        if state.lights.len() >= SCENE_CACHE_ENTRIES {
+            state.lights.clear();
+        }
+        state.lights.insert(key, image.clone());
+        Ok(image)
+    }
+
+    /// A cache key that changes whenever the asset's content may have changed.
+    fn asset_key(&self, asset: &AssetRef, field: &str) -> JobResult<String> {
+        match asset {
+            AssetRef::Builtin { name, params } => Ok(format!("builtin:{name}:{}", serde_json::Value::Object(params.clone()))),
+            AssetRef::Id(id) => Err(JobError::field(
+                ErrorCode::NotUploaded,
+                format!("{field}.id"),
+                format!("no uploaded asset with id `{id}` on this server; upload it first"),
+            )),
+            AssetRef::Path(path) => {
+                let resolved = self.resolve_path(path, &format!("{field}.path"))?;
+                let meta = std::fs::metadata(&resolved).map_err(|_| not_readable(&format!("{field}.path")))?;
+                let modified = meta.modified().ok().and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok()).map(|d| d.as_nanos()).unwrap_or(0);
+                Ok(format!("path:{}:{}:{}", resolved.display(), meta.len(), modified))
+            }
+        }
+    }
+
+    /// Applies the path policy: canonical path inside the allowed directory, or an error
+    /// that does not reveal whether the file exists.
+    fn resolve_path(&self, path: &Path, field: &str) -> JobResult<PathBuf> {
+        match &self.paths {
+            PathPolicy::Deny => Err(JobError::field(ErrorCode::PathNotAllowed, field, "this server reads no paths (start it with --scene-dir)")),
+            PathPolicy::Any => std::fs::canonicalize(path).map_err(|_| not_readable(field)),
+            PathPolicy::Under(dir) => {
+                let dir = std::fs::canonicalize(dir).map_err(|_| not_readable(field))?;
+                let joined = if path.is_absolute() { path.to_path_buf() } else { dir.join(path) };
+                match std::fs::canonicalize(&joined) {
+                    Ok(resolved) if resolved.starts_with(&dir) && resolved.is_file() => Ok(resolved),
+                    _ => Err(not_readable(field)),
+                }
+            }
+        }
+    }
+
+    fn read_path(&self, path: &Path, field: &str) -> JobResult<Vec<u8>> {
+        let resolved = self.resolve_path(path, field)?;
+        let meta = std::fs::metadata(&resolved).map_err(|_| not_readable(field))?;
+        if meta.len() > self.limits.max_body_bytes as u64 {
+            return Err(JobError::field(ErrorCode::LimitExceeded, field, format!("the file exceeds {} bytes", self.limits.max_body_bytes)));
+        }
+        std::fs::read(&resolved).map_err(|_| not_readable(field))
+    }
+}
+
+fn not_readable(field: &str) -> JobError {
+    JobError::field(ErrorCode::PathNotAllowed, field, "no readable file at this path in the allowed directory")
+}

@@ -1,0 +1,96 @@
+//! Job errors: the one error type that crosses module boundaries on the way to a client.
+//!
+//! Every error carries a stable machine-readable `code`, a human message and, for bad
+//! input, the offending `field` as a dotted path (`camera.fov_y_deg`). HTTP status codes are
+//! assigned in exactly one place (`server::error`), never here.
+
+use std::fmt;
+
+/// What went wrong, as a stable code clients can switch on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ErrorCode {
+    /// The body is not JSON, or not the JSON shape a job has.
+    InvalidJson,
+    /// A field has the wrong type or a value outside its documented range.
+    InvalidField,
+    /// A field the contract does not know (including method parameters).
+    UnknownField,
+    /// `method.name` names no registered method.
+    UnknownMethod,
+    /// A built-in scene or light image that does not exist.
+    UnknownBuiltin,
+    /// A scene or light image id the server does not hold (upload it again).
+    NotUploaded,
+    /// A `{"path": ...}` the caller may not read, or that does not exist.
+    PathNotAllowed,
+    /// A scene or image file that could not be decoded.
+    InvalidAsset,
+    /// The request exceeds a configured limit (size, pixels, triangles ...).
+    LimitExceeded,
+    /// The request body exceeds the configured size limit.
+    PayloadTooLarge,
+    /// No such job, result or route.
+    NotFound,
+    /// Something failed inside the renderer; the message is generic towards clients.
+    Internal,
+}
+
+impl ErrorCode {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            ErrorCode::InvalidJson => "invalid_json",
+            ErrorCode::InvalidField => "invalid_field",
+            ErrorCode::UnknownField => "unknown_field",
+            ErrorCode::UnknownMethod => "unknown_method",
+            ErrorCode::UnknownBuiltin => "unknown_builtin",
+            ErrorCode::NotUploaded => "not_uploaded",
+            ErrorCode::PathNotAllowed => "path_not_allowed",
+            ErrorCode::InvalidAsset => "invalid_asset",
+            ErrorCode::LimitExceeded => "limit_exceeded",
+            ErrorCode::PayloadTooLarge => "payload_too_large",
+            ErrorCode::NotFound => "not_found",
+            ErrorCode::Internal => "internal",
+        }
+    }
+}
+
+impl fmt::Display for ErrorCode {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// An error in a job, reported to the client that sent it and to no one else.
+#[derive(Debug, Clone, thiserror::Error)]
+#[error("{code}: {message}{}", field.as_ref().map(|f| format!(" (field `{f}`)")).unwrap_or_default())]
+pub struct JobError {
+    pub code: ErrorCode,
+    pub message: String,
+    pub field: Option<String>,
+}
+
+impl JobError {
+    pub fn new(code: ErrorCode, message: impl Into<String>) -> Self {
+        Self { code, message: message.into(), field: None }
+    }
+
+    /// An error about one field, named by its dotted path.
+    pub fn field(code: ErrorCode, field: impl Into<String>, message: impl Into<String>) -> Self {
+        Self { code, message: message.into(), field: Some(field.into()) }
+    }
+
+    pub fn invalid(field: impl Into<String>, message: impl Into<String>) -> Self {
+        Self::field(ErrorCode::InvalidField, field, message)
+    }
+
+    pub fn internal(message: impl Into<String>) -> Self {
+        Self::new(ErrorCode::Internal, message)
+    }
+
+    /// Whether the client caused this error (4xx) rather than the renderer (5xx).
+    pub fn is_client_error(&self) -> bool {
+        self.code != ErrorCode::Internal
+    }
+}
+
+pub type JobResult<T> = Result<T, JobError>;

@@ -1,0 +1,95 @@
+//! Terse constructors for bind-group-layout entries, so each pass states its bindings in
+//! one readable list instead of nested descriptor literals.
+
+use wgpu::{BindGroupLayoutEntry as Entry, BindingType, ShaderStages, TextureSampleType, TextureViewDimension};
+
+const ALL: ShaderStages = ShaderStages::VERTEX_FRAGMENT.union(ShaderStages::COMPUTE);
+
+pub fn uniform(binding: u32) -> Entry {
+    Entry {
+        binding,
+        visibility: ALL,
+        ty: BindingType::Buffer { ty: wgpu::BufferBindingType::Uniform, has_dynamic_offset: false, min_binding_size: None },
+        count: None,
+    }
+}
+
+pub fn storage_read(binding: u32) -> Entry {
+    Entry {
+        binding,
+        visibility: ALL,
+        ty: BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Storage { read_only: true },
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
+pub fn storage_read_write(binding: u32) -> Entry {
+    Entry {
+        binding,
+        visibility: ShaderStages::COMPUTE.union(ShaderStages::FRAGMENT),
+        ty: BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Storage { read_only: false },
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
+fn texture(binding: u32, sample_type: TextureSampleType) -> Entry {
+    Entry {
+        binding,
+        visibility: ShaderStages::FRAGMENT.union(ShaderStages::COMPUTE),
+        ty: BindingType::Texture { sample_type, view_dimension: TextureViewDimension::D2, multisampled: false },
+        count: None,
+    }
+}
+
+/// A float texture read with `textureLoad` (32-bit float formats are not filterable).
+pub fn texture_float(binding: u32) -> Entry {
+    texture(binding, TextureSampleType::Float { filterable: false })
+}
+
+/// A float texture sampled with a filtering sampler.
+pub fn texture_filterable(binding: u32) -> Entry {
+    texture(binding, TextureSampleType::Float { filterable: true })
+}
+
+pub fn texture_uint(binding: u32) -> Entry {
+    texture(binding, TextureSampleType::Uint)
+}
+
+pub fn sampler(binding: u32) -> Entry {
+    Entry {
+        binding,
+        visibility: ShaderStages::FRAGMENT.union(ShaderStages::COMPUTE),
+        ty: BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+        count: None,
+    }
+}
+
+pub fn storage_texture(binding: u32, format: wgpu::TextureFormat) -> Entry {
+    Entry {
+        binding,
+        visibility: ShaderStages::COMPUTE.union(ShaderStages::FRAGMENT),
+        ty: BindingType::StorageTexture {
+            access: wgpu::StorageTextureAccess::WriteOnly,
+            format,
+            view_dimension: TextureViewDimension::D2,
+        },
+        count: None,
+    }
+}
+
+/// Bind group entries from resources in binding order 0, 1, 2, …
+pub fn entries<'a>(resources: &[wgpu::BindingResource<'a>]) -> Vec<wgpu::BindGroupEntry<'a>> {
+    resources
+        .iter()
+        .enumerate()
+        .map(|(binding, resource)| wgpu::BindGroupEntry { binding: binding as u32, resource: resource.clone() })
+        .collect()
+}

@@ -1,0 +1,138 @@
+//! The GPU side of penumbra: one `GpuContext` (instance, adapter, device, queue) that lives
+//! as long as the process, and the pools, timers and readback helpers built on it. Only this
+//! module and the passes it serves create GPU objects.
+
+pub mod layout;
+pub mod pool;
+pub mod readback;
+pub mod scene;
+pub mod shaders;
+pub mod timing;
+
+use std::fmt;
+
+use serde::Serialize;
+
+/// Which kind of Vulkan adapter to use.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum AdapterChoice {
+    /// A hardware GPU when there is one, else a software rasteriser (lavapipe).
+    #[default]
+    Auto,
+    /// Only a hardware GPU (discrete, integrated or virtual).
+    Hardware,
+    /// Only a software adapter (Mesa's lavapipe / llvmpipe).
+    Software,
+}
+
+impl fmt::Display for AdapterChoice {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            AdapterChoice::Auto => "auto",
+            AdapterChoice::Hardware => "hardware",
+            AdapterChoice::Software => "software",
+        })
+    }
+}
+
+/// What the adapter is, as logged at start-up and reported by `/v1/stats`.
+#[derive(Debug, Clone, Serialize)]
+pub struct AdapterSummary {
+    pub name: String,
+    pub backend: String,
+    pub device_type: String,
+    pub driver: String,
+    pub driver_info: String,
+    pub timestamps: bool,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum GpuError {
+    #[error("no {0} Vulkan adapter found (on a machine without a GPU, install Mesa's lavapipe: `apt-get install mesa-vulkan-drivers`)")]
+    NoAdapter(AdapterChoice),
+    #[error("the adapter refused to create a device: {0}")]
+    RequestDevice(#[from] wgpu::RequestDeviceError),
+}
+
+/// Device, queue and what we learned about the adapter. Lives for the whole process.
+pub struct GpuContext {
+    pub device: wgpu::Device,
+    pub queue: wgpu::Queue,
+    pub adapter: AdapterSummary,
+    pub limits: wgpu::Limits,
+    /// Whether passes can be timed with GPU timestamp queries.
+    pub timestamps: bool,
+}
+
+impl GpuContext {
+    /// Opens the preferred Vulkan adapter headless. Blocks; call it once at start-up.
+    pub fn new(choice: AdapterChoice) -> Result<Self, GpuError> {
+        pollster::block_on(Self::new_async(choice))
+    }
+
+    async fn new_async(choice: AdapterChoice) -> Result<Self, GpuError> {
+        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor {
+            backends: wgpu::Backends::VULKAN,
+            ..wgpu::InstanceDescriptor::new_without_display_handle()
+        });
+        let adapters = instance.enumerate_adapters(wgpu::Backends::VULKAN).await;
+        // Prefer the fastest kind of device that the choice allows.
+        let rank = |t: wgpu::DeviceType| match t {
+            wgpu::DeviceType::DiscreteGpu => 0,
+            wgpu::DeviceType::IntegratedGpu => 1,
+            wgpu::DeviceType::VirtualGpu => 2,
+            wgpu::DeviceType::Other => 3,
+            wgpu::DeviceType::Cpu => 4,
+        };
+        let adapter = adapters
+            .into_iter()
+            .filter(|a| {
+                let software = a.get_info().device_type == wgpu::DeviceType::Cpu;
+                match choice {
+                    AdapterChoice::Auto => true,
+                    AdapterChoice::Hardware => !software,
+                    AdapterChoice::Software => software,
+                }
+            })
+            .min_by_key(|a| rank(a.get_info().device_type))
+            .ok_or(GpuError::NoAdapter(choice))?;
+        let info = adapter.get_info();
+        let timestamps = adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY);
+        let mut required_features = wgpu::Features::empty();
+        if timestamps {
+            required_features |= wgpu::Features::TIMESTAMP_QUERY;
+        }
+        // Ask for what the adapter has: large shadow maps and outputs need more than the
+        // WebGPU defaults, and penumbra enforces its own (smaller) limits per job.
+        let limits = adapter.limits();
+        let (device, queue) = adapter
+            .request_device(&wgpu::DeviceDescriptor {
+                label: Some("GpuContext::device"),
+                required_features,
+                required_limits: limits.clone(),
+                ..Default::default()
+            })
+            .await?;
+        // wgpu's default handler panics; an error outside an error scope is a bug in
+        // penumbra, to be logged, not a reason to take every other job down.
+        device.on_uncaptured_error(std::sync::Arc::new(|error: wgpu::Error| {
+            tracing::error!(%error, "uncaptured GPU error");
+        }));
+        let adapter = AdapterSummary {
+            name: info.name,
+            backend: format!("{:?}", info.backend).to_lowercase(),
+            device_type: format!("{:?}", info.device_type),
+            driver: info.driver,
+            driver_info: info.driver_info,
+            timestamps,
+        };
+        Ok(Self { device, queue, adapter, limits, timestamps })
+    }
+
+    /// Blocks until the GPU has finished everything submitted so far.
+    pub fn wait_idle(&self) {
+        // A failed poll means the device is lost; the next submission reports it.
+        let _ = self.device.poll(wgpu::PollType::wait_indefinitely());
+    }
+}

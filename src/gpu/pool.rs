@@ -1,0 +1,135 @@
+//! Pools for long-lived GPU objects: pipelines compiled once per key and reused by every job,
+//! and render targets recycled between jobs of the same size and format. The pool decides
+//! reuse; its counters show in the timing breakdown and, later, in `/metrics`.
+
+use std::collections::HashMap;
+use std::sync::Arc;
+
+/// Identifies a pipeline: the pass or method that owns it and a variant of it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct PipelineKey {
+    pub name: &'static str,
+    pub variant: u32,
+}
+
+impl PipelineKey {
+    pub const fn new(name: &'static str) -> Self {
+        Self { name, variant: 0 }
+    }
+}
+
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct PoolStats {
+    pub created: u64,
+    pub reused: u64,
+}
+
+/// Compiled render and compute pipelines with their layouts, created on first use.
+#[derive(Default)]
+pub struct PipelinePool {
+    render: HashMap<PipelineKey, Arc<wgpu::RenderPipeline>>,
+    compute: HashMap<PipelineKey, Arc<wgpu::ComputePipeline>>,
+    pub stats: PoolStats,
+}
+
+impl PipelinePool {
+    pub fn render(&mut self, key: PipelineKey, create: impl FnOnce() -> wgpu::RenderPipeline) -> Arc<wgpu::RenderPipeline> {
+        get_or_create(&mut self.render, &mut self.stats, key, create)
+    }
+
+    pub fn compute(&mut self, key: PipelineKey, create: impl FnOnce() -> wgpu::ComputePipeline) -> Arc<wgpu::ComputePipeline> {
+        get_or_create(&mut self.compute, &mut self.stats, key, create)
+    }
+
+    pub fn len(&self) -> usize {
+        self.render.len() + self.compute.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+fn get_or_create<T>(map: &mut HashMap<PipelineKey, Arc<T>>, stats: &mut PoolStats, key: PipelineKey, create: impl FnOnce() -> T) -> Arc<T> {
+    if let Some(existing) = map.get(&key) {
+        stats.reused += 1;
+        return existing.clone();
+    }
+    stats.created += 1;
+    let created = Arc::new(create());
+    map.insert(key, created.clone());
+    created
+}
+
+/// What a render target is: enough to decide whether a free one can be reused.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct TextureKey {
+    pub label: &'static str,
+    pub width: u32,
+    pub height: u32,
+    pub format: wgpu::TextureFormat,
+    pub usage: wgpu::TextureUsages,
+}
+
+impl TextureKey {
+    pub fn bytes(&self) -> u64 {
+        let block = self.format.block_copy_size(Some(wgpu::TextureAspect::All)).unwrap_or(4);
+        u64::from(self.width) * u64::from(self.height) * u64::from(block)
+    }
+}
+
+/// A texture from the pool with its default view.
+pub struct PooledTexture {
+    pub key: TextureKey,
+    pub texture: wgpu::Texture,
+    pub view: wgpu::TextureView,
+}
+
+/// Free render targets by key. Jobs `alloc` what they need and `release` it when done; at
+/// most `max_free_per_key` idle targets of one key are kept, so memory stays bounded when
+/// job sizes vary.
+pub struct TexturePool {
+    free: HashMap<TextureKey, Vec<PooledTexture>>,
+    max_free_per_key: usize,
+    pub stats: PoolStats,
+}
+
+impl Default for TexturePool {
+    fn default() -> Self {
+        Self { free: HashMap::new(), max_free_per_key: 2, stats: PoolStats::default() }
+    }
+}
+
+impl TexturePool {
+    pub fn alloc(&mut self, device: &wgpu::Device, key: TextureKey) -> PooledTexture {
+        if let Some(texture) = self.free.get_mut(&key).and_then(Vec::pop) {
+            self.stats.reused += 1;
+            return texture;
+        }
+        self.stats.created += 1;
+        let texture = device.create_texture(&wgpu::TextureDescriptor {
+            label: Some(key.label),
+            size: wgpu::Extent3d { width: key.width, height: key.height, depth_or_array_layers: 1 },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: key.format,
+            usage: key.usage,
+            view_formats: &[],
+        });
+        let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
+        PooledTexture { key, texture, view }
+    }
+
+    pub fn release(&mut self, texture: PooledTexture) {
+        let list = self.free.entry(texture.key).or_default();
+        if list.len() < self.max_free_per_key {
+            list.push(texture);
+        }
+    }
+
+    /// Bytes held by idle targets.
+    pub fn idle_bytes(&self) -> u64 {
+        self.free.iter().map(|(k, v)| k.bytes() * v.len() as u64).sum()
+    }
+}

@@ -1,0 +1,132 @@
+//! A scene uploaded to the GPU once and kept warm: vertex and index buffers, material
+//! colours, and one bind group per material with its base-colour texture.
+
+use glam::Vec3;
+use wgpu::util::DeviceExt;
+
+use super::GpuContext;
+use crate::scene::{DrawRange, Scene, SceneDefaults};
+
+/// A material's constant part as the G-buffer shader reads it.
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct MaterialGpu {
+    base_color: [f32; 4],
+}
+
+pub struct GpuScene {
+    pub vertex_buffer: wgpu::Buffer,
+    pub index_buffer: wgpu::Buffer,
+    pub index_count: u32,
+    pub materials: wgpu::Buffer,
+    /// Group 1 of the G-buffer pass, one per material: base-colour texture and sampler.
+    pub material_bind_groups: Vec<wgpu::BindGroup>,
+    pub draws: Vec<DrawRange>,
+    pub triangles: u64,
+    pub object_count: u32,
+    pub bounds_min: Vec3,
+    pub bounds_max: Vec3,
+    pub defaults: SceneDefaults,
+    /// Bytes uploaded for this scene (buffers and textures).
+    pub bytes: u64,
+}
+
+impl GpuScene {
+    /// Uploads `scene`. `material_layout` is the G-buffer pass's group-1 layout.
+    pub fn upload(gpu: &GpuContext, scene: &Scene, material_layout: &wgpu::BindGroupLayout) -> Self {
+        let device = &gpu.device;
+        let vertex_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("GpuScene::vertex_buffer"),
+            contents: bytemuck::cast_slice(&scene.vertices),
+            usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::STORAGE,
+        });
+        let index_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("GpuScene::index_buffer"),
+            contents: bytemuck::cast_slice(&scene.indices),
+            usage: wgpu::BufferUsages::INDEX | wgpu::BufferUsages::STORAGE,
+        });
+        let mut material_data: Vec<MaterialGpu> = scene.materials.iter().map(|m| MaterialGpu { base_color: m.base_color }).collect();
+        if material_data.is_empty() {
+            material_data.push(MaterialGpu { base_color: [1.0; 4] });
+        }
+        let materials = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("GpuScene::materials"),
+            contents: bytemuck::cast_slice(&material_data),
+            usage: wgpu::BufferUsages::STORAGE,
+        });
+        let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("GpuScene::sampler"),
+            address_mode_u: wgpu::AddressMode::Repeat,
+            address_mode_v: wgpu::AddressMode::Repeat,
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            ..Default::default()
+        });
+        let upload_texture = |width: u32, height: u32, rgba8: &[u8]| {
+            let texture = device.create_texture_with_data(
+                &gpu.queue,
+                &wgpu::TextureDescriptor {
+                    label: Some("GpuScene::texture"),
+                    size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
+                    mip_level_count: 1,
+                    sample_count: 1,
+                    dimension: wgpu::TextureDimension::D2,
+                    // sRGB storage: the sampler returns linear albedo (DESIGN.md §1).
+                    format: wgpu::TextureFormat::Rgba8UnormSrgb,
+                    usage: wgpu::TextureUsages::TEXTURE_BINDING,
+                    view_formats: &[],
+                },
+                wgpu::util::TextureDataOrder::LayerMajor,
+                rgba8,
+            );
+            texture.create_view(&wgpu::TextureViewDescriptor::default())
+        };
+        let white = upload_texture(1, 1, &[255; 4]);
+        let views: Vec<wgpu::TextureView> = scene.textures.iter().map(|t| upload_texture(t.width, t.height, &t.rgba8)).collect();
+        let material_bind_groups = scene
+            .materials
+            .iter()
+            .map(|m| {
+                let view = m.texture.and_then(|t| views.get(t)).unwrap_or(&white);
+                device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("GpuScene::material_bind_group"),
+                    layout: material_layout,
+                    entries: &super::layout::entries(&[
+                        wgpu::BindingResource::TextureView(view),
+                        wgpu::BindingResource::Sampler(&sampler),
+                    ]),
+                })
+            })
+            .collect();
+        Self {
+            vertex_buffer,
+            index_buffer,
+            index_count: scene.indices.len() as u32,
+            materials,
+            material_bind_groups,
+            draws: scene.draws.clone(),
+            triangles: scene.triangle_count(),
+            object_count: scene.objects.len() as u32,
+            bounds_min: scene.bounds_min,
+            bounds_max: scene.bounds_max,
+            defaults: scene.defaults.clone(),
+            bytes: scene.gpu_bytes(),
+        }
+    }
+
+    pub fn center(&self) -> Vec3 {
+        (self.bounds_min + self.bounds_max) * 0.5
+    }
+
+    /// The eight corners of the scene's bounding box.
+    pub fn corners(&self) -> [Vec3; 8] {
+        let (a, b) = (self.bounds_min, self.bounds_max);
+        [0, 1, 2, 3, 4, 5, 6, 7].map(|k| {
+            Vec3::new(
+                if k & 1 == 0 { a.x } else { b.x },
+                if k & 2 == 0 { a.y } else { b.y },
+                if k & 4 == 0 { a.z } else { b.z },
+            )
+        })
+    }
+}

@@ -1,0 +1,59 @@
+//! WGSL sources, embedded in the binary, and the one mechanism that composes them: a line
+//! `#import common/NAME.wgsl` is replaced by that file (each file at most once per shader),
+//! so shared code (frame constants, light frame, shadow lookups) is written once.
+
+use std::collections::HashSet;
+
+/// Every WGSL file under `shaders/`, by path relative to it.
+pub const SOURCES: &[(&str, &str)] = &[
+    ("common/frame.wgsl", include_str!("../../shaders/common/frame.wgsl")),
+    ("common/frame_inputs.wgsl", include_str!("../../shaders/common/frame_inputs.wgsl")),
+    ("common/light.wgsl", include_str!("../../shaders/common/light.wgsl")),
+    ("common/shadow.wgsl", include_str!("../../shaders/common/shadow.wgsl")),
+    ("shadow_map.wgsl", include_str!("../../shaders/shadow_map.wgsl")),
+    ("gbuffer.wgsl", include_str!("../../shaders/gbuffer.wgsl")),
+    ("e0.wgsl", include_str!("../../shaders/e0.wgsl")),
+    ("composite.wgsl", include_str!("../../shaders/composite.wgsl")),
+    ("methods/hard.wgsl", include_str!("../../shaders/methods/hard.wgsl")),
+];
+
+/// Shaders that are pipelines' entry files (everything outside `common/`).
+pub fn entry_shaders() -> impl Iterator<Item = &'static str> {
+    SOURCES.iter().map(|(name, _)| *name).filter(|name| !name.starts_with("common/"))
+}
+
+fn source(name: &str) -> Option<&'static str> {
+    SOURCES.iter().find(|(n, _)| *n == name).map(|(_, s)| *s)
+}
+
+/// The full WGSL of `name` with its imports resolved.
+pub fn compose(name: &str) -> String {
+    let mut out = String::new();
+    let mut seen = HashSet::new();
+    append(name, &mut out, &mut seen);
+    out
+}
+
+fn append(name: &str, out: &mut String, seen: &mut HashSet<String>) {
+    if !seen.insert(name.to_owned()) {
+        return;
+    }
+    let text = source(name).unwrap_or_else(|| panic!("shader `{name}` is not listed in gpu::shaders::SOURCES"));
+    for line in text.lines() {
+        match line.trim().strip_prefix("#import ") {
+            Some(import) => append(import.trim(), out, seen),
+            None => {
+                out.push_str(line);
+                out.push('\n');
+            }
+        }
+    }
+}
+
+/// Compiles a composed shader into a module on `device`.
+pub fn module(device: &wgpu::Device, name: &str) -> wgpu::ShaderModule {
+    device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some(name),
+        source: wgpu::ShaderSource::Wgsl(compose(name).into()),
+    })
+}

@@ -1,0 +1,366 @@
+//! The job contract (DESIGN.md §3): what a client asks for, parsed and validated.
+//!
+//! Parsing is strict: unknown fields are errors, and every error names the field by its
+//! dotted path so that a client can fix its request without reading server logs. Values that
+//! a job leaves out are filled from the scene's defaults later (`render::FrameSpec`), so
+//! the types here keep them optional.
+
+use std::path::PathBuf;
+
+use serde::{Deserialize, Serialize};
+use serde_json::{Map, Value};
+
+use crate::error::{ErrorCode, JobError, JobResult};
+
+/// Limits on what one job may ask for. Every one is configurable (`Config`) and enforced
+/// before anything is allocated.
+#[derive(Debug, Clone, Serialize)]
+pub struct Limits {
+    /// Largest output width or height in pixels.
+    pub max_output_dim: u32,
+    /// Largest output image in pixels (width × height).
+    pub max_output_pixels: u64,
+    /// Largest shadow-map side in texels.
+    pub max_shadow_map_resolution: u32,
+    /// Most triangles a scene may have (built-in parameters and loaded files alike).
+    pub max_triangles: u64,
+    /// Largest light image side in texels.
+    pub max_light_image_dim: u32,
+    /// Largest side of a texture inside a glTF scene.
+    pub max_texture_dim: u32,
+    /// Largest request body in bytes.
+    pub max_body_bytes: usize,
+}
+
+impl Default for Limits {
+    fn default() -> Self {
+        Self {
+            max_output_dim: 8192,
+            max_output_pixels: 16 * 1024 * 1024,
+            max_shadow_map_resolution: 8192,
+            max_triangles: 4_000_000,
+            max_light_image_dim: 4096,
+            max_texture_dim: 8192,
+            max_body_bytes: 64 * 1024 * 1024,
+        }
+    }
+}
+
+/// A scene or light image: built in (with parameters), uploaded (by id) or a file.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(try_from = "Map<String, Value>", into = "Map<String, Value>")]
+pub enum AssetRef {
+    Builtin { name: String, params: Map<String, Value> },
+    Id(String),
+    Path(PathBuf),
+}
+
+impl AssetRef {
+    pub fn builtin(name: &str) -> Self {
+        AssetRef::Builtin { name: name.to_owned(), params: Map::new() }
+    }
+}
+
+impl TryFrom<Map<String, Value>> for AssetRef {
+    type Error = String;
+
+    fn try_from(mut map: Map<String, Value>) -> Result<Self, String> {
+        let keys = ["builtin", "id", "path"];
+        let present: Vec<&str> = keys.iter().copied().filter(|k| map.contains_key(*k)).collect();
+        if present.len() != 1 {
+            return Err("expected exactly one of `builtin`, `id` or `path`".into());
+        }
+        let value = map.remove(present[0]).unwrap_or_default();
+        let Value::String(text) = value else {
+            return Err(format!("`{}` must be a string", present[0]));
+        };
+        match present[0] {
+            "builtin" => Ok(AssetRef::Builtin { name: text, params: map }),
+            other => {
+                if let Some(extra) = map.keys().next() {
+                    return Err(format!("unknown field `{extra}` next to `{other}`"));
+                }
+                if other == "id" {
+                    Ok(AssetRef::Id(text))
+                } else {
+                    Ok(AssetRef::Path(PathBuf::from(text)))
+                }
+            }
+        }
+    }
+}
+
+impl From<AssetRef> for Map<String, Value> {
+    fn from(asset: AssetRef) -> Self {
+        match asset {
+            AssetRef::Builtin { name, mut params } => {
+                params.insert("builtin".into(), Value::String(name));
+                params
+            }
+            AssetRef::Id(id) => Map::from_iter([("id".to_owned(), Value::String(id))]),
+            AssetRef::Path(path) => Map::from_iter([(
+                "path".to_owned(),
+                Value::String(path.to_string_lossy().into_owned()),
+            )]),
+        }
+    }
+}
+
+/// The eye camera; absent fields come from the scene's default view.
+#[derive(Debug, Clone, Default, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraSpec {
+    pub eye: Option<[f32; 3]>,
+    pub target: Option<[f32; 3]>,
+    pub up: Option<[f32; 3]>,
+    pub fov_y_deg: Option<f32>,
+    pub near: Option<f32>,
+    pub far: Option<f32>,
+}
+
+/// The area light (DESIGN.md §1); absent fields come from the scene's default light.
+#[derive(Debug, Clone, Default, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct LightSpec {
+    pub center: Option<[f32; 3]>,
+    pub direction: Option<[f32; 3]>,
+    pub up: Option<[f32; 3]>,
+    pub size: Option<[f32; 2]>,
+    pub intensity: Option<f32>,
+    pub image: Option<AssetRef>,
+}
+
+/// A shadow method by name, with its own parameters next to the name.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+pub struct MethodSpec {
+    pub name: String,
+    #[serde(flatten)]
+    pub params: Map<String, Value>,
+}
+
+impl Default for MethodSpec {
+    fn default() -> Self {
+        Self { name: "hard".into(), params: Map::new() }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ShadowMapSpec {
+    /// Side of the square light-space shadow map in texels.
+    pub resolution: u32,
+}
+
+impl Default for ShadowMapSpec {
+    fn default() -> Self {
+        Self { resolution: 1024 }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum OutputFormat {
+    /// 8-bit sRGB with alpha, after exposure.
+    Png,
+    /// Linear float: R,G,B,A, visibility.R/G/B and depth.
+    Exr,
+}
+
+impl OutputFormat {
+    pub fn mime(self) -> &'static str {
+        match self {
+            OutputFormat::Png => "image/png",
+            OutputFormat::Exr => "image/x-exr",
+        }
+    }
+
+    /// Picks the format from an output file name, as `penumbra render -o` does.
+    pub fn from_extension(path: &std::path::Path) -> Option<Self> {
+        match path.extension()?.to_str()?.to_ascii_lowercase().as_str() {
+            "png" => Some(OutputFormat::Png),
+            "exr" => Some(OutputFormat::Exr),
+            _ => None,
+        }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct OutputSpec {
+    pub width: u32,
+    pub height: u32,
+    pub format: OutputFormat,
+    /// Exposure in stops applied before the sRGB encoding of PNG output (EXR stays linear).
+    pub exposure: f32,
+}
+
+impl Default for OutputSpec {
+    fn default() -> Self {
+        Self { width: 512, height: 512, format: OutputFormat::Png, exposure: 0.0 }
+    }
+}
+
+/// One render job, as sent by a client.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Job {
+    pub scene: AssetRef,
+    #[serde(default)]
+    pub camera: CameraSpec,
+    #[serde(default)]
+    pub light: LightSpec,
+    #[serde(default)]
+    pub method: MethodSpec,
+    #[serde(default)]
+    pub shadow_map: ShadowMapSpec,
+    #[serde(default)]
+    pub output: OutputSpec,
+    /// Optional constant ambient irradiance added to every visible point, linear RGB.
+    /// DESIGN.md §1: no ambient term unless the job asks for one.
+    #[serde(default)]
+    pub ambient: Option<[f32; 3]>,
+}
+
+impl Job {
+    /// The job the CLI renders when it is given none: the `torus` scene with hard shadows.
+    pub fn embedded_default() -> Self {
+        Self {
+            scene: AssetRef::builtin("torus"),
+            camera: CameraSpec::default(),
+            light: LightSpec::default(),
+            method: MethodSpec::default(),
+            shadow_map: ShadowMapSpec::default(),
+            output: OutputSpec::default(),
+            ambient: None,
+        }
+    }
+
+    /// Parses a job from JSON bytes; type errors name the field by its path.
+    pub fn from_json(bytes: &[u8]) -> JobResult<Self> {
+        let de = &mut serde_json::Deserializer::from_slice(bytes);
+        serde_path_to_error::deserialize(de).map_err(|err| {
+            let path = err.path().to_string();
+            let inner = err.into_inner();
+            let code = if inner.is_syntax() || inner.is_eof() {
+                ErrorCode::InvalidJson
+            } else if inner.to_string().starts_with("unknown field") {
+                ErrorCode::UnknownField
+            } else {
+                ErrorCode::InvalidField
+            };
+            let mut error = JobError::new(code, inner.to_string());
+            if path != "." && !path.is_empty() {
+                error.field = Some(path);
+            }
+            error
+        })
+    }
+
+    /// Range checks that need no scene: output and shadow-map sizes, exposure, ambient.
+    /// (Camera and light are checked once merged with the scene's defaults.)
+    pub fn validate(&self, limits: &Limits) -> JobResult<()> {
+        let out = &self.output;
+        check_dim("output.width", out.width, limits.max_output_dim)?;
+        check_dim("output.height", out.height, limits.max_output_dim)?;
+        if u64::from(out.width) * u64::from(out.height) > limits.max_output_pixels {
+            return Err(JobError::field(
+                ErrorCode::LimitExceeded,
+                "output",
+                format!(
+                    "{}×{} pixels exceeds the limit of {} pixels",
+                    out.width, out.height, limits.max_output_pixels
+                ),
+            ));
+        }
+        if !out.exposure.is_finite() || out.exposure.abs() > 32.0 {
+            return Err(JobError::invalid("output.exposure", "must be a number in [-32, 32]"));
+        }
+        let res = self.shadow_map.resolution;
+        if !(16..=limits.max_shadow_map_resolution).contains(&res) {
+            return Err(JobError::field(
+                if res > limits.max_shadow_map_resolution {
+                    ErrorCode::LimitExceeded
+                } else {
+                    ErrorCode::InvalidField
+                },
+                "shadow_map.resolution",
+                format!("must be in [16, {}]", limits.max_shadow_map_resolution),
+            ));
+        }
+        if let Some(ambient) = self.ambient {
+            for (i, a) in ambient.iter().enumerate() {
+                if !a.is_finite() || *a < 0.0 {
+                    return Err(JobError::invalid(
+                        format!("ambient[{i}]"),
+                        "must be a finite number ≥ 0",
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+fn check_dim(field: &str, value: u32, max: u32) -> JobResult<()> {
+    if value == 0 {
+        return Err(JobError::invalid(field, "must be at least 1"));
+    }
+    if value > max {
+        return Err(JobError::field(
+            ErrorCode::LimitExceeded,
+            field,
+            format!("{value} exceeds the limit of {max}"),
+        ));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parses_the_design_example() {
+        let job = Job::from_json(
+            br#"{
+              "scene":  {"builtin": "torus"},
+              "camera": {"eye": [0, 4, 8], "target": [0, 0, 0], "up": [0, 1, 0], "fov_y_deg": 45},
+              "light":  {"center": [0, 5, 0], "direction": [0, -1, 0], "up": [0, 0, -1],
+                         "size": [1.0, 1.0], "intensity": 10.0, "image": {"builtin": "stripes"}},
+              "method": {"name": "jfa-e", "rounds": 6},
+              "shadow_map": {"resolution": 1024},
+              "output": {"width": 512, "height": 512, "format": "exr"}
+            }"#,
+        )
+        .unwrap();
+        assert_eq!(job.method.name, "jfa-e");
+        assert_eq!(job.method.params["rounds"], 6);
+        assert_eq!(job.output.format, OutputFormat::Exr);
+        assert_eq!(job.light.image, Some(AssetRef::builtin("stripes")));
+    }
+
+    #[test]
+    fn errors_name_the_field() {
+        let err = Job::from_json(br#"{"scene": {"builtin": "torus"}, "camera": {"fov_y_deg": "wide"}}"#)
+            .unwrap_err();
+        assert_eq!(err.code, ErrorCode::InvalidField);
+        assert_eq!(err.field.as_deref(), Some("camera.fov_y_deg"));
+
+        let err = Job::from_json(br#"{"scene": {"builtin": "torus"}, "output": {"widht": 3}}"#)
+            .unwrap_err();
+        assert_eq!(err.code, ErrorCode::UnknownField);
+        assert_eq!(err.field.as_deref(), Some("output"));
+
+        let err = Job::from_json(br#"{"scene": {"builtin": "torus", "id": "x"}}"#).unwrap_err();
+        assert_eq!(err.field.as_deref(), Some("scene"));
+
+        let err = Job::from_json(br#"{"scene": {"builtin": "torus"}, "output": {"width": 0}}"#)
+            .unwrap()
+            .validate(&Limits::default())
+            .unwrap_err();
+        assert_eq!(err.field.as_deref(), Some("output.width"));
+
+        let err = Job::from_json(b"{not json").unwrap_err();
+        assert_eq!(err.code, ErrorCode::InvalidJson);
+    }
+}

@@ -1,0 +1,19 @@
+//! penumbra: a render-as-a-service daemon for soft shadows from coloured area lights.
+//!
+//! The data flow of one job: `job` (the contract) → `scene` and `light` (assets) → `gpu`
+//! (device, pools, timing) → `render` (the frame, pass by pass) → `methods` (one module per
+//! shadow method) → `output` (PNG/EXR). `engine` holds the warm state behind both the CLI and
+//! `server`. See ARCHITECTURE.md for the map.
+
+pub mod config;
+pub mod engine;
+pub mod error;
+pub mod gpu;
+pub mod job;
+pub mod light;
+pub mod methods;
+pub mod output;
+pub mod render;
+pub mod scene;
+pub mod server;
+pub mod timing;

@@ -1,0 +1,109 @@
+//! The `penumbra` command line: `serve` runs the daemon, `render` runs one job through the
+//! same engine without HTTP.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::Arc;
+
+use clap::{Parser, Subcommand};
+use penumbra::config::{RenderOptions, ServeConfig};
+use penumbra::engine::{Engine, PathPolicy};
+use penumbra::gpu::GpuContext;
+use penumbra::job::{Job, OutputFormat};
+use penumbra::timing::Timings;
+
+#[derive(Parser)]
+#[command(name = "penumbra", version, about = "Soft shadows from coloured area lights, rendered on demand")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Run the render daemon (HTTP/JSON).
+    Serve(ServeConfig),
+    /// Render one job to a PNG or EXR file, without a server.
+    Render {
+        /// The job (JSON, see api/examples/). Without it: the built-in `torus` scene, `hard`.
+        job: Option<PathBuf>,
+        /// Output file; the extension (.png or .exr) picks the format.
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Also write the timing breakdown as JSON to this file.
+        #[arg(long)]
+        timings_json: Option<PathBuf>,
+        #[command(flatten)]
+        options: RenderOptions,
+    },
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_env("PENUMBRA_LOG").unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info,wgpu_core=warn,wgpu_hal=warn,naga=warn")),
+        )
+        .with_writer(std::io::stderr)
+        .init();
+    match run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(error) => {
+            eprintln!("penumbra: {error:#}");
+            ExitCode::from(2)
+        }
+    }
+}
+
+fn open_gpu(options: &RenderOptions) -> anyhow::Result<Arc<GpuContext>> {
+    let gpu = GpuContext::new(options.adapter)?;
+    let a = &gpu.adapter;
+    tracing::info!(name = %a.name, backend = %a.backend, kind = %a.device_type, driver = %a.driver, timestamps = a.timestamps, "GPU adapter");
+    Ok(Arc::new(gpu))
+}
+
+fn run(cli: Cli) -> anyhow::Result<()> {
+    match cli.command {
+        Command::Serve(config) => {
+            let gpu = open_gpu(&config.render)?;
+            let paths = match &config.scene_dir {
+                Some(dir) => PathPolicy::Under(dir.clone()),
+                None => PathPolicy::Deny,
+            };
+            let engine = Arc::new(Engine::new(gpu, config.render.limits.limits(), paths));
+            let runtime = tokio::runtime::Runtime::new()?;
+            runtime.block_on(penumbra::server::serve(config, engine))
+        }
+        Command::Render { job, output, timings_json, options } => {
+            let mut job = match &job {
+                Some(path) => {
+                    let bytes = std::fs::read(path).map_err(|e| anyhow::anyhow!("cannot read {}: {e}", path.display()))?;
+                    Job::from_json(&bytes)?
+                }
+                None => Job::embedded_default(),
+            };
+            job.output.format = OutputFormat::from_extension(&output)
+                .ok_or_else(|| anyhow::anyhow!("the output file must end in .png or .exr: {}", output.display()))?;
+            let gpu = open_gpu(&options)?;
+            let engine = Engine::new(gpu, options.limits.limits(), PathPolicy::Any);
+            let rendered = engine.render(&job)?;
+            std::fs::write(&output, &rendered.bytes)?;
+            print_timings(&rendered.timings);
+            if let Some(path) = timings_json {
+                let report = serde_json::json!({"timings": rendered.timings, "counters": rendered.counters});
+                std::fs::write(path, serde_json::to_vec_pretty(&report)?)?;
+            }
+            eprintln!("wrote {} ({}×{}, {} bytes)", output.display(), rendered.width, rendered.height, rendered.bytes.len());
+            Ok(())
+        }
+    }
+}
+
+fn print_timings(timings: &Timings) {
+    eprintln!("{:<12} {:>10} {:>10}", "phase", "wall ms", "gpu ms");
+    for phase in &timings.phases {
+        let gpu = phase.gpu_ms.map(|g| format!("{g:.2}")).unwrap_or_else(|| "-".into());
+        eprintln!("{:<12} {:>10.2} {:>10}", phase.name, phase.cpu_ms, gpu);
+    }
+    eprintln!("{:<12} {:>10.2}", "total", timings.total_ms);
+}

@@ -1,0 +1,60 @@
+//! Image encoding: PNG (8-bit sRGB after exposure, alpha = coverage) and OpenEXR (linear
+//! float: `R,G,B,A` colour, `visibility.R/G/B`, and `depth`), through the `image`/`png` and
+//! `exr` crates.
+
+use std::io::Cursor;
+
+use crate::error::{JobError, JobResult};
+use crate::job::OutputFormat;
+use crate::light::linear_to_srgb;
+use crate::render::FrameOutput;
+
+/// Encodes a frame in the requested format.
+pub fn encode(frame: &FrameOutput, format: OutputFormat, exposure: f32) -> JobResult<Vec<u8>> {
+    match format {
+        OutputFormat::Png => encode_png(frame, exposure),
+        OutputFormat::Exr => encode_exr(frame),
+    }
+}
+
+fn encode_png(frame: &FrameOutput, exposure: f32) -> JobResult<Vec<u8>> {
+    let scale = exposure.exp2();
+    let mut rgba = Vec::with_capacity(frame.color.len() * 4);
+    for [r, g, b, a] in &frame.color {
+        for c in [r, g, b] {
+            rgba.push((linear_to_srgb(c * scale) * 255.0 + 0.5) as u8);
+        }
+        rgba.push((a.clamp(0.0, 1.0) * 255.0 + 0.5) as u8);
+    }
+    let image = image::RgbaImage::from_raw(frame.width, frame.height, rgba).expect("buffer sized from the frame");
+    let mut bytes = Cursor::new(Vec::new());
+    image
+        .write_to(&mut bytes, image::ImageFormat::Png)
+        .map_err(|e| JobError::internal(format!("PNG encoding failed: {e}")))?;
+    Ok(bytes.into_inner())
+}
+
+fn encode_exr(frame: &FrameOutput) -> JobResult<Vec<u8>> {
+    use exr::prelude::*;
+    let size = (frame.width as usize, frame.height as usize);
+    let color = |k: usize| FlatSamples::F32(frame.color.iter().map(|p| p[k]).collect());
+    let mut channels: SmallVec<[AnyChannel<FlatSamples>; 4]> = SmallVec::new();
+    for (k, name) in ["R", "G", "B", "A"].iter().enumerate() {
+        channels.push(AnyChannel::new(*name, color(k)));
+    }
+    if let Some(visibility) = &frame.visibility {
+        for (k, name) in ["visibility.R", "visibility.G", "visibility.B"].iter().enumerate() {
+            channels.push(AnyChannel::new(*name, FlatSamples::F32(visibility.iter().map(|v| v[k]).collect())));
+        }
+    }
+    if let Some(depth) = &frame.depth {
+        channels.push(AnyChannel::new("depth", FlatSamples::F32(depth.clone())));
+    }
+    let layer = Layer::new(size, LayerAttributes::named("penumbra"), Encoding::FAST_LOSSLESS, AnyChannels::sort(channels));
+    let mut bytes = Cursor::new(Vec::new());
+    Image::from_layer(layer)
+        .write()
+        .to_buffered(&mut bytes)
+        .map_err(|e| JobError::internal(format!("EXR encoding failed: {e}")))?;
+    Ok(bytes.into_inner())
+}

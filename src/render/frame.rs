@@ -1,0 +1,223 @@
+//! What one frame renders, resolved from a job and a scene: the job's camera and light
+//! merged over the scene's defaults and checked, the light cut into cells for E0, the
+//! method with its validated parameters, and the light-space projection of the shadow map.
+
+use glam::{Mat4, Vec2, Vec3};
+
+use crate::error::{JobError, JobResult};
+use crate::gpu::scene::GpuScene;
+use crate::job::{Job, OutputFormat};
+use crate::light::{light_cells, AreaLight, LightCell, LightImage};
+use crate::methods::{self, Params, ShadowMethod};
+
+/// The eye camera, complete and valid.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Camera {
+    pub eye: Vec3,
+    pub target: Vec3,
+    pub up: Vec3,
+    pub fov_y_deg: f32,
+    pub near: f32,
+    pub far: f32,
+}
+
+impl Camera {
+    pub fn forward(&self) -> Vec3 {
+        (self.target - self.eye).normalize()
+    }
+
+    pub fn view_proj(&self, aspect: f32) -> Mat4 {
+        Mat4::perspective_rh(self.fov_y_deg.to_radians(), aspect, self.near, self.far)
+            * Mat4::look_at_rh(self.eye, self.target, self.up)
+    }
+}
+
+/// The shadow map's projection: a square frustum from the light centre along `n`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LightProjection {
+    pub view_proj: Mat4,
+    /// Tangent of the frustum's half angle (the same horizontally and vertically).
+    pub tan_half: f32,
+    pub near: f32,
+    pub far: f32,
+}
+
+/// Widest half angle of the shadow frustum. Beyond it surfaces are lit at grazing angles
+/// where E0 is tiny, and texels would be stretched too thin to be useful.
+const MAX_LIGHT_HALF_ANGLE_DEG: f32 = 80.0;
+
+impl LightProjection {
+    /// Fits the frustum to the part of the scene's bounding box in front of the light.
+    pub fn fit(light: &AreaLight, corners: &[Vec3; 8]) -> Self {
+        let tan_max = MAX_LIGHT_HALF_ANGLE_DEG.to_radians().tan();
+        let radius = ((corners[7] - corners[0]) * 0.5).length().max(1e-3);
+        let mut tan_half: f32 = 0.05;
+        let mut far: f32 = 0.0;
+        let mut min_depth = f32::INFINITY;
+        for p in corners {
+            let d = *p - light.center;
+            let depth = d.dot(light.n);
+            far = far.max(depth);
+            min_depth = min_depth.min(depth);
+            let lateral = d.dot(light.r).abs().max(d.dot(light.u).abs());
+            tan_half = if depth > 1e-3 * radius { tan_half.max(lateral / depth) } else { tan_max };
+            if tan_half >= tan_max {
+                tan_half = tan_max;
+            }
+        }
+        let far = (far * 1.05).max(1e-2);
+        let near = if min_depth > 0.0 { (min_depth * 0.5).max(far * 1e-4) } else { far * 1e-4 };
+        let view = Mat4::look_to_rh(light.center, light.n, light.u);
+        let proj = Mat4::perspective_rh(2.0 * tan_half.atan(), 1.0, near, far);
+        Self { view_proj: proj * view, tan_half, near, far }
+    }
+}
+
+/// Which images the caller needs back from the GPU.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Readbacks {
+    pub visibility: bool,
+    pub depth: bool,
+}
+
+impl Readbacks {
+    pub fn for_format(format: OutputFormat) -> Self {
+        let all = format == OutputFormat::Exr;
+        Self { visibility: all, depth: all }
+    }
+}
+
+/// Everything a frame needs, validated.
+pub struct FrameSpec {
+    pub camera: Camera,
+    pub light: AreaLight,
+    pub cells: Vec<LightCell>,
+    pub method: &'static dyn ShadowMethod,
+    pub params: Params,
+    pub shadow_resolution: u32,
+    pub width: u32,
+    pub height: u32,
+    pub ambient: Vec3,
+    pub readbacks: Readbacks,
+}
+
+impl FrameSpec {
+    /// Merges the job over the scene's defaults and checks what the merge produced.
+    pub fn resolve(job: &Job, scene: &GpuScene, light_image: &LightImage) -> JobResult<Self> {
+        let d = &scene.defaults;
+        let v3 = |v: Option<[f32; 3]>, default: Vec3| v.map(Vec3::from).unwrap_or(default);
+        let camera = resolve_camera(
+            v3(job.camera.eye, d.eye),
+            v3(job.camera.target, d.target),
+            v3(job.camera.up, d.up),
+            job.camera.fov_y_deg.unwrap_or(d.fov_y_deg),
+            job.camera.near,
+            job.camera.far,
+            &scene.corners(),
+        )?;
+        let l = &job.light;
+        let light = AreaLight::new(
+            v3(l.center, d.light_center),
+            v3(l.direction, d.light_direction),
+            v3(l.up, d.light_up),
+            l.size.map(Vec2::from).unwrap_or(d.light_size_m),
+            l.intensity.unwrap_or(d.light_intensity),
+        )?;
+        let method = methods::find(&job.method.name)?;
+        let params = Params::parse(method.params(), &job.method.params)?;
+        Ok(Self {
+            camera,
+            cells: light_cells(&light, light_image),
+            light,
+            method,
+            params,
+            shadow_resolution: job.shadow_map.resolution,
+            width: job.output.width,
+            height: job.output.height,
+            ambient: job.ambient.map(Vec3::from).unwrap_or(Vec3::ZERO),
+            readbacks: Readbacks::for_format(job.output.format),
+        })
+    }
+}
+
+fn resolve_camera(eye: Vec3, target: Vec3, up: Vec3, fov_y_deg: f32, near: Option<f32>, far: Option<f32>, corners: &[Vec3; 8]) -> JobResult<Camera> {
+    for (name, v) in [("camera.eye", eye), ("camera.target", target), ("camera.up", up)] {
+        if !v.is_finite() || v.abs().max_element() > 1e7 {
+            return Err(JobError::invalid(name, "must be finite, within ±1e7"));
+        }
+    }
+    if (target - eye).length() < 1e-6 {
+        return Err(JobError::invalid("camera.target", "must differ from camera.eye"));
+    }
+    if !(fov_y_deg.is_finite() && fov_y_deg > 0.0 && fov_y_deg < 180.0) {
+        return Err(JobError::invalid("camera.fov_y_deg", "must be in (0, 180) degrees"));
+    }
+    let forward = (target - eye).normalize();
+    if up.length() < 1e-6 || up.normalize().cross(forward).length() < 1e-4 {
+        return Err(JobError::invalid("camera.up", "must be non-zero and not parallel to the view direction"));
+    }
+    // Fit near and far to the scene's depth range along the view direction.
+    let depths: Vec<f32> = corners.iter().map(|p| (*p - eye).dot(forward)).collect();
+    let fitted_far = (depths.iter().copied().fold(f32::MIN, f32::max) * 1.02).max(1e-2);
+    let fitted_near = {
+        let nearest = depths.iter().copied().fold(f32::MAX, f32::min);
+        if nearest > 0.0 { (nearest * 0.9).max(fitted_far * 1e-4) } else { fitted_far * 1e-4 }
+    };
+    let near = near.unwrap_or(fitted_near);
+    let far = far.unwrap_or(fitted_far.max(near * 2.0));
+    if !(near.is_finite() && near > 0.0) {
+        return Err(JobError::invalid("camera.near", "must be a finite number > 0"));
+    }
+    if !(far.is_finite() && far > near) {
+        return Err(JobError::invalid("camera.far", "must be finite and greater than camera.near"));
+    }
+    Ok(Camera { eye, target, up, fov_y_deg, near, far })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn corners() -> [Vec3; 8] {
+        [0, 1, 2, 3, 4, 5, 6, 7].map(|k| Vec3::new((k & 1) as f32 * 2.0 - 1.0, (k >> 1 & 1) as f32, (k >> 2 & 1) as f32 * 2.0 - 1.0))
+    }
+
+    #[test]
+    fn degenerate_cameras_name_the_field() {
+        let c = corners();
+        let eye = Vec3::new(0.0, 2.0, 5.0);
+        let err = resolve_camera(eye, eye, Vec3::Y, 45.0, None, None, &c).unwrap_err();
+        assert_eq!(err.field.as_deref(), Some("camera.target"));
+        for fov in [0.0, 180.0, -3.0, f32::NAN] {
+            let err = resolve_camera(eye, Vec3::ZERO, Vec3::Y, fov, None, None, &c).unwrap_err();
+            assert_eq!(err.field.as_deref(), Some("camera.fov_y_deg"));
+        }
+        let err = resolve_camera(Vec3::Y * 3.0, Vec3::ZERO, Vec3::Y, 45.0, None, None, &c).unwrap_err();
+        assert_eq!(err.field.as_deref(), Some("camera.up"));
+        let err = resolve_camera(eye, Vec3::ZERO, Vec3::Y, 45.0, Some(2.0), Some(1.0), &c).unwrap_err();
+        assert_eq!(err.field.as_deref(), Some("camera.far"));
+    }
+
+    #[test]
+    fn fitted_range_contains_the_scene() {
+        let camera = resolve_camera(Vec3::new(0.0, 2.0, 5.0), Vec3::ZERO, Vec3::Y, 45.0, None, None, &corners()).unwrap();
+        for p in corners() {
+            let depth = (p - camera.eye).dot(camera.forward());
+            assert!(depth > camera.near && depth < camera.far);
+        }
+    }
+
+    #[test]
+    fn light_frustum_contains_the_scene_below() {
+        let light = AreaLight::new(Vec3::new(0.0, 5.0, 0.0), -Vec3::Y, -Vec3::Z, Vec2::ONE, 1.0).unwrap();
+        let projection = LightProjection::fit(&light, &corners());
+        for p in corners() {
+            let clip = projection.view_proj * p.extend(1.0);
+            let ndc = clip.truncate() / clip.w;
+            assert!(ndc.x.abs() <= 1.0 + 1e-5 && ndc.y.abs() <= 1.0 + 1e-5 && (0.0..=1.0).contains(&ndc.z), "{p} → {ndc}");
+        }
+        // Image up (+u = −z) is NDC +y, i.e. shadow-map row 0.
+        let clip = projection.view_proj * Vec3::new(0.0, 0.0, -1.0).extend(1.0);
+        assert!(clip.y / clip.w > 0.0);
+    }
+}

@@ -1,0 +1,209 @@
+//! glTF 2.0 loading (`.gltf` with embedded `data:` buffers, and `.glb`) into a `Scene`.
+//!
+//! Every node holding a mesh is one object; ids are the rank of the node's index among the
+//! mesh nodes of the scene, so they are stable for a file (DESIGN.md §1). Only `data:` URIs
+//! and the GLB binary chunk are read: the loader never opens a file or a network address
+//! named inside a document, whoever sent it.
+
+use std::collections::{BTreeMap, HashMap};
+use std::io::Cursor;
+
+use base64::Engine as _;
+use glam::{Mat4, Vec2, Vec3};
+
+use super::{fitted_defaults, Material, MeshData, Scene, SceneBuilder, TextureData};
+use crate::error::{ErrorCode, JobError, JobResult};
+use crate::job::Limits;
+
+/// Loads a glTF or GLB document from bytes. `field` names the job field for errors.
+pub fn load(bytes: &[u8], limits: &Limits, field: &str) -> JobResult<Scene> {
+    // The gltf crate validates indices into the document, but a hostile file is still
+    // untrusted input: a panic anywhere in decoding becomes a clean error for this job.
+    match std::panic::catch_unwind(|| load_unchecked(bytes, limits, field)) {
+        Ok(result) => result,
+        Err(_) => Err(invalid(field, "the glTF document could not be decoded")),
+    }
+}
+
+fn invalid(field: &str, message: impl Into<String>) -> JobError {
+    JobError::field(ErrorCode::InvalidAsset, field, message)
+}
+
+fn load_unchecked(bytes: &[u8], limits: &Limits, field: &str) -> JobResult<Scene> {
+    let gltf = gltf::Gltf::from_slice(bytes).map_err(|e| invalid(field, format!("not a valid glTF 2.0 document: {e}")))?;
+    let buffers = gltf
+        .document
+        .buffers()
+        .map(|buffer| {
+            let data = match buffer.source() {
+                gltf::buffer::Source::Bin => gltf.blob.clone().ok_or_else(|| invalid(field, "GLB binary chunk missing"))?,
+                gltf::buffer::Source::Uri(uri) => decode_data_uri(uri, field)?,
+            };
+            if data.len() < buffer.length() {
+                return Err(invalid(field, format!("buffer {} is shorter than its declared length", buffer.index())));
+            }
+            Ok(data)
+        })
+        .collect::<JobResult<Vec<_>>>()?;
+
+    // Mesh nodes in traversal order with their world transforms.
+    let scene = gltf.document.default_scene().or_else(|| gltf.document.scenes().next());
+    let roots: Vec<gltf::Node> = match &scene {
+        Some(scene) => scene.nodes().collect(),
+        None => gltf.document.nodes().collect(),
+    };
+    let mut instances: Vec<(gltf::Node, Mat4)> = Vec::new();
+    let mut stack: Vec<(gltf::Node, Mat4, u32)> = roots.into_iter().map(|n| (n, Mat4::IDENTITY, 0)).collect();
+    while let Some((node, parent, depth)) = stack.pop() {
+        if depth > 64 || instances.len() > 1_000_000 {
+            return Err(invalid(field, "the node hierarchy is too deep or too large"));
+        }
+        let world = parent * Mat4::from_cols_array_2d(&node.transform().matrix());
+        if node.mesh().is_some() {
+            instances.push((node.clone(), world));
+        }
+        for child in node.children() {
+            stack.push((child, world, depth + 1));
+        }
+    }
+    let mut mesh_nodes: Vec<usize> = instances.iter().map(|(n, _)| n.index()).collect();
+    mesh_nodes.sort_unstable();
+    mesh_nodes.dedup();
+    let id_of: HashMap<usize, u32> = mesh_nodes.iter().enumerate().map(|(id, &node)| (node, id as u32)).collect();
+    instances.sort_by_key(|(n, _)| n.index());
+
+    let mut builder = SceneBuilder::default();
+    for &node_index in &mesh_nodes {
+        let node = gltf.document.nodes().nth(node_index).expect("index from this document");
+        builder.begin_object(node.name().map(str::to_owned).unwrap_or_else(|| format!("node-{node_index}")));
+    }
+    let mut materials: BTreeMap<Option<usize>, u32> = BTreeMap::new();
+    let mut textures: HashMap<usize, usize> = HashMap::new();
+    let mut skipped_primitives = 0usize;
+    for (node, world) in &instances {
+        let object_id = id_of[&node.index()];
+        let mesh = node.mesh().expect("mesh nodes only");
+        for primitive in mesh.primitives() {
+            let reader = primitive.reader(|b| buffers.get(b.index()).map(Vec::as_slice));
+            let Some(positions) = reader.read_positions() else {
+                skipped_primitives += 1;
+                continue;
+            };
+            let positions: Vec<Vec3> = positions.map(Vec3::from).collect();
+            let count = positions.len() as u32;
+            let flat: Vec<u32> = match reader.read_indices() {
+                Some(indices) => indices.into_u32().collect(),
+                None => (0..count).collect(),
+            };
+            let indices = match primitive.mode() {
+                gltf::mesh::Mode::Triangles => flat.chunks_exact(3).flatten().copied().collect(),
+                gltf::mesh::Mode::TriangleStrip => (2..flat.len())
+                    .flat_map(|k| if k % 2 == 0 { [flat[k - 2], flat[k - 1], flat[k]] } else { [flat[k - 1], flat[k - 2], flat[k]] })
+                    .collect(),
+                gltf::mesh::Mode::TriangleFan => (2..flat.len()).flat_map(|k| [flat[0], flat[k - 1], flat[k]]).collect(),
+                _ => {
+                    // Points and lines cast no area shadow; they are left out.
+                    skipped_primitives += 1;
+                    continue;
+                }
+            };
+            let indices: Vec<u32> = indices;
+            if indices.iter().any(|&i| i >= count) {
+                return Err(invalid(field, format!("mesh {} indexes past its vertices", mesh.index())));
+            }
+            if builder.triangle_count() + indices.len() as u64 / 3 > limits.max_triangles {
+                return Err(JobError::field(
+                    ErrorCode::LimitExceeded,
+                    field,
+                    format!("the scene has more than {} triangles", limits.max_triangles),
+                ));
+            }
+            let normals: Vec<Vec3> = reader.read_normals().map(|n| n.map(Vec3::from).collect()).unwrap_or_default();
+            let pbr = primitive.material().pbr_metallic_roughness();
+            let texture_info = pbr.base_color_texture();
+            let uvs: Vec<Vec2> = texture_info
+                .as_ref()
+                .and_then(|info| reader.read_tex_coords(info.tex_coord()))
+                .map(|uv| uv.into_f32().map(Vec2::from).collect())
+                .unwrap_or_default();
+            let material_key = primitive.material().index();
+            let material = match materials.get(&material_key) {
+                Some(&m) => m,
+                None => {
+                    let texture = match &texture_info {
+                        Some(info) => {
+                            let image = info.texture().source();
+                            let slot = match textures.get(&image.index()) {
+                                Some(&slot) => slot,
+                                None => {
+                                    let data = decode_texture(&image, &buffers, limits, field)?;
+                                    let slot = builder.add_texture(data);
+                                    textures.insert(image.index(), slot);
+                                    slot
+                                }
+                            };
+                            Some(slot)
+                        }
+                        None => None,
+                    };
+                    let m = builder.add_material(Material { base_color: pbr.base_color_factor(), texture });
+                    materials.insert(material_key, m);
+                    m
+                }
+            };
+            let mesh_data = MeshData {
+                normals: if normals.len() == positions.len() { normals } else { Vec::new() },
+                uvs: if uvs.len() == positions.len() { uvs } else { Vec::new() },
+                positions,
+                indices,
+            };
+            builder.add_mesh(object_id, &mesh_data, *world, material);
+        }
+    }
+    if skipped_primitives > 0 {
+        tracing::debug!(skipped_primitives, "glTF primitives without triangles were left out");
+    }
+    if builder.triangle_count() == 0 {
+        return Err(invalid(field, "the scene holds no triangles"));
+    }
+    Ok(builder.finish(fitted_defaults))
+}
+
+/// Decodes an RFC 2397 `data:` URI with base64 content; every other URI is refused.
+fn decode_data_uri(uri: &str, field: &str) -> JobResult<Vec<u8>> {
+    let Some(rest) = uri.strip_prefix("data:") else {
+        return Err(invalid(field, "only data: URIs are accepted inside an uploaded scene (no files, no network)"));
+    };
+    let Some((header, payload)) = rest.split_once(',') else {
+        return Err(invalid(field, "malformed data: URI"));
+    };
+    if !header.ends_with(";base64") {
+        return Err(invalid(field, "data: URIs must be base64-encoded"));
+    }
+    base64::engine::general_purpose::STANDARD
+        .decode(payload.trim())
+        .map_err(|e| invalid(field, format!("bad base64 in data: URI: {e}")))
+}
+
+fn decode_texture(image: &gltf::Image, buffers: &[Vec<u8>], limits: &Limits, field: &str) -> JobResult<TextureData> {
+    let bytes: Vec<u8> = match image.source() {
+        gltf::image::Source::View { view, .. } => {
+            let buffer = &buffers[view.buffer().index()];
+            buffer
+                .get(view.offset()..view.offset() + view.length())
+                .ok_or_else(|| invalid(field, "an image's buffer view lies outside its buffer"))?
+                .to_vec()
+        }
+        gltf::image::Source::Uri { uri, .. } => decode_data_uri(uri, field)?,
+    };
+    let mut reader = image::ImageReader::new(Cursor::new(bytes))
+        .with_guessed_format()
+        .map_err(|e| invalid(field, format!("cannot read texture: {e}")))?;
+    let mut image_limits = image::Limits::default();
+    image_limits.max_image_width = Some(limits.max_texture_dim);
+    image_limits.max_image_height = Some(limits.max_texture_dim);
+    reader.limits(image_limits);
+    let decoded = reader.decode().map_err(|e| invalid(field, format!("cannot decode texture: {e}")))?;
+    let rgba = decoded.into_rgba8();
+    Ok(TextureData { width: rgba.width(), height: rgba.height(), rgba8: rgba.into_raw() })
+}

@@ -1,0 +1,51 @@
+//! The one place where job errors become HTTP statuses and JSON bodies
+//! (`{"error": {"code", "message", "field"?}}`). 5xx bodies stay generic; details go to logs.
+
+use axum::http::StatusCode;
+use axum::response::{IntoResponse, Response};
+use axum::Json;
+use serde_json::json;
+
+use crate::error::{ErrorCode, JobError};
+
+pub struct ApiError(pub JobError);
+
+impl From<JobError> for ApiError {
+    fn from(error: JobError) -> Self {
+        Self(error)
+    }
+}
+
+pub fn status_of(code: ErrorCode) -> StatusCode {
+    match code {
+        ErrorCode::InvalidJson => StatusCode::BAD_REQUEST,
+        ErrorCode::PayloadTooLarge => StatusCode::PAYLOAD_TOO_LARGE,
+        ErrorCode::NotUploaded | ErrorCode::NotFound => StatusCode::NOT_FOUND,
+        ErrorCode::PathNotAllowed => StatusCode::FORBIDDEN,
+        ErrorCode::InvalidField
+        | ErrorCode::UnknownField
+        | ErrorCode::UnknownMethod
+        | ErrorCode::UnknownBuiltin
+        | ErrorCode::InvalidAsset
+        | ErrorCode::LimitExceeded => StatusCode::UNPROCESSABLE_ENTITY,
+        ErrorCode::Internal => StatusCode::INTERNAL_SERVER_ERROR,
+    }
+}
+
+impl IntoResponse for ApiError {
+    fn into_response(self) -> Response {
+        let error = self.0;
+        let status = status_of(error.code);
+        let message = if error.is_client_error() {
+            error.message
+        } else {
+            tracing::error!(message = %error.message, "job failed inside the renderer");
+            "internal error; the job failed and the server keeps serving".to_owned()
+        };
+        let mut body = json!({"code": error.code.as_str(), "message": message});
+        if let Some(field) = error.field {
+            body["field"] = json!(field);
+        }
+        (status, Json(json!({ "error": body }))).into_response()
+    }
+}

@@ -1,0 +1,226 @@
+//! The HTTP service (DESIGN.md §3): `app(state)` builds the router, `serve` binds it, warms
+//! the engine up and shuts down gracefully. Rendering runs on the blocking pool so the
+//! async workers keep answering health checks while the device is busy.
+
+pub mod error;
+
+use std::collections::VecDeque;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+
+use axum::body::Bytes;
+use axum::extract::rejection::BytesRejection;
+use axum::extract::{DefaultBodyLimit, Path, State};
+use axum::http::{header, HeaderMap, HeaderValue, StatusCode};
+use axum::response::{IntoResponse, Response};
+use axum::routing::{get, post};
+use axum::{Json, Router};
+use serde_json::{json, Value};
+
+use crate::config::ServeConfig;
+use crate::engine::{Engine, Rendered};
+use crate::error::{ErrorCode, JobError};
+use crate::job::Job;
+use crate::light::BUILTIN_LIGHT_IMAGES;
+use crate::methods::REGISTRY;
+use crate::scene::builtin::BUILTIN_SCENES;
+use error::ApiError;
+
+/// Finished renders, newest last, kept so a JSON answer can link to its image.
+struct ResultStore {
+    entries: VecDeque<(String, Arc<Rendered>)>,
+    capacity: usize,
+}
+
+pub struct AppState {
+    engine: Arc<Engine>,
+    results: Mutex<ResultStore>,
+    ready: AtomicBool,
+    next_id: AtomicU64,
+    started: std::time::SystemTime,
+}
+
+impl AppState {
+    pub fn new(engine: Arc<Engine>, results_kept: usize) -> Self {
+        Self {
+            engine,
+            results: Mutex::new(ResultStore { entries: VecDeque::new(), capacity: results_kept.max(1) }),
+            ready: AtomicBool::new(false),
+            next_id: AtomicU64::new(1),
+            started: std::time::SystemTime::now(),
+        }
+    }
+
+    pub fn set_ready(&self) {
+        self.ready.store(true, Ordering::SeqCst);
+    }
+
+    /// A job id unique to this process: start time and a counter.
+    fn new_id(&self) -> String {
+        let epoch = self.started.duration_since(std::time::UNIX_EPOCH).map(|d| d.as_millis()).unwrap_or(0);
+        format!("{epoch:012x}{:08x}", self.next_id.fetch_add(1, Ordering::Relaxed))
+    }
+
+    fn keep(&self, id: String, rendered: Arc<Rendered>) {
+        let mut store = self.results.lock().unwrap_or_else(|p| p.into_inner());
+        if store.entries.len() >= store.capacity {
+            store.entries.pop_front();
+        }
+        store.entries.push_back((id, rendered));
+    }
+
+    fn find(&self, id: &str) -> Option<Arc<Rendered>> {
+        let store = self.results.lock().unwrap_or_else(|p| p.into_inner());
+        store.entries.iter().find(|(k, _)| k == id).map(|(_, r)| r.clone())
+    }
+}
+
+pub fn app(state: Arc<AppState>) -> Router {
+    let body_limit = state.engine.limits().max_body_bytes;
+    Router::new()
+        .route("/v1/render", post(render))
+        .route("/v1/methods", get(methods))
+        .route("/v1/jobs/{id}", get(job_record))
+        .route("/v1/jobs/{id}/image", get(job_image))
+        .route("/healthz", get(|| async { Json(json!({"status": "ok"})) }))
+        .route("/readyz", get(readyz))
+        .fallback(|| async { ApiError(JobError::new(ErrorCode::NotFound, "no such route")) })
+        .layer(DefaultBodyLimit::max(body_limit))
+        .with_state(state)
+}
+
+/// Binds, warms up, serves until SIGINT or SIGTERM, then finishes requests in flight.
+pub async fn serve(config: ServeConfig, engine: Arc<Engine>) -> anyhow::Result<()> {
+    let state = Arc::new(AppState::new(engine.clone(), config.results_kept));
+    let listener = tokio::net::TcpListener::bind(config.listen).await?;
+    tracing::info!(address = %listener.local_addr()?, "listening");
+    let warm = state.clone();
+    let no_warm_up = config.no_warm_up;
+    tokio::task::spawn_blocking(move || {
+        let started = std::time::Instant::now();
+        if !no_warm_up {
+            if let Err(error) = warm.engine.warm_up() {
+                tracing::error!(%error, "warm-up failed");
+                return;
+            }
+        }
+        warm.set_ready();
+        tracing::info!(duration_ms = started.elapsed().as_millis() as u64, "ready: pipelines compiled, default scene uploaded");
+    });
+    axum::serve(listener, app(state)).with_graceful_shutdown(shutdown_signal()).await?;
+    tracing::info!("shut down");
+    Ok(())
+}
+
+async fn shutdown_signal() {
+    let interrupt = tokio::signal::ctrl_c();
+    #[cfg(unix)]
+    let terminate = async {
+        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+            Ok(mut signal) => {
+                signal.recv().await;
+            }
+            Err(_) => std::future::pending::<()>().await,
+        }
+    };
+    #[cfg(not(unix))]
+    let terminate = std::future::pending::<()>();
+    tokio::select! {
+        _ = interrupt => {},
+        _ = terminate => {},
+    }
+    tracing::info!("shutdown signal received; finishing requests in flight");
+}
+
+async fn readyz(State(state): State<Arc<AppState>>) -> Response {
+    if state.ready.load(Ordering::SeqCst) {
+        Json(json!({"status": "ready", "adapter": state.engine.gpu().adapter})).into_response()
+    } else {
+        (StatusCode::SERVICE_UNAVAILABLE, Json(json!({"status": "warming up"}))).into_response()
+    }
+}
+
+async fn methods() -> Json<Value> {
+    let methods: Vec<Value> = REGISTRY
+        .iter()
+        .map(|m| json!({"name": m.name(), "summary": m.summary(), "params": m.params()}))
+        .collect();
+    Json(json!({
+        "methods": methods,
+        "scenes": BUILTIN_SCENES,
+        "light_images": BUILTIN_LIGHT_IMAGES,
+    }))
+}
+
+fn wants_json(headers: &HeaderMap) -> bool {
+    headers
+        .get(header::ACCEPT)
+        .and_then(|v| v.to_str().ok())
+        .is_some_and(|accept| accept.split(',').any(|t| t.trim().starts_with("application/json")))
+}
+
+async fn render(State(state): State<Arc<AppState>>, headers: HeaderMap, body: Result<Bytes, BytesRejection>) -> Result<Response, ApiError> {
+    let body = body.map_err(|rejection| {
+        if rejection.status() == StatusCode::PAYLOAD_TOO_LARGE {
+            JobError::new(ErrorCode::PayloadTooLarge, format!("the body exceeds {} bytes", state.engine.limits().max_body_bytes))
+        } else {
+            JobError::new(ErrorCode::InvalidJson, format!("cannot read the body: {rejection}"))
+        }
+    })?;
+    let job = Job::from_json(&body)?;
+    let id = state.new_id();
+    let span = tracing::info_span!("job", %id, method = %job.method.name);
+    let engine = state.engine.clone();
+    let rendered = tokio::task::spawn_blocking(move || span.in_scope(|| engine.render(&job)))
+        .await
+        .map_err(|e| JobError::internal(format!("render task failed: {e}")))??;
+    tracing::info!(%id, total_ms = rendered.timings.total_ms, "job done");
+    let rendered = Arc::new(rendered);
+    state.keep(id.clone(), rendered.clone());
+    if wants_json(&headers) {
+        Ok(Json(job_json(&id, &rendered)).into_response())
+    } else {
+        Ok(image_response(&id, &rendered))
+    }
+}
+
+fn job_json(id: &str, rendered: &Rendered) -> Value {
+    json!({
+        "id": id,
+        "status": "succeeded",
+        "width": rendered.width,
+        "height": rendered.height,
+        "format": rendered.format,
+        "bytes": rendered.bytes.len(),
+        "timings": rendered.timings,
+        "counters": rendered.counters,
+        "image": format!("/v1/jobs/{id}/image"),
+    })
+}
+
+fn image_response(id: &str, rendered: &Rendered) -> Response {
+    let mut response = rendered.bytes.clone().into_response();
+    let headers = response.headers_mut();
+    headers.insert(header::CONTENT_TYPE, HeaderValue::from_static(rendered.format.mime()));
+    if let Ok(timing) = HeaderValue::from_str(&rendered.timings.server_timing()) {
+        headers.insert("server-timing", timing);
+    }
+    if let Ok(id) = HeaderValue::from_str(id) {
+        headers.insert("x-penumbra-job-id", id);
+    }
+    response
+}
+
+async fn job_record(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Result<Json<Value>, ApiError> {
+    let rendered = state.find(&id).ok_or_else(|| unknown_job(&id))?;
+    Ok(Json(job_json(&id, &rendered)))
+}
+
+async fn job_image(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Result<Response, ApiError> {
+    let rendered = state.find(&id).ok_or_else(|| unknown_job(&id))?;
+    Ok(image_response(&id, &rendered))
+}
+
+fn unknown_job(id: &str) -> ApiError {
+    ApiError(JobError::new(ErrorCode::NotFound, format!("no finished job `{id}` is kept on this server")))
+}

@@ -1,0 +1,66 @@
+//! The timing breakdown of one job: wall-clock time per phase always, GPU time per phase
+//! where the adapter has timestamp queries, and the warm-state facts (pipelines compiled,
+//! scene uploaded) that show whether a job paid for set-up. Sent as JSON and as a
+//! `Server-Timing` header.
+
+use std::time::Instant;
+
+use serde::Serialize;
+
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct Phase {
+    pub name: &'static str,
+    /// Wall-clock milliseconds on the host, GPU work included (each phase waits for it).
+    pub cpu_ms: f64,
+    /// GPU milliseconds between the phase's first and last timestamp, where supported.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub gpu_ms: Option<f64>,
+}
+
+#[derive(Debug, Clone, Default, Serialize, PartialEq)]
+pub struct Timings {
+    pub phases: Vec<Phase>,
+    pub total_ms: f64,
+    /// Pipelines compiled for this job; 0 once the daemon is warm.
+    pub pipelines_compiled: u64,
+    /// Whether the scene came from the cache (no load, no upload).
+    pub scene_cached: bool,
+    /// Bytes uploaded to the GPU for the scene by this job; 0 when cached.
+    pub scene_upload_bytes: u64,
+}
+
+impl Timings {
+    /// Records that phase `name` ran from `start` until now and returns now.
+    pub fn phase(&mut self, name: &'static str, start: Instant) -> Instant {
+        let now = Instant::now();
+        self.phases.push(Phase { name, cpu_ms: (now - start).as_secs_f64() * 1e3, gpu_ms: None });
+        now
+    }
+
+    /// Adds GPU time measured for a phase (summed when a phase has several passes).
+    pub fn add_gpu(&mut self, name: &str, ms: f64) {
+        if let Some(phase) = self.phases.iter_mut().find(|p| p.name == name) {
+            *phase.gpu_ms.get_or_insert(0.0) += ms;
+        }
+    }
+
+    pub fn get(&self, name: &str) -> Option<&Phase> {
+        self.phases.iter().find(|p| p.name == name)
+    }
+
+    /// The `Server-Timing` header value (W3C Server Timing): one entry per phase with its
+    /// wall time, a `gpu_<phase>` entry where GPU time was measured, and `total`.
+    pub fn server_timing(&self) -> String {
+        let mut parts: Vec<String> = Vec::new();
+        for phase in &self.phases {
+            parts.push(format!("{};dur={:.3}", phase.name, phase.cpu_ms));
+        }
+        for phase in &self.phases {
+            if let Some(gpu) = phase.gpu_ms {
+                parts.push(format!("gpu_{};dur={:.3}", phase.name, gpu));
+            }
+        }
+        parts.push(format!("total;dur={:.3}", self.total_ms));
+        parts.join(", ")
+    }
+}
