@@ -111,23 +111,28 @@ impl Engine {
     /// Validates, renders and encodes one job.
     pub fn render(&self, job: &Job) -> JobResult<Rendered> {
         let started = Instant::now();
-        job.validate(&self.limits)?;
-        let mut timings = Timings::default();
-        let frame = {
-            let mut state = self.state.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
-            let start = Instant::now();
-            let scene = self.scene(&mut state, &job.scene, &mut timings)?;
-            let image_ref = job.light.image.clone().unwrap_or_else(|| scene.defaults.light_image.clone());
-            let light_image = self.light_image(&mut state, &image_ref)?;
-            let spec = FrameSpec::resolve(job, &scene, &light_image)?;
-            timings.phase("scene", start);
-            self.render_frame(&mut state, &scene, &spec, &mut timings)?
-        };
+        let (frame, mut timings) = self.render_raw(job)?;
         let start = Instant::now();
         let bytes = crate::output::encode(&frame, job.output.format, job.output.exposure)?;
         timings.phase("encode", start);
         timings.total_ms = started.elapsed().as_secs_f64() * 1e3;
         Ok(Rendered { bytes, format: job.output.format, width: frame.width, height: frame.height, timings, counters: frame.counters })
+    }
+
+    /// Validates and renders one job, returning the linear float frame (what `encode`
+    /// turns into PNG or EXR, and what quality measurements compare).
+    pub fn render_raw(&self, job: &Job) -> JobResult<(FrameOutput, Timings)> {
+        job.validate(&self.limits)?;
+        let mut timings = Timings::default();
+        let mut state = self.state.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+        let start = Instant::now();
+        let scene = self.scene(&mut state, &job.scene, &mut timings)?;
+        let image_ref = job.light.image.clone().unwrap_or_else(|| scene.defaults.light_image.clone());
+        let light_image = self.light_image(&mut state, &image_ref)?;
+        let spec = FrameSpec::resolve(job, &scene, &light_image)?;
+        timings.phase("scene", start);
+        let frame = self.render_frame(&mut state, &scene, &spec, &mut timings)?;
+        Ok((frame, timings))
     }
 
     fn render_frame(&self, state: &mut State, scene: &GpuScene, spec: &FrameSpec, timings: &mut Timings) -> JobResult<FrameOutput> {

@@ -141,7 +141,7 @@ fn columns_scene() -> Scene {
         b.add_mesh(id, &cuboid(Vec3::new(11.6, 0.35, 0.7)), Mat4::from_translation(Vec3::new(0.0, 3.175, row)), stone);
     }
     b.finish(|_, _| {
-        defaults(Vec3::new(2.0, 6.0, 13.0), Vec3::new(0.0, 1.0, 0.0), Vec3::new(-5.0, 7.0, 4.0), Vec3::new(1.0, 0.0, -1.0), Vec2::new(2.0, 1.2), 110.0)
+        defaults(Vec3::new(2.0, 6.0, 13.0), Vec3::new(0.0, 1.0, 0.0), Vec3::new(-8.0, 12.0, 6.0), Vec3::ZERO, Vec2::new(2.0, 1.2), 180.0)
     })
 }
 
@@ -177,7 +177,7 @@ fn terrain_scene(triangles: u64, seed: u32) -> Scene {
     let id = b.begin_object("terrain");
     b.add_mesh(id, &mesh, Mat4::IDENTITY, ground);
     b.finish(|_, _| {
-        defaults(Vec3::new(0.0, 14.0, 20.0), Vec3::new(0.0, 0.0, 0.0), Vec3::new(-10.0, 9.0, -6.0), Vec3::ZERO, Vec2::splat(2.5), 150.0)
+        defaults(Vec3::new(0.0, 14.0, 20.0), Vec3::new(0.0, 0.0, 0.0), Vec3::new(-14.0, 16.0, -8.0), Vec3::ZERO, Vec2::splat(3.0), 200.0)
     })
 }
 

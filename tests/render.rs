@@ -1,0 +1,283 @@
+//! Rendering on the real device (lavapipe in CI): golden images of `hard`, the light frame's
+//! orientation on the receiver, E0 against its CPU twin, glTF loading, and warm state.
+
+mod common;
+
+use std::io::Cursor;
+
+use base64::Engine as _;
+use glam::{Vec2, Vec3};
+use penumbra::job::{AssetRef, Job, Limits, OutputFormat};
+use penumbra::light::{light_cells, unshadowed_irradiance, AreaLight, LightImage};
+use serde_json::json;
+
+fn job(value: serde_json::Value) -> Job {
+    Job::from_json(value.to_string().as_bytes()).unwrap()
+}
+
+#[test]
+fn golden_torus_hard() {
+    let job = job(json!({"scene": {"builtin": "torus"}, "output": {"width": 256, "height": 192}}));
+    let rendered = common::engine().render(&job).unwrap();
+    common::check_golden("torus-hard", &rendered.bytes, 0.01, 0.1);
+}
+
+#[test]
+fn golden_columns_hard() {
+    let job = job(json!({"scene": {"builtin": "columns"}, "output": {"width": 256, "height": 192}}));
+    let rendered = common::engine().render(&job).unwrap();
+    common::check_golden("columns-hard", &rendered.bytes, 0.01, 0.1);
+}
+
+/// A 4 m floor seen from straight above with image-up (−z) at the top of the output, lit by
+/// a low, wide light pointing down with `up = −z`. By DESIGN.md §1, r = cross(u, n) = −x, so
+/// image column 0 lies on +x (the right of the output) and row 0 on −z (the top).
+fn overhead_job(image: &str) -> Job {
+    job(json!({
+        "scene": {"builtin": "torus"},
+        "camera": {"eye": [0, 30, 0], "target": [0, 0, 0], "up": [0, 0, -1], "fov_y_deg": 7.6},
+        "light": {"center": [0, 0.4, 0], "direction": [0, -1, 0], "up": [0, 0, -1], "size": [3, 3],
+                  "intensity": 5, "image": {"builtin": image}},
+        "output": {"width": 64, "height": 64, "format": "exr"}
+    }))
+}
+
+fn mean_rgb(color: &[[f32; 4]], width: usize, xs: std::ops::Range<usize>, ys: std::ops::Range<usize>) -> Vec3 {
+    let mut sum = Vec3::ZERO;
+    let mut n = 0.0;
+    for y in ys {
+        for x in xs.clone() {
+            let c = color[y * width + x];
+            sum += Vec3::new(c[0], c[1], c[2]);
+            n += 1.0;
+        }
+    }
+    sum / n
+}
+
+#[test]
+fn light_image_lands_the_documented_way_round() {
+    // The torus hides the centre; measure the strips along the image edges.
+    let engine = common::engine();
+    let (frame, _) = engine.render_raw(&overhead_job("stripes")).unwrap();
+    let right = mean_rgb(&frame.color, 64, 58..64, 20..44);
+    let left = mean_rgb(&frame.color, 64, 0..6, 20..44);
+    // Column 0 (red, then yellow) is on +x, the right of the output; the last columns
+    // (blue, magenta) on the left.
+    assert!(right.x > 2.0 * right.z, "right edge should be red/yellow: {right}");
+    assert!(left.z > left.x, "left edge should be blue/magenta: {left}");
+    assert!(left.z / left.x > 4.0 * right.z / right.x, "blue/red: left {left}, right {right}");
+
+    // `flame` is yellow-white at row 0 (top, +u = −z = top of the output) and deep red at the
+    // bottom: the green/red ratio falls from the top edge to the bottom edge.
+    let (frame, _) = engine.render_raw(&overhead_job("flame")).unwrap();
+    let top = mean_rgb(&frame.color, 64, 24..40, 0..6);
+    let bottom = mean_rgb(&frame.color, 64, 24..40, 58..64);
+    assert!(top.y / top.x > bottom.y / bottom.x + 0.1, "top {top} bottom {bottom}");
+}
+
+#[test]
+fn e0_on_the_gpu_matches_its_cpu_twin() {
+    // Pixel (16, 16) of a 33×33 view looking straight down at (3, 0, 3) sees exactly that
+    // point of the floor (albedo 0.7), lit by a tilted coloured light and unshadowed.
+    let light_json = json!({"center": [2, 1.5, 2.5], "direction": [0.3, -1, 0.2], "up": [1, 0, 0],
+                            "size": [1.5, 0.7], "intensity": 10, "image": {"builtin": "stripes"}});
+    let job = job(json!({
+        "scene": {"builtin": "torus"},
+        "camera": {"eye": [3, 6, 3], "target": [3, 0, 3], "up": [0, 0, -1], "fov_y_deg": 20},
+        "light": light_json,
+        "output": {"width": 33, "height": 33, "format": "exr"}
+    }));
+    let (frame, _) = common::engine().render_raw(&job).unwrap();
+    let light = AreaLight::new(Vec3::new(2.0, 1.5, 2.5), Vec3::new(0.3, -1.0, 0.2), Vec3::X, Vec2::new(1.5, 0.7), 10.0).unwrap();
+    let cells = light_cells(&light, &LightImage::builtin("stripes", &Default::default(), "light.image").unwrap());
+    let expected = unshadowed_irradiance(&light, &cells, Vec3::new(3.0, 0.0, 3.0), Vec3::Y) * 0.7 / std::f32::consts::PI;
+    let got = frame.color[16 * 33 + 16];
+    for k in 0..3 {
+        let rel = (got[k] - expected[k]).abs() / expected[k].max(1e-6);
+        assert!(rel < 2e-3, "channel {k}: GPU {} vs CPU {}", got[k], expected[k]);
+    }
+    let visibility = frame.visibility.as_ref().unwrap()[16 * 33 + 16];
+    assert_eq!(visibility, [1.0, 1.0, 1.0]);
+}
+
+#[test]
+fn second_identical_job_compiles_and_uploads_nothing() {
+    let engine = common::engine();
+    let job = job(json!({"scene": {"builtin": "crowd"}, "output": {"width": 32, "height": 32}}));
+    engine.render(&job).unwrap();
+    let warm = engine.render(&job).unwrap();
+    assert_eq!(warm.timings.pipelines_compiled, 0, "{:?}", warm.timings);
+    assert!(warm.timings.scene_cached);
+    assert_eq!(warm.timings.scene_upload_bytes, 0);
+    for phase in ["scene", "shadow_map", "gbuffer", "e0", "method", "composite", "readback", "encode"] {
+        assert!(warm.timings.get(phase).is_some(), "missing phase {phase}");
+    }
+}
+
+#[test]
+fn hard_shadow_is_binary_and_present() {
+    let job = job(json!({"scene": {"builtin": "torus"}, "output": {"width": 96, "height": 96, "format": "exr"}}));
+    let (frame, _) = common::engine().render_raw(&job).unwrap();
+    let visibility = frame.visibility.unwrap();
+    assert!(visibility.iter().all(|v| v[0] == 0.0 || v[0] == 1.0));
+    assert!(visibility.iter().all(|v| v[0] == v[1] && v[1] == v[2]), "hard is a gray method");
+    let shadowed = visibility.iter().filter(|v| v[0] == 0.0).count();
+    assert!(shadowed > 200 && shadowed < 96 * 96 / 2, "{shadowed} shadowed pixels");
+}
+
+// --- glTF -----------------------------------------------------------------------------
+
+/// A small glTF made here: node 0 (no mesh, translated up 0.5) has child node 2 (a textured
+/// triangle, further up 0.5); node 1 is a red floor quad. Mesh nodes are 1 and 2, so the floor
+/// is object 0 and the triangle object 1.
+fn test_gltf() -> (serde_json::Value, Vec<u8>) {
+    let mut bin: Vec<u8> = Vec::new();
+    let mut push = |bytes: &[u8]| {
+        let offset = bin.len();
+        bin.extend_from_slice(bytes);
+        while bin.len() % 4 != 0 {
+            bin.push(0);
+        }
+        (offset, bytes.len())
+    };
+    let f32s = |v: &[f32]| v.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<u8>>();
+    let quad_pos = push(&f32s(&[-2., 0., -2., 2., 0., -2., 2., 0., 2., -2., 0., 2.]));
+    let quad_nrm = push(&f32s(&[0., 1., 0., 0., 1., 0., 0., 1., 0., 0., 1., 0.]));
+    let quad_idx = push(&[0u16, 2, 1, 0, 3, 2].iter().flat_map(|i| i.to_le_bytes()).collect::<Vec<u8>>());
+    let tri_pos = push(&f32s(&[-0.4, 0., -0.4, 0.4, 0., -0.4, 0., 0., 0.4]));
+    let tri_uv = push(&f32s(&[0., 0., 1., 0., 0.5, 1.]));
+    let mut png = Cursor::new(Vec::new());
+    image::RgbaImage::from_pixel(2, 2, image::Rgba([0, 255, 0, 255])).write_to(&mut png, image::ImageFormat::Png).unwrap();
+    let png = push(png.get_ref());
+    let views: Vec<serde_json::Value> =
+        [quad_pos, quad_nrm, quad_idx, tri_pos, tri_uv, png].iter().map(|(o, l)| json!({"buffer": 0, "byteOffset": o, "byteLength": l})).collect();
+    let gltf = json!({
+        "asset": {"version": "2.0"},
+        "scene": 0,
+        "scenes": [{"nodes": [0, 1]}],
+        "nodes": [
+            {"name": "group", "translation": [0, 0.5, 0], "children": [2]},
+            {"name": "floor", "mesh": 0},
+            {"name": "leaf", "mesh": 1, "translation": [-0.8, 0.5, -0.8]}
+        ],
+        "meshes": [
+            {"primitives": [{"attributes": {"POSITION": 0, "NORMAL": 1}, "indices": 2, "material": 0}]},
+            {"primitives": [{"attributes": {"POSITION": 3, "TEXCOORD_0": 4}, "material": 1}]}
+        ],
+        "materials": [
+            {"pbrMetallicRoughness": {"baseColorFactor": [0.8, 0.1, 0.1, 1.0]}},
+            {"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}
+        ],
+        "textures": [{"source": 0}],
+        "images": [{"bufferView": 5, "mimeType": "image/png"}],
+        "accessors": [
+            {"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3", "min": [-2, 0, -2], "max": [2, 0, 2]},
+            {"bufferView": 1, "componentType": 5126, "count": 4, "type": "VEC3"},
+            {"bufferView": 2, "componentType": 5123, "count": 6, "type": "SCALAR"},
+            {"bufferView": 3, "componentType": 5126, "count": 3, "type": "VEC3", "min": [-0.4, 0, -0.4], "max": [0.4, 0, 0.4]},
+            {"bufferView": 4, "componentType": 5126, "count": 3, "type": "VEC2"}
+        ],
+        "bufferViews": views,
+        "buffers": [{"byteLength": bin.len()}]
+    });
+    (gltf, bin)
+}
+
+fn as_gltf_with_data_uri() -> Vec<u8> {
+    let (mut gltf, bin) = test_gltf();
+    gltf["buffers"][0]["uri"] = json!(format!("data:application/octet-stream;base64,{}", base64::engine::general_purpose::STANDARD.encode(&bin)));
+    serde_json::to_vec(&gltf).unwrap()
+}
+
+fn as_glb() -> Vec<u8> {
+    let (gltf, mut bin) = test_gltf();
+    let mut json = serde_json::to_vec(&gltf).unwrap();
+    while json.len() % 4 != 0 {
+        json.push(b' ');
+    }
+    while bin.len() % 4 != 0 {
+        bin.push(0);
+    }
+    let total = 12 + 8 + json.len() + 8 + bin.len();
+    let mut glb = Vec::new();
+    glb.extend_from_slice(b"glTF");
+    glb.extend_from_slice(&2u32.to_le_bytes());
+    glb.extend_from_slice(&(total as u32).to_le_bytes());
+    glb.extend_from_slice(&(json.len() as u32).to_le_bytes());
+    glb.extend_from_slice(b"JSON");
+    glb.extend_from_slice(&json);
+    glb.extend_from_slice(&(bin.len() as u32).to_le_bytes());
+    glb.extend_from_slice(b"BIN\0");
+    glb.extend_from_slice(&bin);
+    glb
+}
+
+#[test]
+fn gltf_objects_ids_and_albedo() {
+    for (kind, bytes) in [("gltf", as_gltf_with_data_uri()), ("glb", as_glb())] {
+        let scene = penumbra::scene::gltf::load(&bytes, &Limits::default(), "scene").unwrap_or_else(|e| panic!("{kind}: {e}"));
+        assert_eq!(scene.objects, vec!["floor".to_owned(), "leaf".to_owned()], "{kind}");
+        assert_eq!(scene.triangle_count(), 3, "{kind}");
+        let leaf: Vec<_> = scene.vertices.iter().filter(|v| v.object_id == 1).collect();
+        assert_eq!(leaf.len(), 3, "{kind}");
+        // Parent and child translations compose: 0.5 + 0.5.
+        assert!(leaf.iter().all(|v| (v.position[1] - 1.0).abs() < 1e-6), "{kind}");
+        assert!(scene.vertices.iter().filter(|v| v.object_id == 0).all(|v| v.position[1] == 0.0));
+        let floor_material = &scene.materials[scene.vertices.iter().find(|v| v.object_id == 0).unwrap().material as usize];
+        assert_eq!(floor_material.base_color, [0.8, 0.1, 0.1, 1.0]);
+        let leaf_material = &scene.materials[leaf[0].material as usize];
+        let texture = &scene.textures[leaf_material.texture.unwrap()];
+        assert_eq!((texture.width, texture.height), (2, 2));
+        assert_eq!(&texture.rgba8[..4], &[0, 255, 0, 255]);
+    }
+}
+
+#[test]
+fn gltf_renders_with_its_albedo() {
+    let dir = std::env::temp_dir().join(format!("penumbra-gltf-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("scene.glb");
+    std::fs::write(&path, as_glb()).unwrap();
+    let mut job = job(json!({
+        "scene": {"builtin": "torus"},
+        "camera": {"eye": [0, 8, 0.001], "target": [0, 0, 0], "up": [0, 0, -1], "fov_y_deg": 30},
+        "light": {"center": [1.5, 3, 1.5], "direction": [0, -1, 0], "up": [0, 0, -1], "size": [0.5, 0.5], "intensity": 40},
+        "output": {"width": 64, "height": 64, "format": "exr"}
+    }));
+    job.scene = AssetRef::Path(path);
+    job.output.format = OutputFormat::Exr;
+    let (frame, _) = common::engine().render_raw(&job).unwrap();
+    std::fs::remove_dir_all(&dir).ok();
+    // The leaf (green texture) is centred at (−0.8, 1, −0.8): up and left of the centre.
+    // The red floor at (1, 0, 1), down and right, is lit and not under the leaf.
+    let camera = penumbra::render::Camera { eye: Vec3::new(0.0, 8.0, 0.001), target: Vec3::ZERO, up: -Vec3::Z, fov_y_deg: 30.0, near: 1.0, far: 20.0 };
+    let pixel = |p: Vec3| {
+        let clip = camera.view_proj(1.0) * p.extend(1.0);
+        let (x, y) = (clip.x / clip.w, clip.y / clip.w);
+        (((x * 0.5 + 0.5) * 64.0) as usize, ((0.5 - y * 0.5) * 64.0) as usize)
+    };
+    let (lx, ly) = pixel(Vec3::new(-0.8, 1.0, -0.75));
+    let (fx, fy) = pixel(Vec3::new(1.0, 0.0, 1.0));
+    let leaf = frame.color[ly * 64 + lx];
+    let floor = frame.color[fy * 64 + fx];
+    assert!(leaf[1] > 10.0 * leaf[0].max(1e-4) && leaf[1] > 10.0 * leaf[2].max(1e-4), "leaf pixel should be green: {leaf:?}");
+    assert!((floor[1] / floor[0] - 0.125).abs() < 0.01 && (floor[2] / floor[0] - 0.125).abs() < 0.01, "floor albedo ratio 0.8 : 0.1 : 0.1, got {floor:?}");
+    // Background outside the 4 m floor is transparent.
+    assert_eq!(frame.color[0][3], 0.0);
+}
+
+#[test]
+fn gltf_refuses_external_uris_and_garbage() {
+    let (mut gltf, _) = test_gltf();
+    gltf["buffers"][0]["uri"] = json!("/etc/passwd");
+    let err = penumbra::scene::gltf::load(&serde_json::to_vec(&gltf).unwrap(), &Limits::default(), "scene").unwrap_err();
+    assert_eq!(err.code, penumbra::error::ErrorCode::InvalidAsset);
+    assert!(!err.message.contains("root:"), "never echo file contents");
+    for garbage in [&b"glTF\x02\x00\x00\x00\xff\xff\xff\xff"[..], b"{}", b"\x00\x01\x02"] {
+        assert!(penumbra::scene::gltf::load(garbage, &Limits::default(), "scene").is_err());
+    }
+    let limits = Limits { max_triangles: 1, ..Limits::default() };
+    let err = penumbra::scene::gltf::load(&as_glb(), &limits, "scene").unwrap_err();
+    assert_eq!(err.code, penumbra::error::ErrorCode::LimitExceeded);
+}
