@@ -90,6 +90,11 @@ impl Engine {
         &self.gpu
     }
 
+    /// The shared device, for another engine on the same GPU (tests, several configurations).
+    pub fn gpu_arc(&self) -> Arc<GpuContext> {
+        self.gpu.clone()
+    }
+
     pub fn limits(&self) -> &Limits {
         &self.limits
     }

@@ -237,6 +237,10 @@ impl Job {
 
     /// Parses a job from JSON bytes; type errors name the field by its path.
     pub fn from_json(bytes: &[u8]) -> JobResult<Self> {
+        // serde would accept a struct written as an array of its fields; a job is an object.
+        if bytes.iter().find(|b| !b.is_ascii_whitespace()) != Some(&b'{') {
+            return Err(JobError::new(ErrorCode::InvalidJson, "a job is a JSON object"));
+        }
         let de = &mut serde_json::Deserializer::from_slice(bytes);
         serde_path_to_error::deserialize(de).map_err(|err| {
             let path = err.path().to_string();
@@ -249,7 +253,8 @@ impl Job {
                 ErrorCode::InvalidField
             };
             let mut error = JobError::new(code, inner.to_string());
-            if path != "." && !path.is_empty() {
+            // A syntax error has a position, not a field: the path is where parsing stopped.
+            if code != ErrorCode::InvalidJson && path != "." && !path.is_empty() {
                 error.field = Some(path);
             }
             error
@@ -349,7 +354,7 @@ mod tests {
         let err = Job::from_json(br#"{"scene": {"builtin": "torus"}, "output": {"widht": 3}}"#)
             .unwrap_err();
         assert_eq!(err.code, ErrorCode::UnknownField);
-        assert_eq!(err.field.as_deref(), Some("output"));
+        assert_eq!(err.field.as_deref(), Some("output.widht"));
 
         let err = Job::from_json(br#"{"scene": {"builtin": "torus", "id": "x"}}"#).unwrap_err();
         assert_eq!(err.field.as_deref(), Some("scene"));

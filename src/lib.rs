@@ -17,3 +17,24 @@ pub mod render;
 pub mod scene;
 pub mod server;
 pub mod timing;
+
+#[cfg(test)]
+mod tidy {
+    /// Every Rust module opens with a `//!` doc saying what it is for (rust-analyzer's tidy).
+    #[test]
+    fn every_module_has_a_doc_comment() {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+        let mut stack = vec![root.join("src"), root.join("tests")];
+        while let Some(dir) = stack.pop() {
+            for entry in std::fs::read_dir(dir).unwrap() {
+                let path = entry.unwrap().path();
+                if path.is_dir() {
+                    stack.push(path);
+                } else if path.extension().is_some_and(|e| e == "rs") {
+                    let text = std::fs::read_to_string(&path).unwrap();
+                    assert!(text.starts_with("//!"), "{} lacks a `//!` module doc", path.display());
+                }
+            }
+        }
+    }
+}

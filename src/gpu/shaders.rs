@@ -57,3 +57,37 @@ pub fn module(device: &wgpu::Device, name: &str) -> wgpu::ShaderModule {
         source: wgpu::ShaderSource::Wgsl(compose(name).into()),
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_shader_parses_and_validates_with_naga() {
+        for name in entry_shaders() {
+            let source = compose(name);
+            let module = naga::front::wgsl::parse_str(&source).unwrap_or_else(|e| panic!("{name}:\n{}", e.emit_to_string(&source)));
+            naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::default())
+                .validate(&module)
+                .unwrap_or_else(|e| panic!("{name}: {e:?}"));
+        }
+    }
+
+    #[test]
+    fn every_wgsl_file_is_listed_and_documented() {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("shaders");
+        let mut stack = vec![root.clone()];
+        while let Some(dir) = stack.pop() {
+            for entry in std::fs::read_dir(dir).unwrap() {
+                let path = entry.unwrap().path();
+                if path.is_dir() {
+                    stack.push(path);
+                } else if path.extension().is_some_and(|e| e == "wgsl") {
+                    let name = path.strip_prefix(&root).unwrap().to_string_lossy().replace('\\', "/");
+                    let text = source(&name).unwrap_or_else(|| panic!("{name} is not listed in SOURCES"));
+                    assert!(text.starts_with("// "), "{name} must open with a comment saying what it is for");
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,221 @@
+//! The service over real HTTP: the real router on an ephemeral port, spoken to by a real
+//! client. PNG and EXR answers, Server-Timing, JSON answers with image links, documented 4xx
+//! errors for bad input while other jobs keep being served; and the CLI binary.
+
+mod common;
+
+use std::sync::Arc;
+
+use penumbra::engine::{Engine, PathPolicy};
+use penumbra::job::Limits;
+use penumbra::server::{app, AppState};
+use reqwest::StatusCode;
+use serde_json::{json, Value};
+
+/// Starts the real server on 127.0.0.1:0 with a small body limit and a scene directory.
+async fn start() -> (String, tempdir::Dir) {
+    let scene_dir = tempdir::Dir::new();
+    std::fs::write(scene_dir.path().join("inside.png"), b"not really a png").unwrap();
+    let gpu = common::engine().gpu_arc();
+    let limits = Limits { max_body_bytes: 64 * 1024, max_output_dim: 2048, ..Limits::default() };
+    let engine = Arc::new(Engine::new(gpu, limits, PathPolicy::Under(scene_dir.path().to_path_buf())));
+    let state = Arc::new(AppState::new(engine.clone(), 8));
+    let warm = state.clone();
+    tokio::task::spawn_blocking(move || {
+        warm_up(&engine);
+        warm.set_ready();
+    })
+    .await
+    .unwrap();
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let base = format!("http://{}", listener.local_addr().unwrap());
+    tokio::spawn(async move { axum::serve(listener, app(state)).await.unwrap() });
+    (base, scene_dir)
+}
+
+fn warm_up(engine: &Engine) {
+    engine.warm_up().expect("warm-up renders");
+}
+
+/// A temporary directory removed on drop (no extra crate for one test).
+mod tempdir {
+    pub struct Dir(std::path::PathBuf);
+    impl Dir {
+        pub fn new() -> Self {
+            static COUNTER: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
+            let n = COUNTER.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            let path = std::env::temp_dir().join(format!("penumbra-api-{}-{n}", std::process::id()));
+            std::fs::create_dir_all(&path).unwrap();
+            Self(path)
+        }
+        pub fn path(&self) -> &std::path::Path {
+            &self.0
+        }
+    }
+    impl Drop for Dir {
+        fn drop(&mut self) {
+            std::fs::remove_dir_all(&self.0).ok();
+        }
+    }
+}
+
+fn small_job(format: &str) -> Value {
+    json!({
+        "scene": {"builtin": "torus"},
+        "light": {"image": {"builtin": "stripes"}},
+        "output": {"width": 96, "height": 64, "format": format}
+    })
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn health_methods_and_renders() {
+    let (base, _dir) = start().await;
+    let client = reqwest::Client::new();
+
+    let health: Value = client.get(format!("{base}/healthz")).send().await.unwrap().json().await.unwrap();
+    assert_eq!(health["status"], "ok");
+    let ready = client.get(format!("{base}/readyz")).send().await.unwrap();
+    assert_eq!(ready.status(), StatusCode::OK);
+
+    let methods: Value = client.get(format!("{base}/v1/methods")).send().await.unwrap().json().await.unwrap();
+    let hard = methods["methods"].as_array().unwrap().iter().find(|m| m["name"] == "hard").expect("hard listed");
+    assert!(hard["params"].as_array().unwrap().iter().any(|p| p["name"] == "bias_texels" && p["default"].is_number()));
+    assert!(methods["scenes"].as_array().unwrap().contains(&json!("terrain")));
+
+    // PNG with a Server-Timing header naming every phase.
+    let response = client.post(format!("{base}/v1/render")).json(&small_job("png")).send().await.unwrap();
+    assert_eq!(response.status(), StatusCode::OK);
+    assert_eq!(response.headers()["content-type"], "image/png");
+    let timing = response.headers()["server-timing"].to_str().unwrap().to_owned();
+    for phase in ["scene", "shadow_map", "gbuffer", "e0", "method", "composite", "readback", "encode", "total"] {
+        assert!(timing.contains(&format!("{phase};dur=")), "Server-Timing lacks {phase}: {timing}");
+    }
+    let png = image::load_from_memory(&response.bytes().await.unwrap()).unwrap();
+    assert_eq!((png.width(), png.height()), (96, 64));
+
+    // EXR with colour, visibility and depth channels.
+    let response = client.post(format!("{base}/v1/render")).json(&small_job("exr")).send().await.unwrap();
+    assert_eq!(response.status(), StatusCode::OK);
+    assert_eq!(response.headers()["content-type"], "image/x-exr");
+    let (w, h, channels) = common::decode_exr(&response.bytes().await.unwrap());
+    assert_eq!((w, h), (96, 64));
+    for name in ["R", "G", "B", "A", "visibility.R", "visibility.G", "visibility.B", "depth"] {
+        assert_eq!(channels.get(name).map(Vec::len), Some(96 * 64), "channel {name}");
+    }
+    let depth = &channels["depth"];
+    assert!(depth.iter().any(|d| d.is_infinite()) && depth.iter().any(|d| d.is_finite() && *d > 0.0));
+    assert!(channels["visibility.R"].iter().any(|v| *v == 0.0), "the torus casts a shadow");
+
+    // JSON answer: timings of a warm job (nothing compiled, nothing uploaded) and an image link.
+    let answer: Value = client
+        .post(format!("{base}/v1/render"))
+        .header("accept", "application/json")
+        .json(&small_job("png"))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(answer["status"], "succeeded");
+    assert_eq!(answer["timings"]["pipelines_compiled"], 0);
+    assert_eq!(answer["timings"]["scene_cached"], true);
+    assert_eq!(answer["timings"]["scene_upload_bytes"], 0);
+    let link = answer["image"].as_str().unwrap();
+    let image = client.get(format!("{base}{link}")).send().await.unwrap();
+    assert_eq!(image.status(), StatusCode::OK);
+    assert_eq!(image.bytes().await.unwrap().len() as u64, answer["bytes"].as_u64().unwrap());
+    let record: Value = client.get(format!("{base}/v1/jobs/{}", answer["id"].as_str().unwrap())).send().await.unwrap().json().await.unwrap();
+    assert_eq!(record["id"], answer["id"]);
+}
+
+/// Sends `body` and checks the documented error: status, code and field.
+async fn expect_error(client: &reqwest::Client, base: &str, body: Vec<u8>, status: StatusCode, code: &str, field: Option<&str>) {
+    let response = client.post(format!("{base}/v1/render")).header("content-type", "application/json").body(body.clone()).send().await.unwrap();
+    assert_eq!(response.status(), status, "body {}", String::from_utf8_lossy(&body[..body.len().min(200)]));
+    let answer: Value = response.json().await.unwrap();
+    assert_eq!(answer["error"]["code"], code, "{answer}");
+    assert!(answer["error"]["message"].as_str().is_some_and(|m| !m.is_empty()));
+    match field {
+        Some(field) => assert_eq!(answer["error"]["field"], field, "{answer}"),
+        None => assert!(answer["error"].get("field").is_none(), "{answer}"),
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn bad_input_gets_documented_errors_and_the_daemon_keeps_serving() {
+    let (base, _dir) = start().await;
+    let client = reqwest::Client::new();
+    let with = |patch: Value| {
+        let mut job = small_job("png");
+        for (k, v) in patch.as_object().unwrap() {
+            job[k] = v.clone();
+        }
+        serde_json::to_vec(&job).unwrap()
+    };
+    use StatusCode as S;
+    expect_error(&client, &base, b"{\"scene\": ".to_vec(), S::BAD_REQUEST, "invalid_json", None).await;
+    expect_error(&client, &base, b"[1, 2]".to_vec(), S::BAD_REQUEST, "invalid_json", None).await;
+    expect_error(&client, &base, with(json!({"method": {"name": "magic"}})), S::UNPROCESSABLE_ENTITY, "unknown_method", Some("method.name")).await;
+    expect_error(&client, &base, with(json!({"method": {"name": "hard", "rounds": 6}})), S::UNPROCESSABLE_ENTITY, "unknown_field", Some("method.rounds")).await;
+    expect_error(&client, &base, with(json!({"method": {"name": "hard", "bias_texels": -1}})), S::UNPROCESSABLE_ENTITY, "invalid_field", Some("method.bias_texels")).await;
+    expect_error(&client, &base, with(json!({"scene": {"builtin": "teapot"}})), S::UNPROCESSABLE_ENTITY, "unknown_builtin", Some("scene.builtin")).await;
+    expect_error(&client, &base, with(json!({"scene": {"id": "ab12"}})), S::NOT_FOUND, "not_uploaded", Some("scene.id")).await;
+    expect_error(&client, &base, with(json!({"scene": {"path": "../../etc/passwd"}})), S::FORBIDDEN, "path_not_allowed", Some("scene.path")).await;
+    expect_error(&client, &base, with(json!({"light": {"image": {"path": "inside.png"}}})), S::UNPROCESSABLE_ENTITY, "invalid_asset", Some("light.image")).await;
+    expect_error(&client, &base, with(json!({"light": {"image": {"builtin": "moon"}}})), S::UNPROCESSABLE_ENTITY, "unknown_builtin", Some("light.image.builtin")).await;
+    expect_error(&client, &base, with(json!({"output": {"width": 0, "height": 8}})), S::UNPROCESSABLE_ENTITY, "invalid_field", Some("output.width")).await;
+    expect_error(&client, &base, with(json!({"output": {"width": 4096, "height": 8}})), S::UNPROCESSABLE_ENTITY, "limit_exceeded", Some("output.width")).await;
+    expect_error(&client, &base, with(json!({"output": {"format": "gif"}})), S::UNPROCESSABLE_ENTITY, "invalid_field", Some("output.format")).await;
+    expect_error(&client, &base, with(json!({"output": {"width": -3}})), S::UNPROCESSABLE_ENTITY, "invalid_field", Some("output.width")).await;
+    expect_error(&client, &base, with(json!({"shadow_map": {"resolution": 1_000_000}})), S::UNPROCESSABLE_ENTITY, "limit_exceeded", Some("shadow_map.resolution")).await;
+    expect_error(&client, &base, with(json!({"camera": {"eye": [0, 1]}})), S::UNPROCESSABLE_ENTITY, "invalid_field", Some("camera.eye")).await;
+    expect_error(&client, &base, with(json!({"camera": {"fov_y_deg": 180}})), S::UNPROCESSABLE_ENTITY, "invalid_field", Some("camera.fov_y_deg")).await;
+    expect_error(&client, &base, with(json!({"camera": {"eye": [0, 0, 0], "target": [0, 0, 0]}})), S::UNPROCESSABLE_ENTITY, "invalid_field", Some("camera.target")).await;
+    expect_error(&client, &base, with(json!({"light": {"direction": [0, 0, 0]}})), S::UNPROCESSABLE_ENTITY, "invalid_field", Some("light.direction")).await;
+    expect_error(&client, &base, with(json!({"light": {"intensity": -1}})), S::UNPROCESSABLE_ENTITY, "invalid_field", Some("light.intensity")).await;
+    expect_error(&client, &base, with(json!({"light": {"size": [1, 0]}})), S::UNPROCESSABLE_ENTITY, "invalid_field", Some("light.size[1]")).await;
+    expect_error(&client, &base, with(json!({"colour": 1})), S::UNPROCESSABLE_ENTITY, "unknown_field", Some("colour")).await;
+    expect_error(&client, &base, vec![b' '; 100 * 1024], S::PAYLOAD_TOO_LARGE, "payload_too_large", None).await;
+
+    let missing = client.get(format!("{base}/v1/jobs/nope/image")).send().await.unwrap();
+    assert_eq!(missing.status(), StatusCode::NOT_FOUND);
+    let route = client.get(format!("{base}/v2/everything")).send().await.unwrap();
+    assert_eq!(route.status(), StatusCode::NOT_FOUND);
+    assert_eq!(route.json::<Value>().await.unwrap()["error"]["code"], "not_found");
+
+    // Still serving.
+    let response = client.post(format!("{base}/v1/render")).json(&small_job("png")).send().await.unwrap();
+    assert_eq!(response.status(), StatusCode::OK);
+}
+
+#[test]
+fn cli_renders_the_embedded_default_and_example_jobs() {
+    let dir = tempdir::Dir::new();
+    let exe = env!("CARGO_BIN_EXE_penumbra");
+    let png = dir.path().join("default.png");
+    let timings = dir.path().join("timings.json");
+    let status = std::process::Command::new(exe)
+        .args(["render", "-o", png.to_str().unwrap(), "--timings-json", timings.to_str().unwrap()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let image = image::open(&png).unwrap();
+    assert_eq!((image.width(), image.height()), (512, 512));
+    let report: Value = serde_json::from_slice(&std::fs::read(&timings).unwrap()).unwrap();
+    assert!(report["timings"]["phases"].as_array().unwrap().len() >= 8);
+
+    let example = concat!(env!("CARGO_MANIFEST_DIR"), "/api/examples/torus-stripes.json");
+    let exr = dir.path().join("example.exr");
+    let status = std::process::Command::new(exe).args(["render", example, "-o", exr.to_str().unwrap()]).status().unwrap();
+    assert!(status.success());
+    let (_, _, channels) = common::decode_exr(&std::fs::read(&exr).unwrap());
+    assert!(channels.contains_key("visibility.G"));
+
+    // A bad job: one clear line and a non-zero exit.
+    let bad = dir.path().join("bad.json");
+    std::fs::write(&bad, r#"{"scene": {"builtin": "torus"}, "method": {"name": "nope"}}"#).unwrap();
+    let output = std::process::Command::new(exe).args(["render", bad.to_str().unwrap(), "-o", png.to_str().unwrap()]).output().unwrap();
+    assert!(!output.status.success());
+    assert!(String::from_utf8_lossy(&output.stderr).contains("method.name"));
+}
