@@ -105,6 +105,13 @@ impl Engine {
         for method in crate::methods::REGISTRY {
             let mut job = Job::embedded_default();
             job.method.name = method.name().into();
+            // The cheapest valid setting of every integer parameter (sample counts,
+            // resolutions): warm-up is about compiling pipelines, not about the picture.
+            for spec in method.params() {
+                if let crate::methods::ParamKind::Integer { min, .. } = spec.kind {
+                    job.method.params.insert(spec.name.into(), min.into());
+                }
+            }
             job.output.width = 8;
             job.output.height = 8;
             job.shadow_map.resolution = 64;
@@ -115,8 +122,13 @@ impl Engine {
 
     /// Validates, renders and encodes one job.
     pub fn render(&self, job: &Job) -> JobResult<Rendered> {
+        self.render_observed(job, &|_, _| {})
+    }
+
+    /// `render`, reporting the progress of long methods as (steps done, steps in all).
+    pub fn render_observed(&self, job: &Job, progress: &dyn Fn(u64, u64)) -> JobResult<Rendered> {
         let started = Instant::now();
-        let (frame, mut timings) = self.render_raw(job)?;
+        let (frame, mut timings) = self.render_raw_observed(job, progress)?;
         let start = Instant::now();
         let bytes = crate::output::encode(&frame, job.output.format, job.output.exposure)?;
         timings.phase("encode", start);
@@ -127,6 +139,10 @@ impl Engine {
     /// Validates and renders one job, returning the linear float frame (what `encode`
     /// turns into PNG or EXR, and what quality measurements compare).
     pub fn render_raw(&self, job: &Job) -> JobResult<(FrameOutput, Timings)> {
+        self.render_raw_observed(job, &|_, _| {})
+    }
+
+    pub fn render_raw_observed(&self, job: &Job, progress: &dyn Fn(u64, u64)) -> JobResult<(FrameOutput, Timings)> {
         job.validate(&self.limits)?;
         let mut timings = Timings::default();
         let mut state = self.state.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
@@ -134,17 +150,17 @@ impl Engine {
         let scene = self.scene(&mut state, &job.scene, &mut timings)?;
         let image_ref = job.light.image.clone().unwrap_or_else(|| scene.defaults.light_image.clone());
         let light_image = self.light_image(&mut state, &image_ref)?;
-        let spec = FrameSpec::resolve(job, &scene, &light_image)?;
+        let spec = FrameSpec::resolve(job, &scene, light_image)?;
         timings.phase("scene", start);
-        let frame = self.render_frame(&mut state, &scene, &spec, &mut timings)?;
+        let frame = self.render_frame(&mut state, &scene, &spec, &mut timings, progress)?;
         Ok((frame, timings))
     }
 
-    fn render_frame(&self, state: &mut State, scene: &GpuScene, spec: &FrameSpec, timings: &mut Timings) -> JobResult<FrameOutput> {
+    fn render_frame(&self, state: &mut State, scene: &GpuScene, spec: &FrameSpec, timings: &mut Timings, progress: &dyn Fn(u64, u64)) -> JobResult<FrameOutput> {
         // Validation errors inside wgpu are bugs in penumbra, never the client's fault; they
         // fail this job alone with a generic message and are logged in full.
         let scope = self.gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let frame = state.renderer.render(scene, spec, timings);
+        let frame = state.renderer.render(scene, spec, timings, progress);
         if let Some(error) = pollster::block_on(scope.pop()) {
             tracing::error!(%error, "GPU validation error while rendering");
             return Err(JobError::internal("the renderer failed on the GPU"));

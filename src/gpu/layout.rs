@@ -14,6 +14,16 @@ pub fn uniform(binding: u32) -> Entry {
     }
 }
 
+/// A uniform buffer bound with a dynamic offset (one slot per draw or dispatch).
+pub fn uniform_dynamic(binding: u32) -> Entry {
+    Entry {
+        binding,
+        visibility: ALL,
+        ty: BindingType::Buffer { ty: wgpu::BufferBindingType::Uniform, has_dynamic_offset: true, min_binding_size: None },
+        count: None,
+    }
+}
+
 pub fn storage_read(binding: u32) -> Entry {
     Entry {
         binding,

@@ -15,11 +15,16 @@ pub const SOURCES: &[(&str, &str)] = &[
     ("e0.wgsl", include_str!("../../shaders/e0.wgsl")),
     ("composite.wgsl", include_str!("../../shaders/composite.wgsl")),
     ("methods/hard.wgsl", include_str!("../../shaders/methods/hard.wgsl")),
+    ("methods/reference/sample.wgsl", include_str!("../../shaders/methods/reference/sample.wgsl")),
+    ("methods/reference/sample_depth.wgsl", include_str!("../../shaders/methods/reference/sample_depth.wgsl")),
+    ("methods/reference/accumulate.wgsl", include_str!("../../shaders/methods/reference/accumulate.wgsl")),
+    ("methods/reference/resolve.wgsl", include_str!("../../shaders/methods/reference/resolve.wgsl")),
 ];
 
-/// Shaders that are pipelines' entry files (everything outside `common/`).
+/// Shaders that are pipelines' entry files: everything but the imported pieces
+/// (`common/` and a method's shared `sample.wgsl`-style includes, which declare no entry).
 pub fn entry_shaders() -> impl Iterator<Item = &'static str> {
-    SOURCES.iter().map(|(name, _)| *name).filter(|name| !name.starts_with("common/"))
+    SOURCES.iter().filter(|(_, text)| text.contains("@vertex") || text.contains("@compute")).map(|(name, _)| *name)
 }
 
 fn source(name: &str) -> Option<&'static str> {

@@ -4,6 +4,7 @@
 //! lists them; adding a method adds a module, its shaders and one line there.
 
 pub mod hard;
+pub mod reference;
 
 use std::collections::BTreeMap;
 
@@ -14,10 +15,11 @@ use crate::error::{ErrorCode, JobError, JobResult};
 use crate::gpu::pool::PipelinePool;
 use crate::gpu::timing::GpuTimer;
 use crate::gpu::GpuContext;
-use crate::render::FrameInputs;
+use crate::gpu::scene::GpuScene;
+use crate::render::{FrameInputs, FrameSpec};
 
 /// Every method penumbra serves, in the order `GET /v1/methods` lists them.
-pub static REGISTRY: &[&dyn ShadowMethod] = &[&hard::Hard];
+pub static REGISTRY: &[&dyn ShadowMethod] = &[&hard::Hard, &reference::Reference];
 
 /// Looks a method up by its job name.
 pub fn find(name: &str) -> JobResult<&'static dyn ShadowMethod> {
@@ -42,9 +44,24 @@ pub struct MethodContext<'a> {
     pub height: u32,
     pub encoder: &'a mut wgpu::CommandEncoder,
     pub timer: &'a mut GpuTimer,
+    /// The scene, for methods that draw it again (from light samples, as wedges …).
+    pub scene: &'a GpuScene,
+    /// The whole frame: light, light image, camera, sizes.
+    pub spec: &'a FrameSpec,
+    /// Reports progress of long methods: (steps done, steps in all).
+    pub progress: &'a dyn Fn(u64, u64),
 }
 
 impl MethodContext<'_> {
+    /// Submits what has been recorded so far and waits for it, leaving a fresh encoder:
+    /// for methods that run many passes and report progress between them.
+    pub fn flush(&mut self) {
+        let fresh = self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("MethodContext::encoder") });
+        let done = std::mem::replace(self.encoder, fresh);
+        self.gpu.queue.submit([done.finish()]);
+        self.gpu.wait_idle();
+    }
+
     /// Workgroup counts covering the output with 8×8 workgroups.
     pub fn dispatch_size(&self) -> (u32, u32) {
         (self.width.div_ceil(8), self.height.div_ceil(8))

@@ -2,6 +2,8 @@
 //! merged over the scene's defaults and checked, the light cut into cells for E0, the
 //! method with its validated parameters, and the light-space projection of the shadow map.
 
+use std::sync::Arc;
+
 use glam::{Mat4, Vec2, Vec3};
 
 use crate::error::{JobError, JobResult};
@@ -92,6 +94,7 @@ pub struct FrameSpec {
     pub camera: Camera,
     pub light: AreaLight,
     pub cells: Vec<LightCell>,
+    pub light_image: Arc<LightImage>,
     pub method: &'static dyn ShadowMethod,
     pub params: Params,
     pub shadow_resolution: u32,
@@ -103,7 +106,7 @@ pub struct FrameSpec {
 
 impl FrameSpec {
     /// Merges the job over the scene's defaults and checks what the merge produced.
-    pub fn resolve(job: &Job, scene: &GpuScene, light_image: &LightImage) -> JobResult<Self> {
+    pub fn resolve(job: &Job, scene: &GpuScene, light_image: Arc<LightImage>) -> JobResult<Self> {
         let d = &scene.defaults;
         let v3 = |v: Option<[f32; 3]>, default: Vec3| v.map(Vec3::from).unwrap_or(default);
         let camera = resolve_camera(
@@ -127,7 +130,8 @@ impl FrameSpec {
         let params = Params::parse(method.params(), &job.method.params)?;
         Ok(Self {
             camera,
-            cells: light_cells(&light, light_image),
+            cells: light_cells(&light, &light_image),
+            light_image,
             light,
             method,
             params,

@@ -213,7 +213,7 @@ impl Renderer {
     }
 
     /// Renders one frame and records its phases in `timings`.
-    pub fn render(&mut self, scene: &GpuScene, spec: &FrameSpec, timings: &mut Timings) -> FrameOutput {
+    pub fn render(&mut self, scene: &GpuScene, spec: &FrameSpec, timings: &mut Timings, progress: &dyn Fn(u64, u64)) -> FrameOutput {
         let gpu = self.gpu.clone();
         let device = &gpu.device;
         let compiled_before = self.pipelines.stats.created;
@@ -260,6 +260,9 @@ impl Renderer {
                 height: spec.height,
                 encoder: &mut enc,
                 timer: &mut self.timer,
+                scene,
+                spec,
+                progress,
             };
             spec.method.record(&mut ctx, &spec.params)
         };
