@@ -16,6 +16,7 @@ use crate::gpu::GpuContext;
 use crate::job::{AssetRef, Job, Limits, OutputFormat};
 use crate::light::LightImage;
 use crate::methods::Counters;
+use crate::quality::QualityReport;
 use crate::render::{FrameOutput, FrameSpec, Renderer};
 use crate::scene::{self, builtin};
 use crate::timing::Timings;
@@ -40,6 +41,8 @@ pub struct Rendered {
     pub height: u32,
     pub timings: Timings,
     pub counters: Counters,
+    /// Metrics against `reference`, when the job asked to `compare`.
+    pub quality: Option<QualityReport>,
 }
 
 /// Counts for `/v1/stats` and logs.
@@ -52,7 +55,12 @@ pub struct EngineStats {
     pub pipelines_compiled: u64,
     pub targets_created: u64,
     pub targets_reused: u64,
+    pub reference_cache_hits: u64,
+    pub reference_cache_misses: u64,
 }
+
+/// Reference frames kept for `compare` (each is a few MB of floats).
+const REFERENCE_CACHE_ENTRIES: usize = 8;
 
 /// Most scenes kept on the GPU at once (least recently used ones are dropped first).
 const SCENE_CACHE_ENTRIES: usize = 16;
@@ -77,13 +85,16 @@ pub struct Engine {
     paths: PathPolicy,
     // One frame at a time on the device: the renderer's targets and timer are per frame.
     state: Mutex<State>,
+    references: Mutex<HashMap<String, Arc<FrameOutput>>>,
+    reference_hits: std::sync::atomic::AtomicU64,
+    reference_misses: std::sync::atomic::AtomicU64,
 }
 
 impl Engine {
     pub fn new(gpu: Arc<GpuContext>, limits: Limits, paths: PathPolicy) -> Self {
         let renderer = Renderer::new(gpu.clone());
         let state = State { renderer, scenes: HashMap::new(), lights: HashMap::new(), clock: 0, hits: 0, misses: 0 };
-        Self { gpu, limits, paths, state: Mutex::new(state) }
+        Self { gpu, limits, paths, state: Mutex::new(state), references: Mutex::new(HashMap::new()), reference_hits: Default::default(), reference_misses: Default::default() }
     }
 
     pub fn gpu(&self) -> &GpuContext {
@@ -129,11 +140,45 @@ impl Engine {
     pub fn render_observed(&self, job: &Job, progress: &dyn Fn(u64, u64)) -> JobResult<Rendered> {
         let started = Instant::now();
         let (frame, mut timings) = self.render_raw_observed(job, progress)?;
+        let quality = if job.compare {
+            let start = Instant::now();
+            let reference = self.reference_for(job, progress)?;
+            let start = timings.phase("reference", start);
+            let report = crate::quality::compare(&frame, &reference, job.output.exposure);
+            timings.phase("quality", start);
+            Some(report)
+        } else {
+            None
+        };
         let start = Instant::now();
         let bytes = crate::output::encode(&frame, job.output.format, job.output.exposure)?;
         timings.phase("encode", start);
         timings.total_ms = started.elapsed().as_secs_f64() * 1e3;
-        Ok(Rendered { bytes, format: job.output.format, width: frame.width, height: frame.height, timings, counters: frame.counters })
+        Ok(Rendered { bytes, format: job.output.format, width: frame.width, height: frame.height, timings, counters: frame.counters, quality })
+    }
+
+    /// The reference frame for a job's scene, view, light and size, rendered once and
+    /// cached, so a sweep over methods renders it once.
+    pub fn reference_for(&self, job: &Job, progress: &dyn Fn(u64, u64)) -> JobResult<Arc<FrameOutput>> {
+        let reference_job = job.reference_job();
+        let key = format!(
+            "{}|{}",
+            self.asset_key(&job.scene, "scene")?,
+            serde_json::to_string(&reference_job).map_err(|e| JobError::internal(e.to_string()))?
+        );
+        if let Some(frame) = self.references.lock().unwrap_or_else(|p| p.into_inner()).get(&key) {
+            self.reference_hits.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            return Ok(frame.clone());
+        }
+        self.reference_misses.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let (frame, _) = self.render_raw_observed(&reference_job, progress)?;
+        let frame = Arc::new(frame);
+        let mut references = self.references.lock().unwrap_or_else(|p| p.into_inner());
+        if references.len() >= REFERENCE_CACHE_ENTRIES {
+            references.clear();
+        }
+        references.insert(key, frame.clone());
+        Ok(frame)
     }
 
     /// Validates and renders one job, returning the linear float frame (what `encode`
@@ -179,6 +224,8 @@ impl Engine {
             pipelines_compiled: r.pipelines.stats.created,
             targets_created: r.textures.stats.created,
             targets_reused: r.textures.stats.reused,
+            reference_cache_hits: self.reference_hits.load(std::sync::atomic::Ordering::Relaxed),
+            reference_cache_misses: self.reference_misses.load(std::sync::atomic::Ordering::Relaxed),
         }
     }
 

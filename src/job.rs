@@ -219,6 +219,10 @@ pub struct Job {
     /// DESIGN.md §1: no ambient term unless the job asks for one.
     #[serde(default)]
     pub ambient: Option<[f32; 3]>,
+    /// Also render `reference` for the same scene, view and light (cached) and report
+    /// quality metrics against it.
+    #[serde(default)]
+    pub compare: bool,
 }
 
 impl Job {
@@ -232,6 +236,18 @@ impl Job {
             shadow_map: ShadowMapSpec::default(),
             output: OutputSpec::default(),
             ambient: None,
+            compare: false,
+        }
+    }
+
+    /// The `reference` job for the same scene, view, light and size: what `compare`
+    /// measures against. Its visibility is always read back.
+    pub fn reference_job(&self) -> Job {
+        Job {
+            method: MethodSpec { name: "reference".into(), params: Map::new() },
+            output: OutputSpec { format: OutputFormat::Exr, exposure: 0.0, ..self.output.clone() },
+            compare: false,
+            ..self.clone()
         }
     }
 

@@ -8,11 +8,13 @@
 pub mod config;
 pub mod engine;
 pub mod error;
+pub mod eval;
 pub mod gpu;
 pub mod job;
 pub mod light;
 pub mod methods;
 pub mod output;
+pub mod quality;
 pub mod render;
 pub mod scene;
 pub mod server;

@@ -23,6 +23,13 @@ struct Cli {
 enum Command {
     /// Run the render daemon (HTTP/JSON).
     Serve(ServeConfig),
+    /// Measure methods against `reference`: cost and quality tables, contact sheets, heat-maps.
+    Eval {
+        #[command(flatten)]
+        suite: penumbra::eval::EvalOptions,
+        #[command(flatten)]
+        options: RenderOptions,
+    },
     /// Render one job to a PNG or EXR file, without a server.
     Render {
         /// The job (JSON, see api/examples/). Without it: the built-in `torus` scene, `hard`.
@@ -73,6 +80,13 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             let engine = Arc::new(Engine::new(gpu, config.render.limits.limits(), paths));
             let runtime = tokio::runtime::Runtime::new()?;
             runtime.block_on(penumbra::server::serve(config, engine))
+        }
+        Command::Eval { suite, options } => {
+            let gpu = open_gpu(&options)?;
+            let engine = Engine::new(gpu, options.limits.limits(), PathPolicy::Any);
+            let report = penumbra::eval::run(&engine, &suite)?;
+            eprintln!("wrote {} rows and {} pictures to {}", report.rows.len(), report.files.len(), suite.out.display());
+            Ok(())
         }
         Command::Render { job, output, timings_json, options } => {
             let mut job = match &job {

@@ -14,6 +14,11 @@ use serde_json::{json, Value};
 
 /// Starts the real server on 127.0.0.1:0 with a small body limit and a scene directory.
 async fn start() -> (String, tempdir::Dir) {
+    let (base, dir, _) = start_with_engine().await;
+    (base, dir)
+}
+
+async fn start_with_engine() -> (String, tempdir::Dir, Arc<Engine>) {
     let scene_dir = tempdir::Dir::new();
     std::fs::write(scene_dir.path().join("inside.png"), b"not really a png").unwrap();
     let gpu = common::engine().gpu_arc();
@@ -21,8 +26,9 @@ async fn start() -> (String, tempdir::Dir) {
     let engine = Arc::new(Engine::new(gpu, limits, PathPolicy::Under(scene_dir.path().to_path_buf())));
     let state = Arc::new(AppState::new(engine.clone(), 8));
     let warm = state.clone();
+    let warm_engine = engine.clone();
     tokio::task::spawn_blocking(move || {
-        warm_up(&engine);
+        warm_up(&warm_engine);
         warm.set_ready();
     })
     .await
@@ -30,7 +36,7 @@ async fn start() -> (String, tempdir::Dir) {
     let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
     let base = format!("http://{}", listener.local_addr().unwrap());
     tokio::spawn(async move { axum::serve(listener, app(state)).await.unwrap() });
-    (base, scene_dir)
+    (base, scene_dir, engine)
 }
 
 fn warm_up(engine: &Engine) {
@@ -251,4 +257,46 @@ async fn openapi_document_matches_the_server() {
         let job = penumbra::job::Job::from_json(&std::fs::read(&path).unwrap()).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
         job.validate(&Limits::default()).unwrap();
     }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn compare_reports_quality_against_a_cached_reference() {
+    let (base, _dir, engine) = start_with_engine().await;
+    let client = reqwest::Client::new();
+    let mut job = small_job("png");
+    job["compare"] = json!(true);
+    let ask = |job: Value| {
+        let client = client.clone();
+        let base = base.clone();
+        async move {
+            let response = client.post(format!("{base}/v1/render")).header("accept", "application/json").json(&job).send().await.unwrap();
+            assert_eq!(response.status(), StatusCode::OK);
+            response.json::<Value>().await.unwrap()
+        }
+    };
+    let first = ask(job.clone()).await;
+    let quality = &first["quality"];
+    for kind in ["visibility", "color"] {
+        for region in ["whole", "penumbra"] {
+            for metric in ["rmse", "mae", "ssim", "flip"] {
+                assert!(quality[kind][region][metric].is_number(), "{kind}.{region}.{metric} in {quality}");
+            }
+        }
+    }
+    assert!(quality["penumbra_pixels"].as_u64().unwrap() > 0);
+    assert!(quality["visibility"]["penumbra"]["rmse"].as_f64().unwrap() > 0.05, "hard is far from the truth in the penumbra");
+    assert!(first["timings"]["phases"].as_array().unwrap().iter().any(|p| p["name"] == "reference"));
+    let misses = engine.stats().reference_cache_misses;
+
+    // Another method setting over the same scene, view and light reuses the reference.
+    job["method"] = json!({"name": "hard", "bias_texels": 3.0});
+    let second = ask(job.clone()).await;
+    assert!(second["quality"]["visibility"]["whole"]["rmse"].is_number());
+    let stats = engine.stats();
+    assert_eq!(stats.reference_cache_misses, misses, "the reference was rendered again");
+    assert!(stats.reference_cache_hits >= 1);
+
+    // Without `compare`, no quality.
+    job["compare"] = json!(false);
+    assert!(ask(job).await["quality"].is_null());
 }

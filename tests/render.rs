@@ -383,3 +383,39 @@ fn reference_is_gray_under_white_and_colored_where_the_model_says() {
     let agree = colored.iter().filter(|(v, t)| (v[0] - v[2]).signum() == (t.x - t.z).signum()).count();
     assert!(agree as f32 >= 0.95 * colored.len() as f32, "{agree} of {} agree", colored.len());
 }
+
+#[test]
+fn eval_writes_the_tables_and_the_pictures() {
+    let out = std::env::temp_dir().join(format!("penumbra-eval-{}", std::process::id()));
+    let options = penumbra::eval::EvalOptions {
+        scenes: vec!["torus".into()],
+        lights: vec!["white".into(), "stripes".into()],
+        methods: vec!["hard".into(), "hard:bias_texels=4".into()],
+        sizes: vec!["64x48".into()],
+        samples: 16,
+        shadow_map: 256,
+        out: out.clone(),
+    };
+    let report = penumbra::eval::run(&common::engine(), &options).unwrap();
+    // Per case: the reference and two variants of hard.
+    assert_eq!(report.rows.len(), 2 * 3);
+    for row in &report.rows {
+        assert!(row.quality.penumbra_pixels > 0, "{} {}", row.scene, row.light);
+        if row.method == "reference" {
+            assert_eq!(row.quality.visibility.penumbra.rmse, 0.0);
+        } else {
+            assert!(row.quality.visibility.penumbra.rmse > 0.0, "hard differs from the reference in the penumbra");
+            assert!(row.ratio_to_hard.is_some());
+        }
+    }
+    let md = std::fs::read_to_string(out.join("results.md")).unwrap();
+    assert!(md.contains("| torus | stripes | 64×48 | hard:bias_texels=4 |"), "{md}");
+    let csv = std::fs::read_to_string(out.join("results.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 1 + 6);
+    let json: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("results.json")).unwrap()).unwrap();
+    assert_eq!(json["rows"].as_array().unwrap().len(), 6);
+    let sheet = image::open(out.join("sheet-torus-stripes-64x48.png")).unwrap();
+    assert_eq!((sheet.width(), sheet.height()), (64 * 3, 48 * 2));
+    assert!(out.join("error-torus-white-64x48-hard.png").exists());
+    std::fs::remove_dir_all(&out).ok();
+}

@@ -83,9 +83,10 @@ pub struct Readbacks {
 }
 
 impl Readbacks {
-    pub fn for_format(format: OutputFormat) -> Self {
-        let all = format == OutputFormat::Exr;
-        Self { visibility: all, depth: all }
+    /// EXR carries visibility and depth; a comparison needs the visibility.
+    pub fn for_job(job: &Job) -> Self {
+        let exr = job.output.format == OutputFormat::Exr;
+        Self { visibility: exr || job.compare, depth: exr }
     }
 }
 
@@ -139,7 +140,7 @@ impl FrameSpec {
             width: job.output.width,
             height: job.output.height,
             ambient: job.ambient.map(Vec3::from).unwrap_or(Vec3::ZERO),
-            readbacks: Readbacks::for_format(job.output.format),
+            readbacks: Readbacks::for_job(job),
         })
     }
 }

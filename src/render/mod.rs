@@ -61,7 +61,7 @@ pub struct FrameOutput {
     pub height: u32,
     /// Linear radiance and coverage alpha, RGBA.
     pub color: Vec<[f32; 4]>,
-    /// Per-channel visibility V (EXR only).
+    /// Per-channel visibility V (EXR and comparisons), 1 wherever E0 = 0.
     pub visibility: Option<Vec<[f32; 3]>>,
     /// View depth in metres, +∞ for background (EXR only).
     pub depth: Option<Vec<f32>>,
@@ -280,12 +280,19 @@ impl Renderer {
         let mut readback = Readback::new();
         let color_index = readback.copy(&gpu, &mut enc, &targets.color.texture);
         let visibility_index = spec.readbacks.visibility.then(|| readback.copy(&gpu, &mut enc, &targets.visibility.texture));
+        let e0_index = spec.readbacks.visibility.then(|| readback.copy(&gpu, &mut enc, &targets.e0.texture));
         let depth_index = spec.readbacks.depth.then(|| readback.copy(&gpu, &mut enc, &targets.depth.texture));
         gpu.queue.submit([enc.finish()]);
         let images = readback.finish(&gpu);
         let gpu_times = self.timer.read(&gpu);
         let color: Vec<[f32; 4]> = bytemuck::cast_slice(&images[color_index]).to_vec();
-        let visibility = visibility_index.map(|i| bytemuck::cast_slice::<u8, [f32; 4]>(&images[i]).iter().map(|v| [v[0], v[1], v[2]]).collect());
+        // V = E/E0 is undefined where E0 = 0 (a surface facing away from the light, or behind
+        // it): every method reports 1 there, so visibility metrics measure shadows only.
+        let visibility = visibility_index.zip(e0_index).map(|(v, e)| {
+            let v: &[[f32; 4]] = bytemuck::cast_slice(&images[v]);
+            let e: &[[f32; 4]] = bytemuck::cast_slice(&images[e]);
+            v.iter().zip(e).map(|(v, e)| if e[0] == 0.0 && e[1] == 0.0 && e[2] == 0.0 { [1.0; 3] } else { [v[0], v[1], v[2]] }).collect()
+        });
         let depth = depth_index.map(|i| bytemuck::cast_slice::<u8, f32>(&images[i]).to_vec());
         timings.phase("readback", start);
         for (label, ms) in gpu_times {

@@ -178,7 +178,7 @@ fn terrain_scene(triangles: u64, seed: u32) -> Scene {
     let id = b.begin_object("terrain");
     b.add_mesh(id, &mesh, Mat4::IDENTITY, ground);
     b.finish(|_, _| {
-        defaults(Vec3::new(0.0, 14.0, 20.0), Vec3::new(0.0, 0.0, 0.0), Vec3::new(-14.0, 16.0, -8.0), Vec3::ZERO, Vec2::splat(3.0), 200.0)
+        defaults(Vec3::new(0.0, 14.0, 20.0), Vec3::new(0.0, 0.0, 0.0), Vec3::new(-18.0, 8.0, -6.0), Vec3::ZERO, Vec2::splat(4.0), 250.0)
     })
 }
 

@@ -194,6 +194,7 @@ fn job_json(id: &str, rendered: &Rendered) -> Value {
         "bytes": rendered.bytes.len(),
         "timings": rendered.timings,
         "counters": rendered.counters,
+        "quality": rendered.quality,
         "image": format!("/v1/jobs/{id}/image"),
     })
 }

@@ -1,0 +1,292 @@
+//! `penumbra eval`: runs a suite — built-in scenes × light images × methods × output sizes —
+//! against `reference`, and writes to a folder a Markdown table, the same rows as CSV and
+//! JSON, a contact sheet per case (reference and every method side by side, their
+//! visibility errors below) and an error heat-map per method.
+//!
+//! Timings in one run are comparable with each other: the engine is warmed up first (no
+//! pipeline compilation in any row) and every row reports its ratio to `hard` in the same
+//! case. Quote those ratios, not absolute times: these machines are noisy.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use anyhow::Context as _;
+use serde::Serialize;
+use serde_json::{Map, Value};
+
+use crate::engine::Engine;
+use crate::job::{AssetRef, Job, MethodSpec, OutputFormat};
+use crate::methods::{Counters, REGISTRY};
+use crate::quality::{self, QualityReport};
+use crate::render::FrameOutput;
+use crate::timing::Timings;
+
+/// What to run.
+#[derive(Debug, Clone, clap::Args)]
+pub struct EvalOptions {
+    /// Built-in scenes, comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "torus,crowd,columns,terrain")]
+    pub scenes: Vec<String>,
+    /// Built-in light images, comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "white,stripes")]
+    pub lights: Vec<String>,
+    /// Methods, comma-separated, each optionally with parameters: `name:key=value:key=value`
+    /// (values are JSON). Default: every registered method but `reference`.
+    #[arg(long, value_delimiter = ',')]
+    pub methods: Vec<String>,
+    /// Output sizes, comma-separated, as WIDTHxHEIGHT.
+    #[arg(long, value_delimiter = ',', default_value = "512x384")]
+    pub sizes: Vec<String>,
+    /// Light samples of the reference.
+    #[arg(long, default_value_t = 256)]
+    pub samples: u32,
+    /// Shadow-map resolution of every method (and of the reference's sample maps).
+    #[arg(long, default_value_t = 1024)]
+    pub shadow_map: u32,
+    /// Folder for the results.
+    #[arg(long, default_value = "eval")]
+    pub out: PathBuf,
+}
+
+/// One method in one case.
+#[derive(Debug, Clone, Serialize)]
+pub struct Row {
+    pub scene: String,
+    pub light: String,
+    pub width: u32,
+    pub height: u32,
+    pub method: String,
+    pub timings: Timings,
+    /// Total wall time of this row over that of `hard` in the same case.
+    pub ratio_to_hard: Option<f64>,
+    pub quality: QualityReport,
+    pub counters: Counters,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct EvalReport {
+    pub adapter: crate::gpu::AdapterSummary,
+    pub rows: Vec<Row>,
+    pub files: Vec<PathBuf>,
+}
+
+/// A method as given on the command line: its name, its parameters and a label.
+fn parse_method(text: &str) -> anyhow::Result<MethodSpec> {
+    let mut parts = text.split(':');
+    let name = parts.next().unwrap_or_default().trim().to_owned();
+    let mut params = Map::new();
+    for part in parts {
+        let (key, value) = part.split_once('=').with_context(|| format!("method parameter `{part}` must be key=value"))?;
+        let value: Value = serde_json::from_str(value).unwrap_or_else(|_| Value::String(value.to_owned()));
+        params.insert(key.to_owned(), value);
+    }
+    Ok(MethodSpec { name, params })
+}
+
+fn parse_size(text: &str) -> anyhow::Result<(u32, u32)> {
+    let (w, h) = text.split_once('x').with_context(|| format!("size `{text}` must be WIDTHxHEIGHT"))?;
+    Ok((w.trim().parse()?, h.trim().parse()?))
+}
+
+/// Runs the suite and writes the results under `options.out`.
+pub fn run(engine: &Engine, options: &EvalOptions) -> anyhow::Result<EvalReport> {
+    let methods: Vec<(String, MethodSpec)> = if options.methods.is_empty() {
+        REGISTRY.iter().filter(|m| m.name() != "reference").map(|m| (m.name().to_owned(), MethodSpec { name: m.name().into(), params: Map::new() })).collect()
+    } else {
+        options.methods.iter().map(|text| Ok((text.clone(), parse_method(text)?))).collect::<anyhow::Result<_>>()?
+    };
+    let sizes: Vec<(u32, u32)> = options.sizes.iter().map(|s| parse_size(s)).collect::<anyhow::Result<_>>()?;
+    std::fs::create_dir_all(&options.out).with_context(|| format!("cannot create {}", options.out.display()))?;
+    engine.warm_up().context("warm-up")?;
+
+    let cases = options.scenes.len() * options.lights.len() * sizes.len();
+    let progress = indicatif::ProgressBar::new((cases * (methods.len() + 1)) as u64);
+    progress.set_style(
+        indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} {elapsed_precise} {msg}").unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    let mut rows = Vec::new();
+    let mut files = Vec::new();
+    for scene in &options.scenes {
+        for light in &options.lights {
+            for &(width, height) in &sizes {
+                let case = format!("{scene}-{light}-{width}x{height}");
+                let base = Job {
+                    scene: AssetRef::builtin(scene),
+                    light: crate::job::LightSpec { image: Some(AssetRef::builtin(light)), ..Default::default() },
+                    shadow_map: crate::job::ShadowMapSpec { resolution: options.shadow_map },
+                    output: crate::job::OutputSpec { width, height, format: OutputFormat::Exr, exposure: 0.0 },
+                    ..Job::embedded_default()
+                };
+                progress.set_message(format!("{case}: reference"));
+                let mut reference_job = base.reference_job();
+                reference_job.method.params.insert("samples".into(), options.samples.into());
+                reference_job.method.params.insert("resolution".into(), options.shadow_map.into());
+                let (reference, reference_timings) = engine
+                    .render_raw_observed(&reference_job, &|done, total| progress.set_message(format!("{case}: reference {done}/{total} samples")))
+                    .with_context(|| format!("{case}: reference"))?;
+                progress.inc(1);
+                let mut case_rows = vec![row(scene, light, width, height, "reference", reference_timings, &reference, &reference)];
+                let mut frames = Vec::new();
+                for (label, method) in &methods {
+                    progress.set_message(format!("{case}: {label}"));
+                    let job = Job { method: method.clone(), ..base.clone() };
+                    let (frame, timings) = engine.render_raw(&job).map_err(|e| anyhow::anyhow!("{case}: {label}: {e}"))?;
+                    case_rows.push(row(scene, light, width, height, label, timings, &frame, &reference));
+                    frames.push((label.clone(), frame));
+                    progress.inc(1);
+                }
+                let hard_ms = case_rows.iter().find(|r| r.method == "hard").map(|r| r.timings.total_ms);
+                for r in &mut case_rows {
+                    r.ratio_to_hard = hard_ms.map(|h| r.timings.total_ms / h);
+                }
+                files.extend(write_pictures(&options.out, &case, &reference, &frames)?);
+                rows.extend(case_rows);
+            }
+        }
+    }
+    progress.finish_and_clear();
+    let report = EvalReport { adapter: engine.gpu().adapter.clone(), rows, files };
+    write_tables(&options.out, &report, &methods.iter().map(|(l, _)| l.clone()).collect::<Vec<_>>())?;
+    Ok(report)
+}
+
+fn row(scene: &str, light: &str, width: u32, height: u32, method: &str, mut timings: Timings, frame: &FrameOutput, reference: &FrameOutput) -> Row {
+    timings.total_ms = timings.phases.iter().map(|p| p.cpu_ms).sum();
+    Row {
+        scene: scene.into(),
+        light: light.into(),
+        width,
+        height,
+        method: method.into(),
+        timings,
+        ratio_to_hard: None,
+        quality: quality::compare(frame, reference, 0.0),
+        counters: frame.counters.clone(),
+    }
+}
+
+/// Linear radiance → 8-bit sRGB, background black.
+fn display(frame: &FrameOutput) -> image::RgbImage {
+    let bytes = frame.color.iter().flat_map(|c| [0, 1, 2].map(|k| (crate::light::linear_to_srgb(c[k]) * 255.0 + 0.5) as u8)).collect();
+    image::RgbImage::from_raw(frame.width, frame.height, bytes).expect("sized from the frame")
+}
+
+/// |V − Vref| through the magma colour map, 0 black to 1 bright yellow.
+fn heat_map(error: &[f32], width: u32, height: u32) -> image::RgbImage {
+    let lut = nv_flip::magma_lut().to_vec();
+    let entries = lut.len() / 3;
+    let bytes = error
+        .iter()
+        .flat_map(|e| {
+            let k = ((e.clamp(0.0, 1.0) * (entries - 1) as f32).round() as usize) * 3;
+            [lut[k], lut[k + 1], lut[k + 2]]
+        })
+        .collect();
+    image::RgbImage::from_raw(width, height, bytes).expect("sized from the frame")
+}
+
+fn write_pictures(out: &Path, case: &str, reference: &FrameOutput, frames: &[(String, FrameOutput)]) -> anyhow::Result<Vec<PathBuf>> {
+    let (w, h) = (reference.width, reference.height);
+    let columns = frames.len() as u32 + 1;
+    let mut sheet = image::RgbImage::new(w * columns, h * 2);
+    image::imageops::replace(&mut sheet, &display(reference), 0, 0);
+    // Under the reference: Vref itself (as gray), so the penumbra the errors refer to shows.
+    let vref: Vec<f32> = reference.visibility.as_ref().map(|v| v.iter().map(|p| p[0].max(p[1]).max(p[2])).collect()).unwrap_or_default();
+    let gray = image::RgbImage::from_raw(w, h, vref.iter().flat_map(|v| [(v * 255.0) as u8; 3]).collect()).expect("sized");
+    image::imageops::replace(&mut sheet, &gray, 0, i64::from(h));
+    let mut files = Vec::new();
+    for (k, (label, frame)) in frames.iter().enumerate() {
+        let x = i64::from(w * (k as u32 + 1));
+        image::imageops::replace(&mut sheet, &display(frame), x, 0);
+        let heat = heat_map(&quality::visibility_error(frame, reference), w, h);
+        image::imageops::replace(&mut sheet, &heat, x, i64::from(h));
+        let path = out.join(format!("error-{case}-{}.png", sanitize(label)));
+        heat.save(&path)?;
+        files.push(path);
+    }
+    let path = out.join(format!("sheet-{case}.png"));
+    sheet.save(&path)?;
+    files.push(path);
+    Ok(files)
+}
+
+fn sanitize(label: &str) -> String {
+    label.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' { c } else { '_' }).collect()
+}
+
+fn gpu(t: &Timings, phase: &str) -> String {
+    t.get(phase).and_then(|p| p.gpu_ms.or(Some(p.cpu_ms))).map(|ms| format!("{ms:.1}")).unwrap_or_else(|| "-".into())
+}
+
+fn psnr(db: f64) -> String {
+    if db.is_finite() { format!("{db:.1}") } else { "∞".into() }
+}
+
+fn counters_text(counters: &Counters) -> String {
+    counters.iter().map(|(k, v)| format!("{k}={v}")).collect::<Vec<_>>().join(" ")
+}
+
+fn write_tables(out: &Path, report: &EvalReport, methods: &[String]) -> anyhow::Result<()> {
+    let mut md = String::new();
+    let a = &report.adapter;
+    writeln!(md, "# penumbra eval\n")?;
+    writeln!(md, "Adapter: {} ({}, {}), GPU timestamps: {}.\n", a.name, a.backend, a.device_type, a.timestamps)?;
+    writeln!(md, "Times are per phase in ms — GPU time where timestamps exist, else wall time — and the wall total;")?;
+    writeln!(md, "`× hard` is the row's total over `hard`'s in the same case, the figure to quote. Quality is against")?;
+    writeln!(md, "`reference` (same scene, view, light, size): visibility (V) and displayed colour, whole frame and")?;
+    writeln!(md, "penumbra only (pixels with 0 < Vref < 1). Contact sheets `sheet-*.png`: reference then {} left to", if methods.is_empty() { "no method".into() } else { methods.join(", ") })?;
+    writeln!(md, "right; below each, |V − Vref| (magma, black = 0, yellow = 1), below the reference Vref itself.\n")?;
+    writeln!(md, "## Cost\n")?;
+    writeln!(md, "| scene | light | size | method | shadow map | G-buffer | E0 | method | composite | total ms | × hard | counters |")?;
+    writeln!(md, "|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---|")?;
+    for r in &report.rows {
+        let t = &r.timings;
+        writeln!(
+            md,
+            "| {} | {} | {}×{} | {} | {} | {} | {} | {} | {} | {:.1} | {} | {} |",
+            r.scene, r.light, r.width, r.height, r.method,
+            gpu(t, "shadow_map"), gpu(t, "gbuffer"), gpu(t, "e0"), gpu(t, "method"), gpu(t, "composite"),
+            t.total_ms, r.ratio_to_hard.map(|x| format!("{x:.2}")).unwrap_or_else(|| "-".into()), counters_text(&r.counters)
+        )?;
+    }
+    writeln!(md, "\n## Quality against reference\n")?;
+    writeln!(md, "| scene | light | size | method | penumbra px | V RMSE | V MAE | V PSNR | V SSIM | V FLIP | V RMSE (penumbra) | V MAE (penumbra) | V PSNR (penumbra) | V SSIM (penumbra) | V FLIP (penumbra) | colour RMSE | colour PSNR | colour SSIM | colour FLIP | colour RMSE (penumbra) | colour FLIP (penumbra) |")?;
+    writeln!(md, "|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")?;
+    for r in &report.rows {
+        let (v, c) = (&r.quality.visibility, &r.quality.color);
+        writeln!(
+            md,
+            "| {} | {} | {}×{} | {} | {} | {:.4} | {:.4} | {} | {:.3} | {:.4} | {:.4} | {:.4} | {} | {:.3} | {:.4} | {:.4} | {} | {:.3} | {:.4} | {:.4} | {:.4} |",
+            r.scene, r.light, r.width, r.height, r.method, r.quality.penumbra_pixels,
+            v.whole.rmse, v.whole.mae, psnr(v.whole.psnr_db), v.whole.ssim, v.whole.flip,
+            v.penumbra.rmse, v.penumbra.mae, psnr(v.penumbra.psnr_db), v.penumbra.ssim, v.penumbra.flip,
+            c.whole.rmse, psnr(c.whole.psnr_db), c.whole.ssim, c.whole.flip, c.penumbra.rmse, c.penumbra.flip
+        )?;
+    }
+    std::fs::write(out.join("results.md"), md)?;
+
+    let mut csv = String::from("scene,light,width,height,method,total_ms,ratio_to_hard,shadow_map_ms,gbuffer_ms,e0_ms,method_ms,composite_ms,penumbra_pixels");
+    for region in ["v_whole", "v_penumbra", "color_whole", "color_penumbra"] {
+        for metric in ["rmse", "mae", "psnr_db", "ssim", "flip"] {
+            write!(csv, ",{region}_{metric}")?;
+        }
+    }
+    csv.push_str(",counters\n");
+    for r in &report.rows {
+        let t = &r.timings;
+        write!(
+            csv,
+            "{},{},{},{},{},{:.3},{},{},{},{},{},{},{}",
+            r.scene, r.light, r.width, r.height, r.method, t.total_ms,
+            r.ratio_to_hard.map(|x| format!("{x:.4}")).unwrap_or_default(),
+            gpu(t, "shadow_map"), gpu(t, "gbuffer"), gpu(t, "e0"), gpu(t, "method"), gpu(t, "composite"), r.quality.penumbra_pixels
+        )?;
+        for m in [r.quality.visibility.whole, r.quality.visibility.penumbra, r.quality.color.whole, r.quality.color.penumbra] {
+            write!(csv, ",{:.6},{:.6},{},{:.6},{:.6}", m.rmse, m.mae, if m.psnr_db.is_finite() { format!("{:.3}", m.psnr_db) } else { "inf".into() }, m.ssim, m.flip)?;
+        }
+        writeln!(csv, ",{}", counters_text(&r.counters).replace(' ', ";"))?;
+    }
+    std::fs::write(out.join("results.csv"), csv)?;
+    std::fs::write(out.join("results.json"), serde_json::to_vec_pretty(report)?)?;
+    Ok(())
+}
