@@ -100,7 +100,17 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 .ok_or_else(|| anyhow::anyhow!("the output file must end in .png or .exr: {}", output.display()))?;
             let gpu = open_gpu(&options)?;
             let engine = Engine::new(gpu, options.limits.limits(), PathPolicy::Any);
-            let rendered = engine.render(&job)?;
+            // Long methods (the reference) report samples done; show them as a progress bar.
+            let bar = indicatif::ProgressBar::hidden();
+            bar.set_style(indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} samples {elapsed_precise}").unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()));
+            let rendered = engine.render_observed(&job, &|done, total| {
+                if bar.is_hidden() {
+                    bar.set_draw_target(indicatif::ProgressDrawTarget::stderr());
+                }
+                bar.set_length(total);
+                bar.set_position(done);
+            })?;
+            bar.finish_and_clear();
             std::fs::write(&output, &rendered.bytes)?;
             print_timings(&rendered.timings);
             if let Some(path) = timings_json {

@@ -171,7 +171,9 @@ async fn render(State(state): State<Arc<AppState>>, headers: HeaderMap, body: Re
     let id = state.new_id();
     let span = tracing::info_span!("job", %id, method = %job.method.name);
     let engine = state.engine.clone();
-    let rendered = tokio::task::spawn_blocking(move || span.in_scope(|| engine.render(&job)))
+    let rendered = tokio::task::spawn_blocking(move || {
+        span.in_scope(|| engine.render_observed(&job, &|done, total| tracing::debug!(done, total, "progress")))
+    })
         .await
         .map_err(|e| JobError::internal(format!("render task failed: {e}")))??;
     tracing::info!(%id, total_ms = rendered.timings.total_ms, "job done");
