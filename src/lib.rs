@@ -22,21 +22,44 @@ pub mod timing;
 
 #[cfg(test)]
 mod tidy {
-    /// Every Rust module opens with a `//!` doc saying what it is for (rust-analyzer's tidy).
-    #[test]
-    fn every_module_has_a_doc_comment() {
-        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
-        let mut stack = vec![root.join("src"), root.join("tests")];
+    use std::path::{Path, PathBuf};
+
+    /// Files under `root` whose name ends in `.ext`, recursively.
+    fn files(root: &Path, ext: &str) -> Vec<PathBuf> {
+        let mut found = Vec::new();
+        let mut stack = vec![root.to_path_buf()];
         while let Some(dir) = stack.pop() {
             for entry in std::fs::read_dir(dir).unwrap() {
                 let path = entry.unwrap().path();
                 if path.is_dir() {
                     stack.push(path);
-                } else if path.extension().is_some_and(|e| e == "rs") {
-                    let text = std::fs::read_to_string(&path).unwrap();
-                    assert!(text.starts_with("//!"), "{} lacks a `//!` module doc", path.display());
+                } else if path.extension().is_some_and(|e| e == ext) {
+                    found.push(path);
                 }
             }
+        }
+        found
+    }
+
+    /// Every Rust module opens with a `//!` doc saying what it is for (rust-analyzer's tidy).
+    #[test]
+    fn every_module_has_a_doc_comment() {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+        for path in files(&root.join("src"), "rs").into_iter().chain(files(&root.join("tests"), "rs")) {
+            let text = std::fs::read_to_string(&path).unwrap();
+            assert!(text.starts_with("//!"), "{} lacks a `//!` module doc", path.display());
+        }
+    }
+
+    /// Every WGSL file is embedded (listed in `gpu::shaders::SOURCES`) and opens with a
+    /// comment saying what it is for.
+    #[test]
+    fn every_wgsl_file_is_listed_and_documented() {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("shaders");
+        for path in files(&root, "wgsl") {
+            let name = path.strip_prefix(&root).unwrap().to_string_lossy().replace('\\', "/");
+            let text = crate::gpu::shaders::source(&name).unwrap_or_else(|| panic!("{name} is not listed in SOURCES"));
+            assert!(text.starts_with("// "), "{name} must open with a comment saying what it is for");
         }
     }
 }

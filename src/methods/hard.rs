@@ -7,7 +7,6 @@ use wgpu::util::DeviceExt;
 use super::{Counters, MethodContext, ParamKind, ParamSpec, Params, ShadowMethod};
 use crate::gpu::layout;
 use crate::gpu::pool::PipelineKey;
-use crate::gpu::shaders;
 
 pub struct Hard;
 
@@ -46,28 +45,12 @@ impl ShadowMethod for Hard {
     }
 
     fn record(&self, ctx: &mut MethodContext<'_>, params: &Params) -> Counters {
+        let pipeline = ctx.screen_pipeline(
+            PipelineKey::new("hard"),
+            "methods/hard.wgsl",
+            &[layout::storage_texture(0, wgpu::TextureFormat::Rgba32Float), layout::uniform(1)],
+        );
         let device = &ctx.gpu.device;
-        let inputs_layout = &ctx.inputs.layout;
-        let pipeline = ctx.pipelines.compute(PipelineKey::new("hard"), || {
-            let output_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                label: Some("Hard::output_layout"),
-                entries: &[layout::storage_texture(0, wgpu::TextureFormat::Rgba32Float), layout::uniform(1)],
-            });
-            let module = shaders::module(device, "methods/hard.wgsl");
-            let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                label: Some("Hard::pipeline_layout"),
-                bind_group_layouts: &[Some(inputs_layout), Some(&output_layout)],
-                immediate_size: 0,
-            });
-            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some("Hard::pipeline"),
-                layout: Some(&pipeline_layout),
-                module: &module,
-                entry_point: Some("main"),
-                compilation_options: Default::default(),
-                cache: None,
-            })
-        });
         let uniforms = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("Hard::uniforms"),
             contents: bytemuck::bytes_of(&HardUniforms {

@@ -12,7 +12,9 @@ use serde::Serialize;
 use serde_json::{Map, Value};
 
 use crate::error::{ErrorCode, JobError, JobResult};
-use crate::gpu::pool::PipelinePool;
+use std::sync::Arc;
+
+use crate::gpu::pool::{PipelineKey, PipelinePool};
 use crate::gpu::timing::GpuTimer;
 use crate::gpu::GpuContext;
 use crate::gpu::scene::GpuScene;
@@ -60,6 +62,17 @@ impl MethodContext<'_> {
         let done = std::mem::replace(self.encoder, fresh);
         self.gpu.queue.submit([done.finish()]);
         self.gpu.wait_idle();
+    }
+
+    /// A screen-space compute pipeline from the pool: group 0 the frame inputs, group 1 the
+    /// bindings listed in `io` (bind groups for it come from `get_bind_group_layout(1)`).
+    pub fn screen_pipeline(&mut self, key: PipelineKey, shader: &'static str, io: &[wgpu::BindGroupLayoutEntry]) -> Arc<wgpu::ComputePipeline> {
+        let device = &self.gpu.device;
+        let inputs_layout = &self.inputs.layout;
+        self.pipelines.compute(key, || {
+            let io_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(key.name), entries: io });
+            crate::render::screen_compute_pipeline(device, inputs_layout, key.name, shader, &io_layout)
+        })
     }
 
     /// Workgroup counts covering the output with 8×8 workgroups.

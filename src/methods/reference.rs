@@ -242,7 +242,6 @@ impl ShadowMethod for Reference {
 impl Reference {
     fn pipelines(&self, ctx: &mut MethodContext<'_>) -> (std::sync::Arc<wgpu::RenderPipeline>, std::sync::Arc<wgpu::ComputePipeline>, std::sync::Arc<wgpu::ComputePipeline>) {
         let device = &ctx.gpu.device;
-        let inputs_layout = &ctx.inputs.layout;
         let bgl = |label, entries: &[wgpu::BindGroupLayoutEntry]| device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(label), entries });
         let depth = ctx.pipelines.render(PipelineKey::new("reference.sample_depth"), || {
             let module = shaders::module(device, "methods/reference/sample_depth.wgsl");
@@ -285,30 +284,16 @@ impl Reference {
                 cache: None,
             })
         });
-        let compute = |name: &'static str, shader: &'static str, io: wgpu::BindGroupLayout| {
-            let module = shaders::module(device, shader);
-            let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                label: Some(name),
-                bind_group_layouts: &[Some(inputs_layout), Some(&io)],
-                immediate_size: 0,
-            });
-            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some(name),
-                layout: Some(&layout),
-                module: &module,
-                entry_point: Some("main"),
-                compilation_options: Default::default(),
-                cache: None,
-            })
-        };
-        let accumulate = ctx.pipelines.compute(PipelineKey::new("reference.accumulate"), || {
-            let io = bgl("Reference::accumulate_io", &[layout::uniform_dynamic(0), layout::texture_float(1), layout::storage_read_write(2)]);
-            compute("Reference::accumulate", "methods/reference/accumulate.wgsl", io)
-        });
-        let resolve = ctx.pipelines.compute(PipelineKey::new("reference.resolve"), || {
-            let io = bgl("Reference::resolve_io", &[layout::storage_read(0), layout::storage_texture(1, wgpu::TextureFormat::Rgba32Float)]);
-            compute("Reference::resolve", "methods/reference/resolve.wgsl", io)
-        });
+        let accumulate = ctx.screen_pipeline(
+            PipelineKey::new("reference.accumulate"),
+            "methods/reference/accumulate.wgsl",
+            &[layout::uniform_dynamic(0), layout::texture_float(1), layout::storage_read_write(2)],
+        );
+        let resolve = ctx.screen_pipeline(
+            PipelineKey::new("reference.resolve"),
+            "methods/reference/resolve.wgsl",
+            &[layout::storage_read(0), layout::storage_texture(1, wgpu::TextureFormat::Rgba32Float)],
+        );
         (depth, accumulate, resolve)
     }
 }

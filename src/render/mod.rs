@@ -454,22 +454,7 @@ impl Renderer {
     fn screen_pipeline(&mut self, name: &'static str, shader: &'static str, io_layout: &wgpu::BindGroupLayout) -> Arc<wgpu::ComputePipeline> {
         let device = &self.gpu.device;
         let inputs_layout = &self.layouts.inputs;
-        self.pipelines.compute(PipelineKey::new(name), || {
-            let module = shaders::module(device, shader);
-            let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                label: Some(name),
-                bind_group_layouts: &[Some(inputs_layout), Some(io_layout)],
-                immediate_size: 0,
-            });
-            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some(name),
-                layout: Some(&layout),
-                module: &module,
-                entry_point: Some("main"),
-                compilation_options: Default::default(),
-                cache: None,
-            })
-        })
+        self.pipelines.compute(PipelineKey::new(name), || screen_compute_pipeline(device, inputs_layout, name, shader, io_layout))
     }
 
     fn record_e0(&mut self, encoder: &mut wgpu::CommandEncoder, inputs: &FrameInputs, targets: &FrameTargets, spec: &FrameSpec) {
@@ -502,6 +487,31 @@ impl Renderer {
         pass.set_bind_group(1, io, &[]);
         pass.dispatch_workgroups(spec.width.div_ceil(8), spec.height.div_ceil(8), 1);
     }
+}
+
+/// A compute pipeline over the screen (8×8 workgroups, entry `main`): group 0 is the frame
+/// inputs (`shaders/common/frame_inputs.wgsl`), group 1 the pass's own bindings.
+pub fn screen_compute_pipeline(
+    device: &wgpu::Device,
+    inputs_layout: &wgpu::BindGroupLayout,
+    label: &'static str,
+    shader: &str,
+    io_layout: &wgpu::BindGroupLayout,
+) -> wgpu::ComputePipeline {
+    let module = shaders::module(device, shader);
+    let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some(label),
+        bind_group_layouts: &[Some(inputs_layout), Some(io_layout)],
+        immediate_size: 0,
+    });
+    device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some(label),
+        layout: Some(&layout),
+        module: &module,
+        entry_point: Some("main"),
+        compilation_options: Default::default(),
+        cache: None,
+    })
 }
 
 fn cell_to_gpu(cell: &LightCell) -> LightCellGpu {
