@@ -64,3 +64,21 @@ impl Default for Readback {
         Self::new()
     }
 }
+
+/// Copies a (small) storage buffer back to the CPU and waits for it.
+pub fn read_buffer(gpu: &GpuContext, buffer: &wgpu::Buffer) -> Vec<u8> {
+    let staging = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("Readback::staging"),
+        size: buffer.size(),
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("Readback::encoder") });
+    encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, buffer.size());
+    gpu.queue.submit([encoder.finish()]);
+    staging.slice(..).map_async(wgpu::MapMode::Read, |_| {});
+    gpu.wait_idle();
+    let bytes = staging.slice(..).get_mapped_range().expect("mapped for reading above").to_vec();
+    staging.unmap();
+    bytes
+}

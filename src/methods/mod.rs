@@ -3,6 +3,7 @@
 //! records to turn the frame's G-buffer and shadow map into a visibility target. `REGISTRY`
 //! lists them; adding a method adds a module, its shaders and one line there.
 
+pub mod brabec;
 pub mod hard;
 pub mod reference;
 
@@ -21,7 +22,7 @@ use crate::gpu::scene::GpuScene;
 use crate::render::{FrameInputs, FrameSpec};
 
 /// Every method penumbra serves, in the order `GET /v1/methods` lists them.
-pub static REGISTRY: &[&dyn ShadowMethod] = &[&hard::Hard, &reference::Reference];
+pub static REGISTRY: &[&dyn ShadowMethod] = &[&hard::Hard, &brabec::Brabec, &reference::Reference];
 
 /// Looks a method up by its job name.
 pub fn find(name: &str) -> JobResult<&'static dyn ShadowMethod> {

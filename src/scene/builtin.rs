@@ -23,7 +23,8 @@ pub const TERRAIN_DEFAULT_TRIANGLES: u64 = 100_000;
 pub fn build(name: &str, params: &Map<String, Value>, field: &str, limits: &Limits) -> JobResult<Scene> {
     let allowed: &[&str] = match name {
         "terrain" => &["triangles", "seed"],
-        "torus" | "crowd" | "columns" | "occluder" => &[],
+        "occluder" => &["height"],
+        "torus" | "crowd" | "columns" => &[],
         _ => {
             return Err(JobError::field(
                 ErrorCode::UnknownBuiltin,
@@ -43,7 +44,16 @@ pub fn build(name: &str, params: &Map<String, Value>, field: &str, limits: &Limi
         "torus" => torus_scene(),
         "crowd" => crowd_scene(),
         "columns" => columns_scene(),
-        "occluder" => occluder_scene(),
+        "occluder" => {
+            let height = match params.get("height") {
+                None => OCCLUDER_HEIGHT_M,
+                Some(v) => match v.as_f64() {
+                    Some(h) if (0.05..=2.9).contains(&h) => h as f32,
+                    _ => return Err(JobError::invalid(format!("{field}.height"), "must be a number in [0.05, 2.9] metres (below the light)")),
+                },
+            };
+            occluder_scene(height)
+        }
         _ => {
             let triangles = integer_param(params, "triangles", field, TERRAIN_DEFAULT_TRIANGLES, 2, limits.max_triangles)?;
             let seed = integer_param(params, "seed", field, 1, 0, u64::from(u32::MAX))? as u32;
@@ -182,21 +192,21 @@ fn terrain_scene(triangles: u64, seed: u32) -> Scene {
     })
 }
 
-/// Height, side and floor size of the `occluder` scene, for closed-form checks.
+/// Default height and side of the `occluder` scene's square, for closed-form checks.
 pub const OCCLUDER_HEIGHT_M: f32 = 1.0;
 pub const OCCLUDER_SIDE_M: f32 = 1.5;
 
 /// A square occluder parallel to the floor under a parallel square light: the one scene
 /// whose true visibility has a closed form (the visible part of the light is the light minus
 /// the occluder projected from the receiver point), used to check `reference` and others.
-fn occluder_scene() -> Scene {
+fn occluder_scene(height: f32) -> Scene {
     let mut b = SceneBuilder::default();
     let floor_material = b.color([0.75, 0.75, 0.75]);
     let occluder_material = b.color([0.3, 0.5, 0.8]);
     let floor = b.begin_object("floor");
     b.add_mesh(floor, &plane(10.0, 10.0), Mat4::IDENTITY, floor_material);
     let occluder = b.begin_object("occluder");
-    b.add_mesh(occluder, &plane(OCCLUDER_SIDE_M, OCCLUDER_SIDE_M), Mat4::from_translation(Vec3::Y * OCCLUDER_HEIGHT_M), occluder_material);
+    b.add_mesh(occluder, &plane(OCCLUDER_SIDE_M, OCCLUDER_SIDE_M), Mat4::from_translation(Vec3::Y * height), occluder_material);
     b.finish(|_, _| {
         defaults(Vec3::new(0.0, 7.0, 5.0), Vec3::ZERO, Vec3::new(0.0, 3.0, 0.0), Vec3::ZERO, Vec2::ONE, 30.0)
     })

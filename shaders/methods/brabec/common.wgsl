@@ -1,0 +1,262 @@
+// Method `brabec` (Brabec & Seidel 2002): shared state, parameters and the neighbourhood
+// search of the light depth map (§3.2 outer penumbra, §3.3 inner penumbra, §4.3 sub-pixel
+// distances) used by every pass of the method. See `src/methods/brabec.rs`.
+
+#import common/frame_inputs.wgsl
+#import common/shadow.wgsl
+
+struct BrabecParams {
+    // Search radius in texels: r_max = r_scale·z + r_bias (paper), or derived from the light
+    // size when `derived.x` is 1: r_max = k·(z − d_near)/(2·z·d_near).
+    r_scale: f32,
+    r_bias: f32,
+    // Hit rescale: r_hit = r_shrink·Δz (paper), or k·Δz/(2·z·d) when `derived.y` is 1.
+    r_shrink: f32,
+    // k = light width · resolution / (2 tan half-angle): a light-width in texels at unit depth.
+    k: f32,
+    d_near: f32,
+    max_radius: f32,
+    meet: f32,          // attenuation where inner and outer penumbra meet (paper: 0.5)
+    bias_texels: f32,
+    slope_bias_texels: f32,
+    jitter: f32,        // texels of blocker-position jitter (§4.3), 0 = off
+    falloff: u32,       // 0 linear, 1 sinusoid (paper §6)
+    inner_depth: u32,   // 0: Δz of the blocker over P (default), 1: the paper's depth(lit) − z
+    derived: vec2<u32>, // x: search radius derived, y: hit radius derived
+    lattice_stride: u32, // 4 with adaptive sampling (4×4 blocks), 1 without
+    use_ids: u32,        // 1: the object-id test of §3.2 (off only to show what it prevents)
+}
+
+struct PixelState {
+    t: f32,   // penumbra coordinate: 0 umbra … meet at the hard edge … 1 lit; < 0 not yet known
+    key: u32, // object id (blocker's where hard-shadowed, receiver's where lit) | hard << 31
+}
+
+struct Counters {
+    searches: atomic<u32>,
+    interpolated: atomic<u32>,
+    radius_sum_16: atomic<u32>, // Σ search radius × 16 (fixed point)
+    shaded: atomic<u32>,
+}
+
+@group(1) @binding(0) var<uniform> params: BrabecParams;
+@group(1) @binding(1) var<storage, read_write> state: array<PixelState>;
+@group(1) @binding(2) var<storage, read_write> counters: Counters;
+@group(1) @binding(3) var visibility_out: texture_storage_2d<rgba32float, write>;
+
+const UNKNOWN: f32 = -1.0;
+const BACKGROUND_KEY: u32 = 0x7ffffffeu;
+
+fn state_index(pixel: vec2<u32>) -> u32 {
+    return pixel.y * frame.sizes.x + pixel.x;
+}
+
+// Where P lands in the light depth map and whether it is in hard shadow there.
+struct Warped {
+    texel: vec2<f32>, // unrounded position in texels (§4.3: distances at sub-pixel accuracy)
+    depth: f32,       // P'z: linear depth from the light
+    bias: f32,
+    blocker: f32,     // the depth map at P'
+    inside: bool,
+    hard: bool,
+}
+
+fn warp(pixel: vec2<u32>) -> Warped {
+    var w: Warped;
+    let p = textureLoad(gbuf_position, pixel, 0).xyz;
+    let n = textureLoad(gbuf_normal, pixel, 0).xyz;
+    let ls = to_light_space(p);
+    w.inside = ls.inside;
+    w.texel = ls.uv * f32(frame.sizes.z);
+    w.depth = ls.depth;
+    w.bias = depth_bias(p, n, ls.depth, params.bias_texels, params.slope_bias_texels);
+    w.blocker = textureLoad(shadow_depth, shadow_texel(ls.uv), 0).r;
+    w.hard = ls.inside && w.blocker < ls.depth - w.bias;
+    return w;
+}
+
+// Search radius r_max for a receiver at light depth z (§3.2), capped by `max_radius`.
+fn search_radius(z: f32) -> f32 {
+    var r: f32;
+    if params.derived.x == 1u {
+        r = params.k * max(z - params.d_near, 0.0) / (2.0 * z * params.d_near);
+    } else {
+        r = params.r_scale * abs(z) + params.r_bias;
+    }
+    return clamp(r, 0.0, params.max_radius);
+}
+
+// The rescaled radius once a hit gives the occluder–receiver distance Δz (§3.2).
+fn hit_radius(z: f32, dz: f32) -> f32 {
+    if params.derived.y == 1u {
+        let d = max(z - dz, 1e-4);
+        return params.k * dz / (2.0 * z * d);
+    }
+    return params.r_shrink * dz;
+}
+
+// A hash in [−0.5, 0.5)² per texel: the optional blocker jitter of §4.3.
+fn jitter(t: vec2<i32>) -> vec2<f32> {
+    var h = u32(t.x) * 0x8da6b343u ^ u32(t.y) * 0xd8163841u;
+    h = (h ^ (h >> 13u)) * 0x5bd1e995u;
+    h ^= h >> 15u;
+    return (vec2<f32>(f32(h & 0xffffu), f32(h >> 16u)) / 65536.0 - 0.5) * params.jitter;
+}
+
+// The §3.3 search for one camera pixel; returns the penumbra coordinate t.
+// Outer (lit) pixels look for the nearest texel closer to the light than P that belongs to
+// another object; inner (hard-shadowed) pixels for the nearest lit texel of their own object.
+// Rings of growing Chebyshev radius are visited and the search stops once no closer texel
+// can follow, so its cost grows with the distance found, not with r_max.
+fn search(pixel: vec2<u32>) -> f32 {
+    if !covered(pixel) {
+        return 1.0;
+    }
+    let w = warp(pixel);
+    if !w.inside {
+        return 1.0;
+    }
+    let receiver = textureLoad(gbuf_id, pixel, 0).r;
+    let r_max = search_radius(w.depth);
+    atomicAdd(&counters.searches, 1u);
+    atomicAdd(&counters.radius_sum_16, u32(r_max * 16.0));
+    let res = i32(frame.sizes.z);
+    let base = vec2<i32>(floor(w.texel));
+    var best = r_max;
+    var best_depth = 0.0;
+    var found = false;
+    let rings = i32(ceil(r_max)) + 1;
+    for (var k = 0; k <= rings; k++) {
+        // Texel centres on ring k lie at least k − 0.5 texels from P'.
+        if f32(k) - 0.5 > best {
+            break;
+        }
+        for (var dy = -k; dy <= k; dy++) {
+            let edge_row = dy == -k || dy == k;
+            var dx = -k;
+            loop {
+                if dx > k {
+                    break;
+                }
+                let t = base + vec2<i32>(dx, dy);
+                if all(t >= vec2<i32>(0)) && all(t < vec2<i32>(res)) {
+                    let d = textureLoad(shadow_depth, t, 0).r;
+                    let id = textureLoad(shadow_id, t, 0).r;
+                    var hit: bool;
+                    let same_object = id == receiver || params.use_ids == 0u;
+                    let other_object = id != receiver || params.use_ids == 0u;
+                    if w.hard {
+                        hit = d >= w.depth - w.bias && same_object;
+                    } else {
+                        hit = d < w.depth - w.bias && other_object;
+                    }
+                    if hit {
+                        let dist = length(vec2<f32>(t) + 0.5 + jitter(t) - w.texel);
+                        if dist < best {
+                            best = dist;
+                            best_depth = d;
+                            found = true;
+                        }
+                    }
+                }
+                // Inner rows of the ring: only its two end texels.
+                if edge_row || dx == k {
+                    dx += 1;
+                } else {
+                    dx = k;
+                }
+            }
+        }
+    }
+    if !found {
+        return select(1.0, 0.0, w.hard);
+    }
+    var dz: f32;
+    if !w.hard {
+        dz = w.depth - best_depth;
+    } else if params.inner_depth == 0u {
+        // Δz of the occluder over P: the distance that sets the penumbra's width, the same
+        // quantity the outer search uses, so both halves meet with matching slopes.
+        dz = w.depth - w.blocker;
+    } else {
+        dz = best_depth - w.depth; // the paper's pseudo-code, §3.3
+    }
+    let f = clamp(best / max(hit_radius(w.depth, max(dz, 0.0)), 1e-6), 0.0, 1.0);
+    // The paper's §3.3 pseudo-code returns 1 − 0.5·f outside and 0.5·f inside, which would
+    // make the hard edge brightest; the text (§3.2: f rises from 0 at the blocker to 1) fixes
+    // the intent: outside meet + (1 − meet)·f, inside meet·(1 − f).
+    if w.hard {
+        return params.meet * (1.0 - f);
+    }
+    return params.meet + (1.0 - params.meet) * f;
+}
+
+// The key of the §4.3 interpolation test: ids and hard-shadow results must agree.
+fn pixel_key(pixel: vec2<u32>) -> u32 {
+    if !covered(pixel) {
+        return BACKGROUND_KEY;
+    }
+    let w = warp(pixel);
+    var id = textureLoad(gbuf_id, pixel, 0).r;
+    if w.hard {
+        id = textureLoad(shadow_id, shadow_texel(w.texel / f32(frame.sizes.z)), 0).r;
+    }
+    return (id & 0x7fffffffu) | select(0u, 0x80000000u, w.hard);
+}
+
+// Makes sure pixel `p` has its t, searching if it has none yet.
+fn ensure(p: vec2<u32>) -> f32 {
+    let i = state_index(p);
+    if state[i].t < 0.0 {
+        state[i].t = search(p);
+    }
+    return state[i].t;
+}
+
+// §4.3 adaptive sampling along one line from pixel `a` to pixel `b` (at most 4 apart, both
+// known): interpolate the inner pixels where ids and hard results agree, otherwise search the
+// middle pixel and repeat on both halves.
+fn refine(a: vec2<u32>, step: vec2<u32>, span: u32) {
+    var stack_lo: array<u32, 4>;
+    var stack_hi: array<u32, 4>;
+    var top = 1u;
+    stack_lo[0] = 0u;
+    stack_hi[0] = span;
+    loop {
+        if top == 0u {
+            break;
+        }
+        top -= 1u;
+        let lo = stack_lo[top];
+        let hi = stack_hi[top];
+        if hi - lo < 2u {
+            continue;
+        }
+        let key = state[state_index(a + step * lo)].key;
+        var same = true;
+        for (var k = lo + 1u; k <= hi; k++) {
+            same = same && state[state_index(a + step * k)].key == key;
+        }
+        if same {
+            let t0 = ensure(a + step * lo);
+            let t1 = ensure(a + step * hi);
+            for (var k = lo + 1u; k < hi; k++) {
+                let i = state_index(a + step * k);
+                if state[i].t < 0.0 {
+                    state[i].t = mix(t0, t1, f32(k - lo) / f32(hi - lo));
+                    if key != BACKGROUND_KEY {
+                        atomicAdd(&counters.interpolated, 1u);
+                    }
+                }
+            }
+        } else {
+            let mid = (lo + hi) / 2u;
+            ensure(a + step * mid);
+            stack_lo[top] = lo;
+            stack_hi[top] = mid;
+            stack_lo[top + 1u] = mid;
+            stack_hi[top + 1u] = hi;
+            top += 2u;
+        }
+    }
+}
