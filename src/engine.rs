@@ -94,7 +94,15 @@ impl Engine {
     pub fn new(gpu: Arc<GpuContext>, limits: Limits, paths: PathPolicy) -> Self {
         let renderer = Renderer::new(gpu.clone());
         let state = State { renderer, scenes: HashMap::new(), lights: HashMap::new(), clock: 0, hits: 0, misses: 0 };
-        Self { gpu, limits, paths, state: Mutex::new(state), references: Mutex::new(HashMap::new()), reference_hits: Default::default(), reference_misses: Default::default() }
+        Self {
+            gpu,
+            limits,
+            paths,
+            state: Mutex::new(state),
+            references: Mutex::new(HashMap::new()),
+            reference_hits: Default::default(),
+            reference_misses: Default::default(),
+        }
     }
 
     pub fn gpu(&self) -> &GpuContext {
@@ -154,7 +162,15 @@ impl Engine {
         let bytes = crate::output::encode(&frame, job.output.format, job.output.exposure)?;
         timings.phase("encode", start);
         timings.total_ms = started.elapsed().as_secs_f64() * 1e3;
-        Ok(Rendered { bytes, format: job.output.format, width: frame.width, height: frame.height, timings, counters: frame.counters, quality })
+        Ok(Rendered {
+            bytes,
+            format: job.output.format,
+            width: frame.width,
+            height: frame.height,
+            timings,
+            counters: frame.counters,
+            quality,
+        })
     }
 
     /// The reference frame for a job's scene, view, light and size, rendered once and
@@ -201,7 +217,14 @@ impl Engine {
         Ok((frame, timings))
     }
 
-    fn render_frame(&self, state: &mut State, scene: &GpuScene, spec: &FrameSpec, timings: &mut Timings, progress: &dyn Fn(u64, u64)) -> JobResult<FrameOutput> {
+    fn render_frame(
+        &self,
+        state: &mut State,
+        scene: &GpuScene,
+        spec: &FrameSpec,
+        timings: &mut Timings,
+        progress: &dyn Fn(u64, u64),
+    ) -> JobResult<FrameOutput> {
         // Validation errors inside wgpu are bugs in penumbra, never the client's fault; they
         // fail this job alone with a generic message and are logged in full.
         let scope = self.gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
@@ -292,7 +315,8 @@ impl Engine {
             AssetRef::Path(path) => {
                 let resolved = self.resolve_path(path, &format!("{field}.path"))?;
                 let meta = std::fs::metadata(&resolved).map_err(|_| not_readable(&format!("{field}.path")))?;
-                let modified = meta.modified().ok().and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok()).map(|d| d.as_nanos()).unwrap_or(0);
+                let modified =
+                    meta.modified().ok().and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok()).map(|d| d.as_nanos()).unwrap_or(0);
                 Ok(format!("path:{}:{}:{}", resolved.display(), meta.len(), modified))
             }
         }
@@ -302,7 +326,9 @@ impl Engine {
     /// that does not reveal whether the file exists.
     fn resolve_path(&self, path: &Path, field: &str) -> JobResult<PathBuf> {
         match &self.paths {
-            PathPolicy::Deny => Err(JobError::field(ErrorCode::PathNotAllowed, field, "this server reads no paths (start it with --scene-dir)")),
+            PathPolicy::Deny => {
+                Err(JobError::field(ErrorCode::PathNotAllowed, field, "this server reads no paths (start it with --scene-dir)"))
+            }
             PathPolicy::Any => std::fs::canonicalize(path).map_err(|_| not_readable(field)),
             PathPolicy::Under(dir) => {
                 let dir = std::fs::canonicalize(dir).map_err(|_| not_readable(field))?;

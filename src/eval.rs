@@ -46,6 +46,47 @@ pub struct EvalOptions {
     /// Folder for the results.
     #[arg(long, default_value = "eval")]
     pub out: PathBuf,
+    /// Sweep one numeric parameter of one method, e.g. `brabec:max_radius_texels=4,8,16,32`
+    /// (other `key=value` parts stay fixed): adds one row per value and writes a table and a
+    /// plot (`sweep-*.svg`) of cost and penumbra error against the value.
+    #[arg(long)]
+    pub sweep: Option<String>,
+}
+
+/// A parameter sweep: the method label of each value, in order.
+struct Sweep {
+    method: String,
+    param: String,
+    points: Vec<(f64, String)>,
+}
+
+fn parse_sweep(text: &str) -> anyhow::Result<Sweep> {
+    let mut parts = text.split(':');
+    let method = parts.next().unwrap_or_default().to_owned();
+    let (mut fixed, mut swept) = (Vec::new(), None);
+    for part in parts {
+        let (key, values) = part.split_once('=').with_context(|| format!("sweep part `{part}` must be key=value"))?;
+        if values.contains(',') {
+            anyhow::ensure!(swept.is_none(), "a sweep varies one parameter");
+            swept = Some((key.to_owned(), values.split(',').map(str::to_owned).collect::<Vec<_>>()));
+        } else {
+            fixed.push(part.to_owned());
+        }
+    }
+    let (param, values) = swept.context("a sweep needs one parameter with comma-separated values")?;
+    let points = values
+        .iter()
+        .map(|v| {
+            let x: f64 = v.trim().parse().with_context(|| format!("sweep value `{v}` is not a number"))?;
+            let label = std::iter::once(method.clone())
+                .chain(fixed.iter().cloned())
+                .chain([format!("{param}={}", v.trim())])
+                .collect::<Vec<_>>()
+                .join(":");
+            Ok((x, label))
+        })
+        .collect::<anyhow::Result<_>>()?;
+    Ok(Sweep { method, param, points })
 }
 
 /// One method in one case.
@@ -90,11 +131,21 @@ fn parse_size(text: &str) -> anyhow::Result<(u32, u32)> {
 
 /// Runs the suite and writes the results under `options.out`.
 pub fn run(engine: &Engine, options: &EvalOptions) -> anyhow::Result<EvalReport> {
-    let methods: Vec<(String, MethodSpec)> = if options.methods.is_empty() {
-        REGISTRY.iter().filter(|m| m.name() != "reference").map(|m| (m.name().to_owned(), MethodSpec { name: m.name().into(), params: Map::new() })).collect()
+    let sweep = options.sweep.as_deref().map(parse_sweep).transpose()?;
+    let mut methods: Vec<(String, MethodSpec)> = if options.methods.is_empty() && sweep.is_none() {
+        REGISTRY
+            .iter()
+            .filter(|m| m.name() != "reference")
+            .map(|m| (m.name().to_owned(), MethodSpec { name: m.name().into(), params: Map::new() }))
+            .collect()
     } else {
         options.methods.iter().map(|text| Ok((text.clone(), parse_method(text)?))).collect::<anyhow::Result<_>>()?
     };
+    if let Some(sweep) = &sweep {
+        for (_, label) in &sweep.points {
+            methods.push((label.clone(), parse_method(label)?));
+        }
+    }
     let sizes: Vec<(u32, u32)> = options.sizes.iter().map(|s| parse_size(s)).collect::<anyhow::Result<_>>()?;
     std::fs::create_dir_all(&options.out).with_context(|| format!("cannot create {}", options.out.display()))?;
     engine.warm_up().context("warm-up")?;
@@ -102,7 +153,8 @@ pub fn run(engine: &Engine, options: &EvalOptions) -> anyhow::Result<EvalReport>
     let cases = options.scenes.len() * options.lights.len() * sizes.len();
     let progress = indicatif::ProgressBar::new((cases * (methods.len() + 1)) as u64);
     progress.set_style(
-        indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} {elapsed_precise} {msg}").unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} {elapsed_precise} {msg}")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
     );
     let mut rows = Vec::new();
     let mut files = Vec::new();
@@ -122,7 +174,9 @@ pub fn run(engine: &Engine, options: &EvalOptions) -> anyhow::Result<EvalReport>
                 reference_job.method.params.insert("samples".into(), options.samples.into());
                 reference_job.method.params.insert("resolution".into(), options.shadow_map.into());
                 let (reference, reference_timings) = engine
-                    .render_raw_observed(&reference_job, &|done, total| progress.set_message(format!("{case}: reference {done}/{total} samples")))
+                    .render_raw_observed(&reference_job, &|done, total| {
+                        progress.set_message(format!("{case}: reference {done}/{total} samples"))
+                    })
                     .with_context(|| format!("{case}: reference"))?;
                 progress.inc(1);
                 let mut case_rows = vec![row(scene, light, width, height, "reference", reference_timings, &reference, &reference)];
@@ -140,17 +194,29 @@ pub fn run(engine: &Engine, options: &EvalOptions) -> anyhow::Result<EvalReport>
                     r.ratio_to_hard = hard_ms.map(|h| r.timings.total_ms / h);
                 }
                 files.extend(write_pictures(&options.out, &case, &reference, &frames)?);
+                if let Some(sweep) = &sweep {
+                    files.push(plot_sweep(&options.out, &case, sweep, &case_rows)?);
+                }
                 rows.extend(case_rows);
             }
         }
     }
     progress.finish_and_clear();
     let report = EvalReport { adapter: engine.gpu().adapter.clone(), rows, files };
-    write_tables(&options.out, &report, &methods.iter().map(|(l, _)| l.clone()).collect::<Vec<_>>())?;
+    write_tables(&options.out, &report, &methods.iter().map(|(l, _)| l.clone()).collect::<Vec<_>>(), sweep.as_ref())?;
     Ok(report)
 }
 
-fn row(scene: &str, light: &str, width: u32, height: u32, method: &str, mut timings: Timings, frame: &FrameOutput, reference: &FrameOutput) -> Row {
+fn row(
+    scene: &str,
+    light: &str,
+    width: u32,
+    height: u32,
+    method: &str,
+    mut timings: Timings,
+    frame: &FrameOutput,
+    reference: &FrameOutput,
+) -> Row {
     timings.total_ms = timings.phases.iter().map(|p| p.cpu_ms).sum();
     Row {
         scene: scene.into(),
@@ -219,14 +285,64 @@ fn gpu(t: &Timings, phase: &str) -> String {
 }
 
 fn psnr(db: f64) -> String {
-    if db.is_finite() { format!("{db:.1}") } else { "∞".into() }
+    if db.is_finite() {
+        format!("{db:.1}")
+    } else {
+        "∞".into()
+    }
 }
 
 fn counters_text(counters: &Counters) -> String {
     counters.iter().map(|(k, v)| format!("{k}={v}")).collect::<Vec<_>>().join(" ")
 }
 
-fn write_tables(out: &Path, report: &EvalReport, methods: &[String]) -> anyhow::Result<()> {
+/// The method phase's time of a row: GPU time where measured, else wall time.
+fn method_ms(row: &Row) -> f64 {
+    row.timings.get("method").map(|p| p.gpu_ms.unwrap_or(p.cpu_ms)).unwrap_or(0.0)
+}
+
+/// Cost (method phase, ms) and penumbra RMSE of V against the swept value, as an SVG plot.
+fn plot_sweep(out: &Path, case: &str, sweep: &Sweep, rows: &[Row]) -> anyhow::Result<PathBuf> {
+    use plotters::prelude::*;
+    let points: Vec<(f64, f64, f64)> = sweep
+        .points
+        .iter()
+        .filter_map(|(x, label)| rows.iter().find(|r| &r.method == label).map(|r| (*x, method_ms(r), r.quality.visibility.penumbra.rmse)))
+        .collect();
+    let path = out.join(format!("sweep-{case}-{}-{}.svg", sanitize(&sweep.method), sanitize(&sweep.param)));
+    let (x_min, x_max) = points.iter().fold((f64::MAX, f64::MIN), |(a, b), p| (a.min(p.0), b.max(p.0)));
+    let ms_max = points.iter().map(|p| p.1).fold(0.0, f64::max) * 1.1 + 1e-3;
+    let err_max = points.iter().map(|p| p.2).fold(0.0, f64::max) * 1.1 + 1e-3;
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (720, 420)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(format!("{}: {} sweep, {case}", sweep.method, sweep.param), ("sans-serif", 18))
+            .margin(12)
+            .x_label_area_size(36)
+            .y_label_area_size(56)
+            .right_y_label_area_size(56)
+            .build_cartesian_2d(x_min..x_max.max(x_min + 1e-9), 0.0..ms_max)?
+            .set_secondary_coord(x_min..x_max.max(x_min + 1e-9), 0.0..err_max);
+        chart.configure_mesh().x_desc(sweep.param.as_str()).y_desc("method ms").draw()?;
+        chart.configure_secondary_axes().y_desc("V RMSE in the penumbra").draw()?;
+        chart
+            .draw_series(LineSeries::new(points.iter().map(|p| (p.0, p.1)), &BLUE).point_size(3))?
+            .label("method ms")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], BLUE));
+        chart
+            .draw_secondary_series(LineSeries::new(points.iter().map(|p| (p.0, p.2)), &RED).point_size(3))?
+            .label("V RMSE (penumbra)")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], RED));
+        chart.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw()?;
+        root.present()?;
+    }
+    std::fs::write(&path, svg)?;
+    Ok(path)
+}
+
+fn write_tables(out: &Path, report: &EvalReport, methods: &[String], sweep: Option<&Sweep>) -> anyhow::Result<()> {
     let mut md = String::new();
     let a = &report.adapter;
     writeln!(md, "# penumbra eval\n")?;
@@ -234,7 +350,11 @@ fn write_tables(out: &Path, report: &EvalReport, methods: &[String]) -> anyhow::
     writeln!(md, "Times are per phase in ms — GPU time where timestamps exist, else wall time — and the wall total;")?;
     writeln!(md, "`× hard` is the row's total over `hard`'s in the same case, the figure to quote. Quality is against")?;
     writeln!(md, "`reference` (same scene, view, light, size): visibility (V) and displayed colour, whole frame and")?;
-    writeln!(md, "penumbra only (pixels with 0 < Vref < 1). Contact sheets `sheet-*.png`: reference then {} left to", if methods.is_empty() { "no method".into() } else { methods.join(", ") })?;
+    writeln!(
+        md,
+        "penumbra only (pixels with 0 < Vref < 1). Contact sheets `sheet-*.png`: reference then {} left to",
+        if methods.is_empty() { "no method".into() } else { methods.join(", ") }
+    )?;
     writeln!(md, "right; below each, |V − Vref| (magma, black = 0, yellow = 1), below the reference Vref itself.\n")?;
     writeln!(md, "## Cost\n")?;
     writeln!(md, "| scene | light | size | method | shadow map | G-buffer | E0 | method | composite | total ms | × hard | counters |")?;
@@ -244,9 +364,19 @@ fn write_tables(out: &Path, report: &EvalReport, methods: &[String]) -> anyhow::
         writeln!(
             md,
             "| {} | {} | {}×{} | {} | {} | {} | {} | {} | {} | {:.1} | {} | {} |",
-            r.scene, r.light, r.width, r.height, r.method,
-            gpu(t, "shadow_map"), gpu(t, "gbuffer"), gpu(t, "e0"), gpu(t, "method"), gpu(t, "composite"),
-            t.total_ms, r.ratio_to_hard.map(|x| format!("{x:.2}")).unwrap_or_else(|| "-".into()), counters_text(&r.counters)
+            r.scene,
+            r.light,
+            r.width,
+            r.height,
+            r.method,
+            gpu(t, "shadow_map"),
+            gpu(t, "gbuffer"),
+            gpu(t, "e0"),
+            gpu(t, "method"),
+            gpu(t, "composite"),
+            t.total_ms,
+            r.ratio_to_hard.map(|x| format!("{x:.2}")).unwrap_or_else(|| "-".into()),
+            counters_text(&r.counters)
         )?;
     }
     writeln!(md, "\n## Quality against reference\n")?;
@@ -263,9 +393,33 @@ fn write_tables(out: &Path, report: &EvalReport, methods: &[String]) -> anyhow::
             c.whole.rmse, psnr(c.whole.psnr_db), c.whole.ssim, c.whole.flip, c.penumbra.rmse, c.penumbra.flip
         )?;
     }
+    if let Some(sweep) = sweep {
+        writeln!(md, "\n## Sweep of `{}` in `{}`\n", sweep.param, sweep.method)?;
+        writeln!(md, "Plots: `sweep-*.svg` (method ms and penumbra V RMSE against the value).\n")?;
+        writeln!(md, "| scene | light | size | {} | method ms | total ms | V RMSE (penumbra) | counters |", sweep.param)?;
+        writeln!(md, "|---|---|---|---:|---:|---:|---:|---|")?;
+        for (x, label) in &sweep.points {
+            for r in report.rows.iter().filter(|r| &r.method == label) {
+                writeln!(
+                    md,
+                    "| {} | {} | {}×{} | {x} | {:.1} | {:.1} | {:.4} | {} |",
+                    r.scene,
+                    r.light,
+                    r.width,
+                    r.height,
+                    method_ms(r),
+                    r.timings.total_ms,
+                    r.quality.visibility.penumbra.rmse,
+                    counters_text(&r.counters)
+                )?;
+            }
+        }
+    }
     std::fs::write(out.join("results.md"), md)?;
 
-    let mut csv = String::from("scene,light,width,height,method,total_ms,ratio_to_hard,shadow_map_ms,gbuffer_ms,e0_ms,method_ms,composite_ms,penumbra_pixels");
+    let mut csv = String::from(
+        "scene,light,width,height,method,total_ms,ratio_to_hard,shadow_map_ms,gbuffer_ms,e0_ms,method_ms,composite_ms,penumbra_pixels",
+    );
     for region in ["v_whole", "v_penumbra", "color_whole", "color_penumbra"] {
         for metric in ["rmse", "mae", "psnr_db", "ssim", "flip"] {
             write!(csv, ",{region}_{metric}")?;
@@ -277,12 +431,30 @@ fn write_tables(out: &Path, report: &EvalReport, methods: &[String]) -> anyhow::
         write!(
             csv,
             "{},{},{},{},{},{:.3},{},{},{},{},{},{},{}",
-            r.scene, r.light, r.width, r.height, r.method, t.total_ms,
+            r.scene,
+            r.light,
+            r.width,
+            r.height,
+            r.method,
+            t.total_ms,
             r.ratio_to_hard.map(|x| format!("{x:.4}")).unwrap_or_default(),
-            gpu(t, "shadow_map"), gpu(t, "gbuffer"), gpu(t, "e0"), gpu(t, "method"), gpu(t, "composite"), r.quality.penumbra_pixels
+            gpu(t, "shadow_map"),
+            gpu(t, "gbuffer"),
+            gpu(t, "e0"),
+            gpu(t, "method"),
+            gpu(t, "composite"),
+            r.quality.penumbra_pixels
         )?;
         for m in [r.quality.visibility.whole, r.quality.visibility.penumbra, r.quality.color.whole, r.quality.color.penumbra] {
-            write!(csv, ",{:.6},{:.6},{},{:.6},{:.6}", m.rmse, m.mae, if m.psnr_db.is_finite() { format!("{:.3}", m.psnr_db) } else { "inf".into() }, m.ssim, m.flip)?;
+            write!(
+                csv,
+                ",{:.6},{:.6},{},{:.6},{:.6}",
+                m.rmse,
+                m.mae,
+                if m.psnr_db.is_finite() { format!("{:.3}", m.psnr_db) } else { "inf".into() },
+                m.ssim,
+                m.flip
+            )?;
         }
         writeln!(csv, ",{}", counters_text(&r.counters).replace(' ', ";"))?;
     }

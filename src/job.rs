@@ -98,10 +98,7 @@ impl From<AssetRef> for Map<String, Value> {
                 params
             }
             AssetRef::Id(id) => Map::from_iter([("id".to_owned(), Value::String(id))]),
-            AssetRef::Path(path) => Map::from_iter([(
-                "path".to_owned(),
-                Value::String(path.to_string_lossy().into_owned()),
-            )]),
+            AssetRef::Path(path) => Map::from_iter([("path".to_owned(), Value::String(path.to_string_lossy().into_owned()))]),
         }
     }
 }
@@ -287,10 +284,7 @@ impl Job {
             return Err(JobError::field(
                 ErrorCode::LimitExceeded,
                 "output",
-                format!(
-                    "{}×{} pixels exceeds the limit of {} pixels",
-                    out.width, out.height, limits.max_output_pixels
-                ),
+                format!("{}×{} pixels exceeds the limit of {} pixels", out.width, out.height, limits.max_output_pixels),
             ));
         }
         if !out.exposure.is_finite() || out.exposure.abs() > 32.0 {
@@ -299,11 +293,7 @@ impl Job {
         let res = self.shadow_map.resolution;
         if !(16..=limits.max_shadow_map_resolution).contains(&res) {
             return Err(JobError::field(
-                if res > limits.max_shadow_map_resolution {
-                    ErrorCode::LimitExceeded
-                } else {
-                    ErrorCode::InvalidField
-                },
+                if res > limits.max_shadow_map_resolution { ErrorCode::LimitExceeded } else { ErrorCode::InvalidField },
                 "shadow_map.resolution",
                 format!("must be in [16, {}]", limits.max_shadow_map_resolution),
             ));
@@ -311,10 +301,7 @@ impl Job {
         if let Some(ambient) = self.ambient {
             for (i, a) in ambient.iter().enumerate() {
                 if !a.is_finite() || *a < 0.0 {
-                    return Err(JobError::invalid(
-                        format!("ambient[{i}]"),
-                        "must be a finite number ≥ 0",
-                    ));
+                    return Err(JobError::invalid(format!("ambient[{i}]"), "must be a finite number ≥ 0"));
                 }
             }
         }
@@ -327,11 +314,7 @@ fn check_dim(field: &str, value: u32, max: u32) -> JobResult<()> {
         return Err(JobError::invalid(field, "must be at least 1"));
     }
     if value > max {
-        return Err(JobError::field(
-            ErrorCode::LimitExceeded,
-            field,
-            format!("{value} exceeds the limit of {max}"),
-        ));
+        return Err(JobError::field(ErrorCode::LimitExceeded, field, format!("{value} exceeds the limit of {max}")));
     }
     Ok(())
 }
@@ -362,13 +345,11 @@ mod tests {
 
     #[test]
     fn errors_name_the_field() {
-        let err = Job::from_json(br#"{"scene": {"builtin": "torus"}, "camera": {"fov_y_deg": "wide"}}"#)
-            .unwrap_err();
+        let err = Job::from_json(br#"{"scene": {"builtin": "torus"}, "camera": {"fov_y_deg": "wide"}}"#).unwrap_err();
         assert_eq!(err.code, ErrorCode::InvalidField);
         assert_eq!(err.field.as_deref(), Some("camera.fov_y_deg"));
 
-        let err = Job::from_json(br#"{"scene": {"builtin": "torus"}, "output": {"widht": 3}}"#)
-            .unwrap_err();
+        let err = Job::from_json(br#"{"scene": {"builtin": "torus"}, "output": {"widht": 3}}"#).unwrap_err();
         assert_eq!(err.code, ErrorCode::UnknownField);
         assert_eq!(err.field.as_deref(), Some("output.widht"));
 

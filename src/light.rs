@@ -75,12 +75,8 @@ impl LightImage {
         let black = [0.0, 0.0, 0.0, 0.0];
         Ok(match name {
             "white" => Self::from_fn(1, 1, |_, _| white),
-            "disk" => Self::from_fn(64, 64, |s, t| {
-                if Vec2::new(s - 0.5, t - 0.5).length() <= 0.5 { white } else { black }
-            }),
-            "star" => Self::from_fn(64, 64, |s, t| {
-                if inside_star(Vec2::new(s - 0.5, 0.5 - t)) { white } else { black }
-            }),
+            "disk" => Self::from_fn(64, 64, |s, t| if Vec2::new(s - 0.5, t - 0.5).length() <= 0.5 { white } else { black }),
+            "star" => Self::from_fn(64, 64, |s, t| if inside_star(Vec2::new(s - 0.5, 0.5 - t)) { white } else { black }),
             // Saturated bands left to right, so the image is asymmetric in both colour and
             // position: the first band (red) is column 0, on the light's −r side.
             "stripes" => {
@@ -109,10 +105,7 @@ impl LightImage {
                 return Err(JobError::field(
                     ErrorCode::UnknownBuiltin,
                     format!("{field}.builtin"),
-                    format!(
-                        "unknown built-in light image `{name}`; known: {}",
-                        BUILTIN_LIGHT_IMAGES.join(", ")
-                    ),
+                    format!("unknown built-in light image `{name}`; known: {}", BUILTIN_LIGHT_IMAGES.join(", ")),
                 ))
             }
         })
@@ -135,11 +128,9 @@ impl LightImage {
         limits.max_alloc = Some(u64::from(max_dim) * u64::from(max_dim) * 16 * 2);
         reader.limits(limits);
         let decoded = reader.decode().map_err(|e| match e {
-            image::ImageError::Limits(_) => JobError::field(
-                ErrorCode::LimitExceeded,
-                field,
-                format!("the light image exceeds {max_dim}×{max_dim} texels"),
-            ),
+            image::ImageError::Limits(_) => {
+                JobError::field(ErrorCode::LimitExceeded, field, format!("the light image exceeds {max_dim}×{max_dim} texels"))
+            }
             other => invalid(format!("cannot decode the light image: {other}")),
         })?;
         let linear_input = format == Some(image::ImageFormat::OpenExr);
@@ -151,7 +142,11 @@ impl LightImage {
                 let [r, g, b, a] = p.0;
                 let decode = |c: f32| if linear_input { c.max(0.0) } else { srgb_to_linear(c) };
                 let texel = [decode(r), decode(g), decode(b), a.clamp(0.0, 1.0)];
-                if texel.iter().all(|c| c.is_finite()) { texel } else { [0.0; 4] }
+                if texel.iter().all(|c| c.is_finite()) {
+                    texel
+                } else {
+                    [0.0; 4]
+                }
             })
             .collect();
         Ok(Self { width, height, texels })
@@ -182,12 +177,20 @@ fn inside_star(p: Vec2) -> bool {
 
 pub fn srgb_to_linear(c: f32) -> f32 {
     let c = c.clamp(0.0, 1.0);
-    if c <= 0.04045 { c / 12.92 } else { ((c + 0.055) / 1.055).powf(2.4) }
+    if c <= 0.04045 {
+        c / 12.92
+    } else {
+        ((c + 0.055) / 1.055).powf(2.4)
+    }
 }
 
 pub fn linear_to_srgb(c: f32) -> f32 {
     let c = c.clamp(0.0, 1.0);
-    if c <= 0.003_130_8 { c * 12.92 } else { 1.055 * c.powf(1.0 / 2.4) - 0.055 }
+    if c <= 0.003_130_8 {
+        c * 12.92
+    } else {
+        1.055 * c.powf(1.0 / 2.4) - 0.055
+    }
 }
 
 /// The light's rectangle and frame in world space.
@@ -284,10 +287,7 @@ pub fn light_cells(light: &AreaLight, image: &LightImage) -> Vec<LightCell> {
             while end < gx && grid[(cy * gx + end) as usize] == colour {
                 end += 1;
             }
-            match rects
-                .iter_mut()
-                .find(|r| r.1 == end && r.0 == cx && r.3 == cy && r.4 == colour)
-            {
+            match rects.iter_mut().find(|r| r.1 == end && r.0 == cx && r.3 == cy && r.4 == colour) {
                 Some(rect) => rect.3 = cy + 1,
                 None => rects.push((cx, end, cy, cy + 1, colour)),
             }
@@ -305,12 +305,7 @@ pub fn light_cells(light: &AreaLight, image: &LightImage) -> Vec<LightCell> {
             // (s0,t1) bottom-left, (s1,t1) bottom-right, (s1,t0) top-right, (s0,t0) top-left:
             // counter-clockwise for a viewer on the lit side (right = +r, up = +u).
             LightCell {
-                corners: [
-                    light.image_point(s0, t1),
-                    light.image_point(s1, t1),
-                    light.image_point(s1, t0),
-                    light.image_point(s0, t0),
-                ],
+                corners: [light.image_point(s0, t1), light.image_point(s1, t1), light.image_point(s1, t0), light.image_point(s0, t0)],
                 radiance: colour * light.intensity,
             }
         })
@@ -434,10 +429,8 @@ mod tests {
         // Total flux is preserved by merging: Σ radiance × area equals the image mean × area.
         let image = LightImage::builtin("flame", &none, "f").unwrap();
         let cells = light_cells(&light, &image);
-        let flux: Vec3 = cells
-            .iter()
-            .map(|c| c.radiance * (c.corners[1] - c.corners[0]).length() * (c.corners[3] - c.corners[0]).length())
-            .sum();
+        let flux: Vec3 =
+            cells.iter().map(|c| c.radiance * (c.corners[1] - c.corners[0]).length() * (c.corners[3] - c.corners[0]).length()).sum();
         assert!((flux - image.mean_emission()).length() < 1e-4, "{flux} vs {}", image.mean_emission());
     }
 

@@ -49,7 +49,8 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     tracing_subscriber::fmt()
         .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_env("PENUMBRA_LOG").unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info,wgpu_core=warn,wgpu_hal=warn,naga=warn")),
+            tracing_subscriber::EnvFilter::try_from_env("PENUMBRA_LOG")
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info,wgpu_core=warn,wgpu_hal=warn,naga=warn")),
         )
         .with_writer(std::io::stderr)
         .init();
@@ -102,7 +103,10 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             let engine = Engine::new(gpu, options.limits.limits(), PathPolicy::Any);
             // Long methods (the reference) report samples done; show them as a progress bar.
             let bar = indicatif::ProgressBar::hidden();
-            bar.set_style(indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} samples {elapsed_precise}").unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()));
+            bar.set_style(
+                indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} samples {elapsed_precise}")
+                    .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+            );
             let rendered = engine.render_observed(&job, &|done, total| {
                 if bar.is_hidden() {
                     bar.set_draw_target(indicatif::ProgressDrawTarget::stderr());

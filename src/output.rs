@@ -28,9 +28,7 @@ fn encode_png(frame: &FrameOutput, exposure: f32) -> JobResult<Vec<u8>> {
     }
     let image = image::RgbaImage::from_raw(frame.width, frame.height, rgba).expect("buffer sized from the frame");
     let mut bytes = Cursor::new(Vec::new());
-    image
-        .write_to(&mut bytes, image::ImageFormat::Png)
-        .map_err(|e| JobError::internal(format!("PNG encoding failed: {e}")))?;
+    image.write_to(&mut bytes, image::ImageFormat::Png).map_err(|e| JobError::internal(format!("PNG encoding failed: {e}")))?;
     Ok(bytes.into_inner())
 }
 
@@ -52,9 +50,6 @@ fn encode_exr(frame: &FrameOutput) -> JobResult<Vec<u8>> {
     }
     let layer = Layer::new(size, LayerAttributes::named("penumbra"), Encoding::FAST_LOSSLESS, AnyChannels::sort(channels));
     let mut bytes = Cursor::new(Vec::new());
-    Image::from_layer(layer)
-        .write()
-        .to_buffered(&mut bytes)
-        .map_err(|e| JobError::internal(format!("EXR encoding failed: {e}")))?;
+    Image::from_layer(layer).write().to_buffered(&mut bytes).map_err(|e| JobError::internal(format!("EXR encoding failed: {e}")))?;
     Ok(bytes.into_inner())
 }

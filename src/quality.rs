@@ -57,7 +57,8 @@ impl Planar {
     }
 
     fn visibility(frame: &FrameOutput) -> Self {
-        let rgb = frame.visibility.as_ref().expect("visibility read back for comparison").iter().map(|v| v.map(|c| c.clamp(0.0, 1.0))).collect();
+        let rgb =
+            frame.visibility.as_ref().expect("visibility read back for comparison").iter().map(|v| v.map(|c| c.clamp(0.0, 1.0))).collect();
         Self { width: frame.width, height: frame.height, rgb }
     }
 
@@ -128,7 +129,11 @@ fn metrics(test: &Planar, reference: &Planar, mask: &[bool]) -> Metrics {
 
 fn masked_mean(values: impl Iterator<Item = f64>, mask: &[bool]) -> f64 {
     let (sum, n) = values.zip(mask).filter(|(_, m)| **m).fold((0.0, 0usize), |(s, n), (v, _)| (s + v, n + 1));
-    if n == 0 { 0.0 } else { sum / n as f64 }
+    if n == 0 {
+        0.0
+    } else {
+        sum / n as f64
+    }
 }
 
 /// `|V − Vref|`, the largest channel, per pixel: what the error heat-maps show.
@@ -185,7 +190,11 @@ mod tests {
         // +0.1 on every visibility value inside the penumbra, nothing elsewhere.
         let test = frame(64, 48, |x, y| {
             let v = edge(x, y);
-            if v > 0.0 && v < 1.0 { v + 0.1 } else { v }
+            if v > 0.0 && v < 1.0 {
+                v + 0.1
+            } else {
+                v
+            }
         });
         let report = compare(&test, &reference, 0.0);
         assert!((report.visibility.penumbra.rmse - 0.1).abs() < 1e-5, "{:?}", report.visibility.penumbra);

@@ -131,13 +131,15 @@ async fn health_methods_and_renders() {
     let image = client.get(format!("{base}{link}")).send().await.unwrap();
     assert_eq!(image.status(), StatusCode::OK);
     assert_eq!(image.bytes().await.unwrap().len() as u64, answer["bytes"].as_u64().unwrap());
-    let record: Value = client.get(format!("{base}/v1/jobs/{}", answer["id"].as_str().unwrap())).send().await.unwrap().json().await.unwrap();
+    let record: Value =
+        client.get(format!("{base}/v1/jobs/{}", answer["id"].as_str().unwrap())).send().await.unwrap().json().await.unwrap();
     assert_eq!(record["id"], answer["id"]);
 }
 
 /// Sends `body` and checks the documented error: status, code and field.
 async fn expect_error(client: &reqwest::Client, base: &str, body: Vec<u8>, status: StatusCode, code: &str, field: Option<&str>) {
-    let response = client.post(format!("{base}/v1/render")).header("content-type", "application/json").body(body.clone()).send().await.unwrap();
+    let response =
+        client.post(format!("{base}/v1/render")).header("content-type", "application/json").body(body.clone()).send().await.unwrap();
     assert_eq!(response.status(), status, "body {}", String::from_utf8_lossy(&body[..body.len().min(200)]));
     let answer: Value = response.json().await.unwrap();
     assert_eq!(answer["error"]["code"], code, "{answer}");
@@ -162,25 +164,148 @@ async fn bad_input_gets_documented_errors_and_the_daemon_keeps_serving() {
     use StatusCode as S;
     expect_error(&client, &base, b"{\"scene\": ".to_vec(), S::BAD_REQUEST, "invalid_json", None).await;
     expect_error(&client, &base, b"[1, 2]".to_vec(), S::BAD_REQUEST, "invalid_json", None).await;
-    expect_error(&client, &base, with(json!({"method": {"name": "magic"}})), S::UNPROCESSABLE_ENTITY, "unknown_method", Some("method.name")).await;
-    expect_error(&client, &base, with(json!({"method": {"name": "hard", "rounds": 6}})), S::UNPROCESSABLE_ENTITY, "unknown_field", Some("method.rounds")).await;
-    expect_error(&client, &base, with(json!({"method": {"name": "hard", "bias_texels": -1}})), S::UNPROCESSABLE_ENTITY, "invalid_field", Some("method.bias_texels")).await;
-    expect_error(&client, &base, with(json!({"scene": {"builtin": "teapot"}})), S::UNPROCESSABLE_ENTITY, "unknown_builtin", Some("scene.builtin")).await;
+    expect_error(
+        &client,
+        &base,
+        with(json!({"method": {"name": "magic"}})),
+        S::UNPROCESSABLE_ENTITY,
+        "unknown_method",
+        Some("method.name"),
+    )
+    .await;
+    expect_error(
+        &client,
+        &base,
+        with(json!({"method": {"name": "hard", "rounds": 6}})),
+        S::UNPROCESSABLE_ENTITY,
+        "unknown_field",
+        Some("method.rounds"),
+    )
+    .await;
+    expect_error(
+        &client,
+        &base,
+        with(json!({"method": {"name": "hard", "bias_texels": -1}})),
+        S::UNPROCESSABLE_ENTITY,
+        "invalid_field",
+        Some("method.bias_texels"),
+    )
+    .await;
+    expect_error(
+        &client,
+        &base,
+        with(json!({"scene": {"builtin": "teapot"}})),
+        S::UNPROCESSABLE_ENTITY,
+        "unknown_builtin",
+        Some("scene.builtin"),
+    )
+    .await;
     expect_error(&client, &base, with(json!({"scene": {"id": "ab12"}})), S::NOT_FOUND, "not_uploaded", Some("scene.id")).await;
-    expect_error(&client, &base, with(json!({"scene": {"path": "../../etc/passwd"}})), S::FORBIDDEN, "path_not_allowed", Some("scene.path")).await;
-    expect_error(&client, &base, with(json!({"light": {"image": {"path": "inside.png"}}})), S::UNPROCESSABLE_ENTITY, "invalid_asset", Some("light.image")).await;
-    expect_error(&client, &base, with(json!({"light": {"image": {"builtin": "moon"}}})), S::UNPROCESSABLE_ENTITY, "unknown_builtin", Some("light.image.builtin")).await;
-    expect_error(&client, &base, with(json!({"output": {"width": 0, "height": 8}})), S::UNPROCESSABLE_ENTITY, "invalid_field", Some("output.width")).await;
-    expect_error(&client, &base, with(json!({"output": {"width": 4096, "height": 8}})), S::UNPROCESSABLE_ENTITY, "limit_exceeded", Some("output.width")).await;
-    expect_error(&client, &base, with(json!({"output": {"format": "gif"}})), S::UNPROCESSABLE_ENTITY, "invalid_field", Some("output.format")).await;
-    expect_error(&client, &base, with(json!({"output": {"width": -3}})), S::UNPROCESSABLE_ENTITY, "invalid_field", Some("output.width")).await;
-    expect_error(&client, &base, with(json!({"shadow_map": {"resolution": 1_000_000}})), S::UNPROCESSABLE_ENTITY, "limit_exceeded", Some("shadow_map.resolution")).await;
-    expect_error(&client, &base, with(json!({"camera": {"eye": [0, 1]}})), S::UNPROCESSABLE_ENTITY, "invalid_field", Some("camera.eye")).await;
-    expect_error(&client, &base, with(json!({"camera": {"fov_y_deg": 180}})), S::UNPROCESSABLE_ENTITY, "invalid_field", Some("camera.fov_y_deg")).await;
-    expect_error(&client, &base, with(json!({"camera": {"eye": [0, 0, 0], "target": [0, 0, 0]}})), S::UNPROCESSABLE_ENTITY, "invalid_field", Some("camera.target")).await;
-    expect_error(&client, &base, with(json!({"light": {"direction": [0, 0, 0]}})), S::UNPROCESSABLE_ENTITY, "invalid_field", Some("light.direction")).await;
-    expect_error(&client, &base, with(json!({"light": {"intensity": -1}})), S::UNPROCESSABLE_ENTITY, "invalid_field", Some("light.intensity")).await;
-    expect_error(&client, &base, with(json!({"light": {"size": [1, 0]}})), S::UNPROCESSABLE_ENTITY, "invalid_field", Some("light.size[1]")).await;
+    expect_error(
+        &client,
+        &base,
+        with(json!({"scene": {"path": "../../etc/passwd"}})),
+        S::FORBIDDEN,
+        "path_not_allowed",
+        Some("scene.path"),
+    )
+    .await;
+    expect_error(
+        &client,
+        &base,
+        with(json!({"light": {"image": {"path": "inside.png"}}})),
+        S::UNPROCESSABLE_ENTITY,
+        "invalid_asset",
+        Some("light.image"),
+    )
+    .await;
+    expect_error(
+        &client,
+        &base,
+        with(json!({"light": {"image": {"builtin": "moon"}}})),
+        S::UNPROCESSABLE_ENTITY,
+        "unknown_builtin",
+        Some("light.image.builtin"),
+    )
+    .await;
+    expect_error(
+        &client,
+        &base,
+        with(json!({"output": {"width": 0, "height": 8}})),
+        S::UNPROCESSABLE_ENTITY,
+        "invalid_field",
+        Some("output.width"),
+    )
+    .await;
+    expect_error(
+        &client,
+        &base,
+        with(json!({"output": {"width": 4096, "height": 8}})),
+        S::UNPROCESSABLE_ENTITY,
+        "limit_exceeded",
+        Some("output.width"),
+    )
+    .await;
+    expect_error(
+        &client,
+        &base,
+        with(json!({"output": {"format": "gif"}})),
+        S::UNPROCESSABLE_ENTITY,
+        "invalid_field",
+        Some("output.format"),
+    )
+    .await;
+    expect_error(&client, &base, with(json!({"output": {"width": -3}})), S::UNPROCESSABLE_ENTITY, "invalid_field", Some("output.width"))
+        .await;
+    expect_error(
+        &client,
+        &base,
+        with(json!({"shadow_map": {"resolution": 1_000_000}})),
+        S::UNPROCESSABLE_ENTITY,
+        "limit_exceeded",
+        Some("shadow_map.resolution"),
+    )
+    .await;
+    expect_error(&client, &base, with(json!({"camera": {"eye": [0, 1]}})), S::UNPROCESSABLE_ENTITY, "invalid_field", Some("camera.eye"))
+        .await;
+    expect_error(
+        &client,
+        &base,
+        with(json!({"camera": {"fov_y_deg": 180}})),
+        S::UNPROCESSABLE_ENTITY,
+        "invalid_field",
+        Some("camera.fov_y_deg"),
+    )
+    .await;
+    expect_error(
+        &client,
+        &base,
+        with(json!({"camera": {"eye": [0, 0, 0], "target": [0, 0, 0]}})),
+        S::UNPROCESSABLE_ENTITY,
+        "invalid_field",
+        Some("camera.target"),
+    )
+    .await;
+    expect_error(
+        &client,
+        &base,
+        with(json!({"light": {"direction": [0, 0, 0]}})),
+        S::UNPROCESSABLE_ENTITY,
+        "invalid_field",
+        Some("light.direction"),
+    )
+    .await;
+    expect_error(
+        &client,
+        &base,
+        with(json!({"light": {"intensity": -1}})),
+        S::UNPROCESSABLE_ENTITY,
+        "invalid_field",
+        Some("light.intensity"),
+    )
+    .await;
+    expect_error(&client, &base, with(json!({"light": {"size": [1, 0]}})), S::UNPROCESSABLE_ENTITY, "invalid_field", Some("light.size[1]"))
+        .await;
     expect_error(&client, &base, with(json!({"colour": 1})), S::UNPROCESSABLE_ENTITY, "unknown_field", Some("colour")).await;
     expect_error(&client, &base, vec![b' '; 100 * 1024], S::PAYLOAD_TOO_LARGE, "payload_too_large", None).await;
 

@@ -150,8 +150,10 @@ fn test_gltf() -> (serde_json::Value, Vec<u8>) {
     let mut png = Cursor::new(Vec::new());
     image::RgbaImage::from_pixel(2, 2, image::Rgba([0, 255, 0, 255])).write_to(&mut png, image::ImageFormat::Png).unwrap();
     let png = push(png.get_ref());
-    let views: Vec<serde_json::Value> =
-        [quad_pos, quad_nrm, quad_idx, tri_pos, tri_uv, png].iter().map(|(o, l)| json!({"buffer": 0, "byteOffset": o, "byteLength": l})).collect();
+    let views: Vec<serde_json::Value> = [quad_pos, quad_nrm, quad_idx, tri_pos, tri_uv, png]
+        .iter()
+        .map(|(o, l)| json!({"buffer": 0, "byteOffset": o, "byteLength": l}))
+        .collect();
     let gltf = json!({
         "asset": {"version": "2.0"},
         "scene": 0,
@@ -186,7 +188,8 @@ fn test_gltf() -> (serde_json::Value, Vec<u8>) {
 
 fn as_gltf_with_data_uri() -> Vec<u8> {
     let (mut gltf, bin) = test_gltf();
-    gltf["buffers"][0]["uri"] = json!(format!("data:application/octet-stream;base64,{}", base64::engine::general_purpose::STANDARD.encode(&bin)));
+    gltf["buffers"][0]["uri"] =
+        json!(format!("data:application/octet-stream;base64,{}", base64::engine::general_purpose::STANDARD.encode(&bin)));
     serde_json::to_vec(&gltf).unwrap()
 }
 
@@ -251,7 +254,14 @@ fn gltf_renders_with_its_albedo() {
     std::fs::remove_dir_all(&dir).ok();
     // The leaf (green texture) is centred at (−0.8, 1, −0.8): up and left of the centre.
     // The red floor at (1, 0, 1), down and right, is lit and not under the leaf.
-    let camera = penumbra::render::Camera { eye: Vec3::new(0.0, 8.0, 0.001), target: Vec3::ZERO, up: -Vec3::Z, fov_y_deg: 30.0, near: 1.0, far: 20.0 };
+    let camera = penumbra::render::Camera {
+        eye: Vec3::new(0.0, 8.0, 0.001),
+        target: Vec3::ZERO,
+        up: -Vec3::Z,
+        fov_y_deg: 30.0,
+        near: 1.0,
+        far: 20.0,
+    };
     let pixel = |p: Vec3| {
         let clip = camera.view_proj(1.0) * p.extend(1.0);
         let (x, y) = (clip.x / clip.w, clip.y / clip.w);
@@ -262,7 +272,10 @@ fn gltf_renders_with_its_albedo() {
     let leaf = frame.color[ly * 64 + lx];
     let floor = frame.color[fy * 64 + fx];
     assert!(leaf[1] > 10.0 * leaf[0].max(1e-4) && leaf[1] > 10.0 * leaf[2].max(1e-4), "leaf pixel should be green: {leaf:?}");
-    assert!((floor[1] / floor[0] - 0.125).abs() < 0.01 && (floor[2] / floor[0] - 0.125).abs() < 0.01, "floor albedo ratio 0.8 : 0.1 : 0.1, got {floor:?}");
+    assert!(
+        (floor[1] / floor[0] - 0.125).abs() < 0.01 && (floor[2] / floor[0] - 0.125).abs() < 0.01,
+        "floor albedo ratio 0.8 : 0.1 : 0.1, got {floor:?}"
+    );
     // Background outside the 4 m floor is transparent.
     assert_eq!(frame.color[0][3], 0.0);
 }
@@ -329,7 +342,14 @@ fn reference_error(image: &str, samples: u32, resolution: u32) -> (f32, f32, Vec
     let (frame, _) = common::engine().render_raw(&job).unwrap();
     let light = AreaLight::new(Vec3::new(0.0, 3.0, 0.0), -Vec3::Y, -Vec3::Z, Vec2::ONE, 30.0).unwrap();
     let cells = light_cells(&light, &LightImage::builtin(image, &Default::default(), "f").unwrap());
-    let camera = penumbra::render::Camera { eye: Vec3::new(0.0, 20.0, 0.0), target: Vec3::ZERO, up: -Vec3::Z, fov_y_deg: 10.0, near: 10.0, far: 30.0 };
+    let camera = penumbra::render::Camera {
+        eye: Vec3::new(0.0, 20.0, 0.0),
+        target: Vec3::ZERO,
+        up: -Vec3::Z,
+        fov_y_deg: 10.0,
+        near: 10.0,
+        far: 30.0,
+    };
     let inverse = camera.view_proj(1.0).inverse();
     let visibility = frame.visibility.unwrap();
     let (mut sum, mut worst, mut count) = (0.0, 0.0f32, 0);
@@ -395,10 +415,11 @@ fn eval_writes_the_tables_and_the_pictures() {
         samples: 16,
         shadow_map: 256,
         out: out.clone(),
+        sweep: Some("hard:slope_bias_texels=0,1,4".into()),
     };
     let report = penumbra::eval::run(&common::engine(), &options).unwrap();
-    // Per case: the reference and two variants of hard.
-    assert_eq!(report.rows.len(), 2 * 3);
+    // Per case: the reference, two variants of hard and three sweep points.
+    assert_eq!(report.rows.len(), 2 * 6);
     for row in &report.rows {
         assert!(row.quality.penumbra_pixels > 0, "{} {}", row.scene, row.light);
         if row.method == "reference" {
@@ -411,11 +432,14 @@ fn eval_writes_the_tables_and_the_pictures() {
     let md = std::fs::read_to_string(out.join("results.md")).unwrap();
     assert!(md.contains("| torus | stripes | 64×48 | hard:bias_texels=4 |"), "{md}");
     let csv = std::fs::read_to_string(out.join("results.csv")).unwrap();
-    assert_eq!(csv.lines().count(), 1 + 6);
+    assert_eq!(csv.lines().count(), 1 + 12);
+    assert!(md.contains("## Sweep of `slope_bias_texels` in `hard`"), "{md}");
+    let svg = std::fs::read_to_string(out.join("sweep-torus-white-64x48-hard-slope_bias_texels.svg")).unwrap();
+    assert!(svg.starts_with("<svg") && svg.contains("polyline"), "a plot with lines");
     let json: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("results.json")).unwrap()).unwrap();
-    assert_eq!(json["rows"].as_array().unwrap().len(), 6);
+    assert_eq!(json["rows"].as_array().unwrap().len(), 12);
     let sheet = image::open(out.join("sheet-torus-stripes-64x48.png")).unwrap();
-    assert_eq!((sheet.width(), sheet.height()), (64 * 3, 48 * 2));
+    assert_eq!((sheet.width(), sheet.height()), (64 * 6, 48 * 2));
     assert!(out.join("error-torus-white-64x48-hard.png").exists());
     std::fs::remove_dir_all(&out).ok();
 }
@@ -437,7 +461,14 @@ fn top_down(method: serde_json::Value, scene: serde_json::Value, light: serde_js
 
 /// The output pixel that sees floor point (x, 0, z) in `top_down`.
 fn top_down_pixel(x: f32, z: f32) -> usize {
-    let camera = penumbra::render::Camera { eye: Vec3::new(0.0, 12.0, 0.0), target: Vec3::ZERO, up: -Vec3::Z, fov_y_deg: 24.0, near: 5.0, far: 20.0 };
+    let camera = penumbra::render::Camera {
+        eye: Vec3::new(0.0, 12.0, 0.0),
+        target: Vec3::ZERO,
+        up: -Vec3::Z,
+        fov_y_deg: 24.0,
+        near: 5.0,
+        far: 20.0,
+    };
     let clip = camera.view_proj(1.0) * Vec3::new(x, 0.0, z).extend(1.0);
     let (px, py) = (((clip.x / clip.w) * 0.5 + 0.5) * 128.0, (0.5 - (clip.y / clip.w) * 0.5) * 128.0);
     py as usize * 128 + px as usize
@@ -456,10 +487,12 @@ fn brabec_is_one_far_from_blockers_and_zero_deep_in_umbra() {
 
 fn penumbra_width_px(v: &[[f32; 3]]) -> usize {
     // Along the row through the centre, to the right of the occluder's footprint.
-    (0..128).filter(|&x| {
-        let value = v[64 * 128 + x][0];
-        x > 64 && value > 0.02 && value < 0.98
-    }).count()
+    (0..128)
+        .filter(|&x| {
+            let value = v[64 * 128 + x][0];
+            x > 64 && value > 0.02 && value < 0.98
+        })
+        .count()
 }
 
 #[test]
@@ -468,7 +501,8 @@ fn brabec_penumbra_widens_with_occluder_receiver_distance() {
     let light = json!({"size": [0.6, 0.6]});
     let low = penumbra_width_px(&top_down(json!({"name": "brabec"}), json!({"builtin": "occluder", "height": 0.5}), light.clone()));
     let high = penumbra_width_px(&top_down(json!({"name": "brabec"}), json!({"builtin": "occluder", "height": 1.5}), light.clone()));
-    let reference_high = penumbra_width_px(&top_down(json!({"name": "reference", "samples": 64}), json!({"builtin": "occluder", "height": 1.5}), light));
+    let reference_high =
+        penumbra_width_px(&top_down(json!({"name": "reference", "samples": 64}), json!({"builtin": "occluder", "height": 1.5}), light));
     assert!(high > low + 3, "penumbra {low} px with the occluder at 0.5 m, {high} px at 1.5 m");
     // And it is about as wide as the true one (the light size sets it, §6 future work done).
     assert!((high as f32 / reference_high as f32 - 1.0).abs() < 0.5, "brabec {high} px vs reference {reference_high} px");

@@ -86,11 +86,7 @@ pub fn storage_texture(binding: u32, format: wgpu::TextureFormat) -> Entry {
     Entry {
         binding,
         visibility: ShaderStages::COMPUTE.union(ShaderStages::FRAGMENT),
-        ty: BindingType::StorageTexture {
-            access: wgpu::StorageTextureAccess::WriteOnly,
-            format,
-            view_dimension: TextureViewDimension::D2,
-        },
+        ty: BindingType::StorageTexture { access: wgpu::StorageTextureAccess::WriteOnly, format, view_dimension: TextureViewDimension::D2 },
         count: None,
     }
 }

@@ -91,10 +91,7 @@ impl GpuScene {
                 device.create_bind_group(&wgpu::BindGroupDescriptor {
                     label: Some("GpuScene::material_bind_group"),
                     layout: material_layout,
-                    entries: &super::layout::entries(&[
-                        wgpu::BindingResource::TextureView(view),
-                        wgpu::BindingResource::Sampler(&sampler),
-                    ]),
+                    entries: &super::layout::entries(&[wgpu::BindingResource::TextureView(view), wgpu::BindingResource::Sampler(&sampler)]),
                 })
             })
             .collect();
@@ -121,12 +118,7 @@ impl GpuScene {
     /// The eight corners of the scene's bounding box.
     pub fn corners(&self) -> [Vec3; 8] {
         let (a, b) = (self.bounds_min, self.bounds_max);
-        [0, 1, 2, 3, 4, 5, 6, 7].map(|k| {
-            Vec3::new(
-                if k & 1 == 0 { a.x } else { b.x },
-                if k & 2 == 0 { a.y } else { b.y },
-                if k & 4 == 0 { a.z } else { b.z },
-            )
-        })
+        [0, 1, 2, 3, 4, 5, 6, 7]
+            .map(|k| Vec3::new(if k & 1 == 0 { a.x } else { b.x }, if k & 2 == 0 { a.y } else { b.y }, if k & 4 == 0 { a.z } else { b.z }))
     }
 }

@@ -63,10 +63,7 @@ fn append(name: &str, out: &mut String, seen: &mut HashSet<String>) {
 
 /// Compiles a composed shader into a module on `device`.
 pub fn module(device: &wgpu::Device, name: &str) -> wgpu::ShaderModule {
-    device.create_shader_module(wgpu::ShaderModuleDescriptor {
-        label: Some(name),
-        source: wgpu::ShaderSource::Wgsl(compose(name).into()),
-    })
+    device.create_shader_module(wgpu::ShaderModuleDescriptor { label: Some(name), source: wgpu::ShaderSource::Wgsl(compose(name).into()) })
 }
 
 #[cfg(test)]

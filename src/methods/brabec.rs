@@ -30,18 +30,66 @@ use crate::render::LightProjection;
 pub struct Brabec;
 
 const PARAMS: &[ParamSpec] = &[
-    ParamSpec { name: "max_radius_texels", kind: ParamKind::Float { default: 32.0, min: 1.0, max: 256.0 }, doc: "cap on the search radius r_max, shadow-map texels" },
-    ParamSpec { name: "r_scale", kind: ParamKind::Float { default: -1.0, min: -1.0, max: 1e6 }, doc: "paper's r_scale: texels of r_max per metre of P'z; −1 derives r_max from the light size" },
-    ParamSpec { name: "r_bias", kind: ParamKind::Float { default: -1.0, min: -1.0, max: 1e4 }, doc: "paper's r_bias, texels; −1 derives r_max from the light size" },
-    ParamSpec { name: "r_shrink", kind: ParamKind::Float { default: -1.0, min: -1.0, max: 1e6 }, doc: "paper's r_shrink: texels of r_max per metre of Δz on a hit; −1 derives it from the light size" },
-    ParamSpec { name: "meet", kind: ParamKind::Float { default: 0.5, min: 0.05, max: 0.95 }, doc: "attenuation where inner and outer penumbra meet (§3.3)" },
-    ParamSpec { name: "falloff", kind: ParamKind::Choice { default: "linear", options: &["linear", "sine"] }, doc: "attenuation across the penumbra: linear (paper) or the sinusoid of its §6" },
-    ParamSpec { name: "inner_depth", kind: ParamKind::Choice { default: "blocker", options: &["blocker", "paper"] }, doc: "Δz of the inner search: the occluder over P (no ring) or the paper's depth(lit) − z" },
-    ParamSpec { name: "adaptive", kind: ParamKind::Boolean { default: true }, doc: "adaptive sampling with 4×4 blocks (§4.3); off searches every pixel" },
-    ParamSpec { name: "object_ids", kind: ParamKind::Boolean { default: true }, doc: "object-id test (§3.2); off shows the self-shadowing it prevents" },
-    ParamSpec { name: "jitter_texels", kind: ParamKind::Float { default: 0.0, min: 0.0, max: 1.0 }, doc: "jitter of blocker positions for low-resolution maps (§4.3)" },
-    ParamSpec { name: "bias_texels", kind: ParamKind::Float { default: 1.5, min: 0.0, max: 64.0 }, doc: "constant depth bias of the hard test, texels" },
-    ParamSpec { name: "slope_bias_texels", kind: ParamKind::Float { default: 1.0, min: 0.0, max: 64.0 }, doc: "slope-scaled depth bias, texels × tanθ" },
+    ParamSpec {
+        name: "max_radius_texels",
+        kind: ParamKind::Float { default: 32.0, min: 1.0, max: 256.0 },
+        doc: "cap on the search radius r_max, shadow-map texels",
+    },
+    ParamSpec {
+        name: "r_scale",
+        kind: ParamKind::Float { default: -1.0, min: -1.0, max: 1e6 },
+        doc: "paper's r_scale: texels of r_max per metre of P'z; −1 derives r_max from the light size",
+    },
+    ParamSpec {
+        name: "r_bias",
+        kind: ParamKind::Float { default: -1.0, min: -1.0, max: 1e4 },
+        doc: "paper's r_bias, texels; −1 derives r_max from the light size",
+    },
+    ParamSpec {
+        name: "r_shrink",
+        kind: ParamKind::Float { default: -1.0, min: -1.0, max: 1e6 },
+        doc: "paper's r_shrink: texels of r_max per metre of Δz on a hit; −1 derives it from the light size",
+    },
+    ParamSpec {
+        name: "meet",
+        kind: ParamKind::Float { default: 0.5, min: 0.05, max: 0.95 },
+        doc: "attenuation where inner and outer penumbra meet (§3.3)",
+    },
+    ParamSpec {
+        name: "falloff",
+        kind: ParamKind::Choice { default: "linear", options: &["linear", "sine"] },
+        doc: "attenuation across the penumbra: linear (paper) or the sinusoid of its §6",
+    },
+    ParamSpec {
+        name: "inner_depth",
+        kind: ParamKind::Choice { default: "blocker", options: &["blocker", "paper"] },
+        doc: "Δz of the inner search: the occluder over P (no ring) or the paper's depth(lit) − z",
+    },
+    ParamSpec {
+        name: "adaptive",
+        kind: ParamKind::Boolean { default: true },
+        doc: "adaptive sampling with 4×4 blocks (§4.3); off searches every pixel",
+    },
+    ParamSpec {
+        name: "object_ids",
+        kind: ParamKind::Boolean { default: true },
+        doc: "object-id test (§3.2); off shows the self-shadowing it prevents",
+    },
+    ParamSpec {
+        name: "jitter_texels",
+        kind: ParamKind::Float { default: 0.0, min: 0.0, max: 1.0 },
+        doc: "jitter of blocker positions for low-resolution maps (§4.3)",
+    },
+    ParamSpec {
+        name: "bias_texels",
+        kind: ParamKind::Float { default: 1.5, min: 0.0, max: 64.0 },
+        doc: "constant depth bias of the hard test, texels",
+    },
+    ParamSpec {
+        name: "slope_bias_texels",
+        kind: ParamKind::Float { default: 1.0, min: 0.0, max: 64.0 },
+        doc: "slope-scaled depth bias, texels × tanθ",
+    },
 ];
 
 /// Laid out as `BrabecParams` in `shaders/methods/brabec/common.wgsl`.
@@ -163,10 +211,8 @@ impl ShadowMethod for Brabec {
         let lattice_size = ((w - 1) / stride + 2, (h - 1) / stride + 2);
         let line_groups = |n: u32| (n + 2) / BLOCK;
         let column_count = (w - 1) / BLOCK + 1 + u32::from((w - 1) % BLOCK != 0);
-        let mut passes: Vec<(&wgpu::ComputePipeline, (u32, u32))> = vec![
-            (&classify, (w.div_ceil(8), h.div_ceil(8))),
-            (&lattice, (lattice_size.0.div_ceil(8), lattice_size.1.div_ceil(8))),
-        ];
+        let mut passes: Vec<(&wgpu::ComputePipeline, (u32, u32))> =
+            vec![(&classify, (w.div_ceil(8), h.div_ceil(8))), (&lattice, (lattice_size.0.div_ceil(8), lattice_size.1.div_ceil(8)))];
         if adaptive {
             passes.push((&columns, ((column_count * line_groups(h)).div_ceil(64), 1)));
             passes.push((&rows, ((h * line_groups(w)).div_ceil(64), 1)));

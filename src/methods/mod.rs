@@ -16,9 +16,9 @@ use crate::error::{ErrorCode, JobError, JobResult};
 use std::sync::Arc;
 
 use crate::gpu::pool::{PipelineKey, PipelinePool};
+use crate::gpu::scene::GpuScene;
 use crate::gpu::timing::GpuTimer;
 use crate::gpu::GpuContext;
-use crate::gpu::scene::GpuScene;
 use crate::render::{FrameInputs, FrameSpec};
 
 /// Every method penumbra serves, in the order `GET /v1/methods` lists them.
@@ -67,7 +67,12 @@ impl MethodContext<'_> {
 
     /// A screen-space compute pipeline from the pool: group 0 the frame inputs, group 1 the
     /// bindings listed in `io` (bind groups for it come from `get_bind_group_layout(1)`).
-    pub fn screen_pipeline(&mut self, key: PipelineKey, shader: &'static str, io: &[wgpu::BindGroupLayoutEntry]) -> Arc<wgpu::ComputePipeline> {
+    pub fn screen_pipeline(
+        &mut self,
+        key: PipelineKey,
+        shader: &'static str,
+        io: &[wgpu::BindGroupLayoutEntry],
+    ) -> Arc<wgpu::ComputePipeline> {
         let device = &self.gpu.device;
         let inputs_layout = &self.inputs.layout;
         self.pipelines.compute(key, || {
@@ -133,7 +138,10 @@ impl Params {
             return Err(JobError::field(
                 ErrorCode::UnknownField,
                 format!("method.{unknown}"),
-                format!("unknown parameter `{unknown}`; this method takes: {}", if known.is_empty() { "none".into() } else { known.join(", ") }),
+                format!(
+                    "unknown parameter `{unknown}`; this method takes: {}",
+                    if known.is_empty() { "none".into() } else { known.join(", ") }
+                ),
             ));
         }
         let mut values = BTreeMap::new();

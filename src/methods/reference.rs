@@ -28,11 +28,31 @@ use crate::scene::Vertex;
 pub struct Reference;
 
 const PARAMS: &[ParamSpec] = &[
-    ParamSpec { name: "samples", kind: ParamKind::Integer { default: 256, min: 1, max: 4096 }, doc: "light samples (stratified, jittered); noise falls as 1/√samples" },
-    ParamSpec { name: "resolution", kind: ParamKind::Integer { default: 1024, min: 64, max: 4096 }, doc: "side of each sample's distance map, texels" },
-    ParamSpec { name: "bias_texels", kind: ParamKind::Float { default: 1.0, min: 0.0, max: 64.0 }, doc: "constant bias of the visibility test, in texels of the sample's map" },
-    ParamSpec { name: "slope_bias_texels", kind: ParamKind::Float { default: 1.0, min: 0.0, max: 64.0 }, doc: "slope-scaled bias, texels × tanθ at the receiver" },
-    ParamSpec { name: "seed", kind: ParamKind::Integer { default: 1, min: 0, max: 4_294_967_295 }, doc: "seed of the jitter within strata" },
+    ParamSpec {
+        name: "samples",
+        kind: ParamKind::Integer { default: 256, min: 1, max: 4096 },
+        doc: "light samples (stratified, jittered); noise falls as 1/√samples",
+    },
+    ParamSpec {
+        name: "resolution",
+        kind: ParamKind::Integer { default: 1024, min: 64, max: 4096 },
+        doc: "side of each sample's distance map, texels",
+    },
+    ParamSpec {
+        name: "bias_texels",
+        kind: ParamKind::Float { default: 1.0, min: 0.0, max: 64.0 },
+        doc: "constant bias of the visibility test, in texels of the sample's map",
+    },
+    ParamSpec {
+        name: "slope_bias_texels",
+        kind: ParamKind::Float { default: 1.0, min: 0.0, max: 64.0 },
+        doc: "slope-scaled bias, texels × tanθ at the receiver",
+    },
+    ParamSpec {
+        name: "seed",
+        kind: ParamKind::Integer { default: 1, min: 0, max: 4_294_967_295 },
+        doc: "seed of the jitter within strata",
+    },
 ];
 
 /// Samples recorded per submission; progress is reported between batches.
@@ -157,9 +177,14 @@ impl ShadowMethod for Reference {
                 view_formats: &[],
             })
         };
-        let distance = target("Reference::distance", wgpu::TextureFormat::R32Float, wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING)
+        let distance = target(
+            "Reference::distance",
+            wgpu::TextureFormat::R32Float,
+            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+        )
+        .create_view(&Default::default());
+        let depth = target("Reference::depth", wgpu::TextureFormat::Depth32Float, wgpu::TextureUsages::RENDER_ATTACHMENT)
             .create_view(&Default::default());
-        let depth = target("Reference::depth", wgpu::TextureFormat::Depth32Float, wgpu::TextureUsages::RENDER_ATTACHMENT).create_view(&Default::default());
 
         let (depth_pipeline, accumulate_pipeline, resolve_pipeline) = self.pipelines(ctx);
         let slot_binding = |layout: &wgpu::BindGroupLayout, extra: &[wgpu::BindingResource]| {
@@ -169,7 +194,11 @@ impl ShadowMethod for Reference {
                 size: wgpu::BufferSize::new(std::mem::size_of::<SampleUniforms>() as u64),
             })];
             resources.extend_from_slice(extra);
-            device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some("Reference::bind_group"), layout, entries: &layout::entries(&resources) })
+            device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("Reference::bind_group"),
+                layout,
+                entries: &layout::entries(&resources),
+            })
         };
         let depth_group = slot_binding(&depth_pipeline.get_bind_group_layout(0), &[]);
         let accumulate_group = slot_binding(
@@ -194,7 +223,10 @@ impl ShadowMethod for Reference {
                         view: &distance,
                         depth_slice: None,
                         resolve_target: None,
-                        ops: wgpu::Operations { load: wgpu::LoadOp::Clear(wgpu::Color { r: f64::from(f32::MAX), g: 0.0, b: 0.0, a: 0.0 }), store: wgpu::StoreOp::Store },
+                        ops: wgpu::Operations {
+                            load: wgpu::LoadOp::Clear(wgpu::Color { r: f64::from(f32::MAX), g: 0.0, b: 0.0, a: 0.0 }),
+                            store: wgpu::StoreOp::Store,
+                        },
                     })],
                     depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
                         view: &depth,
@@ -212,7 +244,9 @@ impl ShadowMethod for Reference {
                 pass.draw_indexed(0..ctx.scene.index_count, 0, 0..1);
             }
             {
-                let mut pass = ctx.encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("Reference::accumulate"), timestamp_writes: None });
+                let mut pass = ctx
+                    .encoder
+                    .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("Reference::accumulate"), timestamp_writes: None });
                 pass.set_pipeline(&accumulate_pipeline);
                 pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
                 pass.set_bind_group(1, &accumulate_group, &[offset]);
@@ -225,7 +259,8 @@ impl ShadowMethod for Reference {
             }
         }
         {
-            let mut pass = ctx.encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("Reference::resolve"), timestamp_writes: None });
+            let mut pass =
+                ctx.encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("Reference::resolve"), timestamp_writes: None });
             pass.set_pipeline(&resolve_pipeline);
             pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
             pass.set_bind_group(1, &resolve_group, &[]);
@@ -240,9 +275,14 @@ impl ShadowMethod for Reference {
 }
 
 impl Reference {
-    fn pipelines(&self, ctx: &mut MethodContext<'_>) -> (std::sync::Arc<wgpu::RenderPipeline>, std::sync::Arc<wgpu::ComputePipeline>, std::sync::Arc<wgpu::ComputePipeline>) {
+    fn pipelines(
+        &self,
+        ctx: &mut MethodContext<'_>,
+    ) -> (std::sync::Arc<wgpu::RenderPipeline>, std::sync::Arc<wgpu::ComputePipeline>, std::sync::Arc<wgpu::ComputePipeline>) {
         let device = &ctx.gpu.device;
-        let bgl = |label, entries: &[wgpu::BindGroupLayoutEntry]| device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(label), entries });
+        let bgl = |label, entries: &[wgpu::BindGroupLayoutEntry]| {
+            device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(label), entries })
+        };
         let depth = ctx.pipelines.render(PipelineKey::new("reference.sample_depth"), || {
             let module = shaders::module(device, "methods/reference/sample_depth.wgsl");
             let sample_layout = bgl("Reference::sample_layout", &[layout::uniform_dynamic(0)]);

@@ -29,8 +29,7 @@ impl Camera {
     }
 
     pub fn view_proj(&self, aspect: f32) -> Mat4 {
-        Mat4::perspective_rh(self.fov_y_deg.to_radians(), aspect, self.near, self.far)
-            * Mat4::look_at_rh(self.eye, self.target, self.up)
+        Mat4::perspective_rh(self.fov_y_deg.to_radians(), aspect, self.near, self.far) * Mat4::look_at_rh(self.eye, self.target, self.up)
     }
 }
 
@@ -145,7 +144,15 @@ impl FrameSpec {
     }
 }
 
-fn resolve_camera(eye: Vec3, target: Vec3, up: Vec3, fov_y_deg: f32, near: Option<f32>, far: Option<f32>, corners: &[Vec3; 8]) -> JobResult<Camera> {
+fn resolve_camera(
+    eye: Vec3,
+    target: Vec3,
+    up: Vec3,
+    fov_y_deg: f32,
+    near: Option<f32>,
+    far: Option<f32>,
+    corners: &[Vec3; 8],
+) -> JobResult<Camera> {
     for (name, v) in [("camera.eye", eye), ("camera.target", target), ("camera.up", up)] {
         if !v.is_finite() || v.abs().max_element() > 1e7 {
             return Err(JobError::invalid(name, "must be finite, within ±1e7"));
@@ -166,7 +173,11 @@ fn resolve_camera(eye: Vec3, target: Vec3, up: Vec3, fov_y_deg: f32, near: Optio
     let fitted_far = (depths.iter().copied().fold(f32::MIN, f32::max) * 1.02).max(1e-2);
     let fitted_near = {
         let nearest = depths.iter().copied().fold(f32::MAX, f32::min);
-        if nearest > 0.0 { (nearest * 0.9).max(fitted_far * 1e-4) } else { fitted_far * 1e-4 }
+        if nearest > 0.0 {
+            (nearest * 0.9).max(fitted_far * 1e-4)
+        } else {
+            fitted_far * 1e-4
+        }
     };
     let near = near.unwrap_or(fitted_near);
     let far = far.unwrap_or(fitted_far.max(near * 2.0));

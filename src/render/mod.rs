@@ -348,7 +348,12 @@ impl Renderer {
             device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                 label: Some("ShadowMap::pipeline"),
                 layout: Some(&layout),
-                vertex: wgpu::VertexState { module: &module, entry_point: Some("vs_main"), compilation_options: Default::default(), buffers: &[Some(vertex_layout())] },
+                vertex: wgpu::VertexState {
+                    module: &module,
+                    entry_point: Some("vs_main"),
+                    compilation_options: Default::default(),
+                    buffers: &[Some(vertex_layout())],
+                },
                 primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },
                 depth_stencil: Some(depth_state()),
                 multisample: Default::default(),
@@ -394,7 +399,12 @@ impl Renderer {
             device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                 label: Some("GBuffer::pipeline"),
                 layout: Some(&layout),
-                vertex: wgpu::VertexState { module: &module, entry_point: Some("vs_main"), compilation_options: Default::default(), buffers: &[Some(vertex_layout())] },
+                vertex: wgpu::VertexState {
+                    module: &module,
+                    entry_point: Some("vs_main"),
+                    compilation_options: Default::default(),
+                    buffers: &[Some(vertex_layout())],
+                },
                 primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },
                 depth_stencil: Some(depth_state()),
                 multisample: Default::default(),
@@ -402,7 +412,12 @@ impl Renderer {
                     module: &module,
                     entry_point: Some("fs_main"),
                     compilation_options: Default::default(),
-                    targets: &[Some(POSITION_FORMAT.into()), Some(NORMAL_FORMAT.into()), Some(ALBEDO_FORMAT.into()), Some(ID_FORMAT.into())],
+                    targets: &[
+                        Some(POSITION_FORMAT.into()),
+                        Some(NORMAL_FORMAT.into()),
+                        Some(ALBEDO_FORMAT.into()),
+                        Some(ID_FORMAT.into()),
+                    ],
                 }),
                 multiview_mask: None,
                 cache: None,
@@ -451,7 +466,12 @@ impl Renderer {
         FrameInputs { layout: self.layouts.inputs.clone(), bind_group }
     }
 
-    fn screen_pipeline(&mut self, name: &'static str, shader: &'static str, io_layout: &wgpu::BindGroupLayout) -> Arc<wgpu::ComputePipeline> {
+    fn screen_pipeline(
+        &mut self,
+        name: &'static str,
+        shader: &'static str,
+        io_layout: &wgpu::BindGroupLayout,
+    ) -> Arc<wgpu::ComputePipeline> {
         let device = &self.gpu.device;
         let inputs_layout = &self.layouts.inputs;
         self.pipelines.compute(PipelineKey::new(name), || screen_compute_pipeline(device, inputs_layout, name, shader, io_layout))
@@ -475,13 +495,27 @@ impl Renderer {
         let io = self.gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("Composite::io"),
             layout: &io_layout,
-            entries: &layout::entries(&[view(&targets.e0.view), view(&targets.visibility.view), view(&targets.color.view), view(&targets.depth.view)]),
+            entries: &layout::entries(&[
+                view(&targets.e0.view),
+                view(&targets.visibility.view),
+                view(&targets.color.view),
+                view(&targets.depth.view),
+            ]),
         });
         self.dispatch(encoder, "composite", &pipeline, inputs, &io, spec);
     }
 
-    fn dispatch(&mut self, encoder: &mut wgpu::CommandEncoder, label: &'static str, pipeline: &wgpu::ComputePipeline, inputs: &FrameInputs, io: &wgpu::BindGroup, spec: &FrameSpec) {
-        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(label), timestamp_writes: self.timer.compute_scope(label) });
+    fn dispatch(
+        &mut self,
+        encoder: &mut wgpu::CommandEncoder,
+        label: &'static str,
+        pipeline: &wgpu::ComputePipeline,
+        inputs: &FrameInputs,
+        io: &wgpu::BindGroup,
+        spec: &FrameSpec,
+    ) {
+        let mut pass = encoder
+            .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(label), timestamp_writes: self.timer.compute_scope(label) });
         pass.set_pipeline(pipeline);
         pass.set_bind_group(0, &inputs.bind_group, &[]);
         pass.set_bind_group(1, io, &[]);
@@ -515,16 +549,17 @@ pub fn screen_compute_pipeline(
 }
 
 fn cell_to_gpu(cell: &LightCell) -> LightCellGpu {
-    LightCellGpu {
-        corners: cell.corners.map(|c| [c.x, c.y, c.z, 1.0]),
-        radiance: [cell.radiance.x, cell.radiance.y, cell.radiance.z, 0.0],
-    }
+    LightCellGpu { corners: cell.corners.map(|c| [c.x, c.y, c.z, 1.0]), radiance: [cell.radiance.x, cell.radiance.y, cell.radiance.z, 0.0] }
 }
 
 fn vertex_layout() -> wgpu::VertexBufferLayout<'static> {
     const ATTRIBUTES: [wgpu::VertexAttribute; 5] =
         wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x2, 3 => Uint32, 4 => Uint32];
-    wgpu::VertexBufferLayout { array_stride: std::mem::size_of::<Vertex>() as u64, step_mode: wgpu::VertexStepMode::Vertex, attributes: &ATTRIBUTES }
+    wgpu::VertexBufferLayout {
+        array_stride: std::mem::size_of::<Vertex>() as u64,
+        step_mode: wgpu::VertexStepMode::Vertex,
+        attributes: &ATTRIBUTES,
+    }
 }
 
 fn depth_state() -> wgpu::DepthStencilState {
@@ -542,7 +577,10 @@ fn clear_attachment(view: &wgpu::TextureView, value: f64) -> wgpu::RenderPassCol
         view,
         depth_slice: None,
         resolve_target: None,
-        ops: wgpu::Operations { load: wgpu::LoadOp::Clear(wgpu::Color { r: value, g: value, b: value, a: value }), store: wgpu::StoreOp::Store },
+        ops: wgpu::Operations {
+            load: wgpu::LoadOp::Clear(wgpu::Color { r: value, g: value, b: value, a: value }),
+            store: wgpu::StoreOp::Store,
+        },
     }
 }
 

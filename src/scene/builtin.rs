@@ -49,7 +49,12 @@ pub fn build(name: &str, params: &Map<String, Value>, field: &str, limits: &Limi
                 None => OCCLUDER_HEIGHT_M,
                 Some(v) => match v.as_f64() {
                     Some(h) if (0.05..=2.9).contains(&h) => h as f32,
-                    _ => return Err(JobError::invalid(format!("{field}.height"), "must be a number in [0.05, 2.9] metres (below the light)")),
+                    _ => {
+                        return Err(JobError::invalid(
+                            format!("{field}.height"),
+                            "must be a number in [0.05, 2.9] metres (below the light)",
+                        ))
+                    }
                 },
             };
             occluder_scene(height)
@@ -66,11 +71,9 @@ fn integer_param(params: &Map<String, Value>, key: &str, field: &str, default: u
     let Some(value) = params.get(key) else { return Ok(default) };
     match value.as_u64() {
         Some(v) if (min..=max).contains(&v) => Ok(v),
-        Some(v) if v > max => Err(JobError::field(
-            ErrorCode::LimitExceeded,
-            format!("{field}.{key}"),
-            format!("{v} exceeds the limit of {max}"),
-        )),
+        Some(v) if v > max => {
+            Err(JobError::field(ErrorCode::LimitExceeded, format!("{field}.{key}"), format!("{v} exceeds the limit of {max}")))
+        }
         _ => Err(JobError::invalid(format!("{field}.{key}"), format!("must be an integer in [{min}, {max}]"))),
     }
 }
@@ -101,9 +104,7 @@ fn torus_scene() -> Scene {
     let torus_id = b.begin_object("torus");
     let transform = Mat4::from_rotation_translation(Quat::from_rotation_x(0.35), Vec3::new(0.0, 1.3, 0.0));
     b.add_mesh(torus_id, &torus(1.0, 0.3, 64, 24), transform, torus_material);
-    b.finish(|_, _| {
-        defaults(Vec3::new(0.0, 4.0, 8.0), Vec3::new(0.0, 0.5, 0.0), Vec3::new(0.0, 5.0, 0.0), Vec3::ZERO, Vec2::ONE, 60.0)
-    })
+    b.finish(|_, _| defaults(Vec3::new(0.0, 4.0, 8.0), Vec3::new(0.0, 0.5, 0.0), Vec3::new(0.0, 5.0, 0.0), Vec3::ZERO, Vec2::ONE, 60.0))
 }
 
 /// Tori, spheres and boxes at several heights over a floor: overlapping penumbrae of many
@@ -111,8 +112,7 @@ fn torus_scene() -> Scene {
 fn crowd_scene() -> Scene {
     let mut b = SceneBuilder::default();
     let floor_material = b.color([0.65, 0.65, 0.65]);
-    let palette = [[0.8, 0.3, 0.25], [0.3, 0.6, 0.8], [0.85, 0.75, 0.3], [0.4, 0.75, 0.4]]
-        .map(|c| b.color(c));
+    let palette = [[0.8, 0.3, 0.25], [0.3, 0.6, 0.8], [0.85, 0.75, 0.3], [0.4, 0.75, 0.4]].map(|c| b.color(c));
     let floor = b.begin_object("floor");
     b.add_mesh(floor, &plane(16.0, 16.0), Mat4::IDENTITY, floor_material);
     let mut rng = Lcg(7);
@@ -130,7 +130,14 @@ fn crowd_scene() -> Scene {
         b.add_mesh(id, &mesh, transform, palette[k % palette.len()]);
     }
     b.finish(|_, _| {
-        defaults(Vec3::new(0.0, 7.0, 11.0), Vec3::new(0.0, 0.5, 0.0), Vec3::new(1.0, 8.0, 1.0), Vec3::new(0.0, 0.0, 0.0), Vec2::splat(1.5), 90.0)
+        defaults(
+            Vec3::new(0.0, 7.0, 11.0),
+            Vec3::new(0.0, 0.5, 0.0),
+            Vec3::new(1.0, 8.0, 1.0),
+            Vec3::new(0.0, 0.0, 0.0),
+            Vec2::splat(1.5),
+            90.0,
+        )
     })
 }
 
@@ -207,9 +214,7 @@ fn occluder_scene(height: f32) -> Scene {
     b.add_mesh(floor, &plane(10.0, 10.0), Mat4::IDENTITY, floor_material);
     let occluder = b.begin_object("occluder");
     b.add_mesh(occluder, &plane(OCCLUDER_SIDE_M, OCCLUDER_SIDE_M), Mat4::from_translation(Vec3::Y * height), occluder_material);
-    b.finish(|_, _| {
-        defaults(Vec3::new(0.0, 7.0, 5.0), Vec3::ZERO, Vec3::new(0.0, 3.0, 0.0), Vec3::ZERO, Vec2::ONE, 30.0)
-    })
+    b.finish(|_, _| defaults(Vec3::new(0.0, 7.0, 5.0), Vec3::ZERO, Vec3::new(0.0, 3.0, 0.0), Vec3::ZERO, Vec2::ONE, 30.0))
 }
 
 /// A tiny deterministic generator (numerical recipes LCG); scenes must not depend on a
@@ -361,11 +366,7 @@ mod tests {
     fn builtins_build_with_ids_and_bounds() {
         let limits = Limits::default();
         for name in BUILTIN_SCENES {
-            let params = if *name == "terrain" {
-                Map::from_iter([("triangles".to_owned(), Value::from(5000))])
-            } else {
-                Map::new()
-            };
+            let params = if *name == "terrain" { Map::from_iter([("triangles".to_owned(), Value::from(5000))]) } else { Map::new() };
             let scene = build(name, &params, "scene", &limits).unwrap();
             assert!(scene.triangle_count() > 0, "{name}");
             let max_id = scene.vertices.iter().map(|v| v.object_id).max().unwrap();

@@ -180,9 +180,7 @@ fn decode_data_uri(uri: &str, field: &str) -> JobResult<Vec<u8>> {
     if !header.ends_with(";base64") {
         return Err(invalid(field, "data: URIs must be base64-encoded"));
     }
-    base64::engine::general_purpose::STANDARD
-        .decode(payload.trim())
-        .map_err(|e| invalid(field, format!("bad base64 in data: URI: {e}")))
+    base64::engine::general_purpose::STANDARD.decode(payload.trim()).map_err(|e| invalid(field, format!("bad base64 in data: URI: {e}")))
 }
 
 fn decode_texture(image: &gltf::Image, buffers: &[Vec<u8>], limits: &Limits, field: &str) -> JobResult<TextureData> {

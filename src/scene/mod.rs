@@ -211,22 +211,14 @@ impl SceneBuilder {
     }
 
     pub fn finish(self, defaults: impl FnOnce(Vec3, Vec3) -> SceneDefaults) -> Scene {
-        let (bounds_min, bounds_max) = if self.vertices.is_empty() {
-            (Vec3::ZERO, Vec3::ZERO)
-        } else {
-            (self.bounds_min, self.bounds_max)
-        };
+        let (bounds_min, bounds_max) = if self.vertices.is_empty() { (Vec3::ZERO, Vec3::ZERO) } else { (self.bounds_min, self.bounds_max) };
         let mut indices = Vec::new();
         let mut draws = Vec::new();
         for (material, list) in self.indices_by_material.into_iter().enumerate() {
             if list.is_empty() {
                 continue;
             }
-            draws.push(DrawRange {
-                material: material as u32,
-                first_index: indices.len() as u32,
-                index_count: list.len() as u32,
-            });
+            draws.push(DrawRange { material: material as u32, first_index: indices.len() as u32, index_count: list.len() as u32 });
             indices.extend(list);
         }
         Scene {

@@ -141,10 +141,7 @@ async fn readyz(State(state): State<Arc<AppState>>) -> Response {
 }
 
 async fn methods() -> Json<Value> {
-    let methods: Vec<Value> = REGISTRY
-        .iter()
-        .map(|m| json!({"name": m.name(), "summary": m.summary(), "params": m.params()}))
-        .collect();
+    let methods: Vec<Value> = REGISTRY.iter().map(|m| json!({"name": m.name(), "summary": m.summary(), "params": m.params()})).collect();
     Json(json!({
         "methods": methods,
         "scenes": BUILTIN_SCENES,
@@ -174,8 +171,8 @@ async fn render(State(state): State<Arc<AppState>>, headers: HeaderMap, body: Re
     let rendered = tokio::task::spawn_blocking(move || {
         span.in_scope(|| engine.render_observed(&job, &|done, total| tracing::debug!(done, total, "progress")))
     })
-        .await
-        .map_err(|e| JobError::internal(format!("render task failed: {e}")))??;
+    .await
+    .map_err(|e| JobError::internal(format!("render task failed: {e}")))??;
     tracing::info!(%id, total_ms = rendered.timings.total_ms, "job done");
     let rendered = Arc::new(rendered);
     state.keep(id.clone(), rendered.clone());

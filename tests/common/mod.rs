@@ -36,13 +36,8 @@ pub fn decode_exr(bytes: &[u8]) -> (usize, usize, HashMap<String, Vec<f32>>) {
         .from_buffered(Cursor::new(bytes))
         .expect("a valid EXR");
     let size = image.layer_data.size;
-    let channels = image
-        .layer_data
-        .channel_data
-        .list
-        .iter()
-        .map(|c| (c.name.to_string(), c.sample_data.values_as_f32().collect()))
-        .collect();
+    let channels =
+        image.layer_data.channel_data.list.iter().map(|c| (c.name.to_string(), c.sample_data.values_as_f32().collect())).collect();
     (size.0, size.1, channels)
 }
 
@@ -72,6 +67,8 @@ pub fn check_golden(name: &str, png: &[u8], max_mean: f32, max_p99: f32) {
         actual.save(dir.join(format!("{name}-actual.png"))).unwrap();
         let heat = error.apply_color_lut(&nv_flip::magma_lut());
         image::RgbImage::from_raw(w, h, heat.to_vec()).unwrap().save(dir.join(format!("{name}-difference.png"))).unwrap();
-        panic!("{name}: FLIP mean {mean:.4} (max {max_mean}), p99 {p99:.4} (max {max_p99}); see {name}-actual.png and {name}-difference.png");
+        panic!(
+            "{name}: FLIP mean {mean:.4} (max {max_mean}), p99 {p99:.4} (max {max_p99}); see {name}-actual.png and {name}-difference.png"
+        );
     }
 }
