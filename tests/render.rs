@@ -559,3 +559,25 @@ fn golden_crowd_brabec() {
     let rendered = common::engine().render(&job).unwrap();
     common::check_golden("crowd-brabec", &rendered.bytes, 0.01, 0.1);
 }
+
+#[test]
+fn brabec_jitter_smooths_low_resolution_maps() {
+    // §4.3: with a coarse map many pixels warp into one texel; distances from the unrounded
+    // position already vary, and jittered blocker positions break up the remaining steps.
+    let render = |jitter: f32| {
+        let job = job(json!({"scene": {"builtin": "occluder"}, "shadow_map": {"resolution": 64},
+                             "method": {"name": "brabec", "jitter_texels": jitter},
+                             "output": {"width": 128, "height": 96, "format": "exr"}}));
+        common::engine().render_raw(&job).unwrap().0.visibility.unwrap()
+    };
+    let (plain, jittered) = (render(0.0), render(1.0));
+    let distinct = |v: &[[f32; 3]]| {
+        let mut values: Vec<u32> = v.iter().map(|p| (p[0] * 1e4) as u32).collect();
+        values.sort_unstable();
+        values.dedup();
+        values.len()
+    };
+    assert!(plain.iter().zip(&jittered).any(|(a, b)| a != b), "jitter changes the result");
+    assert!(jittered.iter().all(|p| (0.0..=1.0).contains(&p[0])));
+    assert!(distinct(&plain) > 50, "sub-pixel distances give a continuum of values, not one per texel");
+}
