@@ -25,7 +25,6 @@ use super::{Counters, MethodContext, ParamKind, ParamSpec, Params, ShadowMethod}
 use crate::gpu::layout;
 use crate::gpu::pool::PipelineKey;
 use crate::gpu::readback::read_buffer;
-use crate::render::LightProjection;
 
 pub struct Brabec;
 
@@ -133,7 +132,7 @@ impl ShadowMethod for Brabec {
         let spec = ctx.spec;
         let light = &spec.light;
         let corners = ctx.scene.corners();
-        let projection = LightProjection::fit(light, &corners);
+        let projection = ctx.projection;
         // The one intuitive parameter the paper asks for (§6): the light's size. A light of
         // width w seen from depth z through a blocker at depth d casts a penumbra of
         // w·(z − d)/d metres, i.e. k·(z − d)/(z·d) texels with k = w·res/(2·tan half-angle);

@@ -19,7 +19,7 @@ use crate::gpu::pool::{PipelineKey, PipelinePool};
 use crate::gpu::scene::GpuScene;
 use crate::gpu::timing::GpuTimer;
 use crate::gpu::GpuContext;
-use crate::render::{FrameInputs, FrameSpec};
+use crate::render::{FrameInputs, FrameSpec, LightProjection};
 
 /// Every method penumbra serves, in the order `GET /v1/methods` lists them.
 pub static REGISTRY: &[&dyn ShadowMethod] = &[&hard::Hard, &brabec::Brabec, &reference::Reference];
@@ -51,6 +51,8 @@ pub struct MethodContext<'a> {
     pub scene: &'a GpuScene,
     /// The whole frame: light, light image, camera, sizes.
     pub spec: &'a FrameSpec,
+    /// The shadow map's projection from the light centre, as the frame rendered it.
+    pub projection: &'a LightProjection,
     /// Reports progress of long methods: (steps done, steps in all).
     pub progress: &'a dyn Fn(u64, u64),
 }

@@ -262,6 +262,7 @@ impl Renderer {
                 timer: &mut self.timer,
                 scene,
                 spec,
+                projection: &projection,
                 progress,
             };
             spec.method.record(&mut ctx, &spec.params)
