@@ -13,6 +13,7 @@
 @group(0) @binding(5) var shadow_depth: texture_2d<f32>;  // linear depth along the light normal
 @group(0) @binding(6) var shadow_id: texture_2d<u32>;     // object id seen from the light centre
 @group(0) @binding(7) var<storage, read> light_cells: array<LightCell>;
+@group(0) @binding(8) var shadow_position: texture_2d<f32>; // world position seen from the light centre, w 1 where covered
 
 // True where the G-buffer holds a surface (not background) and the pixel is on screen.
 fn covered(pixel: vec2<u32>) -> bool {

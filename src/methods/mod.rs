@@ -5,6 +5,7 @@
 
 pub mod brabec;
 pub mod hard;
+pub mod jfa_lut;
 pub mod reference;
 
 use std::collections::BTreeMap;
