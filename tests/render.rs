@@ -581,3 +581,49 @@ fn brabec_jitter_smooths_low_resolution_maps() {
     assert!(jittered.iter().all(|p| (0.0..=1.0).contains(&p[0])));
     assert!(distinct(&plain) > 50, "sub-pixel distances give a continuum of values, not one per texel");
 }
+
+// --- jfa-l ----------------------------------------------------------------------------
+
+#[test]
+fn jfa_l_outer_penumbra_matches_the_reference_and_flags_only_penumbra() {
+    let light = json!({"size": [0.6, 0.6]});
+    let jfa = top_down(json!({"name": "jfa-l"}), json!({"builtin": "occluder"}), light.clone());
+    let reference = top_down(json!({"name": "reference", "samples": 256}), json!({"builtin": "occluder"}), light.clone());
+    let hard = top_down(json!({"name": "hard"}), json!({"builtin": "occluder"}), light);
+    // Parity (§4.2): a pixel jfa-l puts in a penumbra is in the true penumbra.
+    let flagged: Vec<usize> = (0..jfa.len()).filter(|&i| jfa[i][0] > 0.0 && jfa[i][0] < 1.0).collect();
+    assert!(flagged.len() > 200, "{} penumbra pixels", flagged.len());
+    let true_penumbra = flagged.iter().filter(|&&i| reference[i][0] > 0.0 && reference[i][0] < 1.0).count();
+    assert!(true_penumbra as f32 >= 0.98 * flagged.len() as f32, "{true_penumbra} of {} in the true penumbra", flagged.len());
+    // The outer penumbra (lit by the light centre, shadowed in the reference) is close to the truth.
+    let outer: Vec<usize> = (0..jfa.len()).filter(|&i| hard[i][0] == 1.0 && reference[i][0] < 1.0).collect();
+    let mean = outer.iter().map(|&i| (jfa[i][0] - reference[i][0]).abs()).sum::<f32>() / outer.len() as f32;
+    assert!(mean < 0.05, "mean |V − Vref| over {} outer-penumbra pixels: {mean}", outer.len());
+}
+
+#[test]
+fn jfa_l_colored_penumbra_and_standard_flooding() {
+    let light = json!({"size": [1.2, 0.6], "image": {"builtin": "stripes"}});
+    let jump = top_down(json!({"name": "jfa-l"}), json!({"builtin": "occluder"}), light.clone());
+    let standard = top_down(json!({"name": "jfa-l", "flooding": "standard"}), json!({"builtin": "occluder"}), light.clone());
+    let reference = top_down(json!({"name": "reference", "samples": 256}), json!({"builtin": "occluder"}), light);
+    // Coloured: in jfa-l's (outer) penumbra, red and blue visibility differ where the reference
+    // says they do, the same way round.
+    let in_penumbra = |v: [f32; 3]| v.iter().any(|&c| c > 0.0 && c < 1.0);
+    let colored: Vec<usize> =
+        (0..jump.len()).filter(|&i| (reference[i][0] - reference[i][2]).abs() > 0.2 && in_penumbra(jump[i])).collect();
+    assert!(colored.len() > 20, "{} coloured penumbra pixels", colored.len());
+    let agree = colored.iter().filter(|&&i| (jump[i][0] - jump[i][2]).signum() == (reference[i][0] - reference[i][2]).signum()).count();
+    assert!(agree as f32 >= 0.9 * colored.len() as f32, "{agree} of {} agree", colored.len());
+    // The paper's flooding experiment in small: jump and standard flooding agree nearly everywhere.
+    let differ = jump.iter().zip(&standard).filter(|(a, b)| (a[0] - b[0]).abs() >= 0.05).count();
+    assert!((differ as f32) < 0.01 * jump.len() as f32, "{differ} pixels differ by ≥ 0.05");
+}
+
+#[test]
+fn golden_crowd_jfa_l() {
+    let job = job(json!({"scene": {"builtin": "crowd"}, "light": {"image": {"builtin": "stripes"}}, "method": {"name": "jfa-l"},
+                         "output": {"width": 256, "height": 192}}));
+    let rendered = common::engine().render(&job).unwrap();
+    common::check_golden("crowd-jfa-l", &rendered.bytes, 0.01, 0.1);
+}

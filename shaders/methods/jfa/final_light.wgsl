@@ -1,0 +1,37 @@
+// Method `jfa-l`, §4.1 "Generating Final Image": hard shadow → 0; a penumbra-map hit →
+// the intensity recomputed from this eye pixel's own point and the stored occluder (not the
+// stored intensity, which would be blocky at the shadow map's resolution); else 1.
+
+#import methods/jfa/common.wgsl
+
+@compute @workgroup_size(8, 8)
+fn main(@builtin(global_invocation_id) id: vec3<u32>) {
+    let pixel = id.xy;
+    if any(pixel >= frame.sizes.xy) {
+        return;
+    }
+    var v = vec3<f32>(1.0);
+    if covered(pixel) {
+        let p = textureLoad(gbuf_position, pixel, 0).xyz;
+        let n = textureLoad(gbuf_normal, pixel, 0).xyz;
+        let ls = to_light_space(p);
+        if ls.inside {
+            let texel = shadow_texel(ls.uv);
+            let blocker = textureLoad(shadow_depth, texel, 0).r;
+            let bias = depth_bias(p, n, ls.depth, params.bias_texels, params.slope_bias_texels);
+            if ls.depth - bias > blocker {
+                v = vec3<f32>(0.0);
+            } else {
+                let record = src[u32(texel.y) * frame.sizes.z + u32(texel.x)];
+                if record.occluder.w > 0.0 && record.intensity.w <= 1.0 {
+                    let i = intensity(p, record.occluder.xyz, false);
+                    if i.w > 0.0 {
+                        v = i.rgb;
+                        atomicAdd(&counters[1], 1u);
+                    }
+                }
+            }
+        }
+    }
+    textureStore(visibility_out, pixel, vec4<f32>(v, 1.0));
+}

@@ -1,0 +1,39 @@
+// Method `jfa-l`, §4.1 "Generating Penumbra Map": one round of flooding over the shadow map.
+// Each texel looks at its 8 neighbours at ±step, computes the intensity every occluder they
+// carry gives its own surface point, and keeps the occluder giving the minimum intensity —
+// the one that blocks the most light shapes the penumbra (§4.1). Occluders whose ray misses
+// the light are not taken and not passed on (§3).
+
+#import methods/jfa/common.wgsl
+
+@compute @workgroup_size(8, 8)
+fn main(@builtin(global_invocation_id) id: vec3<u32>) {
+    let res = i32(frame.sizes.z);
+    if any(id.xy >= vec2<u32>(u32(res))) {
+        return;
+    }
+    let p = vec2<i32>(id.xy);
+    let index = id.y * u32(res) + id.x;
+    var best = src[index];
+    let receiver = textureLoad(shadow_position, p, 0);
+    if receiver.w > 0.0 {
+        for (var b = -1; b <= 1; b++) {
+            for (var a = -1; a <= 1; a++) {
+                let n = p + vec2<i32>(a, b) * params.step;
+                if (a == 0 && b == 0) || any(n < vec2<i32>(0)) || any(n >= vec2<i32>(res)) {
+                    continue;
+                }
+                let carried = src[u32(n.y * res + n.x)];
+                if carried.occluder.w == 0.0 {
+                    continue;
+                }
+                let i = intensity(receiver.xyz, carried.occluder.xyz, false);
+                let key = luminance(i.rgb);
+                if i.w > 0.0 && key < best.intensity.w {
+                    best = Record(carried.occluder, vec4<f32>(i.rgb, key));
+                }
+            }
+        }
+    }
+    dst[index] = best;
+}

@@ -1,0 +1,34 @@
+// Method `jfa-l`, §4.1 "Locating Occluders": a shadow-map texel is a silhouette pixel when one
+// of its 8 neighbours is deeper by more than a threshold (or empty); silhouette pixels seed
+// the flood with their own light-space (world) position.
+
+#import methods/jfa/common.wgsl
+
+@compute @workgroup_size(8, 8)
+fn main(@builtin(global_invocation_id) id: vec3<u32>) {
+    let res = frame.sizes.z;
+    if any(id.xy >= vec2<u32>(res)) {
+        return;
+    }
+    let p = vec2<i32>(id.xy);
+    var record = empty_record();
+    let here = textureLoad(shadow_position, p, 0);
+    if here.w > 0.0 {
+        let depth = textureLoad(shadow_depth, p, 0).r;
+        var silhouette = false;
+        for (var b = -1; b <= 1; b++) {
+            for (var a = -1; a <= 1; a++) {
+                let n = p + vec2<i32>(a, b);
+                if all(n >= vec2<i32>(0)) && all(n < vec2<i32>(i32(res))) {
+                    silhouette = silhouette || textureLoad(shadow_depth, n, 0).r > depth * (1.0 + params.silhouette_relative);
+                }
+            }
+        }
+        if silhouette {
+            record.occluder = vec4<f32>(here.xyz, 1.0);
+            record.intensity = vec4<f32>(1.0, 1.0, 1.0, SEED_KEY);
+            atomicAdd(&counters[0], 1u);
+        }
+    }
+    dst[id.y * res + id.x] = record;
+}
