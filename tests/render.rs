@@ -627,3 +627,50 @@ fn golden_crowd_jfa_l() {
     let rendered = common::engine().render(&job).unwrap();
     common::check_golden("crowd-jfa-l", &rendered.bytes, 0.01, 0.1);
 }
+
+// --- jfa-e ----------------------------------------------------------------------------
+
+#[test]
+fn jfa_e_inner_and_outer_penumbrae_follow_the_reference() {
+    let light = json!({"size": [0.6, 0.6]});
+    let jfa = top_down(json!({"name": "jfa-e"}), json!({"builtin": "occluder"}), light.clone());
+    let reference = top_down(json!({"name": "reference", "samples": 256}), json!({"builtin": "occluder"}), light.clone());
+    let hard = top_down(json!({"name": "hard"}), json!({"builtin": "occluder"}), light);
+    let in_penumbra = |v: [f32; 3]| v[0] > 0.0 && v[0] < 1.0;
+    let flagged: Vec<usize> = (0..jfa.len()).filter(|&i| in_penumbra(jfa[i])).collect();
+    let inner = flagged.iter().filter(|&&i| hard[i][0] == 0.0).count();
+    let outer = flagged.iter().filter(|&&i| hard[i][0] == 1.0).count();
+    assert!(inner > 100 && outer > 100, "inner {inner}, outer {outer} penumbra pixels");
+    // Parity: pixels jfa-e puts in a penumbra are in the true one (its boundary may sit a pixel off).
+    let true_penumbra = flagged.iter().filter(|&&i| in_penumbra(reference[i])).count();
+    assert!(true_penumbra as f32 >= 0.9 * flagged.len() as f32, "{true_penumbra} of {} in the true penumbra", flagged.len());
+    let mean = flagged.iter().map(|&i| (jfa[i][0] - reference[i][0]).abs()).sum::<f32>() / flagged.len() as f32;
+    assert!(mean < 0.1, "mean |V − Vref| over the penumbra: {mean}");
+}
+
+/// Pixels the reference puts in the umbra that a method lights noticeably (V > 0.05): the
+/// "holes in umbra regions" of Rong & Tan §5.2.
+fn umbra_holes(v: &[[f32; 3]], reference: &[[f32; 3]]) -> usize {
+    v.iter().zip(reference).filter(|(a, r)| r[0] == 0.0 && a[0] > 0.05).count()
+}
+
+#[test]
+fn jfa_e_remedies_against_jumping_too_far_leave_no_more_holes() {
+    let render = |method: serde_json::Value| {
+        let job = job(json!({"scene": {"builtin": "crowd"}, "method": method, "output": {"width": 192, "height": 144, "format": "exr"}}));
+        common::engine().render_raw(&job).unwrap().0.visibility.unwrap()
+    };
+    let reference = render(json!({"name": "reference", "samples": 128}));
+    let with = umbra_holes(&render(json!({"name": "jfa-e"})), &reference);
+    let without = umbra_holes(&render(json!({"name": "jfa-e", "same_object": false, "midpoint": false})), &reference);
+    eprintln!("jfa-e umbra holes: {with} with the §5.2 remedies, {without} without");
+    assert!(with <= without, "{with} holes with the remedies, {without} without");
+}
+
+#[test]
+fn golden_crowd_jfa_e() {
+    let job = job(json!({"scene": {"builtin": "crowd"}, "light": {"image": {"builtin": "stripes"}}, "method": {"name": "jfa-e"},
+                         "output": {"width": 256, "height": 192}}));
+    let rendered = common::engine().render(&job).unwrap();
+    common::check_golden("crowd-jfa-e", &rendered.bytes, 0.01, 0.1);
+}

@@ -1,7 +1,9 @@
-//! Method `jfa-l`: soft shadows by jump flooding in light space (Rong & Tan 2006, §4), with
-//! the intensity look-up of §3 made coloured (`jfa_lut`). Shaders: `shaders/methods/jfa/`.
+//! Methods `jfa-l` and `jfa-e`: soft shadows by jump flooding (Rong & Tan 2006) in light
+//! space (§4) and in eye space (§5), with the intensity look-up of §3 made coloured
+//! (`jfa_lut`). Shaders: `shaders/methods/jfa/`. Both share one pass driver (`flood`): seed,
+//! `rounds` rounds of flooding between two record buffers, final pass.
 //!
-//! How it works: the shadow map (from the light centre) also stores each texel's world
+//! `jfa-l`: the shadow map (from the light centre) also stores each texel's world
 //! position (§4.1 "light space coordinates"). `silhouette.wgsl` marks texels with a deeper
 //! neighbour as silhouette pixels, seeded with their own position. `flood_light.wgsl` runs
 //! `rounds` rounds with steps 2^(rounds−1) … 1 (§3), each texel keeping, among the occluders
@@ -11,6 +13,13 @@
 //! for the paper's flooding experiment. `final_light.wgsl` shades eye pixels: hard shadow →
 //! 0, a flooded texel → the intensity recomputed from the eye point and the stored occluder,
 //! else 1. Only outer penumbrae, as in the paper.
+//!
+//! `jfa-e`: `boundary.wgsl` finds eye pixels in hard shadow next to a lit pixel close in 3D
+//! (§5.1) and seeds them with the occluding silhouette point the light centre sees there;
+//! `flood_eye.wgsl` floods over the screen, keeping the highest intensity inside hard shadow
+//! and the lowest outside (inner and outer penumbrae), with the two remedies of §5.2 against
+//! "jump too far" as switches (`same_object`, `midpoint`); `final_eye.wgsl` takes the stored
+//! intensity, else hard shadow → 0, else 1.
 
 use wgpu::util::DeviceExt;
 
@@ -21,33 +30,61 @@ use crate::gpu::pool::PipelineKey;
 use crate::gpu::readback::read_buffer;
 
 pub struct JfaL;
+pub struct JfaE;
 
-const PARAMS: &[ParamSpec] = &[
-    ParamSpec {
-        name: "rounds",
-        kind: ParamKind::Integer { default: 6, min: 1, max: 13 },
-        doc: "jump-flooding rounds: occluders travel up to 2^rounds − 1 texels (log2 of the resolution floods fully)",
-    },
-    ParamSpec {
-        name: "flooding",
-        kind: ParamKind::Choice { default: "jump", options: &["jump", "standard"] },
-        doc: "jump flooding, or standard flooding (step 1, 2^rounds − 1 rounds) for the paper's experiment",
-    },
+const ROUNDS: ParamSpec = ParamSpec {
+    name: "rounds",
+    kind: ParamKind::Integer { default: 6, min: 1, max: 13 },
+    doc: "jump-flooding rounds: occluders travel up to 2^rounds − 1 pixels (log2 of the resolution floods fully)",
+};
+const FLOODING: ParamSpec = ParamSpec {
+    name: "flooding",
+    kind: ParamKind::Choice { default: "jump", options: &["jump", "standard"] },
+    doc: "jump flooding, or standard flooding (step 1, 2^rounds − 1 rounds) for the paper's experiment",
+};
+const BIAS: ParamSpec = ParamSpec {
+    name: "bias_texels",
+    kind: ParamKind::Float { default: 1.5, min: 0.0, max: 64.0 },
+    doc: "constant depth bias of the hard test, texels",
+};
+const SLOPE_BIAS: ParamSpec = ParamSpec {
+    name: "slope_bias_texels",
+    kind: ParamKind::Float { default: 1.0, min: 0.0, max: 64.0 },
+    doc: "slope-scaled depth bias, texels × tanθ",
+};
+
+const PARAMS_L: &[ParamSpec] = &[
+    ROUNDS,
+    FLOODING,
     ParamSpec {
         name: "silhouette_relative",
         kind: ParamKind::Float { default: 0.01, min: 0.0, max: 1.0 },
         doc: "a neighbour deeper by more than depth × this marks a silhouette pixel",
     },
+    BIAS,
+    SLOPE_BIAS,
+];
+
+const PARAMS_E: &[ParamSpec] = &[
+    ROUNDS,
+    FLOODING,
     ParamSpec {
-        name: "bias_texels",
-        kind: ParamKind::Float { default: 1.5, min: 0.0, max: 64.0 },
-        doc: "constant depth bias of the hard test, texels",
+        name: "boundary_relative",
+        kind: ParamKind::Float { default: 0.02, min: 0.0, max: 1.0 },
+        doc: "a lit neighbour closer in 3D than view depth × this makes a hard-shadow pixel a boundary pixel",
     },
     ParamSpec {
-        name: "slope_bias_texels",
-        kind: ParamKind::Float { default: 1.0, min: 0.0, max: 64.0 },
-        doc: "slope-scaled depth bias, texels × tanθ",
+        name: "same_object",
+        kind: ParamKind::Boolean { default: true },
+        doc: "§5.2 remedy: flood only to pixels of the boundary pixel's object",
     },
+    ParamSpec {
+        name: "midpoint",
+        kind: ParamKind::Boolean { default: true },
+        doc: "§5.2 remedy: the midpoint towards the boundary pixel must already be in a penumbra",
+    },
+    BIAS,
+    SLOPE_BIAS,
 ];
 
 /// Laid out as `JfaParams` in `shaders/methods/jfa/common.wgsl`, one 256-byte slot per pass.
@@ -58,11 +95,15 @@ struct Uniforms {
     silhouette_relative: f32,
     bias_texels: f32,
     slope_bias_texels: f32,
+    boundary_relative: f32,
+    same_object: u32,
+    midpoint: u32,
+    _pad: u32,
 }
 
 const SLOT: u64 = 256;
 /// Bytes of one flooded record (`Record` in the shader).
-const RECORD_BYTES: u64 = 32;
+const RECORD_BYTES: u64 = 48;
 
 /// The step lengths of the flood: 2^(rounds−1) … 1, or 1 repeated for standard flooding.
 pub fn steps(rounds: u32, standard: bool) -> Vec<i32> {
@@ -73,9 +114,34 @@ pub fn steps(rounds: u32, standard: bool) -> Vec<i32> {
     }
 }
 
+/// Which flood: the grid it runs over and its three shaders.
+struct Flood {
+    name: &'static str,
+    seed: (&'static str, &'static str),
+    round: (&'static str, &'static str),
+    finish: (&'static str, &'static str),
+    light_space: bool,
+}
+
+const LIGHT_SPACE: Flood = Flood {
+    name: "jfa-l",
+    seed: ("jfa-l.silhouette", "methods/jfa/silhouette.wgsl"),
+    round: ("jfa-l.flood", "methods/jfa/flood_light.wgsl"),
+    finish: ("jfa-l.final", "methods/jfa/final_light.wgsl"),
+    light_space: true,
+};
+
+const EYE_SPACE: Flood = Flood {
+    name: "jfa-e",
+    seed: ("jfa-e.boundary", "methods/jfa/boundary.wgsl"),
+    round: ("jfa-e.flood", "methods/jfa/flood_eye.wgsl"),
+    finish: ("jfa-e.final", "methods/jfa/final_eye.wgsl"),
+    light_space: false,
+};
+
 impl ShadowMethod for JfaL {
     fn name(&self) -> &'static str {
-        "jfa-l"
+        LIGHT_SPACE.name
     }
 
     fn summary(&self) -> &'static str {
@@ -83,129 +149,173 @@ impl ShadowMethod for JfaL {
     }
 
     fn params(&self) -> &'static [ParamSpec] {
-        PARAMS
+        PARAMS_L
     }
 
     fn record(&self, ctx: &mut MethodContext<'_>, params: &Params) -> Counters {
-        let device = ctx.gpu.device.clone();
-        let res = ctx.spec.shadow_resolution;
-        let steps = steps(params.u32("rounds"), params.choice("flooding") == "standard");
-        let base = Uniforms {
-            step: 0,
-            silhouette_relative: params.f32("silhouette_relative"),
-            bias_texels: params.f32("bias_texels"),
-            slope_bias_texels: params.f32("slope_bias_texels"),
-        };
-        // Slot 0: silhouette and final pass; slots 1…: one per round.
-        let mut slots = Vec::new();
-        for step in std::iter::once(0).chain(steps.iter().copied()) {
-            let mut bytes = bytemuck::bytes_of(&Uniforms { step, ..base }).to_vec();
-            bytes.resize(SLOT as usize, 0);
-            slots.extend(bytes);
-        }
-        let uniforms = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("JfaL::uniforms"),
-            contents: &slots,
-            usage: wgpu::BufferUsages::UNIFORM,
-        });
-        let lut: Vec<f32> = intensity_lut(&ctx.spec.light, &ctx.spec.light_image).into_iter().flatten().collect();
-        let lut_view = device
-            .create_texture_with_data(
-                &ctx.gpu.queue,
-                &wgpu::TextureDescriptor {
-                    label: Some("JfaL::lut"),
-                    size: wgpu::Extent3d { width: LUT_SIZE, height: LUT_SIZE, depth_or_array_layers: 1 },
-                    mip_level_count: 1,
-                    sample_count: 1,
-                    dimension: wgpu::TextureDimension::D2,
-                    format: wgpu::TextureFormat::Rgba32Float,
-                    usage: wgpu::TextureUsages::TEXTURE_BINDING,
-                    view_formats: &[],
-                },
-                wgpu::util::TextureDataOrder::LayerMajor,
-                bytemuck::cast_slice(&lut),
-            )
-            .create_view(&Default::default());
-        let records = |label| {
-            device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some(label),
-                size: u64::from(res) * u64::from(res) * RECORD_BYTES,
-                usage: wgpu::BufferUsages::STORAGE,
-                mapped_at_creation: false,
-            })
-        };
-        let (a, b) = (records("JfaL::records_a"), records("JfaL::records_b"));
-        let counters = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("JfaL::counters"),
-            size: 16,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        let io = [
-            layout::uniform_dynamic(0),
-            layout::texture_float(1),
-            layout::storage_read(2),
-            layout::storage_read_write(3),
-            layout::storage_texture(4, wgpu::TextureFormat::Rgba32Float),
-            layout::storage_read_write(5),
-        ];
-        let silhouette = ctx.screen_pipeline(PipelineKey::new("jfa-l.silhouette"), "methods/jfa/silhouette.wgsl", &io);
-        let flood = ctx.screen_pipeline(PipelineKey::new("jfa-l.flood"), "methods/jfa/flood_light.wgsl", &io);
-        let finish = ctx.screen_pipeline(PipelineKey::new("jfa-l.final"), "methods/jfa/final_light.wgsl", &io);
-        // Ping-pong: `a_to_b` reads a and writes b, `b_to_a` the reverse.
-        let group = |src: &wgpu::Buffer, dst: &wgpu::Buffer| {
-            device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("JfaL::bind_group"),
-                layout: &silhouette.get_bind_group_layout(1),
-                entries: &layout::entries(&[
-                    wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                        buffer: &uniforms,
-                        offset: 0,
-                        size: wgpu::BufferSize::new(std::mem::size_of::<Uniforms>() as u64),
-                    }),
-                    wgpu::BindingResource::TextureView(&lut_view),
-                    src.as_entire_binding(),
-                    dst.as_entire_binding(),
-                    wgpu::BindingResource::TextureView(ctx.visibility),
-                    counters.as_entire_binding(),
-                ]),
-            })
-        };
-        let (a_to_b, b_to_a) = (group(&a, &b), group(&b, &a));
-        ctx.encoder.clear_buffer(&counters, 0, None);
-        let grid = res.div_ceil(8);
-        let (w, h) = ctx.dispatch_size();
-        {
-            let mut pass = ctx.encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("JfaL::passes"),
-                timestamp_writes: ctx.timer.compute_scope("method"),
-            });
-            pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
-            // Seeds go to a.
-            pass.set_pipeline(&silhouette);
-            pass.set_bind_group(1, &b_to_a, &[0]);
-            pass.dispatch_workgroups(grid, grid, 1);
-            pass.set_pipeline(&flood);
-            let mut result_in_a = true;
-            for k in 0..steps.len() {
-                let offset = ((k as u64 + 1) * SLOT) as u32;
-                pass.set_bind_group(1, if result_in_a { &a_to_b } else { &b_to_a }, &[offset]);
-                pass.dispatch_workgroups(grid, grid, 1);
-                result_in_a = !result_in_a;
-            }
-            pass.set_pipeline(&finish);
-            pass.set_bind_group(1, if result_in_a { &a_to_b } else { &b_to_a }, &[0]);
-            pass.dispatch_workgroups(w, h, 1);
-        }
-        ctx.flush();
-        let counts: Vec<u32> = bytemuck::cast_slice(&read_buffer(ctx.gpu, &counters)).to_vec();
+        let uniforms = Uniforms { silhouette_relative: params.f32("silhouette_relative"), ..common_uniforms(params) };
+        let (seeds, penumbra, steps) = flood(ctx, &LIGHT_SPACE, params, uniforms);
         Counters::from([
             ("rounds".to_owned(), steps.len() as f64),
             ("max_reach_texels".to_owned(), f64::from(steps.iter().sum::<i32>())),
-            ("silhouette_texels".to_owned(), f64::from(counts[0])),
-            ("penumbra_pixels".to_owned(), f64::from(counts[1])),
+            ("silhouette_texels".to_owned(), f64::from(seeds)),
+            ("penumbra_pixels".to_owned(), f64::from(penumbra)),
         ])
     }
+}
+
+impl ShadowMethod for JfaE {
+    fn name(&self) -> &'static str {
+        EYE_SPACE.name
+    }
+
+    fn summary(&self) -> &'static str {
+        "Rong & Tan 2006 §5: hard shadows with 3D positions, boundary pixels, eye-space jump flooding for inner and outer penumbrae, object-id and midpoint checks against jumping too far"
+    }
+
+    fn params(&self) -> &'static [ParamSpec] {
+        PARAMS_E
+    }
+
+    fn record(&self, ctx: &mut MethodContext<'_>, params: &Params) -> Counters {
+        let uniforms = Uniforms {
+            boundary_relative: params.f32("boundary_relative"),
+            same_object: u32::from(params.bool("same_object")),
+            midpoint: u32::from(params.bool("midpoint")),
+            ..common_uniforms(params)
+        };
+        let (seeds, penumbra, steps) = flood(ctx, &EYE_SPACE, params, uniforms);
+        Counters::from([
+            ("rounds".to_owned(), steps.len() as f64),
+            ("max_reach_pixels".to_owned(), f64::from(steps.iter().sum::<i32>())),
+            ("boundary_pixels".to_owned(), f64::from(seeds)),
+            ("penumbra_pixels".to_owned(), f64::from(penumbra)),
+        ])
+    }
+}
+
+fn common_uniforms(params: &Params) -> Uniforms {
+    Uniforms {
+        step: 0,
+        silhouette_relative: 0.0,
+        bias_texels: params.f32("bias_texels"),
+        slope_bias_texels: params.f32("slope_bias_texels"),
+        boundary_relative: 0.0,
+        same_object: 0,
+        midpoint: 0,
+        _pad: 0,
+    }
+}
+
+/// Seeds, floods and shades; returns (seeds, penumbra pixels, step lengths).
+fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Uniforms) -> (u32, u32, Vec<i32>) {
+    let device = ctx.gpu.device.clone();
+    let grid = if which.light_space { (ctx.spec.shadow_resolution, ctx.spec.shadow_resolution) } else { (ctx.width, ctx.height) };
+    let steps = steps(params.u32("rounds"), params.choice("flooding") == "standard");
+    // Slot 0: seed and final pass; slots 1…: one per round.
+    let mut slots = Vec::new();
+    for step in std::iter::once(0).chain(steps.iter().copied()) {
+        let mut bytes = bytemuck::bytes_of(&Uniforms { step, ..base }).to_vec();
+        bytes.resize(SLOT as usize, 0);
+        slots.extend(bytes);
+    }
+    let uniforms = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("Jfa::uniforms"),
+        contents: &slots,
+        usage: wgpu::BufferUsages::UNIFORM,
+    });
+    let lut: Vec<f32> = intensity_lut(&ctx.spec.light, &ctx.spec.light_image).into_iter().flatten().collect();
+    let lut_view = device
+        .create_texture_with_data(
+            &ctx.gpu.queue,
+            &wgpu::TextureDescriptor {
+                label: Some("Jfa::lut"),
+                size: wgpu::Extent3d { width: LUT_SIZE, height: LUT_SIZE, depth_or_array_layers: 1 },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format: wgpu::TextureFormat::Rgba32Float,
+                usage: wgpu::TextureUsages::TEXTURE_BINDING,
+                view_formats: &[],
+            },
+            wgpu::util::TextureDataOrder::LayerMajor,
+            bytemuck::cast_slice(&lut),
+        )
+        .create_view(&Default::default());
+    let records = |label| {
+        device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size: u64::from(grid.0) * u64::from(grid.1) * RECORD_BYTES,
+            usage: wgpu::BufferUsages::STORAGE,
+            mapped_at_creation: false,
+        })
+    };
+    let (a, b) = (records("Jfa::records_a"), records("Jfa::records_b"));
+    let counters = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("Jfa::counters"),
+        size: 16,
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let io = [
+        layout::uniform_dynamic(0),
+        layout::texture_float(1),
+        layout::storage_read(2),
+        layout::storage_read_write(3),
+        layout::storage_texture(4, wgpu::TextureFormat::Rgba32Float),
+        layout::storage_read_write(5),
+    ];
+    let seed = ctx.screen_pipeline(PipelineKey::new(which.seed.0), which.seed.1, &io);
+    let round = ctx.screen_pipeline(PipelineKey::new(which.round.0), which.round.1, &io);
+    let finish = ctx.screen_pipeline(PipelineKey::new(which.finish.0), which.finish.1, &io);
+    // Ping-pong: `a_to_b` reads a and writes b, `b_to_a` the reverse.
+    let group = |src: &wgpu::Buffer, dst: &wgpu::Buffer| {
+        device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("Jfa::bind_group"),
+            layout: &seed.get_bind_group_layout(1),
+            entries: &layout::entries(&[
+                wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                    buffer: &uniforms,
+                    offset: 0,
+                    size: wgpu::BufferSize::new(std::mem::size_of::<Uniforms>() as u64),
+                }),
+                wgpu::BindingResource::TextureView(&lut_view),
+                src.as_entire_binding(),
+                dst.as_entire_binding(),
+                wgpu::BindingResource::TextureView(ctx.visibility),
+                counters.as_entire_binding(),
+            ]),
+        })
+    };
+    let (a_to_b, b_to_a) = (group(&a, &b), group(&b, &a));
+    ctx.encoder.clear_buffer(&counters, 0, None);
+    let groups = (grid.0.div_ceil(8), grid.1.div_ceil(8));
+    let screen = ctx.dispatch_size();
+    {
+        let mut pass = ctx.encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("Jfa::passes"),
+            timestamp_writes: ctx.timer.compute_scope("method"),
+        });
+        pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
+        // Seeds go to a.
+        pass.set_pipeline(&seed);
+        pass.set_bind_group(1, &b_to_a, &[0]);
+        pass.dispatch_workgroups(groups.0, groups.1, 1);
+        pass.set_pipeline(&round);
+        let mut result_in_a = true;
+        for k in 0..steps.len() {
+            let offset = ((k as u64 + 1) * SLOT) as u32;
+            pass.set_bind_group(1, if result_in_a { &a_to_b } else { &b_to_a }, &[offset]);
+            pass.dispatch_workgroups(groups.0, groups.1, 1);
+            result_in_a = !result_in_a;
+        }
+        pass.set_pipeline(&finish);
+        pass.set_bind_group(1, if result_in_a { &a_to_b } else { &b_to_a }, &[0]);
+        pass.dispatch_workgroups(screen.0, screen.1, 1);
+    }
+    ctx.flush();
+    let counts: Vec<u32> = bytemuck::cast_slice(&read_buffer(ctx.gpu, &counters)).to_vec();
+    (counts[0], counts[1], steps)
 }
 
 #[cfg(test)]

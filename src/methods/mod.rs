@@ -24,7 +24,7 @@ use crate::gpu::GpuContext;
 use crate::render::{FrameInputs, FrameSpec, LightProjection};
 
 /// Every method penumbra serves, in the order `GET /v1/methods` lists them.
-pub static REGISTRY: &[&dyn ShadowMethod] = &[&hard::Hard, &brabec::Brabec, &jfa::JfaL, &reference::Reference];
+pub static REGISTRY: &[&dyn ShadowMethod] = &[&hard::Hard, &brabec::Brabec, &jfa::JfaL, &jfa::JfaE, &reference::Reference];
 
 /// Looks a method up by its job name.
 pub fn find(name: &str) -> JobResult<&'static dyn ShadowMethod> {

@@ -7,15 +7,21 @@
 
 struct JfaParams {
     step: i32,                // this round's step length: 2^(k−1) … 1 (jump) or 1 (standard)
-    silhouette_relative: f32, // a neighbour deeper by more than depth × this marks a silhouette
+    silhouette_relative: f32, // jfa-l: a neighbour deeper by more than depth × this marks a silhouette
     bias_texels: f32,
     slope_bias_texels: f32,
+    boundary_relative: f32,   // jfa-e: a lit neighbour within view depth × this makes a boundary pixel
+    same_object: u32,         // jfa-e §5.2 remedy 1: flood only to pixels of the boundary's object
+    midpoint: u32,            // jfa-e §5.2 remedy 2: the midpoint must already be in a penumbra
+    _pad: u32,
 }
 
-// What flooding carries (§4.1): an occluder point and the intensity it gives the holder.
+// What flooding carries (§4.1, §5.1): an occluder point, the intensity it gives the holder,
+// and (jfa-e) where it came from.
 struct Record {
     occluder: vec4<f32>,  // xyz world position of a silhouette point, w 1 when set
-    intensity: vec4<f32>, // rgb visible fraction of the light; w the key kept minimal (luminance)
+    intensity: vec4<f32>, // rgb visible fraction of the light; w the key kept minimal
+    origin: vec4<f32>,    // jfa-e: xy the boundary pixel, z its object id
 }
 
 @group(1) @binding(0) var<uniform> params: JfaParams;
@@ -29,7 +35,19 @@ struct Record {
 const SEED_KEY: f32 = 2.0;
 
 fn empty_record() -> Record {
-    return Record(vec4<f32>(0.0), vec4<f32>(1.0, 1.0, 1.0, 3.0));
+    return Record(vec4<f32>(0.0), vec4<f32>(1.0, 1.0, 1.0, 3.0), vec4<f32>(0.0));
+}
+
+// The hard-shadow test of an eye pixel (the same test as method `hard`).
+fn hard_shadowed(pixel: vec2<u32>) -> bool {
+    let p = textureLoad(gbuf_position, pixel, 0).xyz;
+    let n = textureLoad(gbuf_normal, pixel, 0).xyz;
+    let ls = to_light_space(p);
+    if !ls.inside {
+        return false;
+    }
+    let blocker = textureLoad(shadow_depth, shadow_texel(ls.uv), 0).r;
+    return ls.depth - depth_bias(p, n, ls.depth, params.bias_texels, params.slope_bias_texels) > blocker;
 }
 
 fn luminance(c: vec3<f32>) -> f32 {

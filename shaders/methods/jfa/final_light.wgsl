@@ -13,13 +13,10 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     var v = vec3<f32>(1.0);
     if covered(pixel) {
         let p = textureLoad(gbuf_position, pixel, 0).xyz;
-        let n = textureLoad(gbuf_normal, pixel, 0).xyz;
         let ls = to_light_space(p);
         if ls.inside {
             let texel = shadow_texel(ls.uv);
-            let blocker = textureLoad(shadow_depth, texel, 0).r;
-            let bias = depth_bias(p, n, ls.depth, params.bias_texels, params.slope_bias_texels);
-            if ls.depth - bias > blocker {
+            if hard_shadowed(pixel) {
                 v = vec3<f32>(0.0);
             } else {
                 let record = src[u32(texel.y) * frame.sizes.z + u32(texel.x)];

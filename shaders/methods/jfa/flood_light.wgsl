@@ -30,7 +30,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
                 let i = intensity(receiver.xyz, carried.occluder.xyz, false);
                 let key = luminance(i.rgb);
                 if i.w > 0.0 && key < best.intensity.w {
-                    best = Record(carried.occluder, vec4<f32>(i.rgb, key));
+                    best = Record(carried.occluder, vec4<f32>(i.rgb, key), carried.origin);
                 }
             }
         }

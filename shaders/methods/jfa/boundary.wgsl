@@ -1,0 +1,42 @@
+// Method `jfa-e`, §5.1 "Locating Occluders": an eye pixel in hard shadow with a lit neighbour
+// whose surface point is close in 3D (not a depth discontinuity) is a boundary pixel; it seeds
+// the flood with the occluding silhouette point — what the light centre sees at its light-space
+// position — and its own inner-penumbra intensity.
+
+#import methods/jfa/common.wgsl
+
+@compute @workgroup_size(8, 8)
+fn main(@builtin(global_invocation_id) id: vec3<u32>) {
+    let pixel = id.xy;
+    let size = frame.sizes.xy;
+    if any(pixel >= size) {
+        return;
+    }
+    var record = empty_record();
+    if covered(pixel) && hard_shadowed(pixel) {
+        let here = textureLoad(gbuf_position, pixel, 0);
+        let reach = here.w * params.boundary_relative;
+        var boundary = false;
+        for (var b = -1; b <= 1; b++) {
+            for (var a = -1; a <= 1; a++) {
+                let n = vec2<i32>(pixel) + vec2<i32>(a, b);
+                if any(n < vec2<i32>(0)) || any(n >= vec2<i32>(size)) {
+                    continue;
+                }
+                let m = vec2<u32>(n);
+                boundary = boundary || (covered(m) && !hard_shadowed(m) && distance(textureLoad(gbuf_position, m, 0).xyz, here.xyz) < reach);
+            }
+        }
+        if boundary {
+            let texel = shadow_texel(to_light_space(here.xyz).uv);
+            let occluder = textureLoad(shadow_position, texel, 0).xyz;
+            let i = intensity(here.xyz, occluder, true);
+            // A seed whose own ray misses the light still passes its occluder on.
+            let key = select(SEED_KEY, 1.0 - luminance(i.rgb), i.w > 0.0);
+            let id_bits = f32(textureLoad(gbuf_id, pixel, 0).r);
+            record = Record(vec4<f32>(occluder, 1.0), vec4<f32>(i.rgb, key), vec4<f32>(vec2<f32>(pixel), id_bits, 0.0));
+            atomicAdd(&counters[0], 1u);
+        }
+    }
+    dst[pixel.y * size.x + pixel.x] = record;
+}
