@@ -40,9 +40,10 @@ pub struct EvalOptions {
     /// Light samples of the reference.
     #[arg(long, default_value_t = 256)]
     pub samples: u32,
-    /// Shadow-map resolution of every method (and of the reference's sample maps).
-    #[arg(long, default_value_t = 1024)]
-    pub shadow_map: u32,
+    /// Shadow-map resolutions, comma-separated (also the reference's sample maps). With
+    /// several, every case runs at each, and `scaling-*.svg` plots cost against resolution.
+    #[arg(long, value_delimiter = ',', default_value = "1024")]
+    pub shadow_map: Vec<u32>,
     /// Folder for the results.
     #[arg(long, default_value = "eval")]
     pub out: PathBuf,
@@ -96,6 +97,7 @@ pub struct Row {
     pub light: String,
     pub width: u32,
     pub height: u32,
+    pub shadow_map: u32,
     pub method: String,
     pub timings: Timings,
     /// Total wall time of this row over that of `hard` in the same case.
@@ -108,7 +110,67 @@ pub struct Row {
 pub struct EvalReport {
     pub adapter: crate::gpu::AdapterSummary,
     pub rows: Vec<Row>,
+    /// Jump against standard flooding, for every method run both ways (Rong & Tan 2006 §4.2).
+    pub flooding: Vec<FloodingComparison>,
     pub files: Vec<PathBuf>,
+}
+
+/// The flooding experiment of Rong & Tan 2006 (Fig. 4, Fig. 7): over the pixels either
+/// variant puts in a penumbra, the fractions whose visibility differs by < 0.05, 0.05–0.1,
+/// 0.1–0.2 and ≥ 0.2 (largest channel), and the fraction in a penumbra in one only (parity).
+#[derive(Debug, Clone, Serialize)]
+pub struct FloodingComparison {
+    pub case: String,
+    pub method: String,
+    pub penumbra_pixels: usize,
+    pub below_005: f64,
+    pub below_010: f64,
+    pub below_020: f64,
+    pub at_least_020: f64,
+    pub parity: f64,
+}
+
+/// The label of the jump-flooding twin of a standard-flooding method label, if it is one.
+fn jump_twin(label: &str) -> Option<String> {
+    label.contains("flooding=\"standard\"").then(|| label.replace(":flooding=\"standard\"", ""))
+}
+
+pub fn compare_flooding(case: &str, method: &str, jump: &FrameOutput, standard: &FrameOutput) -> FloodingComparison {
+    let in_penumbra = |v: &[f32; 3]| v.iter().any(|&c| c > 0.0 && c < 1.0);
+    let (a, b) = (jump.visibility.as_ref().expect("visibility"), standard.visibility.as_ref().expect("visibility"));
+    let mut bins = [0usize; 4];
+    let (mut total, mut parity) = (0usize, 0usize);
+    for (x, y) in a.iter().zip(b) {
+        let (px, py) = (in_penumbra(x), in_penumbra(y));
+        if !(px || py) {
+            continue;
+        }
+        total += 1;
+        if px != py {
+            parity += 1;
+        }
+        let d = (0..3).map(|k| (x[k] - y[k]).abs()).fold(0.0, f32::max);
+        bins[if d < 0.05 {
+            0
+        } else if d < 0.1 {
+            1
+        } else if d < 0.2 {
+            2
+        } else {
+            3
+        }] += 1;
+    }
+    let f = |n: usize| if total > 0 { n as f64 / total as f64 } else { 0.0 };
+    FloodingComparison {
+        case: case.into(),
+        method: method.into(),
+        penumbra_pixels: total,
+        below_005: f(bins[0]),
+        below_010: f(bins[1]),
+        below_020: f(bins[2]),
+        at_least_020: f(bins[3]),
+        parity: f(parity),
+    }
 }
 
 /// A method as given on the command line: its name, its parameters and a label.
@@ -150,48 +212,59 @@ pub fn run(engine: &Engine, options: &EvalOptions) -> anyhow::Result<EvalReport>
     std::fs::create_dir_all(&options.out).with_context(|| format!("cannot create {}", options.out.display()))?;
     engine.warm_up().context("warm-up")?;
 
-    let cases = options.scenes.len() * options.lights.len() * sizes.len();
+    let cases = options.scenes.len() * options.lights.len() * sizes.len() * options.shadow_map.len();
     let progress = indicatif::ProgressBar::new((cases * (methods.len() + 1)) as u64);
     progress.set_style(
         indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} {elapsed_precise} {msg}")
             .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
     );
     let mut rows = Vec::new();
+    let mut flooding = Vec::new();
     let mut files = Vec::new();
     for scene in &options.scenes {
         for light in &options.lights {
-            for &(width, height) in &sizes {
-                let case = format!("{scene}-{light}-{width}x{height}");
+            for (&(width, height), &shadow_map) in sizes.iter().flat_map(|s| options.shadow_map.iter().map(move |m| (s, m))) {
+                let case = if options.shadow_map.len() > 1 {
+                    format!("{scene}-{light}-{width}x{height}-map{shadow_map}")
+                } else {
+                    format!("{scene}-{light}-{width}x{height}")
+                };
                 let base = Job {
                     scene: AssetRef::builtin(scene),
                     light: crate::job::LightSpec { image: Some(AssetRef::builtin(light)), ..Default::default() },
-                    shadow_map: crate::job::ShadowMapSpec { resolution: options.shadow_map },
+                    shadow_map: crate::job::ShadowMapSpec { resolution: shadow_map },
                     output: crate::job::OutputSpec { width, height, format: OutputFormat::Exr, exposure: 0.0 },
                     ..Job::embedded_default()
                 };
                 progress.set_message(format!("{case}: reference"));
                 let mut reference_job = base.reference_job();
                 reference_job.method.params.insert("samples".into(), options.samples.into());
-                reference_job.method.params.insert("resolution".into(), options.shadow_map.into());
+                reference_job.method.params.insert("resolution".into(), shadow_map.into());
                 let (reference, reference_timings) = engine
                     .render_raw_observed(&reference_job, &|done, total| {
                         progress.set_message(format!("{case}: reference {done}/{total} samples"))
                     })
                     .with_context(|| format!("{case}: reference"))?;
                 progress.inc(1);
-                let mut case_rows = vec![row(scene, light, width, height, "reference", reference_timings, &reference, &reference)];
+                let mut case_rows = vec![row(scene, light, shadow_map, "reference", reference_timings, &reference, &reference)];
                 let mut frames = Vec::new();
                 for (label, method) in &methods {
                     progress.set_message(format!("{case}: {label}"));
                     let job = Job { method: method.clone(), ..base.clone() };
                     let (frame, timings) = engine.render_raw(&job).map_err(|e| anyhow::anyhow!("{case}: {label}: {e}"))?;
-                    case_rows.push(row(scene, light, width, height, label, timings, &frame, &reference));
+                    case_rows.push(row(scene, light, shadow_map, label, timings, &frame, &reference));
                     frames.push((label.clone(), frame));
                     progress.inc(1);
                 }
                 let hard_ms = case_rows.iter().find(|r| r.method == "hard").map(|r| r.timings.total_ms);
                 for r in &mut case_rows {
                     r.ratio_to_hard = hard_ms.map(|h| r.timings.total_ms / h);
+                }
+                for (label, frame) in &frames {
+                    let twin = jump_twin(label).and_then(|jump| frames.iter().find(|(l, _)| *l == jump));
+                    if let Some((jump_label, jump)) = twin {
+                        flooding.push(compare_flooding(&case, jump_label, jump, frame));
+                    }
                 }
                 files.extend(write_pictures(&options.out, &case, &reference, &frames)?);
                 if let Some(sweep) = &sweep {
@@ -202,27 +275,26 @@ pub fn run(engine: &Engine, options: &EvalOptions) -> anyhow::Result<EvalReport>
         }
     }
     progress.finish_and_clear();
-    let report = EvalReport { adapter: engine.gpu().adapter.clone(), rows, files };
+    if options.shadow_map.len() > 1 || sizes.len() > 1 {
+        for scene in &options.scenes {
+            for light in &options.lights {
+                files.push(plot_scaling(&options.out, scene, light, options.shadow_map.len() > 1, &rows)?);
+            }
+        }
+    }
+    let report = EvalReport { adapter: engine.gpu().adapter.clone(), rows, flooding, files };
     write_tables(&options.out, &report, &methods.iter().map(|(l, _)| l.clone()).collect::<Vec<_>>(), sweep.as_ref())?;
     Ok(report)
 }
 
-fn row(
-    scene: &str,
-    light: &str,
-    width: u32,
-    height: u32,
-    method: &str,
-    mut timings: Timings,
-    frame: &FrameOutput,
-    reference: &FrameOutput,
-) -> Row {
+fn row(scene: &str, light: &str, shadow_map: u32, method: &str, mut timings: Timings, frame: &FrameOutput, reference: &FrameOutput) -> Row {
     timings.total_ms = timings.phases.iter().map(|p| p.cpu_ms).sum();
     Row {
         scene: scene.into(),
         light: light.into(),
-        width,
-        height,
+        width: frame.width,
+        height: frame.height,
+        shadow_map,
         method: method.into(),
         timings,
         ratio_to_hard: None,
@@ -342,6 +414,47 @@ fn plot_sweep(out: &Path, case: &str, sweep: &Sweep, rows: &[Row]) -> anyhow::Re
     Ok(path)
 }
 
+/// Method cost against shadow-map resolution (or output pixels), one line per method: the
+/// paper's Fig. 8 (JFA cost follows the flooded grid's size).
+fn plot_scaling(out: &Path, scene: &str, light: &str, by_shadow_map: bool, rows: &[Row]) -> anyhow::Result<PathBuf> {
+    use plotters::prelude::*;
+    let rows: Vec<&Row> = rows.iter().filter(|r| r.scene == scene && r.light == light && r.method != "reference").collect();
+    let x_of = |r: &Row| if by_shadow_map { f64::from(r.shadow_map) } else { f64::from(r.width) * f64::from(r.height) / 1e6 };
+    let mut methods: Vec<&str> = rows.iter().map(|r| r.method.as_str()).collect();
+    methods.dedup();
+    methods.sort_unstable();
+    methods.dedup();
+    let (x_min, x_max) = rows.iter().fold((f64::MAX, f64::MIN), |(a, b), r| (a.min(x_of(r)), b.max(x_of(r))));
+    let y_max = rows.iter().map(|r| method_ms(r)).fold(0.0, f64::max) * 1.1 + 1e-3;
+    let path = out.join(format!("scaling-{scene}-{light}.svg"));
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (720, 420)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let x_desc = if by_shadow_map { "shadow-map resolution (texels per side)" } else { "output (megapixels)" };
+        let mut chart = ChartBuilder::on(&root)
+            .caption(format!("method cost, {scene}, {light}"), ("sans-serif", 18))
+            .margin(12)
+            .x_label_area_size(36)
+            .y_label_area_size(56)
+            .build_cartesian_2d(x_min..x_max.max(x_min + 1e-9), 0.0..y_max)?;
+        chart.configure_mesh().x_desc(x_desc).y_desc("method ms").draw()?;
+        for (k, method) in methods.iter().enumerate() {
+            let color = Palette99::pick(k).to_rgba();
+            let mut points: Vec<(f64, f64)> = rows.iter().filter(|r| r.method == *method).map(|r| (x_of(r), method_ms(r))).collect();
+            points.sort_by(|a, b| a.0.total_cmp(&b.0));
+            chart
+                .draw_series(LineSeries::new(points, color).point_size(3))?
+                .label(*method)
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], color));
+        }
+        chart.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw()?;
+        root.present()?;
+    }
+    std::fs::write(&path, svg)?;
+    Ok(path)
+}
+
 fn write_tables(out: &Path, report: &EvalReport, methods: &[String], sweep: Option<&Sweep>) -> anyhow::Result<()> {
     let mut md = String::new();
     let a = &report.adapter;
@@ -357,17 +470,21 @@ fn write_tables(out: &Path, report: &EvalReport, methods: &[String], sweep: Opti
     )?;
     writeln!(md, "right; below each, |V − Vref| (magma, black = 0, yellow = 1), below the reference Vref itself.\n")?;
     writeln!(md, "## Cost\n")?;
-    writeln!(md, "| scene | light | size | method | shadow map | G-buffer | E0 | method | composite | total ms | × hard | counters |")?;
-    writeln!(md, "|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---|")?;
+    writeln!(
+        md,
+        "| scene | light | size | map | method | shadow map | G-buffer | E0 | method | composite | total ms | × hard | counters |"
+    )?;
+    writeln!(md, "|---|---|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---|")?;
     for r in &report.rows {
         let t = &r.timings;
         writeln!(
             md,
-            "| {} | {} | {}×{} | {} | {} | {} | {} | {} | {} | {:.1} | {} | {} |",
+            "| {} | {} | {}×{} | {} | {} | {} | {} | {} | {} | {} | {:.1} | {} | {} |",
             r.scene,
             r.light,
             r.width,
             r.height,
+            r.shadow_map,
             r.method,
             gpu(t, "shadow_map"),
             gpu(t, "gbuffer"),
@@ -392,6 +509,19 @@ fn write_tables(out: &Path, report: &EvalReport, methods: &[String], sweep: Opti
             v.penumbra.rmse, v.penumbra.mae, psnr(v.penumbra.psnr_db), v.penumbra.ssim, v.penumbra.flip,
             c.whole.rmse, psnr(c.whole.psnr_db), c.whole.ssim, c.whole.flip, c.penumbra.rmse, c.penumbra.flip
         )?;
+    }
+    if !report.flooding.is_empty() {
+        writeln!(md, "\n## Flooding experiment: jump against standard flooding\n")?;
+        writeln!(md, "Over the pixels either variant puts in a penumbra (Rong & Tan 2006, Fig. 4 and 7): fractions by |ΔV|, and parity (in a penumbra in one only).\n")?;
+        writeln!(md, "| case | method | penumbra px | < 0.05 | 0.05–0.1 | 0.1–0.2 | ≥ 0.2 | parity |")?;
+        writeln!(md, "|---|---|---:|---:|---:|---:|---:|---:|")?;
+        for f in &report.flooding {
+            writeln!(
+                md,
+                "| {} | {} | {} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} |",
+                f.case, f.method, f.penumbra_pixels, f.below_005, f.below_010, f.below_020, f.at_least_020, f.parity
+            )?;
+        }
     }
     if let Some(sweep) = sweep {
         writeln!(md, "\n## Sweep of `{}` in `{}`\n", sweep.param, sweep.method)?;
@@ -430,11 +560,12 @@ fn write_tables(out: &Path, report: &EvalReport, methods: &[String], sweep: Opti
         let t = &r.timings;
         write!(
             csv,
-            "{},{},{},{},{},{:.3},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{:.3},{},{},{},{},{},{},{}",
             r.scene,
             r.light,
             r.width,
             r.height,
+            r.shadow_map,
             r.method,
             t.total_ms,
             r.ratio_to_hard.map(|x| format!("{x:.4}")).unwrap_or_default(),

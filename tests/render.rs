@@ -410,37 +410,46 @@ fn eval_writes_the_tables_and_the_pictures() {
     let options = penumbra::eval::EvalOptions {
         scenes: vec!["torus".into()],
         lights: vec!["white".into(), "stripes".into()],
-        methods: vec!["hard".into(), "hard:bias_texels=4".into()],
+        methods: vec!["hard".into(), "jfa-l".into(), "jfa-l:flooding=\"standard\"".into()],
         sizes: vec!["64x48".into()],
         samples: 16,
-        shadow_map: 256,
+        shadow_map: vec![128, 256],
         out: out.clone(),
         sweep: Some("hard:slope_bias_texels=0,1,4".into()),
     };
     let report = penumbra::eval::run(&common::engine(), &options).unwrap();
-    // Per case: the reference, two variants of hard and three sweep points.
-    assert_eq!(report.rows.len(), 2 * 6);
+    // 2 lights × 2 shadow maps; per case the reference, hard, jfa-l both ways, three sweep points.
+    assert_eq!(report.rows.len(), 4 * 7);
     for row in &report.rows {
         assert!(row.quality.penumbra_pixels > 0, "{} {}", row.scene, row.light);
         if row.method == "reference" {
             assert_eq!(row.quality.visibility.penumbra.rmse, 0.0);
         } else {
-            assert!(row.quality.visibility.penumbra.rmse > 0.0, "hard differs from the reference in the penumbra");
+            assert!(row.quality.visibility.penumbra.rmse > 0.0, "{} differs from the reference in the penumbra", row.method);
             assert!(row.ratio_to_hard.is_some());
         }
     }
+    // The flooding experiment pairs jfa-l with its standard-flooding twin in every case.
+    assert_eq!(report.flooding.len(), 4);
+    for f in &report.flooding {
+        let sum = f.below_005 + f.below_010 + f.below_020 + f.at_least_020;
+        assert!(f.penumbra_pixels > 0 && (sum - 1.0).abs() < 1e-9, "{f:?}");
+        assert_eq!(f.method, "jfa-l");
+    }
     let md = std::fs::read_to_string(out.join("results.md")).unwrap();
-    assert!(md.contains("| torus | stripes | 64×48 | hard:bias_texels=4 |"), "{md}");
+    assert!(md.contains("| torus | stripes | 64×48 | 256 | jfa-l:flooding=\"standard\" |"), "{md}");
+    assert!(md.contains("## Flooding experiment") && md.contains("## Sweep of `slope_bias_texels` in `hard`"), "{md}");
     let csv = std::fs::read_to_string(out.join("results.csv")).unwrap();
-    assert_eq!(csv.lines().count(), 1 + 12);
-    assert!(md.contains("## Sweep of `slope_bias_texels` in `hard`"), "{md}");
-    let svg = std::fs::read_to_string(out.join("sweep-torus-white-64x48-hard-slope_bias_texels.svg")).unwrap();
-    assert!(svg.starts_with("<svg") && svg.contains("polyline"), "a plot with lines");
+    assert_eq!(csv.lines().count(), 1 + 28);
+    for plot in ["sweep-torus-white-64x48-map128-hard-slope_bias_texels.svg", "scaling-torus-white.svg"] {
+        let svg = std::fs::read_to_string(out.join(plot)).unwrap();
+        assert!(svg.starts_with("<svg") && svg.contains("polyline"), "{plot}: a plot with lines");
+    }
     let json: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("results.json")).unwrap()).unwrap();
-    assert_eq!(json["rows"].as_array().unwrap().len(), 12);
-    let sheet = image::open(out.join("sheet-torus-stripes-64x48.png")).unwrap();
-    assert_eq!((sheet.width(), sheet.height()), (64 * 6, 48 * 2));
-    assert!(out.join("error-torus-white-64x48-hard.png").exists());
+    assert_eq!(json["rows"].as_array().unwrap().len(), 28);
+    let sheet = image::open(out.join("sheet-torus-stripes-64x48-map256.png")).unwrap();
+    assert_eq!((sheet.width(), sheet.height()), (64 * 7, 48 * 2));
+    assert!(out.join("error-torus-white-64x48-map128-hard.png").exists());
     std::fs::remove_dir_all(&out).ok();
 }
 
