@@ -683,3 +683,42 @@ fn golden_crowd_jfa_e() {
     let rendered = common::engine().render(&job).unwrap();
     common::check_golden("crowd-jfa-e", &rendered.bytes, 0.01, 0.1);
 }
+
+#[test]
+fn jump_flooding_is_a_voronoi_flood() {
+    // Brute-force nearest seed against jump flooding on small grids (Rong & Tan 2006 §3):
+    // a full flood (log2 of the size in rounds) gives the nearest seed almost everywhere.
+    let gpu = common::engine().gpu_arc();
+    let mut state = 12345u32;
+    let mut next = |n: u32| {
+        state = state.wrapping_mul(1_103_515_245).wrapping_add(12_345);
+        (state >> 8) % n
+    };
+    for (size, count) in [(64u32, 12usize), (128, 40)] {
+        let seeds: Vec<(u32, u32)> = (0..count).map(|_| (next(size), next(size))).collect();
+        let rounds = size.trailing_zeros();
+        let flooded = penumbra::methods::jfa::voronoi(&gpu, size, &seeds, rounds, false);
+        let d2 = |x: u32, y: u32, s: usize| {
+            let (dx, dy) = (x as i64 - seeds[s].0 as i64, y as i64 - seeds[s].1 as i64);
+            dx * dx + dy * dy
+        };
+        let mut exact = 0;
+        for y in 0..size {
+            for x in 0..size {
+                let got = flooded[(y * size + x) as usize];
+                assert!(got >= 0, "cell ({x}, {y}) received no seed");
+                let best = (0..seeds.len()).map(|s| d2(x, y, s)).min().unwrap();
+                if d2(x, y, got as usize) == best {
+                    exact += 1;
+                }
+            }
+        }
+        let fraction = exact as f64 / f64::from(size * size);
+        eprintln!("jump flooding {size}²: {:.4} of cells hold their nearest seed", fraction);
+        assert!(fraction > 0.99, "{fraction}");
+    }
+    // Standard flooding reaches only 2^rounds − 1 cells: with 3 rounds nothing beyond 7 cells.
+    let flooded = penumbra::methods::jfa::voronoi(&gpu, 32, &[(0, 0)], 3, true);
+    assert_eq!(flooded[7 * 32 + 7], 0);
+    assert_eq!(flooded[8 * 32 + 8], -1);
+}

@@ -22,6 +22,8 @@ pub const SOURCES: &[(&str, &str)] = &[
     ("methods/brabec/rows.wgsl", include_str!("../../shaders/methods/brabec/rows.wgsl")),
     ("methods/brabec/finish.wgsl", include_str!("../../shaders/methods/brabec/finish.wgsl")),
     ("methods/jfa/common.wgsl", include_str!("../../shaders/methods/jfa/common.wgsl")),
+    ("methods/jfa/neighbours.wgsl", include_str!("../../shaders/methods/jfa/neighbours.wgsl")),
+    ("methods/jfa/voronoi.wgsl", include_str!("../../shaders/methods/jfa/voronoi.wgsl")),
     ("methods/jfa/silhouette.wgsl", include_str!("../../shaders/methods/jfa/silhouette.wgsl")),
     ("methods/jfa/flood_light.wgsl", include_str!("../../shaders/methods/jfa/flood_light.wgsl")),
     ("methods/jfa/final_light.wgsl", include_str!("../../shaders/methods/jfa/final_light.wgsl")),

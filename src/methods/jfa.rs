@@ -318,6 +318,88 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
     (counts[0], counts[1], steps)
 }
 
+/// Jump flooding of nearest seeds over a `size`² grid: the Voronoi diagram the flooding pattern
+/// approximates (Rong & Tan 2006 §3). Returns, per cell, the index of the seed it ended with
+/// (−1 for none). It runs `voronoi.wgsl`, which shares `jump_neighbour` with the shadow
+/// methods' floods, so testing it against brute force tests their communication pattern.
+pub fn voronoi(gpu: &crate::gpu::GpuContext, size: u32, seeds: &[(u32, u32)], rounds: u32, standard: bool) -> Vec<i32> {
+    let device = &gpu.device;
+    let steps = steps(rounds, standard);
+    let mut slots = Vec::new();
+    for step in &steps {
+        let mut bytes = [step.to_le_bytes(), size.to_le_bytes()].concat();
+        bytes.resize(SLOT as usize, 0);
+        slots.extend(bytes);
+    }
+    let uniforms = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("Voronoi::uniforms"),
+        contents: &slots,
+        usage: wgpu::BufferUsages::UNIFORM,
+    });
+    let seed_coords: Vec<[i32; 2]> = seeds.iter().map(|&(x, y)| [x as i32, y as i32]).collect();
+    let seed_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("Voronoi::seeds"),
+        contents: bytemuck::cast_slice(&seed_coords),
+        usage: wgpu::BufferUsages::STORAGE,
+    });
+    let mut initial = vec![-1i32; (size * size) as usize];
+    for (k, &(x, y)) in seeds.iter().enumerate() {
+        initial[(y * size + x) as usize] = k as i32;
+    }
+    let cells = |label| {
+        device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(label),
+            contents: bytemuck::cast_slice(&initial),
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        })
+    };
+    let (a, b) = (cells("Voronoi::cells_a"), cells("Voronoi::cells_b"));
+    let bind_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("Voronoi::layout"),
+        entries: &[layout::uniform_dynamic(0), layout::storage_read(1), layout::storage_read(2), layout::storage_read_write(3)],
+    });
+    let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some("Voronoi::pipeline_layout"),
+        bind_group_layouts: &[Some(&bind_layout)],
+        immediate_size: 0,
+    });
+    let module = crate::gpu::shaders::module(device, "methods/jfa/voronoi.wgsl");
+    let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some("Voronoi::pipeline"),
+        layout: Some(&pipeline_layout),
+        module: &module,
+        entry_point: Some("main"),
+        compilation_options: Default::default(),
+        cache: None,
+    });
+    let group = |src: &wgpu::Buffer, dst: &wgpu::Buffer| {
+        device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("Voronoi::bind_group"),
+            layout: &bind_layout,
+            entries: &layout::entries(&[
+                wgpu::BindingResource::Buffer(wgpu::BufferBinding { buffer: &uniforms, offset: 0, size: wgpu::BufferSize::new(8) }),
+                seed_buffer.as_entire_binding(),
+                src.as_entire_binding(),
+                dst.as_entire_binding(),
+            ]),
+        })
+    };
+    let (a_to_b, b_to_a) = (group(&a, &b), group(&b, &a));
+    let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("Voronoi::encoder") });
+    let mut result_in_a = true;
+    {
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("Voronoi::pass"), timestamp_writes: None });
+        pass.set_pipeline(&pipeline);
+        for k in 0..steps.len() {
+            pass.set_bind_group(0, if result_in_a { &a_to_b } else { &b_to_a }, &[(k as u64 * SLOT) as u32]);
+            pass.dispatch_workgroups(size.div_ceil(8), size.div_ceil(8), 1);
+            result_in_a = !result_in_a;
+        }
+    }
+    gpu.queue.submit([encoder.finish()]);
+    bytemuck::cast_slice(&read_buffer(gpu, if result_in_a { &a } else { &b })).to_vec()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

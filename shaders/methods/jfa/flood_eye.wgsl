@@ -6,6 +6,7 @@
 // to be in a penumbra of the same occluder.
 
 #import methods/jfa/common.wgsl
+#import methods/jfa/neighbours.wgsl
 
 fn record_at(p: vec2<i32>) -> Record {
     return src[u32(p.y) * frame.sizes.x + u32(p.x)];
@@ -24,38 +25,36 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
         let here = textureLoad(gbuf_position, pixel, 0).xyz;
         let object = f32(textureLoad(gbuf_id, pixel, 0).r);
         let inside = hard_shadowed(pixel);
-        for (var b = -1; b <= 1; b++) {
-            for (var a = -1; a <= 1; a++) {
-                let n = p + vec2<i32>(a, b) * params.step;
-                if (a == 0 && b == 0) || any(n < vec2<i32>(0)) || any(n >= size) {
+        for (var k = 0u; k < 9u; k++) {
+            let n = jump_neighbour(p, k, params.step, size);
+            if n.x < 0 {
+                continue;
+            }
+            let carried = record_at(n);
+            if carried.occluder.w == 0.0 {
+                continue;
+            }
+            if params.same_object == 1u && carried.origin.z != object {
+                continue;
+            }
+            if params.midpoint == 1u {
+                // §5.2's continuity check, read as: the midpoint between the boundary pixel
+                // and this one must itself be in a penumbra of the same occluder. Asking
+                // instead whether the midpoint already holds a record would depend on the
+                // order jump flooding reaches pixels (far ones first) and cut real penumbrae.
+                let mid = vec2<u32>((vec2<i32>(carried.origin.xy) + p) / 2);
+                if !covered(mid) {
                     continue;
                 }
-                let carried = record_at(n);
-                if carried.occluder.w == 0.0 {
+                let at_mid = intensity(textureLoad(gbuf_position, mid, 0).xyz, carried.occluder.xyz, hard_shadowed(mid));
+                if at_mid.w == 0.0 {
                     continue;
                 }
-                if params.same_object == 1u && carried.origin.z != object {
-                    continue;
-                }
-                if params.midpoint == 1u {
-                    // §5.2's continuity check, read as: the midpoint between the boundary pixel
-                    // and this one must itself be in a penumbra of the same occluder. Asking
-                    // instead whether the midpoint already holds a record would depend on the
-                    // order jump flooding reaches pixels (far ones first) and cut real penumbrae.
-                    let mid = vec2<u32>((vec2<i32>(carried.origin.xy) + p) / 2);
-                    if !covered(mid) {
-                        continue;
-                    }
-                    let at_mid = intensity(textureLoad(gbuf_position, mid, 0).xyz, carried.occluder.xyz, hard_shadowed(mid));
-                    if at_mid.w == 0.0 {
-                        continue;
-                    }
-                }
-                let i = intensity(here, carried.occluder.xyz, inside);
-                let key = select(luminance(i.rgb), 1.0 - luminance(i.rgb), inside);
-                if i.w > 0.0 && key < best.intensity.w {
-                    best = Record(carried.occluder, vec4<f32>(i.rgb, key), carried.origin);
-                }
+            }
+            let i = intensity(here, carried.occluder.xyz, inside);
+            let key = select(luminance(i.rgb), 1.0 - luminance(i.rgb), inside);
+            if i.w > 0.0 && key < best.intensity.w {
+                best = Record(carried.occluder, vec4<f32>(i.rgb, key), carried.origin);
             }
         }
     }

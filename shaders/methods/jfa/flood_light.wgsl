@@ -5,6 +5,7 @@
 // the light are not taken and not passed on (§3).
 
 #import methods/jfa/common.wgsl
+#import methods/jfa/neighbours.wgsl
 
 @compute @workgroup_size(8, 8)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
@@ -17,21 +18,19 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     var best = src[index];
     let receiver = textureLoad(shadow_position, p, 0);
     if receiver.w > 0.0 {
-        for (var b = -1; b <= 1; b++) {
-            for (var a = -1; a <= 1; a++) {
-                let n = p + vec2<i32>(a, b) * params.step;
-                if (a == 0 && b == 0) || any(n < vec2<i32>(0)) || any(n >= vec2<i32>(res)) {
-                    continue;
-                }
-                let carried = src[u32(n.y * res + n.x)];
-                if carried.occluder.w == 0.0 {
-                    continue;
-                }
-                let i = intensity(receiver.xyz, carried.occluder.xyz, false);
-                let key = luminance(i.rgb);
-                if i.w > 0.0 && key < best.intensity.w {
-                    best = Record(carried.occluder, vec4<f32>(i.rgb, key), carried.origin);
-                }
+        for (var k = 0u; k < 9u; k++) {
+            let n = jump_neighbour(p, k, params.step, vec2<i32>(res));
+            if n.x < 0 {
+                continue;
+            }
+            let carried = src[u32(n.y * res + n.x)];
+            if carried.occluder.w == 0.0 {
+                continue;
+            }
+            let i = intensity(receiver.xyz, carried.occluder.xyz, false);
+            let key = luminance(i.rgb);
+            if i.w > 0.0 && key < best.intensity.w {
+                best = Record(carried.occluder, vec4<f32>(i.rgb, key), carried.origin);
             }
         }
     }

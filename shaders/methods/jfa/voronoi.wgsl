@@ -1,0 +1,42 @@
+// Jump flooding as a Voronoi diagram (Rong & Tan 2006 §3, after their earlier JFA paper):
+// every cell keeps the nearest seed among those its neighbours know. Used by the tests to
+// check the flooding pattern against a brute-force nearest seed; the shadow methods flood
+// occluders with the same `jump_neighbour`.
+
+#import methods/jfa/neighbours.wgsl
+
+struct VoronoiParams {
+    step: i32,
+    size: u32,
+}
+
+@group(0) @binding(0) var<uniform> params: VoronoiParams;
+@group(0) @binding(1) var<storage, read> seeds: array<vec2<i32>>;
+@group(0) @binding(2) var<storage, read> src: array<i32>;
+@group(0) @binding(3) var<storage, read_write> dst: array<i32>;
+
+fn distance2(p: vec2<i32>, seed: i32) -> i32 {
+    let d = p - seeds[seed];
+    return d.x * d.x + d.y * d.y;
+}
+
+@compute @workgroup_size(8, 8)
+fn main(@builtin(global_invocation_id) id: vec3<u32>) {
+    let size = i32(params.size);
+    if any(id.xy >= vec2<u32>(params.size)) {
+        return;
+    }
+    let p = vec2<i32>(id.xy);
+    var best = src[id.y * params.size + id.x];
+    for (var i = 0u; i < 9u; i++) {
+        let n = jump_neighbour(p, i, params.step, vec2<i32>(size));
+        if n.x < 0 {
+            continue;
+        }
+        let candidate = src[n.y * size + n.x];
+        if candidate >= 0 && (best < 0 || distance2(p, candidate) < distance2(p, best) || (distance2(p, candidate) == distance2(p, best) && candidate < best)) {
+            best = candidate;
+        }
+    }
+    dst[id.y * params.size + id.x] = best;
+}
