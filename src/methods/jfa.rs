@@ -251,6 +251,12 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
         })
     };
     let (a, b) = (records("Jfa::records_a"), records("Jfa::records_b"));
+    let flags = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("Jfa::flags"),
+        size: u64::from(grid.0) * u64::from(grid.1) * 4,
+        usage: wgpu::BufferUsages::STORAGE,
+        mapped_at_creation: false,
+    });
     let counters = device.create_buffer(&wgpu::BufferDescriptor {
         label: Some("Jfa::counters"),
         size: 16,
@@ -264,6 +270,7 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
         layout::storage_read_write(3),
         layout::storage_texture(4, wgpu::TextureFormat::Rgba32Float),
         layout::storage_read_write(5),
+        layout::storage_read_write(6),
     ];
     let seed = ctx.screen_pipeline(PipelineKey::new(which.seed.0), which.seed.1, &io);
     let round = ctx.screen_pipeline(PipelineKey::new(which.round.0), which.round.1, &io);
@@ -284,6 +291,7 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
                 dst.as_entire_binding(),
                 wgpu::BindingResource::TextureView(ctx.visibility),
                 counters.as_entire_binding(),
+                flags.as_entire_binding(),
             ]),
         })
     };

@@ -13,7 +13,10 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     var record = empty_record();
-    if covered(pixel) && hard_shadowed(pixel) {
+    let is_covered = covered(pixel);
+    let hard = is_covered && hard_shadowed(pixel);
+    flags[pixel.y * size.x + pixel.x] = select(0u, COVERED, is_covered) | select(0u, HARD, hard);
+    if hard {
         let here = textureLoad(gbuf_position, pixel, 0);
         let reach = here.w * params.boundary_relative;
         var boundary = false;

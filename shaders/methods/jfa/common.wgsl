@@ -30,6 +30,12 @@ struct Record {
 @group(1) @binding(3) var<storage, read_write> dst: array<Record>;
 @group(1) @binding(4) var visibility_out: texture_storage_2d<rgba32float, write>;
 @group(1) @binding(5) var<storage, read_write> counters: array<atomic<u32>, 4>;
+// jfa-e: per eye pixel, bit 0 covered, bit 1 in hard shadow — computed once by the boundary
+// pass so that flooding rounds read a flag instead of redoing the shadow test per neighbour.
+@group(1) @binding(6) var<storage, read_write> flags: array<u32>;
+
+const COVERED: u32 = 1u;
+const HARD: u32 = 2u;
 
 // A seed's key: larger than any intensity, so a seed never counts as penumbra itself.
 const SEED_KEY: f32 = 2.0;

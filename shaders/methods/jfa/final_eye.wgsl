@@ -10,12 +10,13 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     var v = vec3<f32>(1.0);
-    if covered(pixel) {
+    let flag = flags[pixel.y * frame.sizes.x + pixel.x];
+    if (flag & COVERED) != 0u {
         let record = src[pixel.y * frame.sizes.x + pixel.x];
         if record.occluder.w > 0.0 && record.intensity.w <= 1.0 {
             v = record.intensity.rgb;
             atomicAdd(&counters[1], 1u);
-        } else if hard_shadowed(pixel) {
+        } else if (flag & HARD) != 0u {
             v = vec3<f32>(0.0);
         }
     }

@@ -21,19 +21,22 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     let p = vec2<i32>(pixel);
     var best = record_at(p);
-    if covered(pixel) {
+    let flag = flags[pixel.y * frame.sizes.x + pixel.x];
+    if (flag & COVERED) != 0u {
         let here = textureLoad(gbuf_position, pixel, 0).xyz;
         let object = f32(textureLoad(gbuf_id, pixel, 0).r);
-        let inside = hard_shadowed(pixel);
+        let inside = (flag & HARD) != 0u;
         for (var k = 0u; k < 9u; k++) {
             let n = jump_neighbour(p, k, params.step, size);
             if n.x < 0 {
                 continue;
             }
-            let carried = record_at(n);
-            if carried.occluder.w == 0.0 {
+            // Only the occluder is read until it proves useful: most neighbours carry none.
+            let occluder = src[u32(n.y) * frame.sizes.x + u32(n.x)].occluder;
+            if occluder.w == 0.0 {
                 continue;
             }
+            let carried = record_at(n);
             if params.same_object == 1u && carried.origin.z != object {
                 continue;
             }
@@ -43,10 +46,11 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
                 // instead whether the midpoint already holds a record would depend on the
                 // order jump flooding reaches pixels (far ones first) and cut real penumbrae.
                 let mid = vec2<u32>((vec2<i32>(carried.origin.xy) + p) / 2);
-                if !covered(mid) {
+                let mid_flag = flags[mid.y * frame.sizes.x + mid.x];
+                if (mid_flag & COVERED) == 0u {
                     continue;
                 }
-                let at_mid = intensity(textureLoad(gbuf_position, mid, 0).xyz, carried.occluder.xyz, hard_shadowed(mid));
+                let at_mid = intensity(textureLoad(gbuf_position, mid, 0).xyz, carried.occluder.xyz, (mid_flag & HARD) != 0u);
                 if at_mid.w == 0.0 {
                     continue;
                 }

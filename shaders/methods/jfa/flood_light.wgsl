@@ -23,14 +23,15 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
             if n.x < 0 {
                 continue;
             }
-            let carried = src[u32(n.y * res + n.x)];
-            if carried.occluder.w == 0.0 {
+            // Only the occluder is read until it proves useful: most neighbours carry none.
+            let occluder = src[u32(n.y * res + n.x)].occluder;
+            if occluder.w == 0.0 {
                 continue;
             }
-            let i = intensity(receiver.xyz, carried.occluder.xyz, false);
+            let i = intensity(receiver.xyz, occluder.xyz, false);
             let key = luminance(i.rgb);
             if i.w > 0.0 && key < best.intensity.w {
-                best = Record(carried.occluder, vec4<f32>(i.rgb, key), carried.origin);
+                best = Record(occluder, vec4<f32>(i.rgb, key), vec4<f32>(0.0));
             }
         }
     }
