@@ -110,7 +110,7 @@ async fn health_methods_and_renders() {
     }
     let depth = &channels["depth"];
     assert!(depth.iter().any(|d| d.is_infinite()) && depth.iter().any(|d| d.is_finite() && *d > 0.0));
-    assert!(channels["visibility.R"].iter().any(|v| *v == 0.0), "the torus casts a shadow");
+    assert!(channels["visibility.R"].contains(&0.0), "the torus casts a shadow");
 
     // JSON answer: timings of a warm job (nothing compiled, nothing uploaded) and an image link.
     let answer: Value = client

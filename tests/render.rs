@@ -136,7 +136,7 @@ fn test_gltf() -> (serde_json::Value, Vec<u8>) {
     let mut push = |bytes: &[u8]| {
         let offset = bin.len();
         bin.extend_from_slice(bytes);
-        while bin.len() % 4 != 0 {
+        while !bin.len().is_multiple_of(4) {
             bin.push(0);
         }
         (offset, bytes.len())

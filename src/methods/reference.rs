@@ -253,7 +253,7 @@ impl ShadowMethod for Reference {
                 pass.dispatch_workgroups(gx, gy, 1);
             }
             let done = k as u64 + 1;
-            if done % BATCH as u64 == 0 || done == total {
+            if done.is_multiple_of(BATCH as u64) || done == total {
                 ctx.flush();
                 (ctx.progress)(done, total);
             }
