@@ -352,6 +352,14 @@ fn sanitize(label: &str) -> String {
     label.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' { c } else { '_' }).collect()
 }
 
+/// The render phases the cost tables list, in pass order.
+const PHASE_COLUMNS: [&str; 5] = ["shadow_map", "gbuffer", "e0", "method", "composite"];
+
+/// A row's time per phase in `PHASE_COLUMNS` order.
+fn phase_cells(t: &Timings) -> Vec<String> {
+    PHASE_COLUMNS.iter().map(|phase| gpu(t, phase)).collect()
+}
+
 fn gpu(t: &Timings, phase: &str) -> String {
     t.get(phase).and_then(|p| p.gpu_ms.or(Some(p.cpu_ms))).map(|ms| format!("{ms:.1}")).unwrap_or_else(|| "-".into())
 }
@@ -470,28 +478,20 @@ fn write_tables(out: &Path, report: &EvalReport, methods: &[String], sweep: Opti
     )?;
     writeln!(md, "right; below each, |V − Vref| (magma, black = 0, yellow = 1), below the reference Vref itself.\n")?;
     writeln!(md, "## Cost\n")?;
-    writeln!(
-        md,
-        "| scene | light | size | map | method | shadow map | G-buffer | E0 | method | composite | total ms | × hard | counters |"
-    )?;
-    writeln!(md, "|---|---|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---|")?;
+    writeln!(md, "| scene | light | size | map res | method | {} | total ms | × hard | counters |", PHASE_COLUMNS.join(" ms | ") + " ms")?;
+    writeln!(md, "|---|---|---|---:|---|{}---:|---:|---|", "---:|".repeat(PHASE_COLUMNS.len()))?;
     for r in &report.rows {
-        let t = &r.timings;
         writeln!(
             md,
-            "| {} | {} | {}×{} | {} | {} | {} | {} | {} | {} | {} | {:.1} | {} | {} |",
+            "| {} | {} | {}×{} | {} | {} | {} | {:.1} | {} | {} |",
             r.scene,
             r.light,
             r.width,
             r.height,
             r.shadow_map,
             r.method,
-            gpu(t, "shadow_map"),
-            gpu(t, "gbuffer"),
-            gpu(t, "e0"),
-            gpu(t, "method"),
-            gpu(t, "composite"),
-            t.total_ms,
+            phase_cells(&r.timings).join(" | "),
+            r.timings.total_ms,
             r.ratio_to_hard.map(|x| format!("{x:.2}")).unwrap_or_else(|| "-".into()),
             counters_text(&r.counters)
         )?;
@@ -547,9 +547,11 @@ fn write_tables(out: &Path, report: &EvalReport, methods: &[String], sweep: Opti
     }
     std::fs::write(out.join("results.md"), md)?;
 
-    let mut csv = String::from(
-        "scene,light,width,height,method,total_ms,ratio_to_hard,shadow_map_ms,gbuffer_ms,e0_ms,method_ms,composite_ms,penumbra_pixels",
-    );
+    let mut csv = String::from("scene,light,width,height,shadow_map,method,total_ms,ratio_to_hard");
+    for phase in PHASE_COLUMNS {
+        write!(csv, ",{phase}_ms")?;
+    }
+    csv.push_str(",penumbra_pixels");
     for region in ["v_whole", "v_penumbra", "color_whole", "color_penumbra"] {
         for metric in ["rmse", "mae", "psnr_db", "ssim", "flip"] {
             write!(csv, ",{region}_{metric}")?;
@@ -557,23 +559,18 @@ fn write_tables(out: &Path, report: &EvalReport, methods: &[String], sweep: Opti
     }
     csv.push_str(",counters\n");
     for r in &report.rows {
-        let t = &r.timings;
         write!(
             csv,
-            "{},{},{},{},{},{},{:.3},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{:.3},{},{},{}",
             r.scene,
             r.light,
             r.width,
             r.height,
             r.shadow_map,
             r.method,
-            t.total_ms,
+            r.timings.total_ms,
             r.ratio_to_hard.map(|x| format!("{x:.4}")).unwrap_or_default(),
-            gpu(t, "shadow_map"),
-            gpu(t, "gbuffer"),
-            gpu(t, "e0"),
-            gpu(t, "method"),
-            gpu(t, "composite"),
+            phase_cells(&r.timings).join(","),
             r.quality.penumbra_pixels
         )?;
         for m in [r.quality.visibility.whole, r.quality.visibility.penumbra, r.quality.color.whole, r.quality.color.penumbra] {

@@ -441,6 +441,8 @@ fn eval_writes_the_tables_and_the_pictures() {
     assert!(md.contains("## Flooding experiment") && md.contains("## Sweep of `slope_bias_texels` in `hard`"), "{md}");
     let csv = std::fs::read_to_string(out.join("results.csv")).unwrap();
     assert_eq!(csv.lines().count(), 1 + 28);
+    let columns = csv.lines().next().unwrap().split(',').count();
+    assert!(csv.lines().all(|line| line.split(',').count() == columns), "every CSV row has the header's {columns} columns");
     for plot in ["sweep-torus-white-64x48-map128-hard-slope_bias_texels.svg", "scaling-torus-white.svg"] {
         let svg = std::fs::read_to_string(out.join(plot)).unwrap();
         assert!(svg.starts_with("<svg") && svg.contains("polyline"), "{plot}: a plot with lines");
