@@ -188,12 +188,11 @@ impl ShadowMethod for Brabec {
             layout::storage_read_write(2),
             layout::storage_texture(3, wgpu::TextureFormat::Rgba32Float),
         ];
-        let stage = |ctx: &mut MethodContext<'_>, name: &'static str| ctx.screen_pipeline(PipelineKey::new(name), shader_of(name), &io);
-        let classify = stage(ctx, "brabec.classify");
-        let lattice = stage(ctx, "brabec.lattice");
-        let columns = stage(ctx, "brabec.columns");
-        let rows = stage(ctx, "brabec.rows");
-        let finish = stage(ctx, "brabec.finish");
+        let classify = ctx.screen_pipeline(PipelineKey::new("brabec.classify"), "methods/brabec/classify.wgsl", &io);
+        let lattice = ctx.screen_pipeline(PipelineKey::new("brabec.lattice"), "methods/brabec/lattice.wgsl", &io);
+        let columns = ctx.screen_pipeline(PipelineKey::new("brabec.columns"), "methods/brabec/columns.wgsl", &io);
+        let rows = ctx.screen_pipeline(PipelineKey::new("brabec.rows"), "methods/brabec/rows.wgsl", &io);
+        let finish = ctx.screen_pipeline(PipelineKey::new("brabec.finish"), "methods/brabec/finish.wgsl", &io);
         let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("Brabec::bind_group"),
             layout: &classify.get_bind_group_layout(1),
@@ -242,20 +241,4 @@ impl ShadowMethod for Brabec {
             ("k_texels".to_owned(), f64::from(k)),
         ])
     }
-}
-
-fn shader_of(stage: &str) -> &'static str {
-    match stage {
-        "brabec.classify" => "methods/brabec/classify.wgsl",
-        "brabec.lattice" => "methods/brabec/lattice.wgsl",
-        "brabec.columns" => "methods/brabec/columns.wgsl",
-        "brabec.rows" => "methods/brabec/rows.wgsl",
-        _ => "methods/brabec/finish.wgsl",
-    }
-}
-
-/// The physical outer half-penumbra in texels that the derived parameters use: for a
-/// receiver at light depth `z` and a blocker at depth `d` (CPU twin of `hit_radius`).
-pub fn derived_hit_radius(k: f32, z: f32, d: f32) -> f32 {
-    k * (z - d) / (2.0 * z * d.max(1e-4))
 }
