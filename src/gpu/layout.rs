@@ -99,3 +99,33 @@ pub fn entries<'a>(resources: &[wgpu::BindingResource<'a>]) -> Vec<wgpu::BindGro
         .map(|(binding, resource)| wgpu::BindGroupEntry { binding: binding as u32, resource: resource.clone() })
         .collect()
 }
+
+/// Distance between the slots of a dynamic-offset uniform buffer: 256 bytes, the offset
+/// alignment every adapter accepts.
+pub const UNIFORM_SLOT: u64 = 256;
+
+/// A uniform buffer with one `UNIFORM_SLOT`-sized slot per item (one zeroed slot when there
+/// are none), for passes that bind the same layout with a different offset each time.
+pub fn uniform_slots<T: bytemuck::Pod>(device: &wgpu::Device, label: &str, items: &[T]) -> wgpu::Buffer {
+    use wgpu::util::DeviceExt;
+    let mut bytes = vec![0u8; items.len().max(1) * UNIFORM_SLOT as usize];
+    for (k, item) in items.iter().enumerate() {
+        let start = k * UNIFORM_SLOT as usize;
+        bytes[start..start + std::mem::size_of::<T>()].copy_from_slice(bytemuck::bytes_of(item));
+    }
+    device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some(label),
+        contents: &bytes,
+        usage: wgpu::BufferUsages::UNIFORM,
+    })
+}
+
+/// The dynamic offset of slot `k` in a `uniform_slots` buffer.
+pub fn slot_offset(k: usize) -> u32 {
+    (k as u64 * UNIFORM_SLOT) as u32
+}
+
+/// A binding of one `T`-sized slot of a `uniform_slots` buffer (the offset comes at draw time).
+pub fn slot_binding<T>(buffer: &wgpu::Buffer) -> wgpu::BindingResource<'_> {
+    wgpu::BindingResource::Buffer(wgpu::BufferBinding { buffer, offset: 0, size: wgpu::BufferSize::new(std::mem::size_of::<T>() as u64) })
+}

@@ -101,7 +101,6 @@ struct Uniforms {
     _pad: u32,
 }
 
-const SLOT: u64 = 256;
 /// Bytes of one flooded record (`Record` in the shader).
 const RECORD_BYTES: u64 = 48;
 
@@ -213,17 +212,8 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
     let grid = if which.light_space { (ctx.spec.shadow_resolution, ctx.spec.shadow_resolution) } else { (ctx.width, ctx.height) };
     let steps = steps(params.u32("rounds"), params.choice("flooding") == "standard");
     // Slot 0: seed and final pass; slots 1…: one per round.
-    let mut slots = Vec::new();
-    for step in std::iter::once(0).chain(steps.iter().copied()) {
-        let mut bytes = bytemuck::bytes_of(&Uniforms { step, ..base }).to_vec();
-        bytes.resize(SLOT as usize, 0);
-        slots.extend(bytes);
-    }
-    let uniforms = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("Jfa::uniforms"),
-        contents: &slots,
-        usage: wgpu::BufferUsages::UNIFORM,
-    });
+    let slots: Vec<Uniforms> = std::iter::once(0).chain(steps.iter().copied()).map(|step| Uniforms { step, ..base }).collect();
+    let uniforms = layout::uniform_slots(&device, "Jfa::uniforms", &slots);
     let lut: Vec<f32> = intensity_lut(&ctx.spec.light, &ctx.spec.light_image).into_iter().flatten().collect();
     let lut_view = device
         .create_texture_with_data(
@@ -281,11 +271,7 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
             label: Some("Jfa::bind_group"),
             layout: &seed.get_bind_group_layout(1),
             entries: &layout::entries(&[
-                wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                    buffer: &uniforms,
-                    offset: 0,
-                    size: wgpu::BufferSize::new(std::mem::size_of::<Uniforms>() as u64),
-                }),
+                layout::slot_binding::<Uniforms>(&uniforms),
                 wgpu::BindingResource::TextureView(&lut_view),
                 src.as_entire_binding(),
                 dst.as_entire_binding(),
@@ -312,7 +298,7 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
         pass.set_pipeline(&round);
         let mut result_in_a = true;
         for k in 0..steps.len() {
-            let offset = ((k as u64 + 1) * SLOT) as u32;
+            let offset = layout::slot_offset(k + 1);
             pass.set_bind_group(1, if result_in_a { &a_to_b } else { &b_to_a }, &[offset]);
             pass.dispatch_workgroups(groups.0, groups.1, 1);
             result_in_a = !result_in_a;
@@ -333,17 +319,9 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
 pub fn voronoi(gpu: &crate::gpu::GpuContext, size: u32, seeds: &[(u32, u32)], rounds: u32, standard: bool) -> Vec<i32> {
     let device = &gpu.device;
     let steps = steps(rounds, standard);
-    let mut slots = Vec::new();
-    for step in &steps {
-        let mut bytes = [step.to_le_bytes(), size.to_le_bytes()].concat();
-        bytes.resize(SLOT as usize, 0);
-        slots.extend(bytes);
-    }
-    let uniforms = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("Voronoi::uniforms"),
-        contents: &slots,
-        usage: wgpu::BufferUsages::UNIFORM,
-    });
+    // `VoronoiParams` in `voronoi.wgsl`: step, grid size (both non-negative, so i32 bits do).
+    let slots: Vec<[i32; 2]> = steps.iter().map(|&step| [step, size as i32]).collect();
+    let uniforms = layout::uniform_slots(device, "Voronoi::uniforms", &slots);
     let seed_coords: Vec<[i32; 2]> = seeds.iter().map(|&(x, y)| [x as i32, y as i32]).collect();
     let seed_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
         label: Some("Voronoi::seeds"),
@@ -385,7 +363,7 @@ pub fn voronoi(gpu: &crate::gpu::GpuContext, size: u32, seeds: &[(u32, u32)], ro
             label: Some("Voronoi::bind_group"),
             layout: &bind_layout,
             entries: &layout::entries(&[
-                wgpu::BindingResource::Buffer(wgpu::BufferBinding { buffer: &uniforms, offset: 0, size: wgpu::BufferSize::new(8) }),
+                layout::slot_binding::<[i32; 2]>(&uniforms),
                 seed_buffer.as_entire_binding(),
                 src.as_entire_binding(),
                 dst.as_entire_binding(),
@@ -399,7 +377,7 @@ pub fn voronoi(gpu: &crate::gpu::GpuContext, size: u32, seeds: &[(u32, u32)], ro
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("Voronoi::pass"), timestamp_writes: None });
         pass.set_pipeline(&pipeline);
         for k in 0..steps.len() {
-            pass.set_bind_group(0, if result_in_a { &a_to_b } else { &b_to_a }, &[(k as u64 * SLOT) as u32]);
+            pass.set_bind_group(0, if result_in_a { &a_to_b } else { &b_to_a }, &[layout::slot_offset(k)]);
             pass.dispatch_workgroups(size.div_ceil(8), size.div_ceil(8), 1);
             result_in_a = !result_in_a;
         }

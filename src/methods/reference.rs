@@ -15,7 +15,6 @@
 //! test in `tests/render.rs` shows the error shrinking).
 
 use glam::Vec3;
-use wgpu::util::DeviceExt;
 
 use super::{Counters, MethodContext, ParamKind, ParamSpec, Params, ShadowMethod};
 use crate::gpu::layout;
@@ -67,9 +66,6 @@ struct SampleUniforms {
     radiance: [f32; 4],
     params: [f32; 4],
 }
-
-/// Uniform slots are 256 bytes apart: the dynamic-offset alignment every adapter accepts.
-const SLOT: u64 = 256;
 
 /// A point on the light and its weight: `L(y)` times the area of its stratum.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -137,27 +133,20 @@ impl ShadowMethod for Reference {
         let resolution = params.u32("resolution");
         let (samples, strata) = light_samples(&spec.light, &spec.light_image, params.u32("samples"), u64::from(params.u32("seed")));
         let corners = ctx.scene.corners();
-        let uniforms: Vec<u8> = samples
+        let slots: Vec<SampleUniforms> = samples
             .iter()
-            .flat_map(|sample| {
+            .map(|sample| {
                 let at_sample = AreaLight { center: sample.position, ..spec.light };
                 let projection = LightProjection::fit(&at_sample, &corners);
-                let slot = SampleUniforms {
+                SampleUniforms {
                     view_proj: projection.view_proj.to_cols_array_2d(),
                     position: sample.position.extend(1.0).to_array(),
                     radiance: sample.weight.extend(0.0).to_array(),
                     params: [projection.tan_half, resolution as f32, params.f32("bias_texels"), params.f32("slope_bias_texels")],
-                };
-                let mut bytes = bytemuck::bytes_of(&slot).to_vec();
-                bytes.resize(SLOT as usize, 0);
-                bytes
+                }
             })
             .collect();
-        let uniform_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("Reference::samples"),
-            contents: if uniforms.is_empty() { &[0; SLOT as usize] } else { &uniforms },
-            usage: wgpu::BufferUsages::UNIFORM,
-        });
+        let uniform_buffer = layout::uniform_slots(&device, "Reference::samples", &slots);
         let pixels = u64::from(ctx.width) * u64::from(ctx.height);
         let sums = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("Reference::sums"),
@@ -188,11 +177,7 @@ impl ShadowMethod for Reference {
 
         let (depth_pipeline, accumulate_pipeline, resolve_pipeline) = self.pipelines(ctx);
         let slot_binding = |layout: &wgpu::BindGroupLayout, extra: &[wgpu::BindingResource]| {
-            let mut resources = vec![wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                buffer: &uniform_buffer,
-                offset: 0,
-                size: wgpu::BufferSize::new(std::mem::size_of::<SampleUniforms>() as u64),
-            })];
+            let mut resources = vec![layout::slot_binding::<SampleUniforms>(&uniform_buffer)];
             resources.extend_from_slice(extra);
             device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("Reference::bind_group"),
@@ -215,7 +200,7 @@ impl ShadowMethod for Reference {
         let (gx, gy) = ctx.dispatch_size();
         let total = samples.len() as u64;
         for (k, _) in samples.iter().enumerate() {
-            let offset = (k as u64 * SLOT) as u32;
+            let offset = layout::slot_offset(k);
             {
                 let mut pass = ctx.encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
                     label: Some("Reference::sample_depth"),
