@@ -55,6 +55,9 @@ pub struct EngineStats {
     pub pipelines_compiled: u64,
     pub targets_created: u64,
     pub targets_reused: u64,
+    /// Look-up tables and other resources derived from a job's light, built or reused.
+    pub derived_created: u64,
+    pub derived_reused: u64,
     pub reference_cache_hits: u64,
     pub reference_cache_misses: u64,
 }
@@ -247,6 +250,8 @@ impl Engine {
             pipelines_compiled: r.pipelines.stats.created,
             targets_created: r.textures.stats.created,
             targets_reused: r.textures.stats.reused,
+            derived_created: r.derived.stats.created,
+            derived_reused: r.derived.stats.reused,
             reference_cache_hits: self.reference_hits.load(std::sync::atomic::Ordering::Relaxed),
             reference_cache_misses: self.reference_misses.load(std::sync::atomic::Ordering::Relaxed),
         }

@@ -52,6 +52,10 @@ pub struct EvalOptions {
     /// plot (`sweep-*.svg`) of cost and penumbra error against the value.
     #[arg(long)]
     pub sweep: Option<String>,
+    /// Render every method this many times, round-robin, and report each phase's median
+    /// time: these machines are noisy, and interleaving lets slow spells hit every method.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=100))]
+    pub repeat: u32,
 }
 
 /// A parameter sweep: the method label of each value, in order.
@@ -109,6 +113,8 @@ pub struct Row {
 #[derive(Debug, Clone, Serialize)]
 pub struct EvalReport {
     pub adapter: crate::gpu::AdapterSummary,
+    /// Runs of every method per case; times are medians over them.
+    pub repeat: u32,
     pub rows: Vec<Row>,
     /// Jump against standard flooding, for every method run both ways (Rong & Tan 2006 §4.2).
     pub flooding: Vec<FloodingComparison>,
@@ -248,12 +254,20 @@ pub fn run(engine: &Engine, options: &EvalOptions) -> anyhow::Result<EvalReport>
                 progress.inc(1);
                 let mut case_rows = vec![row(scene, light, shadow_map, "reference", reference_timings, &reference, &reference)];
                 let mut frames = Vec::new();
-                for (label, method) in &methods {
-                    progress.set_message(format!("{case}: {label}"));
-                    let job = Job { method: method.clone(), ..base.clone() };
-                    let (frame, timings) = engine.render_raw(&job).map_err(|e| anyhow::anyhow!("{case}: {label}: {e}"))?;
-                    case_rows.push(row(scene, light, shadow_map, label, timings, &frame, &reference));
-                    frames.push((label.clone(), frame));
+                let mut runs: Vec<Vec<Timings>> = vec![Vec::new(); methods.len()];
+                for repetition in 0..options.repeat {
+                    for ((label, method), runs) in methods.iter().zip(&mut runs) {
+                        progress.set_message(format!("{case}: {label} ({}/{})", repetition + 1, options.repeat));
+                        let job = Job { method: method.clone(), ..base.clone() };
+                        let (frame, timings) = engine.render_raw(&job).map_err(|e| anyhow::anyhow!("{case}: {label}: {e}"))?;
+                        runs.push(timings);
+                        if repetition == 0 {
+                            frames.push((label.clone(), frame));
+                        }
+                    }
+                }
+                for (((label, _), runs), (_, frame)) in methods.iter().zip(runs).zip(&frames) {
+                    case_rows.push(row(scene, light, shadow_map, label, median_timings(runs), frame, &reference));
                     progress.inc(1);
                 }
                 let hard_ms = case_rows.iter().find(|r| r.method == "hard").map(|r| r.timings.total_ms);
@@ -282,9 +296,38 @@ pub fn run(engine: &Engine, options: &EvalOptions) -> anyhow::Result<EvalReport>
             }
         }
     }
-    let report = EvalReport { adapter: engine.gpu().adapter.clone(), rows, flooding, files };
+    let report = EvalReport { adapter: engine.gpu().adapter.clone(), repeat: options.repeat, rows, flooding, files };
     write_tables(&options.out, &report, &methods.iter().map(|(l, _)| l.clone()).collect::<Vec<_>>(), sweep.as_ref())?;
     Ok(report)
+}
+
+/// Per phase, the median over repeated runs of one job (wall and GPU time separately).
+fn median_timings(mut runs: Vec<Timings>) -> Timings {
+    fn median(mut values: Vec<f64>) -> f64 {
+        values.sort_by(f64::total_cmp);
+        let mid = values.len() / 2;
+        if values.len() % 2 == 1 {
+            values[mid]
+        } else {
+            0.5 * (values[mid - 1] + values[mid])
+        }
+    }
+    let mut result = runs.swap_remove(0);
+    if runs.is_empty() {
+        return result;
+    }
+    for phase in &mut result.phases {
+        let same: Vec<_> = runs.iter().filter_map(|t| t.phases.iter().find(|p| p.name == phase.name)).collect();
+        let mut wall: Vec<f64> = same.iter().map(|p| p.cpu_ms).collect();
+        wall.push(phase.cpu_ms);
+        phase.cpu_ms = median(wall);
+        if let Some(gpu) = phase.gpu_ms {
+            let mut all: Vec<f64> = same.iter().filter_map(|p| p.gpu_ms).collect();
+            all.push(gpu);
+            phase.gpu_ms = Some(median(all));
+        }
+    }
+    result
 }
 
 fn row(scene: &str, light: &str, shadow_map: u32, method: &str, mut timings: Timings, frame: &FrameOutput, reference: &FrameOutput) -> Row {
@@ -469,6 +512,9 @@ fn write_tables(out: &Path, report: &EvalReport, methods: &[String], sweep: Opti
     writeln!(md, "# penumbra eval\n")?;
     writeln!(md, "Adapter: {} ({}, {}), GPU timestamps: {}.\n", a.name, a.backend, a.device_type, a.timestamps)?;
     writeln!(md, "Times are per phase in ms — GPU time where timestamps exist, else wall time — and the wall total;")?;
+    if report.repeat > 1 {
+        writeln!(md, "each the median of {} runs of every method, interleaved;", report.repeat)?;
+    }
     writeln!(md, "`× hard` is the row's total over `hard`'s in the same case, the figure to quote. Quality is against")?;
     writeln!(md, "`reference` (same scene, view, light, size): visibility (V) and displayed colour, whole frame and")?;
     writeln!(
@@ -589,4 +635,27 @@ fn write_tables(out: &Path, report: &EvalReport, methods: &[String], sweep: Opti
     std::fs::write(out.join("results.csv"), csv)?;
     std::fs::write(out.join("results.json"), serde_json::to_vec_pretty(report)?)?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::timing::Phase;
+
+    fn timings(method_ms: f64, gpu_ms: Option<f64>) -> Timings {
+        Timings {
+            phases: vec![Phase { name: "gbuffer", cpu_ms: 1.0, gpu_ms: None }, Phase { name: "method", cpu_ms: method_ms, gpu_ms }],
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn repeated_runs_report_each_phases_median() {
+        let runs = vec![timings(10.0, Some(9.0)), timings(300.0, Some(290.0)), timings(12.0, Some(11.0))];
+        let median = median_timings(runs);
+        assert_eq!(median.phases[1].cpu_ms, 12.0, "one slow spell does not move the median");
+        assert_eq!(median.phases[1].gpu_ms, Some(11.0));
+        assert_eq!(median.phases[0].cpu_ms, 1.0);
+        assert_eq!(median_timings(vec![timings(4.0, None), timings(6.0, None)]).phases[1].cpu_ms, 5.0);
+    }
 }

@@ -28,10 +28,27 @@ pub struct LightImage {
     pub width: u32,
     pub height: u32,
     /// Row-major from the top row, linear RGB (not premultiplied) and alpha.
-    pub texels: Vec<[f32; 4]>,
+    texels: Vec<[f32; 4]>,
+    /// A hash of the size and texels, computed once: keys what is derived from the image.
+    fingerprint: u64,
 }
 
 impl LightImage {
+    fn new(width: u32, height: u32, texels: Vec<[f32; 4]>) -> Self {
+        use std::hash::{Hash, Hasher};
+        let mut hasher = std::collections::hash_map::DefaultHasher::new();
+        (width, height).hash(&mut hasher);
+        for texel in &texels {
+            texel.map(f32::to_bits).hash(&mut hasher);
+        }
+        Self { width, height, texels, fingerprint: hasher.finish() }
+    }
+
+    /// A hash of the image's size and texels: keys what is derived from it and cached.
+    pub fn fingerprint(&self) -> u64 {
+        self.fingerprint
+    }
+
     pub fn from_fn(width: u32, height: u32, f: impl Fn(f32, f32) -> [f32; 4]) -> Self {
         let mut texels = Vec::with_capacity((width * height) as usize);
         for j in 0..height {
@@ -42,7 +59,7 @@ impl LightImage {
                 texels.push(f(s, t));
             }
         }
-        Self { width, height, texels }
+        Self::new(width, height, texels)
     }
 
     /// Radiance weight of a texel: `rgb × alpha` (DESIGN.md §1).
@@ -149,7 +166,7 @@ impl LightImage {
                 }
             })
             .collect();
-        Ok(Self { width, height, texels })
+        Ok(Self::new(width, height, texels))
     }
 }
 

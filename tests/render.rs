@@ -416,6 +416,7 @@ fn eval_writes_the_tables_and_the_pictures() {
         shadow_map: vec![128, 256],
         out: out.clone(),
         sweep: Some("hard:slope_bias_texels=0,1,4".into()),
+        repeat: 2,
     };
     let report = penumbra::eval::run(&common::engine(), &options).unwrap();
     // 2 lights × 2 shadow maps; per case the reference, hard, jfa-l both ways, three sweep points.
@@ -437,6 +438,7 @@ fn eval_writes_the_tables_and_the_pictures() {
         assert_eq!(f.method, "jfa-l");
     }
     let md = std::fs::read_to_string(out.join("results.md")).unwrap();
+    assert!(md.contains("the median of 2 runs"), "{md}");
     assert!(md.contains("| torus | stripes | 64×48 | 256 | jfa-l:flooding=\"standard\" |"), "{md}");
     assert!(md.contains("## Flooding experiment") && md.contains("## Sweep of `slope_bias_texels` in `hard`"), "{md}");
     let csv = std::fs::read_to_string(out.join("results.csv")).unwrap();
@@ -637,6 +639,21 @@ fn golden_crowd_jfa_l() {
                          "output": {"width": 256, "height": 192}}));
     let rendered = common::engine().render(&job).unwrap();
     common::check_golden("crowd-jfa-l", &rendered.bytes, 0.01, 0.1);
+}
+
+#[test]
+fn jfa_look_up_table_is_built_once_per_light() {
+    // A light no other test uses, so the first render builds its table.
+    let job = job(json!({"scene": {"builtin": "occluder"}, "light": {"size": [0.71, 0.43], "image": {"builtin": "flame"}},
+                         "method": {"name": "jfa-l"}, "output": {"width": 64, "height": 48, "format": "exr"}}));
+    let engine = common::engine();
+    let created = engine.stats().derived_created;
+    let first = engine.render_raw(&job).unwrap().0.visibility.unwrap();
+    assert!(engine.stats().derived_created > created, "the first job builds the table");
+    let reused = engine.stats().derived_reused;
+    let second = engine.render_raw(&job).unwrap().0.visibility.unwrap();
+    assert!(engine.stats().derived_reused > reused, "the second job reuses it");
+    assert_eq!(first, second, "the kept table gives the same picture");
 }
 
 // --- jfa-e ----------------------------------------------------------------------------

@@ -2,6 +2,7 @@
 //! and render targets recycled between jobs of the same size and format. The pool decides
 //! reuse; its counters show in the timing breakdown and, later, in `/metrics`.
 
+use std::any::Any;
 use std::collections::HashMap;
 use std::sync::Arc;
 
@@ -131,5 +132,83 @@ impl TexturePool {
     /// Bytes held by idle targets.
     pub fn idle_bytes(&self) -> u64 {
         self.free.iter().map(|(k, v)| k.bytes() * v.len() as u64).sum()
+    }
+}
+
+/// Identifies a texture derived from a job's inputs: the method or pass that derives it and a
+/// fingerprint of everything it depends on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct DerivedKey {
+    pub name: &'static str,
+    pub fingerprint: u64,
+}
+
+/// GPU resources that cost CPU or GPU time to derive from a job's inputs (a method's look-up
+/// table from the light image) and stay valid for any later job with the same inputs: buffers,
+/// textures, views — any type, told apart by key. At most `capacity` are kept; the least
+/// recently used goes first.
+pub struct DerivedResources {
+    /// Most recently used last.
+    entries: Vec<(DerivedKey, Arc<dyn Any + Send + Sync>)>,
+    capacity: usize,
+    pub stats: PoolStats,
+}
+
+impl Default for DerivedResources {
+    fn default() -> Self {
+        Self { entries: Vec::new(), capacity: 16, stats: PoolStats::default() }
+    }
+}
+
+impl DerivedResources {
+    /// The resource under `key`, created now if it is not kept. A key must always name the
+    /// same type: one kept under another type is replaced.
+    pub fn get_or_create<T: Any + Send + Sync>(&mut self, key: DerivedKey, create: impl FnOnce() -> T) -> Arc<T> {
+        let kept = self.entries.iter().position(|(k, _)| *k == key);
+        if let Some(entry) = kept.map(|at| self.entries.remove(at)) {
+            if let Ok(resource) = entry.1.clone().downcast::<T>() {
+                self.stats.reused += 1;
+                self.entries.push(entry);
+                return resource;
+            }
+        }
+        self.stats.created += 1;
+        if self.entries.len() >= self.capacity {
+            self.entries.remove(0);
+        }
+        let resource = Arc::new(create());
+        self.entries.push((key, resource.clone()));
+        resource
+    }
+
+    pub fn len(&self) -> usize {
+        self.entries.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.entries.is_empty()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn derived_resources_are_reused_and_evicted_least_recently_used_first() {
+        let mut cache = DerivedResources { capacity: 2, ..Default::default() };
+        let key = |fingerprint| DerivedKey { name: "test", fingerprint };
+        let first = cache.get_or_create(key(1), || vec![1u8]);
+        assert!(Arc::ptr_eq(&first, &cache.get_or_create(key(1), || unreachable!("cached"))));
+        cache.get_or_create(key(2), || vec![2u8]);
+        cache.get_or_create::<Vec<u8>>(key(1), || unreachable!("cached"));
+        // 2 is now the least recently used: a third key evicts it, not 1.
+        cache.get_or_create(key(3), || vec![3u8]);
+        assert_eq!(cache.len(), 2);
+        cache.get_or_create::<Vec<u8>>(key(1), || unreachable!("1 was used last"));
+        assert_eq!(cache.stats, PoolStats { created: 3, reused: 3 });
+        // The same key asked for as another type is derived again, not mistaken.
+        assert_eq!(*cache.get_or_create(key(1), || 7u32), 7);
+        assert_eq!(cache.len(), 2);
     }
 }

@@ -26,7 +26,7 @@ use wgpu::util::DeviceExt;
 use super::jfa_lut::{intensity_lut, LUT_SIZE};
 use super::{Counters, MethodContext, ParamKind, ParamSpec, Params, ShadowMethod};
 use crate::gpu::layout;
-use crate::gpu::pool::PipelineKey;
+use crate::gpu::pool::{DerivedKey, PipelineKey};
 use crate::gpu::readback::read_buffer;
 
 pub struct JfaL;
@@ -98,11 +98,13 @@ struct Uniforms {
     boundary_relative: f32,
     same_object: u32,
     midpoint: u32,
-    _pad: u32,
+    light_space: u32,
+    lut_size: u32,
+    _pad: [u32; 3],
 }
 
-/// Bytes of one flooded record (`Record` in the shader).
-const RECORD_BYTES: u64 = 48;
+/// The flood's workgroups are `TILE`² cells (`TILE` in `neighbours.wgsl`).
+const TILE: u32 = 8;
 
 /// The step lengths of the flood: 2^(rounds−1) … 1, or 1 repeated for standard flooding.
 pub fn steps(rounds: u32, standard: bool) -> Vec<i32> {
@@ -120,6 +122,8 @@ struct Flood {
     round: (&'static str, &'static str),
     finish: (&'static str, &'static str),
     light_space: bool,
+    /// Bytes of one cell's record (`common.wgsl`): an occluder, plus its origin for jfa-e.
+    record_bytes: u64,
 }
 
 const LIGHT_SPACE: Flood = Flood {
@@ -128,6 +132,7 @@ const LIGHT_SPACE: Flood = Flood {
     round: ("jfa-l.flood", "methods/jfa/flood_light.wgsl"),
     finish: ("jfa-l.final", "methods/jfa/final_light.wgsl"),
     light_space: true,
+    record_bytes: 16,
 };
 
 const EYE_SPACE: Flood = Flood {
@@ -136,6 +141,7 @@ const EYE_SPACE: Flood = Flood {
     round: ("jfa-e.flood", "methods/jfa/flood_eye.wgsl"),
     finish: ("jfa-e.final", "methods/jfa/final_eye.wgsl"),
     light_space: false,
+    record_bytes: 32,
 };
 
 impl ShadowMethod for JfaL {
@@ -153,12 +159,13 @@ impl ShadowMethod for JfaL {
 
     fn record(&self, ctx: &mut MethodContext<'_>, params: &Params) -> Counters {
         let uniforms = Uniforms { silhouette_relative: params.f32("silhouette_relative"), ..common_uniforms(params) };
-        let (seeds, penumbra, steps) = flood(ctx, &LIGHT_SPACE, params, uniforms);
+        let (seeds, penumbra, steps, flooded) = flood(ctx, &LIGHT_SPACE, params, uniforms);
         Counters::from([
             ("rounds".to_owned(), steps.len() as f64),
             ("max_reach_texels".to_owned(), f64::from(steps.iter().sum::<i32>())),
             ("silhouette_texels".to_owned(), f64::from(seeds)),
             ("penumbra_pixels".to_owned(), f64::from(penumbra)),
+            ("flooded_tile_fraction".to_owned(), flooded),
         ])
     }
 }
@@ -183,12 +190,13 @@ impl ShadowMethod for JfaE {
             midpoint: u32::from(params.bool("midpoint")),
             ..common_uniforms(params)
         };
-        let (seeds, penumbra, steps) = flood(ctx, &EYE_SPACE, params, uniforms);
+        let (seeds, penumbra, steps, flooded) = flood(ctx, &EYE_SPACE, params, uniforms);
         Counters::from([
             ("rounds".to_owned(), steps.len() as f64),
             ("max_reach_pixels".to_owned(), f64::from(steps.iter().sum::<i32>())),
             ("boundary_pixels".to_owned(), f64::from(seeds)),
             ("penumbra_pixels".to_owned(), f64::from(penumbra)),
+            ("flooded_tile_fraction".to_owned(), flooded),
         ])
     }
 }
@@ -202,49 +210,54 @@ fn common_uniforms(params: &Params) -> Uniforms {
         boundary_relative: 0.0,
         same_object: 0,
         midpoint: 0,
-        _pad: 0,
+        light_space: 0,
+        lut_size: LUT_SIZE,
+        _pad: [0; 3],
     }
 }
 
-/// Seeds, floods and shades; returns (seeds, penumbra pixels, step lengths).
-fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Uniforms) -> (u32, u32, Vec<i32>) {
+/// Seeds, floods and shades; returns (seeds, penumbra pixels, step lengths, the fraction of
+/// tiles the rounds flooded rather than skipped).
+fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Uniforms) -> (u32, u32, Vec<i32>, f64) {
     let device = ctx.gpu.device.clone();
     let grid = if which.light_space { (ctx.spec.shadow_resolution, ctx.spec.shadow_resolution) } else { (ctx.width, ctx.height) };
     let steps = steps(params.u32("rounds"), params.choice("flooding") == "standard");
+    let base = Uniforms { light_space: u32::from(which.light_space), ..base };
     // Slot 0: seed and final pass; slots 1…: one per round.
     let slots: Vec<Uniforms> = std::iter::once(0).chain(steps.iter().copied()).map(|step| Uniforms { step, ..base }).collect();
     let uniforms = layout::uniform_slots(&device, "Jfa::uniforms", &slots);
-    let lut: Vec<f32> = intensity_lut(&ctx.spec.light, &ctx.spec.light_image).into_iter().flatten().collect();
-    let lut_view = device
-        .create_texture_with_data(
-            &ctx.gpu.queue,
-            &wgpu::TextureDescriptor {
-                label: Some("Jfa::lut"),
-                size: wgpu::Extent3d { width: LUT_SIZE, height: LUT_SIZE, depth_or_array_layers: 1 },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format: wgpu::TextureFormat::Rgba32Float,
-                usage: wgpu::TextureUsages::TEXTURE_BINDING,
-                view_formats: &[],
-            },
-            wgpu::util::TextureDataOrder::LayerMajor,
-            bytemuck::cast_slice(&lut),
-        )
-        .create_view(&Default::default());
+    // The look-up texture depends only on the light image and the light's shape; building it
+    // integrates ~10⁴ samples per entry on the CPU, so it is kept for later jobs.
+    let fingerprint = {
+        use std::hash::{Hash, Hasher};
+        let mut hasher = std::collections::hash_map::DefaultHasher::new();
+        ctx.spec.light_image.fingerprint().hash(&mut hasher);
+        ctx.spec.light.size_m.to_array().map(f32::to_bits).hash(&mut hasher);
+        hasher.finish()
+    };
+    let (gpu, spec) = (ctx.gpu, ctx.spec);
+    let lut = ctx.derived.get_or_create(DerivedKey { name: "jfa.lut", fingerprint }, || lut_buffer(gpu, spec));
     let records = |label| {
         device.create_buffer(&wgpu::BufferDescriptor {
             label: Some(label),
-            size: u64::from(grid.0) * u64::from(grid.1) * RECORD_BYTES,
-            usage: wgpu::BufferUsages::STORAGE,
+            size: u64::from(grid.0) * u64::from(grid.1) * which.record_bytes,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         })
     };
     let (a, b) = (records("Jfa::records_a"), records("Jfa::records_b"));
     let flags = device.create_buffer(&wgpu::BufferDescriptor {
         label: Some("Jfa::flags"),
-        size: u64::from(grid.0) * u64::from(grid.1) * 4,
+        // Only jfa-e keeps per-pixel flags.
+        size: if which.light_space { 4 } else { u64::from(grid.0) * u64::from(grid.1) * 4 },
         usage: wgpu::BufferUsages::STORAGE,
+        mapped_at_creation: false,
+    });
+    let tile_count = grid.0.div_ceil(TILE) * grid.1.div_ceil(TILE);
+    let tiles = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("Jfa::tiles"),
+        size: u64::from(tile_count) * 4,
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
         mapped_at_creation: false,
     });
     let counters = device.create_buffer(&wgpu::BufferDescriptor {
@@ -255,12 +268,13 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
     });
     let io = [
         layout::uniform_dynamic(0),
-        layout::texture_float(1),
+        layout::storage_read(1),
         layout::storage_read(2),
         layout::storage_read_write(3),
         layout::storage_texture(4, wgpu::TextureFormat::Rgba32Float),
         layout::storage_read_write(5),
         layout::storage_read_write(6),
+        layout::storage_read_write(7),
     ];
     let seed = ctx.screen_pipeline(PipelineKey::new(which.seed.0), which.seed.1, &io);
     let round = ctx.screen_pipeline(PipelineKey::new(which.round.0), which.round.1, &io);
@@ -272,18 +286,23 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
             layout: &seed.get_bind_group_layout(1),
             entries: &layout::entries(&[
                 layout::slot_binding::<Uniforms>(&uniforms),
-                wgpu::BindingResource::TextureView(&lut_view),
+                lut.as_entire_binding(),
                 src.as_entire_binding(),
                 dst.as_entire_binding(),
                 wgpu::BindingResource::TextureView(ctx.visibility),
                 counters.as_entire_binding(),
                 flags.as_entire_binding(),
+                tiles.as_entire_binding(),
             ]),
         })
     };
     let (a_to_b, b_to_a) = (group(&a, &b), group(&b, &a));
+    // Rounds skip the tiles no record can reach and leave their cells as they are, so both
+    // record buffers start empty (all zero) and the tile flags start clear.
     ctx.encoder.clear_buffer(&counters, 0, None);
-    let groups = (grid.0.div_ceil(8), grid.1.div_ceil(8));
+    ctx.encoder.clear_buffer(&b, 0, None);
+    ctx.encoder.clear_buffer(&tiles, 0, None);
+    let groups = (grid.0.div_ceil(TILE), grid.1.div_ceil(TILE));
     let screen = ctx.dispatch_size();
     {
         let mut pass = ctx.encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
@@ -309,7 +328,20 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
     }
     ctx.flush();
     let counts: Vec<u32> = bytemuck::cast_slice(&read_buffer(ctx.gpu, &counters)).to_vec();
-    (counts[0], counts[1], steps)
+    let flooded = f64::from(counts[2]) / (f64::from(tile_count) * steps.len() as f64);
+    (counts[0], counts[1], steps, flooded)
+}
+
+/// The coloured intensity look-up table (`jfa_lut`) of this frame's light, on the GPU: a
+/// storage buffer rather than a texture, since lavapipe charges a texel fetch several times a
+/// buffer read and every flooding candidate does four (a bilinear look-up).
+fn lut_buffer(gpu: &crate::gpu::GpuContext, spec: &crate::render::FrameSpec) -> wgpu::Buffer {
+    let lut = intensity_lut(&spec.light, &spec.light_image);
+    gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("Jfa::lut"),
+        contents: bytemuck::cast_slice(&lut),
+        usage: wgpu::BufferUsages::STORAGE,
+    })
 }
 
 /// Jump flooding of nearest seeds over a `size`² grid: the Voronoi diagram the flooding pattern
@@ -340,9 +372,25 @@ pub fn voronoi(gpu: &crate::gpu::GpuContext, size: u32, seeds: &[(u32, u32)], ro
         })
     };
     let (a, b) = (cells("Voronoi::cells_a"), cells("Voronoi::cells_b"));
+    let tiles_across = size.div_ceil(TILE);
+    let mut tile_flags = vec![0u32; (tiles_across * tiles_across) as usize];
+    for &(x, y) in seeds {
+        tile_flags[(y / TILE * tiles_across + x / TILE) as usize] = 1;
+    }
+    let tiles = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("Voronoi::tiles"),
+        contents: bytemuck::cast_slice(&tile_flags),
+        usage: wgpu::BufferUsages::STORAGE,
+    });
     let bind_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
         label: Some("Voronoi::layout"),
-        entries: &[layout::uniform_dynamic(0), layout::storage_read(1), layout::storage_read(2), layout::storage_read_write(3)],
+        entries: &[
+            layout::uniform_dynamic(0),
+            layout::storage_read(1),
+            layout::storage_read(2),
+            layout::storage_read_write(3),
+            layout::storage_read_write(4),
+        ],
     });
     let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
         label: Some("Voronoi::pipeline_layout"),
@@ -367,6 +415,7 @@ pub fn voronoi(gpu: &crate::gpu::GpuContext, size: u32, seeds: &[(u32, u32)], ro
                 seed_buffer.as_entire_binding(),
                 src.as_entire_binding(),
                 dst.as_entire_binding(),
+                tiles.as_entire_binding(),
             ]),
         })
     };

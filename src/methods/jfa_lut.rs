@@ -33,26 +33,39 @@ pub fn intensity_lut(light: &AreaLight, image: &LightImage) -> Vec<[f32; 4]> {
         .collect();
     let total = samples.iter().fold([0.0f32; 3], |acc, (_, e)| [acc[0] + e[0], acc[1] + e[1], acc[2] + e[2]]);
     let luminance = |c: [f32; 3]| 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2];
-    let mut lut = Vec::with_capacity((LUT_SIZE * LUT_SIZE) as usize);
-    for j in 0..LUT_SIZE {
-        for i in 0..LUT_SIZE {
-            let q = local(light, (i as f32 + 0.5) / LUT_SIZE as f32, (j as f32 + 0.5) / LUT_SIZE as f32);
-            // c is the origin: the centre's side of the line through q orthogonal to q.
-            let limit = q.length_squared();
-            let mut visible = [0.0f32; 3];
-            for (y, e) in &samples {
-                if y.dot(q) < limit {
-                    for k in 0..3 {
-                        visible[k] += e[k];
-                    }
+    let entry = |i: u32, j: u32| {
+        let q = local(light, (i as f32 + 0.5) / LUT_SIZE as f32, (j as f32 + 0.5) / LUT_SIZE as f32);
+        // c is the origin: the centre's side of the line through q orthogonal to q.
+        let limit = q.length_squared();
+        let mut visible = [0.0f32; 3];
+        for (y, e) in &samples {
+            if y.dot(q) < limit {
+                for k in 0..3 {
+                    visible[k] += e[k];
                 }
             }
-            let gray = if luminance(total) > 0.0 { luminance(visible) / luminance(total) } else { 0.0 };
-            let fraction = |k: usize| if total[k] > 0.0 { visible[k] / total[k] } else { gray };
-            lut.push([fraction(0), fraction(1), fraction(2), gray]);
         }
-    }
-    lut
+        let gray = if luminance(total) > 0.0 { luminance(visible) / luminance(total) } else { 0.0 };
+        let fraction = |k: usize| if total[k] > 0.0 { visible[k] / total[k] } else { gray };
+        [fraction(0), fraction(1), fraction(2), gray]
+    };
+    // ~4·10⁷ sample tests in all: rows are shared among the CPU's cores.
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get()) as u32;
+    let rows_per_thread = LUT_SIZE.div_ceil(threads);
+    std::thread::scope(|scope| {
+        let workers: Vec<_> = (0..LUT_SIZE)
+            .step_by(rows_per_thread as usize)
+            .map(|first| {
+                let entry = &entry;
+                scope.spawn(move || {
+                    (first..(first + rows_per_thread).min(LUT_SIZE))
+                        .flat_map(|j| (0..LUT_SIZE).map(move |i| entry(i, j)))
+                        .collect::<Vec<_>>()
+                })
+            })
+            .collect();
+        workers.into_iter().flat_map(|worker| worker.join().expect("a look-up row worker panicked")).collect()
+    })
 }
 
 /// Image coordinates (s right, t down) to light-local metres (x along r, y along u).

@@ -17,7 +17,7 @@ use serde_json::{Map, Value};
 use crate::error::{ErrorCode, JobError, JobResult};
 use std::sync::Arc;
 
-use crate::gpu::pool::{PipelineKey, PipelinePool};
+use crate::gpu::pool::{DerivedResources, PipelineKey, PipelinePool};
 use crate::gpu::scene::GpuScene;
 use crate::gpu::timing::GpuTimer;
 use crate::gpu::GpuContext;
@@ -41,6 +41,8 @@ pub type Counters = BTreeMap<String, f64>;
 pub struct MethodContext<'a> {
     pub gpu: &'a GpuContext,
     pub pipelines: &'a mut PipelinePool,
+    /// Resources derived from the job's inputs and kept for later jobs (look-up tables).
+    pub derived: &'a mut DerivedResources,
     /// Group 0 of every screen-space pass: frame constants, G-buffer, shadow map.
     pub inputs: &'a FrameInputs,
     /// Where the method writes its visibility: `rgba32float`, rgb = V per channel.

@@ -12,7 +12,7 @@ use std::time::Instant;
 use glam::Vec3;
 
 use crate::gpu::layout;
-use crate::gpu::pool::{PipelineKey, PipelinePool, PooledTexture, TextureKey, TexturePool};
+use crate::gpu::pool::{DerivedResources, PipelineKey, PipelinePool, PooledTexture, TextureKey, TexturePool};
 use crate::gpu::readback::Readback;
 use crate::gpu::scene::GpuScene;
 use crate::gpu::shaders;
@@ -151,6 +151,7 @@ pub struct Renderer {
     gpu: Arc<GpuContext>,
     pub pipelines: PipelinePool,
     pub textures: TexturePool,
+    pub derived: DerivedResources,
     timer: GpuTimer,
     layouts: Layouts,
     uniforms: wgpu::Buffer,
@@ -204,7 +205,16 @@ impl Renderer {
             mapped_at_creation: false,
         });
         let timer = GpuTimer::new(&gpu);
-        Self { gpu, pipelines: PipelinePool::default(), textures: TexturePool::default(), timer, layouts, uniforms, cells }
+        Self {
+            gpu,
+            pipelines: PipelinePool::default(),
+            textures: TexturePool::default(),
+            derived: DerivedResources::default(),
+            timer,
+            layouts,
+            uniforms,
+            cells,
+        }
     }
 
     pub fn gpu(&self) -> &Arc<GpuContext> {
@@ -258,6 +268,7 @@ impl Renderer {
             let mut ctx = MethodContext {
                 gpu: &gpu,
                 pipelines: &mut self.pipelines,
+                derived: &mut self.derived,
                 inputs: &inputs,
                 visibility: &targets.visibility.view,
                 width: spec.width,

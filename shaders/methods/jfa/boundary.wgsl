@@ -12,7 +12,8 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     if any(pixel >= size) {
         return;
     }
-    var record = empty_record();
+    var record = vec4<f32>(0.0);
+    var origin = vec4<f32>(0.0);
     let is_covered = covered(pixel);
     let hard = is_covered && hard_shadowed(pixel);
     flags[pixel.y * size.x + pixel.x] = select(0u, COVERED, is_covered) | select(0u, HARD, hard);
@@ -37,9 +38,13 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
             // A seed whose own ray misses the light still passes its occluder on.
             let key = select(SEED_KEY, 1.0 - luminance(i.rgb), i.w > 0.0);
             let id_bits = f32(textureLoad(gbuf_id, pixel, 0).r);
-            record = Record(vec4<f32>(occluder, 1.0), vec4<f32>(i.rgb, key), vec4<f32>(vec2<f32>(pixel), id_bits, 0.0));
+            record = packed(occluder, key);
+            origin = vec4<f32>(vec2<f32>(pixel), id_bits, 0.0);
+            mark_tile(vec2<i32>(pixel));
             atomicAdd(&counters[0], 1u);
         }
     }
-    dst[pixel.y * size.x + pixel.x] = record;
+    let index = 2u * (pixel.y * size.x + pixel.x);
+    dst[index] = record;
+    dst[index + 1u] = origin;
 }

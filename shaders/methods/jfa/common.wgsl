@@ -4,6 +4,7 @@
 
 #import common/frame_inputs.wgsl
 #import common/shadow.wgsl
+#import methods/jfa/neighbours.wgsl
 
 struct JfaParams {
     step: i32,                // this round's step length: 2^(k−1) … 1 (jump) or 1 (standard)
@@ -12,36 +13,71 @@ struct JfaParams {
     slope_bias_texels: f32,
     boundary_relative: f32,   // jfa-e: a lit neighbour within view depth × this makes a boundary pixel
     same_object: u32,         // jfa-e §5.2 remedy 1: flood only to pixels of the boundary's object
-    midpoint: u32,            // jfa-e §5.2 remedy 2: the midpoint must already be in a penumbra
-    _pad: u32,
+    midpoint: u32,            // jfa-e §5.2 remedy 2: the midpoint must be in a penumbra of the same occluder
+    light_space: u32,         // 1 for jfa-l (the grid is the shadow map), 0 for jfa-e (the screen)
+    lut_size: u32,            // side of the look-up table
 }
 
-// What flooding carries (§4.1, §5.1): an occluder point, the intensity it gives the holder,
-// and (jfa-e) where it came from.
-struct Record {
-    occluder: vec4<f32>,  // xyz world position of a silhouette point, w 1 when set
-    intensity: vec4<f32>, // rgb visible fraction of the light; w the key kept minimal
-    origin: vec4<f32>,    // jfa-e: xy the boundary pixel, z its object id
-}
-
+// What flooding carries (§4.1, §5.1), packed small because every round moves the whole grid
+// of them: one vec4 per cell for jfa-l, two for jfa-e. The first holds an occluder point
+// (xyz) and, in w, the key flooding minimises plus 1, so that an all-zero record — a cleared
+// buffer — is empty. jfa-e's second holds where the record came from: xy the boundary pixel,
+// z its object id. The rgb intensity is not stored: the final pass recomputes it from the
+// occluder (§4.1 "Generating Final Image" does so for jfa-l; jfa-e gets the same value).
 @group(1) @binding(0) var<uniform> params: JfaParams;
-@group(1) @binding(1) var lut: texture_2d<f32>;
-@group(1) @binding(2) var<storage, read> src: array<Record>;
-@group(1) @binding(3) var<storage, read_write> dst: array<Record>;
+// The look-up table, lut_size² entries row-major from row 0 = +u (`src/methods/jfa_lut.rs`).
+@group(1) @binding(1) var<storage, read> lut: array<vec4<f32>>;
+@group(1) @binding(2) var<storage, read> src: array<vec4<f32>>;
+@group(1) @binding(3) var<storage, read_write> dst: array<vec4<f32>>;
 @group(1) @binding(4) var visibility_out: texture_storage_2d<rgba32float, write>;
 @group(1) @binding(5) var<storage, read_write> counters: array<atomic<u32>, 4>;
 // jfa-e: per eye pixel, bit 0 covered, bit 1 in hard shadow — computed once by the boundary
 // pass so that flooding rounds read a flag instead of redoing the shadow test per neighbour.
 @group(1) @binding(6) var<storage, read_write> flags: array<u32>;
+// Per TILE×TILE tile of the flooded grid, 1 once a cell of it holds a record: lets a round
+// skip the workgroups no record can reach (`reach_holds_record` in neighbours.wgsl).
+@group(1) @binding(7) var<storage, read_write> tiles: array<atomic<u32>>;
 
 const COVERED: u32 = 1u;
 const HARD: u32 = 2u;
 
 // A seed's key: larger than any intensity, so a seed never counts as penumbra itself.
 const SEED_KEY: f32 = 2.0;
+// The key of an empty record: worse than any other.
+const EMPTY_KEY: f32 = 3.0;
 
-fn empty_record() -> Record {
-    return Record(vec4<f32>(0.0), vec4<f32>(1.0, 1.0, 1.0, 3.0), vec4<f32>(0.0));
+fn packed(occluder: vec3<f32>, key: f32) -> vec4<f32> {
+    return vec4<f32>(occluder, key + 1.0);
+}
+
+fn is_empty(record: vec4<f32>) -> bool {
+    return record.w == 0.0;
+}
+
+fn key_of(record: vec4<f32>) -> f32 {
+    return select(record.w - 1.0, EMPTY_KEY, is_empty(record));
+}
+
+// A record holding a penumbra occluder, not just a seed.
+fn in_penumbra(record: vec4<f32>) -> bool {
+    return !is_empty(record) && key_of(record) <= 1.0;
+}
+
+// The flooded grid: the shadow map (jfa-l) or the screen (jfa-e).
+fn grid_size() -> vec2<i32> {
+    return select(vec2<i32>(frame.sizes.xy), vec2<i32>(i32(frame.sizes.z)), params.light_space == 1u);
+}
+
+fn tile_count() -> vec2<i32> {
+    return (grid_size() + TILE - 1) / TILE;
+}
+
+fn tile_holds_record(tile: vec2<i32>) -> bool {
+    return atomicLoad(&tiles[tile.y * tile_count().x + tile.x]) != 0u;
+}
+
+fn mark_tile(cell: vec2<i32>) {
+    atomicStore(&tiles[cell.y / TILE * tile_count().x + cell.x / TILE], 1u);
 }
 
 // The hard-shadow test of an eye pixel (the same test as method `hard`).
@@ -60,15 +96,19 @@ fn luminance(c: vec3<f32>) -> f32 {
     return dot(c, vec3<f32>(0.2126, 0.7152, 0.0722));
 }
 
-// Bilinear look-up of the intensity texture at light coordinates uv ∈ [0,1]² (row 0 = +u).
+fn lut_entry(i: vec2<i32>) -> vec3<f32> {
+    return lut[i.y * i32(params.lut_size) + i.x].rgb;
+}
+
+// Bilinear look-up of the intensity table at light coordinates uv ∈ [0,1]² (row 0 = +u).
 fn lut_sample(uv: vec2<f32>) -> vec3<f32> {
-    let size = vec2<f32>(textureDimensions(lut));
-    let x = clamp(uv * size - 0.5, vec2<f32>(0.0), size - 1.0);
+    let size = f32(params.lut_size);
+    let x = clamp(uv * size - 0.5, vec2<f32>(0.0), vec2<f32>(size - 1.0));
     let i = vec2<i32>(floor(x));
     let f = x - floor(x);
-    let j = min(i + 1, vec2<i32>(size) - 1);
-    let a = mix(textureLoad(lut, i, 0).rgb, textureLoad(lut, vec2<i32>(j.x, i.y), 0).rgb, f.x);
-    let b = mix(textureLoad(lut, vec2<i32>(i.x, j.y), 0).rgb, textureLoad(lut, j, 0).rgb, f.x);
+    let j = min(i + 1, vec2<i32>(i32(params.lut_size) - 1));
+    let a = mix(lut_entry(i), lut_entry(vec2<i32>(j.x, i.y)), f.x);
+    let b = mix(lut_entry(vec2<i32>(i.x, j.y)), lut_entry(j), f.x);
     return mix(a, b, f.y);
 }
 

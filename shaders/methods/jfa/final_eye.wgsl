@@ -1,5 +1,6 @@
 // Method `jfa-e`, §5.1 "Generating Final Image": a pixel the flood reached takes the
-// intensity it stored; otherwise hard shadow → 0, else 1.
+// intensity of the occluder it holds (recomputed from the record, the value flooding chose
+// it by); otherwise hard shadow → 0, else 1.
 
 #import methods/jfa/common.wgsl
 
@@ -12,11 +13,13 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     var v = vec3<f32>(1.0);
     let flag = flags[pixel.y * frame.sizes.x + pixel.x];
     if (flag & COVERED) != 0u {
-        let record = src[pixel.y * frame.sizes.x + pixel.x];
-        if record.occluder.w > 0.0 && record.intensity.w <= 1.0 {
-            v = record.intensity.rgb;
+        let record = src[2u * (pixel.y * frame.sizes.x + pixel.x)];
+        let inside = (flag & HARD) != 0u;
+        let i = intensity(textureLoad(gbuf_position, pixel, 0).xyz, record.xyz, inside);
+        if in_penumbra(record) && i.w > 0.0 {
+            v = i.rgb;
             atomicAdd(&counters[1], 1u);
-        } else if (flag & HARD) != 0u {
+        } else if inside {
             v = vec3<f32>(0.0);
         }
     }

@@ -20,8 +20,8 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
                 v = vec3<f32>(0.0);
             } else {
                 let record = src[u32(texel.y) * frame.sizes.z + u32(texel.x)];
-                if record.occluder.w > 0.0 && record.intensity.w <= 1.0 {
-                    let i = intensity(p, record.occluder.xyz, false);
+                if in_penumbra(record) {
+                    let i = intensity(p, record.xyz, false);
                     if i.w > 0.0 {
                         v = i.rgb;
                         atomicAdd(&counters[1], 1u);

@@ -6,21 +6,28 @@
 // to be in a penumbra of the same occluder.
 
 #import methods/jfa/common.wgsl
-#import methods/jfa/neighbours.wgsl
 
-fn record_at(p: vec2<i32>) -> Record {
-    return src[u32(p.y) * frame.sizes.x + u32(p.x)];
-}
+var<workgroup> in_reach: u32;
 
 @compute @workgroup_size(8, 8)
-fn main(@builtin(global_invocation_id) id: vec3<u32>) {
+fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) local: u32, @builtin(workgroup_id) group: vec3<u32>) {
+    if local == 0u {
+        in_reach = u32(reach_holds_record(vec2<i32>(group.xy), params.step, tile_count()));
+        atomicAdd(&counters[2], in_reach);
+    }
+    if workgroupUniformLoad(&in_reach) == 0u {
+        return;
+    }
     let pixel = id.xy;
     let size = vec2<i32>(frame.sizes.xy);
     if any(pixel >= frame.sizes.xy) {
         return;
     }
     let p = vec2<i32>(pixel);
-    var best = record_at(p);
+    let index = 2u * (pixel.y * frame.sizes.x + pixel.x);
+    var best = src[index];
+    var best_origin = src[index + 1u];
+    var best_key = key_of(best);
     let flag = flags[pixel.y * frame.sizes.x + pixel.x];
     if (flag & COVERED) != 0u {
         let here = textureLoad(gbuf_position, pixel, 0).xyz;
@@ -31,36 +38,46 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
             if n.x < 0 {
                 continue;
             }
-            // Only the occluder is read until it proves useful: most neighbours carry none.
-            let occluder = src[u32(n.y) * frame.sizes.x + u32(n.x)].occluder;
-            if occluder.w == 0.0 {
+            let at = 2u * (u32(n.y) * frame.sizes.x + u32(n.x));
+            let candidate = src[at];
+            // The occluder held already has its key for this pixel: whatever its origin, the
+            // same occluder gives the same key and would not replace it.
+            if is_empty(candidate) || all(candidate.xyz == best.xyz) {
                 continue;
             }
-            let carried = record_at(n);
-            if params.same_object == 1u && carried.origin.z != object {
+            let origin = src[at + 1u];
+            if params.same_object == 1u && origin.z != object {
                 continue;
             }
+            let i = intensity(here, candidate.xyz, inside);
+            let key = select(luminance(i.rgb), 1.0 - luminance(i.rgb), inside);
+            if i.w == 0.0 || key >= best_key {
+                continue;
+            }
+            // Only a candidate that would win pays for the midpoint check.
             if params.midpoint == 1u {
                 // §5.2's continuity check, read as: the midpoint between the boundary pixel
                 // and this one must itself be in a penumbra of the same occluder. Asking
                 // instead whether the midpoint already holds a record would depend on the
                 // order jump flooding reaches pixels (far ones first) and cut real penumbrae.
-                let mid = vec2<u32>((vec2<i32>(carried.origin.xy) + p) / 2);
+                let mid = vec2<u32>((vec2<i32>(origin.xy) + p) / 2);
                 let mid_flag = flags[mid.y * frame.sizes.x + mid.x];
                 if (mid_flag & COVERED) == 0u {
                     continue;
                 }
-                let at_mid = intensity(textureLoad(gbuf_position, mid, 0).xyz, carried.occluder.xyz, (mid_flag & HARD) != 0u);
+                let at_mid = intensity(textureLoad(gbuf_position, mid, 0).xyz, candidate.xyz, (mid_flag & HARD) != 0u);
                 if at_mid.w == 0.0 {
                     continue;
                 }
             }
-            let i = intensity(here, carried.occluder.xyz, inside);
-            let key = select(luminance(i.rgb), 1.0 - luminance(i.rgb), inside);
-            if i.w > 0.0 && key < best.intensity.w {
-                best = Record(carried.occluder, vec4<f32>(i.rgb, key), carried.origin);
-            }
+            best = packed(candidate.xyz, key);
+            best_origin = origin;
+            best_key = key;
         }
     }
-    dst[pixel.y * frame.sizes.x + pixel.x] = best;
+    dst[index] = best;
+    dst[index + 1u] = best_origin;
+    if !is_empty(best) {
+        mark_tile(p);
+    }
 }

@@ -5,10 +5,18 @@
 // the light are not taken and not passed on (§3).
 
 #import methods/jfa/common.wgsl
-#import methods/jfa/neighbours.wgsl
+
+var<workgroup> in_reach: u32;
 
 @compute @workgroup_size(8, 8)
-fn main(@builtin(global_invocation_id) id: vec3<u32>) {
+fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) local: u32, @builtin(workgroup_id) group: vec3<u32>) {
+    if local == 0u {
+        in_reach = u32(reach_holds_record(vec2<i32>(group.xy), params.step, tile_count()));
+        atomicAdd(&counters[2], in_reach);
+    }
+    if workgroupUniformLoad(&in_reach) == 0u {
+        return;
+    }
     let res = i32(frame.sizes.z);
     if any(id.xy >= vec2<u32>(u32(res))) {
         return;
@@ -16,6 +24,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     let p = vec2<i32>(id.xy);
     let index = id.y * u32(res) + id.x;
     var best = src[index];
+    var best_key = key_of(best);
     let receiver = textureLoad(shadow_position, p, 0);
     if receiver.w > 0.0 {
         for (var k = 0u; k < 9u; k++) {
@@ -23,17 +32,22 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
             if n.x < 0 {
                 continue;
             }
-            // Only the occluder is read until it proves useful: most neighbours carry none.
-            let occluder = src[u32(n.y * res + n.x)].occluder;
-            if occluder.w == 0.0 {
+            let candidate = src[u32(n.y * res + n.x)];
+            // Jump flooding hands one occluder to many neighbours; the one held already has
+            // its key for this receiver, so it is not evaluated again.
+            if is_empty(candidate) || all(candidate.xyz == best.xyz) {
                 continue;
             }
-            let i = intensity(receiver.xyz, occluder.xyz, false);
+            let i = intensity(receiver.xyz, candidate.xyz, false);
             let key = luminance(i.rgb);
-            if i.w > 0.0 && key < best.intensity.w {
-                best = Record(occluder, vec4<f32>(i.rgb, key), vec4<f32>(0.0));
+            if i.w > 0.0 && key < best_key {
+                best = packed(candidate.xyz, key);
+                best_key = key;
             }
         }
     }
     dst[index] = best;
+    if !is_empty(best) {
+        mark_tile(p);
+    }
 }

@@ -1,7 +1,7 @@
-// Jump flooding's communication pattern (Rong & Tan 2006 §3): in a round with step length k,
-// cell p reads the cells p + (a, b), a, b ∈ {−k, 0, k}. Every flood uses this one function, so
-// the Voronoi test (`voronoi.wgsl` against a brute-force nearest seed) checks the pattern the
-// shadow methods rely on.
+// Jump flooding's communication pattern (Rong & Tan 2006 §3), and which workgroups a round
+// may skip. In a round with step length k, cell p reads the cells p + (a, b), a, b ∈ {−k, 0, k}.
+// Every flood uses these functions, so the Voronoi test (`voronoi.wgsl` against a brute-force
+// nearest seed) checks the pattern and the skipping the shadow methods rely on.
 
 // The i-th of the 8 neighbours (i in 0..9, 4 being p itself) at this step, or (−1, −1) when
 // it is p or lies outside the grid.
@@ -11,4 +11,39 @@ fn jump_neighbour(p: vec2<i32>, i: u32, step: i32, size: vec2<i32>) -> vec2<i32>
         return vec2<i32>(-1);
     }
     return n;
+}
+
+// Floods run in TILE×TILE workgroups, one per tile of the grid.
+const TILE: i32 = 8;
+
+fn floor_div(a: i32, b: i32) -> i32 {
+    return select(a / b, (a - b + 1) / b, a < 0);
+}
+
+// Past the paper: a flood only ever adds or improves records, so a tile whose cells and all
+// their jump neighbours hold none would copy empty records over the empty records both
+// buffers already hold — its workgroup can return at once. Most of a shadow map is far from
+// any silhouette, so this is where a round's cost goes. Whether a record may reach `tile` this
+// round: some tile holding a neighbour of its cells (offsets a·step, b·step) — or the tile
+// itself — holds one. The importer defines `tile_holds_record(tile)`: a flag any cell of
+// that tile sets once it holds a record (seed pass or an earlier round).
+fn reach_holds_record(tile: vec2<i32>, step: i32, tiles: vec2<i32>) -> bool {
+    for (var b = -1; b <= 1; b++) {
+        // The cells tile.y·TILE + b·step … + TILE − 1 span one tile, or two when step is not
+        // a multiple of TILE.
+        let y = tile.y * TILE + b * step;
+        let rows = clamp(vec2<i32>(floor_div(y, TILE), floor_div(y + TILE - 1, TILE)), vec2<i32>(0), vec2<i32>(tiles.y - 1));
+        for (var a = -1; a <= 1; a++) {
+            let x = tile.x * TILE + a * step;
+            let columns = clamp(vec2<i32>(floor_div(x, TILE), floor_div(x + TILE - 1, TILE)), vec2<i32>(0), vec2<i32>(tiles.x - 1));
+            for (var ty = rows.x; ty <= rows.y; ty++) {
+                for (var tx = columns.x; tx <= columns.y; tx++) {
+                    if tile_holds_record(vec2<i32>(tx, ty)) {
+                        return true;
+                    }
+                }
+            }
+        }
+    }
+    return false;
 }

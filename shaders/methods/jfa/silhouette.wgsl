@@ -11,7 +11,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let p = vec2<i32>(id.xy);
-    var record = empty_record();
+    var record = vec4<f32>(0.0);
     let here = textureLoad(shadow_position, p, 0);
     if here.w > 0.0 {
         let depth = textureLoad(shadow_depth, p, 0).r;
@@ -25,8 +25,8 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
             }
         }
         if silhouette {
-            record.occluder = vec4<f32>(here.xyz, 1.0);
-            record.intensity = vec4<f32>(1.0, 1.0, 1.0, SEED_KEY);
+            record = packed(here.xyz, SEED_KEY);
+            mark_tile(p);
             atomicAdd(&counters[0], 1u);
         }
     }
