@@ -569,6 +569,34 @@ fn write_tables(out: &Path, report: &EvalReport, methods: &[String], sweep: Opti
             )?;
         }
     }
+    let subdivided: Vec<&Row> = report.rows.iter().filter(|r| r.counters.contains_key("pixels_subdivided_0")).collect();
+    if !subdivided.is_empty() {
+        writeln!(md, "\n## Subdivision histogram\n")?;
+        writeln!(md, "Pixels by how often `chun-oh` split their filter (Chun & Oh 2016, Table 2), with shares of the frame.\n")?;
+        writeln!(md, "| scene | light | size | method | background | no subdivision | 1 subdivision | 2 subdivisions | splits forced by the light |")?;
+        writeln!(md, "|---|---|---|---|---:|---:|---:|---:|---:|")?;
+        for r in subdivided {
+            let total = f64::from(r.width) * f64::from(r.height);
+            let cell = |key: &str| {
+                let n = r.counters.get(key).copied().unwrap_or(0.0);
+                format!("{n:.0} ({:.2} %)", 100.0 * n / total)
+            };
+            writeln!(
+                md,
+                "| {} | {} | {}×{} | {} | {} | {} | {} | {} | {:.0} |",
+                r.scene,
+                r.light,
+                r.width,
+                r.height,
+                r.method,
+                cell("background_pixels"),
+                cell("pixels_subdivided_0"),
+                cell("pixels_subdivided_1"),
+                cell("pixels_subdivided_2"),
+                r.counters.get("splits_forced_by_light").copied().unwrap_or(0.0)
+            )?;
+        }
+    }
     if let Some(sweep) = sweep {
         writeln!(md, "\n## Sweep of `{}` in `{}`\n", sweep.param, sweep.method)?;
         writeln!(md, "Plots: `sweep-*.svg` (method ms and penumbra V RMSE against the value).\n")?;

@@ -9,6 +9,7 @@ use base64::Engine as _;
 use glam::{Vec2, Vec3};
 use penumbra::job::{AssetRef, Job, Limits, OutputFormat};
 use penumbra::light::{light_cells, unshadowed_irradiance, AreaLight, LightImage};
+use penumbra::methods::chun_oh::{light_regions, quadtree_probe};
 use serde_json::json;
 
 fn job(value: serde_json::Value) -> Job {
@@ -410,7 +411,7 @@ fn eval_writes_the_tables_and_the_pictures() {
     let options = penumbra::eval::EvalOptions {
         scenes: vec!["torus".into()],
         lights: vec!["white".into(), "stripes".into()],
-        methods: vec!["hard".into(), "jfa-l".into(), "jfa-l:flooding=\"standard\"".into()],
+        methods: vec!["hard".into(), "jfa-l".into(), "jfa-l:flooding=\"standard\"".into(), "chun-oh".into()],
         sizes: vec!["64x48".into()],
         samples: 16,
         shadow_map: vec![128, 256],
@@ -419,8 +420,8 @@ fn eval_writes_the_tables_and_the_pictures() {
         repeat: 2,
     };
     let report = penumbra::eval::run(&common::engine(), &options).unwrap();
-    // 2 lights × 2 shadow maps; per case the reference, hard, jfa-l both ways, three sweep points.
-    assert_eq!(report.rows.len(), 4 * 7);
+    // 2 lights × 2 shadow maps; per case the reference, hard, jfa-l both ways, chun-oh, three sweep points.
+    assert_eq!(report.rows.len(), 4 * 8);
     for row in &report.rows {
         assert!(row.quality.penumbra_pixels > 0, "{} {}", row.scene, row.light);
         if row.method == "reference" {
@@ -439,10 +440,11 @@ fn eval_writes_the_tables_and_the_pictures() {
     }
     let md = std::fs::read_to_string(out.join("results.md")).unwrap();
     assert!(md.contains("the median of 2 runs"), "{md}");
+    assert!(md.contains("## Subdivision histogram") && md.contains("| torus | stripes | 64×48 | chun-oh |"), "{md}");
     assert!(md.contains("| torus | stripes | 64×48 | 256 | jfa-l:flooding=\"standard\" |"), "{md}");
     assert!(md.contains("## Flooding experiment") && md.contains("## Sweep of `slope_bias_texels` in `hard`"), "{md}");
     let csv = std::fs::read_to_string(out.join("results.csv")).unwrap();
-    assert_eq!(csv.lines().count(), 1 + 28);
+    assert_eq!(csv.lines().count(), 1 + 32);
     let columns = csv.lines().next().unwrap().split(',').count();
     assert!(csv.lines().all(|line| line.split(',').count() == columns), "every CSV row has the header's {columns} columns");
     for plot in ["sweep-torus-white-64x48-map128-hard-slope_bias_texels.svg", "scaling-torus-white.svg"] {
@@ -450,9 +452,9 @@ fn eval_writes_the_tables_and_the_pictures() {
         assert!(svg.starts_with("<svg") && svg.contains("polyline"), "{plot}: a plot with lines");
     }
     let json: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("results.json")).unwrap()).unwrap();
-    assert_eq!(json["rows"].as_array().unwrap().len(), 28);
+    assert_eq!(json["rows"].as_array().unwrap().len(), 32);
     let sheet = image::open(out.join("sheet-torus-stripes-64x48-map256.png")).unwrap();
-    assert_eq!((sheet.width(), sheet.height()), (64 * 7, 48 * 2));
+    assert_eq!((sheet.width(), sheet.height()), (64 * 8, 48 * 2));
     assert!(out.join("error-torus-white-64x48-map128-hard.png").exists());
     std::fs::remove_dir_all(&out).ok();
 }
@@ -740,4 +742,116 @@ fn jump_flooding_is_a_voronoi_flood() {
     let flooded = penumbra::methods::jfa::voronoi(&gpu, 32, &[(0, 0)], 3, true);
     assert_eq!(flooded[7 * 32 + 7], 0);
     assert_eq!(flooded[8 * 32 + 8], -1);
+}
+
+// --- pcss, chun-oh ----------------------------------------------------------------------
+
+
+/// A synthetic tile for the quadtree probe: lit tests per 4×4 cell, 2×2 tests per cell.
+fn tile(f: impl Fn(usize) -> u32) -> [u32; 16] {
+    std::array::from_fn(f)
+}
+
+#[test]
+fn chun_oh_quadtree_splits_by_visibility_variance_and_by_the_lights_colour() {
+    let gpu = common::engine().gpu_arc();
+    let image = |name: &str| LightImage::builtin(name, &Default::default(), "light.image").unwrap();
+    let (white, stripes) = (light_regions(&image("white")), light_regions(&image("stripes")));
+    let lit = tile(|_| 4);
+    let dark = tile(|_| 0);
+    // The filter's left half (cell columns 0–1) blocked: E = 0.5, E − E² = 0.25 > 0.2244, so it
+    // splits; each quadrant is then uniform (variance 0) and stops.
+    let half = tile(|i| if i % 4 >= 2 { 4 } else { 0 });
+    // Every cell half lit: the quadrants are at 0.5 too and split again, to 4×4.
+    let fine = tile(|_| 2);
+    // Eq. 1 on either side of the threshold (64 tests): 23 lit → 0.2302 splits, 19 → 0.2088 not.
+    let above = tile(|i| [4, 4, 4, 4, 4, 3][..].get(i).copied().unwrap_or(0));
+    let below = tile(|i| [4, 4, 4, 4, 3][..].get(i).copied().unwrap_or(0));
+    // E = 0.75, variance 0.1875: below the threshold — only a colourful light splits it.
+    let three_quarters = tile(|_| 3);
+    let tiles = [lit, dark, half, fine, above, below, three_quarters];
+    let run = |regions, fixed| quadtree_probe(&gpu, &tiles, regions, fixed, 0.2244, 0.05, 2);
+
+    let on_white = run(&white, false);
+    let levels: Vec<u32> = on_white.iter().map(|r| r.level).collect();
+    assert_eq!(levels, [0, 0, 1, 2, 2, 0, 0], "{on_white:?}");
+    assert!(on_white.iter().all(|r| r.forced == 0), "a uniform light forces no split");
+    // Under a uniform light every subdivision sums back to the plain average.
+    for (r, expected) in on_white.iter().zip([1.0, 0.0, 0.5, 0.5, 23.0 / 64.0, 19.0 / 64.0, 0.75]) {
+        assert!(r.visibility.iter().all(|v| (v - expected).abs() < 1e-6), "{r:?} vs {expected}");
+    }
+
+    let on_stripes = run(&stripes, false);
+    assert_eq!((on_stripes[0].level, on_stripes[1].level), (0, 0), "variance 0 never splits, whatever the light");
+    assert_eq!((on_stripes[6].level, on_stripes[6].forced), (2, 5), "the light's colours split 0.75 down to 4×4: {:?}", on_stripes[6]);
+    assert!(on_stripes[6].visibility.iter().all(|v| (v - 0.75).abs() < 1e-6), "uniform visibility stays 0.75 in every channel");
+    // Half lit: the lit filter columns 2–3 map to the image's left half, stripes 0–2 (red,
+    // yellow, green): of each channel's three stripes, red and green keep two, blue none.
+    let expected = [2.0 / 3.0, 2.0 / 3.0, 0.0];
+    assert!(on_stripes[2].visibility.iter().zip(expected).all(|(v, e)| (v - e).abs() < 1e-5), "{:?}", on_stripes[2]);
+
+    let fixed = run(&white, true);
+    assert!(fixed.iter().all(|r| r.level == 2), "fixed mode always splits to 4×4: {fixed:?}");
+}
+
+#[test]
+fn chun_oh_under_a_uniform_light_is_pcss_and_unsplit_it_is_pcss_everywhere() {
+    let render = |method: serde_json::Value, light: &str| {
+        let job = job(json!({"scene": {"builtin": "crowd"}, "light": {"image": {"builtin": light}}, "method": method,
+                             "output": {"width": 160, "height": 120, "format": "exr"}}));
+        common::engine().render_raw(&job).unwrap().0
+    };
+    let same = |a: &[[f32; 3]], b: &[[f32; 3]]| a.iter().zip(b).all(|(x, y)| x.iter().zip(y).all(|(p, q)| (p - q).abs() < 1e-5));
+    let pcss = render(json!({"name": "pcss"}), "white");
+    let chun_oh = render(json!({"name": "chun-oh"}), "white");
+    assert!(same(pcss.visibility.as_ref().unwrap(), chun_oh.visibility.as_ref().unwrap()), "white: subdivision sums back to the average");
+    assert_eq!(chun_oh.counters["splits_forced_by_light"], 0.0);
+    assert!(chun_oh.counters["pixels_subdivided_2"] > 0.0, "the penumbra's middle still splits: {:?}", chun_oh.counters);
+    // A colourful light with every split switched off: the non-subdivided result is pcss.
+    let pcss = render(json!({"name": "pcss"}), "stripes");
+    let unsplit = render(json!({"name": "chun-oh", "threshold": 0.25, "light_threshold": 1.0e6}), "stripes");
+    assert!(same(pcss.visibility.as_ref().unwrap(), unsplit.visibility.as_ref().unwrap()));
+    assert_eq!(unsplit.counters["pixels_subdivided_0"] + unsplit.counters["background_pixels"], 160.0 * 120.0);
+}
+
+#[test]
+fn chun_oh_colours_the_penumbra_the_right_way_round_and_pcss_is_gray() {
+    let light = json!({"size": [1.2, 0.6], "image": {"builtin": "stripes"}});
+    let chun_oh = top_down(json!({"name": "chun-oh"}), json!({"builtin": "occluder"}), light.clone());
+    let pcss = top_down(json!({"name": "pcss"}), json!({"builtin": "occluder"}), light.clone());
+    let reference = top_down(json!({"name": "reference", "samples": 256}), json!({"builtin": "occluder"}), light);
+    // Where the reference's red and blue visibility differ, chun-oh's differ the same way round.
+    let colored: Vec<usize> = (0..reference.len()).filter(|&i| (reference[i][0] - reference[i][2]).abs() > 0.2).collect();
+    assert!(colored.len() > 100, "{} coloured penumbra pixels", colored.len());
+    let agree = colored.iter().filter(|&&i| (chun_oh[i][0] - chun_oh[i][2]).signum() == (reference[i][0] - reference[i][2]).signum()).count();
+    assert!(agree as f32 >= 0.9 * colored.len() as f32, "{agree} of {} agree", colored.len());
+    assert!(pcss.iter().all(|v| v[0] == v[2]), "pcss averages visibility: gray");
+    let error = |v: &[[f32; 3]]| colored.iter().map(|&i| (0..3).map(|c| (v[i][c] - reference[i][c]).abs()).sum::<f32>()).sum::<f32>();
+    assert!(error(&chun_oh) < 0.7 * error(&pcss), "coloured penumbrae: chun-oh {} vs pcss {}", error(&chun_oh), error(&pcss));
+}
+
+#[test]
+fn pcss_penumbra_follows_the_reference() {
+    let light = json!({"size": [0.6, 0.6]});
+    let pcss = top_down(json!({"name": "pcss"}), json!({"builtin": "occluder"}), light.clone());
+    let hard = top_down(json!({"name": "hard"}), json!({"builtin": "occluder"}), light.clone());
+    let reference = top_down(json!({"name": "reference", "samples": 256}), json!({"builtin": "occluder"}), light);
+    let penumbra: Vec<usize> = (0..reference.len()).filter(|&i| reference[i][0] > 0.0 && reference[i][0] < 1.0).collect();
+    let mean = |v: &[[f32; 3]]| penumbra.iter().map(|&i| (v[i][0] - reference[i][0]).abs()).sum::<f32>() / penumbra.len() as f32;
+    let (soft, binary) = (mean(&pcss), mean(&hard));
+    assert!(soft < 0.06 && soft < binary / 3.0, "mean |V − Vref| over {} penumbra pixels: pcss {soft}, hard {binary}", penumbra.len());
+    assert_eq!(pcss[top_down_pixel(2.3, 2.3)], [1.0; 3], "lit floor far from any blocker");
+}
+
+#[test]
+fn golden_crowd_pcss() {
+    let job = job(json!({"scene": {"builtin": "crowd"}, "method": {"name": "pcss"}, "output": {"width": 256, "height": 192}}));
+    common::check_golden("crowd-pcss", &common::engine().render(&job).unwrap().bytes, 0.01, 0.1);
+}
+
+#[test]
+fn golden_crowd_chun_oh() {
+    let job = job(json!({"scene": {"builtin": "crowd"}, "light": {"image": {"builtin": "flame"}}, "method": {"name": "chun-oh"},
+                         "output": {"width": 256, "height": 192}}));
+    common::check_golden("crowd-chun-oh", &common::engine().render(&job).unwrap().bytes, 0.01, 0.1);
 }

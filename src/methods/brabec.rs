@@ -131,7 +131,6 @@ impl ShadowMethod for Brabec {
     fn record(&self, ctx: &mut MethodContext<'_>, params: &Params) -> Counters {
         let spec = ctx.spec;
         let light = &spec.light;
-        let corners = ctx.scene.corners();
         let projection = ctx.projection;
         // The one intuitive parameter the paper asks for (§6): the light's size. A light of
         // width w seen from depth z through a blocker at depth d casts a penumbra of
@@ -140,8 +139,6 @@ impl ShadowMethod for Brabec {
         // of the light's area (the search is circular).
         let width_m = (light.size_m.x * light.size_m.y).sqrt();
         let k = width_m * spec.shadow_resolution as f32 / (2.0 * projection.tan_half);
-        let nearest_depth = corners.iter().map(|c| (*c - light.center).dot(light.n)).fold(f32::INFINITY, f32::min);
-        let d_near = nearest_depth.max(projection.near).max(1e-3);
         let raw = |name| params.f32(name);
         let derived_search = raw("r_scale") < 0.0 && raw("r_bias") < 0.0;
         let derived_hit = raw("r_shrink") < 0.0;
@@ -151,7 +148,7 @@ impl ShadowMethod for Brabec {
             r_bias: raw("r_bias").max(0.0),
             r_shrink: raw("r_shrink").max(0.0),
             k,
-            d_near,
+            d_near: projection.nearest,
             max_radius: raw("max_radius_texels"),
             meet: raw("meet"),
             bias_texels: raw("bias_texels"),

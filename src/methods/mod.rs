@@ -4,9 +4,11 @@
 //! lists them; adding a method adds a module, its shaders and one line there.
 
 pub mod brabec;
+pub mod chun_oh;
 pub mod hard;
 pub mod jfa;
 pub mod jfa_lut;
+pub mod pcss;
 pub mod reference;
 
 use std::collections::BTreeMap;
@@ -24,7 +26,8 @@ use crate::gpu::GpuContext;
 use crate::render::{FrameInputs, FrameSpec, LightProjection};
 
 /// Every method penumbra serves, in the order `GET /v1/methods` lists them.
-pub static REGISTRY: &[&dyn ShadowMethod] = &[&hard::Hard, &brabec::Brabec, &jfa::JfaL, &jfa::JfaE, &reference::Reference];
+pub static REGISTRY: &[&dyn ShadowMethod] =
+    &[&hard::Hard, &pcss::Pcss, &brabec::Brabec, &jfa::JfaL, &jfa::JfaE, &chun_oh::ChunOh, &reference::Reference];
 
 /// Looks a method up by its job name.
 pub fn find(name: &str) -> JobResult<&'static dyn ShadowMethod> {

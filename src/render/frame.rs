@@ -41,6 +41,9 @@ pub struct LightProjection {
     pub tan_half: f32,
     pub near: f32,
     pub far: f32,
+    /// Depth along n of the scene's nearest bounding-box corner, at least `near`: no
+    /// occluder lies closer to the light, which bounds the regions blocker searches scan.
+    pub nearest: f32,
 }
 
 /// Widest half angle of the shadow frustum. Beyond it surfaces are lit at grazing angles
@@ -70,7 +73,7 @@ impl LightProjection {
         let near = if min_depth > 0.0 { (min_depth * 0.5).max(far * 1e-4) } else { far * 1e-4 };
         let view = Mat4::look_to_rh(light.center, light.n, light.u);
         let proj = Mat4::perspective_rh(2.0 * tan_half.atan(), 1.0, near, far);
-        Self { view_proj: proj * view, tan_half, near, far }
+        Self { view_proj: proj * view, tan_half, near, far, nearest: min_depth.max(near).max(1e-3) }
     }
 }
 

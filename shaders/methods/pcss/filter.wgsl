@@ -1,0 +1,145 @@
+// Methods `pcss` (Fernando 2005) and `chun-oh` (Chun & Oh 2016 §3): the shared front half —
+// the blocker search over the cone from the pixel to the light's corners, the filter sized by
+// the blockers' average depth, and a lattice of shadow tests over that filter, counted per
+// cell of its 4×4 quadtree (for chun-oh) with a few popcounts per row. See `src/methods/pcss.rs`.
+
+#import common/frame_inputs.wgsl
+#import common/shadow.wgsl
+
+struct FilterParams {
+    search_taps: u32,       // blocker-search taps per side
+    lattice: u32,           // filter taps per side: 4 × taps_per_cell, at most 16
+    max_search_texels: f32, // cap on the search region's half-width, texels
+    max_filter_texels: f32, // cap on the filter's half-width, texels
+    bias_texels: f32,
+    slope_bias_texels: f32,
+    nearest: f32,           // depth of the nearest possible occluder (scene bounds)
+    mode: u32,              // 0 pcss, 1 chun-oh adaptive, 2 chun-oh fixed
+    threshold: f32,         // chun-oh: visibility variance above which a region splits
+    light_threshold: f32,   // chun-oh: relative colour variance of the light part that forces a split
+    _pad: vec2<u32>,
+}
+
+@group(1) @binding(0) var visibility_out: texture_storage_2d<rgba32float, write>;
+@group(1) @binding(1) var<uniform> params: FilterParams;
+// chun-oh: the light image integrated over the filter's quadtree (`light_regions` in
+// `src/methods/chun_oh.rs`): 0–15 the 4×4 cells, 16–19 the 2×2, 20 the whole light; rgb the
+// emission, w the relative colour variance. Indexed in filter order: the light frame's
+// mirroring is already applied there.
+@group(1) @binding(2) var<storage, read> light_regions: array<vec4<f32>, 21>;
+// Per-pixel counts (`Counters` in pcss.rs): 0–2 pixels by subdivision level, 3 splits the light
+// forced, 4 pixels that ran the filter, 5 covered pixels.
+@group(1) @binding(3) var<storage, read_write> counters: array<atomic<u32>, 8>;
+
+const MODE_PCSS: u32 = 0u;
+
+// A pixel's filter: how many of its lattice × lattice shadow tests are lit, and whether the
+// blocker search found anything (if not, the filter did not run: all lit).
+struct Filter {
+    lit: u32,
+    taps: u32,
+    found_blocker: bool,
+}
+
+// chun-oh: lit tests per cell of the filter's 4×4 quadtree, cell (x, y) at y·4 + x (x along
+// the shadow map's u, y along its v). Module scope, so functions read it without copying
+// (`quadtree.wgsl` reads it).
+var<private> cells: array<u32, 16>;
+
+// The half-extent, in shadow-map uv, of the cone from a receiver at depth d to the light's
+// rectangle, cut at depth z: a point at depth z on the segment from the receiver to light point
+// y sits y·(d − z)/(d·z) from the receiver in tangent space (lateral / depth from the light
+// centre), and uv spans 2·tan_half of tangent per unit. Chun & Oh §3 "a cone as a target pixel
+// and 4 corner vertices on the area light"; the rectangle keeps the light's aspect.
+fn cone_half_extent(d: f32, z: f32) -> vec2<f32> {
+    let size = vec2<f32>(frame.light_n.w, frame.light_u.w);
+    return 0.5 * size * max(d - z, 0.0) / (d * z) / (2.0 * frame.light_proj.x);
+}
+
+// The depth at which the shadow map's ray through `uv` meets the receiver's tangent plane:
+// comparing each tap with the receiver plane there, not with the pixel's own depth, keeps a
+// wide filter on a surface tilted towards the light from shadowing the surface itself.
+fn receiver_plane_depth(uv: vec2<f32>, p: vec3<f32>, normal: vec3<f32>, d: f32) -> f32 {
+    // uv grows along −r and −u (the shadow map looks along n with u up).
+    let tangent = -(uv - 0.5) * 2.0 * frame.light_proj.x;
+    let w = frame.light_n.xyz + tangent.x * frame.light_r.xyz + tangent.y * frame.light_u.xyz;
+    let facing = dot(w, normal);
+    let z = dot(p - frame.light_center.xyz, normal) / facing;
+    // Grazing planes give wild depths; the pixel's own depth is the safe answer there.
+    return select(d, z, abs(facing) > 0.05 * length(w) && z > 0.5 * d && z < 2.0 * d);
+}
+
+fn tap_depth(uv: vec2<f32>) -> f32 {
+    // Outside the map nothing was rendered: no blocker.
+    if any(uv < vec2<f32>(0.0)) || any(uv >= vec2<f32>(1.0)) {
+        return 1e30;
+    }
+    return textureLoad(shadow_depth, shadow_texel(uv), 0).r;
+}
+
+// PCSS steps 1–3 (Fernando 2005; Chun & Oh §3 "filter size computation"): search the cone's
+// cross-section at the nearest possible occluder depth for blockers, average their depth, and
+// cut the cone there for the filter; then test a lattice of taps over the filter.
+fn run_filter(pixel: vec2<u32>) -> Filter {
+    var f: Filter;
+    f.lit = 0u;
+    f.taps = params.lattice * params.lattice;
+    f.found_blocker = false;
+    let p = textureLoad(gbuf_position, pixel, 0).xyz;
+    let normal = textureLoad(gbuf_normal, pixel, 0).xyz;
+    let ls = to_light_space(p);
+    if !ls.inside {
+        f.lit = f.taps;
+        return f;
+    }
+    let d = ls.depth;
+    let bias = depth_bias(p, normal, d, params.bias_texels, params.slope_bias_texels);
+    let texel = 1.0 / f32(frame.sizes.z);
+
+    // Blocker search over the initial filter: the cone cut at the nearest occluder depth.
+    let search = clamp(cone_half_extent(d, min(params.nearest, d)), vec2<f32>(0.5 * texel), vec2<f32>(params.max_search_texels * texel));
+    var blockers = 0u;
+    var depth_sum = 0.0;
+    let n = params.search_taps;
+    for (var j = 0u; j < n; j++) {
+        for (var i = 0u; i < n; i++) {
+            let uv = ls.uv + ((vec2<f32>(f32(i), f32(j)) + 0.5) / f32(n) - 0.5) * 2.0 * search;
+            let z = tap_depth(uv);
+            if z < receiver_plane_depth(uv, p, normal, d) - bias {
+                blockers++;
+                depth_sum += z;
+            }
+        }
+    }
+    if blockers == 0u {
+        f.lit = f.taps;
+        return f;
+    }
+    f.found_blocker = true;
+
+    // The optimised filter (Chun & Oh §3, after Annen et al. 2008): the cone cut at the
+    // blockers' average depth — the penumbra those blockers cast.
+    let z_avg = depth_sum / f32(blockers);
+    let extent = clamp(cone_half_extent(d, z_avg), vec2<f32>(0.5 * texel), vec2<f32>(params.max_filter_texels * texel));
+    let m = params.lattice;
+    let cell_side = m / 4u;
+    let cell_mask = (1u << cell_side) - 1u;
+    for (var j = 0u; j < m; j++) {
+        // The row's tests as bits: lit = set.
+        var row = 0u;
+        for (var i = 0u; i < m; i++) {
+            let uv = ls.uv + ((vec2<f32>(f32(i), f32(j)) + 0.5) / f32(m) - 0.5) * 2.0 * extent;
+            if tap_depth(uv) >= receiver_plane_depth(uv, p, normal, d) - bias {
+                row |= 1u << i;
+            }
+        }
+        f.lit += countOneBits(row);
+        if params.mode != MODE_PCSS {
+            let first = (j / cell_side) * 4u;
+            for (var x = 0u; x < 4u; x++) {
+                cells[first + x] += countOneBits(row & (cell_mask << (x * cell_side)));
+            }
+        }
+    }
+    return f;
+}
