@@ -573,7 +573,10 @@ fn write_tables(out: &Path, report: &EvalReport, methods: &[String], sweep: Opti
     if !subdivided.is_empty() {
         writeln!(md, "\n## Subdivision histogram\n")?;
         writeln!(md, "Pixels by how often `chun-oh` split their filter (Chun & Oh 2016, Table 2), with shares of the frame.\n")?;
-        writeln!(md, "| scene | light | size | method | background | no subdivision | 1 subdivision | 2 subdivisions | splits forced by the light |")?;
+        writeln!(
+            md,
+            "| scene | light | size | method | background | no subdivision | 1 subdivision | 2 subdivisions | splits forced by the light |"
+        )?;
         writeln!(md, "|---|---|---|---|---:|---:|---:|---:|---:|")?;
         for r in subdivided {
             let total = f64::from(r.width) * f64::from(r.height);

@@ -746,7 +746,6 @@ fn jump_flooding_is_a_voronoi_flood() {
 
 // --- pcss, chun-oh ----------------------------------------------------------------------
 
-
 /// A synthetic tile for the quadtree probe: lit tests per 4×4 cell, 2×2 tests per cell.
 fn tile(f: impl Fn(usize) -> u32) -> [u32; 16] {
     std::array::from_fn(f)
@@ -823,7 +822,8 @@ fn chun_oh_colours_the_penumbra_the_right_way_round_and_pcss_is_gray() {
     // Where the reference's red and blue visibility differ, chun-oh's differ the same way round.
     let colored: Vec<usize> = (0..reference.len()).filter(|&i| (reference[i][0] - reference[i][2]).abs() > 0.2).collect();
     assert!(colored.len() > 100, "{} coloured penumbra pixels", colored.len());
-    let agree = colored.iter().filter(|&&i| (chun_oh[i][0] - chun_oh[i][2]).signum() == (reference[i][0] - reference[i][2]).signum()).count();
+    let agree =
+        colored.iter().filter(|&&i| (chun_oh[i][0] - chun_oh[i][2]).signum() == (reference[i][0] - reference[i][2]).signum()).count();
     assert!(agree as f32 >= 0.9 * colored.len() as f32, "{agree} of {} agree", colored.len());
     assert!(pcss.iter().all(|v| v[0] == v[2]), "pcss averages visibility: gray");
     let error = |v: &[[f32; 3]]| colored.iter().map(|&i| (0..3).map(|c| (v[i][c] - reference[i][c]).abs()).sum::<f32>()).sum::<f32>();

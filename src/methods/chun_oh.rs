@@ -165,7 +165,8 @@ pub fn light_regions(image: &LightImage) -> [[f32; 4]; 21] {
     }
     for y in 0..2 {
         for x in 0..2 {
-            let cells = [cell_index(2 * x, 2 * y), cell_index(2 * x + 1, 2 * y), cell_index(2 * x, 2 * y + 1), cell_index(2 * x + 1, 2 * y + 1)];
+            let cells =
+                [cell_index(2 * x, 2 * y), cell_index(2 * x + 1, 2 * y), cell_index(2 * x, 2 * y + 1), cell_index(2 * x + 1, 2 * y + 1)];
             table[quadrant_index(x, y)] = region(&cells);
         }
     }
@@ -197,7 +198,9 @@ pub fn quadtree_probe(
 ) -> Vec<ProbeResult> {
     use crate::gpu::layout;
     let device = &gpu.device;
-    let storage = |label, contents: &[u8], usage| device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents, usage });
+    let storage = |label, contents: &[u8], usage| {
+        device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents, usage })
+    };
     let tiles_buffer = storage("Probe::tiles", bytemuck::cast_slice(tiles), wgpu::BufferUsages::STORAGE);
     let regions_buffer = storage("Probe::regions", bytemuck::cast_slice(regions), wgpu::BufferUsages::STORAGE);
     let mode = if fixed { MODE_FIXED } else { MODE_ADAPTIVE };
@@ -285,9 +288,12 @@ mod tests {
         let left = table[cell_index(0, 0)];
         assert!(right[0] > left[0], "red lies in filter column 3: {right:?} vs {left:?}");
         // Direct summation of the red in s ∈ [0, 1/4] (rows don't matter for a 6×1 image).
-        let red_quarter: f64 =
-            (0..6000).map(|k| (k as f64 + 0.5) / 6000.0).filter(|s| *s < 0.25).map(|s| f64::from(image.emission(((s * 6.0) as u32).min(5), 0).x)).sum::<f64>()
-                / 6000.0;
+        let red_quarter: f64 = (0..6000)
+            .map(|k| (k as f64 + 0.5) / 6000.0)
+            .filter(|s| *s < 0.25)
+            .map(|s| f64::from(image.emission(((s * 6.0) as u32).min(5), 0).x))
+            .sum::<f64>()
+            / 6000.0;
         let column: f32 = (0..4).map(|y| table[cell_index(3, y)][0]).sum();
         assert!((f64::from(column) - red_quarter).abs() < 1e-3, "{column} vs {red_quarter}");
         assert!((table[..16].iter().map(|c| c[0]).sum::<f32>() - red_total).abs() < 1e-5, "cells partition the light");

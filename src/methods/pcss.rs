@@ -120,7 +120,13 @@ impl Uniforms {
 
 /// Records the one filter pass of `pcss` or `chun-oh` and reads its counters back.
 /// `light_regions` is the light's quadtree table (`chun_oh::light_regions`), 21 `vec4`s.
-pub(super) fn run(ctx: &mut MethodContext<'_>, name: &'static str, shader: &'static str, uniforms: Uniforms, light_regions: &wgpu::Buffer) -> FilterCounts {
+pub(super) fn run(
+    ctx: &mut MethodContext<'_>,
+    name: &'static str,
+    shader: &'static str,
+    uniforms: Uniforms,
+    light_regions: &wgpu::Buffer,
+) -> FilterCounts {
     let pipeline = ctx.screen_pipeline(
         PipelineKey::new(name),
         shader,
