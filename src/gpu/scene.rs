@@ -1,10 +1,12 @@
 //! A scene uploaded to the GPU once and kept warm: vertex and index buffers, material
-//! colours, and one bind group per material with its base-colour texture.
+//! colours, and one bind group per material with its base-colour texture; the triangles also
+//! stay on the CPU for object-space methods, with their adjacency built on first use.
 
 use glam::Vec3;
 use wgpu::util::DeviceExt;
 
 use super::GpuContext;
+use crate::scene::adjacency::EdgeMesh;
 use crate::scene::{DrawRange, Scene, SceneDefaults};
 
 /// A material's constant part as the G-buffer shader reads it.
@@ -29,6 +31,11 @@ pub struct GpuScene {
     pub defaults: SceneDefaults,
     /// Bytes uploaded for this scene (buffers and textures).
     pub bytes: u64,
+    /// The triangles on the CPU as well, for object-space methods (`wedges`).
+    positions: Vec<Vec3>,
+    indices: Vec<u32>,
+    /// Adjacency, built on first use and kept with the scene.
+    edge_mesh: std::sync::OnceLock<std::sync::Arc<EdgeMesh>>,
 }
 
 impl GpuScene {
@@ -108,6 +115,9 @@ impl GpuScene {
             bounds_max: scene.bounds_max,
             defaults: scene.defaults.clone(),
             bytes: scene.gpu_bytes(),
+            positions: scene.vertices.iter().map(|v| Vec3::from(v.position)).collect(),
+            indices: scene.indices.clone(),
+            edge_mesh: Default::default(),
         }
     }
 
@@ -116,6 +126,11 @@ impl GpuScene {
     }
 
     /// The eight corners of the scene's bounding box.
+    /// The scene's adjacency (welded vertices, edges with their triangles), built on first use.
+    pub fn edge_mesh(&self) -> std::sync::Arc<EdgeMesh> {
+        self.edge_mesh.get_or_init(|| std::sync::Arc::new(EdgeMesh::build(&self.positions, &self.indices))).clone()
+    }
+
     pub fn corners(&self) -> [Vec3; 8] {
         let (a, b) = (self.bounds_min, self.bounds_max);
         [0, 1, 2, 3, 4, 5, 6, 7]

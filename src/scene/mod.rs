@@ -4,6 +4,7 @@
 //! A `Scene` is CPU data in the layout the GPU draws (one vertex buffer, one index buffer,
 //! draw ranges grouped by material); `gpu::GpuScene` uploads it once and keeps it warm.
 
+pub mod adjacency;
 pub mod builtin;
 pub mod gltf;
 
