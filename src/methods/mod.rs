@@ -10,6 +10,7 @@ pub mod jfa;
 pub mod jfa_lut;
 pub mod pcss;
 pub mod reference;
+pub mod wedges;
 
 use std::collections::BTreeMap;
 
@@ -27,7 +28,7 @@ use crate::render::{FrameInputs, FrameSpec, LightProjection};
 
 /// Every method penumbra serves, in the order `GET /v1/methods` lists them.
 pub static REGISTRY: &[&dyn ShadowMethod] =
-    &[&hard::Hard, &pcss::Pcss, &brabec::Brabec, &jfa::JfaL, &jfa::JfaE, &chun_oh::ChunOh, &reference::Reference];
+    &[&hard::Hard, &pcss::Pcss, &brabec::Brabec, &jfa::JfaL, &jfa::JfaE, &chun_oh::ChunOh, &wedges::Wedges, &reference::Reference];
 
 /// Looks a method up by its job name.
 pub fn find(name: &str) -> JobResult<&'static dyn ShadowMethod> {

@@ -1,0 +1,54 @@
+// Method `wedges` (Assarsson & Akenine-Möller 2003): what every pass shares — the parameters,
+// the primitives (shadow-volume polygons and penumbra wedges), the work list of (primitive,
+// tile) pairs that survived culling, and the light-intensity (LI) buffer. See
+// `src/methods/wedges.rs`.
+
+#import common/frame_inputs.wgsl
+
+struct WedgeParams {
+    tile: u32,          // tile side, pixels
+    zfail: u32,         // 1: count volume crossings beyond the surface point (§5), 0: in front (z-pass)
+    full: i32,          // full light in the LI buffer's fixed point (the paper's 255)
+    polygon_count: u32, // shadow-volume polygons; wedges follow them in the primitive index space
+}
+
+// A planar convex polygon of the shadow volume from the light centre (a side quad or, for
+// z-fail, a cap triangle with its last vertex repeated), counter-clockwise around its outward
+// normal; w of `v0` is the silhouette multiplicity.
+struct VolumePolygon {
+    v0: vec4<f32>,
+    v1: vec4<f32>,
+    v2: vec4<f32>,
+    v3: vec4<f32>,
+}
+
+// A penumbra wedge: its silhouette edge a → b (oriented as the boundary of the light-facing
+// triangles), w of `a` the multiplicity.
+struct Wedge {
+    a: vec4<f32>,
+    b: vec4<f32>,
+}
+
+// One unit of rasterisation work: a primitive over a tile. `primitive` < polygon_count is a
+// volume polygon; above it, wedge primitive − polygon_count. In the single-pass variant one
+// item may carry both halves of an edge: `both` is then the wedge index + 1.
+struct WorkItem {
+    primitive: u32,
+    tile: u32,
+    both: u32,
+    _pad: u32,
+}
+
+@group(1) @binding(0) var<uniform> params: WedgeParams;
+@group(1) @binding(1) var<storage, read> polygons: array<VolumePolygon>;
+@group(1) @binding(2) var<storage, read> wedges: array<Wedge>;
+@group(1) @binding(3) var<storage, read> work: array<WorkItem>;
+@group(1) @binding(4) var<storage, read_write> li: array<atomic<i32>>;
+@group(1) @binding(5) var<storage, read_write> tile_ranges: array<vec2<f32>>;
+// 0 depth reads, 1 LI writes.
+@group(1) @binding(6) var<storage, read_write> counters: array<atomic<u32>, 4>;
+@group(1) @binding(7) var visibility_out: texture_storage_2d<rgba32float, write>;
+
+fn tile_grid() -> vec2<u32> {
+    return (frame.sizes.xy + params.tile - 1u) / params.tile;
+}

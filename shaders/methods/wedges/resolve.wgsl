@@ -1,0 +1,15 @@
+// Method `wedges`: the LI buffer as visibility. The buffer holds what the volumes and wedges
+// took away from full light (it starts cleared: 0 = full light), so V = 1 + LI / full,
+// clamped to [0, 1] — overlapping volumes can take it past either end, as in the paper (§2).
+
+#import methods/wedges/common.wgsl
+
+@compute @workgroup_size(8, 8)
+fn main(@builtin(global_invocation_id) id: vec3<u32>) {
+    let pixel = id.xy;
+    if any(pixel >= frame.sizes.xy) {
+        return;
+    }
+    let v = clamp(1.0 + f32(atomicLoad(&li[pixel.y * frame.sizes.x + pixel.x])) / f32(params.full), 0.0, 1.0);
+    textureStore(visibility_out, pixel, vec4<f32>(v, v, v, 1.0));
+}
