@@ -212,6 +212,7 @@ impl Engine {
         let mut state = self.state.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
         let start = Instant::now();
         let scene = self.scene(&mut state, &job.scene, &mut timings)?;
+        timings.scene_triangles = scene.triangles;
         let image_ref = job.light.image.clone().unwrap_or_else(|| scene.defaults.light_image.clone());
         let light_image = self.light_image(&mut state, &image_ref)?;
         let spec = FrameSpec::resolve(job, &scene, light_image)?;

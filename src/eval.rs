@@ -179,17 +179,29 @@ pub fn compare_flooding(case: &str, method: &str, jump: &FrameOutput, standard: 
     }
 }
 
-/// A method as given on the command line: its name, its parameters and a label.
-fn parse_method(text: &str) -> anyhow::Result<MethodSpec> {
+/// A name with parameters as given on the command line, `name:key=value:key=value` (values
+/// in JSON, else strings).
+fn parse_named(text: &str) -> anyhow::Result<(String, Map<String, Value>)> {
     let mut parts = text.split(':');
     let name = parts.next().unwrap_or_default().trim().to_owned();
     let mut params = Map::new();
     for part in parts {
-        let (key, value) = part.split_once('=').with_context(|| format!("method parameter `{part}` must be key=value"))?;
+        let (key, value) = part.split_once('=').with_context(|| format!("parameter `{part}` of `{name}` must be key=value"))?;
         let value: Value = serde_json::from_str(value).unwrap_or_else(|_| Value::String(value.to_owned()));
         params.insert(key.to_owned(), value);
     }
+    Ok((name, params))
+}
+
+fn parse_method(text: &str) -> anyhow::Result<MethodSpec> {
+    let (name, params) = parse_named(text)?;
     Ok(MethodSpec { name, params })
+}
+
+/// A built-in scene with parameters, e.g. `terrain:triangles=100000`.
+fn parse_scene(text: &str) -> anyhow::Result<AssetRef> {
+    let (name, params) = parse_named(text)?;
+    Ok(AssetRef::Builtin { name, params })
 }
 
 fn parse_size(text: &str) -> anyhow::Result<(u32, u32)> {
@@ -228,15 +240,17 @@ pub fn run(engine: &Engine, options: &EvalOptions) -> anyhow::Result<EvalReport>
     let mut flooding = Vec::new();
     let mut files = Vec::new();
     for scene in &options.scenes {
+        let scene_ref = parse_scene(scene)?;
         for light in &options.lights {
             for (&(width, height), &shadow_map) in sizes.iter().flat_map(|s| options.shadow_map.iter().map(move |m| (s, m))) {
+                let scene_label = sanitize(scene);
                 let case = if options.shadow_map.len() > 1 {
-                    format!("{scene}-{light}-{width}x{height}-map{shadow_map}")
+                    format!("{scene_label}-{light}-{width}x{height}-map{shadow_map}")
                 } else {
-                    format!("{scene}-{light}-{width}x{height}")
+                    format!("{scene_label}-{light}-{width}x{height}")
                 };
                 let base = Job {
-                    scene: AssetRef::builtin(scene),
+                    scene: scene_ref.clone(),
                     light: crate::job::LightSpec { image: Some(AssetRef::builtin(light)), ..Default::default() },
                     shadow_map: crate::job::ShadowMapSpec { resolution: shadow_map },
                     output: crate::job::OutputSpec { width, height, format: OutputFormat::Exr, exposure: 0.0 },
@@ -292,8 +306,35 @@ pub fn run(engine: &Engine, options: &EvalOptions) -> anyhow::Result<EvalReport>
     if options.shadow_map.len() > 1 || sizes.len() > 1 {
         for scene in &options.scenes {
             for light in &options.lights {
-                files.push(plot_scaling(&options.out, scene, light, options.shadow_map.len() > 1, &rows)?);
+                let by_map = options.shadow_map.len() > 1;
+                let x: fn(&Row) -> f64 =
+                    if by_map { |r| f64::from(r.shadow_map) } else { |r| f64::from(r.width) * f64::from(r.height) / 1e6 };
+                let x_desc = if by_map { "shadow-map resolution (texels per side)" } else { "output (megapixels)" };
+                let chosen: Vec<&Row> = rows.iter().filter(|r| &r.scene == scene && &r.light == light).collect();
+                let name = format!("scaling-{}-{light}.svg", sanitize(scene));
+                files.push(plot_scaling(&options.out, &name, &format!("{scene}, {light}"), x_desc, &chosen, x, false)?);
             }
+        }
+    }
+    // One built-in scene at several sizes (`terrain:triangles=…`): cost against triangles, where
+    // the object-space method grows and the image-space ones stay flat.
+    let bases: Vec<&str> = options.scenes.iter().map(|s| s.split(':').next().unwrap_or_default()).collect();
+    for base in bases.iter().copied().collect::<std::collections::BTreeSet<_>>() {
+        if bases.iter().filter(|b| **b == base).count() < 2 {
+            continue;
+        }
+        for light in &options.lights {
+            let chosen: Vec<&Row> = rows.iter().filter(|r| r.scene.split(':').next() == Some(base) && &r.light == light).collect();
+            let name = format!("scaling-{base}-triangles-{light}.svg");
+            files.push(plot_scaling(
+                &options.out,
+                &name,
+                &format!("{base}, {light}"),
+                "scene triangles",
+                &chosen,
+                |r| r.timings.scene_triangles as f64,
+                true,
+            )?);
         }
     }
     let report = EvalReport { adapter: engine.gpu().adapter.clone(), repeat: options.repeat, rows, flooding, files };
@@ -467,32 +508,41 @@ fn plot_sweep(out: &Path, case: &str, sweep: &Sweep, rows: &[Row]) -> anyhow::Re
 
 /// Method cost against shadow-map resolution (or output pixels), one line per method: the
 /// paper's Fig. 8 (JFA cost follows the flooded grid's size).
-fn plot_scaling(out: &Path, scene: &str, light: &str, by_shadow_map: bool, rows: &[Row]) -> anyhow::Result<PathBuf> {
+/// Each method's cost against `x_of` over `rows` (the reference left out), as `name` in `out`.
+/// With `wall`, the method phase's wall time (CPU set-up included) rather than its GPU time.
+fn plot_scaling(
+    out: &Path,
+    name: &str,
+    title: &str,
+    x_desc: &str,
+    rows: &[&Row],
+    x_of: fn(&Row) -> f64,
+    wall: bool,
+) -> anyhow::Result<PathBuf> {
     use plotters::prelude::*;
-    let rows: Vec<&Row> = rows.iter().filter(|r| r.scene == scene && r.light == light && r.method != "reference").collect();
-    let x_of = |r: &Row| if by_shadow_map { f64::from(r.shadow_map) } else { f64::from(r.width) * f64::from(r.height) / 1e6 };
+    let y_of = |r: &Row| if wall { r.timings.get("method").map_or(0.0, |p| p.cpu_ms) } else { method_ms(r) };
+    let rows: Vec<&Row> = rows.iter().copied().filter(|r| r.method != "reference").collect();
     let mut methods: Vec<&str> = rows.iter().map(|r| r.method.as_str()).collect();
     methods.dedup();
     methods.sort_unstable();
     methods.dedup();
     let (x_min, x_max) = rows.iter().fold((f64::MAX, f64::MIN), |(a, b), r| (a.min(x_of(r)), b.max(x_of(r))));
-    let y_max = rows.iter().map(|r| method_ms(r)).fold(0.0, f64::max) * 1.1 + 1e-3;
-    let path = out.join(format!("scaling-{scene}-{light}.svg"));
+    let y_max = rows.iter().map(|r| y_of(r)).fold(0.0, f64::max) * 1.1 + 1e-3;
+    let path = out.join(name);
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, (720, 420)).into_drawing_area();
         root.fill(&WHITE)?;
-        let x_desc = if by_shadow_map { "shadow-map resolution (texels per side)" } else { "output (megapixels)" };
         let mut chart = ChartBuilder::on(&root)
-            .caption(format!("method cost, {scene}, {light}"), ("sans-serif", 18))
+            .caption(format!("method cost, {title}"), ("sans-serif", 18))
             .margin(12)
             .x_label_area_size(36)
             .y_label_area_size(56)
             .build_cartesian_2d(x_min..x_max.max(x_min + 1e-9), 0.0..y_max)?;
-        chart.configure_mesh().x_desc(x_desc).y_desc("method ms").draw()?;
+        chart.configure_mesh().x_desc(x_desc).y_desc(if wall { "method wall ms" } else { "method ms" }).draw()?;
         for (k, method) in methods.iter().enumerate() {
             let color = Palette99::pick(k).to_rgba();
-            let mut points: Vec<(f64, f64)> = rows.iter().filter(|r| r.method == *method).map(|r| (x_of(r), method_ms(r))).collect();
+            let mut points: Vec<(f64, f64)> = rows.iter().filter(|r| r.method == *method).map(|r| (x_of(r), y_of(r))).collect();
             points.sort_by(|a, b| a.0.total_cmp(&b.0));
             chart
                 .draw_series(LineSeries::new(points, color).point_size(3))?

@@ -27,6 +27,8 @@ pub struct Timings {
     pub scene_cached: bool,
     /// Bytes uploaded to the GPU for the scene by this job; 0 when cached.
     pub scene_upload_bytes: u64,
+    /// Triangles in the job's scene (object-space methods' cost follows them).
+    pub scene_triangles: u64,
 }
 
 impl Timings {

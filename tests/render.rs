@@ -332,12 +332,18 @@ fn analytic_visibility(light: &AreaLight, cells: &[penumbra::light::LightCell], 
 /// Renders `reference` on the occluder scene seen from straight above and returns the mean
 /// absolute error against the closed form over penumbra pixels, and the largest one.
 fn reference_error(image: &str, samples: u32, resolution: u32) -> (f32, f32, Vec<([f32; 3], Vec3)>) {
+    closed_form_error(json!({"name": "reference", "samples": samples, "resolution": resolution}), image)
+}
+
+/// Renders `method` on the occluder scene seen from straight above and returns the mean
+/// absolute error against the closed form over penumbra pixels, the largest one, and the pairs.
+fn closed_form_error(method: serde_json::Value, image: &str) -> (f32, f32, Vec<([f32; 3], Vec3)>) {
     let size = 64usize;
     let job = job(json!({
         "scene": {"builtin": "occluder"},
         "camera": {"eye": [0, 20, 0], "target": [0, 0, 0], "up": [0, 0, -1], "fov_y_deg": 10, "near": 10, "far": 30},
         "light": {"image": {"builtin": image}},
-        "method": {"name": "reference", "samples": samples, "resolution": resolution},
+        "method": method,
         "output": {"width": size, "height": size, "format": "exr"}
     }));
     let (frame, _) = common::engine().render_raw(&job).unwrap();
@@ -854,4 +860,76 @@ fn golden_crowd_chun_oh() {
     let job = job(json!({"scene": {"builtin": "crowd"}, "light": {"image": {"builtin": "flame"}}, "method": {"name": "chun-oh"},
                          "output": {"width": 256, "height": 192}}));
     common::check_golden("crowd-chun-oh", &common::engine().render(&job).unwrap().bytes, 0.01, 0.1);
+}
+
+// --- wedges ------------------------------------------------------------------------------
+
+#[test]
+fn wedges_match_the_closed_form_penumbra_of_a_square_occluder() {
+    let (mean, worst, _) = closed_form_error(json!({"name": "wedges"}), "white");
+    let (hard, _, _) = closed_form_error(json!({"name": "hard"}), "white");
+    eprintln!("wedges vs closed form, mean penumbra error {mean:.4} (worst {worst:.4}); hard {hard:.4}");
+    // For one convex occluder the umbra volume and the wedges' irradiance shares are the closed
+    // form itself, up to the LI buffer's fixed point (2⁻¹⁶) and float rounding.
+    assert!(mean < 1e-3 && worst < 5e-3, "mean {mean}, worst {worst}, hard {hard}");
+}
+
+fn wedges_frame(method: serde_json::Value, camera: Option<serde_json::Value>) -> penumbra::render::FrameOutput {
+    let mut spec = json!({"scene": {"builtin": "crowd"}, "method": method, "output": {"width": 128, "height": 96, "format": "exr"}});
+    if let Some(camera) = camera {
+        spec["scene"] = json!({"builtin": "occluder"});
+        spec["camera"] = camera;
+    }
+    common::engine().render_raw(&job(spec)).unwrap().0
+}
+
+#[test]
+fn wedges_variants_agree_culling_changes_only_the_work() {
+    let culled = wedges_frame(json!({"name": "wedges"}), None);
+    let unculled = wedges_frame(json!({"name": "wedges", "culling": false}), None);
+    let single = wedges_frame(json!({"name": "wedges", "passes": "single"}), None);
+    let zfail = wedges_frame(json!({"name": "wedges", "volume": "zfail"}), None);
+    assert_eq!(culled.visibility, unculled.visibility, "culled and unculled render the same image");
+    assert_eq!(culled.visibility, single.visibility, "three-pass and single-pass render the same image");
+    let differ = culled
+        .visibility
+        .as_ref()
+        .unwrap()
+        .iter()
+        .zip(zfail.visibility.as_ref().unwrap())
+        .filter(|(a, b)| (a[0] - b[0]).abs() > 0.01)
+        .count();
+    assert!(differ <= 128 * 96 / 500, "{differ} pixels differ between z-pass and z-fail with the eye outside every volume");
+    let c = &culled.counters;
+    assert!(c["tiles_culled"] > 0.5 * c["tiles_tested"], "most tiles are culled: {c:?}");
+    assert_eq!(unculled.counters["tiles_culled"], 0.0);
+    assert!(unculled.counters["depth_reads"] > 2.0 * c["depth_reads"], "culling saves depth reads: {c:?}");
+    assert_eq!(unculled.counters["li_writes"], c["li_writes"], "culled tiles held no writes");
+    assert!(single.counters["depth_reads"] < c["depth_reads"], "the single pass reads each pixel once for both halves of an edge");
+    assert!(zfail.counters["cap_polygons"] > 0.0 && c["zfail"] == 0.0);
+}
+
+#[test]
+fn wedges_with_the_eye_inside_a_shadow_volume_use_z_fail_and_see_what_just_outside_sees() {
+    // Under the occluder (side 1.5 m at 1 m, light centre at 3 m), the light centre's shadow
+    // volume ends at |x| = 0.75·2.6/2 = 0.975 at the eye's height, 0.4 m.
+    let camera = |x: f32| json!({"eye": [x, 0.4, 0.0], "target": [-2.0, 0.0, 0.3], "up": [0, 1, 0], "fov_y_deg": 60});
+    let inside = wedges_frame(json!({"name": "wedges"}), Some(camera(0.95)));
+    let outside = wedges_frame(json!({"name": "wedges"}), Some(camera(1.0)));
+    let wrong = wedges_frame(json!({"name": "wedges", "volume": "zpass"}), Some(camera(0.95)));
+    assert_eq!((inside.counters["zfail"], outside.counters["zfail"]), (1.0, 0.0), "auto picks z-fail only inside");
+    let differ = |a: &penumbra::render::FrameOutput, b: &penumbra::render::FrameOutput| {
+        a.visibility.as_ref().unwrap().iter().zip(b.visibility.as_ref().unwrap()).filter(|(p, q)| (p[0] - q[0]).abs() > 0.1).count()
+    };
+    let shadowed = outside.visibility.as_ref().unwrap().iter().filter(|v| v[0] < 0.5).count();
+    assert!(shadowed > 200, "the view holds the shadow ({shadowed} pixels)");
+    let moved = differ(&inside, &outside);
+    assert!(moved < 128 * 96 / 50, "{moved} pixels change for a 5 cm step of the eye");
+    assert!(differ(&wrong, &outside) > 10 * moved.max(20), "z-pass from inside the volume inverts the shadows");
+}
+
+#[test]
+fn golden_crowd_wedges() {
+    let job = job(json!({"scene": {"builtin": "crowd"}, "method": {"name": "wedges"}, "output": {"width": 256, "height": 192}}));
+    common::check_golden("crowd-wedges", &common::engine().render(&job).unwrap().bytes, 0.01, 0.1);
 }

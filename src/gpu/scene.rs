@@ -33,6 +33,7 @@ pub struct GpuScene {
     pub bytes: u64,
     /// The triangles on the CPU as well, for object-space methods (`wedges`).
     positions: Vec<Vec3>,
+    vertex_objects: Vec<u32>,
     indices: Vec<u32>,
     /// Adjacency, built on first use and kept with the scene.
     edge_mesh: std::sync::OnceLock<std::sync::Arc<EdgeMesh>>,
@@ -116,6 +117,7 @@ impl GpuScene {
             defaults: scene.defaults.clone(),
             bytes: scene.gpu_bytes(),
             positions: scene.vertices.iter().map(|v| Vec3::from(v.position)).collect(),
+            vertex_objects: scene.vertices.iter().map(|v| v.object_id).collect(),
             indices: scene.indices.clone(),
             edge_mesh: Default::default(),
         }
@@ -128,7 +130,7 @@ impl GpuScene {
     /// The eight corners of the scene's bounding box.
     /// The scene's adjacency (welded vertices, edges with their triangles), built on first use.
     pub fn edge_mesh(&self) -> std::sync::Arc<EdgeMesh> {
-        self.edge_mesh.get_or_init(|| std::sync::Arc::new(EdgeMesh::build(&self.positions, &self.indices))).clone()
+        self.edge_mesh.get_or_init(|| std::sync::Arc::new(EdgeMesh::build(&self.positions, &self.indices, &self.vertex_objects))).clone()
     }
 
     pub fn corners(&self) -> [Vec3; 8] {

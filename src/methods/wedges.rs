@@ -64,6 +64,11 @@ const PARAMS: &[ParamSpec] = &[
         doc: "count shadow-volume crossings in front of the point (z-pass) or beyond it (z-fail, §5); auto picks z-fail when the eye is in shadow",
     },
     ParamSpec {
+        name: "object_ids",
+        kind: ParamKind::Boolean { default: true },
+        doc: "a receiver facing away from the light centre takes no shadow from its own object's volume and wedges: the horizon already hides that part of the light (E0)",
+    },
+    ParamSpec {
         name: "passes",
         kind: ParamKind::Choice { default: "three", options: &["three", "single"] },
         doc: "three: umbra polygons, then wedges (§6.1); single: an edge's umbra and penumbra in one pass where both touch a tile (§6.2)",
@@ -73,14 +78,14 @@ const PARAMS: &[ParamSpec] = &[
 /// Full light in the LI buffer's fixed point.
 const FULL: i32 = 1 << 16;
 
-/// `VolumePolygon` in `common.wgsl`: v0.w is the multiplicity.
+/// `VolumePolygon` in `common.wgsl`: v0.w is the multiplicity, v1.w the object id.
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 struct PolygonGpu {
     v: [[f32; 4]; 4],
 }
 
-/// `Wedge` in `common.wgsl`: a.w is the multiplicity.
+/// `Wedge` in `common.wgsl`: a.w is the multiplicity, b.w the object id.
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 struct WedgeGpu {
@@ -106,6 +111,8 @@ struct Uniforms {
     zfail: u32,
     full: i32,
     polygon_count: u32,
+    object_ids: u32,
+    _pad: [u32; 3],
 }
 
 /// A primitive's footprint for culling: its screen bounding box in tiles, its NDC depth range,
@@ -139,6 +146,9 @@ impl ShadowMethod for Wedges {
     }
 
     fn record(&self, ctx: &mut MethodContext<'_>, params: &Params) -> Counters {
+        // CPU time spent on the object-space set-up (silhouette, primitives, culling): the part
+        // of the cost GPU timestamps do not see.
+        let setup_start = std::time::Instant::now();
         let spec = ctx.spec;
         let light = &spec.light;
         let c = light.center;
@@ -158,9 +168,15 @@ impl ShadowMethod for Wedges {
         let extrude = |p: Vec3| c + (p - c) * (reach / (p - c).length().max(1e-6));
         let mut polygons: Vec<[Vec3; 4]> = Vec::new();
         let mut multiplicity: Vec<u32> = Vec::new();
+        let mut object: Vec<u32> = Vec::new();
         for e in &silhouette {
-            polygons.push(oriented([e.a, e.b, extrude(e.b), extrude(e.a)], (e.a - c).cross(e.b - e.a)));
+            // Always this order, never flipped per quad: (a − b) × (a' − b) is the outward
+            // normal (a' the extruded a), and neighbouring quads run their shared extruded
+            // edge in opposite directions, which the rasteriser's tie rule relies on; so do
+            // the caps with the quads' near and far edges.
+            polygons.push([e.b, e.a, extrude(e.a), extrude(e.b)]);
             multiplicity.push(e.multiplicity);
+            object.push(e.object);
         }
         let mut caps = 0usize;
         if zfail {
@@ -170,13 +186,14 @@ impl ShadowMethod for Wedges {
                     polygons.push([a, b, d, d]);
                     polygons.push([extrude(d), extrude(b), extrude(a), extrude(a)]);
                     multiplicity.extend([1, 1]);
+                    object.extend([mesh.objects[t]; 2]);
                     caps += 2;
                 }
             }
         }
         let wedges: Vec<WedgeGpu> = silhouette
             .iter()
-            .map(|e| WedgeGpu { a: e.a.extend(e.multiplicity as f32).to_array(), b: e.b.extend(0.0).to_array() })
+            .map(|e| WedgeGpu { a: e.a.extend(e.multiplicity as f32).to_array(), b: e.b.extend(e.object as f32).to_array() })
             .collect();
 
         // Tile depth ranges from the GPU, then culling on the CPU.
@@ -185,7 +202,14 @@ impl ShadowMethod for Wedges {
         let device = ctx.gpu.device.clone();
         let grid_size = (spec.width.div_ceil(tile), spec.height.div_ceil(tile));
         let tile_count = (grid_size.0 * grid_size.1) as usize;
-        let uniforms = Uniforms { tile, zfail: u32::from(zfail), full: FULL, polygon_count: polygons.len() as u32 };
+        let uniforms = Uniforms {
+            tile,
+            zfail: u32::from(zfail),
+            full: FULL,
+            polygon_count: polygons.len() as u32,
+            object_ids: u32::from(params.bool("object_ids")),
+            _pad: [0; 3],
+        };
         let storage = |label, contents: &[u8]| {
             device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some(label),
@@ -201,8 +225,15 @@ impl ShadowMethod for Wedges {
         });
         let polygon_data: Vec<PolygonGpu> = polygons
             .iter()
-            .zip(&multiplicity)
-            .map(|(p, &m)| PolygonGpu { v: [p[0].extend(m as f32).to_array(), p[1].extend(0.0).to_array(), p[2].extend(0.0).to_array(), p[3].extend(0.0).to_array()] })
+            .zip(multiplicity.iter().zip(&object))
+            .map(|(p, (&m, &o))| PolygonGpu {
+                v: [
+                    p[0].extend(m as f32).to_array(),
+                    p[1].extend(o as f32).to_array(),
+                    p[2].extend(0.0).to_array(),
+                    p[3].extend(0.0).to_array(),
+                ],
+            })
             .collect();
         let polygon_buffer = storage("Wedges::polygons", bytemuck::cast_slice(&polygon_data));
         let wedge_buffer = storage("Wedges::wedges", bytemuck::cast_slice(&wedges));
@@ -244,6 +275,7 @@ impl ShadowMethod for Wedges {
             })
         };
         let no_work = storage("Wedges::no_work", &[]);
+        let mut setup = setup_start.elapsed();
         {
             let group = bind(&no_work);
             let mut pass = ctx.encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
@@ -257,6 +289,7 @@ impl ShadowMethod for Wedges {
         }
         ctx.flush();
         let depth_ranges: Vec<[f32; 2]> = bytemuck::cast_slice(&read_buffer(ctx.gpu, &ranges)).to_vec();
+        let culling_start = std::time::Instant::now();
         let grid = TileGrid::new(grid_size, tile, (spec.width, spec.height), &depth_ranges, camera, &view_proj);
 
         // Cull: every (primitive, tile) pair in the primitive's bounding box is tested.
@@ -305,11 +338,14 @@ impl ShadowMethod for Wedges {
             passes.push(items);
         } else {
             passes.push(umbra_tiles.iter().enumerate().flat_map(|(i, ts)| ts.iter().map(move |&t| item(i as u32, t, 0))).collect());
-            passes.push(wedge_tiles.iter().enumerate().flat_map(|(i, ts)| ts.iter().map(move |&t| item(wedge_base + i as u32, t, 0))).collect());
+            passes.push(
+                wedge_tiles.iter().enumerate().flat_map(|(i, ts)| ts.iter().map(move |&t| item(wedge_base + i as u32, t, 0))).collect(),
+            );
         }
         let kept: usize = passes.iter().map(Vec::len).sum::<usize>();
         let rasterized = umbra_tiles.iter().chain(&wedge_tiles).map(Vec::len).sum::<usize>() as u64;
 
+        setup += culling_start.elapsed();
         ctx.encoder.clear_buffer(&li, 0, None);
         let work_buffers: Vec<wgpu::Buffer> = passes.iter().map(|items| storage("Wedges::work", bytemuck::cast_slice(items))).collect();
         let groups: Vec<wgpu::BindGroup> = work_buffers.iter().map(&bind).collect();
@@ -338,6 +374,7 @@ impl ShadowMethod for Wedges {
         let stats = mesh.stats;
         Counters::from([
             ("silhouette_edges".to_owned(), silhouette.len() as f64),
+            ("setup_cpu_ms".to_owned(), setup.as_secs_f64() * 1e3),
             ("volume_polygons".to_owned(), polygons.len() as f64),
             ("cap_polygons".to_owned(), caps as f64),
             ("zfail".to_owned(), f64::from(u8::from(zfail))),
@@ -349,16 +386,6 @@ impl ShadowMethod for Wedges {
             ("boundary_edges".to_owned(), stats.boundary_edges as f64),
             ("non_manifold_edges".to_owned(), stats.non_manifold_edges as f64),
         ])
-    }
-}
-
-/// Orders a planar quad's vertices counter-clockwise around `outward`.
-fn oriented(quad: [Vec3; 4], outward: Vec3) -> [Vec3; 4] {
-    let normal = (quad[1] - quad[0]).cross(quad[2] - quad[0]);
-    if normal.dot(outward) >= 0.0 {
-        quad
-    } else {
-        [quad[3], quad[2], quad[1], quad[0]]
     }
 }
 
@@ -516,7 +543,7 @@ mod tests {
     fn tangent_planes_touch_the_light_and_hold_the_wedge() {
         // A light of 2 × 1 m at y = 3 facing down; an edge along z at height 1.
         let light = AreaLight::new(Vec3::Y * 3.0, -Vec3::Y, -Vec3::Z, Vec2::new(2.0, 1.0), 1.0).unwrap();
-        let edge = SilhouetteEdge { a: Vec3::new(0.5, 1.0, -5.0), b: Vec3::new(0.5, 1.0, 5.0), multiplicity: 1 };
+        let edge = SilhouetteEdge { a: Vec3::new(0.5, 1.0, -5.0), b: Vec3::new(0.5, 1.0, 5.0), multiplicity: 1, object: 0 };
         let planes = tangent_planes(&edge, &light);
         assert_eq!(planes.len(), 2);
         let side = |plane: &Vec4, p: Vec3| plane.truncate().dot(p) + plane.w;
@@ -531,7 +558,7 @@ mod tests {
         // Far to the side on the floor: lit, outside one plane.
         assert!(planes.iter().any(|p| side(p, Vec3::new(4.0, 0.0, 0.0)) < 0.0));
         // An edge whose line passes through the light gives no planes.
-        let through = SilhouetteEdge { a: Vec3::new(0.0, 1.0, 0.0), b: Vec3::new(0.0, 5.0, 0.0), multiplicity: 1 };
+        let through = SilhouetteEdge { a: Vec3::new(0.0, 1.0, 0.0), b: Vec3::new(0.0, 5.0, 0.0), multiplicity: 1, object: 0 };
         assert!(tangent_planes(&through, &light).is_empty());
     }
 }

@@ -54,11 +54,15 @@ pub struct SilhouetteEdge {
     pub b: Vec3,
     /// How many times the front-facing triangles' boundary runs a → b (1 for a closed mesh).
     pub multiplicity: u32,
+    /// The object of a front-facing triangle on the edge.
+    pub object: u32,
 }
 
 pub struct EdgeMesh {
     pub positions: Vec<Vec3>,
     pub triangles: Vec<[u32; 3]>,
+    /// Object id by triangle.
+    pub objects: Vec<u32>,
     /// Unnormalised normals (b − a) × (c − a), by triangle.
     normals: Vec<Vec3>,
     pub edges: Vec<Edge>,
@@ -67,8 +71,9 @@ pub struct EdgeMesh {
 }
 
 impl EdgeMesh {
-    /// Builds adjacency for triangles `indices` (three per triangle) into `positions`.
-    pub fn build(positions: &[Vec3], indices: &[u32]) -> Self {
+    /// Builds adjacency for triangles `indices` (three per triangle) into `positions`, whose
+    /// vertices belong to objects `vertex_objects` (empty: all object 0).
+    pub fn build(positions: &[Vec3], indices: &[u32], vertex_objects: &[u32]) -> Self {
         // Weld vertices that share a position exactly: meshes split them for normals or uvs.
         let mut welded: HashMap<[u32; 3], u32> = HashMap::new();
         let mut unique = Vec::new();
@@ -84,6 +89,7 @@ impl EdgeMesh {
         let mut stats = AdjacencyStats { vertices: unique.len(), ..Default::default() };
         let mut triangles = Vec::with_capacity(indices.len() / 3);
         let mut normals = Vec::with_capacity(indices.len() / 3);
+        let mut objects = Vec::with_capacity(indices.len() / 3);
         for t in indices.chunks_exact(3) {
             let [a, b, c] = [remap[t[0] as usize], remap[t[1] as usize], remap[t[2] as usize]];
             let normal = (unique[b as usize] - unique[a as usize]).cross(unique[c as usize] - unique[a as usize]);
@@ -93,6 +99,7 @@ impl EdgeMesh {
             }
             triangles.push([a, b, c]);
             normals.push(normal);
+            objects.push(vertex_objects.get(t[0] as usize).copied().unwrap_or(0));
         }
         stats.triangles = triangles.len();
         // Every directed use of an edge, sorted so that one edge's uses are adjacent.
@@ -123,7 +130,7 @@ impl EdgeMesh {
             start = end;
         }
         stats.edges = edges.len();
-        Self { positions: unique, triangles, normals, edges, uses: uses.into_iter().map(|u| u.2).collect(), stats }
+        Self { positions: unique, triangles, objects, normals, edges, uses: uses.into_iter().map(|u| u.2).collect(), stats }
     }
 
     /// Whether triangle `t` faces `point` (its winding is counter-clockwise seen from there).
@@ -140,10 +147,11 @@ impl EdgeMesh {
                 let uses = &self.uses[e.first_use as usize..(e.first_use + e.use_count) as usize];
                 let m: i32 = uses.iter().filter(|u| facing[u.triangle as usize]).map(|u| if u.forward { 1 } else { -1 }).sum();
                 let (a, b) = (self.positions[e.a as usize], self.positions[e.b as usize]);
+                let object = uses.iter().find(|u| facing[u.triangle as usize]).map_or(0, |u| self.objects[u.triangle as usize]);
                 match m {
                     0 => None,
-                    m if m > 0 => Some(SilhouetteEdge { a, b, multiplicity: m as u32 }),
-                    m => Some(SilhouetteEdge { a: b, b: a, multiplicity: (-m) as u32 }),
+                    m if m > 0 => Some(SilhouetteEdge { a, b, multiplicity: m as u32, object }),
+                    m => Some(SilhouetteEdge { a: b, b: a, multiplicity: (-m) as u32, object }),
                 }
             })
             .collect()
@@ -188,7 +196,7 @@ mod tests {
     #[test]
     fn a_closed_cube_welds_and_shows_a_hexagon_from_a_corner() {
         let (positions, indices) = cube();
-        let mesh = EdgeMesh::build(&positions, &indices);
+        let mesh = EdgeMesh::build(&positions, &indices, &[]);
         assert_eq!(mesh.stats.vertices, 8);
         assert_eq!(
             (mesh.stats.edges, mesh.stats.boundary_edges, mesh.stats.non_manifold_edges, mesh.stats.inconsistent_edges),
@@ -207,7 +215,7 @@ mod tests {
     #[test]
     fn an_open_quad_casts_from_its_front_only() {
         let positions = [Vec3::ZERO, Vec3::X, Vec3::new(1.0, 1.0, 0.0), Vec3::Y];
-        let mesh = EdgeMesh::build(&positions, &[0, 1, 2, 0, 2, 3]);
+        let mesh = EdgeMesh::build(&positions, &[0, 1, 2, 0, 2, 3], &[]);
         assert_eq!((mesh.stats.edges, mesh.stats.boundary_edges), (5, 4));
         let front = mesh.silhouette(Vec3::new(0.3, 0.4, 2.0));
         assert_eq!(front.len(), 4, "the border, not the diagonal");
@@ -220,13 +228,33 @@ mod tests {
         // Three triangles on one edge (a fin), a repeated-vertex triangle and a zero-area one.
         let positions = [Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::new(0.5, -1.0, 0.1), Vec3::new(0.5, 0.2, 1.0), Vec3::new(2.0, 0.0, 0.0)];
         let indices = [0, 1, 2, 1, 0, 3, 0, 1, 4, 0, 0, 2, 0, 1, 5];
-        let mesh = EdgeMesh::build(&positions, &indices);
+        let mesh = EdgeMesh::build(&positions, &indices, &[]);
         assert_eq!(mesh.stats.degenerate_triangles, 2);
         assert_eq!(mesh.stats.non_manifold_edges, 1);
         for point in [Vec3::new(0.3, 0.3, 3.0), Vec3::new(-1.0, 2.0, -3.0), Vec3::new(0.5, -4.0, 0.5)] {
             assert_closed(&mesh.silhouette(point));
         }
-        let empty = EdgeMesh::build(&[], &[]);
+        let empty = EdgeMesh::build(&[], &[], &[]);
         assert!(empty.silhouette(Vec3::ONE).is_empty());
+    }
+}
+
+#[cfg(test)]
+mod builtin_tests {
+    use super::*;
+    use crate::job::Limits;
+
+    #[test]
+    fn built_in_objects_are_closed_only_their_floors_are_open() {
+        // Seam and pole vertices repeat bit for bit, so every object but the floor planes (and
+        // the occluder's square) is closed: 4 boundary edges per plane.
+        for (name, planes) in [("torus", 1), ("crowd", 1), ("columns", 1), ("occluder", 2)] {
+            let scene = crate::scene::builtin::build(name, &Default::default(), "scene", &Limits::default()).unwrap();
+            let positions: Vec<Vec3> = scene.vertices.iter().map(|v| Vec3::from(v.position)).collect();
+            let objects: Vec<u32> = scene.vertices.iter().map(|v| v.object_id).collect();
+            let mesh = EdgeMesh::build(&positions, &scene.indices, &objects);
+            assert_eq!(mesh.stats.boundary_edges, 4 * planes, "{name}: {:?}", mesh.stats);
+            assert_eq!((mesh.stats.non_manifold_edges, mesh.stats.inconsistent_edges), (0, 0), "{name}: {:?}", mesh.stats);
+        }
     }
 }

@@ -288,13 +288,21 @@ pub fn cuboid(size: Vec3) -> MeshData {
     mesh
 }
 
+/// sin and cos of `TAU · k / n`, exact at the seam (k = n gives k = 0's values): seam and pole
+/// vertices repeat bit for bit, so adjacency sees a closed mesh (f32 `TAU.sin()` is not 0).
+fn turn(k: u32, n: u32) -> (f32, f32) {
+    let angle = TAU * (k % n) as f32 / n as f32;
+    angle.sin_cos()
+}
+
 pub fn uv_sphere(radius: f32, segments: u32, rings: u32) -> MeshData {
     let mut mesh = MeshData::default();
     for j in 0..=rings {
-        let theta = PI * j as f32 / rings as f32;
+        // Half turns: the poles come out exact (sin 0 and sin π as 0).
+        let (sin_theta, cos_theta) = if j == 0 || j == rings { (0.0, if j == 0 { 1.0 } else { -1.0 }) } else { turn(j, 2 * rings) };
         for i in 0..=segments {
-            let phi = TAU * i as f32 / segments as f32;
-            let n = Vec3::new(theta.sin() * phi.cos(), theta.cos(), theta.sin() * phi.sin());
+            let (sin_phi, cos_phi) = turn(i, segments);
+            let n = Vec3::new(sin_theta * cos_phi, cos_theta, sin_theta * sin_phi);
             mesh.positions.push(n * radius);
             mesh.normals.push(n);
         }
@@ -306,11 +314,11 @@ pub fn uv_sphere(radius: f32, segments: u32, rings: u32) -> MeshData {
 pub fn torus(major: f32, minor: f32, segments: u32, sides: u32) -> MeshData {
     let mut mesh = MeshData::default();
     for j in 0..=sides {
-        let v = TAU * j as f32 / sides as f32;
+        let (sin_v, cos_v) = turn(j, sides);
         for i in 0..=segments {
-            let u = TAU * i as f32 / segments as f32;
-            let ring = Vec3::new(u.cos(), 0.0, u.sin());
-            let n = ring * v.cos() + Vec3::Y * v.sin();
+            let (sin_u, cos_u) = turn(i, segments);
+            let ring = Vec3::new(cos_u, 0.0, sin_u);
+            let n = ring * cos_v + Vec3::Y * sin_v;
             mesh.positions.push(ring * major + n * minor);
             mesh.normals.push(n);
         }
@@ -324,24 +332,30 @@ pub fn cylinder(radius: f32, height: f32, segments: u32) -> MeshData {
     let mut mesh = MeshData::default();
     for j in 0..=1 {
         for i in 0..=segments {
-            let a = TAU * i as f32 / segments as f32;
-            let n = Vec3::new(a.cos(), 0.0, a.sin());
+            let (sin_a, cos_a) = turn(i, segments);
+            let n = Vec3::new(cos_a, 0.0, sin_a);
             mesh.positions.push(n * radius + Vec3::Y * height * j as f32);
             mesh.normals.push(n);
         }
     }
     grid_indices(&mut mesh, segments, 1);
-    for (y, n) in [(0.0, -Vec3::Y), (height, Vec3::Y)] {
+    for (y, n, top) in [(0.0, -Vec3::Y, false), (height, Vec3::Y, true)] {
         let center = mesh.positions.len() as u32;
         mesh.positions.push(Vec3::Y * y);
         mesh.normals.push(n);
         for i in 0..=segments {
-            let a = TAU * i as f32 / segments as f32;
-            mesh.positions.push(Vec3::new(a.cos() * radius, y, a.sin() * radius));
+            let (sin_a, cos_a) = turn(i, segments);
+            mesh.positions.push(Vec3::new(cos_a * radius, y, sin_a * radius));
             mesh.normals.push(n);
         }
+        // Counter-clockwise seen from outside: the bottom cap runs with the angle (normal −y),
+        // the top one against it.
         for i in 0..segments {
-            mesh.indices.extend([center, center + 1 + i, center + 2 + i]);
+            if top {
+                mesh.indices.extend([center, center + 2 + i, center + 1 + i]);
+            } else {
+                mesh.indices.extend([center, center + 1 + i, center + 2 + i]);
+            }
         }
     }
     mesh

@@ -10,11 +10,12 @@ struct WedgeParams {
     zfail: u32,         // 1: count volume crossings beyond the surface point (§5), 0: in front (z-pass)
     full: i32,          // full light in the LI buffer's fixed point (the paper's 255)
     polygon_count: u32, // shadow-volume polygons; wedges follow them in the primitive index space
+    object_ids: u32,    // 1: no shadow from a receiver's own object where it faces away from the light centre
 }
 
 // A planar convex polygon of the shadow volume from the light centre (a side quad or, for
 // z-fail, a cap triangle with its last vertex repeated), counter-clockwise around its outward
-// normal; w of `v0` is the silhouette multiplicity.
+// normal; w of `v0` is the silhouette multiplicity, w of `v1` the caster's object id.
 struct VolumePolygon {
     v0: vec4<f32>,
     v1: vec4<f32>,
@@ -23,7 +24,7 @@ struct VolumePolygon {
 }
 
 // A penumbra wedge: its silhouette edge a → b (oriented as the boundary of the light-facing
-// triangles), w of `a` the multiplicity.
+// triangles), w of `a` the multiplicity, w of `b` the edge's object id.
 struct Wedge {
     a: vec4<f32>,
     b: vec4<f32>,

@@ -15,6 +15,17 @@ fn cross2(a: vec2<f32>, b: vec2<f32>) -> f32 {
     return a.x * b.y - a.y * b.x;
 }
 
+// A fixed order of points: lexicographic in x, y, z.
+fn before(u: vec3<f32>, w: vec3<f32>) -> bool {
+    if u.x != w.x {
+        return u.x < w.x;
+    }
+    if u.y != w.y {
+        return u.y < w.y;
+    }
+    return u.z < w.z;
+}
+
 // The signed number of times the eye ray to p crosses `poly` where it counts: in front of p
 // (z-pass: entering +, leaving −) or beyond it (z-fail: the reverse), times the multiplicity.
 fn volume_crossing(poly: VolumePolygon, eye: vec3<f32>, p: vec3<f32>) -> i32 {
@@ -25,18 +36,41 @@ fn volume_crossing(poly: VolumePolygon, eye: vec3<f32>, p: vec3<f32>) -> i32 {
         return 0; // the ray runs along the polygon's plane
     }
     let t = dot(n, poly.v0.xyz - eye) / facing;
-    // A point on the volume's boundary (a lit cap is the caster's own surface) counts as
-    // outside: z-pass ignores crossings at p, z-fail counts them.
-    let near_p = 1.0 - 1e-4;
-    if (params.zfail == 0u && (t <= 0.0 || t >= near_p)) || (params.zfail == 1u && t < near_p) {
+    // Where p lies on the polygon, it counts as outside. That only needs a tolerance for caps:
+    // a top cap is the caster's own lit surface, which z-fail must count at p (the ray enters
+    // there and leaves through the bottom cap). A side quad is compared with p exactly: a ray
+    // grazing a caster can leave its volume through a quad just in front of p, and a
+    // tolerance would drop that exit and shadow a lit point.
+    let cap = all(poly.v3.xyz == poly.v2.xyz);
+    let at_p = select(1.0, 1.0 - 1e-4, cap);
+    if (params.zfail == 0u && (t <= 0.0 || t >= at_p)) || (params.zfail == 1u && t < at_p) {
         return 0;
     }
-    let x = eye + t * ray;
+    // Whether the ray passes through the polygon: on the same side of every edge, by the sign
+    // of ray · ((u − eye) × (v − eye)). Two polygons sharing an edge run it in opposite
+    // directions, which negates that product exactly, so a ray through a shared edge (the
+    // corner ray of a volume) is counted by exactly one of them — testing the hit point
+    // against each polygon's own edges would count it by both or neither.
     let v = array<vec3<f32>, 4>(poly.v0.xyz, poly.v1.xyz, poly.v2.xyz, poly.v3.xyz);
+    var positive = true;
+    var negative = true;
     for (var k = 0u; k < 4u; k++) {
-        if dot(cross(v[(k + 1u) % 4u] - v[k], x - v[k]), n) < 0.0 {
-            return 0;
+        let u = v[k];
+        let w = v[(k + 1u) % 4u];
+        if all(u == w) {
+            continue; // a triangle's repeated vertex
         }
+        var s = dot(ray, cross(u - eye, w - eye));
+        if s == 0.0 {
+            // The ray meets the edge's line exactly (a symmetric view does, along whole rows):
+            // the edge's owner is the polygon running it in the canonical direction.
+            s = select(-1.0, 1.0, before(u, w));
+        }
+        positive = positive && s > 0.0;
+        negative = negative && s < 0.0;
+    }
+    if !(positive || negative) {
+        return 0;
     }
     let entering = facing < 0.0;
     let m = i32(poly.v0.w);
@@ -65,14 +99,37 @@ fn clip(poly: ptr<function, array<vec2<f32>, 8>>, count: u32, normal: vec2<f32>,
     return n;
 }
 
+// Irradiance (up to a constant) at p with normal `normal` from the polygon of light-plane
+// points `poly` (light coordinates), by Lambert's formula ½ Σ Θₖ (n · Γₖ) — the weight the
+// reference and E0 give each part of the light (cosines and distance), so shares of it are
+// fractions of what p receives, not of the light's area.
+fn light_polygon_irradiance(poly: ptr<function, array<vec2<f32>, 8>>, count: u32, p: vec3<f32>, normal: vec3<f32>) -> f32 {
+    var sum = 0.0;
+    for (var k = 0u; k < count; k++) {
+        let a = normalize(light_point((*poly)[k]) - p);
+        let b = normalize(light_point((*poly)[(k + 1u) % count]) - p);
+        let c = cross(a, b);
+        let len = length(c);
+        if len > 1e-12 {
+            sum += atan2(len, dot(a, b)) * dot(normal, c / len);
+        }
+    }
+    return 0.5 * abs(sum);
+}
+
+fn light_point(x: vec2<f32>) -> vec3<f32> {
+    return frame.light_center.xyz + x.x * frame.light_r.xyz + x.y * frame.light_u.xyz;
+}
+
 // The penumbra wedge's contribution at p (§3's light intensity, computed exactly for a
 // rectangle): project the silhouette edge from p onto the light plane (c' at the origin); a
 // light point x is hidden by one more layer than c' for each projected edge that the segment
 // c'x crosses inwards, so the light beyond this edge inside its angular sector from c' —
 // clipped to the rectangle — is this edge's share, added where c' is outside the projected
 // occluder (outer penumbra) and removed where it is inside (inner). Returns that share as a
-// signed fraction of the light, times the multiplicity; 0 outside the wedge.
-fn wedge_share(w: Wedge, p: vec3<f32>) -> f32 {
+// signed fraction of the irradiance the whole light gives p, times the multiplicity; 0
+// outside the wedge.
+fn wedge_share(w: Wedge, p: vec3<f32>, normal: vec3<f32>) -> f32 {
     let c = frame.light_center.xyz;
     let n = frame.light_n.xyz;
     let half = 0.5 * vec2<f32>(frame.light_n.w, frame.light_u.w);
@@ -117,14 +174,33 @@ fn wedge_share(w: Wedge, p: vec3<f32>) -> f32 {
     let s = sign(cross2(a2, b2));
     count = clip(&poly, count, s * vec2<f32>(-a2.y, a2.x), 0.0);
     count = clip(&poly, count, -s * vec2<f32>(-b2.y, b2.x), 0.0);
-    var area = 0.0;
-    for (var k = 0u; k < count; k++) {
-        area += cross2(poly[k], poly[(k + 1u) % count]);
+    if count < 3u {
+        return 0.0;
     }
-    return sign(side) * w.a.w * 0.5 * abs(area) / (4.0 * half.x * half.y);
+    var rect = array<vec2<f32>, 8>(-half, vec2<f32>(half.x, -half.y), half, vec2<f32>(-half.x, half.y), vec2<f32>(0.0), vec2<f32>(0.0), vec2<f32>(0.0), vec2<f32>(0.0));
+    var whole = 0.0;
+    var below_horizon = false;
+    for (var k = 0u; k < 4u; k++) {
+        below_horizon = below_horizon || dot(light_point(rect[k]) - p, normal) <= 0.0;
+    }
+    var part = 0.0;
+    if below_horizon {
+        // Part of the light lies below p's horizon, where Lambert's formula would need
+        // clipping: weigh by area instead (E0 carries the exact horizon).
+        for (var k = 0u; k < count; k++) {
+            part += 0.5 * cross2(poly[k], poly[(k + 1u) % count]);
+        }
+        part = abs(part);
+        whole = 4.0 * half.x * half.y;
+    } else {
+        part = light_polygon_irradiance(&poly, count, p, normal);
+        whole = light_polygon_irradiance(&rect, 4u, p, normal);
+    }
+    return sign(side) * w.a.w * part / max(whole, 1e-30);
 }
 
-var<workgroup> item: WorkItem;
+// cos of the angle to the light centre below which a receiver ignores its own object.
+const SELF_SHADOW_COS: f32 = 0.25;
 
 @compute @workgroup_size(64)
 fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) local: u32) {
@@ -147,13 +223,22 @@ fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index
             continue;
         }
         let p = textureLoad(gbuf_position, pixel, 0).xyz;
+        let normal = textureLoad(gbuf_normal, pixel, 0).xyz;
+        // A point facing away from the light centre lies in its own object's volume — the
+        // segment to the centre runs through the object — yet the part of the light above
+        // its horizon may well reach it, and E0 already leaves out the part below. So its own
+        // object's volume and wedges do not count for it (as with Brabec & Seidel's ids);
+        // other objects' still do. "Away" has a margin: the G-buffer's smooth normal can face
+        // the light on a facet that does not, within about a facet's angle of the terminator.
+        let grazing = dot(normal, normalize(frame.light_center.xyz - p)) < SELF_SHADOW_COS;
+        let own_object = select(-1.0, f32(textureLoad(gbuf_id, pixel, 0).r), params.object_ids == 1u && grazing);
         var delta = 0;
-        if job.primitive < params.polygon_count {
+        if job.primitive < params.polygon_count && polygons[job.primitive].v1.w != own_object {
             delta -= params.full * volume_crossing(polygons[job.primitive], eye, p);
         }
         let wedge = select(job.both, job.primitive - params.polygon_count + 1u, job.primitive >= params.polygon_count);
-        if wedge > 0u {
-            delta -= i32(round(full * wedge_share(wedges[wedge - 1u], p)));
+        if wedge > 0u && wedges[wedge - 1u].b.w != own_object {
+            delta -= i32(round(full * wedge_share(wedges[wedge - 1u], p, normal)));
         }
         if delta != 0 {
             atomicAdd(&li[pixel.y * frame.sizes.x + pixel.x], delta);
