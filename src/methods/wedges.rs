@@ -85,12 +85,14 @@ struct PolygonGpu {
     v: [[f32; 4]; 4],
 }
 
-/// `Wedge` in `common.wgsl`: a.w is the multiplicity, b.w the object id.
+/// `Wedge` in `common.wgsl`: a.w is the multiplicity, b.w the object id; the wedge's two
+/// tangent planes (inside ≥ 0; (0, 0, 0, 1) when there are none).
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 struct WedgeGpu {
     a: [f32; 4],
     b: [f32; 4],
+    planes: [[f32; 4]; 2],
 }
 
 /// `WorkItem` in `common.wgsl`.
@@ -191,9 +193,15 @@ impl ShadowMethod for Wedges {
                 }
             }
         }
+        let wedge_planes: Vec<Vec<Vec4>> = silhouette.iter().map(|e| tangent_planes(e, light)).collect();
         let wedges: Vec<WedgeGpu> = silhouette
             .iter()
-            .map(|e| WedgeGpu { a: e.a.extend(e.multiplicity as f32).to_array(), b: e.b.extend(e.object as f32).to_array() })
+            .zip(&wedge_planes)
+            .map(|(e, planes)| WedgeGpu {
+                a: e.a.extend(e.multiplicity as f32).to_array(),
+                b: e.b.extend(e.object as f32).to_array(),
+                planes: [0, 1].map(|k| planes.get(k).copied().unwrap_or(Vec4::W).to_array()),
+            })
             .collect();
 
         // Tile depth ranges from the GPU, then culling on the CPU.
@@ -245,6 +253,12 @@ impl ShadowMethod for Wedges {
             mapped_at_creation: false,
         });
         let counters = storage("Wedges::counters", &[0u8; 16]);
+        let receivers = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("Wedges::receivers"),
+            size: u64::from(spec.width) * u64::from(spec.height) * 32,
+            usage: wgpu::BufferUsages::STORAGE,
+            mapped_at_creation: false,
+        });
         let io = [
             layout::uniform(0),
             layout::storage_read(1),
@@ -254,9 +268,12 @@ impl ShadowMethod for Wedges {
             layout::storage_read_write(5),
             layout::storage_read_write(6),
             layout::storage_texture(7, wgpu::TextureFormat::Rgba32Float),
+            layout::storage_read_write(8),
         ];
         let tiles_pipeline = ctx.screen_pipeline(PipelineKey::new("wedges.tiles"), "methods/wedges/tiles.wgsl", &io);
-        let rasterize = ctx.screen_pipeline(PipelineKey::new("wedges.rasterize"), "methods/wedges/rasterize.wgsl", &io);
+        let umbra_pipeline = ctx.screen_pipeline(PipelineKey::new("wedges.umbra"), "methods/wedges/rasterize_umbra.wgsl", &io);
+        let penumbra_pipeline = ctx.screen_pipeline(PipelineKey::new("wedges.penumbra"), "methods/wedges/rasterize_penumbra.wgsl", &io);
+        let both_pipeline = ctx.screen_pipeline(PipelineKey::new("wedges.both"), "methods/wedges/rasterize_both.wgsl", &io);
         let resolve = ctx.screen_pipeline(PipelineKey::new("wedges.resolve"), "methods/wedges/resolve.wgsl", &io);
         let bind = |work: &wgpu::Buffer| {
             device.create_bind_group(&wgpu::BindGroupDescriptor {
@@ -271,6 +288,7 @@ impl ShadowMethod for Wedges {
                     ranges.as_entire_binding(),
                     counters.as_entire_binding(),
                     wgpu::BindingResource::TextureView(ctx.visibility),
+                    receivers.as_entire_binding(),
                 ]),
             })
         };
@@ -298,10 +316,8 @@ impl ShadowMethod for Wedges {
         let umbra_footprints: Vec<Footprint> = polygons.iter().map(|p| footprint(&view_proj, p, Vec::new(), &grid)).collect();
         let wedge_footprints: Vec<Footprint> = silhouette
             .iter()
-            .map(|e| {
-                let hull = wedge_hull(e, light, reach);
-                footprint(&view_proj, &hull, tangent_planes(e, light), &grid)
-            })
+            .zip(&wedge_planes)
+            .map(|(e, planes)| footprint(&view_proj, &wedge_hull(e, light, reach), planes.clone(), &grid))
             .collect();
         let mut survivors = |footprint: &Footprint, umbra: bool| -> Vec<u32> {
             let mut kept = Vec::new();
@@ -321,7 +337,8 @@ impl ShadowMethod for Wedges {
         let single = params.choice("passes") == "single";
         let wedge_base = polygons.len() as u32;
         let item = |primitive, tile, both| WorkItem { primitive, tile, both, _pad: 0 };
-        let mut passes: Vec<Vec<WorkItem>> = Vec::new();
+        // Each pass: its pipeline and its items.
+        let mut passes: Vec<(&wgpu::ComputePipeline, Vec<WorkItem>)> = Vec::new();
         if single {
             // An edge's side quad and wedge share the items of the tiles both touch.
             let mut items = Vec::new();
@@ -335,20 +352,25 @@ impl ShadowMethod for Wedges {
                     items.extend(w.iter().filter(|t| quad_tiles.binary_search(t).is_err()).map(|&t| item(wedge_base + i as u32, t, 0)));
                 }
             }
-            passes.push(items);
+            passes.push((&both_pipeline, items));
         } else {
-            passes.push(umbra_tiles.iter().enumerate().flat_map(|(i, ts)| ts.iter().map(move |&t| item(i as u32, t, 0))).collect());
-            passes.push(
-                wedge_tiles.iter().enumerate().flat_map(|(i, ts)| ts.iter().map(move |&t| item(wedge_base + i as u32, t, 0))).collect(),
-            );
+            let umbra = umbra_tiles.iter().enumerate().flat_map(|(i, ts)| ts.iter().map(move |&t| item(i as u32, t, 0)));
+            let penumbra = wedge_tiles.iter().enumerate().flat_map(|(i, ts)| ts.iter().map(move |&t| item(wedge_base + i as u32, t, 0)));
+            passes.push((&umbra_pipeline, umbra.collect()));
+            passes.push((&penumbra_pipeline, penumbra.collect()));
         }
-        let kept: usize = passes.iter().map(Vec::len).sum::<usize>();
+        let kept: usize = passes.iter().map(|(_, items)| items.len()).sum::<usize>();
         let rasterized = umbra_tiles.iter().chain(&wedge_tiles).map(Vec::len).sum::<usize>() as u64;
 
         setup += culling_start.elapsed();
         ctx.encoder.clear_buffer(&li, 0, None);
-        let work_buffers: Vec<wgpu::Buffer> = passes.iter().map(|items| storage("Wedges::work", bytemuck::cast_slice(items))).collect();
-        let groups: Vec<wgpu::BindGroup> = work_buffers.iter().map(&bind).collect();
+        // Work lists go to the GPU in chunks a storage binding can hold, in pass order.
+        let max_items = (device.limits().max_storage_buffer_binding_size as usize / std::mem::size_of::<WorkItem>()).min(1 << 22);
+        let chunks: Vec<(&wgpu::ComputePipeline, &[WorkItem])> =
+            passes.iter().flat_map(|(pipeline, items)| items.chunks(max_items).map(move |chunk| (*pipeline, chunk))).collect();
+        let groups: Vec<wgpu::BindGroup> =
+            chunks.iter().map(|(_, items)| bind(&storage("Wedges::work", bytemuck::cast_slice(items)))).collect();
+        let resolve_group = bind(&no_work);
         let screen = ctx.dispatch_size();
         {
             let mut pass = ctx.encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
@@ -356,17 +378,15 @@ impl ShadowMethod for Wedges {
                 timestamp_writes: ctx.timer.compute_scope("method"),
             });
             pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
-            pass.set_pipeline(&rasterize);
-            for (items, group) in passes.iter().zip(&groups) {
-                if items.is_empty() {
-                    continue;
-                }
+            for ((pipeline, items), group) in chunks.iter().zip(&groups) {
+                // One workgroup per item, in rows of at most 65 535.
                 let n = items.len() as u32;
+                pass.set_pipeline(pipeline);
                 pass.set_bind_group(1, group, &[]);
                 pass.dispatch_workgroups(n.min(65535), n.div_ceil(65535), 1);
             }
             pass.set_pipeline(&resolve);
-            pass.set_bind_group(1, &groups[0], &[]);
+            pass.set_bind_group(1, &resolve_group, &[]);
             pass.dispatch_workgroups(screen.0, screen.1, 1);
         }
         ctx.flush();

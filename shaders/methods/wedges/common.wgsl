@@ -24,10 +24,13 @@ struct VolumePolygon {
 }
 
 // A penumbra wedge: its silhouette edge a → b (oriented as the boundary of the light-facing
-// triangles), w of `a` the multiplicity, w of `b` the edge's object id.
+// triangles), w of `a` the multiplicity, w of `b` the edge's object id, and its two planes
+// through the edge tangent to the light (the wedge on their positive side).
 struct Wedge {
     a: vec4<f32>,
     b: vec4<f32>,
+    front: vec4<f32>,
+    back: vec4<f32>,
 }
 
 // One unit of rasterisation work: a primitive over a tile. `primitive` < polygon_count is a
@@ -49,6 +52,14 @@ struct WorkItem {
 // 0 depth reads, 1 LI writes.
 @group(1) @binding(6) var<storage, read_write> counters: array<atomic<u32>, 4>;
 @group(1) @binding(7) var visibility_out: texture_storage_2d<rgba32float, write>;
+// Per pixel, two vec4s written by `tiles.wgsl`: the surface point with, in w, the object whose
+// volume and wedges it ignores (NO_OBJECT: none; NOT_COVERED: background), then its normal.
+@group(1) @binding(8) var<storage, read_write> receivers: array<vec4<f32>>;
+
+const NO_OBJECT: f32 = -1.0;
+const NOT_COVERED: f32 = -2.0;
+// cos of the angle to the light centre below which a receiver ignores its own object.
+const SELF_SHADOW_COS: f32 = 0.25;
 
 fn tile_grid() -> vec2<u32> {
     return (frame.sizes.xy + params.tile - 1u) / params.tile;

@@ -1,7 +1,10 @@
-// Method `wedges` (Assarsson & Akenine-Möller 2003 §3–§6): rasterise the work list — each
+// Method `wedges` (Assarsson & Akenine-Möller 2003 §3–§6): rasterising the work list — each
 // workgroup takes one (primitive, tile) pair that survived culling and runs over the tile's
 // pixels, reading the pixel's surface point once (the "depth read") and adding to the LI
-// buffer (an "LI write") where the primitive touches it:
+// buffer (an "LI write") where the primitive touches it. The entry points
+// (`rasterize_umbra.wgsl`, `rasterize_penumbra.wgsl`, `rasterize_both.wgsl`) each hold only
+// the code their items need: on a CPU rasteriser (lavapipe) the wedge code alone, even never
+// taken, made the umbra loop 13× slower. The two contributions:
 // - a shadow-volume polygon of the light centre's hard shadow (`rasterizeUmbra`): ∓full for a
 //   crossing of the eye ray in front of the point (z-pass) or, with the signs reversed, beyond
 //   it (z-fail, §5 — with the volume's caps, correct with the eye inside a shadow);
@@ -24,6 +27,18 @@ fn before(u: vec3<f32>, w: vec3<f32>) -> bool {
         return u.y < w.y;
     }
     return u.z < w.z;
+}
+
+// Which side of the edge u → w the ray from `eye` along `ray` passes: the sign of
+// ray · ((u − eye) × (w − eye)), with a fixed owner for an exact 0.
+fn edge_side(ray: vec3<f32>, eye: vec3<f32>, u: vec3<f32>, w: vec3<f32>) -> f32 {
+    let s = dot(ray, cross(u - eye, w - eye));
+    if s == 0.0 {
+        // The ray meets the edge's line exactly (a symmetric view does, along whole rows):
+        // the edge's owner is the polygon running it in the canonical direction.
+        return select(-1.0, 1.0, before(u, w));
+    }
+    return s;
 }
 
 // The signed number of times the eye ray to p crosses `poly` where it counts: in front of p
@@ -51,24 +66,15 @@ fn volume_crossing(poly: VolumePolygon, eye: vec3<f32>, p: vec3<f32>) -> i32 {
     // directions, which negates that product exactly, so a ray through a shared edge (the
     // corner ray of a volume) is counted by exactly one of them — testing the hit point
     // against each polygon's own edges would count it by both or neither.
-    let v = array<vec3<f32>, 4>(poly.v0.xyz, poly.v1.xyz, poly.v2.xyz, poly.v3.xyz);
-    var positive = true;
-    var negative = true;
-    for (var k = 0u; k < 4u; k++) {
-        let u = v[k];
-        let w = v[(k + 1u) % 4u];
-        if all(u == w) {
-            continue; // a triangle's repeated vertex
-        }
-        var s = dot(ray, cross(u - eye, w - eye));
-        if s == 0.0 {
-            // The ray meets the edge's line exactly (a symmetric view does, along whole rows):
-            // the edge's owner is the polygon running it in the canonical direction.
-            s = select(-1.0, 1.0, before(u, w));
-        }
-        positive = positive && s > 0.0;
-        negative = negative && s < 0.0;
-    }
+    let s0 = edge_side(ray, eye, poly.v0.xyz, poly.v1.xyz);
+    let s1 = edge_side(ray, eye, poly.v1.xyz, poly.v2.xyz);
+    let s2 = edge_side(ray, eye, poly.v2.xyz, poly.v3.xyz);
+    let s3 = edge_side(ray, eye, poly.v3.xyz, poly.v0.xyz);
+    let sides = vec4<f32>(s0, s1, s2, s3);
+    // A triangle's repeated vertex makes a null edge, on both sides at once.
+    let null_edge = vec4<bool>(false, false, cap, false);
+    let positive = all((sides > vec4<f32>(0.0)) | null_edge);
+    let negative = all((sides < vec4<f32>(0.0)) | null_edge);
     if !(positive || negative) {
         return 0;
     }
@@ -199,50 +205,68 @@ fn wedge_share(w: Wedge, p: vec3<f32>, normal: vec3<f32>) -> f32 {
     return sign(side) * w.a.w * part / max(whole, 1e-30);
 }
 
-// cos of the angle to the light centre below which a receiver ignores its own object.
-const SELF_SHADOW_COS: f32 = 0.25;
 
-@compute @workgroup_size(64)
-fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) local: u32) {
+// The item this workgroup runs, and the first pixel of its tile; counts the tile's on-screen
+// pixels as depth reads once per item (an atomic per pixel would cost more than the test).
+struct TileItem {
+    job: WorkItem,
+    origin: vec2<u32>,
+    valid: bool,
+}
+
+fn tile_item(group: vec3<u32>, local: u32) -> TileItem {
+    var item: TileItem;
     let index = group.y * 65535u + group.x;
-    if index >= arrayLength(&work) {
-        return;
+    item.valid = index < arrayLength(&work);
+    if !item.valid {
+        return item;
     }
-    let job = work[index];
+    item.job = work[index];
     let tiles = tile_grid();
-    let origin = vec2<u32>(job.tile % tiles.x, job.tile / tiles.x) * params.tile;
-    let eye = frame.eye.xyz;
-    let full = f32(params.full);
-    for (var k = local; k < params.tile * params.tile; k += 64u) {
-        let pixel = origin + vec2<u32>(k % params.tile, k / params.tile);
-        if any(pixel >= frame.sizes.xy) {
-            continue;
-        }
-        atomicAdd(&counters[0], 1u);
-        if !covered(pixel) {
-            continue;
-        }
-        let p = textureLoad(gbuf_position, pixel, 0).xyz;
-        let normal = textureLoad(gbuf_normal, pixel, 0).xyz;
-        // A point facing away from the light centre lies in its own object's volume — the
-        // segment to the centre runs through the object — yet the part of the light above
-        // its horizon may well reach it, and E0 already leaves out the part below. So its own
-        // object's volume and wedges do not count for it (as with Brabec & Seidel's ids);
-        // other objects' still do. "Away" has a margin: the G-buffer's smooth normal can face
-        // the light on a facet that does not, within about a facet's angle of the terminator.
-        let grazing = dot(normal, normalize(frame.light_center.xyz - p)) < SELF_SHADOW_COS;
-        let own_object = select(-1.0, f32(textureLoad(gbuf_id, pixel, 0).r), params.object_ids == 1u && grazing);
-        var delta = 0;
-        if job.primitive < params.polygon_count && polygons[job.primitive].v1.w != own_object {
-            delta -= params.full * volume_crossing(polygons[job.primitive], eye, p);
-        }
-        let wedge = select(job.both, job.primitive - params.polygon_count + 1u, job.primitive >= params.polygon_count);
-        if wedge > 0u && wedges[wedge - 1u].b.w != own_object {
-            delta -= i32(round(full * wedge_share(wedges[wedge - 1u], p, normal)));
-        }
-        if delta != 0 {
-            atomicAdd(&li[pixel.y * frame.sizes.x + pixel.x], delta);
-            atomicAdd(&counters[1], 1u);
-        }
+    item.origin = vec2<u32>(item.job.tile % tiles.x, item.job.tile / tiles.x) * params.tile;
+    if local == 0u {
+        let span = min(item.origin + params.tile, frame.sizes.xy) - item.origin;
+        atomicAdd(&counters[0], span.x * span.y);
     }
+    return item;
+}
+
+// The k-th pixel of the tile at `origin` as an index into per-pixel buffers, or −1 when it is
+// off screen or background.
+fn tile_pixel(origin: vec2<u32>, k: u32) -> i32 {
+    let pixel = origin + vec2<u32>(k % params.tile, k / params.tile);
+    if any(pixel >= frame.sizes.xy) {
+        return -1;
+    }
+    let at = pixel.y * frame.sizes.x + pixel.x;
+    return select(i32(at), -1, receivers[2u * at].w == NOT_COVERED);
+}
+
+fn add_light(at: u32, delta: i32) {
+    if delta != 0 {
+        atomicAdd(&li[at], delta);
+        atomicAdd(&counters[1], 1u);
+    }
+}
+
+// The umbra term at receiver `at` for volume polygon `index`.
+fn umbra_delta(index: u32, at: u32) -> i32 {
+    let receiver = receivers[2u * at];
+    if polygons[index].v1.w == receiver.w {
+        return 0; // its own object, facing away from the light centre
+    }
+    return -params.full * volume_crossing(polygons[index], frame.eye.xyz, receiver.xyz);
+}
+
+// The penumbra term at receiver `at` for wedge `index`.
+fn penumbra_delta(index: u32, at: u32) -> i32 {
+    let receiver = receivers[2u * at];
+    let w = wedges[index];
+    // §3: "if p is inside the wedge" — its plane equations first; most points of a tile the
+    // wedge reaches lie outside it.
+    let p = vec4<f32>(receiver.xyz, 1.0);
+    if w.b.w == receiver.w || dot(w.front, p) < 0.0 || dot(w.back, p) < 0.0 {
+        return 0;
+    }
+    return -i32(round(f32(params.full) * wedge_share(w, receiver.xyz, receivers[2u * at + 1u].xyz)));
 }

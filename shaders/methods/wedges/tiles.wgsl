@@ -1,6 +1,8 @@
 // Method `wedges` (Assarsson & Akenine-Möller 2003 §4): the per-tile depth range occlusion
 // culling tests wedges against — zmin and zmax of the view depth of the tile's covered pixels
-// (+∞ / −∞ for a tile of background only).
+// (+∞ / −∞ for a tile of background only) — and, while reading every pixel, the receiver
+// record the rasteriser reads instead of the G-buffer (one storage read, not four texture
+// loads, per pixel and primitive).
 
 #import methods/wedges/common.wgsl
 
@@ -15,11 +17,27 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     var zmax = -1e30;
     for (var y = origin.y; y < min(origin.y + params.tile, frame.sizes.y); y++) {
         for (var x = origin.x; x < min(origin.x + params.tile, frame.sizes.x); x++) {
-            if covered(vec2<u32>(x, y)) {
-                let depth = textureLoad(gbuf_position, vec2<u32>(x, y), 0).w;
-                zmin = min(zmin, depth);
-                zmax = max(zmax, depth);
+            let pixel = vec2<u32>(x, y);
+            let at = 2u * (y * frame.sizes.x + x);
+            if !covered(pixel) {
+                receivers[at] = vec4<f32>(0.0, 0.0, 0.0, NOT_COVERED);
+                continue;
             }
+            let position = textureLoad(gbuf_position, pixel, 0);
+            let normal = textureLoad(gbuf_normal, pixel, 0).xyz;
+            zmin = min(zmin, position.w);
+            zmax = max(zmax, position.w);
+            // A point facing away from the light centre lies in its own object's volume — the
+            // segment to the centre runs through the object — yet the part of the light above
+            // its horizon may well reach it, and E0 already leaves out the part below. So its
+            // own object's volume and wedges do not count for it (as with Brabec & Seidel's
+            // ids); other objects' still do. "Away" has a margin: the G-buffer's smooth normal
+            // can face the light on a facet that does not, within about a facet's angle of the
+            // terminator.
+            let grazing = dot(normal, normalize(frame.light_center.xyz - position.xyz)) < SELF_SHADOW_COS;
+            let own_object = select(NO_OBJECT, f32(textureLoad(gbuf_id, pixel, 0).r), params.object_ids == 1u && grazing);
+            receivers[at] = vec4<f32>(position.xyz, own_object);
+            receivers[at + 1u] = vec4<f32>(normal, 0.0);
         }
     }
     tile_ranges[id.x] = vec2<f32>(zmin, zmax);

@@ -1,0 +1,31 @@
+// Method `wedges`, single-pass variant (§6.2): an item may carry an edge's volume polygon and
+// its wedge over one tile, so the pixel is read once and the LI buffer written once for both
+// (`rasterize.wgsl`). Items with only one half (a cap, or a tile only one half reaches) are in
+// the same list.
+
+#import methods/wedges/rasterize.wgsl
+
+@compute @workgroup_size(64)
+fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) local: u32) {
+    let item = tile_item(group, local);
+    if !item.valid {
+        return;
+    }
+    let job = item.job;
+    let polygon = job.primitive < params.polygon_count;
+    let wedge = select(job.both, job.primitive - params.polygon_count + 1u, !polygon);
+    for (var k = local; k < params.tile * params.tile; k += 64u) {
+        let at = tile_pixel(item.origin, k);
+        if at < 0 {
+            continue;
+        }
+        var delta = 0;
+        if polygon {
+            delta += umbra_delta(job.primitive, u32(at));
+        }
+        if wedge > 0u {
+            delta += penumbra_delta(wedge - 1u, u32(at));
+        }
+        add_light(u32(at), delta);
+    }
+}

@@ -1,0 +1,19 @@
+// Method `wedges`, three-pass variant (§6.1), the penumbra pass: wedges over their tiles
+// (`rasterize.wgsl`).
+
+#import methods/wedges/rasterize.wgsl
+
+@compute @workgroup_size(64)
+fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) local: u32) {
+    let item = tile_item(group, local);
+    if !item.valid {
+        return;
+    }
+    let wedge = item.job.primitive - params.polygon_count;
+    for (var k = local; k < params.tile * params.tile; k += 64u) {
+        let at = tile_pixel(item.origin, k);
+        if at >= 0 {
+            add_light(u32(at), penumbra_delta(wedge, u32(at)));
+        }
+    }
+}

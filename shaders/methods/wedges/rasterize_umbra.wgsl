@@ -1,0 +1,18 @@
+// Method `wedges`, three-pass variant (§6.1), the umbra pass: volume polygons of the light
+// centre's hard shadow over their tiles (`rasterize.wgsl`).
+
+#import methods/wedges/rasterize.wgsl
+
+@compute @workgroup_size(64)
+fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) local: u32) {
+    let item = tile_item(group, local);
+    if !item.valid {
+        return;
+    }
+    for (var k = local; k < params.tile * params.tile; k += 64u) {
+        let at = tile_pixel(item.origin, k);
+        if at >= 0 {
+            add_light(u32(at), umbra_delta(item.job.primitive, u32(at)));
+        }
+    }
+}
