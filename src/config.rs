@@ -76,6 +76,11 @@ pub struct ServeConfig {
     #[arg(long, env = "PENUMBRA_RESULTS_KEPT", default_value_t = 64)]
     pub results_kept: usize,
 
+    /// Byte budget of the cache of uploaded scenes and light images (a scene counts its CPU
+    /// and GPU copies); the least recently used go first.
+    #[arg(long, env = "PENUMBRA_CACHE_BYTES", default_value_t = crate::engine::DEFAULT_CACHE_BYTES)]
+    pub cache_bytes: u64,
+
     /// Skip compiling pipelines and uploading the default scene before accepting jobs.
     #[arg(long, env = "PENUMBRA_NO_WARM_UP")]
     pub no_warm_up: bool,

@@ -20,6 +20,7 @@ use crate::quality::QualityReport;
 use crate::render::{FrameOutput, FrameSpec, Renderer};
 use crate::scene::{self, builtin};
 use crate::timing::Timings;
+use crate::uploads::{content_id, Asset, UploadStats, UploadStore};
 
 /// Where `{"path": ...}` assets may be read from.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -60,6 +61,7 @@ pub struct EngineStats {
     pub derived_reused: u64,
     pub reference_cache_hits: u64,
     pub reference_cache_misses: u64,
+    pub uploads: UploadStats,
 }
 
 /// Reference frames kept for `compare` (each is a few MB of floats).
@@ -82,10 +84,23 @@ struct State {
     misses: u64,
 }
 
+/// What an upload answers: the asset's id, whether this upload stored it (false: the same
+/// bytes were already there), and what it costs the cache.
+#[derive(Debug, Clone, Serialize)]
+pub struct UploadReceipt {
+    pub id: String,
+    pub created: bool,
+    pub cache_bytes: u64,
+}
+
+/// Default byte budget of the upload cache.
+pub const DEFAULT_CACHE_BYTES: u64 = 1 << 30;
+
 pub struct Engine {
     gpu: Arc<GpuContext>,
     limits: Limits,
     paths: PathPolicy,
+    uploads: Mutex<UploadStore>,
     // One frame at a time on the device: the renderer's targets and timer are per frame.
     state: Mutex<State>,
     references: Mutex<HashMap<String, Arc<FrameOutput>>>,
@@ -105,7 +120,68 @@ impl Engine {
             references: Mutex::new(HashMap::new()),
             reference_hits: Default::default(),
             reference_misses: Default::default(),
+            uploads: Mutex::new(UploadStore::new(DEFAULT_CACHE_BYTES)),
         }
+    }
+
+    /// Sets the upload cache's byte budget (scenes count their CPU and GPU copies).
+    pub fn with_cache_budget(self, bytes: u64) -> Self {
+        Self { uploads: Mutex::new(UploadStore::new(bytes)), ..self }
+    }
+
+    /// Stores a glTF (JSON with `data:` buffers) or GLB scene; validated now, so a bad file
+    /// is refused at upload, not at its first render.
+    pub fn upload_scene(&self, bytes: &[u8]) -> JobResult<UploadReceipt> {
+        let id = content_id("scene", bytes);
+        self.store_upload(id, || Ok(Asset::Scene(Arc::new(scene::gltf::load(bytes, &self.limits, "body")?))))
+    }
+
+    /// Stores a PNG or EXR light image.
+    pub fn upload_light(&self, bytes: &[u8]) -> JobResult<UploadReceipt> {
+        let id = content_id("light", bytes);
+        self.store_upload(id, || Ok(Asset::Light(Arc::new(LightImage::decode(bytes, self.limits.max_light_image_dim, "body")?))))
+    }
+
+    fn store_upload(&self, id: String, decode: impl FnOnce() -> JobResult<Asset>) -> JobResult<UploadReceipt> {
+        if self.lock_uploads().touch(&id) {
+            return Ok(UploadReceipt { id, created: false, cache_bytes: 0 });
+        }
+        let asset = decode()?;
+        let before = self.lock_uploads().stats().bytes;
+        let evicted = self.lock_uploads().insert(id.clone(), asset)?;
+        let after = self.lock_uploads().stats().bytes;
+        // Evicted scenes leave the GPU too (uploads first, then the renderer: never both locks
+        // the other way round).
+        self.forget_gpu_copies(&evicted);
+        Ok(UploadReceipt { id, created: true, cache_bytes: after.saturating_sub(before) })
+    }
+
+    /// Removes an upload; false when there was none under `id`.
+    pub fn delete_upload(&self, id: &str) -> bool {
+        let removed = self.lock_uploads().remove(id);
+        self.forget_gpu_copies(&[id.to_owned()]);
+        removed
+    }
+
+    pub fn upload_stats(&self) -> UploadStats {
+        self.lock_uploads().stats()
+    }
+
+    fn lock_uploads(&self) -> std::sync::MutexGuard<'_, UploadStore> {
+        self.uploads.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+    }
+
+    fn forget_gpu_copies(&self, ids: &[String]) {
+        let mut state = self.state.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+        for id in ids {
+            state.scenes.remove(&format!("id:{id}"));
+            state.lights.remove(&format!("id:{id}"));
+        }
+    }
+
+    /// The uploaded asset under `id`, or `not_uploaded` naming `field`.
+    fn uploaded(&self, id: &str, field: &str) -> JobResult<Asset> {
+        self.lock_uploads().get(id).ok_or_else(|| not_uploaded(id, field))
     }
 
     pub fn gpu(&self) -> &GpuContext {
@@ -255,6 +331,7 @@ impl Engine {
             derived_reused: r.derived.stats.reused,
             reference_cache_hits: self.reference_hits.load(std::sync::atomic::Ordering::Relaxed),
             reference_cache_misses: self.reference_misses.load(std::sync::atomic::Ordering::Relaxed),
+            uploads: self.upload_stats(),
         }
     }
 
@@ -271,12 +348,15 @@ impl Engine {
         }
         state.misses += 1;
         let loaded = match asset {
-            AssetRef::Builtin { name, params } => builtin::build(name, params, "scene", &self.limits)?,
+            AssetRef::Builtin { name, params } => Arc::new(builtin::build(name, params, "scene", &self.limits)?),
             AssetRef::Path(path) => {
                 let bytes = self.read_path(path, "scene.path")?;
-                scene::gltf::load(&bytes, &self.limits, "scene")?
+                Arc::new(scene::gltf::load(&bytes, &self.limits, "scene")?)
             }
-            AssetRef::Id(_) => unreachable!("asset_key refuses ids"),
+            AssetRef::Id(id) => match self.uploaded(id, "scene.id")? {
+                Asset::Scene(scene) => scene,
+                Asset::Light(_) => return Err(not_uploaded(id, "scene.id")),
+            },
         };
         let uploaded = Arc::new(GpuScene::upload(&self.gpu, &loaded, state.renderer.material_layout()));
         timings.scene_upload_bytes = uploaded.bytes;
@@ -294,14 +374,17 @@ impl Engine {
         if let Some(image) = state.lights.get(&key) {
             return Ok(image.clone());
         }
-        let image = Arc::new(match asset {
-            AssetRef::Builtin { name, params } => LightImage::builtin(name, params, "light.image")?,
+        let image = match asset {
+            AssetRef::Builtin { name, params } => Arc::new(LightImage::builtin(name, params, "light.image")?),
             AssetRef::Path(path) => {
                 let bytes = self.read_path(path, "light.image.path")?;
-                LightImage::decode(&bytes, self.limits.max_light_image_dim, "light.image")?
+                Arc::new(LightImage::decode(&bytes, self.limits.max_light_image_dim, "light.image")?)
             }
-            AssetRef::Id(_) => unreachable!("asset_key refuses ids"),
-        });
+            AssetRef::Id(id) => match self.uploaded(id, "light.image.id")? {
+                Asset::Light(image) => image,
+                Asset::Scene(_) => return Err(not_uploaded(id, "light.image.id")),
+            },
+        };
         if state.lights.len() >= SCENE_CACHE_ENTRIES {
             state.lights.clear();
         }
@@ -313,11 +396,8 @@ impl Engine {
     fn asset_key(&self, asset: &AssetRef, field: &str) -> JobResult<String> {
         match asset {
             AssetRef::Builtin { name, params } => Ok(format!("builtin:{name}:{}", serde_json::Value::Object(params.clone()))),
-            AssetRef::Id(id) => Err(JobError::field(
-                ErrorCode::NotUploaded,
-                format!("{field}.id"),
-                format!("no uploaded asset with id `{id}` on this server; upload it first"),
-            )),
+            AssetRef::Id(id) if self.lock_uploads().contains(id) => Ok(format!("id:{id}")),
+            AssetRef::Id(id) => Err(not_uploaded(id, &format!("{field}.id"))),
             AssetRef::Path(path) => {
                 let resolved = self.resolve_path(path, &format!("{field}.path"))?;
                 let meta = std::fs::metadata(&resolved).map_err(|_| not_readable(&format!("{field}.path")))?;
@@ -359,4 +439,13 @@ impl Engine {
 
 fn not_readable(field: &str) -> JobError {
     JobError::field(ErrorCode::PathNotAllowed, field, "no readable file at this path in the allowed directory")
+}
+
+/// The error for an id this server does not hold (never uploaded, evicted or deleted).
+fn not_uploaded(id: &str, field: &str) -> JobError {
+    JobError::field(
+        ErrorCode::NotUploaded,
+        field,
+        format!("no uploaded asset with id `{id}` of this kind on this server (never uploaded, evicted or deleted); upload it again"),
+    )
 }

@@ -19,6 +19,7 @@ pub mod render;
 pub mod scene;
 pub mod server;
 pub mod timing;
+pub mod uploads;
 
 #[cfg(test)]
 mod tidy {

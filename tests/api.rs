@@ -19,11 +19,16 @@ async fn start() -> (String, tempdir::Dir) {
 }
 
 async fn start_with_engine() -> (String, tempdir::Dir, Arc<Engine>) {
+    start_with_cache(penumbra::engine::DEFAULT_CACHE_BYTES).await
+}
+
+/// The same server with an upload cache of `cache_bytes`.
+async fn start_with_cache(cache_bytes: u64) -> (String, tempdir::Dir, Arc<Engine>) {
     let scene_dir = tempdir::Dir::new();
     std::fs::write(scene_dir.path().join("inside.png"), b"not really a png").unwrap();
     let gpu = common::engine().gpu_arc();
     let limits = Limits { max_body_bytes: 64 * 1024, max_output_dim: 2048, ..Limits::default() };
-    let engine = Arc::new(Engine::new(gpu, limits, PathPolicy::Under(scene_dir.path().to_path_buf())));
+    let engine = Arc::new(Engine::new(gpu, limits, PathPolicy::Under(scene_dir.path().to_path_buf())).with_cache_budget(cache_bytes));
     let state = Arc::new(AppState::new(engine.clone(), 8));
     let warm = state.clone();
     let warm_engine = engine.clone();
@@ -365,6 +370,7 @@ async fn openapi_document_matches_the_server() {
             let response = match method.as_str() {
                 "get" => client.get(&url).send().await.unwrap(),
                 "post" => client.post(&url).json(&small_job("png")).send().await.unwrap(),
+                "delete" => client.delete(&url).send().await.unwrap(),
                 other => panic!("undocumented verb {other}"),
             };
             let status = response.status();
@@ -424,4 +430,77 @@ async fn compare_reports_quality_against_a_cached_reference() {
     // Without `compare`, no quality.
     job["compare"] = json!(false);
     assert!(ask(job).await["quality"].is_null());
+}
+
+#[tokio::test(flavor = "multi_thread")]
+async fn uploads_are_content_addressed_cached_under_a_budget_and_rendered_by_id() {
+    let glb = common::as_glb();
+    let gltf = common::as_gltf_with_data_uri();
+    // Room for one of the two (equal) test scenes, not both: the second evicts the first.
+    let cost = 2 * penumbra::scene::gltf::load(&glb, &Limits::default(), "scene").unwrap().gpu_bytes();
+    let (base, dir, engine) = start_with_cache(cost + cost / 2).await;
+    let client = reqwest::Client::new();
+    let upload = |path: &'static str, body: Vec<u8>| {
+        let request = client.post(format!("{base}{path}")).body(body);
+        async move {
+            let response = request.send().await.unwrap();
+            let status = response.status();
+            (status, response.json::<Value>().await.unwrap())
+        }
+    };
+    let render = |scene: Value, light: Value| {
+        let job = json!({"scene": scene, "light": light, "method": {"name": "hard"}, "output": {"width": 64, "height": 48}});
+        let request = client.post(format!("{base}/v1/render")).json(&job);
+        async move {
+            let response = request.send().await.unwrap();
+            let status = response.status();
+            (status, response.bytes().await.unwrap())
+        }
+    };
+
+    // The id is the content: the same bytes again are the same entry and cost nothing.
+    let (status, first) = upload("/v1/scenes", glb.clone()).await;
+    assert_eq!(status, StatusCode::CREATED, "{first}");
+    let id = first["id"].as_str().unwrap().to_owned();
+    assert!(id.starts_with("scene-") && first["cache_bytes"].as_u64() == Some(cost), "{first}");
+    let (status, again) = upload("/v1/scenes", glb.clone()).await;
+    assert_eq!((status, &again["id"], &again["created"]), (StatusCode::OK, &first["id"], &json!(false)));
+
+    // Rendered by id it is the same picture as the same file rendered by path.
+    std::fs::write(dir.path().join("scene.glb"), &glb).unwrap();
+    let (status, by_id) = render(json!({"id": id}), json!({})).await;
+    assert_eq!(status, StatusCode::OK);
+    let (_, by_path) = render(json!({"path": dir.path().join("scene.glb")}), json!({})).await;
+    assert_eq!(by_id, by_path, "upload and file render the same bytes");
+
+    // A light image by id.
+    let mut png = std::io::Cursor::new(Vec::new());
+    image::RgbaImage::from_fn(4, 2, |x, _| image::Rgba([255, (x * 60) as u8, 0, 255])).write_to(&mut png, image::ImageFormat::Png).unwrap();
+    let (status, light) = upload("/v1/lights", png.into_inner()).await;
+    assert_eq!(status, StatusCode::CREATED, "{light}");
+    let (status, _) = render(json!({"id": id}), json!({"image": {"id": light["id"]}})).await;
+    assert_eq!(status, StatusCode::OK);
+
+    // Under the budget a second scene evicts the least recently used one, which must be sent again.
+    let (status, second) = upload("/v1/scenes", gltf).await;
+    assert_eq!(status, StatusCode::CREATED);
+    assert_ne!(second["id"], first["id"]);
+    let (status, body) = render(json!({"id": id}), json!({})).await;
+    assert_eq!(status, StatusCode::NOT_FOUND);
+    assert!(String::from_utf8_lossy(&body).contains("not_uploaded"), "{}", String::from_utf8_lossy(&body));
+    let stats = engine.upload_stats();
+    assert!(stats.evictions >= 1 && stats.bytes <= stats.budget_bytes, "{stats:?}");
+
+    // Deleting: 204, then 404; a light id is no scene.
+    let delete = |path: String| client.delete(format!("{base}{path}")).send();
+    let second_id = second["id"].as_str().unwrap();
+    assert_eq!(delete(format!("/v1/scenes/{second_id}")).await.unwrap().status(), StatusCode::NO_CONTENT);
+    assert_eq!(delete(format!("/v1/scenes/{second_id}")).await.unwrap().status(), StatusCode::NOT_FOUND);
+    assert_eq!(render(json!({"id": light["id"]}), json!({})).await.0, StatusCode::NOT_FOUND);
+
+    // Not a scene, not an image: 422 naming the body.
+    let (status, error) = upload("/v1/scenes", b"{\"not\": \"gltf\"}".to_vec()).await;
+    assert_eq!((status, error["error"]["code"].as_str()), (StatusCode::UNPROCESSABLE_ENTITY, Some("invalid_asset")), "{error}");
+    let (status, _) = upload("/v1/lights", b"GIF89a".to_vec()).await;
+    assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY);
 }

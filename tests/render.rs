@@ -3,9 +3,6 @@
 
 mod common;
 
-use std::io::Cursor;
-
-use base64::Engine as _;
 use glam::{Vec2, Vec3};
 use penumbra::job::{AssetRef, Job, Limits, OutputFormat};
 use penumbra::light::{light_cells, unshadowed_irradiance, AreaLight, LightImage};
@@ -129,97 +126,9 @@ fn hard_shadow_is_binary_and_present() {
 
 // --- glTF -----------------------------------------------------------------------------
 
-/// A small glTF made here: node 0 (no mesh, translated up 0.5) has child node 2 (a textured
-/// triangle, further up 0.5); node 1 is a red floor quad. Mesh nodes are 1 and 2, so the floor
-/// is object 0 and the triangle object 1.
-fn test_gltf() -> (serde_json::Value, Vec<u8>) {
-    let mut bin: Vec<u8> = Vec::new();
-    let mut push = |bytes: &[u8]| {
-        let offset = bin.len();
-        bin.extend_from_slice(bytes);
-        while !bin.len().is_multiple_of(4) {
-            bin.push(0);
-        }
-        (offset, bytes.len())
-    };
-    let f32s = |v: &[f32]| v.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<u8>>();
-    let quad_pos = push(&f32s(&[-2., 0., -2., 2., 0., -2., 2., 0., 2., -2., 0., 2.]));
-    let quad_nrm = push(&f32s(&[0., 1., 0., 0., 1., 0., 0., 1., 0., 0., 1., 0.]));
-    let quad_idx = push(&[0u16, 2, 1, 0, 3, 2].iter().flat_map(|i| i.to_le_bytes()).collect::<Vec<u8>>());
-    let tri_pos = push(&f32s(&[-0.4, 0., -0.4, 0.4, 0., -0.4, 0., 0., 0.4]));
-    let tri_uv = push(&f32s(&[0., 0., 1., 0., 0.5, 1.]));
-    let mut png = Cursor::new(Vec::new());
-    image::RgbaImage::from_pixel(2, 2, image::Rgba([0, 255, 0, 255])).write_to(&mut png, image::ImageFormat::Png).unwrap();
-    let png = push(png.get_ref());
-    let views: Vec<serde_json::Value> = [quad_pos, quad_nrm, quad_idx, tri_pos, tri_uv, png]
-        .iter()
-        .map(|(o, l)| json!({"buffer": 0, "byteOffset": o, "byteLength": l}))
-        .collect();
-    let gltf = json!({
-        "asset": {"version": "2.0"},
-        "scene": 0,
-        "scenes": [{"nodes": [0, 1]}],
-        "nodes": [
-            {"name": "group", "translation": [0, 0.5, 0], "children": [2]},
-            {"name": "floor", "mesh": 0},
-            {"name": "leaf", "mesh": 1, "translation": [-0.8, 0.5, -0.8]}
-        ],
-        "meshes": [
-            {"primitives": [{"attributes": {"POSITION": 0, "NORMAL": 1}, "indices": 2, "material": 0}]},
-            {"primitives": [{"attributes": {"POSITION": 3, "TEXCOORD_0": 4}, "material": 1}]}
-        ],
-        "materials": [
-            {"pbrMetallicRoughness": {"baseColorFactor": [0.8, 0.1, 0.1, 1.0]}},
-            {"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}
-        ],
-        "textures": [{"source": 0}],
-        "images": [{"bufferView": 5, "mimeType": "image/png"}],
-        "accessors": [
-            {"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3", "min": [-2, 0, -2], "max": [2, 0, 2]},
-            {"bufferView": 1, "componentType": 5126, "count": 4, "type": "VEC3"},
-            {"bufferView": 2, "componentType": 5123, "count": 6, "type": "SCALAR"},
-            {"bufferView": 3, "componentType": 5126, "count": 3, "type": "VEC3", "min": [-0.4, 0, -0.4], "max": [0.4, 0, 0.4]},
-            {"bufferView": 4, "componentType": 5126, "count": 3, "type": "VEC2"}
-        ],
-        "bufferViews": views,
-        "buffers": [{"byteLength": bin.len()}]
-    });
-    (gltf, bin)
-}
-
-fn as_gltf_with_data_uri() -> Vec<u8> {
-    let (mut gltf, bin) = test_gltf();
-    gltf["buffers"][0]["uri"] =
-        json!(format!("data:application/octet-stream;base64,{}", base64::engine::general_purpose::STANDARD.encode(&bin)));
-    serde_json::to_vec(&gltf).unwrap()
-}
-
-fn as_glb() -> Vec<u8> {
-    let (gltf, mut bin) = test_gltf();
-    let mut json = serde_json::to_vec(&gltf).unwrap();
-    while json.len() % 4 != 0 {
-        json.push(b' ');
-    }
-    while bin.len() % 4 != 0 {
-        bin.push(0);
-    }
-    let total = 12 + 8 + json.len() + 8 + bin.len();
-    let mut glb = Vec::new();
-    glb.extend_from_slice(b"glTF");
-    glb.extend_from_slice(&2u32.to_le_bytes());
-    glb.extend_from_slice(&(total as u32).to_le_bytes());
-    glb.extend_from_slice(&(json.len() as u32).to_le_bytes());
-    glb.extend_from_slice(b"JSON");
-    glb.extend_from_slice(&json);
-    glb.extend_from_slice(&(bin.len() as u32).to_le_bytes());
-    glb.extend_from_slice(b"BIN\0");
-    glb.extend_from_slice(&bin);
-    glb
-}
-
 #[test]
 fn gltf_objects_ids_and_albedo() {
-    for (kind, bytes) in [("gltf", as_gltf_with_data_uri()), ("glb", as_glb())] {
+    for (kind, bytes) in [("gltf", common::as_gltf_with_data_uri()), ("glb", common::as_glb())] {
         let scene = penumbra::scene::gltf::load(&bytes, &Limits::default(), "scene").unwrap_or_else(|e| panic!("{kind}: {e}"));
         assert_eq!(scene.objects, vec!["floor".to_owned(), "leaf".to_owned()], "{kind}");
         assert_eq!(scene.triangle_count(), 3, "{kind}");
@@ -242,7 +151,7 @@ fn gltf_renders_with_its_albedo() {
     let dir = std::env::temp_dir().join(format!("penumbra-gltf-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("scene.glb");
-    std::fs::write(&path, as_glb()).unwrap();
+    std::fs::write(&path, common::as_glb()).unwrap();
     let mut job = job(json!({
         "scene": {"builtin": "torus"},
         "camera": {"eye": [0, 8, 0.001], "target": [0, 0, 0], "up": [0, 0, -1], "fov_y_deg": 30},
@@ -283,7 +192,7 @@ fn gltf_renders_with_its_albedo() {
 
 #[test]
 fn gltf_refuses_external_uris_and_garbage() {
-    let (mut gltf, _) = test_gltf();
+    let (mut gltf, _) = common::test_gltf();
     gltf["buffers"][0]["uri"] = json!("/etc/passwd");
     let err = penumbra::scene::gltf::load(&serde_json::to_vec(&gltf).unwrap(), &Limits::default(), "scene").unwrap_err();
     assert_eq!(err.code, penumbra::error::ErrorCode::InvalidAsset);
@@ -292,7 +201,7 @@ fn gltf_refuses_external_uris_and_garbage() {
         assert!(penumbra::scene::gltf::load(garbage, &Limits::default(), "scene").is_err());
     }
     let limits = Limits { max_triangles: 1, ..Limits::default() };
-    let err = penumbra::scene::gltf::load(&as_glb(), &limits, "scene").unwrap_err();
+    let err = penumbra::scene::gltf::load(&common::as_glb(), &limits, "scene").unwrap_err();
     assert_eq!(err.code, penumbra::error::ErrorCode::LimitExceeded);
 }
 

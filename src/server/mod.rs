@@ -80,6 +80,10 @@ pub fn app(state: Arc<AppState>) -> Router {
     Router::new()
         .route("/v1/render", post(render))
         .route("/v1/methods", get(methods))
+        .route("/v1/scenes", post(upload_scene))
+        .route("/v1/lights", post(upload_light))
+        .route("/v1/scenes/{id}", axum::routing::delete(delete_upload))
+        .route("/v1/lights/{id}", axum::routing::delete(delete_upload))
         .route("/v1/jobs/{id}", get(job_record))
         .route("/v1/jobs/{id}/image", get(job_image))
         .route("/healthz", get(|| async { Json(json!({"status": "ok"})) }))
@@ -132,6 +136,56 @@ async fn shutdown_signal() {
     tracing::info!("shutdown signal received; finishing requests in flight");
 }
 
+/// A body that could not be read: too large (413), or unreadable, as `unreadable`.
+fn body_error(state: &AppState, rejection: BytesRejection, unreadable: ErrorCode) -> JobError {
+    if rejection.status() == StatusCode::PAYLOAD_TOO_LARGE {
+        JobError::new(ErrorCode::PayloadTooLarge, format!("the body exceeds {} bytes", state.engine.limits().max_body_bytes))
+    } else {
+        JobError::new(unreadable, format!("cannot read the body: {rejection}"))
+    }
+}
+
+/// `POST /v1/scenes`: a glTF (JSON with `data:` buffers) or GLB body → its content id. 201
+/// when stored now, 200 when the same bytes were already there.
+async fn upload_scene(State(state): State<Arc<AppState>>, body: Result<Bytes, BytesRejection>) -> Response {
+    upload(state, body, |engine, bytes| engine.upload_scene(bytes)).await
+}
+
+/// `POST /v1/lights`: a PNG or EXR body → its content id.
+async fn upload_light(State(state): State<Arc<AppState>>, body: Result<Bytes, BytesRejection>) -> Response {
+    upload(state, body, |engine, bytes| engine.upload_light(bytes)).await
+}
+
+async fn upload(
+    state: Arc<AppState>,
+    body: Result<Bytes, BytesRejection>,
+    store: fn(&Engine, &[u8]) -> crate::error::JobResult<crate::engine::UploadReceipt>,
+) -> Response {
+    let bytes = match body {
+        Ok(bytes) => bytes,
+        Err(rejection) => return ApiError(body_error(&state, rejection, ErrorCode::InvalidAsset)).into_response(),
+    };
+    let engine = state.engine.clone();
+    // Decoding a large scene takes a while: off the async workers.
+    match tokio::task::spawn_blocking(move || store(&engine, &bytes)).await {
+        Ok(Ok(receipt)) => {
+            let status = if receipt.created { StatusCode::CREATED } else { StatusCode::OK };
+            (status, Json(receipt)).into_response()
+        }
+        Ok(Err(error)) => ApiError(error).into_response(),
+        Err(_) => ApiError(JobError::new(ErrorCode::Internal, "the upload failed")).into_response(),
+    }
+}
+
+/// `DELETE /v1/scenes/{id}`, `DELETE /v1/lights/{id}`: 204, or 404 when there was none.
+async fn delete_upload(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Response {
+    if state.engine.delete_upload(&id) {
+        StatusCode::NO_CONTENT.into_response()
+    } else {
+        ApiError(JobError::field(ErrorCode::NotUploaded, "id", format!("no uploaded asset with id `{id}`"))).into_response()
+    }
+}
+
 async fn readyz(State(state): State<Arc<AppState>>) -> Response {
     if state.ready.load(Ordering::SeqCst) {
         Json(json!({"status": "ready", "adapter": state.engine.gpu().adapter})).into_response()
@@ -157,13 +211,7 @@ fn wants_json(headers: &HeaderMap) -> bool {
 }
 
 async fn render(State(state): State<Arc<AppState>>, headers: HeaderMap, body: Result<Bytes, BytesRejection>) -> Result<Response, ApiError> {
-    let body = body.map_err(|rejection| {
-        if rejection.status() == StatusCode::PAYLOAD_TOO_LARGE {
-            JobError::new(ErrorCode::PayloadTooLarge, format!("the body exceeds {} bytes", state.engine.limits().max_body_bytes))
-        } else {
-            JobError::new(ErrorCode::InvalidJson, format!("cannot read the body: {rejection}"))
-        }
-    })?;
+    let body = body.map_err(|rejection| body_error(&state, rejection, ErrorCode::InvalidJson))?;
     let job = Job::from_json(&body)?;
     let id = state.new_id();
     let span = tracing::info_span!("job", %id, method = %job.method.name);

@@ -1,5 +1,6 @@
 //! Helpers shared by the integration tests: one warm engine per test binary, EXR decoding,
-//! and golden-image comparison with FLIP in the style of wgpu's own test harness.
+//! golden-image comparison with FLIP in the style of wgpu's own test harness, and a small
+//! glTF scene as glTF JSON and as GLB.
 
 #![allow(dead_code)]
 
@@ -8,9 +9,11 @@ use std::io::Cursor;
 use std::path::PathBuf;
 use std::sync::{Arc, OnceLock};
 
+use base64::Engine as _;
 use penumbra::engine::{Engine, PathPolicy};
 use penumbra::gpu::{AdapterChoice, GpuContext};
 use penumbra::job::Limits;
+use serde_json::json;
 
 /// One engine for the whole test binary: the device, pipelines and scenes stay warm between
 /// tests as they do in the daemon.
@@ -71,4 +74,92 @@ pub fn check_golden(name: &str, png: &[u8], max_mean: f32, max_p99: f32) {
             "{name}: FLIP mean {mean:.4} (max {max_mean}), p99 {p99:.4} (max {max_p99}); see {name}-actual.png and {name}-difference.png"
         );
     }
+}
+
+/// A small glTF made here: node 0 (no mesh, translated up 0.5) has child node 2 (a textured
+/// triangle, further up 0.5); node 1 is a red floor quad. Mesh nodes are 1 and 2, so the floor
+/// is object 0 and the triangle object 1.
+pub fn test_gltf() -> (serde_json::Value, Vec<u8>) {
+    let mut bin: Vec<u8> = Vec::new();
+    let mut push = |bytes: &[u8]| {
+        let offset = bin.len();
+        bin.extend_from_slice(bytes);
+        while !bin.len().is_multiple_of(4) {
+            bin.push(0);
+        }
+        (offset, bytes.len())
+    };
+    let f32s = |v: &[f32]| v.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<u8>>();
+    let quad_pos = push(&f32s(&[-2., 0., -2., 2., 0., -2., 2., 0., 2., -2., 0., 2.]));
+    let quad_nrm = push(&f32s(&[0., 1., 0., 0., 1., 0., 0., 1., 0., 0., 1., 0.]));
+    let quad_idx = push(&[0u16, 2, 1, 0, 3, 2].iter().flat_map(|i| i.to_le_bytes()).collect::<Vec<u8>>());
+    let tri_pos = push(&f32s(&[-0.4, 0., -0.4, 0.4, 0., -0.4, 0., 0., 0.4]));
+    let tri_uv = push(&f32s(&[0., 0., 1., 0., 0.5, 1.]));
+    let mut png = Cursor::new(Vec::new());
+    image::RgbaImage::from_pixel(2, 2, image::Rgba([0, 255, 0, 255])).write_to(&mut png, image::ImageFormat::Png).unwrap();
+    let png = push(png.get_ref());
+    let views: Vec<serde_json::Value> = [quad_pos, quad_nrm, quad_idx, tri_pos, tri_uv, png]
+        .iter()
+        .map(|(o, l)| json!({"buffer": 0, "byteOffset": o, "byteLength": l}))
+        .collect();
+    let gltf = json!({
+        "asset": {"version": "2.0"},
+        "scene": 0,
+        "scenes": [{"nodes": [0, 1]}],
+        "nodes": [
+            {"name": "group", "translation": [0, 0.5, 0], "children": [2]},
+            {"name": "floor", "mesh": 0},
+            {"name": "leaf", "mesh": 1, "translation": [-0.8, 0.5, -0.8]}
+        ],
+        "meshes": [
+            {"primitives": [{"attributes": {"POSITION": 0, "NORMAL": 1}, "indices": 2, "material": 0}]},
+            {"primitives": [{"attributes": {"POSITION": 3, "TEXCOORD_0": 4}, "material": 1}]}
+        ],
+        "materials": [
+            {"pbrMetallicRoughness": {"baseColorFactor": [0.8, 0.1, 0.1, 1.0]}},
+            {"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}
+        ],
+        "textures": [{"source": 0}],
+        "images": [{"bufferView": 5, "mimeType": "image/png"}],
+        "accessors": [
+            {"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3", "min": [-2, 0, -2], "max": [2, 0, 2]},
+            {"bufferView": 1, "componentType": 5126, "count": 4, "type": "VEC3"},
+            {"bufferView": 2, "componentType": 5123, "count": 6, "type": "SCALAR"},
+            {"bufferView": 3, "componentType": 5126, "count": 3, "type": "VEC3", "min": [-0.4, 0, -0.4], "max": [0.4, 0, 0.4]},
+            {"bufferView": 4, "componentType": 5126, "count": 3, "type": "VEC2"}
+        ],
+        "bufferViews": views,
+        "buffers": [{"byteLength": bin.len()}]
+    });
+    (gltf, bin)
+}
+
+pub fn as_gltf_with_data_uri() -> Vec<u8> {
+    let (mut gltf, bin) = test_gltf();
+    gltf["buffers"][0]["uri"] =
+        json!(format!("data:application/octet-stream;base64,{}", base64::engine::general_purpose::STANDARD.encode(&bin)));
+    serde_json::to_vec(&gltf).unwrap()
+}
+
+pub fn as_glb() -> Vec<u8> {
+    let (gltf, mut bin) = test_gltf();
+    let mut json = serde_json::to_vec(&gltf).unwrap();
+    while json.len() % 4 != 0 {
+        json.push(b' ');
+    }
+    while bin.len() % 4 != 0 {
+        bin.push(0);
+    }
+    let total = 12 + 8 + json.len() + 8 + bin.len();
+    let mut glb = Vec::new();
+    glb.extend_from_slice(b"glTF");
+    glb.extend_from_slice(&2u32.to_le_bytes());
+    glb.extend_from_slice(&(total as u32).to_le_bytes());
+    glb.extend_from_slice(&(json.len() as u32).to_le_bytes());
+    glb.extend_from_slice(b"JSON");
+    glb.extend_from_slice(&json);
+    glb.extend_from_slice(&(bin.len() as u32).to_le_bytes());
+    glb.extend_from_slice(b"BIN\0");
+    glb.extend_from_slice(&bin);
+    glb
 }
