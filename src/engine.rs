@@ -101,6 +101,8 @@ pub struct Engine {
     limits: Limits,
     paths: PathPolicy,
     uploads: Mutex<UploadStore>,
+    /// `stats()` as of the last time the renderer was free.
+    last_stats: Mutex<EngineStats>,
     // One frame at a time on the device: the renderer's targets and timer are per frame.
     state: Mutex<State>,
     references: Mutex<HashMap<String, Arc<FrameOutput>>>,
@@ -121,6 +123,7 @@ impl Engine {
             reference_hits: Default::default(),
             reference_misses: Default::default(),
             uploads: Mutex::new(UploadStore::new(DEFAULT_CACHE_BYTES)),
+            last_stats: Mutex::new(EngineStats::default()),
         }
     }
 
@@ -316,8 +319,24 @@ impl Engine {
         Ok(frame)
     }
 
+    /// The engine's counts. Never waits for a render in progress (a scrape must not block on
+    /// a ten-second reference): while the device is busy it answers the counts as of the last
+    /// time it was free, with fresh upload figures.
     pub fn stats(&self) -> EngineStats {
-        let state = self.state.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+        let state = match self.state.try_lock() {
+            Ok(state) => state,
+            Err(std::sync::TryLockError::Poisoned(poisoned)) => poisoned.into_inner(),
+            Err(std::sync::TryLockError::WouldBlock) => {
+                let last = self.last_stats.lock().unwrap_or_else(|p| p.into_inner()).clone();
+                return EngineStats { uploads: self.upload_stats(), ..last };
+            }
+        };
+        let stats = Self::stats_of(&state, self);
+        *self.last_stats.lock().unwrap_or_else(|p| p.into_inner()) = stats.clone();
+        stats
+    }
+
+    fn stats_of(state: &State, engine: &Engine) -> EngineStats {
         let r = &state.renderer;
         EngineStats {
             scenes_cached: state.scenes.len(),
@@ -329,9 +348,9 @@ impl Engine {
             targets_reused: r.textures.stats.reused,
             derived_created: r.derived.stats.created,
             derived_reused: r.derived.stats.reused,
-            reference_cache_hits: self.reference_hits.load(std::sync::atomic::Ordering::Relaxed),
-            reference_cache_misses: self.reference_misses.load(std::sync::atomic::Ordering::Relaxed),
-            uploads: self.upload_stats(),
+            reference_cache_hits: engine.reference_hits.load(std::sync::atomic::Ordering::Relaxed),
+            reference_cache_misses: engine.reference_misses.load(std::sync::atomic::Ordering::Relaxed),
+            uploads: engine.upload_stats(),
         }
     }
 

@@ -13,6 +13,7 @@ pub mod gpu;
 pub mod job;
 pub mod light;
 pub mod methods;
+pub mod metrics;
 pub mod output;
 pub mod quality;
 pub mod render;

@@ -504,3 +504,55 @@ async fn uploads_are_content_addressed_cached_under_a_budget_and_rendered_by_id(
     let (status, _) = upload("/v1/lights", b"GIF89a".to_vec()).await;
     assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY);
 }
+
+#[tokio::test(flavor = "multi_thread")]
+async fn metrics_parse_as_prometheus_text_and_move_with_jobs() {
+    let (base, _dir) = start().await;
+    let client = reqwest::Client::new();
+    let scrape = || {
+        let request = client.get(format!("{base}/metrics"));
+        async move {
+            let response = request.send().await.unwrap();
+            assert_eq!(response.status(), StatusCode::OK);
+            assert!(response.headers()[reqwest::header::CONTENT_TYPE].to_str().unwrap().starts_with("text/plain; version=0.0.4"));
+            let text = response.text().await.unwrap();
+            prometheus_parse::Scrape::parse(text.lines().map(|l| Ok(l.to_owned()))).expect("Prometheus text format")
+        }
+    };
+    let value = |scrape: &prometheus_parse::Scrape, name: &str, labels: &[(&str, &str)]| -> f64 {
+        scrape
+            .samples
+            .iter()
+            .filter(|s| s.metric == name && labels.iter().all(|(k, v)| s.labels.get(k) == Some(*v)))
+            .map(|s| match s.value {
+                prometheus_parse::Value::Counter(v) | prometheus_parse::Value::Gauge(v) | prometheus_parse::Value::Untyped(v) => v,
+                prometheus_parse::Value::Histogram(ref buckets) => buckets.last().map_or(0.0, |b| b.count),
+                _ => 0.0,
+            })
+            .sum()
+    };
+    let before = scrape().await;
+    // One good job, one bad one, one unknown method (labelled `unknown`, not by the client's text).
+    client.post(format!("{base}/v1/render")).json(&small_job("png")).send().await.unwrap();
+    client.post(format!("{base}/v1/render")).body("{").send().await.unwrap();
+    let mut unknown = small_job("png");
+    unknown["method"] = json!({"name": "made-up"});
+    client.post(format!("{base}/v1/render")).json(&unknown).send().await.unwrap();
+    let after = scrape().await;
+    let jobs = |s: &prometheus_parse::Scrape, outcome: &str| value(s, "penumbra_jobs_total", &[("outcome", outcome)]);
+    assert_eq!(jobs(&after, "ok") - jobs(&before, "ok"), 1.0);
+    assert_eq!(jobs(&after, "invalid_json") - jobs(&before, "invalid_json"), 1.0);
+    assert_eq!(value(&after, "penumbra_jobs_total", &[("method", "unknown"), ("outcome", "unknown_method")]), 1.0);
+    assert!(!after.samples.iter().any(|s| s.labels.values().any(|v| v == "made-up")), "client text never becomes a label");
+    assert!(value(&after, "penumbra_phase_duration_seconds_count", &[("phase", "shadow_map")]) >= 1.0);
+    assert_eq!(value(&after, "penumbra_jobs_in_flight", &[]), 0.0);
+    assert!(value(&after, "penumbra_engine", &[("what", "pipelines")]) > 0.0);
+    assert_eq!(value(&after, "penumbra_device_info", &[]), 1.0);
+    // The same state as JSON for the dashboard.
+    let stats: Value = client.get(format!("{base}/v1/stats")).send().await.unwrap().json().await.unwrap();
+    assert!(
+        stats["engine"]["pipelines"].as_u64().unwrap() > 0 && stats["engine"]["uploads"]["budget_bytes"].as_u64().unwrap() > 0,
+        "{stats}"
+    );
+    assert_eq!(stats["jobs_in_flight"], 0);
+}

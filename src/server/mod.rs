@@ -34,6 +34,7 @@ struct ResultStore {
 
 pub struct AppState {
     engine: Arc<Engine>,
+    metrics: crate::metrics::Metrics,
     results: Mutex<ResultStore>,
     ready: AtomicBool,
     next_id: AtomicU64,
@@ -43,6 +44,7 @@ pub struct AppState {
 impl AppState {
     pub fn new(engine: Arc<Engine>, results_kept: usize) -> Self {
         Self {
+            metrics: crate::metrics::Metrics::new(&engine.gpu().adapter),
             engine,
             results: Mutex::new(ResultStore { entries: VecDeque::new(), capacity: results_kept.max(1) }),
             ready: AtomicBool::new(false),
@@ -86,6 +88,8 @@ pub fn app(state: Arc<AppState>) -> Router {
         .route("/v1/lights/{id}", axum::routing::delete(delete_upload))
         .route("/v1/jobs/{id}", get(job_record))
         .route("/v1/jobs/{id}/image", get(job_image))
+        .route("/v1/stats", get(stats))
+        .route("/metrics", get(metrics))
         .route("/healthz", get(|| async { Json(json!({"status": "ok"})) }))
         .route("/readyz", get(readyz))
         .fallback(|| async { ApiError(JobError::new(ErrorCode::NotFound, "no such route")) })
@@ -211,8 +215,34 @@ fn wants_json(headers: &HeaderMap) -> bool {
 }
 
 async fn render(State(state): State<Arc<AppState>>, headers: HeaderMap, body: Result<Bytes, BytesRejection>) -> Result<Response, ApiError> {
-    let body = body.map_err(|rejection| body_error(&state, rejection, ErrorCode::InvalidJson))?;
-    let job = Job::from_json(&body)?;
+    let started = std::time::Instant::now();
+    let _in_flight = state.metrics.job_started();
+    let body = body.map_err(|rejection| body_error(&state, rejection, ErrorCode::InvalidJson));
+    let job = body.and_then(|body| Job::from_json(&body));
+    let method = job.as_ref().map(|j| j.method.name.clone()).unwrap_or_default();
+    let outcome = match job {
+        Ok(job) => render_job(&state, job).await,
+        Err(error) => Err(error),
+    };
+    let seconds = started.elapsed().as_secs_f64();
+    match outcome {
+        Ok((id, rendered)) => {
+            state.metrics.job_finished(&method, "ok", seconds, Some(&rendered.timings));
+            if wants_json(&headers) {
+                Ok(Json(job_json(&id, &rendered)).into_response())
+            } else {
+                Ok(image_response(&id, &rendered))
+            }
+        }
+        Err(error) => {
+            state.metrics.job_finished(&method, error.code.as_str(), seconds, None);
+            Err(ApiError(error))
+        }
+    }
+}
+
+/// Renders a parsed job on the blocking pool and keeps the result for `/v1/jobs/{id}`.
+async fn render_job(state: &Arc<AppState>, job: Job) -> Result<(String, Arc<Rendered>), JobError> {
     let id = state.new_id();
     let span = tracing::info_span!("job", %id, method = %job.method.name);
     let engine = state.engine.clone();
@@ -224,11 +254,22 @@ async fn render(State(state): State<Arc<AppState>>, headers: HeaderMap, body: Re
     tracing::info!(%id, total_ms = rendered.timings.total_ms, "job done");
     let rendered = Arc::new(rendered);
     state.keep(id.clone(), rendered.clone());
-    if wants_json(&headers) {
-        Ok(Json(job_json(&id, &rendered)).into_response())
-    } else {
-        Ok(image_response(&id, &rendered))
-    }
+    Ok((id, rendered))
+}
+
+/// `GET /metrics`: Prometheus text format.
+async fn metrics(State(state): State<Arc<AppState>>) -> Response {
+    let text = state.metrics.encode(&state.engine.stats());
+    ([(header::CONTENT_TYPE, HeaderValue::from_static("text/plain; version=0.0.4; charset=utf-8"))], text).into_response()
+}
+
+/// `GET /v1/stats`: the engine's caches, pools and uploads, and jobs in flight, as JSON.
+async fn stats(State(state): State<Arc<AppState>>) -> Json<Value> {
+    Json(json!({
+        "adapter": state.engine.gpu().adapter,
+        "jobs_in_flight": state.metrics.in_flight(),
+        "engine": state.engine.stats(),
+    }))
 }
 
 fn job_json(id: &str, rendered: &Rendered) -> Value {

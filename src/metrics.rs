@@ -1,0 +1,128 @@
+//! The daemon's Prometheus metrics (`GET /metrics`, text format 0.0.4) through the
+//! `prometheus` crate: jobs by method and outcome, latency by method and by render phase, jobs
+//! in flight, and — read from the engine at each scrape — the upload cache, the GPU pools and
+//! the device. Method labels are registered method names only (a client's typo is `unknown`),
+//! so label sets stay bounded.
+
+use prometheus::{Encoder, HistogramOpts, HistogramVec, IntCounterVec, IntGauge, IntGaugeVec, Opts, Registry, TextEncoder};
+
+use crate::engine::EngineStats;
+use crate::gpu::AdapterSummary;
+use crate::methods::REGISTRY;
+use crate::timing::Timings;
+
+/// Latency buckets in seconds: 1 ms to 2 min, for a `hard` preview through a long `reference`.
+const BUCKETS: &[f64] = &[0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0, 10.0, 25.0, 60.0, 120.0];
+
+pub struct Metrics {
+    registry: Registry,
+    jobs: IntCounterVec,
+    latency: HistogramVec,
+    phases: HistogramVec,
+    in_flight: IntGauge,
+    /// Set from `EngineStats` at each scrape.
+    engine: IntGaugeVec,
+}
+
+/// Counts a job in flight until dropped.
+pub struct InFlight<'a>(&'a IntGauge);
+
+impl Drop for InFlight<'_> {
+    fn drop(&mut self) {
+        self.0.dec();
+    }
+}
+
+impl Metrics {
+    pub fn new(adapter: &AdapterSummary) -> Self {
+        let registry = Registry::new_custom(Some("penumbra".into()), None).expect("a valid prefix");
+        let jobs = IntCounterVec::new(
+            Opts::new("jobs_total", "Jobs finished, by method and outcome (ok or an error code)"),
+            &["method", "outcome"],
+        )
+        .expect("valid metric");
+        let latency = HistogramVec::new(
+            HistogramOpts::new("job_duration_seconds", "Wall time of successful jobs, from the request to the encoded image")
+                .buckets(BUCKETS.to_vec()),
+            &["method"],
+        )
+        .expect("valid metric");
+        let phases = HistogramVec::new(
+            HistogramOpts::new("phase_duration_seconds", "Wall time of each render phase of successful jobs").buckets(BUCKETS.to_vec()),
+            &["method", "phase"],
+        )
+        .expect("valid metric");
+        let in_flight = IntGauge::new("jobs_in_flight", "Jobs being rendered or waiting for the device").expect("valid metric");
+        let engine = IntGaugeVec::new(Opts::new("engine", "Engine state: caches, pools, uploads (see the `what` label)"), &["what"])
+            .expect("valid metric");
+        let device =
+            IntGaugeVec::new(Opts::new("device_info", "The adapter in use (value 1)"), &["name", "backend", "kind"]).expect("valid metric");
+        device.with_label_values(&[adapter.name.as_str(), adapter.backend.as_str(), adapter.device_type.as_str()]).set(1);
+        for collector in [
+            Box::new(jobs.clone()) as Box<dyn prometheus::core::Collector>,
+            Box::new(latency.clone()),
+            Box::new(phases.clone()),
+            Box::new(in_flight.clone()),
+            Box::new(engine.clone()),
+            Box::new(device),
+        ] {
+            registry.register(collector).expect("metric names are unique");
+        }
+        Self { registry, jobs, latency, phases, in_flight, engine }
+    }
+
+    pub fn job_started(&self) -> InFlight<'_> {
+        self.in_flight.inc();
+        InFlight(&self.in_flight)
+    }
+
+    /// Records a finished job: its outcome, and for a success its latency and phases.
+    pub fn job_finished(&self, method: &str, outcome: &str, seconds: f64, timings: Option<&Timings>) {
+        let method = label(method);
+        self.jobs.with_label_values(&[method, outcome]).inc();
+        if let Some(timings) = timings {
+            self.latency.with_label_values(&[method]).observe(seconds);
+            for phase in &timings.phases {
+                self.phases.with_label_values(&[method, phase.name]).observe(phase.cpu_ms / 1e3);
+            }
+        }
+    }
+
+    /// The text exposition, with the engine's state read now.
+    pub fn encode(&self, stats: &EngineStats) -> String {
+        let u = &stats.uploads;
+        for (what, value) in [
+            ("scenes_cached", stats.scenes_cached as u64),
+            ("scene_cache_hits", stats.scene_cache_hits),
+            ("scene_cache_misses", stats.scene_cache_misses),
+            ("pipelines", stats.pipelines as u64),
+            ("pipelines_compiled", stats.pipelines_compiled),
+            ("targets_created", stats.targets_created),
+            ("targets_reused", stats.targets_reused),
+            ("derived_created", stats.derived_created),
+            ("derived_reused", stats.derived_reused),
+            ("reference_cache_hits", stats.reference_cache_hits),
+            ("reference_cache_misses", stats.reference_cache_misses),
+            ("upload_entries", u.entries as u64),
+            ("upload_bytes", u.bytes),
+            ("upload_budget_bytes", u.budget_bytes),
+            ("upload_hits", u.hits),
+            ("upload_misses", u.misses),
+            ("upload_evictions", u.evictions),
+        ] {
+            self.engine.with_label_values(&[what]).set(i64::try_from(value).unwrap_or(i64::MAX));
+        }
+        let mut text = Vec::new();
+        TextEncoder::new().encode(&self.registry.gather(), &mut text).expect("text encoding into memory");
+        String::from_utf8(text).expect("the text format is UTF-8")
+    }
+
+    pub fn in_flight(&self) -> i64 {
+        self.in_flight.get()
+    }
+}
+
+/// A method name fit for a label: a registered method, else `unknown`.
+fn label(method: &str) -> &'static str {
+    REGISTRY.iter().map(|m| m.name()).find(|name| *name == method).unwrap_or("unknown")
+}
