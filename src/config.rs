@@ -81,6 +81,18 @@ pub struct ServeConfig {
     #[arg(long, env = "PENUMBRA_CACHE_BYTES", default_value_t = crate::engine::DEFAULT_CACHE_BYTES)]
     pub cache_bytes: u64,
 
+    /// Render jobs admitted at once, waiting or running; one more answers 429 with Retry-After.
+    #[arg(long, env = "PENUMBRA_QUEUE", default_value_t = 64, value_parser = clap::value_parser!(u32).range(1..))]
+    pub queue: u32,
+
+    /// Jobs on the device at once.
+    #[arg(long, env = "PENUMBRA_CONCURRENCY", default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
+    pub concurrency: u32,
+
+    /// Seconds a job may wait in the queue before it fails with 503 `deadline_exceeded`.
+    #[arg(long, env = "PENUMBRA_DEADLINE_SECS", default_value_t = 120.0)]
+    pub deadline_secs: f64,
+
     /// Skip compiling pipelines and uploading the default scene before accepting jobs.
     #[arg(long, env = "PENUMBRA_NO_WARM_UP")]
     pub no_warm_up: bool,

@@ -31,6 +31,10 @@ pub enum ErrorCode {
     PayloadTooLarge,
     /// No such job, result or route.
     NotFound,
+    /// The job queue is full: retry after the `Retry-After` seconds.
+    QueueFull,
+    /// The job waited in the queue past the configured deadline without starting.
+    DeadlineExceeded,
     /// Something failed inside the renderer; the message is generic towards clients.
     Internal,
 }
@@ -49,6 +53,8 @@ impl ErrorCode {
             ErrorCode::LimitExceeded => "limit_exceeded",
             ErrorCode::PayloadTooLarge => "payload_too_large",
             ErrorCode::NotFound => "not_found",
+            ErrorCode::QueueFull => "queue_full",
+            ErrorCode::DeadlineExceeded => "deadline_exceeded",
             ErrorCode::Internal => "internal",
         }
     }

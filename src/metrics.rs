@@ -20,11 +20,12 @@ pub struct Metrics {
     latency: HistogramVec,
     phases: HistogramVec,
     in_flight: IntGauge,
+    queued: IntGauge,
     /// Set from `EngineStats` at each scrape.
     engine: IntGaugeVec,
 }
 
-/// Counts a job in flight until dropped.
+/// Counts a job in a gauge (queued, or in flight) until dropped.
 pub struct InFlight<'a>(&'a IntGauge);
 
 impl Drop for InFlight<'_> {
@@ -52,7 +53,8 @@ impl Metrics {
             &["method", "phase"],
         )
         .expect("valid metric");
-        let in_flight = IntGauge::new("jobs_in_flight", "Jobs being rendered or waiting for the device").expect("valid metric");
+        let in_flight = IntGauge::new("jobs_in_flight", "Jobs being rendered").expect("valid metric");
+        let queued = IntGauge::new("jobs_queued", "Jobs admitted and waiting for the device").expect("valid metric");
         let engine = IntGaugeVec::new(Opts::new("engine", "Engine state: caches, pools, uploads (see the `what` label)"), &["what"])
             .expect("valid metric");
         let device =
@@ -63,15 +65,23 @@ impl Metrics {
             Box::new(latency.clone()),
             Box::new(phases.clone()),
             Box::new(in_flight.clone()),
+            Box::new(queued.clone()),
             Box::new(engine.clone()),
             Box::new(device),
         ] {
             registry.register(collector).expect("metric names are unique");
         }
-        Self { registry, jobs, latency, phases, in_flight, engine }
+        Self { registry, jobs, latency, phases, in_flight, queued, engine }
     }
 
-    pub fn job_started(&self) -> InFlight<'_> {
+    /// Counts a job as waiting for the device until the guard drops.
+    pub fn job_queued(&self) -> InFlight<'_> {
+        self.queued.inc();
+        InFlight(&self.queued)
+    }
+
+    /// Counts a job as rendering until the guard drops.
+    pub fn job_running(&self) -> InFlight<'_> {
         self.in_flight.inc();
         InFlight(&self.in_flight)
     }
@@ -119,6 +129,10 @@ impl Metrics {
 
     pub fn in_flight(&self) -> i64 {
         self.in_flight.get()
+    }
+
+    pub fn queued(&self) -> i64 {
+        self.queued.get()
     }
 }
 

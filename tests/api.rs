@@ -24,12 +24,23 @@ async fn start_with_engine() -> (String, tempdir::Dir, Arc<Engine>) {
 
 /// The same server with an upload cache of `cache_bytes`.
 async fn start_with_cache(cache_bytes: u64) -> (String, tempdir::Dir, Arc<Engine>) {
+    start_with(cache_bytes, penumbra::server::QueueConfig::default()).await
+}
+
+/// The same server with an upload cache of `cache_bytes` and the job queue `queue`.
+async fn start_with(cache_bytes: u64, queue: penumbra::server::QueueConfig) -> (String, tempdir::Dir, Arc<Engine>) {
+    let (base, dir, engine, _) = start_with_state(cache_bytes, queue).await;
+    (base, dir, engine)
+}
+
+/// `start_with`, also handing back the server's state.
+async fn start_with_state(cache_bytes: u64, queue: penumbra::server::QueueConfig) -> (String, tempdir::Dir, Arc<Engine>, Arc<AppState>) {
     let scene_dir = tempdir::Dir::new();
     std::fs::write(scene_dir.path().join("inside.png"), b"not really a png").unwrap();
     let gpu = common::engine().gpu_arc();
     let limits = Limits { max_body_bytes: 64 * 1024, max_output_dim: 2048, ..Limits::default() };
     let engine = Arc::new(Engine::new(gpu, limits, PathPolicy::Under(scene_dir.path().to_path_buf())).with_cache_budget(cache_bytes));
-    let state = Arc::new(AppState::new(engine.clone(), 8));
+    let state = Arc::new(AppState::new(engine.clone(), 8).with_queue(queue));
     let warm = state.clone();
     let warm_engine = engine.clone();
     tokio::task::spawn_blocking(move || {
@@ -40,8 +51,9 @@ async fn start_with_cache(cache_bytes: u64) -> (String, tempdir::Dir, Arc<Engine
     .unwrap();
     let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
     let base = format!("http://{}", listener.local_addr().unwrap());
-    tokio::spawn(async move { axum::serve(listener, app(state)).await.unwrap() });
-    (base, scene_dir, engine)
+    let served = state.clone();
+    tokio::spawn(async move { axum::serve(listener, app(served)).await.unwrap() });
+    (base, scene_dir, engine, state)
 }
 
 fn warm_up(engine: &Engine) {
@@ -555,4 +567,65 @@ async fn metrics_parse_as_prometheus_text_and_move_with_jobs() {
         "{stats}"
     );
     assert_eq!(stats["jobs_in_flight"], 0);
+}
+
+/// Polls `/v1/stats` (at most 30 s) until `ready` holds for it.
+async fn wait_for_stats(client: &reqwest::Client, base: &str, ready: impl Fn(&Value) -> bool) {
+    for _ in 0..600 {
+        let stats: Value = client.get(format!("{base}/v1/stats")).send().await.unwrap().json().await.unwrap();
+        if ready(&stats) {
+            return;
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+    }
+    panic!("the server never reached the expected state");
+}
+
+#[tokio::test(flavor = "multi_thread")]
+async fn the_queue_is_bounded_has_a_deadline_and_drops_jobs_whose_client_left() {
+    use penumbra::server::QueueConfig;
+    use std::time::Duration;
+    let client = reqwest::Client::new();
+    let render = |base: &str| client.post(format!("{base}/v1/render")).json(&small_job("png")).send();
+
+    // Room for one job. With the device held, one job is admitted and waits; the next is
+    // refused at once with 429 and Retry-After; once the device is free the first completes.
+    let one = QueueConfig { capacity: 1, concurrency: 1, deadline: Duration::from_secs(60) };
+    let (base, _dir, _, state) = start_with_state(penumbra::engine::DEFAULT_CACHE_BYTES, one).await;
+    let held = state.try_hold_device().expect("the device is free");
+    let waiting = tokio::spawn(render(&base));
+    wait_for_stats(&client, &base, |s| s["jobs_queued"] == 1).await;
+    let refused = render(&base).await.unwrap();
+    assert_eq!(refused.status(), StatusCode::TOO_MANY_REQUESTS);
+    assert_eq!(refused.headers()[reqwest::header::RETRY_AFTER], "1");
+    assert_eq!(refused.json::<Value>().await.unwrap()["error"]["code"], "queue_full");
+    drop(held);
+    assert_eq!(waiting.await.unwrap().unwrap().status(), StatusCode::OK, "the admitted job runs once the device is free");
+
+    // A job that cannot reach the device before the deadline fails with 503; one whose client
+    // gives up while it waits is dropped, never rendered, and counted as cancelled.
+    let short = QueueConfig { capacity: 8, concurrency: 1, deadline: Duration::from_secs(1) };
+    let (base, _dir, _, state) = start_with_state(penumbra::engine::DEFAULT_CACHE_BYTES, short).await;
+    let held = state.try_hold_device().expect("the device is free");
+    let late = render(&base).await.unwrap();
+    assert_eq!(late.status(), StatusCode::SERVICE_UNAVAILABLE);
+    assert_eq!(late.json::<Value>().await.unwrap()["error"]["code"], "deadline_exceeded");
+    let impatient = reqwest::Client::builder().timeout(Duration::from_millis(100)).build().unwrap();
+    assert!(impatient.post(format!("{base}/v1/render")).json(&small_job("png")).send().await.is_err(), "the client gives up");
+    let cancelled = |text: &str| {
+        text.lines().any(|l| l.starts_with("penumbra_jobs_total{") && l.contains("outcome=\"cancelled\"") && l.ends_with(" 1"))
+    };
+    let mut seen = false;
+    for _ in 0..100 {
+        let text = client.get(format!("{base}/metrics")).send().await.unwrap().text().await.unwrap();
+        if cancelled(&text) {
+            seen = true;
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    assert!(seen, "the abandoned job is counted as cancelled");
+    drop(held);
+    wait_for_stats(&client, &base, |s| s["jobs_queued"] == 0 && s["jobs_in_flight"] == 0).await;
+    assert_eq!(render(&base).await.unwrap().status(), StatusCode::OK, "the queue serves again");
 }

@@ -28,6 +28,8 @@ pub fn status_of(code: ErrorCode) -> StatusCode {
         | ErrorCode::UnknownBuiltin
         | ErrorCode::InvalidAsset
         | ErrorCode::LimitExceeded => StatusCode::UNPROCESSABLE_ENTITY,
+        ErrorCode::QueueFull => StatusCode::TOO_MANY_REQUESTS,
+        ErrorCode::DeadlineExceeded => StatusCode::SERVICE_UNAVAILABLE,
         ErrorCode::Internal => StatusCode::INTERNAL_SERVER_ERROR,
     }
 }
@@ -46,6 +48,11 @@ impl IntoResponse for ApiError {
         if let Some(field) = error.field {
             body["field"] = json!(field);
         }
-        (status, Json(json!({ "error": body }))).into_response()
+        let mut response = (status, Json(json!({ "error": body }))).into_response();
+        if error.code == ErrorCode::QueueFull {
+            // A job takes about a second on lavapipe: try again then.
+            response.headers_mut().insert(axum::http::header::RETRY_AFTER, axum::http::HeaderValue::from_static("1"));
+        }
+        response
     }
 }

@@ -32,9 +32,29 @@ struct ResultStore {
     capacity: usize,
 }
 
+/// The job queue's shape: jobs admitted at once (waiting or running), jobs on the device at
+/// once, and how long a job may wait.
+#[derive(Debug, Clone, Copy)]
+pub struct QueueConfig {
+    pub capacity: u32,
+    pub concurrency: u32,
+    pub deadline: std::time::Duration,
+}
+
+impl Default for QueueConfig {
+    fn default() -> Self {
+        Self { capacity: 64, concurrency: 1, deadline: std::time::Duration::from_secs(120) }
+    }
+}
+
 pub struct AppState {
     engine: Arc<Engine>,
     metrics: crate::metrics::Metrics,
+    /// One permit per admitted job; none left → 429.
+    admission: Arc<tokio::sync::Semaphore>,
+    /// One permit per job on the device.
+    device: Arc<tokio::sync::Semaphore>,
+    deadline: std::time::Duration,
     results: Mutex<ResultStore>,
     ready: AtomicBool,
     next_id: AtomicU64,
@@ -43,14 +63,33 @@ pub struct AppState {
 
 impl AppState {
     pub fn new(engine: Arc<Engine>, results_kept: usize) -> Self {
+        let queue = QueueConfig::default();
         Self {
             metrics: crate::metrics::Metrics::new(&engine.gpu().adapter),
+            admission: Arc::new(tokio::sync::Semaphore::new(queue.capacity as usize)),
+            device: Arc::new(tokio::sync::Semaphore::new(queue.concurrency as usize)),
+            deadline: queue.deadline,
             engine,
             results: Mutex::new(ResultStore { entries: VecDeque::new(), capacity: results_kept.max(1) }),
             ready: AtomicBool::new(false),
             next_id: AtomicU64::new(1),
             started: std::time::SystemTime::now(),
         }
+    }
+
+    pub fn with_queue(self, queue: QueueConfig) -> Self {
+        Self {
+            admission: Arc::new(tokio::sync::Semaphore::new(queue.capacity as usize)),
+            device: Arc::new(tokio::sync::Semaphore::new(queue.concurrency as usize)),
+            deadline: queue.deadline,
+            ..self
+        }
+    }
+
+    /// Takes a device slot as a job would, until the permit drops: jobs queue behind it. For
+    /// tests of the queue (and for an operator draining the device), not for jobs.
+    pub fn try_hold_device(&self) -> Option<tokio::sync::OwnedSemaphorePermit> {
+        self.device.clone().try_acquire_owned().ok()
     }
 
     pub fn set_ready(&self) {
@@ -99,7 +138,12 @@ pub fn app(state: Arc<AppState>) -> Router {
 
 /// Binds, warms up, serves until SIGINT or SIGTERM, then finishes requests in flight.
 pub async fn serve(config: ServeConfig, engine: Arc<Engine>) -> anyhow::Result<()> {
-    let state = Arc::new(AppState::new(engine.clone(), config.results_kept));
+    let queue = QueueConfig {
+        capacity: config.queue,
+        concurrency: config.concurrency,
+        deadline: std::time::Duration::from_secs_f64(config.deadline_secs.max(0.0)),
+    };
+    let state = Arc::new(AppState::new(engine.clone(), config.results_kept).with_queue(queue));
     let listener = tokio::net::TcpListener::bind(config.listen).await?;
     tracing::info!(address = %listener.local_addr()?, "listening");
     let warm = state.clone();
@@ -216,12 +260,11 @@ fn wants_json(headers: &HeaderMap) -> bool {
 
 async fn render(State(state): State<Arc<AppState>>, headers: HeaderMap, body: Result<Bytes, BytesRejection>) -> Result<Response, ApiError> {
     let started = std::time::Instant::now();
-    let _in_flight = state.metrics.job_started();
     let body = body.map_err(|rejection| body_error(&state, rejection, ErrorCode::InvalidJson));
     let job = body.and_then(|body| Job::from_json(&body));
     let method = job.as_ref().map(|j| j.method.name.clone()).unwrap_or_default();
     let outcome = match job {
-        Ok(job) => render_job(&state, job).await,
+        Ok(job) => queue_and_render(&state, &method, job).await,
         Err(error) => Err(error),
     };
     let seconds = started.elapsed().as_secs_f64();
@@ -241,12 +284,62 @@ async fn render(State(state): State<Arc<AppState>>, headers: HeaderMap, body: Re
     }
 }
 
-/// Renders a parsed job on the blocking pool and keeps the result for `/v1/jobs/{id}`.
-async fn render_job(state: &Arc<AppState>, job: Job) -> Result<(String, Arc<Rendered>), JobError> {
+/// Counts a queued job as `cancelled` if its request goes away (the client disconnected and
+/// axum dropped the handler) before the job reaches the device.
+struct CancelWatch<'a> {
+    state: &'a AppState,
+    method: &'a str,
+    armed: bool,
+}
+
+impl Drop for CancelWatch<'_> {
+    fn drop(&mut self) {
+        if self.armed {
+            tracing::info!(method = self.method, "client went away: queued job cancelled");
+            self.state.metrics.job_finished(self.method, "cancelled", 0.0, None);
+        }
+    }
+}
+
+/// Admits the job (or answers 429), waits for the device up to the deadline (or 503), renders.
+async fn queue_and_render(state: &Arc<AppState>, method: &str, job: Job) -> Result<(String, Arc<Rendered>), JobError> {
+    let admitted = state
+        .admission
+        .clone()
+        .try_acquire_owned()
+        .map_err(|_| JobError::new(ErrorCode::QueueFull, "the job queue is full; retry after the Retry-After seconds"))?;
+    let mut watch = CancelWatch { state, method, armed: true };
+    let waiting = state.metrics.job_queued();
+    let device = tokio::time::timeout(state.deadline, state.device.clone().acquire_owned()).await;
+    watch.armed = false;
+    drop(waiting);
+    let device = match device {
+        Ok(Ok(permit)) => permit,
+        Ok(Err(_)) => return Err(JobError::internal("the device queue is closed")),
+        Err(_) => {
+            return Err(JobError::new(
+                ErrorCode::DeadlineExceeded,
+                format!("the job waited {:.1} s in the queue without reaching the device", state.deadline.as_secs_f64()),
+            ))
+        }
+    };
+    let _running = state.metrics.job_running();
+    render_job(state, job, (admitted, device)).await
+}
+
+/// Renders a job on the blocking pool and keeps the result for `/v1/jobs/{id}`. The queue
+/// permits live in the render task: a client that goes away mid-render frees its place only
+/// when the device does.
+async fn render_job(
+    state: &Arc<AppState>,
+    job: Job,
+    permits: (tokio::sync::OwnedSemaphorePermit, tokio::sync::OwnedSemaphorePermit),
+) -> Result<(String, Arc<Rendered>), JobError> {
     let id = state.new_id();
     let span = tracing::info_span!("job", %id, method = %job.method.name);
     let engine = state.engine.clone();
     let rendered = tokio::task::spawn_blocking(move || {
+        let _permits = permits;
         span.in_scope(|| engine.render_observed(&job, &|done, total| tracing::debug!(done, total, "progress")))
     })
     .await
@@ -268,6 +361,7 @@ async fn stats(State(state): State<Arc<AppState>>) -> Json<Value> {
     Json(json!({
         "adapter": state.engine.gpu().adapter,
         "jobs_in_flight": state.metrics.in_flight(),
+        "jobs_queued": state.metrics.queued(),
         "engine": state.engine.stats(),
     }))
 }
