@@ -629,3 +629,46 @@ async fn the_queue_is_bounded_has_a_deadline_and_drops_jobs_whose_client_left() 
     wait_for_stats(&client, &base, |s| s["jobs_queued"] == 0 && s["jobs_in_flight"] == 0).await;
     assert_eq!(render(&base).await.unwrap().status(), StatusCode::OK, "the queue serves again");
 }
+
+#[tokio::test(flavor = "multi_thread")]
+async fn submitted_jobs_report_progress_as_server_sent_events_and_finish() {
+    let (base, _dir) = start().await;
+    let client = reqwest::Client::new();
+    let job = json!({"scene": {"builtin": "occluder"}, "method": {"name": "reference", "samples": 24, "resolution": 256},
+                     "output": {"width": 64, "height": 48}});
+    let accepted = client.post(format!("{base}/v1/jobs")).json(&job).send().await.unwrap();
+    assert_eq!(accepted.status(), StatusCode::ACCEPTED);
+    let location = accepted.headers()[reqwest::header::LOCATION].to_str().unwrap().to_owned();
+    let links: Value = accepted.json().await.unwrap();
+    assert_eq!(location, links["record"]);
+    // The stream ends after the final event, so the whole body can be read.
+    let stream = client.get(format!("{base}{}", links["events"].as_str().unwrap())).send().await.unwrap();
+    assert_eq!(stream.headers()[reqwest::header::CONTENT_TYPE], "text/event-stream");
+    let text = stream.text().await.unwrap();
+    let events: Vec<(String, Value)> = text
+        .split("\n\n")
+        .filter(|block| block.contains("data:"))
+        .map(|block| {
+            let name = block.lines().find_map(|l| l.strip_prefix("event: ")).unwrap_or_default().to_owned();
+            let data = block.lines().find_map(|l| l.strip_prefix("data: ")).unwrap();
+            (name, serde_json::from_str(data).unwrap())
+        })
+        .collect();
+    let (last, rest) = events.split_last().expect("events");
+    assert_eq!(last.0, "succeeded", "{text}");
+    assert!(rest.iter().all(|(name, _)| name == "progress"), "{text}");
+    // Samples done only grow, and reach all of them.
+    let done: Vec<u64> = events.iter().map(|(_, e)| e["done"].as_u64().unwrap()).collect();
+    assert!(done.windows(2).all(|w| w[0] <= w[1]), "{done:?}");
+    assert_eq!(last.1["done"], last.1["total"]);
+    assert!(last.1["total"].as_u64().unwrap() >= 24, "{}", last.1);
+    // The record and the image.
+    let record: Value = client.get(format!("{base}{location}")).send().await.unwrap().json().await.unwrap();
+    assert_eq!(record["status"], "succeeded");
+    let image = client.get(format!("{base}{}/image", location)).send().await.unwrap();
+    assert_eq!(image.headers()[reqwest::header::CONTENT_TYPE], "image/png");
+    // A bad job is refused at submission, not later.
+    let bad = client.post(format!("{base}/v1/jobs")).json(&json!({"method": {"name": "nope"}})).send().await.unwrap();
+    assert_eq!(bad.status(), StatusCode::UNPROCESSABLE_ENTITY);
+    assert_eq!(client.get(format!("{base}/v1/jobs/0/events")).send().await.unwrap().status(), StatusCode::NOT_FOUND);
+}

@@ -26,6 +26,28 @@ use crate::methods::REGISTRY;
 use crate::scene::builtin::BUILTIN_SCENES;
 use error::ApiError;
 
+/// The state of a submitted job as its events report it.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct JobEvent {
+    /// `queued`, `running`, `succeeded` or `failed`.
+    status: &'static str,
+    /// Progress of long methods: steps done of all (samples for `reference`); 0 of 0 otherwise.
+    done: u64,
+    total: u64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    error: Option<Value>,
+}
+
+impl JobEvent {
+    fn status(status: &'static str) -> Self {
+        Self { status, done: 0, total: 0, error: None }
+    }
+
+    fn finished(&self) -> bool {
+        matches!(self.status, "succeeded" | "failed")
+    }
+}
+
 /// Finished renders, newest last, kept so a JSON answer can link to its image.
 struct ResultStore {
     entries: VecDeque<(String, Arc<Rendered>)>,
@@ -55,6 +77,9 @@ pub struct AppState {
     /// One permit per job on the device.
     device: Arc<tokio::sync::Semaphore>,
     deadline: std::time::Duration,
+    /// Jobs submitted with `POST /v1/jobs`, by id: the latest event of each (finished ones too,
+    /// the oldest dropped beyond `results_kept`).
+    submitted: Mutex<VecDeque<(String, tokio::sync::watch::Sender<JobEvent>)>>,
     results: Mutex<ResultStore>,
     ready: AtomicBool,
     next_id: AtomicU64,
@@ -69,6 +94,7 @@ impl AppState {
             admission: Arc::new(tokio::sync::Semaphore::new(queue.capacity as usize)),
             device: Arc::new(tokio::sync::Semaphore::new(queue.concurrency as usize)),
             deadline: queue.deadline,
+            submitted: Mutex::new(VecDeque::new()),
             engine,
             results: Mutex::new(ResultStore { entries: VecDeque::new(), capacity: results_kept.max(1) }),
             ready: AtomicBool::new(false),
@@ -110,6 +136,27 @@ impl AppState {
         store.entries.push_back((id, rendered));
     }
 
+    /// The event channel of a submitted job.
+    fn submitted(&self, id: &str) -> Option<tokio::sync::watch::Sender<JobEvent>> {
+        let submitted = self.submitted.lock().unwrap_or_else(|p| p.into_inner());
+        submitted.iter().find(|(k, _)| k == id).map(|(_, tx)| tx.clone())
+    }
+
+    fn submit(&self, id: String, events: tokio::sync::watch::Sender<JobEvent>) {
+        let mut submitted = self.submitted.lock().unwrap_or_else(|p| p.into_inner());
+        let capacity = self.results.lock().unwrap_or_else(|p| p.into_inner()).capacity;
+        // Finished jobs beyond the kept results go first; jobs still waiting or running stay.
+        while submitted.len() >= capacity {
+            match submitted.iter().position(|(_, tx)| tx.borrow().finished()) {
+                Some(at) => {
+                    submitted.remove(at);
+                }
+                None => break,
+            }
+        }
+        submitted.push_back((id, events));
+    }
+
     fn find(&self, id: &str) -> Option<Arc<Rendered>> {
         let store = self.results.lock().unwrap_or_else(|p| p.into_inner());
         store.entries.iter().find(|(k, _)| k == id).map(|(_, r)| r.clone())
@@ -125,7 +172,9 @@ pub fn app(state: Arc<AppState>) -> Router {
         .route("/v1/lights", post(upload_light))
         .route("/v1/scenes/{id}", axum::routing::delete(delete_upload))
         .route("/v1/lights/{id}", axum::routing::delete(delete_upload))
+        .route("/v1/jobs", post(submit_job))
         .route("/v1/jobs/{id}", get(job_record))
+        .route("/v1/jobs/{id}/events", get(job_events))
         .route("/v1/jobs/{id}/image", get(job_image))
         .route("/v1/stats", get(stats))
         .route("/metrics", get(metrics))
@@ -395,8 +444,116 @@ fn image_response(id: &str, rendered: &Rendered) -> Response {
 }
 
 async fn job_record(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Result<Json<Value>, ApiError> {
-    let rendered = state.find(&id).ok_or_else(|| unknown_job(&id))?;
-    Ok(Json(job_json(&id, &rendered)))
+    if let Some(rendered) = state.find(&id) {
+        return Ok(Json(job_json(&id, &rendered)));
+    }
+    let events = state.submitted(&id).ok_or_else(|| unknown_job(&id))?;
+    let event = events.borrow().clone();
+    Ok(Json(json!({"id": id, "status": event.status, "progress": {"done": event.done, "total": event.total}, "error": event.error})))
+}
+
+/// `POST /v1/jobs`: validates and admits the job (4xx, or 429 when the queue is full), answers
+/// 202 with its id at once, and renders it in the background: `GET /v1/jobs/{id}` for its
+/// state, `/events` for server-sent progress, `/image` once it succeeded.
+async fn submit_job(State(state): State<Arc<AppState>>, body: Result<Bytes, BytesRejection>) -> Result<Response, ApiError> {
+    let body = body.map_err(|rejection| body_error(&state, rejection, ErrorCode::InvalidJson));
+    let job = body.and_then(|body| Job::from_json(&body)).and_then(|job| job.validate(state.engine.limits()).map(|_| job));
+    let job = job.inspect_err(|error| state.metrics.job_finished("", error.code.as_str(), 0.0, None))?;
+    let admitted = state.admission.clone().try_acquire_owned().map_err(|_| {
+        let error = JobError::new(ErrorCode::QueueFull, "the job queue is full; retry after the Retry-After seconds");
+        state.metrics.job_finished(&job.method.name, error.code.as_str(), 0.0, None);
+        error
+    })?;
+    let id = state.new_id();
+    let (events, _) = tokio::sync::watch::channel(JobEvent::status("queued"));
+    state.submit(id.clone(), events.clone());
+    let task_state = state.clone();
+    let task_id = id.clone();
+    tokio::spawn(async move { run_submitted(task_state, task_id, job, admitted, events).await });
+    let links = json!({"id": id, "status": "queued", "record": format!("/v1/jobs/{id}"), "events": format!("/v1/jobs/{id}/events")});
+    Ok((StatusCode::ACCEPTED, [(header::LOCATION, format!("/v1/jobs/{id}"))], Json(links)).into_response())
+}
+
+/// A submitted job's life: wait for the device (up to the deadline), render with progress
+/// events, keep the result.
+async fn run_submitted(
+    state: Arc<AppState>,
+    id: String,
+    job: Job,
+    admitted: tokio::sync::OwnedSemaphorePermit,
+    events: tokio::sync::watch::Sender<JobEvent>,
+) {
+    let started = std::time::Instant::now();
+    let method = job.method.name.clone();
+    let waiting = state.metrics.job_queued();
+    let device = tokio::time::timeout(state.deadline, state.device.clone().acquire_owned()).await;
+    drop(waiting);
+    let outcome = match device {
+        Ok(Ok(device)) => {
+            events.send_replace(JobEvent::status("running"));
+            let _running = state.metrics.job_running();
+            let engine = state.engine.clone();
+            let progress = events.clone();
+            let span = tracing::info_span!("job", %id, method = %method);
+            tokio::task::spawn_blocking(move || {
+                let _permits = (admitted, device);
+                let report = |done, total| {
+                    progress.send_modify(|event| {
+                        event.done = done;
+                        event.total = total;
+                    })
+                };
+                span.in_scope(|| engine.render_observed(&job, &report))
+            })
+            .await
+            .unwrap_or_else(|e| Err(JobError::internal(format!("render task failed: {e}"))))
+        }
+        Ok(Err(_)) => Err(JobError::internal("the device queue is closed")),
+        Err(_) => Err(JobError::new(ErrorCode::DeadlineExceeded, "the job waited past the deadline without reaching the device")),
+    };
+    let seconds = started.elapsed().as_secs_f64();
+    match outcome {
+        Ok(rendered) => {
+            state.metrics.job_finished(&method, "ok", seconds, Some(&rendered.timings));
+            tracing::info!(%id, total_ms = rendered.timings.total_ms, "job done");
+            state.keep(id, Arc::new(rendered));
+            events.send_modify(|event| event.status = "succeeded");
+        }
+        Err(error) => {
+            state.metrics.job_finished(&method, error.code.as_str(), seconds, None);
+            let body = ApiError(error).into_response();
+            let status = body.status();
+            let bytes = axum::body::to_bytes(body.into_body(), 64 * 1024).await.unwrap_or_default();
+            let mut detail: Value = serde_json::from_slice(&bytes).unwrap_or(Value::Null);
+            detail["error"]["status"] = json!(status.as_u16());
+            events.send_modify(|event| {
+                event.status = "failed";
+                event.error = Some(detail["error"].clone());
+            });
+        }
+    }
+}
+
+/// `GET /v1/jobs/{id}/events`: server-sent events — `progress` with the job's state at once and
+/// on every change, then one `succeeded` or `failed`, and the stream ends.
+async fn job_events(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Result<Response, ApiError> {
+    use axum::response::sse::{Event, KeepAlive, Sse};
+    let events = state.submitted(&id).ok_or_else(|| unknown_job(&id))?;
+    let receiver = events.subscribe();
+    // (receiver, ended): the current state first, then each change, until a final one.
+    let stream = futures_util::stream::unfold((receiver, false, true), |(mut receiver, ended, first)| async move {
+        if ended {
+            return None;
+        }
+        if !first && receiver.changed().await.is_err() {
+            return None;
+        }
+        let event = receiver.borrow_and_update().clone();
+        let name = if event.finished() { event.status } else { "progress" };
+        let sse = Event::default().event(name).json_data(&event).unwrap_or_else(|_| Event::default().event(name));
+        Some((Ok::<_, std::convert::Infallible>(sse), (receiver, event.finished(), false)))
+    });
+    Ok(Sse::new(stream).keep_alive(KeepAlive::default()).into_response())
 }
 
 async fn job_image(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Result<Response, ApiError> {
