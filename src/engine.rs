@@ -59,6 +59,9 @@ pub struct EngineStats {
     /// Look-up tables and other resources derived from a job's light, built or reused.
     pub derived_created: u64,
     pub derived_reused: u64,
+    /// Readback buffers allocated or taken from the pool.
+    pub readbacks_created: u64,
+    pub readbacks_reused: u64,
     pub reference_cache_hits: u64,
     pub reference_cache_misses: u64,
     pub uploads: UploadStats,
@@ -348,6 +351,8 @@ impl Engine {
             targets_reused: r.textures.stats.reused,
             derived_created: r.derived.stats.created,
             derived_reused: r.derived.stats.reused,
+            readbacks_created: r.readbacks.stats.created,
+            readbacks_reused: r.readbacks.stats.reused,
             reference_cache_hits: engine.reference_hits.load(std::sync::atomic::Ordering::Relaxed),
             reference_cache_misses: engine.reference_misses.load(std::sync::atomic::Ordering::Relaxed),
             uploads: engine.upload_stats(),

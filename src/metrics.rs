@@ -111,6 +111,8 @@ impl Metrics {
             ("targets_reused", stats.targets_reused),
             ("derived_created", stats.derived_created),
             ("derived_reused", stats.derived_reused),
+            ("readbacks_created", stats.readbacks_created),
+            ("readbacks_reused", stats.readbacks_reused),
             ("reference_cache_hits", stats.reference_cache_hits),
             ("reference_cache_misses", stats.reference_cache_misses),
             ("upload_entries", u.entries as u64),

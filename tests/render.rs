@@ -842,3 +842,23 @@ fn golden_crowd_wedges() {
     let job = job(json!({"scene": {"builtin": "crowd"}, "method": {"name": "wedges"}, "output": {"width": 256, "height": 192}}));
     common::check_golden("crowd-wedges", &common::engine().render(&job).unwrap().bytes, 0.01, 0.1);
 }
+
+#[test]
+fn a_steady_stream_of_jobs_allocates_nothing_new() {
+    // Its own engine, so that no other test's jobs move its counters.
+    let engine = penumbra::engine::Engine::new(common::engine().gpu_arc(), Limits::default(), penumbra::engine::PathPolicy::Deny);
+    let job =
+        job(json!({"scene": {"builtin": "torus"}, "method": {"name": "pcss"}, "output": {"width": 96, "height": 64, "format": "exr"}}));
+    engine.render(&job).unwrap();
+    let first = engine.stats();
+    for _ in 0..3 {
+        engine.render(&job).unwrap();
+    }
+    let later = engine.stats();
+    assert_eq!(
+        (later.pipelines_compiled, later.targets_created, later.readbacks_created, later.scene_cache_misses),
+        (first.pipelines_compiled, first.targets_created, first.readbacks_created, first.scene_cache_misses),
+        "{first:?} → {later:?}"
+    );
+    assert!(later.targets_reused > first.targets_reused && later.readbacks_reused >= first.readbacks_reused + 3 * 4, "{later:?}");
+}

@@ -135,6 +135,44 @@ impl TexturePool {
     }
 }
 
+/// Free readback (MAP_READ) buffers by size: the readbacks of a steady stream of same-sized
+/// jobs reuse them instead of allocating. At most `max_free_per_size` idle ones per size.
+pub struct ReadbackPool {
+    free: HashMap<u64, Vec<wgpu::Buffer>>,
+    max_free_per_size: usize,
+    pub stats: PoolStats,
+}
+
+impl Default for ReadbackPool {
+    fn default() -> Self {
+        Self { free: HashMap::new(), max_free_per_size: 4, stats: PoolStats::default() }
+    }
+}
+
+impl ReadbackPool {
+    pub fn alloc(&mut self, device: &wgpu::Device, size: u64) -> wgpu::Buffer {
+        if let Some(buffer) = self.free.get_mut(&size).and_then(Vec::pop) {
+            self.stats.reused += 1;
+            return buffer;
+        }
+        self.stats.created += 1;
+        device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("Readback::buffer"),
+            size,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        })
+    }
+
+    /// Takes back an unmapped buffer.
+    pub fn release(&mut self, buffer: wgpu::Buffer) {
+        let list = self.free.entry(buffer.size()).or_default();
+        if list.len() < self.max_free_per_size {
+            list.push(buffer);
+        }
+    }
+}
+
 /// Identifies a texture derived from a job's inputs: the method or pass that derives it and a
 /// fingerprint of everything it depends on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]

@@ -1,6 +1,8 @@
 //! Copies render targets back to the CPU: row padding to the 256-byte copy alignment on the
-//! way out, removed on the way in, all targets of a frame in one submission.
+//! way out, removed on the way in, all targets of a frame in one submission, through buffers
+//! from a `ReadbackPool`.
 
+use super::pool::ReadbackPool;
 use super::GpuContext;
 
 pub struct Readback {
@@ -13,16 +15,17 @@ impl Readback {
     }
 
     /// Records a copy of `texture` and returns its index in `finish`'s result.
-    pub fn copy(&mut self, gpu: &GpuContext, encoder: &mut wgpu::CommandEncoder, texture: &wgpu::Texture) -> usize {
+    pub fn copy(
+        &mut self,
+        gpu: &GpuContext,
+        pool: &mut ReadbackPool,
+        encoder: &mut wgpu::CommandEncoder,
+        texture: &wgpu::Texture,
+    ) -> usize {
         let block = texture.format().block_copy_size(Some(wgpu::TextureAspect::All)).expect("colour format");
         let row_bytes = texture.width() * block;
         let padded = row_bytes.div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
-        let buffer = gpu.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("Readback::buffer"),
-            size: u64::from(padded) * u64::from(texture.height()),
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
+        let buffer = pool.alloc(&gpu.device, u64::from(padded) * u64::from(texture.height()));
         encoder.copy_texture_to_buffer(
             texture.as_image_copy(),
             wgpu::TexelCopyBufferInfo {
@@ -36,8 +39,8 @@ impl Readback {
     }
 
     /// Waits for the copies (submitted by the caller) and returns each texture's tightly
-    /// packed bytes, top row first.
-    pub fn finish(self, gpu: &GpuContext) -> Vec<Vec<u8>> {
+    /// packed bytes, top row first; the buffers go back to `pool`.
+    pub fn finish(self, gpu: &GpuContext, pool: &mut ReadbackPool) -> Vec<Vec<u8>> {
         for (buffer, ..) in &self.pending {
             buffer.slice(..).map_async(wgpu::MapMode::Read, |_| {});
         }
@@ -53,6 +56,7 @@ impl Readback {
                 }
                 drop(mapped);
                 buffer.unmap();
+                pool.release(buffer);
                 out
             })
             .collect()

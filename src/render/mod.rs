@@ -12,7 +12,7 @@ use std::time::Instant;
 use glam::Vec3;
 
 use crate::gpu::layout;
-use crate::gpu::pool::{DerivedResources, PipelineKey, PipelinePool, PooledTexture, TextureKey, TexturePool};
+use crate::gpu::pool::{DerivedResources, PipelineKey, PipelinePool, PooledTexture, ReadbackPool, TextureKey, TexturePool};
 use crate::gpu::readback::Readback;
 use crate::gpu::scene::GpuScene;
 use crate::gpu::shaders;
@@ -152,6 +152,7 @@ pub struct Renderer {
     pub pipelines: PipelinePool,
     pub textures: TexturePool,
     pub derived: DerivedResources,
+    pub readbacks: ReadbackPool,
     timer: GpuTimer,
     layouts: Layouts,
     uniforms: wgpu::Buffer,
@@ -210,6 +211,7 @@ impl Renderer {
             pipelines: PipelinePool::default(),
             textures: TexturePool::default(),
             derived: DerivedResources::default(),
+            readbacks: ReadbackPool::default(),
             timer,
             layouts,
             uniforms,
@@ -294,12 +296,13 @@ impl Renderer {
         // Readback of what the output format needs, and of the GPU timestamps.
         let mut enc = encoder();
         let mut readback = Readback::new();
-        let color_index = readback.copy(&gpu, &mut enc, &targets.color.texture);
-        let visibility_index = spec.readbacks.visibility.then(|| readback.copy(&gpu, &mut enc, &targets.visibility.texture));
-        let e0_index = spec.readbacks.visibility.then(|| readback.copy(&gpu, &mut enc, &targets.e0.texture));
-        let depth_index = spec.readbacks.depth.then(|| readback.copy(&gpu, &mut enc, &targets.depth.texture));
+        let pool = &mut self.readbacks;
+        let color_index = readback.copy(&gpu, pool, &mut enc, &targets.color.texture);
+        let visibility_index = spec.readbacks.visibility.then(|| readback.copy(&gpu, pool, &mut enc, &targets.visibility.texture));
+        let e0_index = spec.readbacks.visibility.then(|| readback.copy(&gpu, pool, &mut enc, &targets.e0.texture));
+        let depth_index = spec.readbacks.depth.then(|| readback.copy(&gpu, pool, &mut enc, &targets.depth.texture));
         gpu.queue.submit([enc.finish()]);
-        let images = readback.finish(&gpu);
+        let images = readback.finish(&gpu, pool);
         let gpu_times = self.timer.read(&gpu);
         let color: Vec<[f32; 4]> = bytemuck::cast_slice(&images[color_index]).to_vec();
         // V = E/E0 is undefined where E0 = 0 (a surface facing away from the light, or behind
