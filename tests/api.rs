@@ -355,8 +355,14 @@ fn cli_renders_the_embedded_default_and_example_jobs() {
 
     let example = concat!(env!("CARGO_MANIFEST_DIR"), "/api/examples/torus-stripes.json");
     let exr = dir.path().join("example.exr");
-    let status = std::process::Command::new(exe).args(["render", example, "-o", exr.to_str().unwrap()]).status().unwrap();
-    assert!(status.success());
+    // Logs as JSON objects for collectors.
+    let output =
+        std::process::Command::new(exe).args(["--log-format", "json", "render", example, "-o", exr.to_str().unwrap()]).output().unwrap();
+    assert!(output.status.success());
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    let adapter_line = stderr.lines().find(|l| l.contains("GPU adapter")).expect("the adapter is logged");
+    let logged: Value = serde_json::from_str(adapter_line).expect("a JSON log line");
+    assert_eq!(logged["level"], "INFO");
     let (_, _, channels) = common::decode_exr(&std::fs::read(&exr).unwrap());
     assert!(channels.contains_key("visibility.G"));
 
