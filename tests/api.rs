@@ -678,3 +678,22 @@ async fn submitted_jobs_report_progress_as_server_sent_events_and_finish() {
     assert_eq!(bad.status(), StatusCode::UNPROCESSABLE_ENTITY);
     assert_eq!(client.get(format!("{base}/v1/jobs/0/events")).send().await.unwrap().status(), StatusCode::NOT_FOUND);
 }
+
+#[tokio::test(flavor = "multi_thread")]
+async fn draining_for_shutdown_waits_for_submitted_jobs_and_admits_no_more() {
+    use std::time::Duration;
+    let queue = penumbra::server::QueueConfig { capacity: 4, concurrency: 1, deadline: Duration::from_secs(60) };
+    let (base, _dir, _, state) = start_with_state(penumbra::engine::DEFAULT_CACHE_BYTES, queue).await;
+    let client = reqwest::Client::new();
+    let held = state.try_hold_device().expect("the device is free");
+    let accepted: Value = client.post(format!("{base}/v1/jobs")).json(&small_job("png")).send().await.unwrap().json().await.unwrap();
+    wait_for_stats(&client, &base, |s| s["jobs_queued"] == 1).await;
+    let draining = state.clone();
+    let drain = tokio::spawn(async move { draining.drain(Duration::from_secs(60)).await });
+    drop(held);
+    assert!(drain.await.unwrap(), "the submitted job finished before the drain returned");
+    let record: Value = client.get(format!("{base}{}", accepted["record"].as_str().unwrap())).send().await.unwrap().json().await.unwrap();
+    assert_eq!(record["status"], "succeeded");
+    let after = client.post(format!("{base}/v1/render")).json(&small_job("png")).send().await.unwrap();
+    assert_eq!(after.status(), StatusCode::TOO_MANY_REQUESTS, "a drained server admits nothing new");
+}

@@ -74,6 +74,7 @@ pub struct AppState {
     metrics: crate::metrics::Metrics,
     /// One permit per admitted job; none left → 429.
     admission: Arc<tokio::sync::Semaphore>,
+    capacity: u32,
     /// One permit per job on the device.
     device: Arc<tokio::sync::Semaphore>,
     deadline: std::time::Duration,
@@ -92,6 +93,7 @@ impl AppState {
         Self {
             metrics: crate::metrics::Metrics::new(&engine.gpu().adapter),
             admission: Arc::new(tokio::sync::Semaphore::new(queue.capacity as usize)),
+            capacity: queue.capacity,
             device: Arc::new(tokio::sync::Semaphore::new(queue.concurrency as usize)),
             deadline: queue.deadline,
             submitted: Mutex::new(VecDeque::new()),
@@ -106,6 +108,7 @@ impl AppState {
     pub fn with_queue(self, queue: QueueConfig) -> Self {
         Self {
             admission: Arc::new(tokio::sync::Semaphore::new(queue.capacity as usize)),
+            capacity: queue.capacity,
             device: Arc::new(tokio::sync::Semaphore::new(queue.concurrency as usize)),
             deadline: queue.deadline,
             ..self
@@ -116,6 +119,19 @@ impl AppState {
     /// tests of the queue (and for an operator draining the device), not for jobs.
     pub fn try_hold_device(&self) -> Option<tokio::sync::OwnedSemaphorePermit> {
         self.device.clone().try_acquire_owned().ok()
+    }
+
+    /// Waits (up to `limit`) until no job is admitted — none waiting, none rendering, submitted
+    /// ones included — so a shutdown finishes the work it accepted. Returns whether it drained.
+    pub async fn drain(&self, limit: std::time::Duration) -> bool {
+        // Every admission permit back means every admitted job has finished; holding them all
+        // keeps new ones out.
+        tokio::time::timeout(limit, self.admission.acquire_many(self.capacity)).await.is_ok_and(|permits| {
+            permits.is_ok_and(|p| {
+                p.forget();
+                true
+            })
+        })
     }
 
     pub fn set_ready(&self) {
@@ -208,7 +224,11 @@ pub async fn serve(config: ServeConfig, engine: Arc<Engine>) -> anyhow::Result<(
         warm.set_ready();
         tracing::info!(duration_ms = started.elapsed().as_millis() as u64, "ready: pipelines compiled, default scene uploaded");
     });
-    axum::serve(listener, app(state)).with_graceful_shutdown(shutdown_signal()).await?;
+    axum::serve(listener, app(state.clone())).with_graceful_shutdown(shutdown_signal()).await?;
+    // Requests in flight have finished; jobs submitted with POST /v1/jobs may still run.
+    if !state.drain(state.deadline + std::time::Duration::from_secs(600)).await {
+        tracing::warn!("shut down with submitted jobs unfinished");
+    }
     tracing::info!("shut down");
     Ok(())
 }
