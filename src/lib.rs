@@ -11,6 +11,7 @@ pub mod error;
 pub mod eval;
 pub mod gpu;
 pub mod job;
+pub mod jobs;
 pub mod light;
 pub mod methods;
 pub mod metrics;

@@ -4,9 +4,8 @@
 
 pub mod error;
 
-use std::collections::VecDeque;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 
 use axum::body::Bytes;
 use axum::extract::rejection::BytesRejection;
@@ -26,62 +25,14 @@ use crate::methods::REGISTRY;
 use crate::scene::builtin::BUILTIN_SCENES;
 use error::ApiError;
 
-/// The state of a submitted job as its events report it.
-#[derive(Debug, Clone, serde::Serialize)]
-pub struct JobEvent {
-    /// `queued`, `running`, `succeeded` or `failed`.
-    status: &'static str,
-    /// Progress of long methods: steps done of all (samples for `reference`); 0 of 0 otherwise.
-    done: u64,
-    total: u64,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    error: Option<Value>,
-}
-
-impl JobEvent {
-    fn status(status: &'static str) -> Self {
-        Self { status, done: 0, total: 0, error: None }
-    }
-
-    fn finished(&self) -> bool {
-        matches!(self.status, "succeeded" | "failed")
-    }
-}
-
-/// Finished renders, newest last, kept so a JSON answer can link to its image.
-struct ResultStore {
-    entries: VecDeque<(String, Arc<Rendered>)>,
-    capacity: usize,
-}
-
-/// The job queue's shape: jobs admitted at once (waiting or running), jobs on the device at
-/// once, and how long a job may wait.
-#[derive(Debug, Clone, Copy)]
-pub struct QueueConfig {
-    pub capacity: u32,
-    pub concurrency: u32,
-    pub deadline: std::time::Duration,
-}
-
-impl Default for QueueConfig {
-    fn default() -> Self {
-        Self { capacity: 64, concurrency: 1, deadline: std::time::Duration::from_secs(120) }
-    }
-}
+pub use crate::jobs::QueueConfig;
+use crate::jobs::{JobEvent, JobQueue, JobStore};
 
 pub struct AppState {
     engine: Arc<Engine>,
     metrics: crate::metrics::Metrics,
-    /// One permit per admitted job; none left → 429.
-    admission: Arc<tokio::sync::Semaphore>,
-    capacity: u32,
-    /// One permit per job on the device.
-    device: Arc<tokio::sync::Semaphore>,
-    deadline: std::time::Duration,
-    /// Jobs submitted with `POST /v1/jobs`, by id: the latest event of each (finished ones too,
-    /// the oldest dropped beyond `results_kept`).
-    submitted: Mutex<VecDeque<(String, tokio::sync::watch::Sender<JobEvent>)>>,
-    results: Mutex<ResultStore>,
+    queue: JobQueue,
+    jobs: JobStore,
     ready: AtomicBool,
     next_id: AtomicU64,
     started: std::time::SystemTime,
@@ -89,16 +40,11 @@ pub struct AppState {
 
 impl AppState {
     pub fn new(engine: Arc<Engine>, results_kept: usize) -> Self {
-        let queue = QueueConfig::default();
         Self {
             metrics: crate::metrics::Metrics::new(&engine.gpu().adapter),
-            admission: Arc::new(tokio::sync::Semaphore::new(queue.capacity as usize)),
-            capacity: queue.capacity,
-            device: Arc::new(tokio::sync::Semaphore::new(queue.concurrency as usize)),
-            deadline: queue.deadline,
-            submitted: Mutex::new(VecDeque::new()),
+            queue: JobQueue::new(QueueConfig::default()),
+            jobs: JobStore::new(results_kept),
             engine,
-            results: Mutex::new(ResultStore { entries: VecDeque::new(), capacity: results_kept.max(1) }),
             ready: AtomicBool::new(false),
             next_id: AtomicU64::new(1),
             started: std::time::SystemTime::now(),
@@ -106,32 +52,17 @@ impl AppState {
     }
 
     pub fn with_queue(self, queue: QueueConfig) -> Self {
-        Self {
-            admission: Arc::new(tokio::sync::Semaphore::new(queue.capacity as usize)),
-            capacity: queue.capacity,
-            device: Arc::new(tokio::sync::Semaphore::new(queue.concurrency as usize)),
-            deadline: queue.deadline,
-            ..self
-        }
+        Self { queue: JobQueue::new(queue), ..self }
     }
 
-    /// Takes a device slot as a job would, until the permit drops: jobs queue behind it. For
-    /// tests of the queue (and for an operator draining the device), not for jobs.
+    /// See `JobQueue::try_hold_device`.
     pub fn try_hold_device(&self) -> Option<tokio::sync::OwnedSemaphorePermit> {
-        self.device.clone().try_acquire_owned().ok()
+        self.queue.try_hold_device()
     }
 
-    /// Waits (up to `limit`) until no job is admitted — none waiting, none rendering, submitted
-    /// ones included — so a shutdown finishes the work it accepted. Returns whether it drained.
+    /// See `JobQueue::drain`: for a shutdown that finishes the work it accepted.
     pub async fn drain(&self, limit: std::time::Duration) -> bool {
-        // Every admission permit back means every admitted job has finished; holding them all
-        // keeps new ones out.
-        tokio::time::timeout(limit, self.admission.acquire_many(self.capacity)).await.is_ok_and(|permits| {
-            permits.is_ok_and(|p| {
-                p.forget();
-                true
-            })
-        })
+        self.queue.drain(limit).await
     }
 
     pub fn set_ready(&self) {
@@ -142,40 +73,6 @@ impl AppState {
     fn new_id(&self) -> String {
         let epoch = self.started.duration_since(std::time::UNIX_EPOCH).map(|d| d.as_millis()).unwrap_or(0);
         format!("{epoch:012x}{:08x}", self.next_id.fetch_add(1, Ordering::Relaxed))
-    }
-
-    fn keep(&self, id: String, rendered: Arc<Rendered>) {
-        let mut store = self.results.lock().unwrap_or_else(|p| p.into_inner());
-        if store.entries.len() >= store.capacity {
-            store.entries.pop_front();
-        }
-        store.entries.push_back((id, rendered));
-    }
-
-    /// The event channel of a submitted job.
-    fn submitted(&self, id: &str) -> Option<tokio::sync::watch::Sender<JobEvent>> {
-        let submitted = self.submitted.lock().unwrap_or_else(|p| p.into_inner());
-        submitted.iter().find(|(k, _)| k == id).map(|(_, tx)| tx.clone())
-    }
-
-    fn submit(&self, id: String, events: tokio::sync::watch::Sender<JobEvent>) {
-        let mut submitted = self.submitted.lock().unwrap_or_else(|p| p.into_inner());
-        let capacity = self.results.lock().unwrap_or_else(|p| p.into_inner()).capacity;
-        // Finished jobs beyond the kept results go first; jobs still waiting or running stay.
-        while submitted.len() >= capacity {
-            match submitted.iter().position(|(_, tx)| tx.borrow().finished()) {
-                Some(at) => {
-                    submitted.remove(at);
-                }
-                None => break,
-            }
-        }
-        submitted.push_back((id, events));
-    }
-
-    fn find(&self, id: &str) -> Option<Arc<Rendered>> {
-        let store = self.results.lock().unwrap_or_else(|p| p.into_inner());
-        store.entries.iter().find(|(k, _)| k == id).map(|(_, r)| r.clone())
     }
 }
 
@@ -226,7 +123,7 @@ pub async fn serve(config: ServeConfig, engine: Arc<Engine>) -> anyhow::Result<(
     });
     axum::serve(listener, app(state.clone())).with_graceful_shutdown(shutdown_signal()).await?;
     // Requests in flight have finished; jobs submitted with POST /v1/jobs may still run.
-    if !state.drain(state.deadline + std::time::Duration::from_secs(600)).await {
+    if !state.drain(state.queue.deadline + std::time::Duration::from_secs(600)).await {
         tracing::warn!("shut down with submitted jobs unfinished");
     }
     tracing::info!("shut down");
@@ -372,26 +269,13 @@ impl Drop for CancelWatch<'_> {
 
 /// Admits the job (or answers 429), waits for the device up to the deadline (or 503), renders.
 async fn queue_and_render(state: &Arc<AppState>, method: &str, job: Job) -> Result<(String, Arc<Rendered>), JobError> {
-    let admitted = state
-        .admission
-        .clone()
-        .try_acquire_owned()
-        .map_err(|_| JobError::new(ErrorCode::QueueFull, "the job queue is full; retry after the Retry-After seconds"))?;
+    let admitted = state.queue.admit()?;
     let mut watch = CancelWatch { state, method, armed: true };
     let waiting = state.metrics.job_queued();
-    let device = tokio::time::timeout(state.deadline, state.device.clone().acquire_owned()).await;
+    let device = state.queue.device().await;
     watch.armed = false;
     drop(waiting);
-    let device = match device {
-        Ok(Ok(permit)) => permit,
-        Ok(Err(_)) => return Err(JobError::internal("the device queue is closed")),
-        Err(_) => {
-            return Err(JobError::new(
-                ErrorCode::DeadlineExceeded,
-                format!("the job waited {:.1} s in the queue without reaching the device", state.deadline.as_secs_f64()),
-            ))
-        }
-    };
+    let device = device?;
     let _running = state.metrics.job_running();
     render_job(state, job, (admitted, device)).await
 }
@@ -415,7 +299,7 @@ async fn render_job(
     .map_err(|e| JobError::internal(format!("render task failed: {e}")))??;
     tracing::info!(%id, total_ms = rendered.timings.total_ms, "job done");
     let rendered = Arc::new(rendered);
-    state.keep(id.clone(), rendered.clone());
+    state.jobs.keep(id.clone(), rendered.clone());
     Ok((id, rendered))
 }
 
@@ -464,10 +348,10 @@ fn image_response(id: &str, rendered: &Rendered) -> Response {
 }
 
 async fn job_record(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Result<Json<Value>, ApiError> {
-    if let Some(rendered) = state.find(&id) {
+    if let Some(rendered) = state.jobs.find(&id) {
         return Ok(Json(job_json(&id, &rendered)));
     }
-    let events = state.submitted(&id).ok_or_else(|| unknown_job(&id))?;
+    let events = state.jobs.submitted(&id).ok_or_else(|| unknown_job(&id))?;
     let event = events.borrow().clone();
     Ok(Json(json!({"id": id, "status": event.status, "progress": {"done": event.done, "total": event.total}, "error": event.error})))
 }
@@ -479,14 +363,10 @@ async fn submit_job(State(state): State<Arc<AppState>>, body: Result<Bytes, Byte
     let body = body.map_err(|rejection| body_error(&state, rejection, ErrorCode::InvalidJson));
     let job = body.and_then(|body| Job::from_json(&body)).and_then(|job| job.validate(state.engine.limits()).map(|_| job));
     let job = job.inspect_err(|error| state.metrics.job_finished("", error.code.as_str(), 0.0, None))?;
-    let admitted = state.admission.clone().try_acquire_owned().map_err(|_| {
-        let error = JobError::new(ErrorCode::QueueFull, "the job queue is full; retry after the Retry-After seconds");
-        state.metrics.job_finished(&job.method.name, error.code.as_str(), 0.0, None);
-        error
-    })?;
+    let admitted = state.queue.admit().inspect_err(|error| state.metrics.job_finished(&job.method.name, error.code.as_str(), 0.0, None))?;
     let id = state.new_id();
     let (events, _) = tokio::sync::watch::channel(JobEvent::status("queued"));
-    state.submit(id.clone(), events.clone());
+    state.jobs.submit(id.clone(), events.clone());
     let task_state = state.clone();
     let task_id = id.clone();
     tokio::spawn(async move { run_submitted(task_state, task_id, job, admitted, events).await });
@@ -506,10 +386,10 @@ async fn run_submitted(
     let started = std::time::Instant::now();
     let method = job.method.name.clone();
     let waiting = state.metrics.job_queued();
-    let device = tokio::time::timeout(state.deadline, state.device.clone().acquire_owned()).await;
+    let device = state.queue.device().await;
     drop(waiting);
     let outcome = match device {
-        Ok(Ok(device)) => {
+        Ok(device) => {
             events.send_replace(JobEvent::status("running"));
             let _running = state.metrics.job_running();
             let engine = state.engine.clone();
@@ -528,15 +408,14 @@ async fn run_submitted(
             .await
             .unwrap_or_else(|e| Err(JobError::internal(format!("render task failed: {e}"))))
         }
-        Ok(Err(_)) => Err(JobError::internal("the device queue is closed")),
-        Err(_) => Err(JobError::new(ErrorCode::DeadlineExceeded, "the job waited past the deadline without reaching the device")),
+        Err(error) => Err(error),
     };
     let seconds = started.elapsed().as_secs_f64();
     match outcome {
         Ok(rendered) => {
             state.metrics.job_finished(&method, "ok", seconds, Some(&rendered.timings));
             tracing::info!(%id, total_ms = rendered.timings.total_ms, "job done");
-            state.keep(id, Arc::new(rendered));
+            state.jobs.keep(id, Arc::new(rendered));
             events.send_modify(|event| event.status = "succeeded");
         }
         Err(error) => {
@@ -558,7 +437,7 @@ async fn run_submitted(
 /// on every change, then one `succeeded` or `failed`, and the stream ends.
 async fn job_events(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Result<Response, ApiError> {
     use axum::response::sse::{Event, KeepAlive, Sse};
-    let events = state.submitted(&id).ok_or_else(|| unknown_job(&id))?;
+    let events = state.jobs.submitted(&id).ok_or_else(|| unknown_job(&id))?;
     let receiver = events.subscribe();
     // (receiver, ended): the current state first, then each change, until a final one.
     let stream = futures_util::stream::unfold((receiver, false, true), |(mut receiver, ended, first)| async move {
@@ -577,7 +456,7 @@ async fn job_events(State(state): State<Arc<AppState>>, Path(id): Path<String>) 
 }
 
 async fn job_image(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Result<Response, ApiError> {
-    let rendered = state.find(&id).ok_or_else(|| unknown_job(&id))?;
+    let rendered = state.jobs.find(&id).ok_or_else(|| unknown_job(&id))?;
     Ok(image_response(&id, &rendered))
 }
 
