@@ -21,7 +21,7 @@
 
 use wgpu::util::DeviceExt;
 
-use super::{Counters, MethodContext, ParamKind, ParamSpec, Params, ShadowMethod};
+use super::{Counters, MethodContext, ParamKind, ParamSpec, Params, ShadowMethod, BIAS_TEXELS, SLOPE_BIAS_TEXELS};
 use crate::gpu::layout;
 use crate::gpu::pool::PipelineKey;
 use crate::gpu::readback::read_buffer;
@@ -79,16 +79,8 @@ const PARAMS: &[ParamSpec] = &[
         kind: ParamKind::Float { default: 0.0, min: 0.0, max: 1.0 },
         doc: "jitter of blocker positions for low-resolution maps (§4.3)",
     },
-    ParamSpec {
-        name: "bias_texels",
-        kind: ParamKind::Float { default: 1.5, min: 0.0, max: 64.0 },
-        doc: "constant depth bias of the hard test, texels",
-    },
-    ParamSpec {
-        name: "slope_bias_texels",
-        kind: ParamKind::Float { default: 1.0, min: 0.0, max: 64.0 },
-        doc: "slope-scaled depth bias, texels × tanθ",
-    },
+    BIAS_TEXELS,
+    SLOPE_BIAS_TEXELS,
 ];
 
 /// Laid out as `BrabecParams` in `shaders/methods/brabec/common.wgsl`.

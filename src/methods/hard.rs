@@ -4,24 +4,13 @@
 
 use wgpu::util::DeviceExt;
 
-use super::{Counters, MethodContext, ParamKind, ParamSpec, Params, ShadowMethod};
+use super::{Counters, MethodContext, ParamSpec, Params, ShadowMethod, BIAS_TEXELS, SLOPE_BIAS_TEXELS};
 use crate::gpu::layout;
 use crate::gpu::pool::PipelineKey;
 
 pub struct Hard;
 
-const PARAMS: &[ParamSpec] = &[
-    ParamSpec {
-        name: "bias_texels",
-        kind: ParamKind::Float { default: 1.5, min: 0.0, max: 64.0 },
-        doc: "constant depth bias, in shadow-map texels at the receiver's depth",
-    },
-    ParamSpec {
-        name: "slope_bias_texels",
-        kind: ParamKind::Float { default: 1.0, min: 0.0, max: 64.0 },
-        doc: "slope-scaled depth bias: texels × tan of the angle between normal and light",
-    },
-];
+const PARAMS: &[ParamSpec] = &[BIAS_TEXELS, SLOPE_BIAS_TEXELS];
 
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]

@@ -24,7 +24,7 @@
 use wgpu::util::DeviceExt;
 
 use super::jfa_lut::{intensity_lut, LUT_SIZE};
-use super::{Counters, MethodContext, ParamKind, ParamSpec, Params, ShadowMethod};
+use super::{Counters, MethodContext, ParamKind, ParamSpec, Params, ShadowMethod, BIAS_TEXELS, SLOPE_BIAS_TEXELS};
 use crate::gpu::layout;
 use crate::gpu::pool::{DerivedKey, PipelineKey};
 use crate::gpu::readback::read_buffer;
@@ -42,16 +42,6 @@ const FLOODING: ParamSpec = ParamSpec {
     kind: ParamKind::Choice { default: "jump", options: &["jump", "standard"] },
     doc: "jump flooding, or standard flooding (step 1, 2^rounds − 1 rounds) for the paper's experiment",
 };
-const BIAS: ParamSpec = ParamSpec {
-    name: "bias_texels",
-    kind: ParamKind::Float { default: 1.5, min: 0.0, max: 64.0 },
-    doc: "constant depth bias of the hard test, texels",
-};
-const SLOPE_BIAS: ParamSpec = ParamSpec {
-    name: "slope_bias_texels",
-    kind: ParamKind::Float { default: 1.0, min: 0.0, max: 64.0 },
-    doc: "slope-scaled depth bias, texels × tanθ",
-};
 
 const PARAMS_L: &[ParamSpec] = &[
     ROUNDS,
@@ -61,8 +51,8 @@ const PARAMS_L: &[ParamSpec] = &[
         kind: ParamKind::Float { default: 0.01, min: 0.0, max: 1.0 },
         doc: "a neighbour deeper by more than depth × this marks a silhouette pixel",
     },
-    BIAS,
-    SLOPE_BIAS,
+    BIAS_TEXELS,
+    SLOPE_BIAS_TEXELS,
 ];
 
 const PARAMS_E: &[ParamSpec] = &[
@@ -83,8 +73,8 @@ const PARAMS_E: &[ParamSpec] = &[
         kind: ParamKind::Boolean { default: true },
         doc: "§5.2 remedy: the midpoint towards the boundary pixel must already be in a penumbra",
     },
-    BIAS,
-    SLOPE_BIAS,
+    BIAS_TEXELS,
+    SLOPE_BIAS_TEXELS,
 ];
 
 /// Laid out as `JfaParams` in `shaders/methods/jfa/common.wgsl`, one 256-byte slot per pass.

@@ -108,6 +108,20 @@ pub trait ShadowMethod: Send + Sync {
     fn record(&self, ctx: &mut MethodContext<'_>, params: &Params) -> Counters;
 }
 
+/// The depth bias of a shadow-map test from the light centre, the same for every method that
+/// makes one (`hard`, `pcss`, `chun-oh`, `brabec`, `jfa-l`, `jfa-e`): constant and
+/// slope-scaled, in texels at the receiver's depth (`depth_bias` in `common/shadow.wgsl`).
+pub(super) const BIAS_TEXELS: ParamSpec = ParamSpec {
+    name: "bias_texels",
+    kind: ParamKind::Float { default: 1.5, min: 0.0, max: 64.0 },
+    doc: "constant depth bias of the shadow-map test, in texels at the receiver's depth",
+};
+pub(super) const SLOPE_BIAS_TEXELS: ParamSpec = ParamSpec {
+    name: "slope_bias_texels",
+    kind: ParamKind::Float { default: 1.0, min: 0.0, max: 64.0 },
+    doc: "slope-scaled depth bias: texels × tan of the angle between normal and light",
+};
+
 /// The type, default and range of one method parameter.
 #[derive(Debug, Clone, Copy, Serialize)]
 #[serde(tag = "type", rename_all = "lowercase")]

@@ -14,7 +14,7 @@
 
 use wgpu::util::DeviceExt;
 
-use super::{Counters, MethodContext, ParamKind, ParamSpec, Params, ShadowMethod};
+use super::{Counters, MethodContext, ParamKind, ParamSpec, Params, ShadowMethod, BIAS_TEXELS, SLOPE_BIAS_TEXELS};
 use crate::gpu::layout;
 use crate::gpu::pool::PipelineKey;
 use crate::gpu::readback::read_buffer;
@@ -43,16 +43,8 @@ pub(super) const FILTER_PARAMS: [ParamSpec; 6] = [
         kind: ParamKind::Float { default: 64.0, min: 0.5, max: 1024.0 },
         doc: "cap on the filter's half-width, texels",
     },
-    ParamSpec {
-        name: "bias_texels",
-        kind: ParamKind::Float { default: 1.5, min: 0.0, max: 64.0 },
-        doc: "constant depth bias of each shadow test, texels",
-    },
-    ParamSpec {
-        name: "slope_bias_texels",
-        kind: ParamKind::Float { default: 1.0, min: 0.0, max: 64.0 },
-        doc: "slope-scaled depth bias, texels × tanθ",
-    },
+    BIAS_TEXELS,
+    SLOPE_BIAS_TEXELS,
 ];
 
 /// Laid out as `FilterParams` in `filter.wgsl`.

@@ -76,6 +76,19 @@ fn tile_holds_record(tile: vec2<i32>) -> bool {
     return atomicLoad(&tiles[tile.y * tile_count().x + tile.x]) != 0u;
 }
 
+var<workgroup> in_reach: u32;
+
+// Whether a record may reach this workgroup's tile in this round (`reach_holds_record`), the
+// same answer for the whole workgroup; counts the tiles flooded. Call it first, in uniform
+// control flow.
+fn tile_in_reach(local: u32, group: vec2<u32>) -> bool {
+    if local == 0u {
+        in_reach = u32(reach_holds_record(vec2<i32>(group), params.step, tile_count()));
+        atomicAdd(&counters[2], in_reach);
+    }
+    return workgroupUniformLoad(&in_reach) != 0u;
+}
+
 fn mark_tile(cell: vec2<i32>) {
     atomicStore(&tiles[cell.y / TILE * tile_count().x + cell.x / TILE], 1u);
 }

@@ -6,15 +6,9 @@
 
 #import methods/jfa/common.wgsl
 
-var<workgroup> in_reach: u32;
-
 @compute @workgroup_size(8, 8)
 fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) local: u32, @builtin(workgroup_id) group: vec3<u32>) {
-    if local == 0u {
-        in_reach = u32(reach_holds_record(vec2<i32>(group.xy), params.step, tile_count()));
-        atomicAdd(&counters[2], in_reach);
-    }
-    if workgroupUniformLoad(&in_reach) == 0u {
+    if !tile_in_reach(local, group.xy) {
         return;
     }
     let res = i32(frame.sizes.z);
