@@ -153,13 +153,12 @@ impl Engine {
             return Ok(UploadReceipt { id, created: false, cache_bytes: 0 });
         }
         let asset = decode()?;
-        let before = self.lock_uploads().stats().bytes;
+        let cache_bytes = asset.cost();
         let evicted = self.lock_uploads().insert(id.clone(), asset)?;
-        let after = self.lock_uploads().stats().bytes;
         // Evicted scenes leave the GPU too (uploads first, then the renderer: never both locks
         // the other way round).
         self.forget_gpu_copies(&evicted);
-        Ok(UploadReceipt { id, created: true, cache_bytes: after.saturating_sub(before) })
+        Ok(UploadReceipt { id, created: true, cache_bytes })
     }
 
     /// Removes an upload; false when there was none under `id`.
@@ -334,12 +333,12 @@ impl Engine {
                 return EngineStats { uploads: self.upload_stats(), ..last };
             }
         };
-        let stats = Self::stats_of(&state, self);
+        let stats = self.stats_of(&state);
         *self.last_stats.lock().unwrap_or_else(|p| p.into_inner()) = stats.clone();
         stats
     }
 
-    fn stats_of(state: &State, engine: &Engine) -> EngineStats {
+    fn stats_of(&self, state: &State) -> EngineStats {
         let r = &state.renderer;
         EngineStats {
             scenes_cached: state.scenes.len(),
@@ -353,9 +352,9 @@ impl Engine {
             derived_reused: r.derived.stats.reused,
             readbacks_created: r.readbacks.stats.created,
             readbacks_reused: r.readbacks.stats.reused,
-            reference_cache_hits: engine.reference_hits.load(std::sync::atomic::Ordering::Relaxed),
-            reference_cache_misses: engine.reference_misses.load(std::sync::atomic::Ordering::Relaxed),
-            uploads: engine.upload_stats(),
+            reference_cache_hits: self.reference_hits.load(std::sync::atomic::Ordering::Relaxed),
+            reference_cache_misses: self.reference_misses.load(std::sync::atomic::Ordering::Relaxed),
+            uploads: self.upload_stats(),
         }
     }
 

@@ -22,7 +22,7 @@ pub enum Asset {
 
 impl Asset {
     /// Bytes the asset holds while cached: CPU copy, plus the GPU copy for a scene.
-    fn cost(&self) -> u64 {
+    pub fn cost(&self) -> u64 {
         match self {
             Asset::Scene(scene) => 2 * scene.gpu_bytes(),
             Asset::Light(image) => u64::from(image.width) * u64::from(image.height) * 16,

@@ -34,21 +34,27 @@ pub fn status_of(code: ErrorCode) -> StatusCode {
     }
 }
 
+/// The `error` object clients see for `error`: code, message (generic for internal errors,
+/// which are logged here in full), field. Shared by error responses and failed-job events.
+pub fn error_body(error: &JobError) -> serde_json::Value {
+    let message = if error.is_client_error() {
+        error.message.clone()
+    } else {
+        tracing::error!(message = %error.message, "job failed inside the renderer");
+        "internal error; the job failed and the server keeps serving".to_owned()
+    };
+    let mut body = json!({"code": error.code.as_str(), "message": message});
+    if let Some(field) = &error.field {
+        body["field"] = json!(field);
+    }
+    body
+}
+
 impl IntoResponse for ApiError {
     fn into_response(self) -> Response {
         let error = self.0;
         let status = status_of(error.code);
-        let message = if error.is_client_error() {
-            error.message
-        } else {
-            tracing::error!(message = %error.message, "job failed inside the renderer");
-            "internal error; the job failed and the server keeps serving".to_owned()
-        };
-        let mut body = json!({"code": error.code.as_str(), "message": message});
-        if let Some(field) = error.field {
-            body["field"] = json!(field);
-        }
-        let mut response = (status, Json(json!({ "error": body }))).into_response();
+        let mut response = (status, Json(json!({ "error": error_body(&error) }))).into_response();
         if error.code == ErrorCode::QueueFull {
             // A job takes about a second on lavapipe: try again then.
             response.headers_mut().insert(axum::http::header::RETRY_AFTER, axum::http::HeaderValue::from_static("1"));

@@ -420,14 +420,11 @@ async fn run_submitted(
         }
         Err(error) => {
             state.metrics.job_finished(&method, error.code.as_str(), seconds, None);
-            let body = ApiError(error).into_response();
-            let status = body.status();
-            let bytes = axum::body::to_bytes(body.into_body(), 64 * 1024).await.unwrap_or_default();
-            let mut detail: Value = serde_json::from_slice(&bytes).unwrap_or(Value::Null);
-            detail["error"]["status"] = json!(status.as_u16());
+            let mut detail = error::error_body(&error);
+            detail["status"] = json!(error::status_of(error.code).as_u16());
             events.send_modify(|event| {
                 event.status = "failed";
-                event.error = Some(detail["error"].clone());
+                event.error = Some(detail);
             });
         }
     }
