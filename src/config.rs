@@ -76,6 +76,10 @@ pub struct ServeConfig {
     #[arg(long, env = "PENUMBRA_RESULTS_KEPT", default_value_t = 64)]
     pub results_kept: usize,
 
+    /// Seconds a finished job's record, events and image stay readable.
+    #[arg(long, env = "PENUMBRA_RESULTS_TTL_SECS", default_value_t = 3600.0)]
+    pub results_ttl_secs: f64,
+
     /// Byte budget of the cache of uploaded scenes and light images (a scene counts its CPU
     /// and GPU copies); the least recently used go first.
     #[arg(long, env = "PENUMBRA_CACHE_BYTES", default_value_t = crate::engine::DEFAULT_CACHE_BYTES)]

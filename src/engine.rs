@@ -65,6 +65,8 @@ pub struct EngineStats {
     pub reference_cache_hits: u64,
     pub reference_cache_misses: u64,
     pub uploads: UploadStats,
+    /// Times the GPU device was lost and replaced.
+    pub device_resets: u64,
 }
 
 /// Reference frames kept for `compare` (each is a few MB of floats).
@@ -100,7 +102,9 @@ pub struct UploadReceipt {
 pub const DEFAULT_CACHE_BYTES: u64 = 1 << 30;
 
 pub struct Engine {
-    gpu: Arc<GpuContext>,
+    /// The device in use; replaced (under the state lock) when the device is lost.
+    gpu: std::sync::RwLock<Arc<GpuContext>>,
+    device_resets: std::sync::atomic::AtomicU64,
     limits: Limits,
     paths: PathPolicy,
     uploads: Mutex<UploadStore>,
@@ -118,7 +122,8 @@ impl Engine {
         let renderer = Renderer::new(gpu.clone());
         let state = State { renderer, scenes: HashMap::new(), lights: HashMap::new(), clock: 0, hits: 0, misses: 0 };
         Self {
-            gpu,
+            gpu: std::sync::RwLock::new(gpu),
+            device_resets: Default::default(),
             limits,
             paths,
             state: Mutex::new(state),
@@ -189,13 +194,14 @@ impl Engine {
         self.lock_uploads().get(id).ok_or_else(|| not_uploaded(id, field))
     }
 
-    pub fn gpu(&self) -> &GpuContext {
-        &self.gpu
+    /// The device in use now (another engine may share it: tests, several configurations).
+    pub fn gpu(&self) -> Arc<GpuContext> {
+        self.gpu.read().unwrap_or_else(|p| p.into_inner()).clone()
     }
 
-    /// The shared device, for another engine on the same GPU (tests, several configurations).
-    pub fn gpu_arc(&self) -> Arc<GpuContext> {
-        self.gpu.clone()
+    /// Times the device was lost and replaced.
+    pub fn device_resets(&self) -> u64 {
+        self.device_resets.load(std::sync::atomic::Ordering::Relaxed)
     }
 
     pub fn limits(&self) -> &Limits {
@@ -287,19 +293,56 @@ impl Engine {
         self.render_raw_observed(job, &|_, _| {})
     }
 
+    /// Renders on the device; when the device is lost (before or during the job) it opens a
+    /// new one and retries the job once, so a driver reset costs one slow job, not the daemon.
     pub fn render_raw_observed(&self, job: &Job, progress: &dyn Fn(u64, u64)) -> JobResult<(FrameOutput, Timings)> {
         job.validate(&self.limits)?;
-        let mut timings = Timings::default();
         let mut state = self.state.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+        if state.renderer.gpu().is_lost() {
+            self.recover_device(&mut state)?;
+        }
+        match self.render_on_device(&mut state, job, progress) {
+            Err(_) if state.renderer.gpu().is_lost() => {
+                self.recover_device(&mut state)?;
+                tracing::warn!("retrying the job once on the new device");
+                self.render_on_device(&mut state, job, progress)
+            }
+            outcome => outcome,
+        }
+    }
+
+    fn render_on_device(&self, state: &mut State, job: &Job, progress: &dyn Fn(u64, u64)) -> JobResult<(FrameOutput, Timings)> {
+        let mut timings = Timings::default();
         let start = Instant::now();
-        let scene = self.scene(&mut state, &job.scene, &mut timings)?;
+        let scene = self.scene(state, &job.scene, &mut timings)?;
         timings.scene_triangles = scene.triangles;
         let image_ref = job.light.image.clone().unwrap_or_else(|| scene.defaults.light_image.clone());
-        let light_image = self.light_image(&mut state, &image_ref)?;
+        let light_image = self.light_image(state, &image_ref)?;
         let spec = FrameSpec::resolve(job, &scene, light_image)?;
         timings.phase("scene", start);
-        let frame = self.render_frame(&mut state, &scene, &spec, &mut timings, progress)?;
+        // A lost device makes readbacks fail deep inside the renderer, which treats mapping
+        // as infallible; the panic is caught here and becomes this job's error (or a retry).
+        let frame =
+            std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| self.render_frame(state, &scene, &spec, &mut timings, progress)))
+                .unwrap_or_else(|_| Err(JobError::internal("the renderer failed on the GPU")))?;
         Ok((frame, timings))
+    }
+
+    /// Replaces a lost device: a new device on the same kind of adapter, a new renderer (its
+    /// pipelines and pools belonged to the old device) and no GPU scenes; CPU caches stay.
+    fn recover_device(&self, state: &mut State) -> JobResult<()> {
+        let choice = state.renderer.gpu().choice;
+        let gpu = GpuContext::new(choice).map_err(|error| {
+            tracing::error!(%error, "GPU device lost and no new device could be opened");
+            JobError::internal("the GPU device was lost and could not be reopened")
+        })?;
+        let gpu = Arc::new(gpu);
+        state.renderer = Renderer::new(gpu.clone());
+        state.scenes.clear();
+        *self.gpu.write().unwrap_or_else(|p| p.into_inner()) = gpu.clone();
+        let resets = self.device_resets.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+        tracing::warn!(adapter = %gpu.adapter.name, resets, "GPU device lost: opened a new device; pipelines and scenes are rebuilt on demand");
+        Ok(())
     }
 
     fn render_frame(
@@ -312,7 +355,8 @@ impl Engine {
     ) -> JobResult<FrameOutput> {
         // Validation errors inside wgpu are bugs in penumbra, never the client's fault; they
         // fail this job alone with a generic message and are logged in full.
-        let scope = self.gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let gpu = state.renderer.gpu().clone();
+        let scope = gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let frame = state.renderer.render(scene, spec, timings, progress);
         if let Some(error) = pollster::block_on(scope.pop()) {
             tracing::error!(%error, "GPU validation error while rendering");
@@ -355,6 +399,7 @@ impl Engine {
             reference_cache_hits: self.reference_hits.load(std::sync::atomic::Ordering::Relaxed),
             reference_cache_misses: self.reference_misses.load(std::sync::atomic::Ordering::Relaxed),
             uploads: self.upload_stats(),
+            device_resets: self.device_resets(),
         }
     }
 
@@ -381,7 +426,7 @@ impl Engine {
                 Asset::Light(_) => return Err(not_uploaded(id, "scene.id")),
             },
         };
-        let uploaded = Arc::new(GpuScene::upload(&self.gpu, &loaded, state.renderer.material_layout()));
+        let uploaded = Arc::new(GpuScene::upload(state.renderer.gpu(), &loaded, state.renderer.material_layout()));
         timings.scene_upload_bytes = uploaded.bytes;
         if state.scenes.len() >= SCENE_CACHE_ENTRIES {
             if let Some(oldest) = state.scenes.iter().min_by_key(|(_, c)| c.last_used).map(|(k, _)| k.clone()) {

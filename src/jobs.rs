@@ -4,7 +4,7 @@
 
 use std::collections::VecDeque;
 use std::sync::{Arc, Mutex};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use serde_json::Value;
 use tokio::sync::{watch, OwnedSemaphorePermit, Semaphore};
@@ -96,11 +96,21 @@ pub struct JobEvent {
     pub total: u64,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub error: Option<Value>,
+    /// When the job reached `succeeded` or `failed`: its record expires a while after.
+    #[serde(skip)]
+    pub finished_at: Option<Instant>,
 }
 
 impl JobEvent {
     pub fn status(status: &'static str) -> Self {
-        Self { status, done: 0, total: 0, error: None }
+        Self { status, done: 0, total: 0, error: None, finished_at: None }
+    }
+
+    /// Marks the job `succeeded` or `failed` as of now.
+    pub fn finish(&mut self, status: &'static str, error: Option<Value>) {
+        self.status = status;
+        self.error = error;
+        self.finished_at = Some(Instant::now());
     }
 
     pub fn finished(&self) -> bool {
@@ -108,34 +118,35 @@ impl JobEvent {
     }
 }
 
-/// Finished renders (newest last) and submitted jobs' event channels, each bounded by the
-/// number of results kept; finished submissions go first, unfinished ones stay.
+/// Finished renders (newest last) and submitted jobs' event channels. Both are bounded by the
+/// number of results kept (finished submissions go first, unfinished ones stay) and by age: a
+/// finished job is dropped `ttl` after it finished.
 pub struct JobStore {
-    results: Mutex<VecDeque<(String, Arc<Rendered>)>>,
+    results: Mutex<VecDeque<(String, Arc<Rendered>, Instant)>>,
     submitted: Mutex<VecDeque<(String, watch::Sender<JobEvent>)>>,
     capacity: usize,
+    ttl: Duration,
 }
 
 impl JobStore {
-    pub fn new(results_kept: usize) -> Self {
-        Self { results: Mutex::new(VecDeque::new()), submitted: Mutex::new(VecDeque::new()), capacity: results_kept.max(1) }
+    pub fn new(results_kept: usize, ttl: Duration) -> Self {
+        Self { results: Mutex::new(VecDeque::new()), submitted: Mutex::new(VecDeque::new()), capacity: results_kept.max(1), ttl }
     }
 
     pub fn keep(&self, id: String, rendered: Arc<Rendered>) {
-        let mut results = self.results.lock().unwrap_or_else(|p| p.into_inner());
+        let mut results = self.results();
         if results.len() >= self.capacity {
             results.pop_front();
         }
-        results.push_back((id, rendered));
+        results.push_back((id, rendered, Instant::now()));
     }
 
     pub fn find(&self, id: &str) -> Option<Arc<Rendered>> {
-        let results = self.results.lock().unwrap_or_else(|p| p.into_inner());
-        results.iter().find(|(k, _)| k == id).map(|(_, r)| r.clone())
+        self.results().iter().find(|(k, _, _)| k == id).map(|(_, r, _)| r.clone())
     }
 
     pub fn submit(&self, id: String, events: watch::Sender<JobEvent>) {
-        let mut submitted = self.submitted.lock().unwrap_or_else(|p| p.into_inner());
+        let mut submitted = self.submitted_jobs();
         while submitted.len() >= self.capacity {
             match submitted.iter().position(|(_, tx)| tx.borrow().finished()) {
                 Some(at) => {
@@ -149,7 +160,106 @@ impl JobStore {
 
     /// The event channel of a submitted job.
     pub fn submitted(&self, id: &str) -> Option<watch::Sender<JobEvent>> {
-        let submitted = self.submitted.lock().unwrap_or_else(|p| p.into_inner());
-        submitted.iter().find(|(k, _)| k == id).map(|(_, tx)| tx.clone())
+        self.submitted_jobs().iter().find(|(k, _)| k == id).map(|(_, tx)| tx.clone())
+    }
+
+    /// Kept results, expired ones dropped first (they are in finishing order).
+    fn results(&self) -> std::sync::MutexGuard<'_, VecDeque<(String, Arc<Rendered>, Instant)>> {
+        let mut results = self.results.lock().unwrap_or_else(|p| p.into_inner());
+        while results.front().is_some_and(|(_, _, at)| at.elapsed() > self.ttl) {
+            results.pop_front();
+        }
+        results
+    }
+
+    /// Submitted jobs, those finished longer than `ttl` ago dropped first.
+    fn submitted_jobs(&self) -> std::sync::MutexGuard<'_, VecDeque<(String, watch::Sender<JobEvent>)>> {
+        let mut submitted = self.submitted.lock().unwrap_or_else(|p| p.into_inner());
+        submitted.retain(|(_, tx)| tx.borrow().finished_at.is_none_or(|at| at.elapsed() <= self.ttl));
+        submitted
+    }
+}
+
+/// What the dashboard shows of one finished job.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct JobSummary {
+    pub id: String,
+    pub method: String,
+    /// `ok`, or the error code.
+    pub outcome: String,
+    /// Milliseconds since the Unix epoch when it finished.
+    pub finished_unix_ms: u64,
+    /// Wall time from the request (or submission) to the result, queueing included.
+    pub wall_ms: f64,
+    /// Render phases of a successful job, in order: (name, wall milliseconds).
+    pub phases: Vec<(&'static str, f64)>,
+    pub width: u32,
+    pub height: u32,
+}
+
+/// Per-method latency over the recent window.
+#[derive(Debug, Clone, Default, serde::Serialize)]
+pub struct MethodLatency {
+    pub jobs: usize,
+    pub failed: usize,
+    pub p50_ms: f64,
+    pub p95_ms: f64,
+    pub max_ms: f64,
+}
+
+/// The last finished jobs (newest last), for `/v1/stats` and the dashboard: throughput,
+/// latency per method and the phase breakdown are computed from them.
+pub struct RecentJobs {
+    jobs: Mutex<VecDeque<(Instant, JobSummary)>>,
+    capacity: usize,
+}
+
+impl RecentJobs {
+    pub fn new(capacity: usize) -> Self {
+        Self { jobs: Mutex::new(VecDeque::new()), capacity: capacity.max(1) }
+    }
+
+    pub fn record(&self, summary: JobSummary) {
+        let mut jobs = self.jobs.lock().unwrap_or_else(|p| p.into_inner());
+        if jobs.len() >= self.capacity {
+            jobs.pop_front();
+        }
+        jobs.push_back((Instant::now(), summary));
+    }
+
+    /// The newest `n` jobs, newest first.
+    pub fn newest(&self, n: usize) -> Vec<JobSummary> {
+        let jobs = self.jobs.lock().unwrap_or_else(|p| p.into_inner());
+        jobs.iter().rev().take(n).map(|(_, s)| s.clone()).collect()
+    }
+
+    /// Jobs finished in the last `window`, per minute.
+    pub fn per_minute(&self, window: Duration) -> f64 {
+        let jobs = self.jobs.lock().unwrap_or_else(|p| p.into_inner());
+        let count = jobs.iter().rev().take_while(|(at, _)| at.elapsed() <= window).count();
+        count as f64 * 60.0 / window.as_secs_f64()
+    }
+
+    /// Latency percentiles per method (successful jobs) over the recent jobs.
+    pub fn latency_by_method(&self) -> std::collections::BTreeMap<String, MethodLatency> {
+        let jobs = self.jobs.lock().unwrap_or_else(|p| p.into_inner());
+        let mut walls: std::collections::BTreeMap<String, (Vec<f64>, usize)> = Default::default();
+        for (_, job) in jobs.iter() {
+            let entry = walls.entry(job.method.clone()).or_default();
+            if job.outcome == "ok" {
+                entry.0.push(job.wall_ms);
+            } else {
+                entry.1 += 1;
+            }
+        }
+        walls
+            .into_iter()
+            .map(|(method, (mut ms, failed))| {
+                ms.sort_by(f64::total_cmp);
+                let at = |q: f64| if ms.is_empty() { 0.0 } else { ms[((ms.len() - 1) as f64 * q).round() as usize] };
+                let latency = MethodLatency { jobs: ms.len() + failed, failed, p50_ms: at(0.5), p95_ms: at(0.95), max_ms: at(1.0) };
+                (method, latency)
+            })
+            .collect()
     }
 }

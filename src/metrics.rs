@@ -4,7 +4,7 @@
 //! the device. Method labels are registered method names only (a client's typo is `unknown`),
 //! so label sets stay bounded.
 
-use prometheus::{Encoder, HistogramOpts, HistogramVec, IntCounterVec, IntGauge, IntGaugeVec, Opts, Registry, TextEncoder};
+use prometheus::{Encoder, HistogramOpts, HistogramVec, IntCounter, IntCounterVec, IntGauge, IntGaugeVec, Opts, Registry, TextEncoder};
 
 use crate::engine::EngineStats;
 use crate::gpu::AdapterSummary;
@@ -23,6 +23,8 @@ pub struct Metrics {
     queued: IntGauge,
     /// Set from `EngineStats` at each scrape.
     engine: IntGaugeVec,
+    /// Brought up to `EngineStats::device_resets` at each scrape.
+    device_resets: IntCounter,
 }
 
 /// Counts a job in a gauge (queued, or in flight) until dropped.
@@ -60,8 +62,11 @@ impl Metrics {
         let device =
             IntGaugeVec::new(Opts::new("device_info", "The adapter in use (value 1)"), &["name", "backend", "kind"]).expect("valid metric");
         device.with_label_values(&[adapter.name.as_str(), adapter.backend.as_str(), adapter.device_type.as_str()]).set(1);
+        let device_resets =
+            IntCounter::new("device_resets_total", "Times the GPU device was lost and a new one opened").expect("valid metric");
         for collector in [
-            Box::new(jobs.clone()) as Box<dyn prometheus::core::Collector>,
+            Box::new(device_resets.clone()) as Box<dyn prometheus::core::Collector>,
+            Box::new(jobs.clone()),
             Box::new(latency.clone()),
             Box::new(phases.clone()),
             Box::new(in_flight.clone()),
@@ -71,7 +76,7 @@ impl Metrics {
         ] {
             registry.register(collector).expect("metric names are unique");
         }
-        Self { registry, jobs, latency, phases, in_flight, queued, engine }
+        Self { registry, jobs, latency, phases, in_flight, queued, engine, device_resets }
     }
 
     /// Counts a job as waiting for the device until the guard drops.
@@ -124,6 +129,7 @@ impl Metrics {
         ] {
             self.engine.with_label_values(&[what]).set(i64::try_from(value).unwrap_or(i64::MAX));
         }
+        self.device_resets.inc_by(stats.device_resets.saturating_sub(self.device_resets.get()));
         let mut text = Vec::new();
         TextEncoder::new().encode(&self.registry.gather(), &mut text).expect("text encoding into memory");
         String::from_utf8(text).expect("the text format is UTF-8")

@@ -17,6 +17,25 @@ pub fn encode(frame: &FrameOutput, format: OutputFormat, exposure: f32) -> JobRe
     }
 }
 
+/// A PNG at most `size` pixels on its longest side, from an encoded PNG or EXR result. EXR's
+/// linear values are sRGB-encoded as PNG output is (exposure 0), so previews look alike.
+pub fn thumbnail(encoded: &[u8], size: u32) -> JobResult<Vec<u8>> {
+    let image = image::load_from_memory(encoded).map_err(|e| JobError::internal(format!("cannot decode a kept result: {e}")))?;
+    // Only ever down: `thumbnail` would also enlarge small results, with box-filter seams.
+    let small =
+        if image.width().max(image.height()) <= size { image } else { image.resize(size, size, image::imageops::FilterType::Triangle) };
+    let rgb = if matches!(small, image::DynamicImage::ImageRgb32F(_) | image::DynamicImage::ImageRgba32F(_)) {
+        let linear = small.to_rgb32f();
+        let bytes = linear.as_raw().iter().map(|&c| (linear_to_srgb(c) * 255.0 + 0.5) as u8).collect();
+        image::RgbImage::from_raw(linear.width(), linear.height(), bytes).expect("buffer sized from the image")
+    } else {
+        small.to_rgb8()
+    };
+    let mut bytes = Cursor::new(Vec::new());
+    rgb.write_to(&mut bytes, image::ImageFormat::Png).map_err(|e| JobError::internal(format!("PNG encoding failed: {e}")))?;
+    Ok(bytes.into_inner())
+}
+
 fn encode_png(frame: &FrameOutput, exposure: f32) -> JobResult<Vec<u8>> {
     let scale = exposure.exp2();
     let mut rgba = Vec::with_capacity(frame.color.len() * 4);

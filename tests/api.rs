@@ -35,12 +35,20 @@ async fn start_with(cache_bytes: u64, queue: penumbra::server::QueueConfig) -> (
 
 /// `start_with`, also handing back the server's state.
 async fn start_with_state(cache_bytes: u64, queue: penumbra::server::QueueConfig) -> (String, tempdir::Dir, Arc<Engine>, Arc<AppState>) {
+    start_configured(cache_bytes, |state| state.with_queue(queue)).await
+}
+
+/// The server with an upload cache of `cache_bytes` and its state set up by `configure`.
+async fn start_configured(
+    cache_bytes: u64,
+    configure: impl FnOnce(AppState) -> AppState,
+) -> (String, tempdir::Dir, Arc<Engine>, Arc<AppState>) {
     let scene_dir = tempdir::Dir::new();
     std::fs::write(scene_dir.path().join("inside.png"), b"not really a png").unwrap();
-    let gpu = common::engine().gpu_arc();
+    let gpu = common::engine().gpu();
     let limits = Limits { max_body_bytes: 64 * 1024, max_output_dim: 2048, ..Limits::default() };
     let engine = Arc::new(Engine::new(gpu, limits, PathPolicy::Under(scene_dir.path().to_path_buf())).with_cache_budget(cache_bytes));
-    let state = Arc::new(AppState::new(engine.clone(), 8).with_queue(queue));
+    let state = Arc::new(configure(AppState::new(engine.clone(), 8)));
     let warm = state.clone();
     let warm_engine = engine.clone();
     tokio::task::spawn_blocking(move || {
@@ -566,6 +574,7 @@ async fn metrics_parse_as_prometheus_text_and_move_with_jobs() {
     assert_eq!(value(&after, "penumbra_jobs_in_flight", &[]), 0.0);
     assert!(value(&after, "penumbra_engine", &[("what", "pipelines")]) > 0.0);
     assert_eq!(value(&after, "penumbra_device_info", &[]), 1.0);
+    assert_eq!(value(&after, "penumbra_device_resets_total", &[]), 0.0);
     // The same state as JSON for the dashboard.
     let stats: Value = client.get(format!("{base}/v1/stats")).send().await.unwrap().json().await.unwrap();
     assert!(
@@ -696,4 +705,130 @@ async fn draining_for_shutdown_waits_for_submitted_jobs_and_admits_no_more() {
     assert_eq!(record["status"], "succeeded");
     let after = client.post(format!("{base}/v1/render")).json(&small_job("png")).send().await.unwrap();
     assert_eq!(after.status(), StatusCode::TOO_MANY_REQUESTS, "a drained server admits nothing new");
+}
+
+/// Device loss (DESIGN.md §3, issue 8): a device destroyed between jobs, and one destroyed in
+/// the middle of a job, are replaced; the affected job is retried once and comes out the same
+/// as before the loss, and the resets are counted. The engine has its own device: destroying
+/// the shared one would take every other test down.
+#[test]
+fn a_lost_device_is_replaced_and_the_affected_job_retried() {
+    use penumbra::gpu::{AdapterChoice, GpuContext};
+    let gpu = Arc::new(GpuContext::new(AdapterChoice::Auto).expect("a Vulkan adapter"));
+    let engine = Engine::new(gpu, Limits::default(), PathPolicy::Deny);
+    let job = penumbra::job::Job::from_json(small_job("png").to_string().as_bytes()).unwrap();
+    let before = engine.render(&job).expect("renders on the first device");
+
+    engine.gpu().simulate_loss();
+    let after_loss = engine.render(&job).expect("renders on a new device after a loss between jobs");
+    assert_eq!(engine.device_resets(), 1);
+    assert!(!engine.gpu().is_lost());
+    assert_eq!(after_loss.bytes, before.bytes, "the new device renders the same image");
+
+    // Lose the device while the job runs: the first progress report of a reference render
+    // comes after its first batch of samples was submitted.
+    let mut reference = job.clone();
+    reference.method.name = "reference".into();
+    reference.method.params.insert("samples".into(), json!(8));
+    let clean = engine.render(&reference).expect("a reference render");
+    let lost_once = std::sync::atomic::AtomicBool::new(false);
+    let current = engine.gpu();
+    let retried = engine
+        .render_observed(&reference, &|_, _| {
+            if !lost_once.swap(true, std::sync::atomic::Ordering::SeqCst) {
+                current.simulate_loss();
+            }
+        })
+        .expect("the job is retried once on a new device");
+    assert_eq!(engine.device_resets(), 2);
+    assert_eq!(retried.bytes, clean.bytes, "the retried job renders what an undisturbed one does");
+    assert_eq!(engine.stats().device_resets, 2);
+}
+
+/// Finished jobs expire: after the configured time their record, events and image answer 404.
+#[tokio::test(flavor = "multi_thread")]
+async fn finished_jobs_expire_after_their_time() {
+    let ttl = std::time::Duration::from_millis(400);
+    let (base, _dir, _, _) = start_configured(penumbra::engine::DEFAULT_CACHE_BYTES, |state| state.with_results_ttl(ttl)).await;
+    let client = reqwest::Client::new();
+    let accepted: Value = client.post(format!("{base}/v1/jobs")).json(&small_job("png")).send().await.unwrap().json().await.unwrap();
+    let record = format!("{base}{}", accepted["record"].as_str().unwrap());
+    // The event stream ends when the job does.
+    client.get(format!("{record}/events")).send().await.unwrap().text().await.unwrap();
+    let finished: Value = client.get(&record).send().await.unwrap().json().await.unwrap();
+    assert_eq!(finished["status"], "succeeded");
+    assert_eq!(client.get(format!("{record}/image")).send().await.unwrap().status(), StatusCode::OK);
+    tokio::time::sleep(ttl * 2).await;
+    for path in ["", "/image", "/events", "/thumbnail"] {
+        assert_eq!(client.get(format!("{record}{path}")).send().await.unwrap().status(), StatusCode::NOT_FOUND, "{path}");
+    }
+}
+
+/// The dashboard in a real browser (Debian's `chromium`, headless): it loads its script and
+/// Chart.js from the daemon, polls `/v1/stats`, draws a phase bar for every recent successful
+/// job and a thumbnail for each, and a screenshot is kept in `target/test-artifacts/`.
+#[tokio::test(flavor = "multi_thread")]
+async fn the_dashboard_draws_live_data_in_headless_chromium() {
+    let (base, _dir) = start().await;
+    let client = reqwest::Client::new();
+    for (scene, method) in [("torus", "hard"), ("crowd", "pcss"), ("columns", "jfa-e"), ("torus", "chun-oh")] {
+        let job = json!({"scene": {"builtin": scene}, "method": {"name": method}, "output": {"width": 192, "height": 128}});
+        assert_eq!(client.post(format!("{base}/v1/render")).json(&job).send().await.unwrap().status(), StatusCode::OK);
+    }
+    let failing = json!({"scene": {"id": "scene-0000"}, "method": {"name": "hard"}});
+    assert_eq!(client.post(format!("{base}/v1/render")).json(&failing).send().await.unwrap().status(), StatusCode::NOT_FOUND);
+    let stats: Value = client.get(format!("{base}/v1/stats")).send().await.unwrap().json().await.unwrap();
+    let recent = stats["jobs"]["recent"].as_array().unwrap();
+    let succeeded: Vec<&Value> = recent.iter().filter(|j| j["outcome"] == "ok").collect();
+    assert_eq!(succeeded.len(), 4, "{stats}");
+    assert_eq!(recent.iter().filter(|j| j["outcome"] == "not_uploaded").count(), 1);
+    assert!(stats["jobs"]["by_method"]["jfa-e"]["p50_ms"].as_f64().unwrap() > 0.0);
+    assert!(succeeded[0]["phases"].as_array().unwrap().iter().any(|p| p[0] == "shadow_map"));
+    let thumbnail = client.get(format!("{base}/v1/jobs/{}/thumbnail", succeeded[0]["id"].as_str().unwrap())).send().await.unwrap();
+    let thumbnail = image::load_from_memory(&thumbnail.bytes().await.unwrap()).expect("a PNG thumbnail");
+    assert_eq!(thumbnail.width().max(thumbnail.height()), 160);
+
+    let artifacts = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("target/test-artifacts");
+    std::fs::create_dir_all(&artifacts).unwrap();
+    let screenshot = artifacts.join("dashboard.png");
+    std::fs::remove_file(&screenshot).ok();
+    let url = format!("{base}/");
+    let (dom, shot) = tokio::task::spawn_blocking(move || {
+        (chromium(&["--dump-dom"], &url), chromium(&[&format!("--screenshot={}", screenshot.display())], &url))
+    })
+    .await
+    .unwrap();
+    let body = dom.split("<body").nth(1).and_then(|b| b.split('>').next()).expect("a body element");
+    let attribute = |name: &str| body.split(&format!("{name}=\"")).nth(1).and_then(|v| v.split('"').next()).unwrap_or("").to_owned();
+    assert!(attribute("data-polls").parse::<u32>().unwrap_or(0) >= 1, "the page polled /v1/stats: {body}");
+    assert_eq!(attribute("data-phase-bars"), "4", "one stacked bar per successful job: {body}");
+    assert!(attribute("data-phases").contains("shadow_map"), "{body}");
+    assert_eq!(dom.matches("/thumbnail\"").count(), 4, "a thumbnail per successful job");
+    assert!(dom.contains("class=\"status ok\""), "the page reports the daemon live");
+    // The screenshot shows drawn charts: the accent colour of the bars and lines is there.
+    let shot = image::open(&shot).expect("chromium wrote a PNG screenshot").to_rgb8();
+    let accent = shot.pixels().filter(|p| p.0[0].abs_diff(0xf0) < 12 && p.0[1].abs_diff(0xb4) < 12 && p.0[2].abs_diff(0x29) < 12).count();
+    assert!(accent > 500, "charts drawn in the screenshot ({accent} accent pixels)");
+}
+
+/// Runs headless Chromium on `url` with `extra` flags; returns its standard output (the DOM for
+/// `--dump-dom`) or, for `--screenshot=PATH`, the path. `PENUMBRA_CHROMIUM` names the binary.
+fn chromium(extra: &[&str], url: &str) -> String {
+    let binary = std::env::var("PENUMBRA_CHROMIUM").unwrap_or_else(|_| "chromium".into());
+    let profile = std::env::temp_dir().join(format!("penumbra-chromium-{}-{}", std::process::id(), extra.len()));
+    let output = std::process::Command::new(&binary)
+        .args(["--headless", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage", "--hide-scrollbars", "--window-size=1280,1300"])
+        // Virtual time runs the page's timers without waiting for them: three polls or so.
+        .arg("--virtual-time-budget=5000")
+        .arg(format!("--user-data-dir={}", profile.display()))
+        .args(extra)
+        .arg(url)
+        .output()
+        .unwrap_or_else(|e| panic!("cannot run `{binary}` ({e}); install Debian's chromium: apt-get install -y chromium"));
+    std::fs::remove_dir_all(&profile).ok();
+    assert!(output.status.success(), "chromium failed: {}", String::from_utf8_lossy(&output.stderr));
+    match extra.iter().find_map(|f| f.strip_prefix("--screenshot=")) {
+        Some(path) => path.to_owned(),
+        None => String::from_utf8(output.stdout).expect("UTF-8 DOM"),
+    }
 }

@@ -564,7 +564,7 @@ fn jfa_look_up_table_is_built_once_per_light() {
     // render holds the shared one, and no other test may build this table first.
     let job = job(json!({"scene": {"builtin": "occluder"}, "light": {"size": [0.71, 0.43], "image": {"builtin": "flame"}},
                          "method": {"name": "jfa-l"}, "output": {"width": 64, "height": 48, "format": "exr"}}));
-    let engine = penumbra::engine::Engine::new(common::engine().gpu_arc(), Limits::default(), penumbra::engine::PathPolicy::Deny);
+    let engine = penumbra::engine::Engine::new(common::engine().gpu(), Limits::default(), penumbra::engine::PathPolicy::Deny);
     let created = engine.stats().derived_created;
     let first = engine.render_raw(&job).unwrap().0.visibility.unwrap();
     assert!(engine.stats().derived_created > created, "the first job builds the table");
@@ -625,7 +625,7 @@ fn golden_crowd_jfa_e() {
 fn jump_flooding_is_a_voronoi_flood() {
     // Brute-force nearest seed against jump flooding on small grids (Rong & Tan 2006 §3):
     // a full flood (log2 of the size in rounds) gives the nearest seed almost everywhere.
-    let gpu = common::engine().gpu_arc();
+    let gpu = common::engine().gpu();
     let mut state = 12345u32;
     let mut next = |n: u32| {
         state = state.wrapping_mul(1_103_515_245).wrapping_add(12_345);
@@ -669,7 +669,7 @@ fn tile(f: impl Fn(usize) -> u32) -> [u32; 16] {
 
 #[test]
 fn chun_oh_quadtree_splits_by_visibility_variance_and_by_the_lights_colour() {
-    let gpu = common::engine().gpu_arc();
+    let gpu = common::engine().gpu();
     let image = |name: &str| LightImage::builtin(name, &Default::default(), "light.image").unwrap();
     let (white, stripes) = (light_regions(&image("white")), light_regions(&image("stripes")));
     let lit = tile(|_| 4);
@@ -847,7 +847,7 @@ fn golden_crowd_wedges() {
 #[test]
 fn a_steady_stream_of_jobs_allocates_nothing_new() {
     // Its own engine, so that no other test's jobs move its counters.
-    let engine = penumbra::engine::Engine::new(common::engine().gpu_arc(), Limits::default(), penumbra::engine::PathPolicy::Deny);
+    let engine = penumbra::engine::Engine::new(common::engine().gpu(), Limits::default(), penumbra::engine::PathPolicy::Deny);
     let job =
         job(json!({"scene": {"builtin": "torus"}, "method": {"name": "pcss"}, "output": {"width": 96, "height": 64, "format": "exr"}}));
     engine.render(&job).unwrap();

@@ -55,8 +55,13 @@ pub enum GpuError {
     RequestDevice(#[from] wgpu::RequestDeviceError),
 }
 
-/// Device, queue and what we learned about the adapter. Lives for the whole process.
+/// Device, queue and what we learned about the adapter. Lives until the device is lost; the
+/// engine then opens a new one with the same `choice` (see `Engine::recover_device`).
 pub struct GpuContext {
+    /// The adapter choice this context was opened with, to open its replacement.
+    pub choice: AdapterChoice,
+    /// Set by wgpu's device-lost callback (driver reset, removal, or `destroy`).
+    lost: std::sync::Arc<std::sync::atomic::AtomicBool>,
     pub device: wgpu::Device,
     pub queue: wgpu::Queue,
     pub adapter: AdapterSummary,
@@ -119,6 +124,12 @@ impl GpuContext {
         device.on_uncaptured_error(std::sync::Arc::new(|error: wgpu::Error| {
             tracing::error!(%error, "uncaptured GPU error");
         }));
+        let lost = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let flag = lost.clone();
+        device.set_device_lost_callback(move |reason, message| {
+            tracing::error!(?reason, %message, "GPU device lost");
+            flag.store(true, std::sync::atomic::Ordering::SeqCst);
+        });
         let adapter = AdapterSummary {
             name: info.name,
             backend: format!("{:?}", info.backend).to_lowercase(),
@@ -127,7 +138,21 @@ impl GpuContext {
             driver_info: info.driver_info,
             timestamps,
         };
-        Ok(Self { device, queue, adapter, limits, timestamps })
+        Ok(Self { choice, lost, device, queue, adapter, limits, timestamps })
+    }
+
+    /// Whether the device is gone: every later submission would fail or read back nothing.
+    pub fn is_lost(&self) -> bool {
+        self.lost.load(std::sync::atomic::Ordering::SeqCst)
+    }
+
+    /// Destroys the device as a driver reset would, for the fault tests of device-loss
+    /// recovery. Not for production paths.
+    #[doc(hidden)]
+    pub fn simulate_loss(&self) {
+        self.device.destroy();
+        // wgpu calls the lost callback on destroy; set the flag too in case a backend defers it.
+        self.lost.store(true, std::sync::atomic::Ordering::SeqCst);
     }
 
     /// Blocks until the GPU has finished everything submitted so far.

@@ -2,6 +2,7 @@
 //! the engine up and shuts down gracefully. Rendering runs on the blocking pool so the
 //! async workers keep answering health checks while the device is busy.
 
+mod dashboard;
 pub mod error;
 
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -26,13 +27,23 @@ use crate::scene::builtin::BUILTIN_SCENES;
 use error::ApiError;
 
 pub use crate::jobs::QueueConfig;
-use crate::jobs::{JobEvent, JobQueue, JobStore};
+
+/// How long finished jobs stay readable unless configured (`--results-ttl-secs`).
+pub const DEFAULT_RESULTS_TTL: std::time::Duration = std::time::Duration::from_secs(3600);
+
+/// Finished jobs remembered for the dashboard's charts.
+const RECENT_JOBS: usize = 200;
+use crate::jobs::{JobEvent, JobQueue, JobStore, JobSummary, RecentJobs};
 
 pub struct AppState {
     engine: Arc<Engine>,
     metrics: crate::metrics::Metrics,
     queue: JobQueue,
+    queue_config: QueueConfig,
     jobs: JobStore,
+    results_kept: usize,
+    /// The last finished jobs, for `/v1/stats` and the dashboard.
+    recent: RecentJobs,
     ready: AtomicBool,
     next_id: AtomicU64,
     started: std::time::SystemTime,
@@ -43,7 +54,10 @@ impl AppState {
         Self {
             metrics: crate::metrics::Metrics::new(&engine.gpu().adapter),
             queue: JobQueue::new(QueueConfig::default()),
-            jobs: JobStore::new(results_kept),
+            queue_config: QueueConfig::default(),
+            jobs: JobStore::new(results_kept, DEFAULT_RESULTS_TTL),
+            results_kept,
+            recent: RecentJobs::new(RECENT_JOBS),
             engine,
             ready: AtomicBool::new(false),
             next_id: AtomicU64::new(1),
@@ -52,7 +66,32 @@ impl AppState {
     }
 
     pub fn with_queue(self, queue: QueueConfig) -> Self {
-        Self { queue: JobQueue::new(queue), ..self }
+        Self { queue: JobQueue::new(queue), queue_config: queue, ..self }
+    }
+
+    /// Finished jobs (results, records and events) are dropped `ttl` after they finished.
+    pub fn with_results_ttl(self, ttl: std::time::Duration) -> Self {
+        Self { jobs: JobStore::new(self.results_kept, ttl), ..self }
+    }
+
+    /// Records a finished job in the metrics and in the recent jobs the dashboard shows.
+    fn job_finished(&self, id: &str, method: &str, outcome: &str, seconds: f64, rendered: Option<&Rendered>) {
+        self.metrics.job_finished(method, outcome, seconds, rendered.map(|r| &r.timings));
+        if method.is_empty() {
+            return; // Not a job yet (unparseable body): the metrics count it, the dashboard does not.
+        }
+        let finished_unix_ms =
+            std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_millis() as u64).unwrap_or(0);
+        self.recent.record(JobSummary {
+            id: id.to_string(),
+            method: method.to_string(),
+            outcome: outcome.to_string(),
+            finished_unix_ms,
+            wall_ms: seconds * 1e3,
+            phases: rendered.map(|r| r.timings.phases.iter().map(|p| (p.name, p.cpu_ms)).collect()).unwrap_or_default(),
+            width: rendered.map_or(0, |r| r.width),
+            height: rendered.map_or(0, |r| r.height),
+        });
     }
 
     /// See `JobQueue::try_hold_device`.
@@ -89,6 +128,9 @@ pub fn app(state: Arc<AppState>) -> Router {
         .route("/v1/jobs/{id}", get(job_record))
         .route("/v1/jobs/{id}/events", get(job_events))
         .route("/v1/jobs/{id}/image", get(job_image))
+        .route("/v1/jobs/{id}/thumbnail", get(job_thumbnail))
+        .route("/", get(dashboard::page))
+        .route("/dashboard/{asset}", get(dashboard::asset))
         .route("/v1/stats", get(stats))
         .route("/metrics", get(metrics))
         .route("/healthz", get(|| async { Json(json!({"status": "ok"})) }))
@@ -105,7 +147,11 @@ pub async fn serve(config: ServeConfig, engine: Arc<Engine>) -> anyhow::Result<(
         concurrency: config.concurrency,
         deadline: std::time::Duration::from_secs_f64(config.deadline_secs.max(0.0)),
     };
-    let state = Arc::new(AppState::new(engine.clone(), config.results_kept).with_queue(queue));
+    let state = Arc::new(
+        AppState::new(engine.clone(), config.results_kept)
+            .with_queue(queue)
+            .with_results_ttl(std::time::Duration::from_secs_f64(config.results_ttl_secs.max(0.0))),
+    );
     let listener = tokio::net::TcpListener::bind(config.listen).await?;
     tracing::info!(address = %listener.local_addr()?, "listening");
     let warm = state.clone();
@@ -236,7 +282,7 @@ async fn render(State(state): State<Arc<AppState>>, headers: HeaderMap, body: Re
     let seconds = started.elapsed().as_secs_f64();
     match outcome {
         Ok((id, rendered)) => {
-            state.metrics.job_finished(&method, "ok", seconds, Some(&rendered.timings));
+            state.job_finished(&id, &method, "ok", seconds, Some(&rendered));
             if wants_json(&headers) {
                 Ok(Json(job_json(&id, &rendered)).into_response())
             } else {
@@ -244,7 +290,7 @@ async fn render(State(state): State<Arc<AppState>>, headers: HeaderMap, body: Re
             }
         }
         Err(error) => {
-            state.metrics.job_finished(&method, error.code.as_str(), seconds, None);
+            state.job_finished("", &method, error.code.as_str(), seconds, None);
             Err(ApiError(error))
         }
     }
@@ -262,7 +308,7 @@ impl Drop for CancelWatch<'_> {
     fn drop(&mut self) {
         if self.armed {
             tracing::info!(method = self.method, "client went away: queued job cancelled");
-            self.state.metrics.job_finished(self.method, "cancelled", 0.0, None);
+            self.state.job_finished("", self.method, "cancelled", 0.0, None);
         }
     }
 }
@@ -309,13 +355,25 @@ async fn metrics(State(state): State<Arc<AppState>>) -> Response {
     ([(header::CONTENT_TYPE, HeaderValue::from_static("text/plain; version=0.0.4; charset=utf-8"))], text).into_response()
 }
 
-/// `GET /v1/stats`: the engine's caches, pools and uploads, and jobs in flight, as JSON.
+/// Jobs listed in `/v1/stats` (newest first).
+const STATS_RECENT: usize = 40;
+
+/// `GET /v1/stats`: what the dashboard draws — the engine's caches, pools and uploads, the
+/// queue, and the recent jobs with throughput, latency per method and phase breakdowns.
 async fn stats(State(state): State<Arc<AppState>>) -> Json<Value> {
+    let uptime_s = state.started.elapsed().map(|d| d.as_secs_f64()).unwrap_or(0.0);
     Json(json!({
         "adapter": state.engine.gpu().adapter,
+        "uptime_s": uptime_s,
         "jobs_in_flight": state.metrics.in_flight(),
         "jobs_queued": state.metrics.queued(),
+        "queue": {"capacity": state.queue_config.capacity, "concurrency": state.queue_config.concurrency},
         "engine": state.engine.stats(),
+        "jobs": {
+            "per_minute": state.recent.per_minute(std::time::Duration::from_secs(60)),
+            "by_method": state.recent.latency_by_method(),
+            "recent": state.recent.newest(STATS_RECENT),
+        },
     }))
 }
 
@@ -362,8 +420,8 @@ async fn job_record(State(state): State<Arc<AppState>>, Path(id): Path<String>) 
 async fn submit_job(State(state): State<Arc<AppState>>, body: Result<Bytes, BytesRejection>) -> Result<Response, ApiError> {
     let body = body.map_err(|rejection| body_error(&state, rejection, ErrorCode::InvalidJson));
     let job = body.and_then(|body| Job::from_json(&body)).and_then(|job| job.validate(state.engine.limits()).map(|_| job));
-    let job = job.inspect_err(|error| state.metrics.job_finished("", error.code.as_str(), 0.0, None))?;
-    let admitted = state.queue.admit().inspect_err(|error| state.metrics.job_finished(&job.method.name, error.code.as_str(), 0.0, None))?;
+    let job = job.inspect_err(|error| state.job_finished("", "", error.code.as_str(), 0.0, None))?;
+    let admitted = state.queue.admit().inspect_err(|error| state.job_finished("", &job.method.name, error.code.as_str(), 0.0, None))?;
     let id = state.new_id();
     let (events, _) = tokio::sync::watch::channel(JobEvent::status("queued"));
     state.jobs.submit(id.clone(), events.clone());
@@ -413,19 +471,16 @@ async fn run_submitted(
     let seconds = started.elapsed().as_secs_f64();
     match outcome {
         Ok(rendered) => {
-            state.metrics.job_finished(&method, "ok", seconds, Some(&rendered.timings));
+            state.job_finished(&id, &method, "ok", seconds, Some(&rendered));
             tracing::info!(%id, total_ms = rendered.timings.total_ms, "job done");
             state.jobs.keep(id, Arc::new(rendered));
-            events.send_modify(|event| event.status = "succeeded");
+            events.send_modify(|event| event.finish("succeeded", None));
         }
         Err(error) => {
-            state.metrics.job_finished(&method, error.code.as_str(), seconds, None);
+            state.job_finished(&id, &method, error.code.as_str(), seconds, None);
             let mut detail = error::error_body(&error);
             detail["status"] = json!(error::status_of(error.code).as_u16());
-            events.send_modify(|event| {
-                event.status = "failed";
-                event.error = Some(detail);
-            });
+            events.send_modify(|event| event.finish("failed", Some(detail)));
         }
     }
 }
@@ -456,6 +511,19 @@ async fn job_image(State(state): State<Arc<AppState>>, Path(id): Path<String>) -
     let rendered = state.jobs.find(&id).ok_or_else(|| unknown_job(&id))?;
     Ok(image_response(&id, &rendered))
 }
+
+/// `GET /v1/jobs/{id}/thumbnail`: a small PNG of a kept result (the dashboard's previews).
+/// Results never change under their id, so browsers may cache it for good.
+async fn job_thumbnail(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Result<Response, ApiError> {
+    let rendered = state.jobs.find(&id).ok_or_else(|| unknown_job(&id))?;
+    let png = tokio::task::spawn_blocking(move || crate::output::thumbnail(&rendered.bytes, THUMBNAIL_SIZE))
+        .await
+        .map_err(|e| JobError::internal(format!("thumbnail task failed: {e}")))??;
+    Ok(([(header::CONTENT_TYPE, "image/png"), (header::CACHE_CONTROL, "private, max-age=86400, immutable")], png).into_response())
+}
+
+/// Longest side of a thumbnail, pixels.
+const THUMBNAIL_SIZE: u32 = 160;
 
 fn unknown_job(id: &str) -> ApiError {
     ApiError(JobError::new(ErrorCode::NotFound, format!("no finished job `{id}` is kept on this server")))

@@ -1,0 +1,198 @@
+// The dashboard's logic: polls /v1/stats every couple of seconds and redraws the tiles, four
+// Chart.js charts and the thumbnails of recent renders. History (throughput and queue depth
+// over time) lives in the page: the server keeps only the recent jobs.
+"use strict";
+
+const POLL_MS = 2000;
+const HISTORY_POINTS = 150; // five minutes at one poll every two seconds
+const PHASE_COLOURS = ["#f0b429", "#3fb950", "#58a6ff", "#d2a8ff", "#ff7b72", "#79c0ff", "#ffa657", "#a5d6ff", "#7ee787", "#e3b341"];
+
+Chart.defaults.color = "#8b949e";
+Chart.defaults.borderColor = "#2a313b";
+Chart.defaults.animation = false; // redrawn every poll; animation would only blur the screenshot
+Chart.defaults.maintainAspectRatio = false;
+
+const history = { labels: [], throughput: [], queued: [], running: [] };
+let polls = 0;
+
+function chart(id, config) {
+  return new Chart(document.getElementById(id), config);
+}
+
+const loadChart = chart("chart-load", {
+  type: "line",
+  data: {
+    labels: history.labels,
+    datasets: [
+      { label: "jobs / min", data: history.throughput, borderColor: "#f0b429", yAxisID: "y", pointRadius: 0, tension: 0.2 },
+      { label: "queued", data: history.queued, borderColor: "#58a6ff", yAxisID: "q", pointRadius: 0, stepped: true },
+      { label: "rendering", data: history.running, borderColor: "#3fb950", yAxisID: "q", pointRadius: 0, stepped: true },
+    ],
+  },
+  options: {
+    scales: {
+      y: { beginAtZero: true, title: { display: true, text: "jobs / min" } },
+      q: { beginAtZero: true, position: "right", grid: { drawOnChartArea: false }, ticks: { precision: 0 }, title: { display: true, text: "jobs" } },
+    },
+  },
+});
+
+const latencyChart = chart("chart-latency", {
+  type: "bar",
+  data: {
+    labels: [],
+    datasets: [
+      { label: "p50", data: [], backgroundColor: "#3fb950" },
+      { label: "p95", data: [], backgroundColor: "#f0b429" },
+      { label: "max", data: [], backgroundColor: "#ff7b72" },
+    ],
+  },
+  options: { scales: { y: { type: "logarithmic", title: { display: true, text: "ms" } } } },
+});
+
+const phaseChart = chart("chart-phases", {
+  type: "bar",
+  data: { labels: [], datasets: [] },
+  options: {
+    scales: { x: { stacked: true, ticks: { maxRotation: 60, autoSkip: true } }, y: { stacked: true, title: { display: true, text: "ms" } } },
+    plugins: { tooltip: { mode: "index" } },
+  },
+});
+
+const cacheChart = chart("chart-cache", {
+  type: "doughnut",
+  data: { labels: ["used", "free"], datasets: [{ data: [0, 1], backgroundColor: ["#f0b429", "#2a313b"], borderWidth: 0 }] },
+  options: { plugins: { legend: { position: "right" } } },
+});
+
+function bytes(n) {
+  const units = ["B", "KiB", "MiB", "GiB", "TiB"];
+  let i = 0;
+  while (n >= 1024 && i < units.length - 1) {
+    n /= 1024;
+    i += 1;
+  }
+  return `${n.toFixed(n < 10 && i > 0 ? 1 : 0)} ${units[i]}`;
+}
+
+function duration(seconds) {
+  const h = Math.floor(seconds / 3600);
+  const m = Math.floor((seconds % 3600) / 60);
+  return h > 0 ? `up ${h} h ${m} min` : `up ${m} min ${Math.floor(seconds % 60)} s`;
+}
+
+function setText(id, text) {
+  document.getElementById(id).textContent = text;
+}
+
+function ratio(reused, created) {
+  const all = reused + created;
+  return all === 0 ? "–" : `${Math.round((100 * reused) / all)} %`;
+}
+
+function drawTiles(stats) {
+  const uploads = stats.engine.uploads;
+  setText("adapter", `${stats.adapter.name} (${stats.adapter.backend})`);
+  setText("uptime", duration(stats.uptime_s));
+  setText("throughput", stats.jobs.per_minute.toFixed(1));
+  setText("queue", `${stats.jobs_queued} · ${stats.jobs_in_flight}`);
+  setText("queue-unit", `waiting · rendering (of ${stats.queue.capacity}, ${stats.queue.concurrency} on the device)`);
+  setText("cache", bytes(uploads.bytes));
+  setText("cache-unit", `of ${bytes(uploads.budget_bytes)} · ${uploads.entries} assets`);
+  const e = stats.engine;
+  setText("pools", ratio(e.targets_reused + e.readbacks_reused + e.derived_reused, e.targets_created + e.readbacks_created + e.derived_created));
+  setText("resets", String(e.device_resets));
+}
+
+function drawHistory(stats) {
+  history.labels.push(new Date().toLocaleTimeString());
+  history.throughput.push(stats.jobs.per_minute);
+  history.queued.push(stats.jobs_queued);
+  history.running.push(stats.jobs_in_flight);
+  if (history.labels.length > HISTORY_POINTS) {
+    for (const series of Object.values(history)) series.shift();
+  }
+  loadChart.update();
+}
+
+function drawLatency(stats) {
+  const methods = Object.keys(stats.jobs.by_method);
+  latencyChart.data.labels = methods;
+  const pick = (key) => methods.map((m) => Math.max(stats.jobs.by_method[m][key], 0.01));
+  latencyChart.data.datasets[0].data = pick("p50_ms");
+  latencyChart.data.datasets[1].data = pick("p95_ms");
+  latencyChart.data.datasets[2].data = pick("max_ms");
+  latencyChart.update();
+}
+
+// One stacked bar per recent successful job (oldest left), one colour per render phase.
+function drawPhases(stats) {
+  const jobs = stats.jobs.recent.filter((j) => j.outcome === "ok").reverse();
+  const phases = [];
+  for (const job of jobs) for (const [name] of job.phases) if (!phases.includes(name)) phases.push(name);
+  phaseChart.data.labels = jobs.map((j) => `${j.method} ${j.width}×${j.height}`);
+  phaseChart.data.datasets = phases.map((phase, k) => ({
+    label: phase,
+    backgroundColor: PHASE_COLOURS[k % PHASE_COLOURS.length],
+    data: jobs.map((j) => (j.phases.find(([name]) => name === phase) || [phase, 0])[1]),
+  }));
+  phaseChart.update();
+  document.body.dataset.phaseBars = String(jobs.length);
+  document.body.dataset.phases = phases.join(",");
+}
+
+function drawCache(stats) {
+  const u = stats.engine.uploads;
+  cacheChart.data.labels = [`used ${bytes(u.bytes)}`, `free ${bytes(Math.max(u.budget_bytes - u.bytes, 0))}`];
+  cacheChart.data.datasets[0].data = [u.bytes, Math.max(u.budget_bytes - u.bytes, 0)];
+  cacheChart.update();
+}
+
+// Thumbnails of the newest successful jobs; ids are unique, so existing images are kept.
+function drawThumbnails(stats) {
+  const box = document.getElementById("thumbnails");
+  const jobs = stats.jobs.recent.filter((j) => j.outcome === "ok").slice(0, 12);
+  const wanted = new Set(jobs.map((j) => j.id));
+  for (const child of [...box.children]) if (!wanted.has(child.dataset.id)) child.remove();
+  jobs.forEach((job, k) => {
+    let item = box.querySelector(`[data-id="${job.id}"]`);
+    if (!item) {
+      item = document.createElement("figure");
+      item.dataset.id = job.id;
+      const img = document.createElement("img");
+      img.src = `/v1/jobs/${encodeURIComponent(job.id)}/thumbnail`;
+      img.alt = `${job.method} render`;
+      img.onerror = () => item.remove(); // expired from the server's store
+      const caption = document.createElement("figcaption");
+      caption.textContent = `${job.method} · ${job.wall_ms.toFixed(0)} ms`;
+      item.append(img, caption);
+    }
+    if (box.children[k] !== item) box.insertBefore(item, box.children[k] || null);
+  });
+}
+
+async function poll() {
+  const status = document.getElementById("status");
+  try {
+    const response = await fetch("/v1/stats", { headers: { accept: "application/json" } });
+    if (!response.ok) throw new Error(`HTTP ${response.status}`);
+    const stats = await response.json();
+    drawTiles(stats);
+    drawHistory(stats);
+    drawLatency(stats);
+    drawPhases(stats);
+    drawCache(stats);
+    drawThumbnails(stats);
+    status.textContent = "live";
+    status.className = "status ok";
+    polls += 1;
+    document.body.dataset.polls = String(polls);
+    document.body.dataset.recentJobs = String(stats.jobs.recent.length);
+  } catch (error) {
+    status.textContent = `unreachable (${error.message})`;
+    status.className = "status down";
+  }
+}
+
+poll();
+setInterval(poll, POLL_MS);
