@@ -406,6 +406,12 @@ impl Engine {
     /// Finds a scene in the cache or loads and uploads it.
     fn scene(&self, state: &mut State, asset: &AssetRef, timings: &mut Timings) -> JobResult<Arc<GpuScene>> {
         let key = self.asset_key(asset, "scene")?;
+        // GPU copies of uploads that were evicted or deleted go too: the upload budget counts
+        // them, so they must not outlive their upload.
+        {
+            let uploads = self.lock_uploads();
+            state.scenes.retain(|key, _| key.strip_prefix("id:").is_none_or(|id| uploads.contains(id)));
+        }
         state.clock += 1;
         let clock = state.clock;
         if let Some(cached) = state.scenes.get_mut(&key) {

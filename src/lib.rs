@@ -5,6 +5,7 @@
 //! shadow method) → `output` (PNG/EXR). `engine` holds the warm state behind both the CLI and
 //! `server`. See ARCHITECTURE.md for the map.
 
+pub mod bench;
 pub mod config;
 pub mod engine;
 pub mod error;

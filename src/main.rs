@@ -40,6 +40,14 @@ enum Command {
         #[command(flatten)]
         options: RenderOptions,
     },
+    /// Measure the daemon around the render: HTTP overhead, throughput under concurrent
+    /// clients, memory under uploads of ten times the cache budget (a real loopback server).
+    BenchDaemon {
+        #[command(flatten)]
+        bench: penumbra::bench::BenchOptions,
+        #[command(flatten)]
+        options: RenderOptions,
+    },
     /// Render one job to a PNG or EXR file, without a server.
     Render {
         /// The job (JSON, see api/examples/). Without it: the built-in `torus` scene, `hard`.
@@ -97,6 +105,11 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             let engine = Engine::new(gpu, options.limits.limits(), PathPolicy::Any);
             let report = penumbra::eval::run(&engine, &suite)?;
             eprintln!("wrote {} rows and {} pictures to {}", report.rows.len(), report.files.len(), suite.out.display());
+            Ok(())
+        }
+        Command::BenchDaemon { bench, options } => {
+            let gpu = open_gpu(&options)?;
+            penumbra::bench::run(gpu, &bench)?;
             Ok(())
         }
         Command::Render { job, output, timings_json, options } => {

@@ -832,3 +832,26 @@ fn chromium(extra: &[&str], url: &str) -> String {
         None => String::from_utf8(output.stdout).expect("UTF-8 DOM"),
     }
 }
+
+/// `penumbra bench-daemon` in miniature: its report is complete, no job failed, and the
+/// memory measurement really went through evictions. (The figures themselves are for the
+/// closing notes, never asserted.)
+#[test]
+fn the_daemon_benchmark_runs_and_reports() {
+    let out = tempdir::Dir::new();
+    let options = penumbra::bench::BenchOptions {
+        out: out.path().to_path_buf(),
+        repeat: 2,
+        clients: vec![1, 3],
+        jobs: 3,
+        cache_mib: 2,
+        scene_side: 24,
+    };
+    let report = penumbra::bench::run(common::engine().gpu(), &options).expect("the benchmark runs");
+    assert!(report.overhead.library_median_ms > 0.0 && report.overhead.http_median_ms > 0.0);
+    assert_eq!(report.throughput.len(), 2);
+    assert!(report.throughput.iter().all(|t| t.other_statuses.is_empty() && t.jobs_per_second > 0.0), "{:?}", report.throughput);
+    assert!(report.memory.scenes >= 10 && report.memory.evictions > 0, "{:?}", report.memory);
+    let written: Value = serde_json::from_slice(&std::fs::read(out.path().join("daemon.json")).unwrap()).unwrap();
+    assert_eq!(written["throughput"][1]["clients"], 3);
+}

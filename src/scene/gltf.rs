@@ -205,3 +205,84 @@ fn decode_texture(image: &gltf::Image, buffers: &[Vec<u8>], limits: &Limits, fie
     let rgba = decoded.into_rgba8();
     Ok(TextureData { width: rgba.width(), height: rgba.height(), rgba8: rgba.into_raw() })
 }
+
+/// Packs a glTF document and its binary buffer into one GLB file (glTF 2.0 §4.4: a 12-byte
+/// header, a JSON chunk padded with spaces, a BIN chunk padded with zeros). The document's
+/// buffer 0 must leave out `uri` to mean the BIN chunk.
+pub fn glb(document: &serde_json::Value, bin: &[u8]) -> Vec<u8> {
+    let mut json = serde_json::to_vec(document).expect("a JSON value serialises");
+    json.resize(json.len().next_multiple_of(4), b' ');
+    let mut bin = bin.to_vec();
+    bin.resize(bin.len().next_multiple_of(4), 0);
+    let total = 12 + 8 + json.len() + 8 + bin.len();
+    let mut out = Vec::with_capacity(total);
+    out.extend_from_slice(b"glTF");
+    out.extend_from_slice(&2u32.to_le_bytes());
+    out.extend_from_slice(&(total as u32).to_le_bytes());
+    out.extend_from_slice(&(json.len() as u32).to_le_bytes());
+    out.extend_from_slice(b"JSON");
+    out.extend_from_slice(&json);
+    out.extend_from_slice(&(bin.len() as u32).to_le_bytes());
+    out.extend_from_slice(b"BIN\0");
+    out.extend_from_slice(&bin);
+    out
+}
+
+/// A GLB height field of `n × n` vertices (2 (n−1)² triangles) over a 4 m square with bumps
+/// set by `seed`: distinct bytes for every seed, for benchmarks and load tests that need many
+/// different scenes of a chosen size.
+pub fn height_field_glb(n: u32, seed: u32) -> Vec<u8> {
+    let n = n.max(2);
+    let mut bin = Vec::new();
+    let (fx, fz) = (1.0 + (seed % 7) as f32, 1.0 + (seed / 7 % 5) as f32);
+    for z in 0..n {
+        for x in 0..n {
+            let (u, v) = (x as f32 / (n - 1) as f32, z as f32 / (n - 1) as f32);
+            let y = 0.3 * (fx * u * std::f32::consts::TAU).sin() * (fz * v * std::f32::consts::TAU).cos() + 0.4;
+            for c in [4.0 * u - 2.0, y, 4.0 * v - 2.0] {
+                bin.extend_from_slice(&c.to_le_bytes());
+            }
+        }
+    }
+    let positions = bin.len();
+    for z in 0..n - 1 {
+        for x in 0..n - 1 {
+            let i = z * n + x;
+            for k in [i, i + n, i + 1, i + 1, i + n, i + n + 1] {
+                bin.extend_from_slice(&k.to_le_bytes());
+            }
+        }
+    }
+    let indices = bin.len() - positions;
+    let document = serde_json::json!({
+        "asset": {"version": "2.0", "generator": format!("penumbra height field {n}x{n} seed {seed}")},
+        "scene": 0,
+        "scenes": [{"nodes": [0]}],
+        "nodes": [{"name": "field", "mesh": 0}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}],
+        "buffers": [{"byteLength": bin.len()}],
+        "bufferViews": [
+            {"buffer": 0, "byteOffset": 0, "byteLength": positions},
+            {"buffer": 0, "byteOffset": positions, "byteLength": indices}
+        ],
+        "accessors": [
+            {"bufferView": 0, "componentType": 5126, "count": n * n, "type": "VEC3",
+             "min": [-2.0, 0.1, -2.0], "max": [2.0, 0.7, 2.0]},
+            {"bufferView": 1, "componentType": 5125, "count": 6 * (n - 1) * (n - 1), "type": "SCALAR"}
+        ]
+    });
+    glb(&document, &bin)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn height_fields_load_with_the_requested_triangles_and_differ_by_seed() {
+        let bytes = height_field_glb(9, 3);
+        let scene = load(&bytes, &Limits::default(), "scene").expect("a valid GLB");
+        assert_eq!(scene.indices.len(), 3 * 2 * 8 * 8);
+        assert_ne!(bytes, height_field_glb(9, 4));
+    }
+}

@@ -142,24 +142,6 @@ pub fn as_gltf_with_data_uri() -> Vec<u8> {
 }
 
 pub fn as_glb() -> Vec<u8> {
-    let (gltf, mut bin) = test_gltf();
-    let mut json = serde_json::to_vec(&gltf).unwrap();
-    while json.len() % 4 != 0 {
-        json.push(b' ');
-    }
-    while bin.len() % 4 != 0 {
-        bin.push(0);
-    }
-    let total = 12 + 8 + json.len() + 8 + bin.len();
-    let mut glb = Vec::new();
-    glb.extend_from_slice(b"glTF");
-    glb.extend_from_slice(&2u32.to_le_bytes());
-    glb.extend_from_slice(&(total as u32).to_le_bytes());
-    glb.extend_from_slice(&(json.len() as u32).to_le_bytes());
-    glb.extend_from_slice(b"JSON");
-    glb.extend_from_slice(&json);
-    glb.extend_from_slice(&(bin.len() as u32).to_le_bytes());
-    glb.extend_from_slice(b"BIN\0");
-    glb.extend_from_slice(&bin);
-    glb
+    let (gltf, bin) = test_gltf();
+    penumbra::scene::gltf::glb(&gltf, &bin)
 }
