@@ -76,6 +76,20 @@ pub struct ServeConfig {
     #[arg(long, env = "PENUMBRA_RESULTS_KEPT", default_value_t = 64)]
     pub results_kept: usize,
 
+    /// Where submitted jobs and their results are kept: `embedded` (a file under --data-dir;
+    /// accepted jobs survive a crash and finish after a restart) or `memory`.
+    #[arg(long, env = "PENUMBRA_JOB_STORE", default_value = "embedded")]
+    pub job_store: String,
+
+    /// Directory of the embedded job store.
+    #[arg(long, env = "PENUMBRA_DATA_DIR", default_value = "penumbra-data")]
+    pub data_dir: PathBuf,
+
+    /// Byte budget of stored result images; the oldest go first (their records stay until
+    /// they expire by age).
+    #[arg(long, env = "PENUMBRA_RESULTS_BYTES", default_value_t = 1 << 30)]
+    pub results_bytes: u64,
+
     /// Seconds a finished job's record, events and image stay readable.
     #[arg(long, env = "PENUMBRA_RESULTS_TTL_SECS", default_value_t = 3600.0)]
     pub results_ttl_secs: f64,

@@ -20,7 +20,7 @@ use crate::quality::QualityReport;
 use crate::render::{FrameOutput, FrameSpec, Renderer};
 use crate::scene::{self, builtin};
 use crate::timing::Timings;
-use crate::uploads::{content_id, Asset, UploadStats, UploadStore};
+use crate::uploads::{content_id, Asset, Kind, UploadStats, UploadStore};
 
 /// Where `{"path": ...}` assets may be read from.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -143,33 +143,46 @@ impl Engine {
     /// Stores a glTF (JSON with `data:` buffers) or GLB scene; validated now, so a bad file
     /// is refused at upload, not at its first render.
     pub fn upload_scene(&self, bytes: &[u8]) -> JobResult<UploadReceipt> {
-        let id = content_id("scene", bytes);
-        self.store_upload(id, || Ok(Asset::Scene(Arc::new(scene::gltf::load(bytes, &self.limits, "body")?))))
+        self.upload(Kind::Scene, bytes)
     }
 
     /// Stores a PNG or EXR light image.
     pub fn upload_light(&self, bytes: &[u8]) -> JobResult<UploadReceipt> {
-        let id = content_id("light", bytes);
-        self.store_upload(id, || Ok(Asset::Light(Arc::new(LightImage::decode(bytes, self.limits.max_light_image_dim, "body")?))))
+        self.upload(Kind::Light, bytes)
     }
 
-    fn store_upload(&self, id: String, decode: impl FnOnce() -> JobResult<Asset>) -> JobResult<UploadReceipt> {
-        if self.lock_uploads().touch(&id) {
+    /// Stores an upload of either kind under its content id (`content_id(bytes)`).
+    pub fn upload(&self, kind: Kind, bytes: &[u8]) -> JobResult<UploadReceipt> {
+        let id = content_id(bytes);
+        if self.lock_uploads().touch(kind, &id) {
             return Ok(UploadReceipt { id, created: false, cache_bytes: 0 });
         }
-        let asset = decode()?;
+        let asset = match kind {
+            Kind::Scene => Asset::Scene(Arc::new(scene::gltf::load(bytes, &self.limits, "body")?)),
+            Kind::Light => Asset::Light(Arc::new(LightImage::decode(bytes, self.limits.max_light_image_dim, "body")?)),
+        };
+        self.store_upload(id, asset)
+    }
+
+    /// Whether the server holds the upload `id` of this kind (`HEAD /v1/scenes/{id}`).
+    pub fn holds_upload(&self, kind: Kind, id: &str) -> bool {
+        self.lock_uploads().contains(kind, id)
+    }
+
+    fn store_upload(&self, id: String, asset: Asset) -> JobResult<UploadReceipt> {
+        if self.lock_uploads().touch(asset.kind(), &id) {
+            return Ok(UploadReceipt { id, created: false, cache_bytes: 0 });
+        }
         let cache_bytes = asset.cost();
         let evicted = self.lock_uploads().insert(id.clone(), asset)?;
-        // Evicted scenes leave the GPU too (uploads first, then the renderer: never both locks
-        // the other way round).
         self.forget_gpu_copies(&evicted);
         Ok(UploadReceipt { id, created: true, cache_bytes })
     }
 
     /// Removes an upload; false when there was none under `id`.
-    pub fn delete_upload(&self, id: &str) -> bool {
-        let removed = self.lock_uploads().remove(id);
-        self.forget_gpu_copies(&[id.to_owned()]);
+    pub fn delete_upload(&self, kind: Kind, id: &str) -> bool {
+        let removed = self.lock_uploads().remove(kind, id);
+        self.forget_gpu_copies(&[(kind, id.to_owned())]);
         removed
     }
 
@@ -181,17 +194,27 @@ impl Engine {
         self.uploads.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
     }
 
-    fn forget_gpu_copies(&self, ids: &[String]) {
-        let mut state = self.state.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
-        for id in ids {
-            state.scenes.remove(&format!("id:{id}"));
-            state.lights.remove(&format!("id:{id}"));
+    /// Drops the GPU copies of evicted or deleted uploads now when the renderer is free; while
+    /// it renders, `prune_gone_uploads` drops them before the next job instead (an upload never
+    /// waits for a render).
+    fn forget_gpu_copies(&self, gone: &[(Kind, String)]) {
+        let mut state = match self.state.try_lock() {
+            Ok(state) => state,
+            Err(std::sync::TryLockError::Poisoned(poisoned)) => poisoned.into_inner(),
+            Err(std::sync::TryLockError::WouldBlock) => return,
+        };
+        for (kind, id) in gone {
+            let key = format!("id:{id}");
+            match kind {
+                Kind::Scene => drop(state.scenes.remove(&key)),
+                Kind::Light => drop(state.lights.remove(&key)),
+            }
         }
     }
 
     /// The uploaded asset under `id`, or `not_uploaded` naming `field`.
-    fn uploaded(&self, id: &str, field: &str) -> JobResult<Asset> {
-        self.lock_uploads().get(id).ok_or_else(|| not_uploaded(id, field))
+    fn uploaded(&self, kind: Kind, id: &str, field: &str) -> JobResult<Asset> {
+        self.lock_uploads().get(kind, id).ok_or_else(|| not_uploaded(id, field))
     }
 
     /// The device in use now (another engine may share it: tests, several configurations).
@@ -269,7 +292,7 @@ impl Engine {
         let reference_job = job.reference_job();
         let key = format!(
             "{}|{}",
-            self.asset_key(&job.scene, "scene")?,
+            self.asset_key(&job.scene, Kind::Scene, "scene")?,
             serde_json::to_string(&reference_job).map_err(|e| JobError::internal(e.to_string()))?
         );
         if let Some(frame) = self.references.lock().unwrap_or_else(|p| p.into_inner()).get(&key) {
@@ -403,15 +426,18 @@ impl Engine {
         }
     }
 
+    /// Drops cached copies of uploads that were evicted or deleted: the upload budget counts
+    /// them, so they must not outlive their upload.
+    fn prune_gone_uploads(&self, state: &mut State) {
+        let uploads = self.lock_uploads();
+        state.scenes.retain(|key, _| key.strip_prefix("id:").is_none_or(|id| uploads.contains(Kind::Scene, id)));
+        state.lights.retain(|key, _| key.strip_prefix("id:").is_none_or(|id| uploads.contains(Kind::Light, id)));
+    }
+
     /// Finds a scene in the cache or loads and uploads it.
     fn scene(&self, state: &mut State, asset: &AssetRef, timings: &mut Timings) -> JobResult<Arc<GpuScene>> {
-        let key = self.asset_key(asset, "scene")?;
-        // GPU copies of uploads that were evicted or deleted go too: the upload budget counts
-        // them, so they must not outlive their upload.
-        {
-            let uploads = self.lock_uploads();
-            state.scenes.retain(|key, _| key.strip_prefix("id:").is_none_or(|id| uploads.contains(id)));
-        }
+        let key = self.asset_key(asset, Kind::Scene, "scene")?;
+        self.prune_gone_uploads(state);
         state.clock += 1;
         let clock = state.clock;
         if let Some(cached) = state.scenes.get_mut(&key) {
@@ -427,7 +453,7 @@ impl Engine {
                 let bytes = self.read_path(path, "scene.path")?;
                 Arc::new(scene::gltf::load(&bytes, &self.limits, "scene")?)
             }
-            AssetRef::Id(id) => match self.uploaded(id, "scene.id")? {
+            AssetRef::Id(id) => match self.uploaded(Kind::Scene, id, "scene.id")? {
                 Asset::Scene(scene) => scene,
                 Asset::Light(_) => return Err(not_uploaded(id, "scene.id")),
             },
@@ -444,7 +470,7 @@ impl Engine {
     }
 
     fn light_image(&self, state: &mut State, asset: &AssetRef) -> JobResult<Arc<LightImage>> {
-        let key = self.asset_key(asset, "light.image")?;
+        let key = self.asset_key(asset, Kind::Light, "light.image")?;
         if let Some(image) = state.lights.get(&key) {
             return Ok(image.clone());
         }
@@ -454,7 +480,7 @@ impl Engine {
                 let bytes = self.read_path(path, "light.image.path")?;
                 Arc::new(LightImage::decode(&bytes, self.limits.max_light_image_dim, "light.image")?)
             }
-            AssetRef::Id(id) => match self.uploaded(id, "light.image.id")? {
+            AssetRef::Id(id) => match self.uploaded(Kind::Light, id, "light.image.id")? {
                 Asset::Light(image) => image,
                 Asset::Scene(_) => return Err(not_uploaded(id, "light.image.id")),
             },
@@ -467,10 +493,10 @@ impl Engine {
     }
 
     /// A cache key that changes whenever the asset's content may have changed.
-    fn asset_key(&self, asset: &AssetRef, field: &str) -> JobResult<String> {
+    fn asset_key(&self, asset: &AssetRef, kind: Kind, field: &str) -> JobResult<String> {
         match asset {
             AssetRef::Builtin { name, params } => Ok(format!("builtin:{name}:{}", serde_json::Value::Object(params.clone()))),
-            AssetRef::Id(id) if self.lock_uploads().contains(id) => Ok(format!("id:{id}")),
+            AssetRef::Id(id) if self.lock_uploads().contains(kind, id) => Ok(format!("id:{id}")),
             AssetRef::Id(id) => Err(not_uploaded(id, &format!("{field}.id"))),
             AssetRef::Path(path) => {
                 let resolved = self.resolve_path(path, &format!("{field}.path"))?;

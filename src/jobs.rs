@@ -54,6 +54,12 @@ impl JobQueue {
             .map_err(|_| JobError::new(ErrorCode::QueueFull, "the job queue is full; retry after the Retry-After seconds"))
     }
 
+    /// A place in the queue, waiting for one: for jobs accepted before a restart, which were
+    /// admitted once already and must not be refused now.
+    pub async fn admit_waiting(&self) -> anyhow::Result<OwnedSemaphorePermit> {
+        Ok(self.admission.clone().acquire_owned().await?)
+    }
+
     /// A device slot, waiting at most the deadline.
     pub async fn device(&self) -> Result<OwnedSemaphorePermit, JobError> {
         match tokio::time::timeout(self.deadline, self.device.clone().acquire_owned()).await {

@@ -21,6 +21,7 @@ pub mod quality;
 pub mod render;
 pub mod scene;
 pub mod server;
+pub mod store;
 pub mod timing;
 pub mod uploads;
 

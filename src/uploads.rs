@@ -20,7 +20,21 @@ pub enum Asset {
     Light(Arc<LightImage>),
 }
 
+/// The two kinds of upload; each has its own ids (`/v1/scenes/{id}`, `/v1/lights/{id}`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Kind {
+    Scene,
+    Light,
+}
+
 impl Asset {
+    pub fn kind(&self) -> Kind {
+        match self {
+            Asset::Scene(_) => Kind::Scene,
+            Asset::Light(_) => Kind::Light,
+        }
+    }
+
     /// Bytes the asset holds while cached: CPU copy, plus the GPU copy for a scene.
     pub fn cost(&self) -> u64 {
         match self {
@@ -48,19 +62,22 @@ pub struct UploadStats {
 }
 
 pub struct UploadStore {
-    entries: HashMap<String, Entry>,
+    entries: HashMap<(Kind, String), Entry>,
     budget: u64,
     used: u64,
     clock: u64,
     stats: UploadStats,
 }
 
-/// The content address of `bytes`: the first 128 bits of their SHA-256, in hex, with a prefix
-/// naming the kind (a scene and a light never share an id).
-pub fn content_id(kind: &str, bytes: &[u8]) -> String {
-    let digest = Sha256::digest(bytes);
-    let hex: String = digest[..16].iter().map(|b| format!("{b:02x}")).collect();
-    format!("{kind}-{hex}")
+/// The content address of `bytes` (DESIGN.md §3): the lowercase hex SHA-256, so a client can
+/// compute it before uploading and ask whether the server holds it.
+pub fn content_id(bytes: &[u8]) -> String {
+    Sha256::digest(bytes).iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// Whether `id` has the shape of a content id (64 lowercase hex digits).
+pub fn is_content_id(id: &str) -> bool {
+    id.len() == 64 && id.bytes().all(|b| b.is_ascii_digit() || (b'a'..=b'f').contains(&b))
 }
 
 impl UploadStore {
@@ -69,9 +86,9 @@ impl UploadStore {
     }
 
     /// Whether `id` is stored (and marks it used), for an upload of the same bytes.
-    pub fn touch(&mut self, id: &str) -> bool {
+    pub fn touch(&mut self, kind: Kind, id: &str) -> bool {
         self.clock += 1;
-        match self.entries.get_mut(id) {
+        match self.entries.get_mut(&(kind, id.to_owned())) {
             Some(entry) => {
                 entry.last_used = self.clock;
                 true
@@ -81,9 +98,9 @@ impl UploadStore {
     }
 
     /// Stores `asset` under `id`, evicting the least recently used until it fits. Returns the
-    /// ids evicted (their GPU copies must go too). An asset larger than the whole budget is
+    /// entries evicted (their GPU copies must go too). An asset larger than the whole budget is
     /// refused.
-    pub fn insert(&mut self, id: String, asset: Asset) -> JobResult<Vec<String>> {
+    pub fn insert(&mut self, id: String, asset: Asset) -> JobResult<Vec<(Kind, String)>> {
         let cost = asset.cost();
         if cost > self.budget {
             return Err(JobError::field(
@@ -97,20 +114,20 @@ impl UploadStore {
             let Some(oldest) = self.entries.iter().min_by_key(|(_, e)| e.last_used).map(|(k, _)| k.clone()) else {
                 break;
             };
-            self.remove(&oldest);
+            self.remove(oldest.0, &oldest.1);
             self.stats.evictions += 1;
             evicted.push(oldest);
         }
         self.clock += 1;
         self.used += cost;
-        self.entries.insert(id, Entry { asset, cost, last_used: self.clock });
+        self.entries.insert((asset.kind(), id), Entry { asset, cost, last_used: self.clock });
         Ok(evicted)
     }
 
     /// The asset under `id`, counted as a hit or a miss.
-    pub fn get(&mut self, id: &str) -> Option<Asset> {
+    pub fn get(&mut self, kind: Kind, id: &str) -> Option<Asset> {
         self.clock += 1;
-        match self.entries.get_mut(id) {
+        match self.entries.get_mut(&(kind, id.to_owned())) {
             Some(entry) => {
                 entry.last_used = self.clock;
                 self.stats.hits += 1;
@@ -123,12 +140,12 @@ impl UploadStore {
         }
     }
 
-    pub fn contains(&self, id: &str) -> bool {
-        self.entries.contains_key(id)
+    pub fn contains(&self, kind: Kind, id: &str) -> bool {
+        self.entries.contains_key(&(kind, id.to_owned()))
     }
 
-    pub fn remove(&mut self, id: &str) -> bool {
-        match self.entries.remove(id) {
+    pub fn remove(&mut self, kind: Kind, id: &str) -> bool {
+        match self.entries.remove(&(kind, id.to_owned())) {
             Some(entry) => {
                 self.used -= entry.cost;
                 true
@@ -152,10 +169,11 @@ mod tests {
 
     #[test]
     fn ids_follow_the_content_and_the_kind() {
-        assert_eq!(content_id("scene", b"abc"), content_id("scene", b"abc"));
-        assert_ne!(content_id("scene", b"abc"), content_id("scene", b"abd"));
-        assert_ne!(content_id("scene", b"abc"), content_id("light", b"abc"));
-        assert_eq!(content_id("light", b"").len(), "light-".len() + 32);
+        assert_eq!(content_id(b"abc"), content_id(b"abc"));
+        assert_ne!(content_id(b"abc"), content_id(b"abd"));
+        // The SHA-256 test vector of FIPS 180-2, so clients can compute ids with any tool.
+        assert_eq!(content_id(b"abc"), "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad");
+        assert!(is_content_id(&content_id(b"")) && !is_content_id("BA78") && !is_content_id(&"g".repeat(64)));
     }
 
     #[test]
@@ -165,13 +183,14 @@ mod tests {
         for id in ["a", "b", "c"] {
             assert!(store.insert(id.into(), light(8)).unwrap().is_empty());
         }
-        assert!(store.get("a").is_some());
+        assert!(store.get(Kind::Light, "a").is_some());
+        assert!(store.get(Kind::Scene, "a").is_none(), "ids are per kind");
         // "b" is now the least recently used.
-        assert_eq!(store.insert("d".into(), light(8)).unwrap(), vec!["b".to_owned()]);
-        assert!(store.get("b").is_none() && store.contains("a") && store.contains("d"));
+        assert_eq!(store.insert("d".into(), light(8)).unwrap(), vec![(Kind::Light, "b".to_owned())]);
+        assert!(store.get(Kind::Light, "b").is_none() && store.contains(Kind::Light, "a") && store.contains(Kind::Light, "d"));
         let stats = store.stats();
-        assert_eq!((stats.entries, stats.bytes, stats.evictions, stats.hits, stats.misses), (3, 3 * 1024, 1, 1, 1));
-        assert!(store.remove("a") && !store.remove("a"));
+        assert_eq!((stats.entries, stats.bytes, stats.evictions, stats.hits, stats.misses), (3, 3 * 1024, 1, 1, 2));
+        assert!(store.remove(Kind::Light, "a") && !store.remove(Kind::Light, "a"));
         assert_eq!(store.stats().bytes, 2 * 1024);
         // Larger than the whole budget: refused, nothing evicted.
         assert_eq!(store.insert("huge".into(), light(64)).unwrap_err().code, ErrorCode::LimitExceeded);

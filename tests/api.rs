@@ -397,11 +397,14 @@ async fn openapi_document_matches_the_server() {
                 "get" => client.get(&url).send().await.unwrap(),
                 "post" => client.post(&url).json(&small_job("png")).send().await.unwrap(),
                 "delete" => client.delete(&url).send().await.unwrap(),
+                "put" => client.put(&url).body("{}").send().await.unwrap(),
+                "head" => client.head(&url).send().await.unwrap(),
                 other => panic!("undocumented verb {other}"),
             };
             let status = response.status();
             let body = response.bytes().await.unwrap();
-            let routed = status != StatusCode::NOT_FOUND || !String::from_utf8_lossy(&body).contains("no such route");
+            // (A HEAD answer has no body: its 404 is the documented "not held".)
+            let routed = status != StatusCode::NOT_FOUND || method == "head" || !String::from_utf8_lossy(&body).contains("no such route");
             assert!(routed, "{method} {path} is documented but not served");
             assert!(item[method]["responses"].get(status.as_str()).is_some(), "{method} {path} answered {status}, which is not documented");
         }
@@ -488,9 +491,20 @@ async fn uploads_are_content_addressed_cached_under_a_budget_and_rendered_by_id(
     let (status, first) = upload("/v1/scenes", glb.clone()).await;
     assert_eq!(status, StatusCode::CREATED, "{first}");
     let id = first["id"].as_str().unwrap().to_owned();
-    assert!(id.starts_with("scene-") && first["cache_bytes"].as_u64() == Some(cost), "{first}");
+    assert_eq!(id, sha256_hex(&glb), "the id is the SHA-256 a client can compute");
+    assert_eq!(first["cache_bytes"].as_u64(), Some(cost), "{first}");
     let (status, again) = upload("/v1/scenes", glb.clone()).await;
     assert_eq!((status, &again["id"], &again["created"]), (StatusCode::OK, &first["id"], &json!(false)));
+    // HEAD says whether the server holds an id; PUT uploads under an id the server checks.
+    let head = |path: String| client.head(format!("{base}{path}")).send();
+    assert_eq!(head(format!("/v1/scenes/{id}")).await.unwrap().status(), StatusCode::OK);
+    assert_eq!(head(format!("/v1/lights/{id}")).await.unwrap().status(), StatusCode::NOT_FOUND, "ids are per kind");
+    let put = |path: String, body: Vec<u8>| client.put(format!("{base}{path}")).body(body).send();
+    assert_eq!(put(format!("/v1/scenes/{id}"), glb.clone()).await.unwrap().status(), StatusCode::OK);
+    let wrong = put(format!("/v1/scenes/{}", sha256_hex(b"other")), glb.clone()).await.unwrap();
+    assert_eq!(wrong.status(), StatusCode::UNPROCESSABLE_ENTITY);
+    assert_eq!(wrong.json::<Value>().await.unwrap()["error"]["field"], "id");
+    assert_eq!(put("/v1/scenes/scene-1".into(), glb.clone()).await.unwrap().status(), StatusCode::UNPROCESSABLE_ENTITY);
 
     // Rendered by id it is the same picture as the same file rendered by path.
     std::fs::write(dir.path().join("scene.glb"), &glb).unwrap();
@@ -775,7 +789,7 @@ async fn the_dashboard_draws_live_data_in_headless_chromium() {
         let job = json!({"scene": {"builtin": scene}, "method": {"name": method}, "output": {"width": 192, "height": 128}});
         assert_eq!(client.post(format!("{base}/v1/render")).json(&job).send().await.unwrap().status(), StatusCode::OK);
     }
-    let failing = json!({"scene": {"id": "scene-0000"}, "method": {"name": "hard"}});
+    let failing = json!({"scene": {"id": sha256_hex(b"never uploaded")}, "method": {"name": "hard"}});
     assert_eq!(client.post(format!("{base}/v1/render")).json(&failing).send().await.unwrap().status(), StatusCode::NOT_FOUND);
     let stats: Value = client.get(format!("{base}/v1/stats")).send().await.unwrap().json().await.unwrap();
     let recent = stats["jobs"]["recent"].as_array().unwrap();
@@ -854,4 +868,151 @@ fn the_daemon_benchmark_runs_and_reports() {
     assert!(report.memory.scenes >= 10 && report.memory.evictions > 0, "{:?}", report.memory);
     let written: Value = serde_json::from_slice(&std::fs::read(out.path().join("daemon.json")).unwrap()).unwrap();
     assert_eq!(written["throughput"][1]["clients"], 3);
+}
+
+fn sha256_hex(bytes: &[u8]) -> String {
+    use sha2::Digest;
+    sha2::Sha256::digest(bytes).iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// The embedded job store across a crash (issue 10): a daemon killed with SIGKILL while one
+/// submitted job renders and others wait, restarted on the same data directory, finishes
+/// every job it had accepted, and still serves the result it had finished before the kill.
+#[tokio::test(flavor = "multi_thread")]
+async fn accepted_jobs_survive_sigkill_and_sigterm_and_finish_after_a_restart() {
+    let data = tempdir::Dir::new();
+    let address = {
+        let probe = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        probe.local_addr().unwrap().to_string()
+    };
+    let base = format!("http://{address}");
+    let start = || {
+        std::process::Command::new(env!("CARGO_BIN_EXE_penumbra"))
+            .args(["serve", "--listen", &address, "--no-warm-up", "--data-dir"])
+            .arg(data.path())
+            .env("PENUMBRA_LOG", "warn")
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .expect("the daemon starts")
+    };
+    let client = reqwest::Client::new();
+    let ready = || async {
+        for _ in 0..300 {
+            if client.get(format!("{base}/readyz")).send().await.is_ok_and(|r| r.status() == StatusCode::OK) {
+                return;
+            }
+            tokio::time::sleep(std::time::Duration::from_millis(100)).await;
+        }
+        panic!("the daemon did not become ready in 30 s");
+    };
+    let status = |id: String| {
+        let request = client.get(format!("{base}/v1/jobs/{id}"));
+        async move { request.send().await.unwrap().json::<Value>().await.unwrap()["status"].as_str().unwrap_or("").to_owned() }
+    };
+    let submit = |job: Value| {
+        let request = client.post(format!("{base}/v1/jobs")).json(&job);
+        async move {
+            let response = request.send().await.unwrap();
+            assert_eq!(response.status(), StatusCode::ACCEPTED);
+            response.json::<Value>().await.unwrap()["id"].as_str().unwrap().to_owned()
+        }
+    };
+
+    let mut daemon = start();
+    ready().await;
+    let finished = submit(small_job("png")).await;
+    while status(finished.clone()).await != "succeeded" {
+        tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+    }
+    let before: Vec<u8> = client.get(format!("{base}/v1/jobs/{finished}/image")).send().await.unwrap().bytes().await.unwrap().to_vec();
+    let slow = json!({"scene": {"builtin": "occluder"}, "method": {"name": "reference", "samples": 256, "resolution": 256},
+                      "output": {"width": 96, "height": 64}});
+    let mut accepted = Vec::new();
+    for _ in 0..4 {
+        accepted.push(submit(slow.clone()).await);
+    }
+    // Kill while the first renders and the rest wait.
+    for _ in 0..600 {
+        if status(accepted[0].clone()).await == "running" {
+            break;
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(20)).await;
+    }
+    let waiting = status(accepted[3].clone()).await;
+    daemon.kill().unwrap();
+    daemon.wait().unwrap();
+    assert_eq!(waiting, "queued", "the last job had not started when the daemon was killed");
+    assert!(client.get(format!("{base}/healthz")).send().await.is_err(), "the daemon is gone");
+
+    let mut daemon = start();
+    ready().await;
+    for id in &accepted {
+        let mut last = String::new();
+        for _ in 0..1200 {
+            last = status(id.clone()).await;
+            if last == "succeeded" || last == "failed" {
+                break;
+            }
+            tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+        }
+        assert_eq!(last, "succeeded", "job {id} after the restart");
+        let image = client.get(format!("{base}/v1/jobs/{id}/image")).send().await.unwrap();
+        assert_eq!(image.headers()[reqwest::header::CONTENT_TYPE], "image/png");
+    }
+    let after = client.get(format!("{base}/v1/jobs/{finished}/image")).send().await.unwrap();
+    assert_eq!(after.status(), StatusCode::OK, "a result finished before the kill is served after it");
+    assert_eq!(after.bytes().await.unwrap().to_vec(), before);
+
+    // SIGTERM: the running job finishes, the waiting ones stay queued in the store, the process
+    // exits 0; the next start renders them.
+    let mut accepted = Vec::new();
+    for _ in 0..3 {
+        accepted.push(submit(slow.clone()).await);
+    }
+    for _ in 0..600 {
+        if status(accepted[0].clone()).await == "running" {
+            break;
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(20)).await;
+    }
+    let terminated = std::process::Command::new("kill").args(["-TERM", &daemon.id().to_string()]).status().unwrap();
+    assert!(terminated.success());
+    let exit = daemon.wait().unwrap();
+    assert!(exit.success(), "a SIGTERM exits 0: {exit:?}");
+    let stored = penumbra::store::EmbeddedStore::open(data.path()).unwrap();
+    use penumbra::store::JobStore as _;
+    assert_eq!(stored.get(&accepted[0]).unwrap().unwrap().status, "succeeded", "the running job finished");
+    assert_eq!(stored.get(&accepted[2]).unwrap().unwrap().status, "queued", "a waiting job stayed queued");
+    drop(stored);
+    let mut daemon = start();
+    ready().await;
+    for id in &accepted {
+        client.get(format!("{base}/v1/jobs/{id}/events")).send().await.unwrap().text().await.unwrap();
+        assert_eq!(status(id.clone()).await, "succeeded", "job {id} after the graceful restart");
+    }
+    daemon.kill().unwrap();
+    daemon.wait().unwrap();
+}
+
+/// A stored job that daemons kept dying on is failed with a reason at the next start instead
+/// of being tried for ever; a job merely queued at the stop is rendered.
+#[tokio::test(flavor = "multi_thread")]
+async fn a_job_that_keeps_killing_its_daemon_is_failed_with_a_reason() {
+    use penumbra::store::{EmbeddedStore, JobStore};
+    let data = tempdir::Dir::new();
+    let store = Arc::new(EmbeddedStore::open(data.path()).unwrap());
+    store.accept("poison", &small_job("png")).unwrap();
+    for _ in 0..penumbra::store::MAX_ATTEMPTS {
+        store.start("poison").unwrap();
+    }
+    store.accept("plain", &small_job("png")).unwrap();
+    let shared: Arc<dyn JobStore> = store.clone();
+    let (base, _dir, _, state) = start_configured(penumbra::engine::DEFAULT_CACHE_BYTES, |s| s.with_store(shared)).await;
+    assert_eq!(state.resume_unfinished().await.unwrap(), 1);
+    let client = reqwest::Client::new();
+    let poison: Value = client.get(format!("{base}/v1/jobs/poison")).send().await.unwrap().json().await.unwrap();
+    assert_eq!(poison["status"], "failed");
+    assert!(poison["error"]["message"].as_str().unwrap().contains("started 3 times"), "{poison}");
+    client.get(format!("{base}/v1/jobs/plain/events")).send().await.unwrap().text().await.unwrap();
+    assert_eq!(store.get("plain").unwrap().unwrap().status, "succeeded");
 }

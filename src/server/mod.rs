@@ -24,6 +24,7 @@ use crate::job::Job;
 use crate::light::BUILTIN_LIGHT_IMAGES;
 use crate::methods::REGISTRY;
 use crate::scene::builtin::BUILTIN_SCENES;
+use crate::uploads::{content_id, is_content_id, Kind};
 use error::ApiError;
 
 pub use crate::jobs::QueueConfig;
@@ -34,6 +35,7 @@ pub const DEFAULT_RESULTS_TTL: std::time::Duration = std::time::Duration::from_s
 /// Finished jobs remembered for the dashboard's charts.
 const RECENT_JOBS: usize = 200;
 use crate::jobs::{JobEvent, JobQueue, JobStore, JobSummary, RecentJobs};
+use crate::store::{JobStore as DurableStore, StoredJob, MAX_ATTEMPTS};
 
 pub struct AppState {
     engine: Arc<Engine>,
@@ -44,6 +46,12 @@ pub struct AppState {
     results_kept: usize,
     /// The last finished jobs, for `/v1/stats` and the dashboard.
     recent: RecentJobs,
+    /// Where submitted jobs and their results are kept durably (None: memory only).
+    store: Option<Arc<dyn DurableStore>>,
+    /// Set at shutdown: event streams end (clients reconnect elsewhere or after the restart),
+    /// and with a durable store, jobs still waiting for the device stay queued there for the
+    /// next start instead of holding the shutdown up.
+    stopping: tokio::sync::watch::Sender<bool>,
     ready: AtomicBool,
     next_id: AtomicU64,
     started: std::time::SystemTime,
@@ -58,6 +66,8 @@ impl AppState {
             jobs: JobStore::new(results_kept, DEFAULT_RESULTS_TTL),
             results_kept,
             recent: RecentJobs::new(RECENT_JOBS),
+            store: None,
+            stopping: tokio::sync::watch::channel(false).0,
             engine,
             ready: AtomicBool::new(false),
             next_id: AtomicU64::new(1),
@@ -67,6 +77,11 @@ impl AppState {
 
     pub fn with_queue(self, queue: QueueConfig) -> Self {
         Self { queue: JobQueue::new(queue), queue_config: queue, ..self }
+    }
+
+    /// Keeps submitted jobs and their results in `store`, so that they survive a restart.
+    pub fn with_store(self, store: Arc<dyn DurableStore>) -> Self {
+        Self { store: Some(store), ..self }
     }
 
     /// Finished jobs (results, records and events) are dropped `ttl` after they finished.
@@ -99,9 +114,78 @@ impl AppState {
         self.queue.try_hold_device()
     }
 
-    /// See `JobQueue::drain`: for a shutdown that finishes the work it accepted.
+    /// See `JobQueue::drain`: for a shutdown that finishes the work it accepted. With a durable
+    /// store, jobs that have not reached the device stay queued there for the next start.
     pub async fn drain(&self, limit: std::time::Duration) -> bool {
+        self.begin_shutdown();
         self.queue.drain(limit).await
+    }
+
+    /// Tells waiting jobs and event streams that the daemon is stopping.
+    pub fn begin_shutdown(&self) {
+        self.stopping.send_replace(true);
+    }
+
+    /// Submits again every job the store holds unfinished (queued, or running when the last
+    /// daemon stopped), oldest first; one started `MAX_ATTEMPTS` times already fails instead.
+    /// Returns how many were resumed.
+    pub async fn resume_unfinished(self: &Arc<Self>) -> anyhow::Result<usize> {
+        let Some(store) = self.store.clone() else { return Ok(0) };
+        let unfinished = tokio::task::spawn_blocking(move || store.unfinished()).await??;
+        let mut resumed = 0;
+        for stored in unfinished {
+            let job = Job::from_json(stored.job.to_string().as_bytes());
+            let failure = match job {
+                // Said in full: the reason is the point here, and it reveals nothing internal.
+                Ok(_) if stored.attempts >= MAX_ATTEMPTS => Some(json!({
+                    "code": "internal",
+                    "status": 500,
+                    "message": format!(
+                        "the job was started {} times by daemons that stopped before it finished; it is not retried again",
+                        stored.attempts
+                    ),
+                })),
+                Ok(job) => {
+                    let admitted = self.queue.admit_waiting().await?;
+                    self.spawn_submitted(stored.id.clone(), job, admitted);
+                    resumed += 1;
+                    None
+                }
+                Err(error) => Some(failure_detail(&error)),
+            };
+            if let Some(detail) = failure {
+                tracing::warn!(id = %stored.id, %detail, "stored job failed at resumption");
+                let store = self.store.clone();
+                tokio::task::spawn_blocking(move || store.map(|s| s.fail(&stored.id, &detail))).await?.transpose()?;
+            }
+        }
+        Ok(resumed)
+    }
+
+    /// Registers a submitted job's event channel and starts its life in the background.
+    fn spawn_submitted(self: &Arc<Self>, id: String, job: Job, admitted: tokio::sync::OwnedSemaphorePermit) {
+        let (events, _) = tokio::sync::watch::channel(JobEvent::status("queued"));
+        self.jobs.submit(id.clone(), events.clone());
+        let state = self.clone();
+        tokio::spawn(async move { run_submitted(state, id, job, admitted, events).await });
+    }
+
+    /// Drops stored results past their age or beyond the byte budget, now and then forever.
+    fn spawn_expiry(self: &Arc<Self>, ttl: std::time::Duration, max_image_bytes: u64) {
+        let Some(store) = self.store.clone() else { return };
+        tokio::spawn(async move {
+            let mut tick = tokio::time::interval(std::time::Duration::from_secs(30));
+            loop {
+                tick.tick().await;
+                let store = store.clone();
+                match tokio::task::spawn_blocking(move || store.expire(ttl, max_image_bytes)).await {
+                    Ok(Ok((0, 0))) => {}
+                    Ok(Ok((records, images))) => tracing::info!(records, images, "expired stored results"),
+                    Ok(Err(error)) => tracing::warn!(%error, "expiring stored results failed"),
+                    Err(_) => {}
+                }
+            }
+        });
     }
 
     pub fn set_ready(&self) {
@@ -122,8 +206,8 @@ pub fn app(state: Arc<AppState>) -> Router {
         .route("/v1/methods", get(methods))
         .route("/v1/scenes", post(upload_scene))
         .route("/v1/lights", post(upload_light))
-        .route("/v1/scenes/{id}", axum::routing::delete(delete_upload))
-        .route("/v1/lights/{id}", axum::routing::delete(delete_upload))
+        .route("/v1/scenes/{id}", upload_routes(Kind::Scene))
+        .route("/v1/lights/{id}", upload_routes(Kind::Light))
         .route("/v1/jobs", post(submit_job))
         .route("/v1/jobs/{id}", get(job_record))
         .route("/v1/jobs/{id}/events", get(job_events))
@@ -147,11 +231,23 @@ pub async fn serve(config: ServeConfig, engine: Arc<Engine>) -> anyhow::Result<(
         concurrency: config.concurrency,
         deadline: std::time::Duration::from_secs_f64(config.deadline_secs.max(0.0)),
     };
-    let state = Arc::new(
-        AppState::new(engine.clone(), config.results_kept)
-            .with_queue(queue)
-            .with_results_ttl(std::time::Duration::from_secs_f64(config.results_ttl_secs.max(0.0))),
-    );
+    let ttl = std::time::Duration::from_secs_f64(config.results_ttl_secs.max(0.0));
+    let mut state = AppState::new(engine.clone(), config.results_kept).with_queue(queue).with_results_ttl(ttl);
+    match config.job_store.as_str() {
+        "memory" => tracing::warn!("job store in memory: submitted jobs are lost when the daemon stops"),
+        "embedded" => {
+            let store = crate::store::EmbeddedStore::open(&config.data_dir)?;
+            tracing::info!(data_dir = %config.data_dir.display(), "job store: embedded");
+            state = state.with_store(Arc::new(store));
+        }
+        other => anyhow::bail!("unknown --job-store `{other}` (embedded or memory)"),
+    }
+    let state = Arc::new(state);
+    let resumed = state.resume_unfinished().await?;
+    if resumed > 0 {
+        tracing::info!(resumed, "resumed jobs accepted before the last stop");
+    }
+    state.spawn_expiry(ttl, config.results_bytes);
     let listener = tokio::net::TcpListener::bind(config.listen).await?;
     tracing::info!(address = %listener.local_addr()?, "listening");
     let warm = state.clone();
@@ -167,7 +263,12 @@ pub async fn serve(config: ServeConfig, engine: Arc<Engine>) -> anyhow::Result<(
         warm.set_ready();
         tracing::info!(duration_ms = started.elapsed().as_millis() as u64, "ready: pipelines compiled, default scene uploaded");
     });
-    axum::serve(listener, app(state.clone())).with_graceful_shutdown(shutdown_signal()).await?;
+    let stopping = state.clone();
+    let signal = async move {
+        shutdown_signal().await;
+        stopping.begin_shutdown();
+    };
+    axum::serve(listener, app(state.clone())).with_graceful_shutdown(signal).await?;
     // Requests in flight have finished; jobs submitted with POST /v1/jobs may still run.
     if !state.drain(state.queue.deadline + std::time::Duration::from_secs(600)).await {
         tracing::warn!("shut down with submitted jobs unfinished");
@@ -208,26 +309,22 @@ fn body_error(state: &AppState, rejection: BytesRejection, unreadable: ErrorCode
 /// `POST /v1/scenes`: a glTF (JSON with `data:` buffers) or GLB body → its content id. 201
 /// when stored now, 200 when the same bytes were already there.
 async fn upload_scene(State(state): State<Arc<AppState>>, body: Result<Bytes, BytesRejection>) -> Response {
-    upload(state, body, |engine, bytes| engine.upload_scene(bytes)).await
+    upload(state, body, Kind::Scene).await
 }
 
 /// `POST /v1/lights`: a PNG or EXR body → its content id.
 async fn upload_light(State(state): State<Arc<AppState>>, body: Result<Bytes, BytesRejection>) -> Response {
-    upload(state, body, |engine, bytes| engine.upload_light(bytes)).await
+    upload(state, body, Kind::Light).await
 }
 
-async fn upload(
-    state: Arc<AppState>,
-    body: Result<Bytes, BytesRejection>,
-    store: fn(&Engine, &[u8]) -> crate::error::JobResult<crate::engine::UploadReceipt>,
-) -> Response {
+async fn upload(state: Arc<AppState>, body: Result<Bytes, BytesRejection>, kind: Kind) -> Response {
     let bytes = match body {
         Ok(bytes) => bytes,
         Err(rejection) => return ApiError(body_error(&state, rejection, ErrorCode::InvalidAsset)).into_response(),
     };
     let engine = state.engine.clone();
     // Decoding a large scene takes a while: off the async workers.
-    match tokio::task::spawn_blocking(move || store(&engine, &bytes)).await {
+    match tokio::task::spawn_blocking(move || engine.upload(kind, &bytes)).await {
         Ok(Ok(receipt)) => {
             let status = if receipt.created { StatusCode::CREATED } else { StatusCode::OK };
             (status, Json(receipt)).into_response()
@@ -237,9 +334,48 @@ async fn upload(
     }
 }
 
+/// `PUT`, `HEAD` and `DELETE` on `/v1/scenes/{id}` or `/v1/lights/{id}`.
+fn upload_routes(kind: Kind) -> axum::routing::MethodRouter<Arc<AppState>> {
+    axum::routing::put(move |state: State<Arc<AppState>>, id: Path<String>, body: Result<Bytes, BytesRejection>| {
+        put_upload(kind, state, id, body)
+    })
+    .head(move |state: State<Arc<AppState>>, Path(id): Path<String>| async move {
+        if state.engine.holds_upload(kind, &id) {
+            StatusCode::OK
+        } else {
+            StatusCode::NOT_FOUND
+        }
+    })
+    .delete(move |state: State<Arc<AppState>>, id: Path<String>| delete_upload(kind, state, id))
+}
+
+/// `PUT /v1/scenes/{id}`, `PUT /v1/lights/{id}`: an idempotent upload under the id the client
+/// computed (the SHA-256 of the body, checked here); 201 when stored now, 200 when held.
+async fn put_upload(
+    kind: Kind,
+    State(state): State<Arc<AppState>>,
+    Path(id): Path<String>,
+    body: Result<Bytes, BytesRejection>,
+) -> Response {
+    if !is_content_id(&id) {
+        let message = "an upload id is the lowercase hex SHA-256 of the bytes (64 digits)";
+        return ApiError(JobError::field(ErrorCode::InvalidField, "id", message)).into_response();
+    }
+    let bytes = match body {
+        Ok(bytes) => bytes,
+        Err(rejection) => return ApiError(body_error(&state, rejection, ErrorCode::InvalidAsset)).into_response(),
+    };
+    let actual = content_id(&bytes);
+    if actual != id {
+        let message = format!("the body's SHA-256 is {actual}, not the id in the path");
+        return ApiError(JobError::field(ErrorCode::InvalidField, "id", message)).into_response();
+    }
+    upload(state, Ok(bytes), kind).await
+}
+
 /// `DELETE /v1/scenes/{id}`, `DELETE /v1/lights/{id}`: 204, or 404 when there was none.
-async fn delete_upload(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Response {
-    if state.engine.delete_upload(&id) {
+async fn delete_upload(kind: Kind, State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Response {
+    if state.engine.delete_upload(kind, &id) {
         StatusCode::NO_CONTENT.into_response()
     } else {
         ApiError(JobError::field(ErrorCode::NotUploaded, "id", format!("no uploaded asset with id `{id}`"))).into_response()
@@ -409,9 +545,25 @@ async fn job_record(State(state): State<Arc<AppState>>, Path(id): Path<String>) 
     if let Some(rendered) = state.jobs.find(&id) {
         return Ok(Json(job_json(&id, &rendered)));
     }
-    let events = state.jobs.submitted(&id).ok_or_else(|| unknown_job(&id))?;
-    let event = events.borrow().clone();
-    Ok(Json(json!({"id": id, "status": event.status, "progress": {"done": event.done, "total": event.total}, "error": event.error})))
+    if let Some(events) = state.jobs.submitted(&id) {
+        let event = events.borrow().clone();
+        return Ok(Json(
+            json!({"id": id, "status": event.status, "progress": {"done": event.done, "total": event.total}, "error": event.error}),
+        ));
+    }
+    let stored = stored_job(&state, &id).await?.ok_or_else(|| unknown_job(&id))?;
+    Ok(Json(match stored.result {
+        Some(result) if stored.status == "succeeded" => result,
+        _ => json!({"id": id, "status": stored.status, "progress": {"done": 0, "total": 0}, "error": stored.error}),
+    }))
+}
+
+/// A job from the durable store (one this process did not run, or no longer holds).
+async fn stored_job(state: &AppState, id: &str) -> Result<Option<StoredJob>, ApiError> {
+    let Some(store) = state.store.clone() else { return Ok(None) };
+    let id = id.to_owned();
+    let stored = tokio::task::spawn_blocking(move || store.get(&id)).await.map_err(|e| JobError::internal(e.to_string()))?;
+    Ok(stored.map_err(|error| JobError::internal(format!("the job store failed: {error}")))?)
 }
 
 /// `POST /v1/jobs`: validates and admits the job (4xx, or 429 when the queue is full), answers
@@ -419,21 +571,35 @@ async fn job_record(State(state): State<Arc<AppState>>, Path(id): Path<String>) 
 /// state, `/events` for server-sent progress, `/image` once it succeeded.
 async fn submit_job(State(state): State<Arc<AppState>>, body: Result<Bytes, BytesRejection>) -> Result<Response, ApiError> {
     let body = body.map_err(|rejection| body_error(&state, rejection, ErrorCode::InvalidJson));
-    let job = body.and_then(|body| Job::from_json(&body)).and_then(|job| job.validate(state.engine.limits()).map(|_| job));
-    let job = job.inspect_err(|error| state.job_finished("", "", error.code.as_str(), 0.0, None))?;
+    let parsed = body.and_then(|body| {
+        let job = Job::from_json(&body)?;
+        job.validate(state.engine.limits())?;
+        // The job as sent (it parsed, so it is JSON): what the store keeps and resumes.
+        let sent: Value = serde_json::from_slice(&body).map_err(|e| JobError::new(ErrorCode::InvalidJson, e.to_string()))?;
+        Ok((job, sent))
+    });
+    let (job, sent) = parsed.inspect_err(|error| state.job_finished("", "", error.code.as_str(), 0.0, None))?;
     let admitted = state.queue.admit().inspect_err(|error| state.job_finished("", &job.method.name, error.code.as_str(), 0.0, None))?;
     let id = state.new_id();
-    let (events, _) = tokio::sync::watch::channel(JobEvent::status("queued"));
-    state.jobs.submit(id.clone(), events.clone());
-    let task_state = state.clone();
-    let task_id = id.clone();
-    tokio::spawn(async move { run_submitted(task_state, task_id, job, admitted, events).await });
+    // Durable before the 202: an accepted job survives a crash from here on.
+    if let Some(store) = state.store.clone() {
+        let stored_id = id.clone();
+        tokio::task::spawn_blocking(move || store.accept(&stored_id, &sent))
+            .await
+            .map_err(|e| JobError::internal(e.to_string()))?
+            .map_err(|error| {
+                tracing::error!(%error, "cannot record a submitted job");
+                JobError::internal("the job store failed; the job was not accepted")
+            })?;
+    }
+    state.spawn_submitted(id.clone(), job, admitted);
     let links = json!({"id": id, "status": "queued", "record": format!("/v1/jobs/{id}"), "events": format!("/v1/jobs/{id}/events")});
     Ok((StatusCode::ACCEPTED, [(header::LOCATION, format!("/v1/jobs/{id}"))], Json(links)).into_response())
 }
 
-/// A submitted job's life: wait for the device (up to the deadline), render with progress
-/// events, keep the result.
+/// A submitted job's life: wait for the device (up to the deadline; at shutdown with a
+/// durable store, stop waiting and stay queued there), render with progress events, store
+/// the outcome.
 async fn run_submitted(
     state: Arc<AppState>,
     id: String,
@@ -444,24 +610,47 @@ async fn run_submitted(
     let started = std::time::Instant::now();
     let method = job.method.name.clone();
     let waiting = state.metrics.job_queued();
-    let device = state.queue.device().await;
+    let mut stopping = state.stopping.subscribe();
+    let durable = state.store.is_some();
+    let device = tokio::select! {
+        device = state.queue.device() => device,
+        _ = stopping.wait_for(|stop| *stop), if durable => {
+            tracing::info!(%id, "shutting down: the job stays queued in the store for the next start");
+            return;
+        }
+    };
     drop(waiting);
     let outcome = match device {
         Ok(device) => {
             events.send_replace(JobEvent::status("running"));
             let _running = state.metrics.job_running();
             let engine = state.engine.clone();
+            let store = state.store.clone();
             let progress = events.clone();
             let span = tracing::info_span!("job", %id, method = %method);
+            let job_id = id.clone();
             tokio::task::spawn_blocking(move || {
                 let _permits = (admitted, device);
-                let report = |done, total| {
-                    progress.send_modify(|event| {
-                        event.done = done;
-                        event.total = total;
-                    })
-                };
-                span.in_scope(|| engine.render_observed(&job, &report))
+                span.in_scope(|| {
+                    if let Some(store) = &store {
+                        if let Err(error) = store.start(&job_id) {
+                            tracing::warn!(%error, "cannot mark the job running in the store");
+                        }
+                    }
+                    let report = |done, total| {
+                        progress.send_modify(|event| {
+                            event.done = done;
+                            event.total = total;
+                        })
+                    };
+                    let rendered = engine.render_observed(&job, &report)?;
+                    if let Some(store) = &store {
+                        store
+                            .succeed(&job_id, &job_json(&job_id, &rendered), &rendered.bytes)
+                            .map_err(|error| JobError::internal(format!("cannot store the result: {error}")))?;
+                    }
+                    Ok(rendered)
+                })
             })
             .await
             .unwrap_or_else(|e| Err(JobError::internal(format!("render task failed: {e}"))))
@@ -478,38 +667,78 @@ async fn run_submitted(
         }
         Err(error) => {
             state.job_finished(&id, &method, error.code.as_str(), seconds, None);
-            let mut detail = error::error_body(&error);
-            detail["status"] = json!(error::status_of(error.code).as_u16());
+            let detail = failure_detail(&error);
+            if let Some(store) = state.store.clone() {
+                let (stored_id, stored_detail) = (id.clone(), detail.clone());
+                let failed = tokio::task::spawn_blocking(move || store.fail(&stored_id, &stored_detail)).await;
+                if !matches!(failed, Ok(Ok(()))) {
+                    tracing::warn!(%id, "cannot store the job's failure");
+                }
+            }
             events.send_modify(|event| event.finish("failed", Some(detail)));
         }
     }
+}
+
+/// A failed job's error as its record and events carry it: the error body with its status.
+fn failure_detail(error: &JobError) -> Value {
+    let mut detail = error::error_body(error);
+    detail["status"] = json!(error::status_of(error.code).as_u16());
+    detail
 }
 
 /// `GET /v1/jobs/{id}/events`: server-sent events — `progress` with the job's state at once and
 /// on every change, then one `succeeded` or `failed`, and the stream ends.
 async fn job_events(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Result<Response, ApiError> {
     use axum::response::sse::{Event, KeepAlive, Sse};
-    let events = state.jobs.submitted(&id).ok_or_else(|| unknown_job(&id))?;
+    let events = match state.jobs.submitted(&id) {
+        Some(events) => events,
+        // Finished under an earlier process: its final state, and the stream ends.
+        None => {
+            let stored = stored_job(&state, &id).await?.filter(StoredJob::finished).ok_or_else(|| unknown_job(&id))?;
+            let status = if stored.status == "succeeded" { "succeeded" } else { "failed" };
+            let mut event = JobEvent::status("queued");
+            event.finish(status, stored.error);
+            tokio::sync::watch::channel(event).0
+        }
+    };
     let receiver = events.subscribe();
     // (receiver, ended): the current state first, then each change, until a final one.
-    let stream = futures_util::stream::unfold((receiver, false, true), |(mut receiver, ended, first)| async move {
+    let stopping = state.stopping.subscribe();
+    let stream = futures_util::stream::unfold((receiver, stopping, false, true), |(mut receiver, mut stopping, ended, first)| async move {
         if ended {
             return None;
         }
-        if !first && receiver.changed().await.is_err() {
-            return None;
+        if !first {
+            tokio::select! {
+                changed = receiver.changed() => changed.ok()?,
+                // A shutdown ends the stream: graceful shutdown waits for open responses.
+                _ = stopping.wait_for(|stop| *stop) => return None,
+            }
         }
         let event = receiver.borrow_and_update().clone();
         let name = if event.finished() { event.status } else { "progress" };
         let sse = Event::default().event(name).json_data(&event).unwrap_or_else(|_| Event::default().event(name));
-        Some((Ok::<_, std::convert::Infallible>(sse), (receiver, event.finished(), false)))
+        Some((Ok::<_, std::convert::Infallible>(sse), (receiver, stopping, event.finished(), false)))
     });
     Ok(Sse::new(stream).keep_alive(KeepAlive::default()).into_response())
 }
 
 async fn job_image(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Result<Response, ApiError> {
-    let rendered = state.jobs.find(&id).ok_or_else(|| unknown_job(&id))?;
-    Ok(image_response(&id, &rendered))
+    if let Some(rendered) = state.jobs.find(&id) {
+        return Ok(image_response(&id, &rendered));
+    }
+    // A result from the durable store: the bytes and the format its record names.
+    let stored = stored_job(&state, &id).await?.filter(|job| job.image_bytes > 0).ok_or_else(|| unknown_job(&id))?;
+    let Some(store) = state.store.clone() else { return Err(unknown_job(&id)) };
+    let image_id = id.clone();
+    let bytes = tokio::task::spawn_blocking(move || store.image(&image_id))
+        .await
+        .map_err(|e| JobError::internal(e.to_string()))?
+        .map_err(|error| JobError::internal(format!("the job store failed: {error}")))?
+        .ok_or_else(|| unknown_job(&id))?;
+    let mime = if stored.result.as_ref().is_some_and(|r| r["format"] == "exr") { "image/x-exr" } else { "image/png" };
+    Ok(([(header::CONTENT_TYPE, mime)], bytes).into_response())
 }
 
 /// `GET /v1/jobs/{id}/thumbnail`: a small PNG of a kept result (the dashboard's previews).
