@@ -6,6 +6,7 @@
 //! `server`. See ARCHITECTURE.md for the map.
 
 pub mod bench;
+pub mod client;
 pub mod config;
 pub mod engine;
 pub mod error;

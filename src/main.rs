@@ -48,6 +48,9 @@ enum Command {
         #[command(flatten)]
         options: RenderOptions,
     },
+    /// Render a job on a remote penumbra: upload what it lacks, submit, follow the progress,
+    /// download the image. Prints what it did as JSON.
+    Submit(penumbra::client::SubmitOptions),
     /// Render one job to a PNG or EXR file, without a server.
     Render {
         /// The job (JSON, see api/examples/). Without it: the built-in `torus` scene, `hard`.
@@ -110,6 +113,24 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::BenchDaemon { bench, options } => {
             let gpu = open_gpu(&options)?;
             penumbra::bench::run(gpu, &bench)?;
+            Ok(())
+        }
+        Command::Submit(options) => {
+            let bar = if options.quiet { indicatif::ProgressBar::hidden() } else { indicatif::ProgressBar::new(0) };
+            bar.set_style(
+                indicatif::ProgressStyle::with_template("{bar:40} {percent:>3}% {pos}/{len} {elapsed_precise}")
+                    .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+            );
+            let runtime = tokio::runtime::Runtime::new()?;
+            let report = runtime.block_on(penumbra::client::submit(&options, &|done, total| {
+                // Methods without steps report 0 of 0: one step, done when the job is.
+                bar.set_length(total.max(1));
+                bar.set_position(if total == 0 { 0 } else { done });
+            }))?;
+            bar.set_position(bar.length().unwrap_or(1));
+            bar.finish();
+            println!("{}", serde_json::to_string(&report)?);
+            eprintln!("wrote {} ({} bytes)", options.output.display(), report.output_bytes);
             Ok(())
         }
         Command::Render { job, output, timings_json, options } => {

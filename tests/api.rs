@@ -1016,3 +1016,58 @@ async fn a_job_that_keeps_killing_its_daemon_is_failed_with_a_reason() {
     client.get(format!("{base}/v1/jobs/plain/events")).send().await.unwrap().text().await.unwrap();
     assert_eq!(store.get("plain").unwrap().unwrap().status, "succeeded");
 }
+
+/// `penumbra submit` against a live server: it uploads the job's local scene and light image
+/// once (a second submit uploads nothing), follows the progress to the end and writes the image.
+#[tokio::test(flavor = "multi_thread")]
+async fn submit_uploads_only_what_the_server_lacks_and_follows_progress() {
+    let (base, _dir) = start().await;
+    let work = tempdir::Dir::new();
+    std::fs::write(work.path().join("scene.glb"), common::as_glb()).unwrap();
+    let mut png = std::io::Cursor::new(Vec::new());
+    image::RgbaImage::from_fn(4, 2, |x, _| image::Rgba([255, (x * 60) as u8, 40, 255]))
+        .write_to(&mut png, image::ImageFormat::Png)
+        .unwrap();
+    std::fs::write(work.path().join("light.png"), png.into_inner()).unwrap();
+    let job = json!({"scene": {"path": "scene.glb"}, "light": {"image": {"path": "light.png"}},
+                     "method": {"name": "reference", "samples": 16, "resolution": 256}, "output": {"width": 64, "height": 48}});
+    std::fs::write(work.path().join("job.json"), job.to_string()).unwrap();
+    let submit = |output: &str| {
+        let args = [
+            "submit".to_owned(),
+            work.path().join("job.json").display().to_string(),
+            "--server".into(),
+            base.clone(),
+            "--quiet".into(),
+            "-o".into(),
+            work.path().join(output).display().to_string(),
+        ];
+        async move {
+            let output = tokio::task::spawn_blocking(move || {
+                std::process::Command::new(env!("CARGO_BIN_EXE_penumbra")).args(&args).output().unwrap()
+            })
+            .await
+            .unwrap();
+            assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+            serde_json::from_slice::<Value>(&output.stdout).expect("a JSON report on stdout")
+        }
+    };
+    let first = submit("first.png").await;
+    assert_eq!(first["uploaded"].as_array().unwrap().len(), 2, "{first}");
+    assert!(first["done"].as_u64().unwrap() >= 16 && first["done"] == first["total"], "progress reached 100 %: {first}");
+    let second = submit("second.png").await;
+    assert_eq!(second["uploaded"], json!([]), "nothing uploaded the second time: {second}");
+    assert_eq!(second["reused"], first["uploaded"]);
+    let (a, b) = (std::fs::read(work.path().join("first.png")).unwrap(), std::fs::read(work.path().join("second.png")).unwrap());
+    assert_eq!(image::load_from_memory(&a).unwrap().width(), 64);
+    assert_eq!(a, b, "the same job renders the same image");
+    // A job the server refuses: the CLI fails with the server's error, not a hang.
+    std::fs::write(work.path().join("bad.json"), json!({"scene": {"builtin": "nope"}}).to_string()).unwrap();
+    let output = std::process::Command::new(env!("CARGO_BIN_EXE_penumbra"))
+        .args(["submit", &work.path().join("bad.json").display().to_string(), "--server", &base, "--quiet", "-o"])
+        .arg(work.path().join("bad.png"))
+        .output()
+        .unwrap();
+    assert!(!output.status.success());
+    assert!(String::from_utf8_lossy(&output.stderr).contains("unknown_builtin"), "{}", String::from_utf8_lossy(&output.stderr));
+}
