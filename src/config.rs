@@ -77,9 +77,15 @@ pub struct ServeConfig {
     pub results_kept: usize,
 
     /// Where submitted jobs and their results are kept: `embedded` (a file under --data-dir;
-    /// accepted jobs survive a crash and finish after a restart) or `memory`.
+    /// accepted jobs survive a crash and finish after a restart), `memory`, or
+    /// `redis://HOST:PORT/DB` (shared by several replicas acting as one service).
     #[arg(long, env = "PENUMBRA_JOB_STORE", default_value = "embedded")]
     pub job_store: String,
+
+    /// With a Redis store: seconds a job taken by a replica may go without its heartbeat
+    /// before another replica claims it (the first is presumed dead).
+    #[arg(long, env = "PENUMBRA_CLAIM_IDLE_SECS", default_value_t = 15.0)]
+    pub claim_idle_secs: f64,
 
     /// Directory of the embedded job store.
     #[arg(long, env = "PENUMBRA_DATA_DIR", default_value = "penumbra-data")]

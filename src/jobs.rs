@@ -72,6 +72,12 @@ impl JobQueue {
         }
     }
 
+    /// A device slot, waiting as long as it takes (a shared-queue worker, which takes a job
+    /// only once it can start it).
+    pub async fn device_slot(&self) -> Option<OwnedSemaphorePermit> {
+        self.device.clone().acquire_owned().await.ok()
+    }
+
     /// Takes a device slot as a job would, until the permit drops: jobs queue behind it. For
     /// tests of the queue (and for an operator draining the device), not for jobs.
     pub fn try_hold_device(&self) -> Option<OwnedSemaphorePermit> {

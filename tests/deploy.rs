@@ -77,8 +77,15 @@ fn docker(args: &[&str]) -> String {
 
 /// A blocking HTTP exchange over loopback (the test has no async runtime).
 fn http(method: &str, url: &str, body: Option<&str>) -> Option<(u16, Vec<u8>)> {
+    http_with(method, url, body, &[])
+}
+
+fn http_with(method: &str, url: &str, body: Option<&str>, headers: &[&str]) -> Option<(u16, Vec<u8>)> {
     let mut command = Command::new("curl");
     command.args(["-s", "-m", "30", "-X", method, "-o", "-", "-w", "\n%{http_code}", url]);
+    for header in headers {
+        command.args(["-H", header]);
+    }
     if let Some(body) = body {
         command.args(["-H", "content-type: application/json", "-d", body]);
     }
@@ -154,4 +161,148 @@ fn the_container_image_builds_serves_and_stops_gracefully() {
     assert_eq!(finished["status"], "succeeded", "the running job finished before the stop: {finished}");
     let (status, image) = http("GET", &format!("{base}/v1/jobs/{id}/image"), None).unwrap();
     assert!(status == 200 && image.starts_with(b"\x89PNG"));
+}
+
+/// A child process killed when the test ends, however it ends.
+struct Child(std::process::Child);
+
+impl Drop for Child {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// nginx, stopped with SIGQUIT (a SIGKILLed master would orphan its workers) when the test ends.
+struct Nginx(std::process::Child);
+
+impl Drop for Nginx {
+    fn drop(&mut self) {
+        let _ = Command::new("kill").args(["-QUIT", &self.0.id().to_string()]).status();
+        if wait_until(Duration::from_secs(10), || matches!(self.0.try_wait(), Ok(Some(_)))).is_none() {
+            let _ = self.0.kill();
+            let _ = self.0.wait();
+        }
+    }
+}
+
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
+}
+
+fn redis_get(port: u16, key: &str) -> String {
+    run(Command::new("redis-cli").args(["-p", &port.to_string(), "--raw", "GET", key])).trim().to_owned()
+}
+
+/// The cluster on loopback (issue 10): Debian's `redis-server`, three replicas sharing it as
+/// their job store, Debian's `nginx` in front with `deploy/nginx.conf`. A batch of async jobs
+/// goes through nginx; one replica is killed with SIGKILL while it renders; every job still
+/// ends `succeeded` and downloads through the survivors, and only the job the dead replica had
+/// in flight was rendered twice.
+#[test]
+fn three_replicas_behind_nginx_share_redis_and_survive_a_sigkill() {
+    let work = std::env::temp_dir().join(format!("penumbra-cluster-{}", std::process::id()));
+    std::fs::remove_dir_all(&work).ok();
+    std::fs::create_dir_all(work.join("nginx/tmp")).unwrap();
+    let redis_port = free_port();
+    let _redis = Child(
+        Command::new("redis-server")
+            .args(["--port", &redis_port.to_string(), "--bind", "127.0.0.1", "--save", "", "--appendonly", "no"])
+            .stdout(std::process::Stdio::null())
+            .spawn()
+            .expect("redis-server (apt-get install redis-server)"),
+    );
+    assert!(wait_until(Duration::from_secs(20), || Command::new("redis-cli")
+        .args(["-p", &redis_port.to_string(), "PING"])
+        .output()
+        .is_ok_and(|o| o.stdout.starts_with(b"PONG")))
+    .is_some());
+
+    let ports: Vec<u16> = (0..3).map(|_| free_port()).collect();
+    let replica = |port: u16| {
+        Child(
+            Command::new(env!("CARGO_BIN_EXE_penumbra"))
+                .args(["serve", "--no-warm-up", "--listen", &format!("127.0.0.1:{port}"), "--claim-idle-secs", "2"])
+                .args(["--job-store", &format!("redis://127.0.0.1:{redis_port}/0")])
+                .env_remove("HOSTNAME")
+                .env("PENUMBRA_LOG", "warn")
+                .stderr(std::process::Stdio::null())
+                .spawn()
+                .unwrap(),
+        )
+    };
+    let mut replicas: Vec<Option<Child>> = ports.iter().map(|&p| Some(replica(p))).collect();
+    for port in &ports {
+        let ready = wait_until(Duration::from_secs(60), || {
+            http("GET", &format!("http://127.0.0.1:{port}/readyz"), None).is_some_and(|(s, _)| s == 200)
+        });
+        assert!(ready.is_some(), "replica on {port} not ready");
+    }
+
+    let nginx_port = free_port();
+    let conf = std::fs::read_to_string(repo().join("deploy/nginx.conf"))
+        .unwrap()
+        .replace("127.0.0.1:8081", &format!("127.0.0.1:{}", ports[0]))
+        .replace("127.0.0.1:8082", &format!("127.0.0.1:{}", ports[1]))
+        .replace("127.0.0.1:8083", &format!("127.0.0.1:{}", ports[2]))
+        .replace("listen 127.0.0.1:8080", &format!("listen 127.0.0.1:{nginx_port}"));
+    std::fs::write(work.join("nginx/nginx.conf"), conf).unwrap();
+    let nginx = if Path::new("/usr/sbin/nginx").exists() { "/usr/sbin/nginx" } else { "nginx" };
+    let _nginx = Nginx(
+        Command::new(nginx)
+            .arg("-p")
+            .arg(work.join("nginx"))
+            .arg("-c")
+            .arg(work.join("nginx/nginx.conf"))
+            .args(["-g", "daemon off;"])
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .expect("nginx (apt-get install nginx)"),
+    );
+    let base = format!("http://127.0.0.1:{nginx_port}");
+    assert!(wait_until(Duration::from_secs(20), || http("GET", &format!("{base}/healthz"), None).is_some_and(|(s, _)| s == 200)).is_some());
+
+    let job = r#"{"scene": {"builtin": "occluder"}, "method": {"name": "reference", "samples": 384, "resolution": 256}, "output": {"width": 96, "height": 64}}"#;
+    let ids: Vec<String> = (0..9)
+        .map(|_| {
+            let (status, body) = http_with("POST", &format!("{base}/v1/jobs"), Some(job), &["x-penumbra-scene: builtin:occluder"]).unwrap();
+            assert_eq!(status, 202, "{}", String::from_utf8_lossy(&body));
+            serde_json::from_slice::<serde_json::Value>(&body).unwrap()["id"].as_str().unwrap().to_owned()
+        })
+        .collect();
+    let record =
+        |id: &str| -> serde_json::Value { serde_json::from_str(&redis_get(redis_port, &format!("penumbra:job:{id}"))).unwrap_or_default() };
+
+    // SIGKILL the replica on ports[1] while it renders one of the jobs.
+    let victim = format!("127.0.0.1:{}/", ports[1]);
+    let caught = wait_until(Duration::from_secs(60), || {
+        ids.iter().any(|id| {
+            let r = record(id);
+            r["status"] == "running" && r["worker"].as_str().is_some_and(|w| w.starts_with(&victim))
+        })
+    });
+    assert!(caught.is_some(), "the victim never took a job");
+    drop(replicas[1].take());
+
+    let all_done =
+        wait_until(Duration::from_secs(240), || ids.iter().all(|id| matches!(record(id)["status"].as_str(), Some("succeeded" | "failed"))));
+    assert!(all_done.is_some(), "not every job finished: {:?}", ids.iter().map(|id| record(id)["status"].clone()).collect::<Vec<_>>());
+    let mut twice = 0;
+    for id in &ids {
+        let r = record(id);
+        assert_eq!(r["status"], "succeeded", "{r}");
+        if r["attempts"].as_u64() > Some(1) {
+            twice += 1;
+        }
+        // Any survivor answers for any job through nginx.
+        let (status, image) = http("GET", &format!("{base}/v1/jobs/{id}/image"), None).unwrap();
+        assert!(status == 200 && image.starts_with(b"\x89PNG"), "job {id} image: {status}");
+        let (status, body) = http("GET", &format!("{base}/v1/jobs/{id}"), None).unwrap();
+        assert_eq!(status, 200, "{}", String::from_utf8_lossy(&body));
+    }
+    eprintln!("cluster: {} jobs, {twice} rendered twice after the SIGKILL", ids.len());
+    assert!(twice <= 1, "only the job the dead replica had in flight may be rendered twice ({twice})");
+    drop(replicas);
+    std::fs::remove_dir_all(&work).ok();
 }

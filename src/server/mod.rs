@@ -136,15 +136,7 @@ impl AppState {
         for stored in unfinished {
             let job = Job::from_json(stored.job.to_string().as_bytes());
             let failure = match job {
-                // Said in full: the reason is the point here, and it reveals nothing internal.
-                Ok(_) if stored.attempts >= MAX_ATTEMPTS => Some(json!({
-                    "code": "internal",
-                    "status": 500,
-                    "message": format!(
-                        "the job was started {} times by daemons that stopped before it finished; it is not retried again",
-                        stored.attempts
-                    ),
-                })),
+                Ok(_) if stored.attempts >= MAX_ATTEMPTS => Some(abandoned(stored.attempts)),
                 Ok(job) => {
                     let admitted = self.queue.admit_waiting().await?;
                     self.spawn_submitted(stored.id.clone(), job, admitted);
@@ -168,6 +160,19 @@ impl AppState {
         self.jobs.submit(id.clone(), events.clone());
         let state = self.clone();
         tokio::spawn(async move { run_submitted(state, id, job, admitted, events).await });
+    }
+
+    /// With a shared store, one worker per device slot takes jobs from the shared queue, as
+    /// consumer `REPLICA/SLOT` (REPLICA: `$HOSTNAME` — the pod name under Kubernetes — else
+    /// the listen address), so a job's record says where it ran.
+    pub fn spawn_workers(self: &Arc<Self>, replica: &str) {
+        if !self.store.as_ref().is_some_and(|s| s.shared()) {
+            return;
+        }
+        for worker in 0..self.queue_config.concurrency {
+            let consumer = format!("{replica}/{worker}");
+            tokio::spawn(work_shared_queue(self.clone(), consumer));
+        }
     }
 
     /// Drops stored results past their age or beyond the byte budget, now and then forever.
@@ -240,7 +245,13 @@ pub async fn serve(config: ServeConfig, engine: Arc<Engine>) -> anyhow::Result<(
             tracing::info!(data_dir = %config.data_dir.display(), "job store: embedded");
             state = state.with_store(Arc::new(store));
         }
-        other => anyhow::bail!("unknown --job-store `{other}` (embedded or memory)"),
+        url if url.starts_with("redis://") => {
+            let claim_idle = std::time::Duration::from_secs_f64(config.claim_idle_secs.max(0.5));
+            let store = crate::store::RedisStore::open(url, ttl, claim_idle)?;
+            tracing::info!("job store: redis (shared queue; this replica takes jobs from it)");
+            state = state.with_store(Arc::new(store));
+        }
+        other => anyhow::bail!("unknown --job-store `{other}` (embedded, memory or redis://HOST:PORT/DB)"),
     }
     let state = Arc::new(state);
     let resumed = state.resume_unfinished().await?;
@@ -253,16 +264,22 @@ pub async fn serve(config: ServeConfig, engine: Arc<Engine>) -> anyhow::Result<(
     tracing::info!(address = %listener.local_addr()?, lavapipe_threads, "listening");
     let warm = state.clone();
     let no_warm_up = config.no_warm_up;
-    tokio::task::spawn_blocking(move || {
+    let replica = std::env::var("HOSTNAME").ok().filter(|h| !h.is_empty()).unwrap_or_else(|| config.listen.to_string());
+    tokio::spawn(async move {
         let started = std::time::Instant::now();
         if !no_warm_up {
-            if let Err(error) = warm.engine.warm_up() {
+            let engine = warm.engine.clone();
+            if let Err(error) =
+                tokio::task::spawn_blocking(move || engine.warm_up()).await.unwrap_or_else(|e| Err(JobError::internal(e.to_string())))
+            {
                 tracing::error!(%error, "warm-up failed");
                 return;
             }
         }
         warm.set_ready();
         tracing::info!(duration_ms = started.elapsed().as_millis() as u64, "ready: pipelines compiled, default scene uploaded");
+        // A replica of a shared store takes jobs only once it is warm.
+        warm.spawn_workers(&replica);
     });
     let stopping = state.clone();
     let signal = async move {
@@ -324,8 +341,17 @@ async fn upload(state: Arc<AppState>, body: Result<Bytes, BytesRejection>, kind:
         Err(rejection) => return ApiError(body_error(&state, rejection, ErrorCode::InvalidAsset)).into_response(),
     };
     let engine = state.engine.clone();
-    // Decoding a large scene takes a while: off the async workers.
-    match tokio::task::spawn_blocking(move || engine.upload(kind, &bytes)).await {
+    let shared = state.store.clone().filter(|s| s.shared());
+    // Decoding a large scene takes a while: off the async workers. A shared store keeps the
+    // bytes once for every replica (after they decoded: a bad file is refused, not shared).
+    let stored = move || {
+        let receipt = engine.upload(kind, &bytes)?;
+        if let Some(store) = shared {
+            store.put_upload(kind, &receipt.id, &bytes).map_err(|e| JobError::internal(format!("cannot share the upload: {e}")))?;
+        }
+        Ok(receipt)
+    };
+    match tokio::task::spawn_blocking(stored).await {
         Ok(Ok(receipt)) => {
             let status = if receipt.created { StatusCode::CREATED } else { StatusCode::OK };
             (status, Json(receipt)).into_response()
@@ -342,9 +368,12 @@ fn upload_routes(kind: Kind) -> axum::routing::MethodRouter<Arc<AppState>> {
     })
     .head(move |state: State<Arc<AppState>>, Path(id): Path<String>| async move {
         if state.engine.holds_upload(kind, &id) {
-            StatusCode::OK
-        } else {
-            StatusCode::NOT_FOUND
+            return StatusCode::OK;
+        }
+        let Some(store) = state.store.clone().filter(|s| s.shared()) else { return StatusCode::NOT_FOUND };
+        match tokio::task::spawn_blocking(move || store.has_upload(kind, &id)).await {
+            Ok(Ok(true)) => StatusCode::OK,
+            _ => StatusCode::NOT_FOUND,
         }
     })
     .delete(move |state: State<Arc<AppState>>, id: Path<String>| delete_upload(kind, state, id))
@@ -376,7 +405,12 @@ async fn put_upload(
 
 /// `DELETE /v1/scenes/{id}`, `DELETE /v1/lights/{id}`: 204, or 404 when there was none.
 async fn delete_upload(kind: Kind, State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Response {
-    if state.engine.delete_upload(kind, &id) {
+    let mut deleted = state.engine.delete_upload(kind, &id);
+    if let Some(store) = state.store.clone().filter(|s| s.shared()) {
+        let shared_id = id.clone();
+        deleted |= matches!(tokio::task::spawn_blocking(move || store.delete_upload(kind, &shared_id)).await, Ok(Ok(true)));
+    }
+    if deleted {
         StatusCode::NO_CONTENT.into_response()
     } else {
         ApiError(JobError::field(ErrorCode::NotUploaded, "id", format!("no uploaded asset with id `{id}`"))).into_response()
@@ -474,9 +508,13 @@ async fn render_job(
     let id = state.new_id();
     let span = tracing::info_span!("job", %id, method = %job.method.name);
     let engine = state.engine.clone();
+    let store = state.store.clone();
     let rendered = tokio::task::spawn_blocking(move || {
         let _permits = permits;
-        span.in_scope(|| engine.render_observed(&job, &|done, total| tracing::debug!(done, total, "progress")))
+        span.in_scope(|| {
+            fetch_shared_uploads(&engine, store.as_deref(), &job)?;
+            engine.render_observed(&job, &|done, total| tracing::debug!(done, total, "progress"))
+        })
     })
     .await
     .map_err(|e| JobError::internal(format!("render task failed: {e}")))??;
@@ -555,7 +593,7 @@ async fn job_record(State(state): State<Arc<AppState>>, Path(id): Path<String>) 
     let stored = stored_job(&state, &id).await?.ok_or_else(|| unknown_job(&id))?;
     Ok(Json(match stored.result {
         Some(result) if stored.status == "succeeded" => result,
-        _ => json!({"id": id, "status": stored.status, "progress": {"done": 0, "total": 0}, "error": stored.error}),
+        _ => json!({"id": id, "status": stored.status, "progress": {"done": stored.done, "total": stored.total}, "error": stored.error}),
     }))
 }
 
@@ -580,7 +618,24 @@ async fn submit_job(State(state): State<Arc<AppState>>, body: Result<Bytes, Byte
         Ok((job, sent))
     });
     let (job, sent) = parsed.inspect_err(|error| state.job_finished("", "", error.code.as_str(), 0.0, None))?;
-    let admitted = state.queue.admit().inspect_err(|error| state.job_finished("", &job.method.name, error.code.as_str(), 0.0, None))?;
+    let shared = state.store.clone().filter(|s| s.shared());
+    if let Some(store) = &shared {
+        // The shared queue is bounded as a whole, by the same --queue.
+        let store = store.clone();
+        let queued = tokio::task::spawn_blocking(move || store.queued()).await.map_err(|e| JobError::internal(e.to_string()))?;
+        let queued = queued.map_err(|error| JobError::internal(format!("the job store failed: {error}")))?;
+        if queued >= u64::from(state.queue_config.capacity) {
+            let error = JobError::new(ErrorCode::QueueFull, "the shared job queue is full; retry after the Retry-After seconds");
+            state.job_finished("", &job.method.name, error.code.as_str(), 0.0, None);
+            return Err(ApiError(error));
+        }
+    }
+    // A local place in the queue, unless the shared queue holds the job (its workers take one
+    // when they take the job).
+    let admitted = match shared {
+        Some(_) => None,
+        None => Some(state.queue.admit().inspect_err(|error| state.job_finished("", &job.method.name, error.code.as_str(), 0.0, None))?),
+    };
     let id = state.new_id();
     // Durable before the 202: an accepted job survives a crash from here on.
     if let Some(store) = state.store.clone() {
@@ -593,14 +648,15 @@ async fn submit_job(State(state): State<Arc<AppState>>, body: Result<Bytes, Byte
                 JobError::internal("the job store failed; the job was not accepted")
             })?;
     }
-    state.spawn_submitted(id.clone(), job, admitted);
+    if let Some(admitted) = admitted {
+        state.spawn_submitted(id.clone(), job, admitted);
+    }
     let links = json!({"id": id, "status": "queued", "record": format!("/v1/jobs/{id}"), "events": format!("/v1/jobs/{id}/events")});
     Ok((StatusCode::ACCEPTED, [(header::LOCATION, format!("/v1/jobs/{id}"))], Json(links)).into_response())
 }
 
 /// A submitted job's life: wait for the device (up to the deadline; at shutdown with a
-/// durable store, stop waiting and stay queued there), render with progress events, store
-/// the outcome.
+/// durable store, stop waiting and stay queued there), then render and store it.
 async fn run_submitted(
     state: Arc<AppState>,
     id: String,
@@ -609,7 +665,6 @@ async fn run_submitted(
     events: tokio::sync::watch::Sender<JobEvent>,
 ) {
     let started = std::time::Instant::now();
-    let method = job.method.name.clone();
     let waiting = state.metrics.job_queued();
     let mut stopping = state.stopping.subscribe();
     let durable = state.store.is_some();
@@ -621,64 +676,186 @@ async fn run_submitted(
         }
     };
     drop(waiting);
-    let outcome = match device {
-        Ok(device) => {
-            events.send_replace(JobEvent::status("running"));
-            let _running = state.metrics.job_running();
-            let engine = state.engine.clone();
-            let store = state.store.clone();
-            let progress = events.clone();
-            let span = tracing::info_span!("job", %id, method = %method);
-            let job_id = id.clone();
-            tokio::task::spawn_blocking(move || {
-                let _permits = (admitted, device);
-                span.in_scope(|| {
-                    if let Some(store) = &store {
-                        if let Err(error) = store.start(&job_id) {
-                            tracing::warn!(%error, "cannot mark the job running in the store");
-                        }
+    match device {
+        Ok(device) => render_and_store(&state, id, job, vec![admitted, device], events, started).await,
+        Err(error) => finish_failed(&state, &id, &job.method.name, error, started, &events).await,
+    }
+}
+
+/// One worker of a replica on a shared store: with a free device slot, takes the next job
+/// (a dead replica's first), keeps it claimed while it renders, stores the outcome.
+async fn work_shared_queue(state: Arc<AppState>, consumer: String) {
+    let Some(store) = state.store.clone() else { return };
+    let mut stopping = state.stopping.subscribe();
+    loop {
+        let device = tokio::select! {
+            device = state.queue.device_slot() => device,
+            _ = stopping.wait_for(|stop| *stop) => return,
+        };
+        let Some(device) = device.filter(|_| !*stopping.borrow()) else { return };
+        let (taker, name) = (store.clone(), consumer.clone());
+        let taken = tokio::task::spawn_blocking(move || taker.next(&name, std::time::Duration::from_secs(2))).await;
+        let stored = match taken {
+            Ok(Ok(Some(stored))) => stored,
+            Ok(Ok(None)) => continue,
+            Ok(Err(error)) => {
+                tracing::warn!(%error, "cannot take a job from the shared queue; retrying in 1 s");
+                tokio::time::sleep(std::time::Duration::from_secs(1)).await;
+                continue;
+            }
+            Err(_) => continue,
+        };
+        let Ok(admitted) = state.queue.admit_waiting().await else { return };
+        let started = std::time::Instant::now();
+        let (events, _) = tokio::sync::watch::channel(JobEvent::status("queued"));
+        state.jobs.submit(stored.id.clone(), events.clone());
+        let method = stored.job["method"]["name"].as_str().unwrap_or("hard").to_owned();
+        let job = match Job::from_json(stored.job.to_string().as_bytes()) {
+            Ok(_) if stored.attempts >= MAX_ATTEMPTS => {
+                let detail = abandoned(stored.attempts);
+                store_failure(&state, &stored.id, detail.clone()).await;
+                events.send_modify(|event| event.finish("failed", Some(detail)));
+                continue;
+            }
+            Ok(job) => job,
+            Err(error) => {
+                finish_failed(&state, &stored.id, &method, error, started, &events).await;
+                continue;
+            }
+        };
+        // Renew the claim while the job renders, so no other replica takes it over.
+        let (beat_store, beat_consumer, beat_job) = (store.clone(), consumer.clone(), stored.clone());
+        let heartbeat = tokio::spawn(async move {
+            let mut tick = tokio::time::interval(beat_store.heartbeat_every());
+            loop {
+                tick.tick().await;
+                let (s, c, j) = (beat_store.clone(), beat_consumer.clone(), beat_job.clone());
+                if let Ok(Err(error)) = tokio::task::spawn_blocking(move || s.heartbeat(&c, &j)).await {
+                    tracing::warn!(%error, "cannot renew the claim on a job");
+                }
+            }
+        });
+        render_and_store(&state, stored.id.clone(), job, vec![admitted, device], events, started).await;
+        heartbeat.abort();
+    }
+}
+
+/// The error of a job that daemons kept dying on: said in full, since the reason is the
+/// point and reveals nothing internal.
+fn abandoned(attempts: u32) -> Value {
+    json!({
+        "code": "internal",
+        "status": 500,
+        "message": format!("the job was started {attempts} times by daemons that stopped before it finished; it is not retried again"),
+    })
+}
+
+/// Renders a job that holds its device slot (`permits`), reporting progress (to the shared
+/// store too, at most every 250 ms), and stores the outcome.
+async fn render_and_store(
+    state: &Arc<AppState>,
+    id: String,
+    job: Job,
+    permits: Vec<tokio::sync::OwnedSemaphorePermit>,
+    events: tokio::sync::watch::Sender<JobEvent>,
+    started: std::time::Instant,
+) {
+    let method = job.method.name.clone();
+    events.send_replace(JobEvent::status("running"));
+    let running = state.metrics.job_running();
+    let engine = state.engine.clone();
+    let store = state.store.clone();
+    let progress = events.clone();
+    let span = tracing::info_span!("job", %id, method = %method);
+    let job_id = id.clone();
+    let outcome = tokio::task::spawn_blocking(move || {
+        let _permits = permits;
+        span.in_scope(|| {
+            if let Some(store) = &store {
+                if let Err(error) = store.start(&job_id) {
+                    tracing::warn!(%error, "cannot mark the job running in the store");
+                }
+            }
+            fetch_shared_uploads(&engine, store.as_deref(), &job)?;
+            let last_shared = std::sync::Mutex::new(std::time::Instant::now());
+            let report = |done, total| {
+                progress.send_modify(|event| {
+                    event.done = done;
+                    event.total = total;
+                });
+                if let Some(store) = store.as_ref().filter(|s| s.shared()) {
+                    let mut last = last_shared.lock().unwrap_or_else(|p| p.into_inner());
+                    if last.elapsed() >= std::time::Duration::from_millis(250) {
+                        *last = std::time::Instant::now();
+                        let _ = store.progress(&job_id, done, total);
                     }
-                    let report = |done, total| {
-                        progress.send_modify(|event| {
-                            event.done = done;
-                            event.total = total;
-                        })
-                    };
-                    let rendered = engine.render_observed(&job, &report)?;
-                    if let Some(store) = &store {
-                        store
-                            .succeed(&job_id, &job_json(&job_id, &rendered), &rendered.bytes)
-                            .map_err(|error| JobError::internal(format!("cannot store the result: {error}")))?;
-                    }
-                    Ok(rendered)
-                })
-            })
-            .await
-            .unwrap_or_else(|e| Err(JobError::internal(format!("render task failed: {e}"))))
-        }
-        Err(error) => Err(error),
-    };
-    let seconds = started.elapsed().as_secs_f64();
+                }
+            };
+            let rendered = engine.render_observed(&job, &report)?;
+            if let Some(store) = &store {
+                store
+                    .succeed(&job_id, &job_json(&job_id, &rendered), &rendered.bytes)
+                    .map_err(|error| JobError::internal(format!("cannot store the result: {error}")))?;
+            }
+            Ok(rendered)
+        })
+    })
+    .await
+    .unwrap_or_else(|e| Err(JobError::internal(format!("render task failed: {e}"))));
+    drop(running);
     match outcome {
         Ok(rendered) => {
-            state.job_finished(&id, &method, "ok", seconds, Some(&rendered));
+            state.job_finished(&id, &method, "ok", started.elapsed().as_secs_f64(), Some(&rendered));
             tracing::info!(%id, total_ms = rendered.timings.total_ms, "job done");
             state.jobs.keep(id, Arc::new(rendered));
             events.send_modify(|event| event.finish("succeeded", None));
         }
-        Err(error) => {
-            state.job_finished(&id, &method, error.code.as_str(), seconds, None);
-            let detail = failure_detail(&error);
-            if let Some(store) = state.store.clone() {
-                let (stored_id, stored_detail) = (id.clone(), detail.clone());
-                let failed = tokio::task::spawn_blocking(move || store.fail(&stored_id, &stored_detail)).await;
-                if !matches!(failed, Ok(Ok(()))) {
-                    tracing::warn!(%id, "cannot store the job's failure");
-                }
+        Err(error) => finish_failed(state, &id, &method, error, started, &events).await,
+    }
+}
+
+/// Records, stores and announces a job's failure.
+async fn finish_failed(
+    state: &Arc<AppState>,
+    id: &str,
+    method: &str,
+    error: JobError,
+    started: std::time::Instant,
+    events: &tokio::sync::watch::Sender<JobEvent>,
+) {
+    state.job_finished(id, method, error.code.as_str(), started.elapsed().as_secs_f64(), None);
+    let detail = failure_detail(&error);
+    store_failure(state, id, detail.clone()).await;
+    events.send_modify(|event| event.finish("failed", Some(detail)));
+}
+
+async fn store_failure(state: &AppState, id: &str, detail: Value) {
+    let Some(store) = state.store.clone() else { return };
+    let stored_id = id.to_owned();
+    if !matches!(tokio::task::spawn_blocking(move || store.fail(&stored_id, &detail)).await, Ok(Ok(()))) {
+        tracing::warn!(%id, "cannot store the job's failure");
+    }
+}
+
+/// Loads into the engine's cache the uploads a job names that this replica does not hold but
+/// the shared store does (another replica received them).
+fn fetch_shared_uploads(engine: &Engine, store: Option<&dyn DurableStore>, job: &Job) -> Result<(), JobError> {
+    let Some(store) = store.filter(|s| s.shared()) else { return Ok(()) };
+    let light = job.light.image.as_ref();
+    for (kind, asset) in [(Kind::Scene, Some(&job.scene)), (Kind::Light, light)] {
+        let Some(crate::job::AssetRef::Id(id)) = asset else { continue };
+        if engine.holds_upload(kind, id) {
+            continue;
+        }
+        match store.get_upload(kind, id) {
+            Ok(Some(bytes)) => {
+                engine.upload(kind, &bytes)?;
             }
-            events.send_modify(|event| event.finish("failed", Some(detail)));
+            Ok(None) => {} // The render reports `not_uploaded` for the field.
+            Err(error) => tracing::warn!(%error, "cannot read a shared upload"),
         }
     }
+    Ok(())
 }
 
 /// A failed job's error as its record and events carry it: the error body with its status.
@@ -694,13 +871,15 @@ async fn job_events(State(state): State<Arc<AppState>>, Path(id): Path<String>) 
     use axum::response::sse::{Event, KeepAlive, Sse};
     let events = match state.jobs.submitted(&id) {
         Some(events) => events,
-        // Finished under an earlier process: its final state, and the stream ends.
+        // Finished under an earlier process, or running on another replica of a shared store:
+        // its stored state, followed by polling the store until it finishes.
         None => {
-            let stored = stored_job(&state, &id).await?.filter(StoredJob::finished).ok_or_else(|| unknown_job(&id))?;
-            let status = if stored.status == "succeeded" { "succeeded" } else { "failed" };
-            let mut event = JobEvent::status("queued");
-            event.finish(status, stored.error);
-            tokio::sync::watch::channel(event).0
+            let stored = stored_job(&state, &id).await?.ok_or_else(|| unknown_job(&id))?;
+            let (events, _) = tokio::sync::watch::channel(event_of(&stored));
+            if let Some(store) = state.store.clone().filter(|_| !stored.finished()) {
+                tokio::spawn(follow_stored(store, id.clone(), events.clone()));
+            }
+            events
         }
     };
     let receiver = events.subscribe();
@@ -723,6 +902,45 @@ async fn job_events(State(state): State<Arc<AppState>>, Path(id): Path<String>) 
         Some((Ok::<_, std::convert::Infallible>(sse), (receiver, stopping, event.finished(), false)))
     });
     Ok(Sse::new(stream).keep_alive(KeepAlive::default()).into_response())
+}
+
+/// A stored job's state as an event.
+fn event_of(stored: &StoredJob) -> JobEvent {
+    let status = match stored.status.as_str() {
+        "running" => "running",
+        "succeeded" => "succeeded",
+        "failed" => "failed",
+        _ => "queued",
+    };
+    let mut event = JobEvent::status(status);
+    (event.done, event.total) = (stored.done, stored.total);
+    if event.finished() {
+        event.finish(status, stored.error.clone());
+    }
+    event
+}
+
+/// Polls the store for a job another replica runs, every 300 ms, until it finishes, its
+/// record goes, or nobody listens any more.
+async fn follow_stored(store: Arc<dyn DurableStore>, id: String, events: tokio::sync::watch::Sender<JobEvent>) {
+    loop {
+        tokio::time::sleep(std::time::Duration::from_millis(300)).await;
+        if events.receiver_count() == 0 {
+            return;
+        }
+        let (reader, job) = (store.clone(), id.clone());
+        let Ok(Ok(Some(stored))) = tokio::task::spawn_blocking(move || reader.get(&job)).await else { return };
+        let event = event_of(&stored);
+        let finished = event.finished();
+        events.send_if_modified(|current| {
+            let changed = (current.status, current.done, current.total) != (event.status, event.done, event.total);
+            *current = event;
+            changed
+        });
+        if finished {
+            return;
+        }
+    }
 }
 
 async fn job_image(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Result<Response, ApiError> {

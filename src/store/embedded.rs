@@ -1,9 +1,7 @@
-//! The durable job store behind `POST /v1/jobs` (issue 10): every accepted job is written
-//! before its 202 is answered, and every finished one with its record and image, so a daemon
-//! killed at any moment and restarted on the same `--data-dir` finishes what it accepted and
-//! still serves what it finished. `JobStore` is the interface; `EmbeddedStore` is the
-//! one-machine backend on `redb` (a pure-Rust, crash-safe B-tree file: each commit is durable).
-//! Finished records expire by age and the stored images by a byte budget.
+//! The one-machine job store on `redb` (a pure-Rust, crash-safe B-tree file: each commit is
+//! durable): a daemon killed at any moment and restarted on the same `--data-dir` finishes
+//! what it accepted and still serves what it finished. Finished records expire by age and
+//! the stored images by a byte budget.
 //!
 //! Why redb over SQLite: on this store's write pattern (per job: insert the record, update it,
 //! update it again with a 100 KB image; one durable commit each), 300 jobs on the 2-core
@@ -12,74 +10,17 @@
 //! build time and on having no C code to fuzz.
 
 use std::path::Path;
-use std::time::{Duration, SystemTime, UNIX_EPOCH};
+use std::time::Duration;
 
 use redb::{Database, ReadableDatabase, ReadableTable, TableDefinition};
-use serde::{Deserialize, Serialize};
 use serde_json::Value;
+
+use super::{unix_ms, JobStore, StoredJob};
 
 /// Job records by id: `StoredJob` as JSON.
 const JOBS: TableDefinition<&str, &[u8]> = TableDefinition::new("jobs");
 /// Result images by job id.
 const IMAGES: TableDefinition<&str, &[u8]> = TableDefinition::new("images");
-
-/// Times a job may be started by a daemon that then died before finishing it; the next start
-/// fails it with a reason instead of taking the daemon down again and again.
-pub const MAX_ATTEMPTS: u32 = 3;
-
-/// A job as the store keeps it.
-#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
-pub struct StoredJob {
-    pub id: String,
-    /// `queued`, `running`, `succeeded` or `failed` (DESIGN.md §3).
-    pub status: String,
-    /// The job as the client sent it (validated at submission).
-    pub job: Value,
-    pub submitted_unix_ms: u64,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub finished_unix_ms: Option<u64>,
-    /// Times a daemon started rendering it.
-    pub attempts: u32,
-    /// The record `GET /v1/jobs/{id}` answers once it succeeded (timings, counters, quality).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub result: Option<Value>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub error: Option<Value>,
-    /// Bytes of the stored image (0 until it succeeded, and after the image was dropped).
-    #[serde(default)]
-    pub image_bytes: u64,
-}
-
-impl StoredJob {
-    pub fn finished(&self) -> bool {
-        matches!(self.status.as_str(), "succeeded" | "failed")
-    }
-}
-
-/// Milliseconds since the Unix epoch, now.
-pub fn unix_ms() -> u64 {
-    SystemTime::now().duration_since(UNIX_EPOCH).map(|d| d.as_millis() as u64).unwrap_or(0)
-}
-
-/// Where accepted jobs and finished results live. Every method is a short blocking call (a
-/// local commit or a round trip): call it off the async workers.
-pub trait JobStore: Send + Sync {
-    /// Records an accepted job as `queued`; durable when it returns.
-    fn accept(&self, id: &str, job: &Value) -> anyhow::Result<()>;
-    /// Marks a job `running` and counts the attempt.
-    fn start(&self, id: &str) -> anyhow::Result<()>;
-    /// Stores a success: its record and its image, in one commit.
-    fn succeed(&self, id: &str, result: &Value, image: &[u8]) -> anyhow::Result<()>;
-    /// Stores a failure with its error body.
-    fn fail(&self, id: &str, error: &Value) -> anyhow::Result<()>;
-    fn get(&self, id: &str) -> anyhow::Result<Option<StoredJob>>;
-    fn image(&self, id: &str) -> anyhow::Result<Option<Vec<u8>>>;
-    /// Jobs accepted but not finished (queued, or running when a daemon stopped), oldest first.
-    fn unfinished(&self) -> anyhow::Result<Vec<StoredJob>>;
-    /// Drops finished jobs older than `max_age`, then the images of the oldest finished jobs
-    /// until the images fit in `max_image_bytes`. Returns how many records and images went.
-    fn expire(&self, max_age: Duration, max_image_bytes: u64) -> anyhow::Result<(usize, usize)>;
-}
 
 /// The one-machine store: `jobs.redb` under the data directory.
 pub struct EmbeddedStore {
@@ -139,11 +80,7 @@ impl JobStore for EmbeddedStore {
             status: "queued".into(),
             job: job.clone(),
             submitted_unix_ms: unix_ms(),
-            finished_unix_ms: None,
-            attempts: 0,
-            result: None,
-            error: None,
-            image_bytes: 0,
+            ..StoredJob::default()
         };
         let txn = self.db.begin_write()?;
         txn.open_table(JOBS)?.insert(id, serde_json::to_vec(&record)?.as_slice())?;

@@ -1,0 +1,281 @@
+//! The shared job store on Redis (`--job-store redis://HOST:PORT/DB`), for several replicas
+//! acting as one service. The queue is a stream (`penumbra:queue`) with one consumer group
+//! (`workers`): a replica's worker takes an entry with `XREADGROUP`, keeps it claimed while it
+//! renders (an `XCLAIM` of its own entry every few seconds resets the entry's idle time), and
+//! acknowledges and deletes it when the job is stored. An entry idle for longer than
+//! `CLAIM_IDLE` belongs to a replica that died: `XAUTOCLAIM` hands it to the next worker that
+//! asks. Job records (`penumbra:job:ID`, JSON) and result images (`penumbra:image:ID`) get a
+//! TTL once finished; uploads (`penumbra:upload:KIND:SHA256`) are stored once for every
+//! replica, each of which keeps its own LRU cache in front.
+
+use std::sync::Mutex;
+use std::time::Duration;
+
+use redis::{Commands, Connection};
+use serde_json::Value;
+
+use super::{unix_ms, JobStore, StoredJob};
+use crate::uploads::Kind;
+
+const QUEUE: &str = "penumbra:queue";
+const GROUP: &str = "workers";
+
+/// How long a taken job may go without a heartbeat before another replica claims it, unless
+/// configured (`--claim-idle-secs`); workers renew their claim five times as often.
+pub const CLAIM_IDLE: Duration = Duration::from_secs(15);
+/// Uploads live at least this long after their last use.
+const UPLOAD_TTL: Duration = Duration::from_secs(7 * 24 * 3600);
+
+pub struct RedisStore {
+    client: redis::Client,
+    /// Idle connections; a worker blocked in `XREADGROUP` holds its own meanwhile.
+    pool: Mutex<Vec<Connection>>,
+    /// How long finished records and images stay.
+    ttl: Duration,
+    /// Idle time after which a taken job is another replica's to claim.
+    claim_idle: Duration,
+}
+
+fn job_key(id: &str) -> String {
+    format!("penumbra:job:{id}")
+}
+
+fn image_key(id: &str) -> String {
+    format!("penumbra:image:{id}")
+}
+
+fn upload_key(kind: Kind, id: &str) -> String {
+    let kind = match kind {
+        Kind::Scene => "scene",
+        Kind::Light => "light",
+    };
+    format!("penumbra:upload:{kind}:{id}")
+}
+
+impl RedisStore {
+    /// Connects and creates the consumer group (and the stream) when they do not exist.
+    pub fn open(url: &str, ttl: Duration, claim_idle: Duration) -> anyhow::Result<Self> {
+        let client = redis::Client::open(url).map_err(|e| anyhow::anyhow!("bad Redis URL `{url}`: {e}"))?;
+        let claim_idle = claim_idle.max(Duration::from_millis(500));
+        let store = Self { client, pool: Mutex::new(Vec::new()), ttl: ttl.max(Duration::from_secs(1)), claim_idle };
+        store.with(|c| match c.xgroup_create_mkstream::<_, _, _, ()>(QUEUE, GROUP, "0") {
+            Err(e) if e.code() == Some("BUSYGROUP") => Ok(()),
+            other => other,
+        })?;
+        Ok(store)
+    }
+
+    /// Runs `f` on a pooled connection (a new one when none is idle); a connection that
+    /// failed is dropped rather than returned.
+    fn with<T>(&self, f: impl FnOnce(&mut Connection) -> redis::RedisResult<T>) -> anyhow::Result<T> {
+        let pooled = self.pool.lock().unwrap_or_else(|p| p.into_inner()).pop();
+        let mut connection = match pooled {
+            Some(c) => c,
+            None => {
+                let c = self.client.get_connection_with_timeout(Duration::from_secs(5))?;
+                c.set_read_timeout(Some(Duration::from_secs(30)))?;
+                c.set_write_timeout(Some(Duration::from_secs(30)))?;
+                c
+            }
+        };
+        let result = f(&mut connection);
+        if result.is_ok() {
+            self.pool.lock().unwrap_or_else(|p| p.into_inner()).push(connection);
+        }
+        Ok(result?)
+    }
+
+    fn put_record(&self, job: &StoredJob, expire: bool) -> anyhow::Result<()> {
+        let json = serde_json::to_vec(job)?;
+        let key = job_key(&job.id);
+        if expire {
+            self.with(|c| c.set_ex::<_, _, ()>(key, json, self.ttl.as_secs()))
+        } else {
+            self.with(|c| c.set::<_, _, ()>(key, json))
+        }
+    }
+
+    fn update(&self, id: &str, change: impl FnOnce(&mut StoredJob)) -> anyhow::Result<StoredJob> {
+        let mut job = self.get(id)?.ok_or_else(|| anyhow::anyhow!("no job `{id}` in the store"))?;
+        change(&mut job);
+        Ok(job)
+    }
+
+    /// Stores a finished record (with its TTL) and takes its entry off the queue.
+    fn finish(&self, job: StoredJob, image: Option<&[u8]>) -> anyhow::Result<()> {
+        let ttl = self.ttl.as_secs();
+        let json = serde_json::to_vec(&job)?;
+        self.with(|c| {
+            let mut pipe = redis::pipe();
+            pipe.atomic();
+            if let Some(image) = image {
+                pipe.set_ex(image_key(&job.id), image, ttl).ignore();
+            }
+            pipe.set_ex(job_key(&job.id), json, ttl).ignore();
+            if let Some(entry) = &job.entry {
+                pipe.xack(QUEUE, GROUP, &[entry]).ignore();
+                pipe.xdel(QUEUE, &[entry]).ignore();
+            }
+            pipe.query::<()>(c)
+        })
+    }
+
+    /// The job an entry carries, with the entry noted; None (and the entry dropped) when the
+    /// record is gone or already finished (a replica finished it just before it died).
+    fn take(&self, consumer: &str, entry: &str, id: Option<String>) -> anyhow::Result<Option<StoredJob>> {
+        let job = match id {
+            Some(id) => self.get(&id)?,
+            None => None,
+        };
+        match job {
+            Some(mut job) if !job.finished() => {
+                job.entry = Some(entry.to_owned());
+                job.worker = Some(consumer.to_owned());
+                self.put_record(&job, false)?;
+                Ok(Some(job))
+            }
+            _ => {
+                self.with(|c| redis::pipe().xack(QUEUE, GROUP, &[entry]).xdel(QUEUE, &[entry]).query::<()>(c))?;
+                Ok(None)
+            }
+        }
+    }
+}
+
+impl JobStore for RedisStore {
+    fn accept(&self, id: &str, job: &Value) -> anyhow::Result<()> {
+        let record = StoredJob {
+            id: id.to_owned(),
+            status: "queued".into(),
+            job: job.clone(),
+            submitted_unix_ms: unix_ms(),
+            ..StoredJob::default()
+        };
+        let json = serde_json::to_vec(&record)?;
+        // The record first: a worker that takes the entry always finds it.
+        self.with(|c| redis::pipe().atomic().set(job_key(id), json).ignore().xadd(QUEUE, "*", &[("id", id)]).ignore().query::<()>(c))
+    }
+
+    fn start(&self, id: &str) -> anyhow::Result<()> {
+        let job = self.update(id, |job| {
+            job.status = "running".into();
+            job.attempts += 1;
+        })?;
+        self.put_record(&job, false)
+    }
+
+    fn succeed(&self, id: &str, result: &Value, image: &[u8]) -> anyhow::Result<()> {
+        let job = self.update(id, |job| {
+            job.status = "succeeded".into();
+            job.finished_unix_ms = Some(unix_ms());
+            job.result = Some(result.clone());
+            job.image_bytes = image.len() as u64;
+            job.done = job.total;
+        })?;
+        self.finish(job, Some(image))
+    }
+
+    fn fail(&self, id: &str, error: &Value) -> anyhow::Result<()> {
+        let job = self.update(id, |job| {
+            job.status = "failed".into();
+            job.finished_unix_ms = Some(unix_ms());
+            job.error = Some(error.clone());
+        })?;
+        self.finish(job, None)
+    }
+
+    fn get(&self, id: &str) -> anyhow::Result<Option<StoredJob>> {
+        let bytes: Option<Vec<u8>> = self.with(|c| c.get(job_key(id)))?;
+        Ok(match bytes {
+            Some(bytes) => Some(serde_json::from_slice(&bytes)?),
+            None => None,
+        })
+    }
+
+    fn image(&self, id: &str) -> anyhow::Result<Option<Vec<u8>>> {
+        self.with(|c| c.get(image_key(id)))
+    }
+
+    fn unfinished(&self) -> anyhow::Result<Vec<StoredJob>> {
+        Ok(Vec::new())
+    }
+
+    fn expire(&self, _max_age: Duration, _max_image_bytes: u64) -> anyhow::Result<(usize, usize)> {
+        // Finished records and images carry their TTL; Redis drops them itself.
+        Ok((0, 0))
+    }
+
+    fn shared(&self) -> bool {
+        true
+    }
+
+    fn queued(&self) -> anyhow::Result<u64> {
+        // Entries in the stream that no worker has taken: all of them less the pending ones.
+        self.with(|c| {
+            let length: u64 = c.xlen(QUEUE)?;
+            let pending: redis::streams::StreamPendingReply = c.xpending(QUEUE, GROUP)?;
+            Ok(length.saturating_sub(pending.count() as u64))
+        })
+    }
+
+    fn next(&self, consumer: &str, wait: Duration) -> anyhow::Result<Option<StoredJob>> {
+        // A dead replica's job first: entries no heartbeat renewed for CLAIM_IDLE.
+        let claimed: redis::streams::StreamAutoClaimReply = self.with(|c| {
+            c.xautoclaim_options(
+                QUEUE,
+                GROUP,
+                consumer,
+                self.claim_idle.as_millis() as u64,
+                "0-0",
+                redis::streams::StreamAutoClaimOptions::default().count(1),
+            )
+        })?;
+        if let Some(entry) = claimed.claimed.first() {
+            tracing::warn!(entry = %entry.id, "claimed a job whose replica stopped answering");
+            return self.take(consumer, &entry.id, entry.get("id"));
+        }
+        let options = redis::streams::StreamReadOptions::default().group(GROUP, consumer).count(1).block(wait.as_millis() as usize);
+        let reply: Option<redis::streams::StreamReadReply> = self.with(|c| c.xread_options(&[QUEUE], &[">"], &options))?;
+        let Some(entry) = reply.and_then(|r| r.keys.into_iter().next()).and_then(|k| k.ids.into_iter().next()) else {
+            return Ok(None);
+        };
+        self.take(consumer, &entry.id, entry.get("id"))
+    }
+
+    fn heartbeat_every(&self) -> Duration {
+        self.claim_idle / 5
+    }
+
+    fn heartbeat(&self, consumer: &str, job: &StoredJob) -> anyhow::Result<()> {
+        let Some(entry) = &job.entry else { return Ok(()) };
+        // Claiming one's own entry with no minimum idle time resets its idle time.
+        self.with(|c| {
+            redis::cmd("XCLAIM").arg(QUEUE).arg(GROUP).arg(consumer).arg(0).arg(entry).arg("JUSTID").query::<redis::Value>(c).map(|_| ())
+        })
+    }
+
+    fn progress(&self, id: &str, done: u64, total: u64) -> anyhow::Result<()> {
+        let job = self.update(id, |job| {
+            job.done = done;
+            job.total = total;
+        })?;
+        self.put_record(&job, false)
+    }
+
+    fn put_upload(&self, kind: Kind, id: &str, bytes: &[u8]) -> anyhow::Result<()> {
+        self.with(|c| c.set_ex::<_, _, ()>(upload_key(kind, id), bytes, UPLOAD_TTL.as_secs()))
+    }
+
+    fn get_upload(&self, kind: Kind, id: &str) -> anyhow::Result<Option<Vec<u8>>> {
+        // Reading renews the TTL: an upload in use never expires.
+        self.with(|c| redis::cmd("GETEX").arg(upload_key(kind, id)).arg("EX").arg(UPLOAD_TTL.as_secs()).query(c))
+    }
+
+    fn has_upload(&self, kind: Kind, id: &str) -> anyhow::Result<bool> {
+        self.with(|c| c.exists(upload_key(kind, id)))
+    }
+
+    fn delete_upload(&self, kind: Kind, id: &str) -> anyhow::Result<bool> {
+        self.with(|c| c.del::<_, u64>(upload_key(kind, id)).map(|n| n > 0))
+    }
+}
