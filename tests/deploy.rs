@@ -194,6 +194,112 @@ fn redis_get(port: u16, key: &str) -> String {
     run(Command::new("redis-cli").args(["-p", &port.to_string(), "--raw", "GET", key])).trim().to_owned()
 }
 
+/// Redis, replicas sharing it as their job store, and nginx in front with `deploy/nginx.conf`
+/// (or, for comparison, the same with round robin for everything), all on loopback.
+struct Cluster {
+    work: PathBuf,
+    redis_port: u16,
+    ports: Vec<u16>,
+    replicas: Vec<Option<Child>>,
+    base: String,
+    // Dropped last: nginx before the replicas before Redis.
+    _nginx: Nginx,
+    _redis: Child,
+}
+
+impl Cluster {
+    fn start(replicas: usize, consistent_hashing: bool) -> Self {
+        let work = std::env::temp_dir().join(format!("penumbra-cluster-{}-{}", std::process::id(), free_port()));
+        std::fs::create_dir_all(work.join("nginx/tmp")).unwrap();
+        let redis_port = free_port();
+        let redis = Child(
+            Command::new("redis-server")
+                .args(["--port", &redis_port.to_string(), "--bind", "127.0.0.1", "--save", "", "--appendonly", "no"])
+                .stdout(std::process::Stdio::null())
+                .spawn()
+                .expect("redis-server (apt-get install redis-server)"),
+        );
+        let ping = || {
+            Command::new("redis-cli").args(["-p", &redis_port.to_string(), "PING"]).output().is_ok_and(|o| o.stdout.starts_with(b"PONG"))
+        };
+        assert!(wait_until(Duration::from_secs(20), ping).is_some(), "redis-server did not start");
+
+        let ports: Vec<u16> = (0..replicas).map(|_| free_port()).collect();
+        let children = ports
+            .iter()
+            .map(|port| {
+                Some(Child(
+                    Command::new(env!("CARGO_BIN_EXE_penumbra"))
+                        .args(["serve", "--no-warm-up", "--listen", &format!("127.0.0.1:{port}"), "--claim-idle-secs", "2"])
+                        .args(["--job-store", &format!("redis://127.0.0.1:{redis_port}/0")])
+                        .env_remove("HOSTNAME")
+                        .env("PENUMBRA_LOG", "warn")
+                        .stderr(std::process::Stdio::null())
+                        .spawn()
+                        .unwrap(),
+                ))
+            })
+            .collect();
+        for port in &ports {
+            let ready = || http("GET", &format!("http://127.0.0.1:{port}/readyz"), None).is_some_and(|(s, _)| s == 200);
+            assert!(wait_until(Duration::from_secs(60), ready).is_some(), "replica on {port} not ready");
+        }
+
+        // deploy/nginx.conf with this cluster's addresses (three replicas are listed there).
+        let nginx_port = free_port();
+        let mut conf = std::fs::read_to_string(repo().join("deploy/nginx.conf")).unwrap();
+        let listed: Vec<String> = (0..3).map(|k| format!("        server 127.0.0.1:{} max_fails=1 fail_timeout=5s;\n", 8081 + k)).collect();
+        let servers: String = ports.iter().map(|p| format!("        server 127.0.0.1:{p} max_fails=1 fail_timeout=5s;\n")).collect();
+        conf = conf.replace(&listed.concat(), &servers).replace("listen 127.0.0.1:8080", &format!("listen 127.0.0.1:{nginx_port}"));
+        if !consistent_hashing {
+            conf = conf.replace("        hash $route_key consistent;\n", "");
+        }
+        assert!(conf.contains(&servers), "deploy/nginx.conf lists 127.0.0.1:8081-8083");
+        std::fs::write(work.join("nginx/nginx.conf"), conf).unwrap();
+        let binary = if Path::new("/usr/sbin/nginx").exists() { "/usr/sbin/nginx" } else { "nginx" };
+        let nginx = Nginx(
+            Command::new(binary)
+                .arg("-p")
+                .arg(work.join("nginx"))
+                .arg("-c")
+                .arg(work.join("nginx/nginx.conf"))
+                .args(["-g", "daemon off;"])
+                .stdout(std::process::Stdio::null())
+                .stderr(std::process::Stdio::null())
+                .spawn()
+                .expect("nginx (apt-get install nginx)"),
+        );
+        let base = format!("http://127.0.0.1:{nginx_port}");
+        assert!(
+            wait_until(Duration::from_secs(20), || http("GET", &format!("{base}/healthz"), None).is_some_and(|(s, _)| s == 200)).is_some()
+        );
+        Self { work, redis_port, ports, replicas: children, base, _nginx: nginx, _redis: redis }
+    }
+
+    /// A job's record as the shared store holds it (attempts and worker included).
+    fn record(&self, id: &str) -> serde_json::Value {
+        serde_json::from_str(&redis_get(self.redis_port, &format!("penumbra:job:{id}"))).unwrap_or_default()
+    }
+
+    fn submit(&self, job: &str, scene: &str) -> String {
+        let (status, body) =
+            http_with("POST", &format!("{}/v1/jobs", self.base), Some(job), &[&format!("x-penumbra-scene: {scene}")]).unwrap();
+        assert_eq!(status, 202, "{}", String::from_utf8_lossy(&body));
+        serde_json::from_slice::<serde_json::Value>(&body).unwrap()["id"].as_str().unwrap().to_owned()
+    }
+
+    fn wait_finished(&self, ids: &[String], limit: Duration) -> bool {
+        wait_until(limit, || ids.iter().all(|id| matches!(self.record(id)["status"].as_str(), Some("succeeded" | "failed")))).is_some()
+    }
+}
+
+impl Drop for Cluster {
+    fn drop(&mut self) {
+        self.replicas.clear();
+        std::fs::remove_dir_all(&self.work).ok();
+    }
+}
+
 /// The cluster on loopback (issue 10): Debian's `redis-server`, three replicas sharing it as
 /// their job store, Debian's `nginx` in front with `deploy/nginx.conf`. A batch of async jobs
 /// goes through nginx; one replica is killed with SIGKILL while it renders; every job still
@@ -201,108 +307,162 @@ fn redis_get(port: u16, key: &str) -> String {
 /// in flight was rendered twice.
 #[test]
 fn three_replicas_behind_nginx_share_redis_and_survive_a_sigkill() {
-    let work = std::env::temp_dir().join(format!("penumbra-cluster-{}", std::process::id()));
-    std::fs::remove_dir_all(&work).ok();
-    std::fs::create_dir_all(work.join("nginx/tmp")).unwrap();
-    let redis_port = free_port();
-    let _redis = Child(
-        Command::new("redis-server")
-            .args(["--port", &redis_port.to_string(), "--bind", "127.0.0.1", "--save", "", "--appendonly", "no"])
-            .stdout(std::process::Stdio::null())
-            .spawn()
-            .expect("redis-server (apt-get install redis-server)"),
-    );
-    assert!(wait_until(Duration::from_secs(20), || Command::new("redis-cli")
-        .args(["-p", &redis_port.to_string(), "PING"])
-        .output()
-        .is_ok_and(|o| o.stdout.starts_with(b"PONG")))
-    .is_some());
-
-    let ports: Vec<u16> = (0..3).map(|_| free_port()).collect();
-    let replica = |port: u16| {
-        Child(
-            Command::new(env!("CARGO_BIN_EXE_penumbra"))
-                .args(["serve", "--no-warm-up", "--listen", &format!("127.0.0.1:{port}"), "--claim-idle-secs", "2"])
-                .args(["--job-store", &format!("redis://127.0.0.1:{redis_port}/0")])
-                .env_remove("HOSTNAME")
-                .env("PENUMBRA_LOG", "warn")
-                .stderr(std::process::Stdio::null())
-                .spawn()
-                .unwrap(),
-        )
-    };
-    let mut replicas: Vec<Option<Child>> = ports.iter().map(|&p| Some(replica(p))).collect();
-    for port in &ports {
-        let ready = wait_until(Duration::from_secs(60), || {
-            http("GET", &format!("http://127.0.0.1:{port}/readyz"), None).is_some_and(|(s, _)| s == 200)
-        });
-        assert!(ready.is_some(), "replica on {port} not ready");
-    }
-
-    let nginx_port = free_port();
-    let conf = std::fs::read_to_string(repo().join("deploy/nginx.conf"))
-        .unwrap()
-        .replace("127.0.0.1:8081", &format!("127.0.0.1:{}", ports[0]))
-        .replace("127.0.0.1:8082", &format!("127.0.0.1:{}", ports[1]))
-        .replace("127.0.0.1:8083", &format!("127.0.0.1:{}", ports[2]))
-        .replace("listen 127.0.0.1:8080", &format!("listen 127.0.0.1:{nginx_port}"));
-    std::fs::write(work.join("nginx/nginx.conf"), conf).unwrap();
-    let nginx = if Path::new("/usr/sbin/nginx").exists() { "/usr/sbin/nginx" } else { "nginx" };
-    let _nginx = Nginx(
-        Command::new(nginx)
-            .arg("-p")
-            .arg(work.join("nginx"))
-            .arg("-c")
-            .arg(work.join("nginx/nginx.conf"))
-            .args(["-g", "daemon off;"])
-            .stdout(std::process::Stdio::null())
-            .stderr(std::process::Stdio::null())
-            .spawn()
-            .expect("nginx (apt-get install nginx)"),
-    );
-    let base = format!("http://127.0.0.1:{nginx_port}");
-    assert!(wait_until(Duration::from_secs(20), || http("GET", &format!("{base}/healthz"), None).is_some_and(|(s, _)| s == 200)).is_some());
-
+    let mut cluster = Cluster::start(3, true);
     let job = r#"{"scene": {"builtin": "occluder"}, "method": {"name": "reference", "samples": 384, "resolution": 256}, "output": {"width": 96, "height": 64}}"#;
-    let ids: Vec<String> = (0..9)
-        .map(|_| {
-            let (status, body) = http_with("POST", &format!("{base}/v1/jobs"), Some(job), &["x-penumbra-scene: builtin:occluder"]).unwrap();
-            assert_eq!(status, 202, "{}", String::from_utf8_lossy(&body));
-            serde_json::from_slice::<serde_json::Value>(&body).unwrap()["id"].as_str().unwrap().to_owned()
-        })
-        .collect();
-    let record =
-        |id: &str| -> serde_json::Value { serde_json::from_str(&redis_get(redis_port, &format!("penumbra:job:{id}"))).unwrap_or_default() };
+    let ids: Vec<String> = (0..9).map(|_| cluster.submit(job, "builtin:occluder")).collect();
 
-    // SIGKILL the replica on ports[1] while it renders one of the jobs.
-    let victim = format!("127.0.0.1:{}/", ports[1]);
+    // SIGKILL the second replica while it renders one of the jobs.
+    let victim = format!("127.0.0.1:{}/", cluster.ports[1]);
     let caught = wait_until(Duration::from_secs(60), || {
         ids.iter().any(|id| {
-            let r = record(id);
+            let r = cluster.record(id);
             r["status"] == "running" && r["worker"].as_str().is_some_and(|w| w.starts_with(&victim))
         })
     });
     assert!(caught.is_some(), "the victim never took a job");
-    drop(replicas[1].take());
+    drop(cluster.replicas[1].take());
 
-    let all_done =
-        wait_until(Duration::from_secs(240), || ids.iter().all(|id| matches!(record(id)["status"].as_str(), Some("succeeded" | "failed"))));
-    assert!(all_done.is_some(), "not every job finished: {:?}", ids.iter().map(|id| record(id)["status"].clone()).collect::<Vec<_>>());
+    let finished = cluster.wait_finished(&ids, Duration::from_secs(240));
+    assert!(finished, "not every job finished: {:?}", ids.iter().map(|id| cluster.record(id)["status"].clone()).collect::<Vec<_>>());
     let mut twice = 0;
     for id in &ids {
-        let r = record(id);
+        let r = cluster.record(id);
         assert_eq!(r["status"], "succeeded", "{r}");
         if r["attempts"].as_u64() > Some(1) {
             twice += 1;
         }
         // Any survivor answers for any job through nginx.
-        let (status, image) = http("GET", &format!("{base}/v1/jobs/{id}/image"), None).unwrap();
+        let (status, image) = http("GET", &format!("{}/v1/jobs/{id}/image", cluster.base), None).unwrap();
         assert!(status == 200 && image.starts_with(b"\x89PNG"), "job {id} image: {status}");
-        let (status, body) = http("GET", &format!("{base}/v1/jobs/{id}"), None).unwrap();
+        let (status, body) = http("GET", &format!("{}/v1/jobs/{id}", cluster.base), None).unwrap();
         assert_eq!(status, 200, "{}", String::from_utf8_lossy(&body));
     }
     eprintln!("cluster: {} jobs, {twice} rendered twice after the SIGKILL", ids.len());
     assert!(twice <= 1, "only the job the dead replica had in flight may be rendered twice ({twice})");
-    drop(replicas);
-    std::fs::remove_dir_all(&work).ok();
+}
+
+/// The figures of the deploy issue's closing note, printed, never asserted (run by hand:
+/// `cargo test --release --test deploy -- --ignored --nocapture cluster_figures`): what a
+/// small job costs through nginx and Redis against one replica on the embedded store, how
+/// many jobs per second each store sustains on its own, and the scene-cache hit rate across
+/// three replicas with consistent hashing against round robin (30 scenes × 10 jobs).
+#[test]
+#[ignore = "a benchmark: run by hand for the figures"]
+fn cluster_figures() {
+    use penumbra::store::JobStore;
+    let small = r#"{"scene": {"builtin": "torus"}, "output": {"width": 128, "height": 96}}"#;
+    // One async job, submitted, followed to its end and downloaded: milliseconds.
+    let round_trip = |base: &str| {
+        let start = Instant::now();
+        let (_, body) = http_with("POST", &format!("{base}/v1/jobs"), Some(small), &["x-penumbra-scene: builtin:torus"]).unwrap();
+        let id = serde_json::from_slice::<serde_json::Value>(&body).unwrap()["id"].as_str().unwrap().to_owned();
+        http("GET", &format!("{base}/v1/jobs/{id}/events"), None).unwrap();
+        let (status, _) = http("GET", &format!("{base}/v1/jobs/{id}/image"), None).unwrap();
+        assert_eq!(status, 200);
+        start.elapsed().as_secs_f64() * 1e3
+    };
+    let median = |mut v: Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+
+    let cluster = Cluster::start(3, true);
+    let data = cluster.work.join("embedded");
+    let port = free_port();
+    let direct = format!("http://127.0.0.1:{port}");
+    let _single = Child(
+        Command::new(env!("CARGO_BIN_EXE_penumbra"))
+            .args(["serve", "--no-warm-up", "--listen", &format!("127.0.0.1:{port}"), "--data-dir"])
+            .arg(&data)
+            .env("PENUMBRA_LOG", "warn")
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    assert!(wait_until(Duration::from_secs(60), || http("GET", &format!("{direct}/readyz"), None).is_some_and(|(s, _)| s == 200)).is_some());
+    for _ in 0..3 {
+        round_trip(&cluster.base);
+        round_trip(&direct);
+    }
+    let (mut shared, mut embedded) = (Vec::new(), Vec::new());
+    for _ in 0..20 {
+        shared.push(round_trip(&cluster.base));
+        embedded.push(round_trip(&direct));
+    }
+    let (shared, embedded) = (median(shared), median(embedded));
+    eprintln!("small async job (torus, hard, 128×96), medians of 20: nginx + Redis {shared:.1} ms, direct + embedded {embedded:.1} ms ({:+.1} ms)", shared - embedded);
+
+    // The stores alone, rendering nothing: accept, take, start, succeed with a 20 kB image.
+    let image = vec![7u8; 20_000];
+    let redis = penumbra::store::RedisStore::open(
+        &format!("redis://127.0.0.1:{}/1", cluster.redis_port),
+        Duration::from_secs(60),
+        Duration::from_secs(15),
+    )
+    .unwrap();
+    let start = Instant::now();
+    for k in 0..500 {
+        let id = format!("bench-{k}");
+        redis.accept(&id, &serde_json::json!({"scene": {"builtin": "torus"}})).unwrap();
+        let taken = redis.next("bench/0", Duration::from_millis(100)).unwrap().expect("the job just queued");
+        redis.start(&taken.id).unwrap();
+        redis.succeed(&taken.id, &serde_json::json!({"id": taken.id}), &image).unwrap();
+    }
+    let redis_rate = 500.0 / start.elapsed().as_secs_f64();
+    let store = penumbra::store::EmbeddedStore::open(&cluster.work.join("bench-embedded")).unwrap();
+    let start = Instant::now();
+    for k in 0..500 {
+        let id = format!("bench-{k}");
+        store.accept(&id, &serde_json::json!({"scene": {"builtin": "torus"}})).unwrap();
+        store.start(&id).unwrap();
+        store.succeed(&id, &serde_json::json!({"id": id}), &image).unwrap();
+    }
+    let embedded_rate = 500.0 / start.elapsed().as_secs_f64();
+    eprintln!(
+        "store alone, one client, 500 jobs: Redis {redis_rate:.0} jobs/s, embedded (redb, durable commits) {embedded_rate:.0} jobs/s"
+    );
+    drop(cluster);
+
+    // Scene-cache hit rate: 30 uploaded scenes × 10 renders each, scenes interleaved.
+    for hashing in [true, false] {
+        let cluster = Cluster::start(3, hashing);
+        let mut ids = Vec::new();
+        for seed in 0..30 {
+            let path = cluster.work.join(format!("scene-{seed}.glb"));
+            let bytes = penumbra::scene::gltf::height_field_glb(48, seed);
+            std::fs::write(&path, &bytes).unwrap();
+            let id = penumbra::uploads::content_id(&bytes);
+            let url = format!("{}/v1/scenes/{id}", cluster.base);
+            let put = Command::new("curl")
+                .args(["-s", "-o", "/dev/null", "-w", "%{http_code}", "-X", "PUT", "--data-binary"])
+                .arg(format!("@{}", path.display()))
+                .arg(&url)
+                .output()
+                .unwrap();
+            assert!(put.stdout.starts_with(b"201") || put.stdout.starts_with(b"200"), "{}", String::from_utf8_lossy(&put.stdout));
+            ids.push(id);
+        }
+        for _round in 0..10 {
+            for id in &ids {
+                let job = format!(
+                    r#"{{"scene": {{"id": "{id}"}}, "output": {{"width": 64, "height": 48}}, "shadow_map": {{"resolution": 256}}}}"#
+                );
+                let (status, _) =
+                    http_with("POST", &format!("{}/v1/render", cluster.base), Some(&job), &[&format!("x-penumbra-scene: {id}")]).unwrap();
+                assert_eq!(status, 200);
+            }
+        }
+        let (mut hits, mut misses) = (0, 0);
+        for port in &cluster.ports {
+            let (_, body) = http("GET", &format!("http://127.0.0.1:{port}/v1/stats"), None).unwrap();
+            let stats: serde_json::Value = serde_json::from_slice(&body).unwrap();
+            hits += stats["engine"]["scene_cache_hits"].as_u64().unwrap();
+            misses += stats["engine"]["scene_cache_misses"].as_u64().unwrap();
+        }
+        let routing = if hashing { "consistent hashing" } else { "round robin" };
+        eprintln!(
+            "scene cache across 3 replicas, 30 scenes × 10 renders, {routing}: {hits} hits, {misses} misses, hit rate {:.1} %",
+            100.0 * hits as f64 / (hits + misses) as f64
+        );
+    }
 }

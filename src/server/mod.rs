@@ -32,6 +32,10 @@ pub use crate::jobs::QueueConfig;
 /// How long finished jobs stay readable unless configured (`--results-ttl-secs`).
 pub const DEFAULT_RESULTS_TTL: std::time::Duration = std::time::Duration::from_secs(3600);
 
+/// How often an idle worker of a shared store asks the queue for a job (the most an async job
+/// waits for an idle replica).
+const SHARED_QUEUE_POLL: std::time::Duration = std::time::Duration::from_millis(50);
+
 /// Finished jobs remembered for the dashboard's charts.
 const RECENT_JOBS: usize = 200;
 use crate::jobs::{JobEvent, JobQueue, JobStore, JobSummary, RecentJobs};
@@ -693,11 +697,17 @@ async fn work_shared_queue(state: Arc<AppState>, consumer: String) {
             _ = stopping.wait_for(|stop| *stop) => return,
         };
         let Some(device) = device.filter(|_| !*stopping.borrow()) else { return };
+        // Asked without waiting: an idle worker must not sit on the device slot that a
+        // synchronous render needs, so when the queue is empty it lets go and asks again soon.
         let (taker, name) = (store.clone(), consumer.clone());
-        let taken = tokio::task::spawn_blocking(move || taker.next(&name, std::time::Duration::from_secs(2))).await;
+        let taken = tokio::task::spawn_blocking(move || taker.next(&name, std::time::Duration::ZERO)).await;
         let stored = match taken {
             Ok(Ok(Some(stored))) => stored,
-            Ok(Ok(None)) => continue,
+            Ok(Ok(None)) => {
+                drop(device);
+                tokio::time::sleep(SHARED_QUEUE_POLL).await;
+                continue;
+            }
             Ok(Err(error)) => {
                 tracing::warn!(%error, "cannot take a job from the shared queue; retrying in 1 s");
                 tokio::time::sleep(std::time::Duration::from_secs(1)).await;
@@ -920,11 +930,12 @@ fn event_of(stored: &StoredJob) -> JobEvent {
     event
 }
 
-/// Polls the store for a job another replica runs, every 300 ms, until it finishes, its
-/// record goes, or nobody listens any more.
+/// Polls the store for a job another replica runs, every 50 ms (one small GET: cheap for
+/// Redis, and what a client waits at most beyond the job), until it finishes, its record
+/// goes, or nobody listens any more.
 async fn follow_stored(store: Arc<dyn DurableStore>, id: String, events: tokio::sync::watch::Sender<JobEvent>) {
     loop {
-        tokio::time::sleep(std::time::Duration::from_millis(300)).await;
+        tokio::time::sleep(std::time::Duration::from_millis(50)).await;
         if events.receiver_count() == 0 {
             return;
         }

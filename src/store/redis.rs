@@ -234,7 +234,11 @@ impl JobStore for RedisStore {
             tracing::warn!(entry = %entry.id, "claimed a job whose replica stopped answering");
             return self.take(consumer, &entry.id, entry.get("id"));
         }
-        let options = redis::streams::StreamReadOptions::default().group(GROUP, consumer).count(1).block(wait.as_millis() as usize);
+        let mut options = redis::streams::StreamReadOptions::default().group(GROUP, consumer).count(1);
+        // BLOCK 0 would wait for ever: no wait means no BLOCK at all.
+        if !wait.is_zero() {
+            options = options.block(wait.as_millis() as usize);
+        }
         let reply: Option<redis::streams::StreamReadReply> = self.with(|c| c.xread_options(&[QUEUE], &[">"], &options))?;
         let Some(entry) = reply.and_then(|r| r.keys.into_iter().next()).and_then(|k| k.ids.into_iter().next()) else {
             return Ok(None);
