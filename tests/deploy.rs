@@ -466,3 +466,46 @@ fn cluster_figures() {
         );
     }
 }
+
+/// On the Redis store, a job that replicas kept dying on (three starts, never finished) is
+/// claimed by a live replica and failed with the reason instead of being rendered again.
+#[test]
+fn a_shared_job_that_keeps_killing_replicas_is_failed_with_a_reason() {
+    use penumbra::store::JobStore;
+    let redis_port = free_port();
+    let _redis = Child(
+        Command::new("redis-server")
+            .args(["--port", &redis_port.to_string(), "--bind", "127.0.0.1", "--save", "", "--appendonly", "no"])
+            .stdout(std::process::Stdio::null())
+            .spawn()
+            .expect("redis-server"),
+    );
+    let url = format!("redis://127.0.0.1:{redis_port}/0");
+    let connect = || penumbra::store::RedisStore::open(&url, Duration::from_secs(60), Duration::from_millis(500)).ok();
+    assert!(wait_until(Duration::from_secs(20), || connect().is_some()).is_some(), "redis-server did not start");
+    let store = connect().unwrap();
+    store.accept("poison", &serde_json::json!({"scene": {"builtin": "torus"}})).unwrap();
+    // Three replicas took it and died while rendering it.
+    let taken = store.next("ghost/0", Duration::from_millis(100)).unwrap().expect("the queued job");
+    for _ in 0..penumbra::store::MAX_ATTEMPTS {
+        store.start(&taken.id).unwrap();
+    }
+    let port = free_port();
+    let _replica = Child(
+        Command::new(env!("CARGO_BIN_EXE_penumbra"))
+            .args(["serve", "--no-warm-up", "--listen", &format!("127.0.0.1:{port}"), "--claim-idle-secs", "1", "--job-store", &url])
+            .env("PENUMBRA_LOG", "warn")
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    let failed = wait_until(Duration::from_secs(60), || store.get("poison").unwrap().is_some_and(|j| j.status == "failed"));
+    assert!(failed.is_some(), "the poison job was not failed: {:?}", store.get("poison").unwrap());
+    let record = store.get("poison").unwrap().unwrap();
+    assert_eq!(record.attempts, penumbra::store::MAX_ATTEMPTS, "it was not rendered again");
+    assert!(record.error.unwrap()["message"].as_str().unwrap().contains("started 3 times"));
+    // Any replica serves the failure, with the reason.
+    let (status, body) = http("GET", &format!("http://127.0.0.1:{port}/v1/jobs/poison"), None).unwrap();
+    assert_eq!(status, 200);
+    assert!(String::from_utf8_lossy(&body).contains("started 3 times"));
+}
