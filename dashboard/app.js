@@ -15,6 +15,35 @@ Chart.defaults.maintainAspectRatio = false;
 const history = { labels: [], throughput: [], queued: [], running: [] };
 let polls = 0;
 
+// A server started with --auth-token-file wants a bearer token: taken once from the URL
+// fragment (`/#token=…`, never sent to the server in the URL) and kept for this tab only.
+const TOKEN_KEY = "penumbra-token";
+const fragmentToken = new URLSearchParams(location.hash.slice(1)).get("token");
+if (fragmentToken) {
+  sessionStorage.setItem(TOKEN_KEY, fragmentToken);
+  window.history.replaceState(null, "", location.pathname);
+}
+
+function authHeaders() {
+  const token = sessionStorage.getItem(TOKEN_KEY);
+  return token ? { authorization: `Bearer ${token}` } : {};
+}
+
+// Asks for a token after a 401 (once; a wrong one asks again on the next 401).
+function askForToken() {
+  if (document.getElementById("token-form")) return;
+  const form = document.createElement("form");
+  form.id = "token-form";
+  form.innerHTML = '<input type="password" placeholder="bearer token" autocomplete="off"> <button>use</button>';
+  form.onsubmit = (event) => {
+    event.preventDefault();
+    sessionStorage.setItem(TOKEN_KEY, form.querySelector("input").value.trim());
+    form.remove();
+    poll();
+  };
+  document.querySelector("header").append(form);
+}
+
 function chart(id, config) {
   return new Chart(document.getElementById(id), config);
 }
@@ -153,16 +182,27 @@ function drawThumbnails(stats) {
   const box = document.getElementById("thumbnails");
   const jobs = stats.jobs.recent.filter((j) => j.outcome === "ok").slice(0, 12);
   const wanted = new Set(jobs.map((j) => j.id));
-  for (const child of [...box.children]) if (!wanted.has(child.dataset.id)) child.remove();
+  for (const child of [...box.children]) {
+    if (!wanted.has(child.dataset.id)) {
+      const img = child.querySelector("img");
+      if (img && img.src.startsWith("blob:")) URL.revokeObjectURL(img.src);
+      child.remove();
+    }
+  }
   jobs.forEach((job, k) => {
     let item = box.querySelector(`[data-id="${job.id}"]`);
     if (!item) {
       item = document.createElement("figure");
       item.dataset.id = job.id;
       const img = document.createElement("img");
-      img.src = `/v1/jobs/${encodeURIComponent(job.id)}/thumbnail`;
       img.alt = `${job.method} render`;
-      img.onerror = () => item.remove(); // expired from the server's store
+      img.dataset.src = `/v1/jobs/${encodeURIComponent(job.id)}/thumbnail`;
+      // Fetched with the token (an <img src> could not send it); a thumbnail that expired
+      // from the server's store leaves the grid.
+      fetch(img.dataset.src, { headers: authHeaders() })
+        .then((r) => (r.ok ? r.blob() : Promise.reject(new Error(String(r.status)))))
+        .then((blob) => (img.src = URL.createObjectURL(blob)))
+        .catch(() => item.remove());
       const caption = document.createElement("figcaption");
       caption.textContent = `${job.method} · ${job.wall_ms.toFixed(0)} ms`;
       item.append(img, caption);
@@ -174,7 +214,8 @@ function drawThumbnails(stats) {
 async function poll() {
   const status = document.getElementById("status");
   try {
-    const response = await fetch("/v1/stats", { headers: { accept: "application/json" } });
+    const response = await fetch("/v1/stats", { headers: { accept: "application/json", ...authHeaders() } });
+    if (response.status === 401) askForToken();
     if (!response.ok) throw new Error(`HTTP ${response.status}`);
     const stats = await response.json();
     drawTiles(stats);

@@ -117,6 +117,20 @@ pub struct ServeConfig {
     #[arg(long, env = "PENUMBRA_DEADLINE_SECS", default_value_t = 120.0)]
     pub deadline_secs: f64,
 
+    /// A file of bearer tokens (one per line, at least 16 characters; `#` comments): every
+    /// `/v1` request must carry one (`Authorization: Bearer TOKEN`). None: the API is open.
+    #[arg(long, env = "PENUMBRA_AUTH_TOKEN_FILE")]
+    pub auth_token_file: Option<PathBuf>,
+
+    /// With tokens: leave `/metrics` open to scrapers without one.
+    #[arg(long, env = "PENUMBRA_METRICS_OPEN")]
+    pub metrics_open: bool,
+
+    /// Origins allowed to call the API from a browser (CORS), comma-separated, e.g.
+    /// `https://tools.example`. None: CORS closed.
+    #[arg(long, env = "PENUMBRA_CORS_ORIGINS", value_delimiter = ',')]
+    pub cors_origins: Vec<String>,
+
     /// Skip compiling pipelines and uploading the default scene before accepting jobs.
     #[arg(long, env = "PENUMBRA_NO_WARM_UP")]
     pub no_warm_up: bool,

@@ -35,6 +35,8 @@ pub enum ErrorCode {
     QueueFull,
     /// The job waited in the queue past the configured deadline without starting.
     DeadlineExceeded,
+    /// No valid bearer token on a server that requires one.
+    Unauthorized,
     /// Something failed inside the renderer; the message is generic towards clients.
     Internal,
 }
@@ -55,6 +57,7 @@ impl ErrorCode {
             ErrorCode::NotFound => "not_found",
             ErrorCode::QueueFull => "queue_full",
             ErrorCode::DeadlineExceeded => "deadline_exceeded",
+            ErrorCode::Unauthorized => "unauthorized",
             ErrorCode::Internal => "internal",
         }
     }

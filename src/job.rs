@@ -14,6 +14,40 @@ use crate::error::{ErrorCode, JobError, JobResult};
 
 /// Limits on what one job may ask for. Every one is configurable (`Config`) and enforced
 /// before anything is allocated.
+/// Whether arrays and objects in `bytes` nest deeper than `max` (brackets inside strings do
+/// not count). A linear scan before any parsing: a hostile body is refused before it costs
+/// a deep recursion or an allocation.
+fn nesting_exceeds(bytes: &[u8], max: usize) -> bool {
+    let (mut depth, mut in_string, mut escaped) = (0usize, false, false);
+    for &b in bytes {
+        if in_string {
+            match (escaped, b) {
+                (true, _) => escaped = false,
+                (false, b'\\') => escaped = true,
+                (false, b'"') => in_string = false,
+                _ => {}
+            }
+            continue;
+        }
+        match b {
+            b'"' => in_string = true,
+            b'[' | b'{' => {
+                depth += 1;
+                if depth > max {
+                    return true;
+                }
+            }
+            b']' | b'}' => depth = depth.saturating_sub(1),
+            _ => {}
+        }
+    }
+    false
+}
+
+/// Deepest nesting of arrays and objects a job may have (a job needs 4; serde_json's own
+/// recursion limit of 128 would still allocate for a hostile body).
+pub const MAX_JSON_DEPTH: usize = 16;
+
 #[derive(Debug, Clone, Serialize)]
 pub struct Limits {
     /// Largest output width or height in pixels.
@@ -254,6 +288,9 @@ impl Job {
         if bytes.iter().find(|b| !b.is_ascii_whitespace()) != Some(&b'{') {
             return Err(JobError::new(ErrorCode::InvalidJson, "a job is a JSON object"));
         }
+        if nesting_exceeds(bytes, MAX_JSON_DEPTH) {
+            return Err(JobError::new(ErrorCode::InvalidJson, format!("the JSON nests deeper than {MAX_JSON_DEPTH} levels")));
+        }
         let de = &mut serde_json::Deserializer::from_slice(bytes);
         serde_path_to_error::deserialize(de).map_err(|err| {
             let path = err.path().to_string();
@@ -322,6 +359,19 @@ fn check_dim(field: &str, value: u32, max: u32) -> JobResult<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn deep_nesting_is_refused_before_parsing_and_strings_do_not_count() {
+        let deep = format!("{{\"scene\": {}{}}}", "[".repeat(100_000), "]".repeat(100_000));
+        let error = Job::from_json(deep.as_bytes()).unwrap_err();
+        assert_eq!(error.code, ErrorCode::InvalidJson);
+        assert!(error.message.contains("nests deeper"), "{}", error.message);
+        assert!(!nesting_exceeds(
+            br#"{"a": "[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[", "b": "\\\"{{{{{{{{{{{{{{{{{{{{{{{{{{{{{{{{{{{{"}"#,
+            3
+        ));
+        assert!(nesting_exceeds(b"[[[[", 3) && !nesting_exceeds(b"[[[]]]", 3));
+    }
 
     #[test]
     fn parses_the_design_example() {

@@ -829,7 +829,10 @@ async fn the_dashboard_draws_live_data_in_headless_chromium() {
 /// `--dump-dom`) or, for `--screenshot=PATH`, the path. `PENUMBRA_CHROMIUM` names the binary.
 fn chromium(extra: &[&str], url: &str) -> String {
     let binary = std::env::var("PENUMBRA_CHROMIUM").unwrap_or_else(|_| "chromium".into());
-    let profile = std::env::temp_dir().join(format!("penumbra-chromium-{}-{}", std::process::id(), extra.len()));
+    // One profile per run: tests open Chromium concurrently, and a profile is single-instance.
+    static RUNS: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
+    let run = RUNS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let profile = std::env::temp_dir().join(format!("penumbra-chromium-{}-{run}", std::process::id()));
     let output = std::process::Command::new(&binary)
         .args(["--headless", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage", "--hide-scrollbars", "--window-size=1280,1300"])
         // Virtual time runs the page's timers without waiting for them: three polls or so.
@@ -1070,4 +1073,102 @@ async fn submit_uploads_only_what_the_server_lacks_and_follows_progress() {
         .unwrap();
     assert!(!output.status.success());
     assert!(String::from_utf8_lossy(&output.stderr).contains("unknown_builtin"), "{}", String::from_utf8_lossy(&output.stderr));
+}
+
+/// Access control (issue 11): with tokens configured, `/v1` and `/metrics` need one of them
+/// (401 `unauthorized` with `WWW-Authenticate` otherwise), `/healthz`, `/readyz` and the
+/// dashboard's files stay open, the dashboard works with a token given in its URL fragment,
+/// CORS answers only configured origins, and `/v1/limits` lists the limits.
+#[tokio::test(flavor = "multi_thread")]
+async fn bearer_tokens_guard_the_api_and_cors_is_closed_unless_configured() {
+    let tokens = ["first-token-0123456789abcdef", "second-token-0123456789abcdef"];
+    let origins = vec!["https://tools.example".to_owned()];
+    let (base, _dir, _, _) = start_configured(penumbra::engine::DEFAULT_CACHE_BYTES, |state| {
+        state.with_auth(penumbra::server::auth::Auth::new(&tokens, false)).with_cors_origins(&origins).unwrap()
+    })
+    .await;
+    let client = reqwest::Client::new();
+    let get = |path: &str, token: Option<&str>| {
+        let mut request = client.get(format!("{base}{path}"));
+        if let Some(token) = token {
+            request = request.bearer_auth(token);
+        }
+        request.send()
+    };
+    for path in ["/v1/methods", "/v1/stats", "/v1/limits", "/metrics"] {
+        let refused = get(path, None).await.unwrap();
+        assert_eq!(refused.status(), StatusCode::UNAUTHORIZED, "{path}");
+        assert!(refused.headers()[reqwest::header::WWW_AUTHENTICATE].to_str().unwrap().starts_with("Bearer"));
+        assert_eq!(refused.json::<Value>().await.unwrap()["error"]["code"], "unauthorized");
+        assert_eq!(get(path, Some("not-a-token-0123456789")).await.unwrap().status(), StatusCode::UNAUTHORIZED, "{path}");
+        for token in tokens {
+            assert_eq!(get(path, Some(token)).await.unwrap().status(), StatusCode::OK, "{path}");
+        }
+    }
+    for path in ["/healthz", "/readyz", "/", "/dashboard/app.js"] {
+        assert_eq!(get(path, None).await.unwrap().status(), StatusCode::OK, "{path} stays open");
+    }
+    let render = client.post(format!("{base}/v1/render")).json(&small_job("png")).send().await.unwrap();
+    assert_eq!(render.status(), StatusCode::UNAUTHORIZED, "no render without a token");
+    let limits: Value = get("/v1/limits", Some(tokens[0])).await.unwrap().json().await.unwrap();
+    assert_eq!(limits["max_body_bytes"], 64 * 1024);
+    assert!(limits["method_params"]["reference"].is_array() && limits["max_json_depth"].as_u64() > Some(4), "{limits}");
+
+    // CORS: a preflight from the configured origin is answered; another origin gets nothing.
+    let preflight = |origin: &str| {
+        client
+            .request(reqwest::Method::OPTIONS, format!("{base}/v1/render"))
+            .header("origin", origin)
+            .header("access-control-request-method", "POST")
+            .header("access-control-request-headers", "authorization, content-type")
+            .send()
+    };
+    let allowed = preflight("https://tools.example").await.unwrap();
+    assert_eq!(allowed.headers()["access-control-allow-origin"], "https://tools.example");
+    let other = preflight("https://evil.example").await.unwrap();
+    assert!(other.headers().get("access-control-allow-origin").is_none());
+
+    // The dashboard with its token in the URL fragment polls and draws.
+    let render = client.post(format!("{base}/v1/render")).bearer_auth(tokens[1]).json(&small_job("png")).send().await.unwrap();
+    assert_eq!(render.status(), StatusCode::OK);
+    let url = format!("{base}/#token={}", tokens[1]);
+    let dom = tokio::task::spawn_blocking(move || chromium(&["--dump-dom"], &url)).await.unwrap();
+    assert!(dom.contains("class=\"status ok\""), "the dashboard got its stats with the token");
+    assert!(!dom.contains("token-form"), "no token was asked for");
+}
+
+/// The daemon never writes a token to its logs, even at debug level.
+#[test]
+fn tokens_never_reach_the_logs() {
+    let dir = tempdir::Dir::new();
+    let token = "log-probe-token-5f1e0c9a7b";
+    std::fs::write(dir.path().join("tokens"), format!("# the probe\n{token}\n")).unwrap();
+    let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+    let mut daemon = std::process::Command::new(env!("CARGO_BIN_EXE_penumbra"))
+        .args(["serve", "--no-warm-up", "--job-store", "memory", "--listen", &format!("127.0.0.1:{port}"), "--auth-token-file"])
+        .arg(dir.path().join("tokens"))
+        .env("PENUMBRA_LOG", "debug")
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let runtime = tokio::runtime::Runtime::new().unwrap();
+    runtime.block_on(async {
+        let client = reqwest::Client::new();
+        let base = format!("http://127.0.0.1:{port}");
+        for _ in 0..300 {
+            if client.get(format!("{base}/readyz")).send().await.is_ok_and(|r| r.status() == StatusCode::OK) {
+                break;
+            }
+            tokio::time::sleep(std::time::Duration::from_millis(100)).await;
+        }
+        let ok = client.post(format!("{base}/v1/render")).bearer_auth(token).json(&small_job("png")).send().await.unwrap();
+        assert_eq!(ok.status(), StatusCode::OK);
+        let refused = client.get(format!("{base}/v1/stats")).bearer_auth(format!("{token}-wrong")).send().await.unwrap();
+        assert_eq!(refused.status(), StatusCode::UNAUTHORIZED);
+    });
+    daemon.kill().unwrap();
+    let output = daemon.wait_with_output().unwrap();
+    let logs = String::from_utf8_lossy(&output.stderr);
+    assert!(logs.contains("bearer tokens required"), "the daemon logged at all: {logs}");
+    assert!(!logs.contains(token), "a token reached the logs");
 }

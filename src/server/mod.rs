@@ -2,6 +2,7 @@
 //! the engine up and shuts down gracefully. Rendering runs on the blocking pool so the
 //! async workers keep answering health checks while the device is busy.
 
+pub mod auth;
 mod dashboard;
 pub mod error;
 
@@ -56,6 +57,10 @@ pub struct AppState {
     /// and with a durable store, jobs still waiting for the device stay queued there for the
     /// next start instead of holding the shutdown up.
     stopping: tokio::sync::watch::Sender<bool>,
+    /// Bearer tokens (None: the API is open).
+    auth: Option<auth::Auth>,
+    /// Allowed cross-origin callers (None: CORS closed).
+    cors: Option<tower_http::cors::CorsLayer>,
     ready: AtomicBool,
     next_id: AtomicU64,
     started: std::time::SystemTime,
@@ -72,6 +77,8 @@ impl AppState {
             recent: RecentJobs::new(RECENT_JOBS),
             store: None,
             stopping: tokio::sync::watch::channel(false).0,
+            auth: None,
+            cors: None,
             engine,
             ready: AtomicBool::new(false),
             next_id: AtomicU64::new(1),
@@ -86,6 +93,34 @@ impl AppState {
     /// Keeps submitted jobs and their results in `store`, so that they survive a restart.
     pub fn with_store(self, store: Arc<dyn DurableStore>) -> Self {
         Self { store: Some(store), ..self }
+    }
+
+    /// Requires one of these bearer tokens on `/v1` (and `/metrics` unless it is open).
+    pub fn with_auth(self, auth: auth::Auth) -> Self {
+        Self { auth: Some(auth), ..self }
+    }
+
+    /// Lets browsers on these origins call the API (CORS); none: closed.
+    pub fn with_cors_origins(self, origins: &[String]) -> anyhow::Result<Self> {
+        if origins.is_empty() {
+            return Ok(self);
+        }
+        use axum::http::{HeaderName, Method};
+        let origins: Vec<HeaderValue> = origins
+            .iter()
+            .map(|o| HeaderValue::from_str(o).map_err(|_| anyhow::anyhow!("bad CORS origin `{o}`")))
+            .collect::<Result<_, _>>()?;
+        let cors = tower_http::cors::CorsLayer::new()
+            .allow_origin(origins)
+            .allow_methods([Method::GET, Method::POST, Method::PUT, Method::DELETE, Method::HEAD])
+            .allow_headers([header::AUTHORIZATION, header::CONTENT_TYPE, header::ACCEPT, HeaderName::from_static("x-penumbra-scene")])
+            .expose_headers([
+                header::LOCATION,
+                header::RETRY_AFTER,
+                HeaderName::from_static("server-timing"),
+                HeaderName::from_static("x-penumbra-job-id"),
+            ]);
+        Ok(Self { cors: Some(cors), ..self })
     }
 
     /// Finished jobs (results, records and events) are dropped `ttl` after they finished.
@@ -210,9 +245,12 @@ impl AppState {
 
 pub fn app(state: Arc<AppState>) -> Router {
     let body_limit = state.engine.limits().max_body_bytes;
-    Router::new()
+    let guard = || axum::middleware::from_fn_with_state(state.clone(), auth::require_token);
+    // Everything under /v1 needs a token when tokens are configured.
+    let v1 = Router::new()
         .route("/v1/render", post(render))
         .route("/v1/methods", get(methods))
+        .route("/v1/limits", get(limits))
         .route("/v1/scenes", post(upload_scene))
         .route("/v1/lights", post(upload_light))
         .route("/v1/scenes/{id}", upload_routes(Kind::Scene))
@@ -222,15 +260,48 @@ pub fn app(state: Arc<AppState>) -> Router {
         .route("/v1/jobs/{id}/events", get(job_events))
         .route("/v1/jobs/{id}/image", get(job_image))
         .route("/v1/jobs/{id}/thumbnail", get(job_thumbnail))
+        .route("/v1/stats", get(stats))
+        .route_layer(guard());
+    // /metrics has its own setting: scrapers often cannot send a token.
+    let mut metrics_route = Router::new().route("/metrics", get(metrics));
+    if !state.auth.as_ref().is_none_or(|a| a.metrics_open) {
+        metrics_route = metrics_route.route_layer(guard());
+    }
+    let router = Router::new()
+        .merge(v1)
+        .merge(metrics_route)
         .route("/", get(dashboard::page))
         .route("/dashboard/{asset}", get(dashboard::asset))
-        .route("/v1/stats", get(stats))
-        .route("/metrics", get(metrics))
         .route("/healthz", get(|| async { Json(json!({"status": "ok"})) }))
         .route("/readyz", get(readyz))
         .fallback(|| async { ApiError(JobError::new(ErrorCode::NotFound, "no such route")) })
-        .layer(DefaultBodyLimit::max(body_limit))
-        .with_state(state)
+        .layer(DefaultBodyLimit::max(body_limit));
+    // CORS is closed unless origins are configured; the layer answers preflights before auth.
+    let router = match &state.cors {
+        Some(cors) => router.layer(cors.clone()),
+        None => router,
+    };
+    router.with_state(state)
+}
+
+/// `GET /v1/limits`: every limit the server enforces, with its value (all configurable).
+async fn limits(State(state): State<Arc<AppState>>) -> Json<Value> {
+    let limits = state.engine.limits();
+    Json(json!({
+        "max_body_bytes": limits.max_body_bytes,
+        "max_output_dim": limits.max_output_dim,
+        "max_output_pixels": limits.max_output_pixels,
+        "max_shadow_map_resolution": limits.max_shadow_map_resolution,
+        "max_triangles": limits.max_triangles,
+        "max_light_image_dim": limits.max_light_image_dim,
+        "max_texture_dim": limits.max_texture_dim,
+        "max_json_depth": crate::job::MAX_JSON_DEPTH,
+        "queue": state.queue_config.capacity,
+        "concurrency": state.queue_config.concurrency,
+        "deadline_secs": state.queue_config.deadline.as_secs_f64(),
+        "upload_cache_bytes": state.engine.upload_stats().budget_bytes,
+        "method_params": REGISTRY.iter().map(|m| (m.name(), m.params())).collect::<std::collections::BTreeMap<_, _>>(),
+    }))
 }
 
 /// Binds, warms up, serves until SIGINT or SIGTERM, then finishes requests in flight.
@@ -241,7 +312,15 @@ pub async fn serve(config: ServeConfig, engine: Arc<Engine>) -> anyhow::Result<(
         deadline: std::time::Duration::from_secs_f64(config.deadline_secs.max(0.0)),
     };
     let ttl = std::time::Duration::from_secs_f64(config.results_ttl_secs.max(0.0));
-    let mut state = AppState::new(engine.clone(), config.results_kept).with_queue(queue).with_results_ttl(ttl);
+    let mut state = AppState::new(engine.clone(), config.results_kept)
+        .with_queue(queue)
+        .with_results_ttl(ttl)
+        .with_cors_origins(&config.cors_origins)?;
+    if let Some(path) = &config.auth_token_file {
+        let auth = auth::Auth::from_file(path, config.metrics_open)?;
+        tracing::info!(metrics_open = auth.metrics_open, "bearer tokens required on /v1");
+        state = state.with_auth(auth);
+    }
     match config.job_store.as_str() {
         "memory" => tracing::warn!("job store in memory: submitted jobs are lost when the daemon stops"),
         "embedded" => {
