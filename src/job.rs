@@ -314,6 +314,13 @@ impl Job {
     /// Range checks that need no scene: output and shadow-map sizes, exposure, ambient.
     /// (Camera and light are checked once merged with the scene's defaults.)
     pub fn validate(&self, limits: &Limits) -> JobResult<()> {
+        // Built-in assets are known now: a misspelt one is refused at submission, not later.
+        if let AssetRef::Builtin { name, params } = &self.scene {
+            crate::scene::builtin::parse(name, params, "scene", limits)?;
+        }
+        if let Some(AssetRef::Builtin { name, params }) = &self.light.image {
+            crate::light::LightImage::check_builtin(name, params, "light.image")?;
+        }
         let out = &self.output;
         check_dim("output.width", out.width, limits.max_output_dim)?;
         check_dim("output.height", out.height, limits.max_output_dim)?;

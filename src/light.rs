@@ -80,7 +80,9 @@ impl LightImage {
     }
 
     /// A built-in light image by name. Built-ins take no parameters yet; any given is an error.
-    pub fn builtin(name: &str, params: &Map<String, Value>, field: &str) -> JobResult<Self> {
+    /// Checks a built-in light image's name and (absent) parameters, at submission and before
+    /// building it.
+    pub fn check_builtin(name: &str, params: &Map<String, Value>, field: &str) -> JobResult<()> {
         if let Some(key) = params.keys().next() {
             return Err(JobError::field(
                 ErrorCode::UnknownField,
@@ -88,6 +90,18 @@ impl LightImage {
                 format!("the built-in light image `{name}` takes no parameter `{key}`"),
             ));
         }
+        if !BUILTIN_LIGHT_IMAGES.contains(&name) {
+            return Err(JobError::field(
+                ErrorCode::UnknownBuiltin,
+                format!("{field}.builtin"),
+                format!("unknown built-in light image `{name}`; known: {}", BUILTIN_LIGHT_IMAGES.join(", ")),
+            ));
+        }
+        Ok(())
+    }
+
+    pub fn builtin(name: &str, params: &Map<String, Value>, field: &str) -> JobResult<Self> {
+        Self::check_builtin(name, params, field)?;
         let white = [1.0, 1.0, 1.0, 1.0];
         let black = [0.0, 0.0, 0.0, 0.0];
         Ok(match name {

@@ -19,8 +19,19 @@ pub const BUILTIN_SCENES: &[&str] = &["torus", "crowd", "columns", "terrain", "o
 /// Default triangle count of `terrain`.
 pub const TERRAIN_DEFAULT_TRIANGLES: u64 = 100_000;
 
-/// Builds a built-in scene; `field` is where the scene was named in the job (for errors).
-pub fn build(name: &str, params: &Map<String, Value>, field: &str, limits: &Limits) -> JobResult<Scene> {
+/// A built-in scene with its parameters checked: what a job asks for, before anything is built.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Builtin {
+    Torus,
+    Crowd,
+    Columns,
+    Occluder { height: f32 },
+    Terrain { triangles: u64, seed: u32 },
+}
+
+/// Checks a built-in scene's name and parameters (at submission, and before building);
+/// `field` is where the scene was named in the job (for errors).
+pub fn parse(name: &str, params: &Map<String, Value>, field: &str, limits: &Limits) -> JobResult<Builtin> {
     let allowed: &[&str] = match name {
         "terrain" => &["triangles", "seed"],
         "occluder" => &["height"],
@@ -41,9 +52,9 @@ pub fn build(name: &str, params: &Map<String, Value>, field: &str, limits: &Limi
         ));
     }
     Ok(match name {
-        "torus" => torus_scene(),
-        "crowd" => crowd_scene(),
-        "columns" => columns_scene(),
+        "torus" => Builtin::Torus,
+        "crowd" => Builtin::Crowd,
+        "columns" => Builtin::Columns,
         "occluder" => {
             let height = match params.get("height") {
                 None => OCCLUDER_HEIGHT_M,
@@ -57,13 +68,23 @@ pub fn build(name: &str, params: &Map<String, Value>, field: &str, limits: &Limi
                     }
                 },
             };
-            occluder_scene(height)
+            Builtin::Occluder { height }
         }
-        _ => {
-            let triangles = integer_param(params, "triangles", field, TERRAIN_DEFAULT_TRIANGLES, 2, limits.max_triangles)?;
-            let seed = integer_param(params, "seed", field, 1, 0, u64::from(u32::MAX))? as u32;
-            terrain_scene(triangles, seed)
-        }
+        _ => Builtin::Terrain {
+            triangles: integer_param(params, "triangles", field, TERRAIN_DEFAULT_TRIANGLES, 2, limits.max_triangles)?,
+            seed: integer_param(params, "seed", field, 1, 0, u64::from(u32::MAX))? as u32,
+        },
+    })
+}
+
+/// Builds a built-in scene; `field` is where the scene was named in the job (for errors).
+pub fn build(name: &str, params: &Map<String, Value>, field: &str, limits: &Limits) -> JobResult<Scene> {
+    Ok(match parse(name, params, field, limits)? {
+        Builtin::Torus => torus_scene(),
+        Builtin::Crowd => crowd_scene(),
+        Builtin::Columns => columns_scene(),
+        Builtin::Occluder { height } => occluder_scene(height),
+        Builtin::Terrain { triangles, seed } => terrain_scene(triangles, seed),
     })
 }
 
