@@ -29,7 +29,34 @@ fn invalid(field: &str, message: impl Into<String>) -> JobError {
     JobError::field(ErrorCode::InvalidAsset, field, message)
 }
 
+/// Checks a GLB container's header and chunk lengths against the bytes there are (glTF 2.0
+/// §4.4) before the gltf crate reads them: its parser subtracts before it compares (a declared
+/// length under 12 underflows; found by `cargo fuzz`, kept as a regression test).
+fn check_glb_container(bytes: &[u8], field: &str) -> JobResult<()> {
+    if !bytes.starts_with(b"glTF") {
+        return Ok(()); // glTF JSON: the JSON parser bounds itself.
+    }
+    let word = |at: usize| bytes.get(at..at + 4).map(|w| u32::from_le_bytes([w[0], w[1], w[2], w[3]]) as usize);
+    let (Some(version), Some(length)) = (word(4), word(8)) else { return Err(invalid(field, "GLB header truncated")) };
+    if version != 2 {
+        return Err(invalid(field, format!("GLB version {version}; only glTF 2.0 is supported")));
+    }
+    if length < 12 + 8 || length > bytes.len() {
+        return Err(invalid(field, format!("GLB declares {length} bytes; the body has {}", bytes.len())));
+    }
+    let mut at = 12;
+    while at < length {
+        let Some(chunk) = word(at).filter(|_| at + 8 <= length) else { return Err(invalid(field, "GLB chunk header truncated")) };
+        if chunk > length - at - 8 {
+            return Err(invalid(field, format!("GLB chunk at byte {at} declares {chunk} bytes past the end of the file")));
+        }
+        at += 8 + chunk;
+    }
+    Ok(())
+}
+
 fn load_unchecked(bytes: &[u8], limits: &Limits, field: &str) -> JobResult<Scene> {
+    check_glb_container(bytes, field)?;
     let gltf = gltf::Gltf::from_slice(bytes).map_err(|e| invalid(field, format!("not a valid glTF 2.0 document: {e}")))?;
     let buffers = gltf
         .document
@@ -277,6 +304,30 @@ pub fn height_field_glb(n: u32, seed: u32) -> Vec<u8> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `cargo fuzz run scene` found this: a GLB header declaring a length of 0.
+    #[test]
+    fn malformed_glb_containers_are_refused_before_parsing() {
+        let fuzzed = b"glTF\x02\x00\x00\x00\x00\x00\x00\x00\x80\x02\x00\x00cene\xcd\":[{";
+        for bytes in [&fuzzed[..], b"glTF\x02\x00\x00\x00", b"glTF\x02\x00\x00\x00\x14\x00\x00\x00\xff\xff\xff\x7fJSON"] {
+            let error = check_glb_container(bytes, "scene").unwrap_err();
+            assert_eq!(error.code, ErrorCode::InvalidAsset, "{}", error.message);
+            assert_eq!(load(bytes, &Limits::default(), "scene").unwrap_err().code, ErrorCode::InvalidAsset);
+        }
+        let valid = height_field_glb(3, 1);
+        assert!(check_glb_container(&valid, "scene").is_ok());
+    }
+
+    /// `cargo fuzz run scene` found this: a POSITION accessor index past the accessors makes
+    /// the `gltf` crate's own validator index out of bounds; the loader answers `invalid_asset`.
+    #[test]
+    fn an_attribute_naming_a_missing_accessor_is_an_invalid_asset() {
+        let document = br#"{"asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}],
+            "meshes": [{"primitives": [{"attributes": {"POSITION": 5}}]}],
+            "accessors": [{"componentType": 5126, "count": 3, "type": "VEC3"}]}"#;
+        let error = load(document, &Limits::default(), "scene").unwrap_err();
+        assert_eq!((error.code, error.field.as_deref()), (ErrorCode::InvalidAsset, Some("scene")));
+    }
 
     #[test]
     fn height_fields_load_with_the_requested_triangles_and_differ_by_seed() {
