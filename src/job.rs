@@ -302,10 +302,17 @@ impl Job {
             } else {
                 ErrorCode::InvalidField
             };
-            let mut error = JobError::new(code, inner.to_string());
+            let message = inner.to_string();
+            let mut error = JobError::new(code, message.clone());
             // A syntax error has a position, not a field: the path is where parsing stopped.
             if code != ErrorCode::InvalidJson && path != "." && !path.is_empty() {
-                error.field = Some(path);
+                error.field = Some(path.clone());
+            }
+            // A missing field is named by serde in the message only: the field is the path of
+            // the object it is missing from, and its name.
+            if let Some(name) = message.strip_prefix("missing field `").and_then(|m| m.split('`').next()) {
+                let parent = if path == "." || path.is_empty() { String::new() } else { format!("{path}.") };
+                error.field = Some(format!("{parent}{name}"));
             }
             error
         })
@@ -366,6 +373,12 @@ fn check_dim(field: &str, value: u32, max: u32) -> JobResult<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_missing_field_is_named() {
+        let error = Job::from_json(br#"{"output": {"width": 64}}"#).unwrap_err();
+        assert_eq!((error.code, error.field.as_deref()), (ErrorCode::InvalidField, Some("scene")), "{}", error.message);
+    }
 
     #[test]
     fn deep_nesting_is_refused_before_parsing_and_strings_do_not_count() {

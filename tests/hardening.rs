@@ -11,6 +11,15 @@ fn repo() -> &'static Path {
     Path::new(env!("CARGO_MANIFEST_DIR"))
 }
 
+/// The test virtual environment (`$PENUMBRA_TOOLS`, default ~/.cache/penumbra-tools), as
+/// `deploy/install-test-deps.sh` makes it.
+fn tools_dir() -> std::path::PathBuf {
+    std::env::var_os("PENUMBRA_TOOLS")
+        .filter(|d| !d.is_empty())
+        .map(std::path::PathBuf::from)
+        .unwrap_or_else(|| std::path::PathBuf::from(std::env::var_os("HOME").expect("HOME")).join(".cache/penumbra-tools"))
+}
+
 /// Seconds per target: `PENUMBRA_FUZZ_SECS`, default 45 (the README's long form: 600).
 fn fuzz_seconds() -> u64 {
     std::env::var("PENUMBRA_FUZZ_SECS").ok().and_then(|s| s.parse().ok()).unwrap_or(45)
@@ -69,11 +78,7 @@ fn fuzz_targets_survive_their_time_budget() {
 /// rightly get a 422; and the event streams, which stay open by design.
 #[test]
 fn the_api_conforms_to_its_openapi_document_under_schemathesis() {
-    let tools = std::env::var_os("PENUMBRA_TOOLS")
-        .filter(|d| !d.is_empty())
-        .map(std::path::PathBuf::from)
-        .unwrap_or_else(|| std::path::PathBuf::from(std::env::var_os("HOME").expect("HOME")).join(".cache/penumbra-tools"));
-    let schemathesis = tools.join("bin/schemathesis");
+    let schemathesis = tools_dir().join("bin/schemathesis");
     assert!(schemathesis.exists(), "{} is missing: run ./deploy/install-test-deps.sh", schemathesis.display());
     let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
     let mut daemon = Command::new(env!("CARGO_BIN_EXE_penumbra"))
@@ -112,8 +117,7 @@ fn the_api_conforms_to_its_openapi_document_under_schemathesis() {
 /// `target/test-artifacts/load/` (figures for notes come from the 5-minute form, never asserted).
 #[test]
 fn sixteen_clients_get_only_documented_answers() {
-    let python = std::path::PathBuf::from(std::env::var_os("HOME").expect("HOME")).join(".cache/penumbra-tools/bin/python");
-    let python = std::env::var_os("PENUMBRA_TOOLS").filter(|d| !d.is_empty()).map(|d| std::path::PathBuf::from(d).join("bin/python")).unwrap_or(python);
+    let python = tools_dir().join("bin/python");
     assert!(python.exists(), "{} is missing: run ./deploy/install-test-deps.sh", python.display());
     let out = repo().join("target/test-artifacts/load");
     let seconds = std::env::var("PENUMBRA_LOAD_SECS").unwrap_or_else(|_| "45".into());
