@@ -190,6 +190,19 @@ fn free_port() -> u16 {
     std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
 }
 
+/// Debian's `redis-server` on a free loopback port, without persistence: (port, process).
+fn start_redis() -> (u16, Child) {
+    let port = free_port();
+    let child = Child(
+        Command::new("redis-server")
+            .args(["--port", &port.to_string(), "--bind", "127.0.0.1", "--save", "", "--appendonly", "no"])
+            .stdout(std::process::Stdio::null())
+            .spawn()
+            .expect("redis-server (apt-get install redis-server)"),
+    );
+    (port, child)
+}
+
 fn redis_get(port: u16, key: &str) -> String {
     run(Command::new("redis-cli").args(["-p", &port.to_string(), "--raw", "GET", key])).trim().to_owned()
 }
@@ -211,14 +224,7 @@ impl Cluster {
     fn start(replicas: usize, consistent_hashing: bool) -> Self {
         let work = std::env::temp_dir().join(format!("penumbra-cluster-{}-{}", std::process::id(), free_port()));
         std::fs::create_dir_all(work.join("nginx/tmp")).unwrap();
-        let redis_port = free_port();
-        let redis = Child(
-            Command::new("redis-server")
-                .args(["--port", &redis_port.to_string(), "--bind", "127.0.0.1", "--save", "", "--appendonly", "no"])
-                .stdout(std::process::Stdio::null())
-                .spawn()
-                .expect("redis-server (apt-get install redis-server)"),
-        );
+        let (redis_port, redis) = start_redis();
         let ping = || {
             Command::new("redis-cli").args(["-p", &redis_port.to_string(), "PING"]).output().is_ok_and(|o| o.stdout.starts_with(b"PONG"))
         };
@@ -472,14 +478,7 @@ fn cluster_figures() {
 #[test]
 fn a_shared_job_that_keeps_killing_replicas_is_failed_with_a_reason() {
     use penumbra::store::JobStore;
-    let redis_port = free_port();
-    let _redis = Child(
-        Command::new("redis-server")
-            .args(["--port", &redis_port.to_string(), "--bind", "127.0.0.1", "--save", "", "--appendonly", "no"])
-            .stdout(std::process::Stdio::null())
-            .spawn()
-            .expect("redis-server"),
-    );
+    let (redis_port, _redis) = start_redis();
     let url = format!("redis://127.0.0.1:{redis_port}/0");
     let connect = || penumbra::store::RedisStore::open(&url, Duration::from_secs(60), Duration::from_millis(500)).ok();
     assert!(wait_until(Duration::from_secs(20), || connect().is_some()).is_some(), "redis-server did not start");

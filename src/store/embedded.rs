@@ -75,13 +75,7 @@ impl EmbeddedStore {
 
 impl JobStore for EmbeddedStore {
     fn accept(&self, id: &str, job: &Value) -> anyhow::Result<()> {
-        let record = StoredJob {
-            id: id.to_owned(),
-            status: "queued".into(),
-            job: job.clone(),
-            submitted_unix_ms: unix_ms(),
-            ..StoredJob::default()
-        };
+        let record = StoredJob::queued(id, job);
         let txn = self.db.begin_write()?;
         txn.open_table(JOBS)?.insert(id, serde_json::to_vec(&record)?.as_slice())?;
         txn.commit()?;

@@ -56,6 +56,11 @@ pub struct StoredJob {
 }
 
 impl StoredJob {
+    /// A job just accepted: queued, submitted now.
+    pub fn queued(id: &str, job: &Value) -> Self {
+        Self { id: id.to_owned(), status: "queued".into(), job: job.clone(), submitted_unix_ms: unix_ms(), ..Self::default() }
+    }
+
     pub fn finished(&self) -> bool {
         matches!(self.status.as_str(), "succeeded" | "failed")
     }

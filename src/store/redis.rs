@@ -144,13 +144,7 @@ impl RedisStore {
 
 impl JobStore for RedisStore {
     fn accept(&self, id: &str, job: &Value) -> anyhow::Result<()> {
-        let record = StoredJob {
-            id: id.to_owned(),
-            status: "queued".into(),
-            job: job.clone(),
-            submitted_unix_ms: unix_ms(),
-            ..StoredJob::default()
-        };
+        let record = StoredJob::queued(id, job);
         let json = serde_json::to_vec(&record)?;
         // The record first: a worker that takes the entry always finds it.
         self.with(|c| redis::pipe().atomic().set(job_key(id), json).ignore().xadd(QUEUE, "*", &[("id", id)]).ignore().query::<()>(c))
