@@ -17,7 +17,7 @@ use crate::job::{AssetRef, Job, Limits, OutputFormat};
 use crate::light::LightImage;
 use crate::methods::Counters;
 use crate::quality::QualityReport;
-use crate::render::{FrameOutput, FrameSpec, Renderer};
+use crate::render::{FrameOutput, FrameSpec, Observer, Renderer};
 use crate::scene::{self, builtin};
 use crate::timing::Timings;
 use crate::uploads::{content_id, Asset, Kind, UploadStats, UploadStore};
@@ -257,13 +257,14 @@ impl Engine {
         self.render_observed(job, &|_, _| {})
     }
 
-    /// `render`, reporting the progress of long methods as (steps done, steps in all).
-    pub fn render_observed(&self, job: &Job, progress: &dyn Fn(u64, u64)) -> JobResult<Rendered> {
+    /// `render`, reporting the progress of long methods to `observer` (steps done, steps in
+    /// all), which may also cancel it.
+    pub fn render_observed(&self, job: &Job, observer: &dyn Observer) -> JobResult<Rendered> {
         let started = Instant::now();
-        let (frame, mut timings) = self.render_raw_observed(job, progress)?;
+        let (frame, mut timings) = self.render_raw_observed(job, observer)?;
         let quality = if job.compare {
             let start = Instant::now();
-            let reference = self.reference_for(job, progress)?;
+            let reference = self.reference_for(job, observer)?;
             let start = timings.phase("reference", start);
             let report = crate::quality::compare(&frame, &reference, job.output.exposure);
             timings.phase("quality", start);
@@ -288,7 +289,7 @@ impl Engine {
 
     /// The reference frame for a job's scene, view, light and size, rendered once and
     /// cached, so a sweep over methods renders it once.
-    pub fn reference_for(&self, job: &Job, progress: &dyn Fn(u64, u64)) -> JobResult<Arc<FrameOutput>> {
+    pub fn reference_for(&self, job: &Job, observer: &dyn Observer) -> JobResult<Arc<FrameOutput>> {
         let reference_job = job.reference_job();
         let key = format!(
             "{}|{}",
@@ -300,7 +301,7 @@ impl Engine {
             return Ok(frame.clone());
         }
         self.reference_misses.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-        let (frame, _) = self.render_raw_observed(&reference_job, progress)?;
+        let (frame, _) = self.render_raw_observed(&reference_job, observer)?;
         let frame = Arc::new(frame);
         let mut references = self.references.lock().unwrap_or_else(|p| p.into_inner());
         if references.len() >= REFERENCE_CACHE_ENTRIES {
@@ -318,23 +319,27 @@ impl Engine {
 
     /// Renders on the device; when the device is lost (before or during the job) it opens a
     /// new one and retries the job once, so a driver reset costs one slow job, not the daemon.
-    pub fn render_raw_observed(&self, job: &Job, progress: &dyn Fn(u64, u64)) -> JobResult<(FrameOutput, Timings)> {
+    pub fn render_raw_observed(&self, job: &Job, observer: &dyn Observer) -> JobResult<(FrameOutput, Timings)> {
         job.validate(&self.limits)?;
         let mut state = self.state.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+        // Cancelled while it waited for the device: nothing to render.
+        if observer.cancelled() {
+            return Err(crate::render::cancelled_error());
+        }
         if state.renderer.gpu().is_lost() {
             self.recover_device(&mut state)?;
         }
-        match self.render_on_device(&mut state, job, progress) {
+        match self.render_on_device(&mut state, job, observer) {
             Err(_) if state.renderer.gpu().is_lost() => {
                 self.recover_device(&mut state)?;
                 tracing::warn!("retrying the job once on the new device");
-                self.render_on_device(&mut state, job, progress)
+                self.render_on_device(&mut state, job, observer)
             }
             outcome => outcome,
         }
     }
 
-    fn render_on_device(&self, state: &mut State, job: &Job, progress: &dyn Fn(u64, u64)) -> JobResult<(FrameOutput, Timings)> {
+    fn render_on_device(&self, state: &mut State, job: &Job, observer: &dyn Observer) -> JobResult<(FrameOutput, Timings)> {
         let mut timings = Timings::default();
         let start = Instant::now();
         let scene = self.scene(state, &job.scene, &mut timings)?;
@@ -346,7 +351,7 @@ impl Engine {
         // A lost device makes readbacks fail deep inside the renderer, which treats mapping
         // as infallible; the panic is caught here and becomes this job's error (or a retry).
         let frame =
-            std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| self.render_frame(state, &scene, &spec, &mut timings, progress)))
+            std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| self.render_frame(state, &scene, &spec, &mut timings, observer)))
                 .unwrap_or_else(|_| Err(JobError::internal("the renderer failed on the GPU")))?;
         Ok((frame, timings))
     }
@@ -374,18 +379,18 @@ impl Engine {
         scene: &GpuScene,
         spec: &FrameSpec,
         timings: &mut Timings,
-        progress: &dyn Fn(u64, u64),
+        observer: &dyn Observer,
     ) -> JobResult<FrameOutput> {
         // Validation errors inside wgpu are bugs in penumbra, never the client's fault; they
         // fail this job alone with a generic message and are logged in full.
         let gpu = state.renderer.gpu().clone();
         let scope = gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let frame = state.renderer.render(scene, spec, timings, progress);
+        let frame = state.renderer.render(scene, spec, timings, observer);
         if let Some(error) = pollster::block_on(scope.pop()) {
             tracing::error!(%error, "GPU validation error while rendering");
             return Err(JobError::internal("the renderer failed on the GPU"));
         }
-        Ok(frame)
+        frame
     }
 
     /// The engine's counts. Never waits for a render in progress (a scrape must not block on

@@ -37,6 +37,8 @@ pub enum ErrorCode {
     DeadlineExceeded,
     /// No valid bearer token on a server that requires one.
     Unauthorized,
+    /// The job was cancelled (its client went away, or `DELETE /v1/jobs/{id}`).
+    Cancelled,
     /// Something failed inside the renderer; the message is generic towards clients.
     Internal,
 }
@@ -58,6 +60,7 @@ impl ErrorCode {
             ErrorCode::QueueFull => "queue_full",
             ErrorCode::DeadlineExceeded => "deadline_exceeded",
             ErrorCode::Unauthorized => "unauthorized",
+            ErrorCode::Cancelled => "cancelled",
             ErrorCode::Internal => "internal",
         }
     }

@@ -598,6 +598,27 @@ async fn metrics_parse_as_prometheus_text_and_move_with_jobs() {
     assert_eq!(stats["jobs_in_flight"], 0);
 }
 
+/// Polls `/metrics` (at most 30 s) until `ready` holds for its text.
+async fn wait_for_metrics(client: &reqwest::Client, base: &str, ready: impl Fn(&str) -> bool) {
+    for _ in 0..600 {
+        let text = client.get(format!("{base}/metrics")).send().await.unwrap().text().await.unwrap();
+        if ready(&text) {
+            return;
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+    }
+    panic!("the metrics never reached the expected state");
+}
+
+/// `penumbra_jobs_total{outcome="cancelled"}` summed over methods.
+fn cancelled_jobs(metrics: &str) -> u64 {
+    metrics
+        .lines()
+        .filter(|l| l.starts_with("penumbra_jobs_total{") && l.contains(r#"outcome="cancelled""#))
+        .filter_map(|l| l.rsplit(' ').next()?.parse::<f64>().ok())
+        .sum::<f64>() as u64
+}
+
 /// Polls `/v1/stats` (at most 30 s) until `ready` holds for it.
 async fn wait_for_stats(client: &reqwest::Client, base: &str, ready: impl Fn(&Value) -> bool) {
     for _ in 0..600 {
@@ -641,19 +662,7 @@ async fn the_queue_is_bounded_has_a_deadline_and_drops_jobs_whose_client_left() 
     assert_eq!(late.json::<Value>().await.unwrap()["error"]["code"], "deadline_exceeded");
     let impatient = reqwest::Client::builder().timeout(Duration::from_millis(100)).build().unwrap();
     assert!(impatient.post(format!("{base}/v1/render")).json(&small_job("png")).send().await.is_err(), "the client gives up");
-    let cancelled = |text: &str| {
-        text.lines().any(|l| l.starts_with("penumbra_jobs_total{") && l.contains("outcome=\"cancelled\"") && l.ends_with(" 1"))
-    };
-    let mut seen = false;
-    for _ in 0..100 {
-        let text = client.get(format!("{base}/metrics")).send().await.unwrap().text().await.unwrap();
-        if cancelled(&text) {
-            seen = true;
-            break;
-        }
-        tokio::time::sleep(Duration::from_millis(50)).await;
-    }
-    assert!(seen, "the abandoned job is counted as cancelled");
+    wait_for_metrics(&client, &base, |text| cancelled_jobs(text) == 1).await; // The abandoned job.
     drop(held);
     wait_for_stats(&client, &base, |s| s["jobs_queued"] == 0 && s["jobs_in_flight"] == 0).await;
     assert_eq!(render(&base).await.unwrap().status(), StatusCode::OK, "the queue serves again");
@@ -757,6 +766,59 @@ fn a_lost_device_is_replaced_and_the_affected_job_retried() {
     assert_eq!(engine.device_resets(), 2);
     assert_eq!(retried.bytes, clean.bytes, "the retried job renders what an undisturbed one does");
     assert_eq!(engine.stats().device_resets, 2);
+}
+
+/// An observer that cancels the render once it has heard `after` progress reports.
+struct CancelAfter {
+    after: usize,
+    heard: std::sync::atomic::AtomicUsize,
+}
+
+impl penumbra::render::Observer for CancelAfter {
+    fn progress(&self, _done: u64, _total: u64) {
+        self.heard.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+    }
+    fn cancelled(&self) -> bool {
+        self.heard.load(std::sync::atomic::Ordering::SeqCst) >= self.after
+    }
+}
+
+#[test]
+fn a_cancelled_render_stops_at_its_next_batch_and_the_engine_renders_on() {
+    use penumbra::gpu::{AdapterChoice, GpuContext};
+    let gpu = Arc::new(GpuContext::new(AdapterChoice::Auto).expect("a Vulkan adapter"));
+    let engine = Engine::new(gpu, Limits::default(), PathPolicy::Deny);
+    let mut reference = penumbra::job::Job::from_json(small_job("png").to_string().as_bytes()).unwrap();
+    reference.method.name = "reference".into();
+    reference.method.params.extend([("samples".into(), json!(256)), ("resolution".into(), json!(128))]);
+    let observer = CancelAfter { after: 1, heard: Default::default() };
+    let error = engine.render_observed(&reference, &observer).err().expect("the render is cancelled");
+    assert_eq!(error.code, penumbra::error::ErrorCode::Cancelled);
+    // 256 samples are 16 batches; a cancelled render stops after the first.
+    assert_eq!(observer.heard.load(std::sync::atomic::Ordering::SeqCst), 1, "no batch runs after the cancel");
+
+    // Cancelled before it reaches the device: nothing is rendered at all.
+    let error = engine.render_observed(&reference, &CancelAfter { after: 0, heard: Default::default() }).err().unwrap();
+    assert_eq!(error.code, penumbra::error::ErrorCode::Cancelled);
+    let job = penumbra::job::Job::from_json(small_job("png").to_string().as_bytes()).unwrap();
+    assert_eq!(engine.render(&job).expect("the engine renders on").bytes, engine.render(&job).unwrap().bytes);
+}
+
+#[tokio::test(flavor = "multi_thread")]
+async fn a_client_that_disconnects_mid_render_cancels_its_job_and_others_are_served() {
+    let (base, _dir) = start().await;
+    let client = reqwest::Client::new();
+    // A reference render long enough to be caught running: 4096 samples, 256 batches.
+    let mut long = small_job("png");
+    long["method"] = json!({"name": "reference", "samples": 4096, "resolution": 256});
+    let leaving = tokio::spawn(client.post(format!("{base}/v1/render")).json(&long).send());
+    wait_for_stats(&client, &base, |s| s["jobs_in_flight"] == 1).await;
+    leaving.abort(); // The client goes away: its connection closes mid-render.
+    let _ = leaving.await;
+    // Counted only once the render returned `cancelled`, i.e. stopped before its last batch.
+    wait_for_metrics(&client, &base, |text| cancelled_jobs(text) == 1).await;
+    let served = client.post(format!("{base}/v1/render")).json(&small_job("png")).send().await.unwrap();
+    assert_eq!(served.status(), StatusCode::OK, "the next client is served");
 }
 
 /// Finished jobs expire: after the configured time their record, events and image answer 404.

@@ -24,7 +24,7 @@ use crate::gpu::pool::{DerivedResources, PipelineKey, PipelinePool};
 use crate::gpu::scene::GpuScene;
 use crate::gpu::timing::GpuTimer;
 use crate::gpu::GpuContext;
-use crate::render::{FrameInputs, FrameSpec, LightProjection};
+use crate::render::{FrameInputs, FrameSpec, LightProjection, Observer};
 
 /// Every method penumbra serves, in the order `GET /v1/methods` lists them.
 pub static REGISTRY: &[&dyn ShadowMethod] =
@@ -61,8 +61,9 @@ pub struct MethodContext<'a> {
     pub spec: &'a FrameSpec,
     /// The shadow map's projection from the light centre, as the frame rendered it.
     pub projection: &'a LightProjection,
-    /// Reports progress of long methods: (steps done, steps in all).
-    pub progress: &'a dyn Fn(u64, u64),
+    /// Hears the progress of long methods (steps done, steps in all); a long method asks it
+    /// between batches whether to stop (`Observer::cancelled`).
+    pub observer: &'a dyn Observer,
 }
 
 impl MethodContext<'_> {

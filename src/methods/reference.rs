@@ -240,7 +240,12 @@ impl ShadowMethod for Reference {
             let done = k as u64 + 1;
             if done.is_multiple_of(BATCH as u64) || done == total {
                 ctx.flush();
-                (ctx.progress)(done, total);
+                ctx.observer.progress(done, total);
+                // Cancelled: the renderer discards this frame, so the remaining batches
+                // would only keep the device from the next job.
+                if ctx.observer.cancelled() {
+                    break;
+                }
             }
         }
         {

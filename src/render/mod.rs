@@ -11,6 +11,7 @@ use std::time::Instant;
 
 use glam::Vec3;
 
+use crate::error::{ErrorCode, JobError, JobResult};
 use crate::gpu::layout;
 use crate::gpu::pool::{DerivedResources, PipelineKey, PipelinePool, PooledTexture, ReadbackPool, TextureKey, TexturePool};
 use crate::gpu::readback::Readback;
@@ -23,6 +24,45 @@ use crate::methods::{Counters, MethodContext};
 use crate::scene::Vertex;
 use crate::timing::Timings;
 pub use frame::{Camera, FrameSpec, LightProjection, Readbacks};
+
+/// Watches a render in progress: hears the progress of long methods, and may stop the render
+/// between GPU submissions (a client that went away, a job cancelled by `DELETE`). Any
+/// `Fn(done, total)` is an observer that never cancels.
+pub trait Observer {
+    /// Steps done and steps in all of a long method (the reference's sample batches).
+    fn progress(&self, _done: u64, _total: u64) {}
+    /// Asked between phases and between a long method's batches: once it answers true the
+    /// render stops at the next such point and fails with `cancelled`.
+    fn cancelled(&self) -> bool {
+        false
+    }
+}
+
+impl<F: Fn(u64, u64)> Observer for F {
+    fn progress(&self, done: u64, total: u64) {
+        self(done, total)
+    }
+}
+
+/// An observer whose render stops once `flag` is raised (from any thread).
+pub struct Cancellable<'a, P> {
+    pub progress: P,
+    pub flag: &'a std::sync::atomic::AtomicBool,
+}
+
+impl<P: Fn(u64, u64)> Observer for Cancellable<'_, P> {
+    fn progress(&self, done: u64, total: u64) {
+        (self.progress)(done, total)
+    }
+    fn cancelled(&self) -> bool {
+        self.flag.load(std::sync::atomic::Ordering::Relaxed)
+    }
+}
+
+/// The error of a render stopped by its observer.
+pub fn cancelled_error() -> JobError {
+    JobError::new(ErrorCode::Cancelled, "the job was cancelled before it finished")
+}
 
 /// The per-frame constants, laid out as `Frame` in `shaders/common/frame.wgsl`.
 #[repr(C)]
@@ -228,15 +268,32 @@ impl Renderer {
         &self.layouts.material
     }
 
-    /// Renders one frame and records its phases in `timings`.
-    pub fn render(&mut self, scene: &GpuScene, spec: &FrameSpec, timings: &mut Timings, progress: &dyn Fn(u64, u64)) -> FrameOutput {
-        let gpu = self.gpu.clone();
-        let device = &gpu.device;
+    /// Renders one frame and records its phases in `timings`; stops between phases (and
+    /// between a long method's batches) once `observer` says the job is cancelled.
+    pub fn render(&mut self, scene: &GpuScene, spec: &FrameSpec, timings: &mut Timings, observer: &dyn Observer) -> JobResult<FrameOutput> {
         let compiled_before = self.pipelines.stats.created;
         self.timer.begin_frame();
+        let targets = FrameTargets::alloc(&mut self.textures, &self.gpu.device, spec.width, spec.height, spec.shadow_resolution);
+        let frame = self.render_into(&targets, scene, spec, timings, observer);
+        // A cancelled frame gives its targets back too: the next job reuses them.
+        targets.release(&mut self.textures);
+        timings.pipelines_compiled += self.pipelines.stats.created - compiled_before;
+        frame
+    }
+
+    fn render_into(
+        &mut self,
+        targets: &FrameTargets,
+        scene: &GpuScene,
+        spec: &FrameSpec,
+        timings: &mut Timings,
+        observer: &dyn Observer,
+    ) -> JobResult<FrameOutput> {
+        let gpu = self.gpu.clone();
+        let device = &gpu.device;
+        let go_on = || if observer.cancelled() { Err(cancelled_error()) } else { Ok(()) };
         let projection = LightProjection::fit(&spec.light, &scene.corners());
         self.write_constants(spec, &projection);
-        let targets = FrameTargets::alloc(&mut self.textures, device, spec.width, spec.height, spec.shadow_resolution);
         let encoder = || device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("Renderer::encoder") });
         let submit = |encoder: wgpu::CommandEncoder| {
             gpu.queue.submit([encoder.finish()]);
@@ -246,23 +303,26 @@ impl Renderer {
         // Shadow map from the light centre.
         let start = Instant::now();
         let mut enc = encoder();
-        self.record_shadow_map(&mut enc, scene, &targets);
+        self.record_shadow_map(&mut enc, scene, targets);
         submit(enc);
         let start = timings.phase("shadow_map", start);
+        go_on()?;
 
         // Eye-space G-buffer.
         let mut enc = encoder();
-        self.record_gbuffer(&mut enc, scene, &targets);
+        self.record_gbuffer(&mut enc, scene, targets);
         submit(enc);
         let start = timings.phase("gbuffer", start);
+        go_on()?;
 
-        let inputs = self.frame_inputs(&targets);
+        let inputs = self.frame_inputs(targets);
 
         // Unshadowed irradiance E0.
         let mut enc = encoder();
-        self.record_e0(&mut enc, &inputs, &targets, spec);
+        self.record_e0(&mut enc, &inputs, targets, spec);
         submit(enc);
         let start = timings.phase("e0", start);
+        go_on()?;
 
         // The method's visibility.
         let mut enc = encoder();
@@ -280,16 +340,18 @@ impl Renderer {
                 scene,
                 spec,
                 projection: &projection,
-                progress,
+                observer,
             };
             spec.method.record(&mut ctx, &spec.params)
         };
         submit(enc);
         let start = timings.phase("method", start);
+        // A long method stops recording its batches once cancelled; what it left is discarded.
+        go_on()?;
 
         // Composite.
         let mut enc = encoder();
-        self.record_composite(&mut enc, &inputs, &targets, spec);
+        self.record_composite(&mut enc, &inputs, targets, spec);
         submit(enc);
         let start = timings.phase("composite", start);
 
@@ -317,9 +379,7 @@ impl Renderer {
         for (label, ms) in gpu_times {
             timings.add_gpu(label, ms);
         }
-        targets.release(&mut self.textures);
-        timings.pipelines_compiled += self.pipelines.stats.created - compiled_before;
-        FrameOutput { width: spec.width, height: spec.height, color, visibility, depth, counters }
+        Ok(FrameOutput { width: spec.width, height: spec.height, color, visibility, depth, counters })
     }
 
     fn write_constants(&self, spec: &FrameSpec, projection: &LightProjection) {

@@ -24,6 +24,7 @@ use crate::error::{ErrorCode, JobError};
 use crate::job::Job;
 use crate::light::BUILTIN_LIGHT_IMAGES;
 use crate::methods::REGISTRY;
+use crate::render::Cancellable;
 use crate::scene::builtin::BUILTIN_SCENES;
 use crate::uploads::{content_id, is_content_id, Kind};
 use error::ApiError;
@@ -580,9 +581,20 @@ async fn queue_and_render(state: &Arc<AppState>, method: &str, job: Job) -> Resu
     render_job(state, job, (admitted, device)).await
 }
 
-/// Renders a job on the blocking pool and keeps the result for `/v1/jobs/{id}`. The queue
-/// permits live in the render task: a client that goes away mid-render frees its place only
-/// when the device does.
+/// Raises a job's cancel flag when dropped: held by a request handler, which axum drops when
+/// its client disconnects.
+struct CancelOnDrop(Arc<AtomicBool>);
+
+impl Drop for CancelOnDrop {
+    fn drop(&mut self) {
+        self.0.store(true, Ordering::Relaxed);
+    }
+}
+
+/// Renders a job on the blocking pool and keeps the result for `/v1/jobs/{id}`. A client
+/// that goes away mid-render cancels the job: the render stops at its next phase or batch
+/// and the device goes to the next job. The queue permits live in the render task, so the
+/// place is freed only when the device is.
 async fn render_job(
     state: &Arc<AppState>,
     job: Job,
@@ -590,13 +602,23 @@ async fn render_job(
 ) -> Result<(String, Arc<Rendered>), JobError> {
     let id = state.new_id();
     let span = tracing::info_span!("job", %id, method = %job.method.name);
-    let engine = state.engine.clone();
-    let store = state.store.clone();
+    let cancel = Arc::new(AtomicBool::new(false));
+    let _client = CancelOnDrop(cancel.clone());
+    let task_state = state.clone();
     let rendered = tokio::task::spawn_blocking(move || {
         let _permits = permits;
         span.in_scope(|| {
-            fetch_shared_uploads(&engine, store.as_deref(), &job)?;
-            engine.render_observed(&job, &|done, total| tracing::debug!(done, total, "progress"))
+            let started = std::time::Instant::now();
+            let state = task_state;
+            fetch_shared_uploads(&state.engine, state.store.as_deref(), &job)?;
+            let observer = Cancellable { progress: |done, total| tracing::debug!(done, total, "progress"), flag: &cancel };
+            let rendered = state.engine.render_observed(&job, &observer);
+            // Its handler is gone with its client: the outcome is counted here.
+            if matches!(&rendered, Err(error) if error.code == ErrorCode::Cancelled) {
+                tracing::info!("client went away: job cancelled mid-render");
+                state.job_finished("", &job.method.name, "cancelled", started.elapsed().as_secs_f64(), None);
+            }
+            rendered
         })
     })
     .await
