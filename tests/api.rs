@@ -792,7 +792,7 @@ fn a_cancelled_render_stops_at_its_next_batch_and_the_engine_renders_on() {
     reference.method.name = "reference".into();
     reference.method.params.extend([("samples".into(), json!(256)), ("resolution".into(), json!(128))]);
     let observer = CancelAfter { after: 1, heard: Default::default() };
-    let error = engine.render_observed(&reference, &observer).err().expect("the render is cancelled");
+    let Err(error) = engine.render_observed(&reference, &observer) else { panic!("the render is cancelled") };
     assert_eq!(error.code, penumbra::error::ErrorCode::Cancelled);
     // 256 samples are 16 batches; a cancelled render stops after the first.
     assert_eq!(observer.heard.load(std::sync::atomic::Ordering::SeqCst), 1, "no batch runs after the cancel");
