@@ -152,13 +152,23 @@ def main():
     parser.add_argument("--seconds", type=float, default=120)
     parser.add_argument("--warm-up-seconds", type=float, default=10, help="excluded from the memory figures")
     parser.add_argument("--out", default="load-out")
+    parser.add_argument(
+        "--cache-mib",
+        type=float,
+        default=8,
+        help="the daemon's upload cache budget: small, so the cache is full (and memory flat) early in the run",
+    )
     args = parser.parse_args()
     os.makedirs(args.out, exist_ok=True)
 
     port = free_port()
     base = f"http://127.0.0.1:{port}"
     env = dict(os.environ, PENUMBRA_LOG="warn", PENUMBRA_LISTEN=f"127.0.0.1:{port}")
-    daemon = subprocess.Popen([args.binary, "serve", "--job-store", "memory", "--queue", "64"], env=env, stderr=subprocess.DEVNULL)
+    # Every upload is a distinct scene: with the default 1 GiB budget the upload cache would
+    # still be filling at the end of the run, and memory with it.
+    cache_bytes = str(int(args.cache_mib * 2**20))
+    command = [args.binary, "serve", "--job-store", "memory", "--queue", "64", "--cache-bytes", cache_bytes]
+    daemon = subprocess.Popen(command, env=env, stderr=subprocess.DEVNULL)
     try:
         for _ in range(600):
             if request(base, "GET", "/readyz", timeout=2)[0] == 200:
@@ -200,6 +210,10 @@ def main():
         if ms:
             per_method[method] = {"jobs": len(ms), "p50_ms": percentile(ms, 0.5), "p95_ms": percentile(ms, 0.95), "p99_ms": percentile(ms, 0.99)}
     steady = [s[1] for s in samples if s[0] >= args.warm_up_seconds] or [s[1] for s in samples]
+    # Growth of the floor (between renders' transient peaks): the lowest memory in the last
+    # quarter of the steady run against the lowest in its first quarter. A leak raises it.
+    quarter = max(1, len(steady) // 4)
+    floor_growth = min(steady[-quarter:], default=0) - min(steady[:quarter], default=0)
     report = {
         "clients": args.clients,
         "seconds": elapsed,
@@ -208,7 +222,8 @@ def main():
         "by_status": by_status,
         "unexpected": sum(n for s, n in by_status.items() if int(s) not in EXPECTED),
         "latency_by_method": per_method,
-        "rss_after_warm_up_bytes": {"min": min(steady, default=0), "max": max(steady, default=0)},
+        "rss_after_warm_up_bytes": {"min": min(steady, default=0), "max": max(steady, default=0), "floor_growth": floor_growth},
+        "upload_cache_bytes": int(cache_bytes),
         "queue_depth_max": max((s[2] for s in samples), default=0),
         "daemon_exit_code": daemon.returncode,
     }

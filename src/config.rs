@@ -44,6 +44,18 @@ pub struct LimitArgs {
     /// Largest request body (and scene or image file), bytes.
     #[arg(long, env = "PENUMBRA_MAX_BODY_BYTES", default_value_t = Limits::default().max_body_bytes)]
     pub max_body_bytes: usize,
+    /// Deepest nesting of arrays and objects in a job's JSON.
+    #[arg(long, env = "PENUMBRA_MAX_JSON_DEPTH", default_value_t = Limits::default().max_json_depth)]
+    pub max_json_depth: usize,
+    /// Most vertices per loaded scene (summed over mesh instances).
+    #[arg(long, env = "PENUMBRA_MAX_VERTICES", default_value_t = Limits::default().max_vertices)]
+    pub max_vertices: u64,
+    /// Most samples per pixel a method may take (`reference`'s `samples`).
+    #[arg(long, env = "PENUMBRA_MAX_SAMPLES", default_value_t = Limits::default().max_samples)]
+    pub max_samples: u32,
+    /// Most rounds an iterative method may run (JFA's `rounds`).
+    #[arg(long, env = "PENUMBRA_MAX_ROUNDS", default_value_t = Limits::default().max_rounds)]
+    pub max_rounds: u32,
 }
 
 impl LimitArgs {
@@ -56,6 +68,10 @@ impl LimitArgs {
             max_light_image_dim: self.max_light_image_dim,
             max_texture_dim: self.max_texture_dim,
             max_body_bytes: self.max_body_bytes,
+            max_json_depth: self.max_json_depth,
+            max_vertices: self.max_vertices,
+            max_samples: self.max_samples,
+            max_rounds: self.max_rounds,
         }
     }
 }

@@ -44,8 +44,8 @@ fn nesting_exceeds(bytes: &[u8], max: usize) -> bool {
     false
 }
 
-/// Deepest nesting of arrays and objects a job may have (a job needs 4; serde_json's own
-/// recursion limit of 128 would still allocate for a hostile body).
+/// Default deepest nesting of arrays and objects a job may have (a job needs 4; serde_json's
+/// own recursion limit of 128 would still allocate for a hostile body).
 pub const MAX_JSON_DEPTH: usize = 16;
 
 #[derive(Debug, Clone, Serialize)]
@@ -62,8 +62,29 @@ pub struct Limits {
     pub max_light_image_dim: u32,
     /// Largest side of a texture inside a glTF scene.
     pub max_texture_dim: u32,
-    /// Largest request body in bytes.
+    /// Largest request body in bytes (and scene or image file, and buffer a glTF declares).
     pub max_body_bytes: usize,
+    /// Deepest nesting of arrays and objects in a job's JSON, refused before parsing.
+    pub max_json_depth: usize,
+    /// Most vertices a loaded scene may have (summed over the nodes that instance a mesh),
+    /// refused from the accessors' declared counts before any is read.
+    pub max_vertices: u64,
+    /// Most samples a method may take per pixel (`reference`'s `samples`).
+    pub max_samples: u32,
+    /// Most rounds an iterative method may run (JFA's `rounds`).
+    pub max_rounds: u32,
+}
+
+impl Limits {
+    /// The operator's cap on a method parameter, where there is one: the parameter's range
+    /// ends at the smaller of the method's own maximum and this.
+    pub fn param_cap(&self, param: &str) -> Option<(i64, &'static str)> {
+        match param {
+            "samples" => Some((i64::from(self.max_samples), "max_samples")),
+            "rounds" => Some((i64::from(self.max_rounds), "max_rounds")),
+            _ => None,
+        }
+    }
 }
 
 impl Default for Limits {
@@ -76,6 +97,10 @@ impl Default for Limits {
             max_light_image_dim: 4096,
             max_texture_dim: 8192,
             max_body_bytes: 64 * 1024 * 1024,
+            max_json_depth: MAX_JSON_DEPTH,
+            max_vertices: 8_000_000,
+            max_samples: 4096,
+            max_rounds: 13,
         }
     }
 }
@@ -282,14 +307,22 @@ impl Job {
         }
     }
 
-    /// Parses a job from JSON bytes; type errors name the field by its path.
+    /// Parses a job from JSON bytes under the default limits; type errors name the field by
+    /// its path.
     pub fn from_json(bytes: &[u8]) -> JobResult<Self> {
+        Self::from_json_limited(bytes, &Limits::default())
+    }
+
+    /// Parses a job from JSON bytes, refusing nesting deeper than `limits.max_json_depth`
+    /// before anything is allocated for it.
+    pub fn from_json_limited(bytes: &[u8], limits: &Limits) -> JobResult<Self> {
         // serde would accept a struct written as an array of its fields; a job is an object.
         if bytes.iter().find(|b| !b.is_ascii_whitespace()) != Some(&b'{') {
             return Err(JobError::new(ErrorCode::InvalidJson, "a job is a JSON object"));
         }
-        if nesting_exceeds(bytes, MAX_JSON_DEPTH) {
-            return Err(JobError::new(ErrorCode::InvalidJson, format!("the JSON nests deeper than {MAX_JSON_DEPTH} levels")));
+        let depth = limits.max_json_depth;
+        if nesting_exceeds(bytes, depth) {
+            return Err(JobError::new(ErrorCode::InvalidJson, format!("the JSON nests deeper than {depth} levels (max_json_depth)")));
         }
         let de = &mut serde_json::Deserializer::from_slice(bytes);
         serde_path_to_error::deserialize(de).map_err(|err| {
@@ -321,6 +354,23 @@ impl Job {
     /// Range checks that need no scene: output and shadow-map sizes, exposure, ambient.
     /// (Camera and light are checked once merged with the scene's defaults.)
     pub fn validate(&self, limits: &Limits) -> JobResult<()> {
+        // The method and its parameters, under the operator's caps (a missing parameter
+        // counts with its default: a server capped below it needs the value given).
+        let method = crate::methods::find(&self.method.name)?;
+        let params = crate::methods::Params::parse(method.params(), &self.method.params)?;
+        for spec in method.params() {
+            let (Some((cap, limit)), crate::methods::ParamKind::Integer { .. }) = (limits.param_cap(spec.name), spec.kind) else {
+                continue;
+            };
+            let value = i64::from(params.u32(spec.name));
+            if value > cap {
+                return Err(JobError::field(
+                    ErrorCode::LimitExceeded,
+                    format!("method.{}", spec.name),
+                    format!("{value} exceeds this server's limit of {cap} ({limit})"),
+                ));
+            }
+        }
         // Built-in assets are known now: a misspelt one is refused at submission, not later.
         if let AssetRef::Builtin { name, params } = &self.scene {
             crate::scene::builtin::parse(name, params, "scene", limits)?;

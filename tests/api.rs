@@ -598,6 +598,23 @@ async fn metrics_parse_as_prometheus_text_and_move_with_jobs() {
     assert_eq!(stats["jobs_in_flight"], 0);
 }
 
+/// Waits (at most 30 s) until a daemon at `base` answers `/readyz` with 200.
+async fn wait_ready(base: &str) {
+    let client = reqwest::Client::new();
+    for _ in 0..300 {
+        if client.get(format!("{base}/readyz")).send().await.is_ok_and(|r| r.status() == StatusCode::OK) {
+            return;
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(100)).await;
+    }
+    panic!("the daemon at {base} did not become ready in 30 s");
+}
+
+/// A free port on 127.0.0.1, as `127.0.0.1:PORT`.
+fn free_address() -> String {
+    std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().to_string()
+}
+
 /// Polls `/metrics` (at most 30 s) until `ready` holds for its text.
 async fn wait_for_metrics(client: &reqwest::Client, base: &str, ready: impl Fn(&str) -> bool) {
     for _ in 0..600 {
@@ -946,10 +963,7 @@ fn sha256_hex(bytes: &[u8]) -> String {
 #[tokio::test(flavor = "multi_thread")]
 async fn accepted_jobs_survive_sigkill_and_sigterm_and_finish_after_a_restart() {
     let data = tempdir::Dir::new();
-    let address = {
-        let probe = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
-        probe.local_addr().unwrap().to_string()
-    };
+    let address = free_address();
     let base = format!("http://{address}");
     let start = || {
         std::process::Command::new(env!("CARGO_BIN_EXE_penumbra"))
@@ -961,15 +975,7 @@ async fn accepted_jobs_survive_sigkill_and_sigterm_and_finish_after_a_restart() 
             .expect("the daemon starts")
     };
     let client = reqwest::Client::new();
-    let ready = || async {
-        for _ in 0..300 {
-            if client.get(format!("{base}/readyz")).send().await.is_ok_and(|r| r.status() == StatusCode::OK) {
-                return;
-            }
-            tokio::time::sleep(std::time::Duration::from_millis(100)).await;
-        }
-        panic!("the daemon did not become ready in 30 s");
-    };
+    let ready = || wait_ready(&base);
     let status = |id: String| {
         let request = client.get(format!("{base}/v1/jobs/{id}"));
         async move { request.send().await.unwrap().json::<Value>().await.unwrap()["status"].as_str().unwrap_or("").to_owned() }
@@ -1205,9 +1211,9 @@ fn tokens_never_reach_the_logs() {
     let dir = tempdir::Dir::new();
     let token = "log-probe-token-5f1e0c9a7b";
     std::fs::write(dir.path().join("tokens"), format!("# the probe\n{token}\n")).unwrap();
-    let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+    let address = free_address();
     let mut daemon = std::process::Command::new(env!("CARGO_BIN_EXE_penumbra"))
-        .args(["serve", "--no-warm-up", "--job-store", "memory", "--listen", &format!("127.0.0.1:{port}"), "--auth-token-file"])
+        .args(["serve", "--no-warm-up", "--job-store", "memory", "--listen", &address, "--auth-token-file"])
         .arg(dir.path().join("tokens"))
         .env("PENUMBRA_LOG", "debug")
         .stderr(std::process::Stdio::piped())
@@ -1216,13 +1222,8 @@ fn tokens_never_reach_the_logs() {
     let runtime = tokio::runtime::Runtime::new().unwrap();
     runtime.block_on(async {
         let client = reqwest::Client::new();
-        let base = format!("http://127.0.0.1:{port}");
-        for _ in 0..300 {
-            if client.get(format!("{base}/readyz")).send().await.is_ok_and(|r| r.status() == StatusCode::OK) {
-                break;
-            }
-            tokio::time::sleep(std::time::Duration::from_millis(100)).await;
-        }
+        let base = format!("http://{address}");
+        wait_ready(&base).await;
         let ok = client.post(format!("{base}/v1/render")).bearer_auth(token).json(&small_job("png")).send().await.unwrap();
         assert_eq!(ok.status(), StatusCode::OK);
         let refused = client.get(format!("{base}/v1/stats")).bearer_auth(format!("{token}-wrong")).send().await.unwrap();
@@ -1233,4 +1234,90 @@ fn tokens_never_reach_the_logs() {
     let logs = String::from_utf8_lossy(&output.stderr);
     assert!(logs.contains("bearer tokens required"), "the daemon logged at all: {logs}");
     assert!(!logs.contains(token), "a token reached the logs");
+}
+
+/// Every limit is a flag of the real binary, listed by `/v1/limits` (method ranges included)
+/// and enforced with a 4xx naming the field; method parameters are checked at submission, so
+/// an async job that could only fail later is refused before its 202.
+#[tokio::test(flavor = "multi_thread")]
+async fn limits_are_flags_listed_and_enforced_with_the_field_named() {
+    let address = free_address();
+    let flags = ["--max-samples", "64", "--max-rounds", "4", "--max-json-depth", "6", "--max-vertices", "100", "--max-output-dim", "512"];
+    let _daemon = KillOnDrop(
+        std::process::Command::new(env!("CARGO_BIN_EXE_penumbra"))
+            .args(["serve", "--no-warm-up", "--job-store", "memory", "--listen", &address])
+            .args(flags)
+            .env("PENUMBRA_LOG", "warn")
+            .env("PENUMBRA_MAX_TRIANGLES", "5000")
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    let base = format!("http://{address}");
+    wait_ready(&base).await;
+    let client = reqwest::Client::new();
+    let limits: Value = client.get(format!("{base}/v1/limits")).send().await.unwrap().json().await.unwrap();
+    for (name, value) in [("max_samples", 64), ("max_rounds", 4), ("max_json_depth", 6), ("max_vertices", 100), ("max_triangles", 5000)] {
+        assert_eq!(limits[name], value, "{name} in {limits}");
+    }
+    let max_of = |method: &str, param: &str| {
+        limits["method_params"][method].as_array().unwrap().iter().find(|p| p["name"] == param).unwrap()["max"].clone()
+    };
+    assert_eq!((max_of("reference", "samples"), max_of("jfa-e", "rounds")), (json!(64), json!(4)), "ranges end at the caps");
+
+    let refused = |job: Value, path: &'static str| {
+        let request = client.post(format!("{base}{path}")).json(&job);
+        async move {
+            let response = request.send().await.unwrap();
+            let status = response.status();
+            let error = response.json::<Value>().await.unwrap()["error"].clone();
+            (status.as_u16(), error["code"].as_str().unwrap_or("").to_owned(), error["field"].as_str().unwrap_or("").to_owned())
+        }
+    };
+    let with_method = |method: Value| {
+        let mut job = small_job("png");
+        job["method"] = method;
+        job
+    };
+    let limit = |field: &str| (422, "limit_exceeded".to_owned(), field.to_owned());
+    for path in ["/v1/render", "/v1/jobs"] {
+        assert_eq!(refused(with_method(json!({"name": "reference", "samples": 65})), path).await, limit("method.samples"));
+        // The default of 256 samples is over this server's cap: the job must say how many.
+        assert_eq!(refused(with_method(json!({"name": "reference"})), path).await, limit("method.samples"));
+        assert_eq!(refused(with_method(json!({"name": "jfa-e", "rounds": 5})), path).await, limit("method.rounds"));
+        let bad_param = (422, "invalid_field".to_owned(), "method.rounds".to_owned());
+        assert_eq!(refused(with_method(json!({"name": "jfa-e", "rounds": "six"})), path).await, bad_param);
+        let unknown = (422, "unknown_field".to_owned(), "method.radius".to_owned());
+        assert_eq!(refused(with_method(json!({"name": "pcss", "radius": 1})), path).await, unknown);
+        let mut wide = small_job("png");
+        wide["output"]["width"] = json!(513);
+        assert_eq!(refused(wide, path).await, limit("output.width"));
+        let mut terrain = small_job("png");
+        terrain["scene"] = json!({"builtin": "terrain", "triangles": 5001});
+        assert_eq!(refused(terrain, path).await.0, 422);
+    }
+    let deep = format!(r#"{{"scene": {{"builtin": "torus"}}, "extra": {}{}}}"#, "[".repeat(6), "]".repeat(6));
+    let response = client.post(format!("{base}/v1/render")).header("content-type", "application/json").body(deep).send().await.unwrap();
+    assert_eq!(response.status(), StatusCode::BAD_REQUEST);
+    assert!(response.text().await.unwrap().contains("max_json_depth"));
+    // A scene over the vertex cap is refused from its declared counts, naming the field.
+    let glb = penumbra::scene::gltf::height_field_glb(11, 1); // 121 vertices.
+    let upload = client.post(format!("{base}/v1/scenes")).header("content-type", "model/gltf-binary").body(glb).send().await.unwrap();
+    let status = upload.status();
+    let error = upload.json::<Value>().await.unwrap()["error"].clone();
+    assert_eq!((status, error["code"].as_str()), (StatusCode::UNPROCESSABLE_ENTITY, Some("limit_exceeded")), "{error}");
+    assert!(error["message"].as_str().unwrap().contains("max_vertices"), "{error}");
+    // Within every limit, the same server renders.
+    let ok = client.post(format!("{base}/v1/render")).json(&with_method(json!({"name": "reference", "samples": 16}))).send().await.unwrap();
+    assert_eq!(ok.status(), StatusCode::OK);
+}
+
+/// A child process killed when the test ends, passed or not.
+struct KillOnDrop(std::process::Child);
+
+impl Drop for KillOnDrop {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
 }

@@ -66,6 +66,13 @@ fn load_unchecked(bytes: &[u8], limits: &Limits, field: &str) -> JobResult<Scene
                 gltf::buffer::Source::Bin => gltf.blob.clone().ok_or_else(|| invalid(field, "GLB binary chunk missing"))?,
                 gltf::buffer::Source::Uri(uri) => decode_data_uri(uri, field)?,
             };
+            if buffer.length() > limits.max_body_bytes {
+                return Err(JobError::field(
+                    ErrorCode::LimitExceeded,
+                    field,
+                    format!("buffer {} declares {} bytes; the limit is {} (max_body_bytes)", buffer.index(), buffer.length(), limits.max_body_bytes),
+                ));
+            }
             if data.len() < buffer.length() {
                 return Err(invalid(field, format!("buffer {} is shorter than its declared length", buffer.index())));
             }
@@ -107,10 +114,29 @@ fn load_unchecked(bytes: &[u8], limits: &Limits, field: &str) -> JobResult<Scene
     let mut materials: BTreeMap<Option<usize>, u32> = BTreeMap::new();
     let mut textures: HashMap<usize, usize> = HashMap::new();
     let mut skipped_primitives = 0usize;
+    let (mut vertices, mut declared_triangles) = (0u64, 0u64);
     for (node, world) in &instances {
         let object_id = id_of[&node.index()];
         let mesh = node.mesh().expect("mesh nodes only");
         for primitive in mesh.primitives() {
+            // Refused from the counts the accessors declare, before a vertex or index is read:
+            // a strip of one-byte indices would otherwise grow twelvefold into triangles.
+            let declared_vertices = primitive.get(&gltf::Semantic::Positions).map_or(0, |a| a.count() as u64);
+            let declared_indices = primitive.indices().map_or(declared_vertices, |a| a.count() as u64);
+            declared_triangles += match primitive.mode() {
+                gltf::mesh::Mode::Triangles => declared_indices / 3,
+                gltf::mesh::Mode::TriangleStrip | gltf::mesh::Mode::TriangleFan => declared_indices.saturating_sub(2),
+                _ => 0,
+            };
+            vertices += declared_vertices;
+            if vertices > limits.max_vertices {
+                let message = format!("the scene has more than {} vertices (max_vertices)", limits.max_vertices);
+                return Err(JobError::field(ErrorCode::LimitExceeded, field, message));
+            }
+            if declared_triangles > limits.max_triangles {
+                let message = format!("the scene has more than {} triangles (max_triangles)", limits.max_triangles);
+                return Err(JobError::field(ErrorCode::LimitExceeded, field, message));
+            }
             let reader = primitive.reader(|b| buffers.get(b.index()).map(Vec::as_slice));
             let Some(positions) = reader.read_positions() else {
                 skipped_primitives += 1;
@@ -137,13 +163,6 @@ fn load_unchecked(bytes: &[u8], limits: &Limits, field: &str) -> JobResult<Scene
             let indices: Vec<u32> = indices;
             if indices.iter().any(|&i| i >= count) {
                 return Err(invalid(field, format!("mesh {} indexes past its vertices", mesh.index())));
-            }
-            if builder.triangle_count() + indices.len() as u64 / 3 > limits.max_triangles {
-                return Err(JobError::field(
-                    ErrorCode::LimitExceeded,
-                    field,
-                    format!("the scene has more than {} triangles", limits.max_triangles),
-                ));
             }
             let normals: Vec<Vec3> = reader.read_normals().map(|n| n.map(Vec3::from).collect()).unwrap_or_default();
             let pbr = primitive.material().pbr_metallic_roughness();
@@ -327,6 +346,29 @@ mod tests {
             "accessors": [{"componentType": 5126, "count": 3, "type": "VEC3"}]}"#;
         let error = load(document, &Limits::default(), "scene").unwrap_err();
         assert_eq!((error.code, error.field.as_deref()), (ErrorCode::InvalidAsset, Some("scene")));
+    }
+
+    #[test]
+    fn counts_and_lengths_are_refused_from_what_the_file_declares() {
+        let bytes = height_field_glb(9, 3); // 81 vertices, 128 triangles, 1.3 KiB buffer.
+        let refused = |limits: Limits| {
+            let error = load(&bytes, &limits, "scene").unwrap_err();
+            assert_eq!((error.code, error.field.as_deref()), (ErrorCode::LimitExceeded, Some("scene")), "{}", error.message);
+            error.message
+        };
+        assert!(refused(Limits { max_vertices: 80, ..Limits::default() }).contains("max_vertices"));
+        assert!(refused(Limits { max_triangles: 127, ..Limits::default() }).contains("max_triangles"));
+        assert!(refused(Limits { max_body_bytes: 1000, ..Limits::default() }).contains("declares"));
+        load(&bytes, &Limits { max_vertices: 81, max_triangles: 128, ..Limits::default() }, "scene").expect("at the limits");
+
+        // A billion vertices declared over a 36-byte buffer: refused from the count alone.
+        let document = br#"{"asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}],
+            "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "mode": 5}]}],
+            "buffers": [{"byteLength": 36, "uri": "data:application/octet-stream;base64,AAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAA"}],
+            "bufferViews": [{"buffer": 0, "byteLength": 36}],
+            "accessors": [{"bufferView": 0, "componentType": 5126, "count": 1000000000, "type": "VEC3"}]}"#;
+        let error = load(document, &Limits::default(), "scene").unwrap_err();
+        assert!(matches!(error.code, ErrorCode::LimitExceeded | ErrorCode::InvalidAsset), "{error}");
     }
 
     #[test]

@@ -174,7 +174,7 @@ impl AppState {
         let unfinished = tokio::task::spawn_blocking(move || store.unfinished()).await??;
         let mut resumed = 0;
         for stored in unfinished {
-            let job = Job::from_json(stored.job.to_string().as_bytes());
+            let job = Job::from_json_limited(stored.job.to_string().as_bytes(), self.engine.limits());
             let failure = match job {
                 Ok(_) if stored.attempts >= MAX_ATTEMPTS => Some(abandoned(stored.attempts)),
                 Ok(job) => {
@@ -296,13 +296,27 @@ async fn limits(State(state): State<Arc<AppState>>) -> Json<Value> {
         "max_triangles": limits.max_triangles,
         "max_light_image_dim": limits.max_light_image_dim,
         "max_texture_dim": limits.max_texture_dim,
-        "max_json_depth": crate::job::MAX_JSON_DEPTH,
+        "max_json_depth": limits.max_json_depth,
+        "max_vertices": limits.max_vertices,
+        "max_samples": limits.max_samples,
+        "max_rounds": limits.max_rounds,
         "queue": state.queue_config.capacity,
         "concurrency": state.queue_config.concurrency,
         "deadline_secs": state.queue_config.deadline.as_secs_f64(),
         "upload_cache_bytes": state.engine.upload_stats().budget_bytes,
-        "method_params": REGISTRY.iter().map(|m| (m.name(), m.params())).collect::<std::collections::BTreeMap<_, _>>(),
+        "method_params": REGISTRY.iter().map(|m| (m.name().to_owned(), capped_params(m.params(), limits))).collect::<serde_json::Map<_, _>>(),
     }))
+}
+
+/// A method's parameters as `/v1/limits` lists them: ranges ending at the operator's caps.
+fn capped_params(specs: &[crate::methods::ParamSpec], limits: &crate::job::Limits) -> Value {
+    let mut listed = json!(specs);
+    for (spec, listed) in specs.iter().zip(listed.as_array_mut().into_iter().flatten()) {
+        if let (Some((cap, _)), Some(max)) = (limits.param_cap(spec.name), listed["max"].as_i64()) {
+            listed["max"] = json!(max.min(cap));
+        }
+    }
+    listed
 }
 
 /// Binds, warms up, serves until SIGINT or SIGTERM, then finishes requests in flight.
@@ -528,7 +542,7 @@ fn wants_json(headers: &HeaderMap) -> bool {
 async fn render(State(state): State<Arc<AppState>>, headers: HeaderMap, body: Result<Bytes, BytesRejection>) -> Result<Response, ApiError> {
     let started = std::time::Instant::now();
     let body = body.map_err(|rejection| body_error(&state, rejection, ErrorCode::InvalidJson));
-    let job = body.and_then(|body| Job::from_json(&body));
+    let job = body.and_then(|body| Job::from_json_limited(&body, state.engine.limits()));
     let method = job.as_ref().map(|j| j.method.name.clone()).unwrap_or_default();
     let outcome = match job {
         Ok(job) => queue_and_render(&state, &method, job).await,
@@ -716,7 +730,7 @@ async fn stored_job(state: &AppState, id: &str) -> Result<Option<StoredJob>, Api
 async fn submit_job(State(state): State<Arc<AppState>>, body: Result<Bytes, BytesRejection>) -> Result<Response, ApiError> {
     let body = body.map_err(|rejection| body_error(&state, rejection, ErrorCode::InvalidJson));
     let parsed = body.and_then(|body| {
-        let job = Job::from_json(&body)?;
+        let job = Job::from_json_limited(&body, state.engine.limits())?;
         job.validate(state.engine.limits())?;
         // The job as sent (it parsed, so it is JSON): what the store keeps and resumes.
         let sent: Value = serde_json::from_slice(&body).map_err(|e| JobError::new(ErrorCode::InvalidJson, e.to_string()))?;
@@ -821,7 +835,7 @@ async fn work_shared_queue(state: Arc<AppState>, consumer: String) {
         let (events, _) = tokio::sync::watch::channel(JobEvent::status("queued"));
         state.jobs.submit(stored.id.clone(), events.clone());
         let method = stored.job["method"]["name"].as_str().unwrap_or("hard").to_owned();
-        let job = match Job::from_json(stored.job.to_string().as_bytes()) {
+        let job = match Job::from_json_limited(stored.job.to_string().as_bytes(), state.engine.limits()) {
             Ok(_) if stored.attempts >= MAX_ATTEMPTS => {
                 let detail = abandoned(stored.attempts);
                 store_failure(&state, &stored.id, detail.clone()).await;
