@@ -119,6 +119,12 @@ pub struct Engine {
 
 impl Engine {
     pub fn new(gpu: Arc<GpuContext>, limits: Limits, paths: PathPolicy) -> Self {
+        // Honoured as configured (a scene over the device's limit then fails its own job at
+        // upload), but said once, since it is almost certainly not what the operator meant.
+        let device_max = gpu.limits.max_texture_dimension_2d;
+        if limits.max_texture_dim > device_max {
+            tracing::warn!(max_texture_dim = limits.max_texture_dim, device_max, "textures above the device's limit will fail their jobs");
+        }
         let renderer = Renderer::new(gpu.clone());
         let state = State { renderer, scenes: HashMap::new(), lights: HashMap::new(), clock: 0, hits: 0, misses: 0 };
         Self {
@@ -463,7 +469,17 @@ impl Engine {
                 Asset::Light(_) => return Err(not_uploaded(id, "scene.id")),
             },
         };
-        let uploaded = Arc::new(GpuScene::upload(state.renderer.gpu(), &loaded, state.renderer.material_layout()));
+        let gpu = state.renderer.gpu().clone();
+        let uploaded = GpuScene::upload(&gpu, &loaded, state.renderer.material_layout()).map_err(|error| {
+            tracing::warn!(%error, "a scene failed to upload to the GPU");
+            let first_line = error.to_string().lines().find(|l| !l.trim().is_empty()).unwrap_or("").trim().to_owned();
+            JobError::field(
+                ErrorCode::LimitExceeded,
+                "scene",
+                format!("the scene does not fit on this GPU ({}): {first_line}", gpu.adapter.name),
+            )
+        })?;
+        let uploaded = Arc::new(uploaded);
         timings.scene_upload_bytes = uploaded.bytes;
         if state.scenes.len() >= SCENE_CACHE_ENTRIES {
             if let Some(oldest) = state.scenes.iter().min_by_key(|(_, c)| c.last_used).map(|(k, _)| k.clone()) {

@@ -1321,3 +1321,66 @@ impl Drop for KillOnDrop {
         let _ = self.0.wait();
     }
 }
+
+/// A job whose scene fails on the GPU (here a texture wider than the device allows, under an
+/// operator's texture limit set above the device's) fails alone, with the field named, while
+/// the jobs queued around it succeed; the scene is not cached, and the daemon serves on.
+#[tokio::test(flavor = "multi_thread")]
+async fn a_scene_that_fails_on_the_gpu_mid_queue_fails_alone() {
+    let address = free_address();
+    let _daemon = KillOnDrop(
+        std::process::Command::new(env!("CARGO_BIN_EXE_penumbra"))
+            .args(["serve", "--no-warm-up", "--job-store", "memory", "--listen", &address, "--max-texture-dim", "100000"])
+            .env("PENUMBRA_LOG", "warn")
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    let base = format!("http://{address}");
+    wait_ready(&base).await;
+    let client = reqwest::Client::new();
+    let device_max = 16384 * 4; // Wider than any device allows (lavapipe: 16384; NVIDIA: 32768).
+    let (gltf, bin) = common::test_gltf_with_texture(device_max + 1, 1);
+    let glb = penumbra::scene::gltf::glb(&gltf, &bin);
+    let upload = client.post(format!("{base}/v1/scenes")).header("content-type", "model/gltf-binary").body(glb).send().await.unwrap();
+    assert_eq!(upload.status(), StatusCode::CREATED, "the file itself is within the configured limits");
+    let scene_id = upload.json::<Value>().await.unwrap()["id"].as_str().unwrap().to_owned();
+
+    let mut first = small_job("png");
+    first["method"] = json!({"name": "reference", "samples": 64});
+    let mut bad = small_job("png");
+    bad["scene"] = json!({"id": scene_id});
+    let submit = |job: Value| {
+        let request = client.post(format!("{base}/v1/jobs")).json(&job);
+        async move {
+            let response = request.send().await.unwrap();
+            assert_eq!(response.status(), StatusCode::ACCEPTED);
+            response.json::<Value>().await.unwrap()["id"].as_str().unwrap().to_owned()
+        }
+    };
+    // Queued behind a reference render: good, bad, good.
+    let ids = [submit(first).await, submit(small_job("png")).await, submit(bad.clone()).await, submit(small_job("exr")).await];
+    let mut outcomes = Vec::new();
+    for id in &ids {
+        let events = client.get(format!("{base}/v1/jobs/{id}/events")).send().await.unwrap().text().await.unwrap();
+        assert!(events.contains("event: succeeded") || events.contains("event: failed"), "{events}");
+        let record: Value = client.get(format!("{base}/v1/jobs/{id}")).send().await.unwrap().json().await.unwrap();
+        outcomes.push(record);
+    }
+    let statuses: Vec<&str> = outcomes.iter().map(|r| r["status"].as_str().unwrap()).collect();
+    assert_eq!(statuses, ["succeeded", "succeeded", "failed", "succeeded"], "{outcomes:?}");
+    let error = &outcomes[2]["error"];
+    assert_eq!(
+        (error["code"].as_str(), error["field"].as_str(), error["status"].as_u64()),
+        (Some("limit_exceeded"), Some("scene"), Some(422))
+    );
+    assert!(error["message"].as_str().unwrap().contains("does not fit on this GPU"), "{error}");
+
+    // Not cached as if it had worked: it fails the same way again, synchronously too, and a
+    // good job after it renders.
+    let again = client.post(format!("{base}/v1/render")).json(&bad).send().await.unwrap();
+    assert_eq!(again.status(), StatusCode::UNPROCESSABLE_ENTITY);
+    assert_eq!(again.json::<Value>().await.unwrap()["error"]["field"], "scene");
+    let good = client.post(format!("{base}/v1/render")).json(&small_job("png")).send().await.unwrap();
+    assert_eq!(good.status(), StatusCode::OK);
+}

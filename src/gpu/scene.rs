@@ -41,7 +41,22 @@ pub struct GpuScene {
 
 impl GpuScene {
     /// Uploads `scene`. `material_layout` is the G-buffer pass's group-1 layout.
-    pub fn upload(gpu: &GpuContext, scene: &Scene, material_layout: &wgpu::BindGroupLayout) -> Self {
+    ///
+    /// A scene within the operator's limits can still exceed this device's (a texture wider
+    /// than it allows, memory it does not have): the error is caught here, so the scene fails
+    /// its own job and is never cached, instead of an invalid scene failing later jobs.
+    pub fn upload(gpu: &GpuContext, scene: &Scene, material_layout: &wgpu::BindGroupLayout) -> Result<Self, wgpu::Error> {
+        let out_of_memory = gpu.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+        let validation = gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let uploaded = Self::upload_unchecked(gpu, scene, material_layout);
+        let errors = [pollster::block_on(validation.pop()), pollster::block_on(out_of_memory.pop())];
+        match errors.into_iter().flatten().next() {
+            Some(error) => Err(error),
+            None => Ok(uploaded),
+        }
+    }
+
+    fn upload_unchecked(gpu: &GpuContext, scene: &Scene, material_layout: &wgpu::BindGroupLayout) -> Self {
         let device = &gpu.device;
         let vertex_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("GpuScene::vertex_buffer"),

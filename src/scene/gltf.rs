@@ -70,7 +70,12 @@ fn load_unchecked(bytes: &[u8], limits: &Limits, field: &str) -> JobResult<Scene
                 return Err(JobError::field(
                     ErrorCode::LimitExceeded,
                     field,
-                    format!("buffer {} declares {} bytes; the limit is {} (max_body_bytes)", buffer.index(), buffer.length(), limits.max_body_bytes),
+                    format!(
+                        "buffer {} declares {} bytes; the limit is {} (max_body_bytes)",
+                        buffer.index(),
+                        buffer.length(),
+                        limits.max_body_bytes
+                    ),
                 ));
             }
             if data.len() < buffer.length() {

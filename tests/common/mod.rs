@@ -80,6 +80,11 @@ pub fn check_golden(name: &str, png: &[u8], max_mean: f32, max_p99: f32) {
 /// triangle, further up 0.5); node 1 is a red floor quad. Mesh nodes are 1 and 2, so the floor
 /// is object 0 and the triangle object 1.
 pub fn test_gltf() -> (serde_json::Value, Vec<u8>) {
+    test_gltf_with_texture(2, 2)
+}
+
+/// `test_gltf` with a green texture of `width × height` texels on the triangle.
+pub fn test_gltf_with_texture(width: u32, height: u32) -> (serde_json::Value, Vec<u8>) {
     let mut bin: Vec<u8> = Vec::new();
     let mut push = |bytes: &[u8]| {
         let offset = bin.len();
@@ -96,7 +101,7 @@ pub fn test_gltf() -> (serde_json::Value, Vec<u8>) {
     let tri_pos = push(&f32s(&[-0.4, 0., -0.4, 0.4, 0., -0.4, 0., 0., 0.4]));
     let tri_uv = push(&f32s(&[0., 0., 1., 0., 0.5, 1.]));
     let mut png = Cursor::new(Vec::new());
-    image::RgbaImage::from_pixel(2, 2, image::Rgba([0, 255, 0, 255])).write_to(&mut png, image::ImageFormat::Png).unwrap();
+    image::RgbaImage::from_pixel(width, height, image::Rgba([0, 255, 0, 255])).write_to(&mut png, image::ImageFormat::Png).unwrap();
     let png = push(png.get_ref());
     let views: Vec<serde_json::Value> = [quad_pos, quad_nrm, quad_idx, tri_pos, tri_uv, png]
         .iter()
