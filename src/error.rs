@@ -37,6 +37,8 @@ pub enum ErrorCode {
     DeadlineExceeded,
     /// No valid bearer token on a server that requires one.
     Unauthorized,
+    /// The request conflicts with the resource's state (cancelling a finished job).
+    Conflict,
     /// The job was cancelled (its client went away, or `DELETE /v1/jobs/{id}`).
     Cancelled,
     /// Something failed inside the renderer; the message is generic towards clients.
@@ -60,6 +62,7 @@ impl ErrorCode {
             ErrorCode::QueueFull => "queue_full",
             ErrorCode::DeadlineExceeded => "deadline_exceeded",
             ErrorCode::Unauthorized => "unauthorized",
+            ErrorCode::Conflict => "conflict",
             ErrorCode::Cancelled => "cancelled",
             ErrorCode::Internal => "internal",
         }

@@ -101,14 +101,15 @@ impl JobQueue {
 /// The state of a submitted job as its events report it.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct JobEvent {
-    /// `queued`, `running`, `succeeded` or `failed`.
+    /// `queued`, `running`, `succeeded`, `failed` or `cancelled`.
     pub status: &'static str,
     /// Progress of long methods: steps done of all (samples for `reference`); 0 of 0 otherwise.
     pub done: u64,
     pub total: u64,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub error: Option<Value>,
-    /// When the job reached `succeeded` or `failed`: its record expires a while after.
+    /// When the job reached `succeeded`, `failed` or `cancelled`: its record expires a while
+    /// after.
     #[serde(skip)]
     pub finished_at: Option<Instant>,
 }
@@ -118,7 +119,7 @@ impl JobEvent {
         Self { status, done: 0, total: 0, error: None, finished_at: None }
     }
 
-    /// Marks the job `succeeded` or `failed` as of now.
+    /// Marks the job `succeeded`, `failed` or `cancelled` as of now.
     pub fn finish(&mut self, status: &'static str, error: Option<Value>) {
         self.status = status;
         self.error = error;
@@ -126,7 +127,7 @@ impl JobEvent {
     }
 
     pub fn finished(&self) -> bool {
-        matches!(self.status, "succeeded" | "failed")
+        matches!(self.status, "succeeded" | "failed" | "cancelled")
     }
 }
 
@@ -135,7 +136,7 @@ impl JobEvent {
 /// finished job is dropped `ttl` after it finished.
 pub struct JobStore {
     results: Mutex<VecDeque<(String, Arc<Rendered>, Instant)>>,
-    submitted: Mutex<VecDeque<(String, watch::Sender<JobEvent>)>>,
+    submitted: Mutex<VecDeque<Submitted>>,
     capacity: usize,
     ttl: Duration,
 }
@@ -157,22 +158,38 @@ impl JobStore {
         self.results().iter().find(|(k, _, _)| k == id).map(|(_, r, _)| r.clone())
     }
 
-    pub fn submit(&self, id: String, events: watch::Sender<JobEvent>) {
+    /// Registers a submitted job's events; the answer says (once true) that it was cancelled.
+    pub fn submit(&self, id: String, events: watch::Sender<JobEvent>) -> watch::Receiver<bool> {
         let mut submitted = self.submitted_jobs();
         while submitted.len() >= self.capacity {
-            match submitted.iter().position(|(_, tx)| tx.borrow().finished()) {
+            match submitted.iter().position(|s| s.events.borrow().finished()) {
                 Some(at) => {
                     submitted.remove(at);
                 }
                 None => break,
             }
         }
-        submitted.push_back((id, events));
+        let (cancel, cancelled) = watch::channel(false);
+        submitted.push_back(Submitted { id, events, cancel });
+        cancelled
     }
 
     /// The event channel of a submitted job.
     pub fn submitted(&self, id: &str) -> Option<watch::Sender<JobEvent>> {
-        self.submitted_jobs().iter().find(|(k, _)| k == id).map(|(_, tx)| tx.clone())
+        self.submitted_jobs().iter().find(|s| s.id == id).map(|s| s.events.clone())
+    }
+
+    /// Asks a submitted job held here to stop: a waiting one leaves the queue, a running one
+    /// stops at its next phase or batch. `None`: not held here; `Some(false)`: it had
+    /// already finished.
+    pub fn cancel(&self, id: &str) -> Option<bool> {
+        let submitted = self.submitted_jobs();
+        let job = submitted.iter().find(|s| s.id == id)?;
+        if job.events.borrow().finished() {
+            return Some(false);
+        }
+        job.cancel.send_replace(true);
+        Some(true)
     }
 
     /// Kept results, expired ones dropped first (they are in finishing order).
@@ -185,11 +202,18 @@ impl JobStore {
     }
 
     /// Submitted jobs, those finished longer than `ttl` ago dropped first.
-    fn submitted_jobs(&self) -> std::sync::MutexGuard<'_, VecDeque<(String, watch::Sender<JobEvent>)>> {
+    fn submitted_jobs(&self) -> std::sync::MutexGuard<'_, VecDeque<Submitted>> {
         let mut submitted = self.submitted.lock().unwrap_or_else(|p| p.into_inner());
-        submitted.retain(|(_, tx)| tx.borrow().finished_at.is_none_or(|at| at.elapsed() <= self.ttl));
+        submitted.retain(|s| s.events.borrow().finished_at.is_none_or(|at| at.elapsed() <= self.ttl));
         submitted
     }
+}
+
+/// A submitted job held by this process: its events, and the flag that cancels it.
+struct Submitted {
+    id: String,
+    events: watch::Sender<JobEvent>,
+    cancel: watch::Sender<bool>,
 }
 
 /// What the dashboard shows of one finished job.

@@ -1384,3 +1384,64 @@ async fn a_scene_that_fails_on_the_gpu_mid_queue_fails_alone() {
     let good = client.post(format!("{base}/v1/render")).json(&small_job("png")).send().await.unwrap();
     assert_eq!(good.status(), StatusCode::OK);
 }
+
+/// `DELETE /v1/jobs/{id}` cancels a submitted job on the embedded store: a running one stops
+/// mid-render, a waiting one leaves the queue, both end `cancelled` (record, events, store),
+/// the job after them succeeds, a finished job answers 409 and an unknown one 404.
+#[tokio::test(flavor = "multi_thread")]
+async fn submitted_jobs_can_be_cancelled_waiting_or_running() {
+    let data = tempdir::Dir::new();
+    let address = free_address();
+    let _daemon = KillOnDrop(
+        std::process::Command::new(env!("CARGO_BIN_EXE_penumbra"))
+            .args(["serve", "--no-warm-up", "--listen", &address, "--data-dir"])
+            .arg(data.path())
+            .env("PENUMBRA_LOG", "warn")
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    let base = format!("http://{address}");
+    wait_ready(&base).await;
+    let client = reqwest::Client::new();
+    let submit = |job: Value| {
+        let request = client.post(format!("{base}/v1/jobs")).json(&job);
+        async move { request.send().await.unwrap().json::<Value>().await.unwrap()["id"].as_str().unwrap().to_owned() }
+    };
+    let record = |id: String| {
+        let request = client.get(format!("{base}/v1/jobs/{id}"));
+        async move { request.send().await.unwrap().json::<Value>().await.unwrap() }
+    };
+    let cancel = |id: String| client.delete(format!("{base}/v1/jobs/{id}")).send();
+    let mut long = small_job("png");
+    long["method"] = json!({"name": "reference", "samples": 4096, "resolution": 256});
+    let running = submit(long.clone()).await;
+    let waiting = submit(long).await;
+    let after = submit(small_job("png")).await;
+    for _ in 0..600 {
+        if record(running.clone()).await["status"] == "running" {
+            break;
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+    }
+    assert_eq!(record(waiting.clone()).await["status"], "queued");
+    for id in [&waiting, &running] {
+        let answer = cancel(id.clone()).await.unwrap();
+        assert_eq!(answer.status(), StatusCode::ACCEPTED, "{id}");
+    }
+    for id in [&running, &waiting] {
+        let events = client.get(format!("{base}/v1/jobs/{id}/events")).send().await.unwrap().text().await.unwrap();
+        assert!(events.contains("event: cancelled"), "{events}");
+        let stopped = record(id.clone()).await;
+        assert_eq!((&stopped["status"], &stopped["error"]["code"]), (&json!("cancelled"), &json!("cancelled")), "{stopped}");
+        let image = client.get(format!("{base}/v1/jobs/{id}/image")).send().await.unwrap();
+        assert_eq!(image.status(), StatusCode::NOT_FOUND);
+    }
+    let events = client.get(format!("{base}/v1/jobs/{after}/events")).send().await.unwrap().text().await.unwrap();
+    assert!(events.contains("event: succeeded"), "the next job is served: {events}");
+    let finished = cancel(after).await.unwrap();
+    assert_eq!(finished.status(), StatusCode::CONFLICT);
+    assert_eq!(finished.json::<Value>().await.unwrap()["error"]["code"], "conflict");
+    assert_eq!(cancel("0".repeat(32)).await.unwrap().status(), StatusCode::NOT_FOUND);
+    wait_for_metrics(&client, &base, |text| cancelled_jobs(text) == 2).await;
+}

@@ -44,18 +44,19 @@ impl<F: Fn(u64, u64)> Observer for F {
     }
 }
 
-/// An observer whose render stops once `flag` is raised (from any thread).
-pub struct Cancellable<'a, P> {
+/// An observer made of two closures: progress, and whether to stop (a flag another thread
+/// raises, typically).
+pub struct Cancellable<P, C> {
     pub progress: P,
-    pub flag: &'a std::sync::atomic::AtomicBool,
+    pub cancelled: C,
 }
 
-impl<P: Fn(u64, u64)> Observer for Cancellable<'_, P> {
+impl<P: Fn(u64, u64), C: Fn() -> bool> Observer for Cancellable<P, C> {
     fn progress(&self, done: u64, total: u64) {
         (self.progress)(done, total)
     }
     fn cancelled(&self) -> bool {
-        self.flag.load(std::sync::atomic::Ordering::Relaxed)
+        (self.cancelled)()
     }
 }
 

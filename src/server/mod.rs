@@ -197,9 +197,9 @@ impl AppState {
     /// Registers a submitted job's event channel and starts its life in the background.
     fn spawn_submitted(self: &Arc<Self>, id: String, job: Job, admitted: tokio::sync::OwnedSemaphorePermit) {
         let (events, _) = tokio::sync::watch::channel(JobEvent::status("queued"));
-        self.jobs.submit(id.clone(), events.clone());
+        let cancel = self.jobs.submit(id.clone(), events.clone());
         let state = self.clone();
-        tokio::spawn(async move { run_submitted(state, id, job, admitted, events).await });
+        tokio::spawn(async move { run_submitted(state, id, job, admitted, events, cancel).await });
     }
 
     /// With a shared store, one worker per device slot takes jobs from the shared queue, as
@@ -257,7 +257,7 @@ pub fn app(state: Arc<AppState>) -> Router {
         .route("/v1/scenes/{id}", upload_routes(Kind::Scene))
         .route("/v1/lights/{id}", upload_routes(Kind::Light))
         .route("/v1/jobs", post(submit_job))
-        .route("/v1/jobs/{id}", get(job_record))
+        .route("/v1/jobs/{id}", get(job_record).delete(cancel_job))
         .route("/v1/jobs/{id}/events", get(job_events))
         .route("/v1/jobs/{id}/image", get(job_image))
         .route("/v1/jobs/{id}/thumbnail", get(job_thumbnail))
@@ -625,7 +625,10 @@ async fn render_job(
             let started = std::time::Instant::now();
             let state = task_state;
             fetch_shared_uploads(&state.engine, state.store.as_deref(), &job)?;
-            let observer = Cancellable { progress: |done, total| tracing::debug!(done, total, "progress"), flag: &cancel };
+            let observer = Cancellable {
+                progress: |done, total| tracing::debug!(done, total, "progress"),
+                cancelled: || cancel.load(Ordering::Relaxed),
+            };
             let rendered = state.engine.render_observed(&job, &observer);
             // Its handler is gone with its client: the outcome is counted here.
             if matches!(&rendered, Err(error) if error.code == ErrorCode::Cancelled) {
@@ -775,17 +778,20 @@ async fn submit_job(State(state): State<Arc<AppState>>, body: Result<Bytes, Byte
 }
 
 /// A submitted job's life: wait for the device (up to the deadline; at shutdown with a
-/// durable store, stop waiting and stay queued there), then render and store it.
+/// durable store, stop waiting and stay queued there; cancelled, leave the queue), then
+/// render and store it.
 async fn run_submitted(
     state: Arc<AppState>,
     id: String,
     job: Job,
     admitted: tokio::sync::OwnedSemaphorePermit,
     events: tokio::sync::watch::Sender<JobEvent>,
+    cancel: tokio::sync::watch::Receiver<bool>,
 ) {
     let started = std::time::Instant::now();
     let waiting = state.metrics.job_queued();
     let mut stopping = state.stopping.subscribe();
+    let mut cancelled = cancel.clone();
     let durable = state.store.is_some();
     let device = tokio::select! {
         device = state.queue.device() => device,
@@ -793,10 +799,11 @@ async fn run_submitted(
             tracing::info!(%id, "shutting down: the job stays queued in the store for the next start");
             return;
         }
+        Ok(_) = cancelled.wait_for(|c| *c) => Err(crate::render::cancelled_error()),
     };
     drop(waiting);
     match device {
-        Ok(device) => render_and_store(&state, id, job, vec![admitted, device], events, started).await,
+        Ok(device) => render_and_store(&state, id, job, vec![admitted, device], events, cancel, started).await,
         Err(error) => finish_failed(&state, &id, &job.method.name, error, started, &events).await,
     }
 }
@@ -833,7 +840,7 @@ async fn work_shared_queue(state: Arc<AppState>, consumer: String) {
         let Ok(admitted) = state.queue.admit_waiting().await else { return };
         let started = std::time::Instant::now();
         let (events, _) = tokio::sync::watch::channel(JobEvent::status("queued"));
-        state.jobs.submit(stored.id.clone(), events.clone());
+        let cancel = state.jobs.submit(stored.id.clone(), events.clone());
         let method = stored.job["method"]["name"].as_str().unwrap_or("hard").to_owned();
         let job = match Job::from_json_limited(stored.job.to_string().as_bytes(), state.engine.limits()) {
             Ok(_) if stored.attempts >= MAX_ATTEMPTS => {
@@ -848,19 +855,24 @@ async fn work_shared_queue(state: Arc<AppState>, consumer: String) {
                 continue;
             }
         };
-        // Renew the claim while the job renders, so no other replica takes it over.
-        let (beat_store, beat_consumer, beat_job) = (store.clone(), consumer.clone(), stored.clone());
+        // Renew the claim while the job renders, so no other replica takes it over, and stop
+        // it if a replica that got its `DELETE` marked it cancelled in the store.
+        let (beat_store, beat_consumer, beat_job, beat_state) = (store.clone(), consumer.clone(), stored.clone(), state.clone());
         let heartbeat = tokio::spawn(async move {
             let mut tick = tokio::time::interval(beat_store.heartbeat_every());
             loop {
                 tick.tick().await;
                 let (s, c, j) = (beat_store.clone(), beat_consumer.clone(), beat_job.clone());
-                if let Ok(Err(error)) = tokio::task::spawn_blocking(move || s.heartbeat(&c, &j)).await {
-                    tracing::warn!(%error, "cannot renew the claim on a job");
+                match tokio::task::spawn_blocking(move || s.heartbeat(&c, &j).and_then(|()| s.get(&j.id))).await {
+                    Ok(Ok(Some(record))) if record.status == "cancelled" => {
+                        beat_state.jobs.cancel(&beat_job.id);
+                    }
+                    Ok(Err(error)) => tracing::warn!(%error, "cannot renew the claim on a job"),
+                    _ => {}
                 }
             }
         });
-        render_and_store(&state, stored.id.clone(), job, vec![admitted, device], events, started).await;
+        render_and_store(&state, stored.id.clone(), job, vec![admitted, device], events, cancel, started).await;
         heartbeat.abort();
     }
 }
@@ -883,6 +895,7 @@ async fn render_and_store(
     job: Job,
     permits: Vec<tokio::sync::OwnedSemaphorePermit>,
     events: tokio::sync::watch::Sender<JobEvent>,
+    cancel: tokio::sync::watch::Receiver<bool>,
     started: std::time::Instant,
 ) {
     let method = job.method.name.clone();
@@ -915,7 +928,7 @@ async fn render_and_store(
                     }
                 }
             };
-            let rendered = engine.render_observed(&job, &report)?;
+            let rendered = engine.render_observed(&job, &Cancellable { progress: report, cancelled: || *cancel.borrow() })?;
             if let Some(store) = &store {
                 store
                     .succeed(&job_id, &job_json(&job_id, &rendered), &rendered.bytes)
@@ -940,7 +953,7 @@ async fn render_and_store(
     drop(permits);
 }
 
-/// Records, stores and announces a job's failure.
+/// Records, stores and announces a job's failure (or cancellation).
 async fn finish_failed(
     state: &Arc<AppState>,
     id: &str,
@@ -951,8 +964,12 @@ async fn finish_failed(
 ) {
     state.job_finished(id, method, error.code.as_str(), started.elapsed().as_secs_f64(), None);
     let detail = failure_detail(&error);
+    let status = StoredJob::status_after(&detail);
+    if status == "cancelled" {
+        tracing::info!(%id, "job cancelled");
+    }
     store_failure(state, id, detail.clone()).await;
-    events.send_modify(|event| event.finish("failed", Some(detail)));
+    events.send_modify(|event| event.finish(status, Some(detail)));
 }
 
 async fn store_failure(state: &AppState, id: &str, detail: Value) {
@@ -1036,6 +1053,7 @@ fn event_of(stored: &StoredJob) -> JobEvent {
         "running" => "running",
         "succeeded" => "succeeded",
         "failed" => "failed",
+        "cancelled" => "cancelled",
         _ => "queued",
     };
     let mut event = JobEvent::status(status);
@@ -1068,6 +1086,34 @@ async fn follow_stored(store: Arc<dyn DurableStore>, id: String, events: tokio::
             return;
         }
     }
+}
+
+/// `DELETE /v1/jobs/{id}`: cancels a submitted job that has not finished. A waiting job leaves
+/// the queue at once; a running one stops at its next phase or sample batch (on another
+/// replica of a shared store: at its next heartbeat). Answers 202 with the job's record as it
+/// is now; its events end with `cancelled`. A finished job answers 409.
+async fn cancel_job(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Result<Response, ApiError> {
+    let already_finished = || ApiError(JobError::new(ErrorCode::Conflict, format!("job `{id}` has already finished")));
+    match state.jobs.cancel(&id) {
+        Some(true) => {}
+        Some(false) => return Err(already_finished()),
+        // Not held here: a job in the shared store that another replica runs or will run.
+        None => {
+            let stored = stored_job(&state, &id).await?.ok_or_else(|| unknown_job(&id))?;
+            if stored.finished() {
+                return Err(already_finished());
+            }
+            let error = crate::render::cancelled_error();
+            // A running job is counted where it runs, when it stops; a waiting one only here.
+            if stored.status == "queued" {
+                state.job_finished(&id, stored.job["method"]["name"].as_str().unwrap_or(""), error.code.as_str(), 0.0, None);
+            }
+            store_failure(&state, &id, failure_detail(&error)).await;
+        }
+    }
+    tracing::info!(%id, "job cancellation requested");
+    let record = job_record(State(state), Path(id)).await?;
+    Ok((StatusCode::ACCEPTED, record).into_response())
 }
 
 async fn job_image(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Result<Response, ApiError> {

@@ -109,7 +109,7 @@ impl JobStore for EmbeddedStore {
         self.update(
             id,
             |job| {
-                job.status = "failed".into();
+                job.status = StoredJob::status_after(error).into();
                 job.finished_unix_ms = Some(unix_ms());
                 job.error = Some(error.clone());
             },

@@ -25,7 +25,7 @@ pub const MAX_ATTEMPTS: u32 = 3;
 #[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
 pub struct StoredJob {
     pub id: String,
-    /// `queued`, `running`, `succeeded` or `failed` (DESIGN.md §3).
+    /// `queued`, `running`, `succeeded`, `failed` or `cancelled` (DESIGN.md §3).
     pub status: String,
     /// The job as the client sent it (validated at submission).
     pub job: Value,
@@ -62,7 +62,16 @@ impl StoredJob {
     }
 
     pub fn finished(&self) -> bool {
-        matches!(self.status.as_str(), "succeeded" | "failed")
+        matches!(self.status.as_str(), "succeeded" | "failed" | "cancelled")
+    }
+
+    /// The status a job ends in with `error`: `cancelled` for a cancellation, else `failed`.
+    pub fn status_after(error: &Value) -> &'static str {
+        if error["code"] == "cancelled" {
+            "cancelled"
+        } else {
+            "failed"
+        }
     }
 }
 
@@ -81,7 +90,8 @@ pub trait JobStore: Send + Sync {
     fn start(&self, id: &str) -> anyhow::Result<()>;
     /// Stores a success: its record and its image (and takes it off a shared queue).
     fn succeed(&self, id: &str, result: &Value, image: &[u8]) -> anyhow::Result<()>;
-    /// Stores a failure with its error body (and takes it off a shared queue).
+    /// Stores a failure with its error body — `cancelled` when the error's code says so
+    /// (`StoredJob::status_after`) — and takes it off a shared queue, so no worker takes it.
     fn fail(&self, id: &str, error: &Value) -> anyhow::Result<()>;
     fn get(&self, id: &str) -> anyhow::Result<Option<StoredJob>>;
     fn image(&self, id: &str) -> anyhow::Result<Option<Vec<u8>>>;

@@ -171,7 +171,7 @@ impl JobStore for RedisStore {
 
     fn fail(&self, id: &str, error: &Value) -> anyhow::Result<()> {
         let job = self.update(id, |job| {
-            job.status = "failed".into();
+            job.status = StoredJob::status_after(error).into();
             job.finished_unix_ms = Some(unix_ms());
             job.error = Some(error.clone());
         })?;
