@@ -1,0 +1,432 @@
+//! Submitted jobs (DESIGN.md §3): `POST /v1/jobs` answers 202 and renders in the background;
+//! records, server-sent events, images and thumbnails; `DELETE` cancels. With a shared store,
+//! each replica's workers take jobs from the store's queue and follow jobs run elsewhere.
+
+use super::*;
+
+pub(super) async fn job_record(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Result<Json<Value>, ApiError> {
+    if let Some(rendered) = state.jobs.find(&id) {
+        return Ok(Json(job_json(&id, &rendered)));
+    }
+    if let Some(events) = state.jobs.submitted(&id) {
+        let event = events.borrow().clone();
+        return Ok(Json(
+            json!({"id": id, "status": event.status, "progress": {"done": event.done, "total": event.total}, "error": event.error}),
+        ));
+    }
+    let stored = stored_job(&state, &id).await?.ok_or_else(|| unknown_job(&id))?;
+    Ok(Json(match stored.result {
+        Some(result) if stored.status == "succeeded" => result,
+        _ => json!({"id": id, "status": stored.status, "progress": {"done": stored.done, "total": stored.total}, "error": stored.error}),
+    }))
+}
+
+/// A job from the durable store (one this process did not run, or no longer holds).
+pub(super) async fn stored_job(state: &AppState, id: &str) -> Result<Option<StoredJob>, ApiError> {
+    let Some(store) = state.store.clone() else { return Ok(None) };
+    let id = id.to_owned();
+    let stored = tokio::task::spawn_blocking(move || store.get(&id)).await.map_err(|e| JobError::internal(e.to_string()))?;
+    Ok(stored.map_err(|error| JobError::internal(format!("the job store failed: {error}")))?)
+}
+
+/// `POST /v1/jobs`: validates and admits the job (4xx, or 429 when the queue is full), answers
+/// 202 with its id at once, and renders it in the background: `GET /v1/jobs/{id}` for its
+/// state, `/events` for server-sent progress, `/image` once it succeeded.
+pub(super) async fn submit_job(State(state): State<Arc<AppState>>, body: Result<Bytes, BytesRejection>) -> Result<Response, ApiError> {
+    let body = body.map_err(|rejection| body_error(&state, rejection, ErrorCode::InvalidJson));
+    let parsed = body.and_then(|body| {
+        let job = Job::from_json_limited(&body, state.engine.limits())?;
+        job.validate(state.engine.limits())?;
+        // The job as sent (it parsed, so it is JSON): what the store keeps and resumes.
+        let sent: Value = serde_json::from_slice(&body).map_err(|e| JobError::new(ErrorCode::InvalidJson, e.to_string()))?;
+        Ok((job, sent))
+    });
+    let (job, sent) = parsed.inspect_err(|error| state.job_finished("", "", error.code.as_str(), 0.0, None))?;
+    let shared = state.store.clone().filter(|s| s.shared());
+    if let Some(store) = &shared {
+        // The shared queue is bounded as a whole, by the same --queue.
+        let store = store.clone();
+        let queued = tokio::task::spawn_blocking(move || store.queued()).await.map_err(|e| JobError::internal(e.to_string()))?;
+        let queued = queued.map_err(|error| JobError::internal(format!("the job store failed: {error}")))?;
+        if queued >= u64::from(state.queue_config.capacity) {
+            let error = JobError::new(ErrorCode::QueueFull, "the shared job queue is full; retry after the Retry-After seconds");
+            state.job_finished("", &job.method.name, error.code.as_str(), 0.0, None);
+            return Err(ApiError(error));
+        }
+    }
+    // A local place in the queue, unless the shared queue holds the job (its workers take one
+    // when they take the job).
+    let admitted = match shared {
+        Some(_) => None,
+        None => Some(state.queue.admit().inspect_err(|error| state.job_finished("", &job.method.name, error.code.as_str(), 0.0, None))?),
+    };
+    let id = state.new_id();
+    // Durable before the 202: an accepted job survives a crash from here on.
+    if let Some(store) = state.store.clone() {
+        let stored_id = id.clone();
+        tokio::task::spawn_blocking(move || store.accept(&stored_id, &sent))
+            .await
+            .map_err(|e| JobError::internal(e.to_string()))?
+            .map_err(|error| {
+                tracing::error!(%error, "cannot record a submitted job");
+                JobError::internal("the job store failed; the job was not accepted")
+            })?;
+    }
+    if let Some(admitted) = admitted {
+        state.spawn_submitted(id.clone(), job, admitted);
+    }
+    let links = json!({"id": id, "status": "queued", "record": format!("/v1/jobs/{id}"), "events": format!("/v1/jobs/{id}/events")});
+    Ok((StatusCode::ACCEPTED, [(header::LOCATION, format!("/v1/jobs/{id}"))], Json(links)).into_response())
+}
+
+/// A submitted job's life: wait for the device (up to the deadline; at shutdown with a
+/// durable store, stop waiting and stay queued there; cancelled, leave the queue), then
+/// render and store it.
+pub(super) async fn run_submitted(
+    state: Arc<AppState>,
+    id: String,
+    job: Job,
+    admitted: tokio::sync::OwnedSemaphorePermit,
+    events: tokio::sync::watch::Sender<JobEvent>,
+    cancel: tokio::sync::watch::Receiver<bool>,
+) {
+    let started = std::time::Instant::now();
+    let waiting = state.metrics.job_queued();
+    let mut stopping = state.stopping.subscribe();
+    let mut cancelled = cancel.clone();
+    let durable = state.store.is_some();
+    let device = tokio::select! {
+        device = state.queue.device() => device,
+        _ = stopping.wait_for(|stop| *stop), if durable => {
+            tracing::info!(%id, "shutting down: the job stays queued in the store for the next start");
+            return;
+        }
+        Ok(_) = cancelled.wait_for(|c| *c) => Err(crate::render::cancelled_error()),
+    };
+    drop(waiting);
+    match device {
+        Ok(device) => render_and_store(&state, id, job, vec![admitted, device], events, cancel, started).await,
+        Err(error) => finish_failed(&state, &id, &job.method.name, error, started, &events).await,
+    }
+}
+
+/// One worker of a replica on a shared store: with a free device slot, takes the next job
+/// (a dead replica's first), keeps it claimed while it renders, stores the outcome.
+pub(super) async fn work_shared_queue(state: Arc<AppState>, consumer: String) {
+    let Some(store) = state.store.clone() else { return };
+    let mut stopping = state.stopping.subscribe();
+    loop {
+        let device = tokio::select! {
+            device = state.queue.device_slot() => device,
+            _ = stopping.wait_for(|stop| *stop) => return,
+        };
+        let Some(device) = device.filter(|_| !*stopping.borrow()) else { return };
+        // Asked without waiting: an idle worker must not sit on the device slot that a
+        // synchronous render needs, so when the queue is empty it lets go and asks again soon.
+        let (taker, name) = (store.clone(), consumer.clone());
+        let taken = tokio::task::spawn_blocking(move || taker.next(&name, std::time::Duration::ZERO)).await;
+        let stored = match taken {
+            Ok(Ok(Some(stored))) => stored,
+            Ok(Ok(None)) => {
+                drop(device);
+                tokio::time::sleep(SHARED_QUEUE_POLL).await;
+                continue;
+            }
+            Ok(Err(error)) => {
+                tracing::warn!(%error, "cannot take a job from the shared queue; retrying in 1 s");
+                tokio::time::sleep(std::time::Duration::from_secs(1)).await;
+                continue;
+            }
+            Err(_) => continue,
+        };
+        let Ok(admitted) = state.queue.admit_waiting().await else { return };
+        let started = std::time::Instant::now();
+        let (events, _) = tokio::sync::watch::channel(JobEvent::status("queued"));
+        let cancel = state.jobs.submit(stored.id.clone(), events.clone());
+        let method = stored.job["method"]["name"].as_str().unwrap_or("hard").to_owned();
+        let job = match Job::from_json_limited(stored.job.to_string().as_bytes(), state.engine.limits()) {
+            Ok(_) if stored.attempts >= MAX_ATTEMPTS => {
+                let detail = abandoned(stored.attempts);
+                store_failure(&state, &stored.id, detail.clone()).await;
+                events.send_modify(|event| event.finish("failed", Some(detail)));
+                continue;
+            }
+            Ok(job) => job,
+            Err(error) => {
+                finish_failed(&state, &stored.id, &method, error, started, &events).await;
+                continue;
+            }
+        };
+        // Renew the claim while the job renders, so no other replica takes it over, and stop
+        // it if a replica that got its `DELETE` marked it cancelled in the store.
+        let (beat_store, beat_consumer, beat_job, beat_state) = (store.clone(), consumer.clone(), stored.clone(), state.clone());
+        let heartbeat = tokio::spawn(async move {
+            let mut tick = tokio::time::interval(beat_store.heartbeat_every());
+            loop {
+                tick.tick().await;
+                let (s, c, j) = (beat_store.clone(), beat_consumer.clone(), beat_job.clone());
+                match tokio::task::spawn_blocking(move || s.heartbeat(&c, &j).and_then(|()| s.get(&j.id))).await {
+                    Ok(Ok(Some(record))) if record.status == "cancelled" => {
+                        beat_state.jobs.cancel(&beat_job.id);
+                    }
+                    Ok(Err(error)) => tracing::warn!(%error, "cannot renew the claim on a job"),
+                    _ => {}
+                }
+            }
+        });
+        render_and_store(&state, stored.id.clone(), job, vec![admitted, device], events, cancel, started).await;
+        heartbeat.abort();
+    }
+}
+
+/// The error of a job that daemons kept dying on: said in full, since the reason is the
+/// point and reveals nothing internal.
+pub(super) fn abandoned(attempts: u32) -> Value {
+    json!({
+        "code": "internal",
+        "status": 500,
+        "message": format!("the job was started {attempts} times by daemons that stopped before it finished; it is not retried again"),
+    })
+}
+
+/// Renders a job that holds its device slot (`permits`), reporting progress (to the shared
+/// store too, at most every 250 ms), and stores the outcome.
+pub(super) async fn render_and_store(
+    state: &Arc<AppState>,
+    id: String,
+    job: Job,
+    permits: Vec<tokio::sync::OwnedSemaphorePermit>,
+    events: tokio::sync::watch::Sender<JobEvent>,
+    cancel: tokio::sync::watch::Receiver<bool>,
+    started: std::time::Instant,
+) {
+    let method = job.method.name.clone();
+    events.send_replace(JobEvent::status("running"));
+    let running = state.metrics.job_running();
+    let engine = state.engine.clone();
+    let store = state.store.clone();
+    let progress = events.clone();
+    let span = tracing::info_span!("job", %id, method = %method);
+    let job_id = id.clone();
+    let outcome = tokio::task::spawn_blocking(move || {
+        span.in_scope(|| {
+            if let Some(store) = &store {
+                if let Err(error) = store.start(&job_id) {
+                    tracing::warn!(%error, "cannot mark the job running in the store");
+                }
+            }
+            fetch_shared_uploads(&engine, store.as_deref(), &job)?;
+            let last_shared = std::sync::Mutex::new(std::time::Instant::now());
+            let report = |done, total| {
+                progress.send_modify(|event| {
+                    event.done = done;
+                    event.total = total;
+                });
+                if let Some(store) = store.as_ref().filter(|s| s.shared()) {
+                    let mut last = last_shared.lock().unwrap_or_else(|p| p.into_inner());
+                    if last.elapsed() >= std::time::Duration::from_millis(250) {
+                        *last = std::time::Instant::now();
+                        let _ = store.progress(&job_id, done, total);
+                    }
+                }
+            };
+            let rendered = engine.render_observed(&job, &Cancellable { progress: report, cancelled: || *cancel.borrow() })?;
+            if let Some(store) = &store {
+                store
+                    .succeed(&job_id, &job_json(&job_id, &rendered), &rendered.bytes)
+                    .map_err(|error| JobError::internal(format!("cannot store the result: {error}")))?;
+            }
+            Ok(rendered)
+        })
+    })
+    .await
+    .unwrap_or_else(|e| Err(JobError::internal(format!("render task failed: {e}"))));
+    drop(running);
+    match outcome {
+        Ok(rendered) => {
+            state.job_finished(&id, &method, "ok", started.elapsed().as_secs_f64(), Some(&rendered));
+            tracing::info!(%id, total_ms = rendered.timings.total_ms, "job done");
+            state.jobs.keep(id, Arc::new(rendered));
+            events.send_modify(|event| event.finish("succeeded", None));
+        }
+        Err(error) => finish_failed(state, &id, &method, error, started, &events).await,
+    }
+    // The queue places go only now: a drain that sees them back finds the job recorded.
+    drop(permits);
+}
+
+/// Records, stores and announces a job's failure (or cancellation).
+pub(super) async fn finish_failed(
+    state: &Arc<AppState>,
+    id: &str,
+    method: &str,
+    error: JobError,
+    started: std::time::Instant,
+    events: &tokio::sync::watch::Sender<JobEvent>,
+) {
+    state.job_finished(id, method, error.code.as_str(), started.elapsed().as_secs_f64(), None);
+    let detail = failure_detail(&error);
+    let status = StoredJob::status_after(&detail);
+    if status == "cancelled" {
+        tracing::info!(%id, "job cancelled");
+    }
+    store_failure(state, id, detail.clone()).await;
+    events.send_modify(|event| event.finish(status, Some(detail)));
+}
+
+pub(super) async fn store_failure(state: &AppState, id: &str, detail: Value) {
+    let Some(store) = state.store.clone() else { return };
+    let stored_id = id.to_owned();
+    if !matches!(tokio::task::spawn_blocking(move || store.fail(&stored_id, &detail)).await, Ok(Ok(()))) {
+        tracing::warn!(%id, "cannot store the job's failure");
+    }
+}
+
+/// A failed job's error as its record and events carry it: the error body with its status.
+pub(super) fn failure_detail(error: &JobError) -> Value {
+    let mut detail = error::error_body(error);
+    detail["status"] = json!(error::status_of(error.code).as_u16());
+    detail
+}
+
+/// `GET /v1/jobs/{id}/events`: server-sent events — `progress` with the job's state at once and
+/// on every change, then one `succeeded` or `failed`, and the stream ends.
+pub(super) async fn job_events(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Result<Response, ApiError> {
+    use axum::response::sse::{Event, KeepAlive, Sse};
+    let events = match state.jobs.submitted(&id) {
+        Some(events) => events,
+        // Finished under an earlier process, or running on another replica of a shared store:
+        // its stored state, followed by polling the store until it finishes.
+        None => {
+            let stored = stored_job(&state, &id).await?.ok_or_else(|| unknown_job(&id))?;
+            let (events, _) = tokio::sync::watch::channel(event_of(&stored));
+            if let Some(store) = state.store.clone().filter(|_| !stored.finished()) {
+                tokio::spawn(follow_stored(store, id.clone(), events.clone()));
+            }
+            events
+        }
+    };
+    let receiver = events.subscribe();
+    // (receiver, ended): the current state first, then each change, until a final one.
+    let stopping = state.stopping.subscribe();
+    let stream = futures_util::stream::unfold((receiver, stopping, false, true), |(mut receiver, mut stopping, ended, first)| async move {
+        if ended {
+            return None;
+        }
+        if !first {
+            tokio::select! {
+                changed = receiver.changed() => changed.ok()?,
+                // A shutdown ends the stream: graceful shutdown waits for open responses.
+                _ = stopping.wait_for(|stop| *stop) => return None,
+            }
+        }
+        let event = receiver.borrow_and_update().clone();
+        let name = if event.finished() { event.status } else { "progress" };
+        let sse = Event::default().event(name).json_data(&event).unwrap_or_else(|_| Event::default().event(name));
+        Some((Ok::<_, std::convert::Infallible>(sse), (receiver, stopping, event.finished(), false)))
+    });
+    Ok(Sse::new(stream).keep_alive(KeepAlive::default()).into_response())
+}
+
+/// A stored job's state as an event.
+pub(super) fn event_of(stored: &StoredJob) -> JobEvent {
+    let status = match stored.status.as_str() {
+        "running" => "running",
+        "succeeded" => "succeeded",
+        "failed" => "failed",
+        "cancelled" => "cancelled",
+        _ => "queued",
+    };
+    let mut event = JobEvent::status(status);
+    (event.done, event.total) = (stored.done, stored.total);
+    if event.finished() {
+        event.finish(status, stored.error.clone());
+    }
+    event
+}
+
+/// Polls the store for a job another replica runs, every 50 ms (one small GET: cheap for
+/// Redis, and what a client waits at most beyond the job), until it finishes, its record
+/// goes, or nobody listens any more.
+pub(super) async fn follow_stored(store: Arc<dyn DurableStore>, id: String, events: tokio::sync::watch::Sender<JobEvent>) {
+    loop {
+        tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+        if events.receiver_count() == 0 {
+            return;
+        }
+        let (reader, job) = (store.clone(), id.clone());
+        let Ok(Ok(Some(stored))) = tokio::task::spawn_blocking(move || reader.get(&job)).await else { return };
+        let event = event_of(&stored);
+        let finished = event.finished();
+        events.send_if_modified(|current| {
+            let changed = (current.status, current.done, current.total) != (event.status, event.done, event.total);
+            *current = event;
+            changed
+        });
+        if finished {
+            return;
+        }
+    }
+}
+
+/// `DELETE /v1/jobs/{id}`: cancels a submitted job that has not finished. A waiting job leaves
+/// the queue at once; a running one stops at its next phase or sample batch (on another
+/// replica of a shared store: at its next heartbeat). Answers 202 with the job's record as it
+/// is now; its events end with `cancelled`. A finished job answers 409.
+pub(super) async fn cancel_job(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Result<Response, ApiError> {
+    let already_finished = || ApiError(JobError::new(ErrorCode::Conflict, format!("job `{id}` has already finished")));
+    match state.jobs.cancel(&id) {
+        Some(true) => {}
+        Some(false) => return Err(already_finished()),
+        // Not held here: a job in the shared store that another replica runs or will run.
+        None => {
+            let stored = stored_job(&state, &id).await?.ok_or_else(|| unknown_job(&id))?;
+            if stored.finished() {
+                return Err(already_finished());
+            }
+            let error = crate::render::cancelled_error();
+            // A running job is counted where it runs, when it stops; a waiting one only here.
+            if stored.status == "queued" {
+                state.job_finished(&id, stored.job["method"]["name"].as_str().unwrap_or(""), error.code.as_str(), 0.0, None);
+            }
+            store_failure(&state, &id, failure_detail(&error)).await;
+        }
+    }
+    tracing::info!(%id, "job cancellation requested");
+    let record = job_record(State(state), Path(id)).await?;
+    Ok((StatusCode::ACCEPTED, record).into_response())
+}
+
+pub(super) async fn job_image(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Result<Response, ApiError> {
+    if let Some(rendered) = state.jobs.find(&id) {
+        return Ok(image_response(&id, &rendered));
+    }
+    // A result from the durable store: the bytes and the format its record names.
+    let stored = stored_job(&state, &id).await?.filter(|job| job.image_bytes > 0).ok_or_else(|| unknown_job(&id))?;
+    let Some(store) = state.store.clone() else { return Err(unknown_job(&id)) };
+    let image_id = id.clone();
+    let bytes = tokio::task::spawn_blocking(move || store.image(&image_id))
+        .await
+        .map_err(|e| JobError::internal(e.to_string()))?
+        .map_err(|error| JobError::internal(format!("the job store failed: {error}")))?
+        .ok_or_else(|| unknown_job(&id))?;
+    let mime = if stored.result.as_ref().is_some_and(|r| r["format"] == "exr") { "image/x-exr" } else { "image/png" };
+    Ok(([(header::CONTENT_TYPE, mime)], bytes).into_response())
+}
+
+/// `GET /v1/jobs/{id}/thumbnail`: a small PNG of a kept result (the dashboard's previews).
+/// Results never change under their id, so browsers may cache it for good.
+pub(super) async fn job_thumbnail(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Result<Response, ApiError> {
+    let rendered = state.jobs.find(&id).ok_or_else(|| unknown_job(&id))?;
+    let png = tokio::task::spawn_blocking(move || crate::output::thumbnail(&rendered.bytes, THUMBNAIL_SIZE))
+        .await
+        .map_err(|e| JobError::internal(format!("thumbnail task failed: {e}")))??;
+    Ok(([(header::CONTENT_TYPE, "image/png"), (header::CACHE_CONTROL, "private, max-age=86400, immutable")], png).into_response())
+}
+
+/// Longest side of a thumbnail, pixels.
+const THUMBNAIL_SIZE: u32 = 160;
+
+pub(super) fn unknown_job(id: &str) -> ApiError {
+    ApiError(JobError::new(ErrorCode::NotFound, format!("no finished job `{id}` is kept on this server")))
+}
