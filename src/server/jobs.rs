@@ -232,9 +232,12 @@ pub(super) async fn render_and_store(
             };
             let rendered = engine.render_observed(&job, &Cancellable { progress: report, cancelled: || *cancel.borrow() })?;
             if let Some(store) = &store {
-                store
+                let stored = store
                     .succeed(&job_id, &job_json(&job_id, &rendered), &rendered.bytes)
                     .map_err(|error| JobError::internal(format!("cannot store the result: {error}")))?;
+                if !stored {
+                    return Err(crate::render::cancelled_error());
+                }
             }
             Ok(rendered)
         })

@@ -93,7 +93,12 @@ impl JobStore for EmbeddedStore {
         )
     }
 
-    fn succeed(&self, id: &str, result: &Value, image: &[u8]) -> anyhow::Result<()> {
+    fn succeed(&self, id: &str, result: &Value, image: &[u8]) -> anyhow::Result<bool> {
+        // A cancelled record stays cancelled (`JobStore::succeed`). One process uses this
+        // store, so the read and the write below cannot be split by another writer's cancel.
+        if self.get(id)?.is_some_and(|job| job.status == "cancelled") {
+            return Ok(false);
+        }
         self.update(
             id,
             |job| {
@@ -102,7 +107,8 @@ impl JobStore for EmbeddedStore {
                 job.result = Some(result.clone());
             },
             Some(image),
-        )
+        )?;
+        Ok(true)
     }
 
     fn fail(&self, id: &str, error: &Value) -> anyhow::Result<()> {

@@ -88,8 +88,10 @@ pub trait JobStore: Send + Sync {
     fn accept(&self, id: &str, job: &Value) -> anyhow::Result<()>;
     /// Marks a job `running` and counts the attempt.
     fn start(&self, id: &str) -> anyhow::Result<()>;
-    /// Stores a success: its record and its image (and takes it off a shared queue).
-    fn succeed(&self, id: &str, result: &Value, image: &[u8]) -> anyhow::Result<()>;
+    /// Stores a success: its record and its image (and takes it off a shared queue). A job
+    /// cancelled meanwhile (by a `DELETE` another replica received) stays cancelled — the
+    /// client was told so — and the answer is `false`.
+    fn succeed(&self, id: &str, result: &Value, image: &[u8]) -> anyhow::Result<bool>;
     /// Stores a failure with its error body — `cancelled` when the error's code says so
     /// (`StoredJob::status_after`) — and takes it off a shared queue, so no worker takes it.
     fn fail(&self, id: &str, error: &Value) -> anyhow::Result<()>;

@@ -158,15 +158,20 @@ impl JobStore for RedisStore {
         self.put_record(&job, false)
     }
 
-    fn succeed(&self, id: &str, result: &Value, image: &[u8]) -> anyhow::Result<()> {
+    fn succeed(&self, id: &str, result: &Value, image: &[u8]) -> anyhow::Result<bool> {
+        let mut cancelled = false;
         let job = self.update(id, |job| {
-            job.status = "succeeded".into();
-            job.finished_unix_ms = Some(unix_ms());
-            job.result = Some(result.clone());
-            job.image_bytes = image.len() as u64;
-            job.done = job.total;
+            cancelled = job.status == "cancelled";
+            if !cancelled {
+                job.status = "succeeded".into();
+                job.finished_unix_ms = Some(unix_ms());
+                job.result = Some(result.clone());
+                job.image_bytes = image.len() as u64;
+                job.done = job.total;
+            }
         })?;
-        self.finish(job, Some(image))
+        self.finish(job, (!cancelled).then_some(image))?;
+        Ok(!cancelled)
     }
 
     fn fail(&self, id: &str, error: &Value) -> anyhow::Result<()> {
