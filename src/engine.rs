@@ -180,15 +180,15 @@ impl Engine {
             return Ok(UploadReceipt { id, created: false, cache_bytes: 0 });
         }
         let cache_bytes = asset.cost();
-        let evicted = self.lock_uploads().insert(id.clone(), asset)?;
-        self.forget_gpu_copies(&evicted);
+        self.lock_uploads().insert(id.clone(), asset)?;
+        self.prune_if_free();
         Ok(UploadReceipt { id, created: true, cache_bytes })
     }
 
     /// Removes an upload; false when there was none under `id`.
     pub fn delete_upload(&self, kind: Kind, id: &str) -> bool {
         let removed = self.lock_uploads().remove(kind, id);
-        self.forget_gpu_copies(&[(kind, id.to_owned())]);
+        self.prune_if_free();
         removed
     }
 
@@ -201,21 +201,14 @@ impl Engine {
     }
 
     /// Drops the GPU copies of evicted or deleted uploads now when the renderer is free; while
-    /// it renders, `prune_gone_uploads` drops them before the next job instead (an upload never
-    /// waits for a render).
-    fn forget_gpu_copies(&self, gone: &[(Kind, String)]) {
+    /// it renders, the next job's `prune_gone_uploads` does (an upload never waits for a render).
+    fn prune_if_free(&self) {
         let mut state = match self.state.try_lock() {
             Ok(state) => state,
             Err(std::sync::TryLockError::Poisoned(poisoned)) => poisoned.into_inner(),
             Err(std::sync::TryLockError::WouldBlock) => return,
         };
-        for (kind, id) in gone {
-            let key = format!("id:{id}");
-            match kind {
-                Kind::Scene => drop(state.scenes.remove(&key)),
-                Kind::Light => drop(state.lights.remove(&key)),
-            }
-        }
+        self.prune_gone_uploads(&mut state);
     }
 
     /// The uploaded asset under `id`, or `not_uploaded` naming `field`.

@@ -328,7 +328,12 @@ impl Job {
         serde_path_to_error::deserialize(de).map_err(|err| {
             let path = err.path().to_string();
             let inner = err.into_inner();
-            let code = if inner.is_syntax() || inner.is_eof() {
+            // A number no float can hold (1e999) is well-formed JSON to a reader: a bad value
+            // of the field being read, not a syntax error.
+            let out_of_range = inner.to_string().starts_with("number out of range");
+            let code = if out_of_range {
+                ErrorCode::InvalidField
+            } else if inner.is_syntax() || inner.is_eof() {
                 ErrorCode::InvalidJson
             } else if inner.to_string().starts_with("unknown field") {
                 ErrorCode::UnknownField

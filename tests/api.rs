@@ -332,6 +332,21 @@ async fn bad_input_gets_documented_errors_and_the_daemon_keeps_serving() {
     expect_error(&client, &base, with(json!({"light": {"size": [1, 0]}})), S::UNPROCESSABLE_ENTITY, "invalid_field", Some("light.size[1]"))
         .await;
     expect_error(&client, &base, with(json!({"colour": 1})), S::UNPROCESSABLE_ENTITY, "unknown_field", Some("colour")).await;
+    // Zero field of view, numbers of the wrong type, and numbers that only overflow once they
+    // are f32 (1e39) or not at all representable (1e999): each named.
+    let invalid = |field: &'static str| (S::UNPROCESSABLE_ENTITY, "invalid_field", Some(field));
+    for (body, (status, code, field)) in [
+        (with(json!({"camera": {"fov_y_deg": 0}})), invalid("camera.fov_y_deg")),
+        (with(json!({"camera": {"fov_y_deg": "wide"}})), invalid("camera.fov_y_deg")),
+        (with(json!({"light": {"size": [1, "1"]}})), invalid("light.size[1]")),
+        (with(json!({"light": {"center": [0, 1e39, 0]}})), invalid("light.center")),
+        (with(json!({"camera": {"eye": [0, 4, 1e39]}})), invalid("camera.eye")),
+        (with(json!({"light": {"intensity": 1e39}})), invalid("light.intensity")),
+        (with(json!({"output": {"exposure": 1e39}})), invalid("output.exposure")),
+        (br#"{"scene": {"builtin": "torus"}, "light": {"intensity": 1e999}}"#.to_vec(), invalid("light.intensity")),
+    ] {
+        expect_error(&client, &base, body, status, code, field).await;
+    }
     expect_error(&client, &base, vec![b' '; 100 * 1024], S::PAYLOAD_TOO_LARGE, "payload_too_large", None).await;
 
     let missing = client.get(format!("{base}/v1/jobs/nope/image")).send().await.unwrap();
