@@ -171,6 +171,25 @@ impl Engine {
     }
 
     /// Whether the server holds the upload `id` of this kind (`HEAD /v1/scenes/{id}`).
+    /// Checks a job before it is accepted to run later: its fields and limits, and that the
+    /// files it names may be read (a 202 must not turn into `path_not_allowed` later). With
+    /// `uploads_here`, also that the uploads it names are held (a shared store may hold them
+    /// for another replica instead). An upload can still be evicted before the job runs.
+    pub fn check(&self, job: &Job, uploads_here: bool) -> JobResult<()> {
+        job.validate(&self.limits)?;
+        let light = job.light.image.as_ref();
+        for (kind, asset, field) in [(Kind::Scene, Some(&job.scene), "scene"), (Kind::Light, light, "light.image")] {
+            match asset {
+                Some(AssetRef::Path(path)) => drop(self.resolve_path(path, &format!("{field}.path"))?),
+                Some(AssetRef::Id(id)) if uploads_here && !self.holds_upload(kind, id) => {
+                    return Err(not_uploaded(id, &format!("{field}.id")));
+                }
+                _ => {}
+            }
+        }
+        Ok(())
+    }
+
     pub fn holds_upload(&self, kind: Kind, id: &str) -> bool {
         self.lock_uploads().contains(kind, id)
     }

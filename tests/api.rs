@@ -1440,6 +1440,20 @@ async fn submitted_jobs_can_be_cancelled_waiting_or_running() {
         tokio::time::sleep(std::time::Duration::from_millis(50)).await;
     }
     assert_eq!(record(waiting.clone()).await["status"], "queued");
+    let early = client.get(format!("{base}/v1/jobs/{waiting}/image")).send().await.unwrap();
+    assert_eq!(early.status(), StatusCode::CONFLICT, "no image yet, but the job exists");
+    // What can only fail later is refused now: a path on a server that reads none, an
+    // upload it does not hold.
+    for (scene, status, field) in [
+        (json!({"path": "scene.glb"}), StatusCode::FORBIDDEN, "scene.path"),
+        (json!({"id": "ab".repeat(32)}), StatusCode::NOT_FOUND, "scene.id"),
+    ] {
+        let mut job = small_job("png");
+        job["scene"] = scene;
+        let refused = client.post(format!("{base}/v1/jobs")).json(&job).send().await.unwrap();
+        assert_eq!(refused.status(), status);
+        assert_eq!(refused.json::<Value>().await.unwrap()["error"]["field"], field);
+    }
     for id in [&waiting, &running] {
         let answer = cancel(id.clone()).await.unwrap();
         assert_eq!(answer.status(), StatusCode::ACCEPTED, "{id}");
@@ -1450,7 +1464,7 @@ async fn submitted_jobs_can_be_cancelled_waiting_or_running() {
         let stopped = record(id.clone()).await;
         assert_eq!((&stopped["status"], &stopped["error"]["code"]), (&json!("cancelled"), &json!("cancelled")), "{stopped}");
         let image = client.get(format!("{base}/v1/jobs/{id}/image")).send().await.unwrap();
-        assert_eq!(image.status(), StatusCode::NOT_FOUND);
+        assert_eq!(image.status(), StatusCode::CONFLICT, "a cancelled job has no image");
     }
     let events = client.get(format!("{base}/v1/jobs/{after}/events")).send().await.unwrap().text().await.unwrap();
     assert!(events.contains("event: succeeded"), "the next job is served: {events}");

@@ -36,7 +36,8 @@ pub(super) async fn submit_job(State(state): State<Arc<AppState>>, body: Result<
     let body = body.map_err(|rejection| body_error(&state, rejection, ErrorCode::InvalidJson));
     let parsed = body.and_then(|body| {
         let job = Job::from_json_limited(&body, state.engine.limits())?;
-        job.validate(state.engine.limits())?;
+        let uploads_here = !state.store.as_ref().is_some_and(|s| s.shared());
+        state.engine.check(&job, uploads_here)?;
         // The job as sent (it parsed, so it is JSON): what the store keeps and resumes.
         let sent: Value = serde_json::from_slice(&body).map_err(|e| JobError::new(ErrorCode::InvalidJson, e.to_string()))?;
         Ok((job, sent))
@@ -404,8 +405,15 @@ pub(super) async fn job_image(State(state): State<Arc<AppState>>, Path(id): Path
     if let Some(rendered) = state.jobs.find(&id) {
         return Ok(image_response(&id, &rendered));
     }
+    unless_unfinished_here(&state, &id)?;
     // A result from the durable store: the bytes and the format its record names.
-    let stored = stored_job(&state, &id).await?.filter(|job| job.image_bytes > 0).ok_or_else(|| unknown_job(&id))?;
+    let stored = stored_job(&state, &id).await?.ok_or_else(|| unknown_job(&id))?;
+    if stored.status != "succeeded" {
+        return Err(no_image(&id, &stored.status));
+    }
+    if stored.image_bytes == 0 {
+        return Err(unknown_job(&id)); // Dropped under --results-bytes.
+    }
     let Some(store) = state.store.clone() else { return Err(unknown_job(&id)) };
     let image_id = id.clone();
     let bytes = tokio::task::spawn_blocking(move || store.image(&image_id))
@@ -420,6 +428,7 @@ pub(super) async fn job_image(State(state): State<Arc<AppState>>, Path(id): Path
 /// `GET /v1/jobs/{id}/thumbnail`: a small PNG of a kept result (the dashboard's previews).
 /// Results never change under their id, so browsers may cache it for good.
 pub(super) async fn job_thumbnail(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Result<Response, ApiError> {
+    unless_unfinished_here(&state, &id)?;
     let rendered = state.jobs.find(&id).ok_or_else(|| unknown_job(&id))?;
     let png = tokio::task::spawn_blocking(move || crate::output::thumbnail(&rendered.bytes, THUMBNAIL_SIZE))
         .await
@@ -429,6 +438,23 @@ pub(super) async fn job_thumbnail(State(state): State<Arc<AppState>>, Path(id): 
 
 /// Longest side of a thumbnail, pixels.
 const THUMBNAIL_SIZE: u32 = 160;
+
+/// A job held here that has not succeeded has no image yet (or ever): 409 saying its state,
+/// not 404, which would tell a client the job does not exist.
+fn unless_unfinished_here(state: &AppState, id: &str) -> Result<(), ApiError> {
+    match state.jobs.submitted(id).map(|events| events.borrow().status) {
+        Some(status) if status != "succeeded" => Err(no_image(id, status)),
+        _ => Ok(()),
+    }
+}
+
+fn no_image(id: &str, status: &str) -> ApiError {
+    let message = match status {
+        "queued" | "running" => format!("job `{id}` is {status}; its image exists once it has succeeded"),
+        _ => format!("job `{id}` {status}; it has no image"),
+    };
+    ApiError(JobError::new(ErrorCode::Conflict, message))
+}
 
 pub(super) fn unknown_job(id: &str) -> ApiError {
     ApiError(JobError::new(ErrorCode::NotFound, format!("no finished job `{id}` is kept on this server")))
