@@ -166,10 +166,8 @@ pub(super) async fn work_shared_queue(state: Arc<AppState>, consumer: String) {
             loop {
                 tick.tick().await;
                 let (s, c, j) = (beat_store.clone(), beat_consumer.clone(), beat_job.clone());
-                match tokio::task::spawn_blocking(move || s.heartbeat(&c, &j).and_then(|()| s.get(&j.id))).await {
-                    Ok(Ok(Some(record))) if record.status == "cancelled" => {
-                        beat_state.jobs.cancel(&beat_job.id);
-                    }
+                match tokio::task::spawn_blocking(move || s.heartbeat(&c, &j).and_then(|()| s.cancelled(&j.id))).await {
+                    Ok(Ok(true)) => drop(beat_state.jobs.cancel(&beat_job.id)),
                     Ok(Err(error)) => tracing::warn!(%error, "cannot renew the claim on a job"),
                     _ => {}
                 }

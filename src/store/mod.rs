@@ -127,6 +127,11 @@ pub trait JobStore: Send + Sync {
     fn heartbeat(&self, _consumer: &str, _job: &StoredJob) -> anyhow::Result<()> {
         Ok(())
     }
+    /// Whether a job was cancelled through the store (by a replica other than the one that
+    /// runs it: shared stores).
+    fn cancelled(&self, _id: &str) -> anyhow::Result<bool> {
+        Ok(false)
+    }
     /// Records progress for readers on other replicas (shared stores).
     fn progress(&self, _id: &str, _done: u64, _total: u64) -> anyhow::Result<()> {
         Ok(())

@@ -6,7 +6,9 @@
 //! `CLAIM_IDLE` belongs to a replica that died: `XAUTOCLAIM` hands it to the next worker that
 //! asks. Job records (`penumbra:job:ID`, JSON) and result images (`penumbra:image:ID`) get a
 //! TTL once finished; uploads (`penumbra:upload:KIND:SHA256`) are stored once for every
-//! replica, each of which keeps its own LRU cache in front.
+//! replica, each of which keeps its own LRU cache in front. A cancellation is a key of its
+//! own (`penumbra:cancel:ID`), written once and only read after: record updates are
+//! read-modify-write, so a progress report could otherwise overwrite a `cancelled` status.
 
 use std::sync::Mutex;
 use std::time::Duration;
@@ -38,6 +40,10 @@ pub struct RedisStore {
 
 fn job_key(id: &str) -> String {
     format!("penumbra:job:{id}")
+}
+
+fn cancel_key(id: &str) -> String {
+    format!("penumbra:cancel:{id}")
 }
 
 fn image_key(id: &str) -> String {
@@ -159,10 +165,16 @@ impl JobStore for RedisStore {
     }
 
     fn succeed(&self, id: &str, result: &Value, image: &[u8]) -> anyhow::Result<bool> {
-        let mut cancelled = false;
+        let cancelled = self.cancelled(id)?;
         let job = self.update(id, |job| {
-            cancelled = job.status == "cancelled";
-            if !cancelled {
+            if cancelled {
+                // The record may say `running` again (a progress report read it before the
+                // cancel): the cancel key decides.
+                job.status = "cancelled".into();
+                job.finished_unix_ms = Some(unix_ms());
+                job.error =
+                    Some(serde_json::json!({"code": "cancelled", "message": "the job was cancelled before it finished", "status": 409}));
+            } else {
                 job.status = "succeeded".into();
                 job.finished_unix_ms = Some(unix_ms());
                 job.result = Some(result.clone());
@@ -175,6 +187,10 @@ impl JobStore for RedisStore {
     }
 
     fn fail(&self, id: &str, error: &Value) -> anyhow::Result<()> {
+        if StoredJob::status_after(error) == "cancelled" {
+            let ttl = self.ttl.as_secs();
+            self.with(|c| c.set_ex::<_, _, ()>(cancel_key(id), 1, ttl))?;
+        }
         let job = self.update(id, |job| {
             job.status = StoredJob::status_after(error).into();
             job.finished_unix_ms = Some(unix_ms());
@@ -247,6 +263,10 @@ impl JobStore for RedisStore {
 
     fn heartbeat_every(&self) -> Duration {
         self.claim_idle / 5
+    }
+
+    fn cancelled(&self, id: &str) -> anyhow::Result<bool> {
+        self.with(|c| c.exists(cancel_key(id)))
     }
 
     fn heartbeat(&self, consumer: &str, job: &StoredJob) -> anyhow::Result<()> {
