@@ -35,6 +35,8 @@ pub enum ErrorCode {
     QueueFull,
     /// The job waited in the queue past the configured deadline without starting.
     DeadlineExceeded,
+    /// The daemon is shutting down and admits no new job: retry on another replica, or later.
+    ShuttingDown,
     /// No valid bearer token on a server that requires one.
     Unauthorized,
     /// The request conflicts with the resource's state (cancelling a finished job).
@@ -61,6 +63,7 @@ impl ErrorCode {
             ErrorCode::NotFound => "not_found",
             ErrorCode::QueueFull => "queue_full",
             ErrorCode::DeadlineExceeded => "deadline_exceeded",
+            ErrorCode::ShuttingDown => "shutting_down",
             ErrorCode::Unauthorized => "unauthorized",
             ErrorCode::Conflict => "conflict",
             ErrorCode::Cancelled => "cancelled",

@@ -758,8 +758,14 @@ async fn draining_for_shutdown_waits_for_submitted_jobs_and_admits_no_more() {
     assert!(drain.await.unwrap(), "the submitted job finished before the drain returned");
     let record: Value = client.get(format!("{base}{}", accepted["record"].as_str().unwrap())).send().await.unwrap().json().await.unwrap();
     assert_eq!(record["status"], "succeeded");
-    let after = client.post(format!("{base}/v1/render")).json(&small_job("png")).send().await.unwrap();
-    assert_eq!(after.status(), StatusCode::TOO_MANY_REQUESTS, "a drained server admits nothing new");
+    // A stopping (drained) daemon admits nothing new: 503, and readiness goes away, so a load
+    // balancer sends the work elsewhere.
+    for path in ["/v1/render", "/v1/jobs"] {
+        let refused = client.post(format!("{base}{path}")).json(&small_job("png")).send().await.unwrap();
+        assert_eq!(refused.status(), StatusCode::SERVICE_UNAVAILABLE, "{path}");
+        assert_eq!(refused.json::<Value>().await.unwrap()["error"]["code"], "shutting_down");
+    }
+    assert_eq!(client.get(format!("{base}/readyz")).send().await.unwrap().status(), StatusCode::SERVICE_UNAVAILABLE);
 }
 
 /// Device loss (DESIGN.md §3, issue 8): a device destroyed between jobs, and one destroyed in

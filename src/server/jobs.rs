@@ -59,7 +59,7 @@ pub(super) async fn submit_job(State(state): State<Arc<AppState>>, body: Result<
     // when they take the job).
     let admitted = match shared {
         Some(_) => None,
-        None => Some(state.queue.admit().inspect_err(|error| state.job_finished("", &job.method.name, error.code.as_str(), 0.0, None))?),
+        None => Some(state.admit().inspect_err(|error| state.job_finished("", &job.method.name, error.code.as_str(), 0.0, None))?),
     };
     let id = state.new_id();
     // Durable before the 202: an accepted job survives a crash from here on.

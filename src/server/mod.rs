@@ -168,6 +168,18 @@ impl AppState {
         self.queue.drain(limit).await
     }
 
+    /// A place in the queue for a new job: none once the daemon is stopping (503, so a load
+    /// balancer retries elsewhere), none when the queue is full (429).
+    fn admit(&self) -> Result<tokio::sync::OwnedSemaphorePermit, JobError> {
+        if *self.stopping.borrow() {
+            return Err(JobError::new(
+                ErrorCode::ShuttingDown,
+                "the daemon is shutting down; retry on another replica or after it restarts",
+            ));
+        }
+        self.queue.admit()
+    }
+
     /// Tells waiting jobs and event streams that the daemon is stopping.
     pub fn begin_shutdown(&self) {
         self.stopping.send_replace(true);
@@ -430,7 +442,9 @@ fn body_error(state: &AppState, rejection: BytesRejection, unreadable: ErrorCode
 }
 
 async fn readyz(State(state): State<Arc<AppState>>) -> Response {
-    if state.ready.load(Ordering::SeqCst) {
+    if *state.stopping.borrow() {
+        (StatusCode::SERVICE_UNAVAILABLE, Json(json!({"status": "stopping"}))).into_response()
+    } else if state.ready.load(Ordering::SeqCst) {
         Json(json!({"status": "ready", "adapter": state.engine.gpu().adapter})).into_response()
     } else {
         (StatusCode::SERVICE_UNAVAILABLE, Json(json!({"status": "warming up"}))).into_response()
@@ -498,7 +512,7 @@ impl Drop for CancelWatch<'_> {
 
 /// Admits the job (or answers 429), waits for the device up to the deadline (or 503), renders.
 async fn queue_and_render(state: &Arc<AppState>, method: &str, job: Job) -> Result<(String, Arc<Rendered>), JobError> {
-    let admitted = state.queue.admit()?;
+    let admitted = state.admit()?;
     let mut watch = CancelWatch { state, method, armed: true };
     let waiting = state.metrics.job_queued();
     let device = state.queue.device().await;
