@@ -145,6 +145,14 @@ impl LightImage {
     /// Decodes a PNG (sRGB, decoded to linear) or an EXR (linear) light image, refusing
     /// images larger than `max_dim` from the header, before decoding the pixels.
     pub fn decode(bytes: &[u8], max_dim: u32, field: &str) -> JobResult<Self> {
+        // Decoders are untrusted-input parsers too: `cargo fuzz` found a tiled EXR on which the
+        // `exr` crate overflows (a panic with overflow checks on). A panic is this job's
+        // `invalid_asset`, never a lost worker thread.
+        std::panic::catch_unwind(|| Self::decode_unchecked(bytes, max_dim, field))
+            .unwrap_or_else(|_| Err(JobError::field(ErrorCode::InvalidAsset, field, "the light image could not be decoded")))
+    }
+
+    fn decode_unchecked(bytes: &[u8], max_dim: u32, field: &str) -> JobResult<Self> {
         let invalid = |message: String| JobError::field(ErrorCode::InvalidAsset, field, message);
         let mut reader = image::ImageReader::new(Cursor::new(bytes))
             .with_guessed_format()
@@ -487,5 +495,19 @@ mod tests {
         assert_eq!(err.field.as_deref(), Some("light.size[1]"));
         let err = AreaLight::new(Vec3::ZERO, Vec3::Y, Vec3::X, Vec2::ONE, -1.0).unwrap_err();
         assert_eq!(err.field.as_deref(), Some("light.intensity"));
+    }
+}
+
+#[cfg(test)]
+mod fuzz_regressions {
+    use super::*;
+
+    /// `cargo fuzz run light_image` found this: a tiled EXR on which the `exr` crate panics
+    /// when built with overflow checks (as fuzz builds are); either way it is `invalid_asset`.
+    #[test]
+    fn a_malformed_tiled_exr_is_an_invalid_asset() {
+        let bytes = include_bytes!("../fuzz/regressions/light_image-exr-tiles.exr");
+        let error = LightImage::decode(bytes, 64, "light.image").unwrap_err();
+        assert_eq!(error.code, ErrorCode::InvalidAsset, "{}", error.message);
     }
 }
