@@ -1262,20 +1262,8 @@ fn tokens_never_reach_the_logs() {
 /// an async job that could only fail later is refused before its 202.
 #[tokio::test(flavor = "multi_thread")]
 async fn limits_are_flags_listed_and_enforced_with_the_field_named() {
-    let address = free_address();
     let flags = ["--max-samples", "64", "--max-rounds", "4", "--max-json-depth", "6", "--max-vertices", "100", "--max-output-dim", "512"];
-    let _daemon = KillOnDrop(
-        std::process::Command::new(env!("CARGO_BIN_EXE_penumbra"))
-            .args(["serve", "--no-warm-up", "--job-store", "memory", "--listen", &address])
-            .args(flags)
-            .env("PENUMBRA_LOG", "warn")
-            .env("PENUMBRA_MAX_TRIANGLES", "5000")
-            .stderr(std::process::Stdio::null())
-            .spawn()
-            .unwrap(),
-    );
-    let base = format!("http://{address}");
-    wait_ready(&base).await;
+    let (_daemon, base) = serve(&[&["--job-store", "memory"], &flags[..]].concat(), &[("PENUMBRA_MAX_TRIANGLES", "5000")]).await;
     let client = reqwest::Client::new();
     let limits: Value = client.get(format!("{base}/v1/limits")).send().await.unwrap().json().await.unwrap();
     for (name, value) in [("max_samples", 64), ("max_rounds", 4), ("max_json_depth", 6), ("max_vertices", 100), ("max_triangles", 5000)] {
@@ -1333,6 +1321,25 @@ async fn limits_are_flags_listed_and_enforced_with_the_field_named() {
     assert_eq!(ok.status(), StatusCode::OK);
 }
 
+/// `penumbra serve ARGS` (no warm-up, a free loopback port, `warn` logs) with extra
+/// environment variables, once ready: the process (killed when dropped) and its base URL.
+async fn serve(args: &[&str], env: &[(&str, &str)]) -> (KillOnDrop, String) {
+    let address = free_address();
+    let daemon = KillOnDrop(
+        std::process::Command::new(env!("CARGO_BIN_EXE_penumbra"))
+            .args(["serve", "--no-warm-up", "--listen", &address])
+            .args(args)
+            .env("PENUMBRA_LOG", "warn")
+            .envs(env.iter().copied())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    let base = format!("http://{address}");
+    wait_ready(&base).await;
+    (daemon, base)
+}
+
 /// A child process killed when the test ends, passed or not.
 struct KillOnDrop(std::process::Child);
 
@@ -1348,17 +1355,7 @@ impl Drop for KillOnDrop {
 /// the jobs queued around it succeed; the scene is not cached, and the daemon serves on.
 #[tokio::test(flavor = "multi_thread")]
 async fn a_scene_that_fails_on_the_gpu_mid_queue_fails_alone() {
-    let address = free_address();
-    let _daemon = KillOnDrop(
-        std::process::Command::new(env!("CARGO_BIN_EXE_penumbra"))
-            .args(["serve", "--no-warm-up", "--job-store", "memory", "--listen", &address, "--max-texture-dim", "100000"])
-            .env("PENUMBRA_LOG", "warn")
-            .stderr(std::process::Stdio::null())
-            .spawn()
-            .unwrap(),
-    );
-    let base = format!("http://{address}");
-    wait_ready(&base).await;
+    let (_daemon, base) = serve(&["--job-store", "memory", "--max-texture-dim", "100000"], &[]).await;
     let client = reqwest::Client::new();
     let device_max = 16384 * 4; // Wider than any device allows (lavapipe: 16384; NVIDIA: 32768).
     let (gltf, bin) = common::test_gltf_with_texture(device_max + 1, 1);
@@ -1412,18 +1409,7 @@ async fn a_scene_that_fails_on_the_gpu_mid_queue_fails_alone() {
 #[tokio::test(flavor = "multi_thread")]
 async fn submitted_jobs_can_be_cancelled_waiting_or_running() {
     let data = tempdir::Dir::new();
-    let address = free_address();
-    let _daemon = KillOnDrop(
-        std::process::Command::new(env!("CARGO_BIN_EXE_penumbra"))
-            .args(["serve", "--no-warm-up", "--listen", &address, "--data-dir"])
-            .arg(data.path())
-            .env("PENUMBRA_LOG", "warn")
-            .stderr(std::process::Stdio::null())
-            .spawn()
-            .unwrap(),
-    );
-    let base = format!("http://{address}");
-    wait_ready(&base).await;
+    let (_daemon, base) = serve(&["--data-dir", data.path().to_str().unwrap()], &[]).await;
     let client = reqwest::Client::new();
     let submit = |job: Value| {
         let request = client.post(format!("{base}/v1/jobs")).json(&job);
