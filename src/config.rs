@@ -112,6 +112,17 @@ pub struct ServeConfig {
     #[arg(long, env = "PENUMBRA_RESULTS_BYTES", default_value_t = 1 << 30)]
     pub results_bytes: u64,
 
+    /// Bytes kept free on the embedded store's disk: the oldest stored results are dropped to
+    /// keep them, and submitted jobs whose result would not fit are refused with 507.
+    #[arg(long, env = "PENUMBRA_MIN_FREE_BYTES", default_value_t = 128 << 20)]
+    pub min_free_bytes: u64,
+
+    /// Seconds a finished job's outcome is retried while the store cannot take it (down, or
+    /// its disk full); then a shared store's job is left for another replica to claim, and an
+    /// embedded store's result is served from memory until a restart renders it again.
+    #[arg(long, env = "PENUMBRA_STORE_RETRY_SECS", default_value_t = 600.0)]
+    pub store_retry_secs: f64,
+
     /// Seconds a finished job's record, events and image stay readable.
     #[arg(long, env = "PENUMBRA_RESULTS_TTL_SECS", default_value_t = 3600.0)]
     pub results_ttl_secs: f64,
@@ -147,10 +158,43 @@ pub struct ServeConfig {
     #[arg(long, env = "PENUMBRA_CORS_ORIGINS", value_delimiter = ',')]
     pub cors_origins: Vec<String>,
 
+    /// Open client connections at most (like nginx's `worker_connections`); lowered, with a
+    /// warning, to the open-files limit (`ulimit -n`) less 128. At the cap, a new connection
+    /// still gets in and the one that has waited longest on its client is closed.
+    #[arg(long, env = "PENUMBRA_MAX_CONNECTIONS", default_value_t = 4096, value_parser = clap::value_parser!(u64).range(1..))]
+    pub max_connections: u64,
+
+    /// Seconds a client may take to send a request's head, from its first byte (and a new
+    /// connection to start its first request): nginx's `client_header_timeout`.
+    #[arg(long, env = "PENUMBRA_HEADER_TIMEOUT_SECS", default_value_t = 30.0)]
+    pub header_timeout_secs: f64,
+
+    /// Seconds a client may go without sending more of a request body: nginx's
+    /// `client_body_timeout`. The connection is closed.
+    #[arg(long, env = "PENUMBRA_BODY_TIMEOUT_SECS", default_value_t = 30.0)]
+    pub body_timeout_secs: f64,
+
+    /// Seconds an idle keep-alive connection stays open: nginx's `keepalive_timeout`.
+    #[arg(long, env = "PENUMBRA_KEEP_ALIVE_SECS", default_value_t = 75.0)]
+    pub keep_alive_secs: f64,
+
     /// Skip compiling pipelines and uploading the default scene before accepting jobs.
     #[arg(long, env = "PENUMBRA_NO_WARM_UP")]
     pub no_warm_up: bool,
 
     #[command(flatten)]
     pub render: RenderOptions,
+}
+
+impl ServeConfig {
+    /// The connection limits the flags ask for (before the file-descriptor limit lowers them).
+    pub fn connection_limits(&self) -> crate::server::connections::ConnectionLimits {
+        let secs = |s: f64| std::time::Duration::from_secs_f64(s.max(0.001));
+        crate::server::connections::ConnectionLimits {
+            max_connections: self.max_connections,
+            header_timeout: secs(self.header_timeout_secs),
+            body_timeout: secs(self.body_timeout_secs),
+            keep_alive_timeout: secs(self.keep_alive_secs),
+        }
+    }
 }

@@ -36,6 +36,8 @@ pub enum PathPolicy {
 /// A finished render: the encoded image and what it cost.
 #[derive(Debug, Clone)]
 pub struct Rendered {
+    /// The method that rendered it (`method.name` of the job).
+    pub method: String,
     pub bytes: Vec<u8>,
     pub format: OutputFormat,
     pub width: u32,
@@ -295,6 +297,7 @@ impl Engine {
         timings.phase("encode", start);
         timings.total_ms = started.elapsed().as_secs_f64() * 1e3;
         Ok(Rendered {
+            method: job.method.name.clone(),
             bytes,
             format: job.output.format,
             width: frame.width,

@@ -37,6 +37,11 @@ pub enum ErrorCode {
     DeadlineExceeded,
     /// The daemon is shutting down and admits no new job: retry on another replica, or later.
     ShuttingDown,
+    /// The job store does not answer (Redis down, the data directory failing): retry after
+    /// the `Retry-After` seconds.
+    StoreUnavailable,
+    /// The job store has no room for this job's result (its disk is at the free-space margin).
+    InsufficientStorage,
     /// No valid bearer token on a server that requires one.
     Unauthorized,
     /// The request conflicts with the resource's state (cancelling a finished job).
@@ -64,6 +69,8 @@ impl ErrorCode {
             ErrorCode::QueueFull => "queue_full",
             ErrorCode::DeadlineExceeded => "deadline_exceeded",
             ErrorCode::ShuttingDown => "shutting_down",
+            ErrorCode::StoreUnavailable => "store_unavailable",
+            ErrorCode::InsufficientStorage => "insufficient_storage",
             ErrorCode::Unauthorized => "unauthorized",
             ErrorCode::Conflict => "conflict",
             ErrorCode::Cancelled => "cancelled",
@@ -105,7 +112,8 @@ impl JobError {
         Self::new(ErrorCode::Internal, message)
     }
 
-    /// Whether the client caused this error (4xx) rather than the renderer (5xx).
+    /// Whether the message may be shown to the client as it is: every error but a failure
+    /// inside the renderer, whose details stay in the logs.
     pub fn is_client_error(&self) -> bool {
         self.code != ErrorCode::Internal
     }

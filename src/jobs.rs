@@ -179,6 +179,11 @@ impl JobStore {
         self.submitted_jobs().iter().find(|s| s.id == id).map(|s| s.events.clone())
     }
 
+    /// Stops holding a submitted job's events here (its state is then read from the store).
+    pub fn forget(&self, id: &str) {
+        self.submitted_jobs().retain(|s| s.id != id);
+    }
+
     /// Asks a submitted job held here to stop: a waiting one leaves the queue, a running one
     /// stops at its next phase or batch. `None`: not held here; `Some(false)`: it had
     /// already finished.

@@ -9,6 +9,8 @@ use prometheus::{Encoder, HistogramOpts, HistogramVec, IntCounter, IntCounterVec
 use crate::engine::EngineStats;
 use crate::gpu::AdapterSummary;
 use crate::methods::REGISTRY;
+use crate::server::connections::ConnectionStats;
+use crate::store::StoreStatus;
 use crate::timing::Timings;
 
 /// Latency buckets in seconds: 1 ms to 2 min, for a `hard` preview through a long `reference`.
@@ -25,6 +27,10 @@ pub struct Metrics {
     engine: IntGaugeVec,
     /// Brought up to `EngineStats::device_resets` at each scrape.
     device_resets: IntCounter,
+    /// Set from the store's health at each scrape.
+    store: IntGaugeVec,
+    /// Set from the connection tracker at each scrape.
+    connections: IntGaugeVec,
 }
 
 /// Counts a job in a gauge (queued, or in flight) until dropped.
@@ -64,6 +70,22 @@ impl Metrics {
         device.with_label_values(&[adapter.name.as_str(), adapter.backend.as_str(), adapter.device_type.as_str()]).set(1);
         let device_resets =
             IntCounter::new("device_resets_total", "Times the GPU device was lost and a new one opened").expect("valid metric");
+        let store = IntGaugeVec::new(
+            Opts::new(
+                "store",
+                "Job store: available (1/0), room (1/0: its disk above the margin), free_bytes, min_free_bytes, reserved_bytes, outages",
+            ),
+            &["what"],
+        )
+        .expect("valid metric");
+        let connections = IntGaugeVec::new(
+            Opts::new(
+                "connections",
+                "Client connections: open, max, and closed for header_timeouts, body_timeouts, idle_timeouts, shed (at the cap)",
+            ),
+            &["what"],
+        )
+        .expect("valid metric");
         for collector in [
             Box::new(device_resets.clone()) as Box<dyn prometheus::core::Collector>,
             Box::new(jobs.clone()),
@@ -72,11 +94,13 @@ impl Metrics {
             Box::new(in_flight.clone()),
             Box::new(queued.clone()),
             Box::new(engine.clone()),
+            Box::new(store.clone()),
+            Box::new(connections.clone()),
             Box::new(device),
         ] {
             registry.register(collector).expect("metric names are unique");
         }
-        Self { registry, jobs, latency, phases, in_flight, queued, engine, device_resets }
+        Self { registry, jobs, latency, phases, in_flight, queued, engine, device_resets, store, connections }
     }
 
     /// Counts a job as waiting for the device until the guard drops.
@@ -99,6 +123,38 @@ impl Metrics {
             self.latency.with_label_values(&[method]).observe(seconds);
             for phase in &timings.phases {
                 self.phases.with_label_values(&[method, phase.name]).observe(phase.cpu_ms / 1e3);
+            }
+        }
+    }
+
+    /// Sets the store and connection gauges from their state now (absent: not shown).
+    pub fn observe_service(&self, store: Option<StoreStatus>, connections: Option<ConnectionStats>) {
+        let gauge =
+            |vec: &IntGaugeVec, what: &str, value: u64| vec.with_label_values(&[what]).set(i64::try_from(value).unwrap_or(i64::MAX));
+        if let Some(s) = store {
+            for (what, value) in [
+                ("available", u64::from(s.available)),
+                ("room", u64::from(s.room)),
+                ("min_free_bytes", s.min_free_bytes),
+                ("reserved_bytes", s.reserved_bytes),
+                ("outages", s.outages),
+            ] {
+                gauge(&self.store, what, value);
+            }
+            if let Some(free) = s.free_bytes {
+                gauge(&self.store, "free_bytes", free);
+            }
+        }
+        if let Some(c) = connections {
+            for (what, value) in [
+                ("open", c.open),
+                ("max", c.max),
+                ("header_timeouts", c.header_timeouts),
+                ("body_timeouts", c.body_timeouts),
+                ("idle_timeouts", c.idle_timeouts),
+                ("shed", c.shed),
+            ] {
+                gauge(&self.connections, what, value);
             }
         }
     }

@@ -17,6 +17,19 @@ pub fn encode(frame: &FrameOutput, format: OutputFormat, exposure: f32) -> JobRe
     }
 }
 
+/// An upper bound on the bytes of an encoded result and its record, for promising disk space
+/// before rendering: PNG holds at most 4 bytes a pixel and a filter byte a row, EXR eight f32
+/// channels; neither codec expands incompressible data by 1/64 (deflate's stored blocks add 5
+/// bytes per 64 KiB, RLE one per 128), and headers, timings and counters fit in 64 KiB.
+pub fn max_result_bytes(width: u32, height: u32, format: OutputFormat) -> u64 {
+    let pixels = u64::from(width) * u64::from(height);
+    let raw = match format {
+        OutputFormat::Png => pixels * 4 + u64::from(height),
+        OutputFormat::Exr => pixels * 8 * 4,
+    };
+    raw + raw / 64 + 64 * 1024
+}
+
 /// A PNG at most `size` pixels on its longest side, from an encoded PNG or EXR result. EXR's
 /// linear values are sRGB-encoded as PNG output is (exposure 0), so previews look alike.
 pub fn thumbnail(encoded: &[u8], size: u32) -> JobResult<Vec<u8>> {

@@ -1099,7 +1099,8 @@ async fn a_job_that_keeps_killing_its_daemon_is_failed_with_a_reason() {
     }
     store.accept("plain", &small_job("png")).unwrap();
     let shared: Arc<dyn JobStore> = store.clone();
-    let (base, _dir, _, state) = start_configured(penumbra::engine::DEFAULT_CACHE_BYTES, |s| s.with_store(shared)).await;
+    let (base, _dir, _, state) =
+        start_configured(penumbra::engine::DEFAULT_CACHE_BYTES, |s| s.with_store(penumbra::store::Store::new(shared, "embedded", 0))).await;
     assert_eq!(state.resume_unfinished().await.unwrap(), 1);
     let client = reqwest::Client::new();
     let poison: Value = client.get(format!("{base}/v1/jobs/poison")).send().await.unwrap().json().await.unwrap();

@@ -502,7 +502,10 @@ fn a_shared_job_that_keeps_killing_replicas_is_failed_with_a_reason() {
     use penumbra::store::JobStore;
     let (redis_port, _redis) = start_redis();
     let url = format!("redis://127.0.0.1:{redis_port}/0");
-    let connect = || penumbra::store::RedisStore::open(&url, Duration::from_secs(60), Duration::from_millis(500)).ok();
+    let connect = || {
+        let store = penumbra::store::RedisStore::open(&url, Duration::from_secs(60), Duration::from_millis(500)).ok()?;
+        store.ping().is_ok().then_some(store)
+    };
     assert!(wait_until(Duration::from_secs(20), || connect().is_some()).is_some(), "redis-server did not start");
     let store = connect().unwrap();
     store.accept("poison", &serde_json::json!({"scene": {"builtin": "torus"}})).unwrap();

@@ -29,10 +29,27 @@ pub fn status_of(code: ErrorCode) -> StatusCode {
         | ErrorCode::InvalidAsset
         | ErrorCode::LimitExceeded => StatusCode::UNPROCESSABLE_ENTITY,
         ErrorCode::QueueFull => StatusCode::TOO_MANY_REQUESTS,
-        ErrorCode::DeadlineExceeded | ErrorCode::ShuttingDown => StatusCode::SERVICE_UNAVAILABLE,
+        ErrorCode::DeadlineExceeded | ErrorCode::ShuttingDown | ErrorCode::StoreUnavailable => StatusCode::SERVICE_UNAVAILABLE,
+        ErrorCode::InsufficientStorage => StatusCode::INSUFFICIENT_STORAGE,
         ErrorCode::Unauthorized => StatusCode::UNAUTHORIZED,
         ErrorCode::Conflict | ErrorCode::Cancelled => StatusCode::CONFLICT,
         ErrorCode::Internal => StatusCode::INTERNAL_SERVER_ERROR,
+    }
+}
+
+/// A failed store call as the client's error: 503 while the store is unavailable, 507 when it
+/// has no room; anything else is internal (logged, generic towards the client).
+pub fn store_error(error: crate::store::StoreError) -> JobError {
+    use crate::store::StoreError;
+    match error {
+        StoreError::Unavailable(detail) => {
+            tracing::debug!(%detail, "job store unavailable");
+            JobError::new(ErrorCode::StoreUnavailable, "the job store is unavailable; retry after the Retry-After seconds")
+        }
+        StoreError::Full(detail) => {
+            JobError::new(ErrorCode::InsufficientStorage, format!("the job store has no room for this job: {detail}"))
+        }
+        other => JobError::internal(format!("the job store failed: {other}")),
     }
 }
 
@@ -57,9 +74,15 @@ impl IntoResponse for ApiError {
         let error = self.0;
         let status = status_of(error.code);
         let mut response = (status, Json(json!({ "error": error_body(&error) }))).into_response();
-        if error.code == ErrorCode::QueueFull {
+        let retry_after = match error.code {
             // A job takes about a second on lavapipe: try again then.
-            response.headers_mut().insert(axum::http::header::RETRY_AFTER, axum::http::HeaderValue::from_static("1"));
+            ErrorCode::QueueFull => Some("1"),
+            // The store is probed every second; a blink is over in a few.
+            ErrorCode::StoreUnavailable => Some("2"),
+            _ => None,
+        };
+        if let Some(seconds) = retry_after {
+            response.headers_mut().insert(axum::http::header::RETRY_AFTER, axum::http::HeaderValue::from_static(seconds));
         }
         response
     }

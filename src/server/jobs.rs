@@ -25,13 +25,13 @@ pub(super) async fn job_record(State(state): State<Arc<AppState>>, Path(id): Pat
 pub(super) async fn stored_job(state: &AppState, id: &str) -> Result<Option<StoredJob>, ApiError> {
     let Some(store) = state.store.clone() else { return Ok(None) };
     let id = id.to_owned();
-    let stored = tokio::task::spawn_blocking(move || store.get(&id)).await.map_err(|e| JobError::internal(e.to_string()))?;
-    Ok(stored.map_err(|error| JobError::internal(format!("the job store failed: {error}")))?)
+    Ok(store.call(move |s| s.get(&id)).await.map_err(store_error)?)
 }
 
-/// `POST /v1/jobs`: validates and admits the job (4xx, or 429 when the queue is full), answers
-/// 202 with its id at once, and renders it in the background: `GET /v1/jobs/{id}` for its
-/// state, `/events` for server-sent progress, `/image` once it succeeded.
+/// `POST /v1/jobs`: validates and admits the job (4xx; 429 when the queue is full; 503 while
+/// the store does not answer; 507 when its disk has no room for the result), answers 202 with
+/// its id at once, and renders it in the background: `GET /v1/jobs/{id}` for its state,
+/// `/events` for server-sent progress, `/image` once it succeeded.
 pub(super) async fn submit_job(State(state): State<Arc<AppState>>, body: Result<Bytes, BytesRejection>) -> Result<Response, ApiError> {
     let body = body.map_err(|rejection| body_error(&state, rejection, ErrorCode::InvalidJson));
     let parsed = body.and_then(|body| {
@@ -43,41 +43,62 @@ pub(super) async fn submit_job(State(state): State<Arc<AppState>>, body: Result<
         Ok((job, sent))
     });
     let (job, sent) = parsed.inspect_err(|error| state.job_finished("", "", error.code.as_str(), 0.0, None))?;
-    let shared = state.store.clone().filter(|s| s.shared());
-    if let Some(store) = &shared {
-        // The shared queue is bounded as a whole, by the same --queue.
-        let store = store.clone();
-        let queued = tokio::task::spawn_blocking(move || store.queued()).await.map_err(|e| JobError::internal(e.to_string()))?;
-        let queued = queued.map_err(|error| JobError::internal(format!("the job store failed: {error}")))?;
-        if queued >= u64::from(state.queue_config.capacity) {
-            let error = JobError::new(ErrorCode::QueueFull, "the shared job queue is full; retry after the Retry-After seconds");
-            state.job_finished("", &job.method.name, error.code.as_str(), 0.0, None);
-            return Err(ApiError(error));
-        }
-    }
-    // A local place in the queue, unless the shared queue holds the job (its workers take one
-    // when they take the job).
-    let admitted = match shared {
-        Some(_) => None,
-        None => Some(state.admit().inspect_err(|error| state.job_finished("", &job.method.name, error.code.as_str(), 0.0, None))?),
-    };
-    let id = state.new_id();
-    // Durable before the 202: an accepted job survives a crash from here on.
-    if let Some(store) = state.store.clone() {
-        let stored_id = id.clone();
-        tokio::task::spawn_blocking(move || store.accept(&stored_id, &sent))
-            .await
-            .map_err(|e| JobError::internal(e.to_string()))?
-            .map_err(|error| {
-                tracing::error!(%error, "cannot record a submitted job");
-                JobError::internal("the job store failed; the job was not accepted")
-            })?;
-    }
-    if let Some(admitted) = admitted {
-        state.spawn_submitted(id.clone(), job, admitted);
-    }
+    let method = job.method.name.clone();
+    let id = accept_job(&state, job, sent).await.inspect_err(|error| state.job_finished("", &method, error.code.as_str(), 0.0, None))?;
     let links = json!({"id": id, "status": "queued", "record": format!("/v1/jobs/{id}"), "events": format!("/v1/jobs/{id}/events")});
     Ok((StatusCode::ACCEPTED, [(header::LOCATION, format!("/v1/jobs/{id}"))], Json(links)).into_response())
+}
+
+/// Admits a valid job and records it in the store before its 202: the store must answer
+/// (503) and, on a local disk, have room for the result (507); the queue must have a place
+/// (429). Returns the new job's id.
+async fn accept_job(state: &Arc<AppState>, job: Job, sent: Value) -> Result<String, JobError> {
+    let store = state.store.clone();
+    if store.as_ref().is_some_and(|s| !s.health().available()) {
+        // Known down: answered at once; the probe notices when it is back.
+        return Err(store_error(StoreError::Unavailable("the last call and probe failed".into())));
+    }
+    let shared = store.clone().filter(|s| s.shared());
+    if let Some(store) = &shared {
+        // The shared queue is bounded as a whole, by the same --queue.
+        let queued = store.call(|s| s.queued()).await.map_err(store_error)?;
+        if queued >= u64::from(state.queue_config.capacity) {
+            return Err(JobError::new(ErrorCode::QueueFull, "the shared job queue is full; retry after the Retry-After seconds"));
+        }
+    }
+    // Room for the result on a local store's disk, promised until it is stored.
+    let reservation = match store.as_ref().filter(|s| !s.shared()) {
+        Some(store) => {
+            let bytes = crate::output::max_result_bytes(job.output.width, job.output.height, job.output.format);
+            Some(store.reserve(bytes).await.map_err(store_error)?)
+        }
+        None => None,
+    };
+    // A local place in the queue, unless the shared queue holds the job (its workers take one
+    // when they take the job).
+    let admitted = if shared.is_some() { None } else { Some(state.admit()?) };
+    let mut id = new_job_id();
+    // Durable before the 202: an accepted job survives a crash from here on. Ids are random, so
+    // one the store already holds is a once-in-2^122 event; a fresh one is drawn, never an
+    // existing record overwritten.
+    if let Some(store) = &store {
+        let sent = Arc::new(sent);
+        for attempt in 1.. {
+            let (stored_id, sent) = (id.clone(), sent.clone());
+            match store.call(move |s| s.accept(&stored_id, &sent)).await {
+                Ok(()) => break,
+                Err(StoreError::Exists(_)) if attempt < 3 => id = new_job_id(),
+                Err(error) => {
+                    tracing::warn!(%error, "cannot record a submitted job");
+                    return Err(store_error(error));
+                }
+            }
+        }
+    }
+    if let Some(admitted) = admitted {
+        state.spawn_submitted(id.clone(), job, (admitted, reservation));
+    }
+    Ok(id)
 }
 
 /// A submitted job's life: wait for the device (up to the deadline; at shutdown with a
@@ -87,7 +108,7 @@ pub(super) async fn run_submitted(
     state: Arc<AppState>,
     id: String,
     job: Job,
-    admitted: tokio::sync::OwnedSemaphorePermit,
+    admitted: Admitted,
     events: tokio::sync::watch::Sender<JobEvent>,
     cancel: tokio::sync::watch::Receiver<bool>,
 ) {
@@ -106,7 +127,7 @@ pub(super) async fn run_submitted(
     };
     drop(waiting);
     match device {
-        Ok(device) => render_and_store(&state, id, job, vec![admitted, device], events, cancel, started).await,
+        Ok(device) => render_and_store(&state, id, job, (admitted, device), events, cancel, started).await,
         Err(error) => finish_failed(&state, &id, &job.method.name, error, started, &events).await,
     }
 }
@@ -124,21 +145,24 @@ pub(super) async fn work_shared_queue(state: Arc<AppState>, consumer: String) {
         let Some(device) = device.filter(|_| !*stopping.borrow()) else { return };
         // Asked without waiting: an idle worker must not sit on the device slot that a
         // synchronous render needs, so when the queue is empty it lets go and asks again soon.
-        let (taker, name) = (store.clone(), consumer.clone());
-        let taken = tokio::task::spawn_blocking(move || taker.next(&name, std::time::Duration::ZERO)).await;
-        let stored = match taken {
-            Ok(Ok(Some(stored))) => stored,
-            Ok(Ok(None)) => {
+        let name = consumer.clone();
+        let stored = match store.call(move |s| s.next(&name, std::time::Duration::ZERO)).await {
+            // Claimed back while this replica still holds it, storing its finished result
+            // through an outage: not rendered again; storing it acknowledges the entry.
+            Ok(Some(stored)) if state.jobs.submitted(&stored.id).is_some_and(|e| !e.borrow().finished()) => continue,
+            Ok(Some(stored)) => stored,
+            Ok(None) => {
                 drop(device);
                 tokio::time::sleep(SHARED_QUEUE_POLL).await;
                 continue;
             }
-            Ok(Err(error)) => {
-                tracing::warn!(%error, "cannot take a job from the shared queue; retrying in 1 s");
+            Err(error) => {
+                // An outage is logged once by the store's health.
+                tracing::debug!(%error, "cannot take a job from the shared queue; retrying in 1 s");
+                drop(device);
                 tokio::time::sleep(std::time::Duration::from_secs(1)).await;
                 continue;
             }
-            Err(_) => continue,
         };
         let Ok(admitted) = state.queue.admit_waiting().await else { return };
         let started = std::time::Instant::now();
@@ -162,18 +186,18 @@ pub(super) async fn work_shared_queue(state: Arc<AppState>, consumer: String) {
         // it if a replica that got its `DELETE` marked it cancelled in the store.
         let (beat_store, beat_consumer, beat_job, beat_state) = (store.clone(), consumer.clone(), stored.clone(), state.clone());
         let heartbeat = tokio::spawn(async move {
-            let mut tick = tokio::time::interval(beat_store.heartbeat_every());
+            let mut tick = tokio::time::interval(beat_store.blocking().heartbeat_every());
             loop {
                 tick.tick().await;
-                let (s, c, j) = (beat_store.clone(), beat_consumer.clone(), beat_job.clone());
-                match tokio::task::spawn_blocking(move || s.heartbeat(&c, &j).and_then(|()| s.cancelled(&j.id))).await {
-                    Ok(Ok(true)) => drop(beat_state.jobs.cancel(&beat_job.id)),
-                    Ok(Err(error)) => tracing::warn!(%error, "cannot renew the claim on a job"),
+                let (c, j) = (beat_consumer.clone(), beat_job.clone());
+                match beat_store.call(move |s| s.heartbeat(&c, &j).and_then(|()| s.cancelled(&j.id))).await {
+                    Ok(true) => drop(beat_state.jobs.cancel(&beat_job.id)),
+                    Err(error) => tracing::debug!(%error, "cannot renew the claim on a job"),
                     _ => {}
                 }
             }
         });
-        render_and_store(&state, stored.id.clone(), job, vec![admitted, device], events, cancel, started).await;
+        render_and_store(&state, stored.id.clone(), job, ((admitted, None), device), events, cancel, started).await;
         heartbeat.abort();
     }
 }
@@ -188,13 +212,15 @@ pub(super) fn abandoned(attempts: u32) -> Value {
     })
 }
 
-/// Renders a job that holds its device slot (`permits`), reporting progress (to the shared
-/// store too, at most every 250 ms), and stores the outcome.
+/// Renders a job that holds its device slot, reporting progress (to the shared store too, at
+/// most every 250 ms), and stores the outcome. The device slot goes as soon as the render is
+/// done; the queue place and the promised room stay until the outcome is stored, which is
+/// retried while the store cannot take it (`persist`).
 pub(super) async fn render_and_store(
     state: &Arc<AppState>,
     id: String,
     job: Job,
-    permits: Vec<tokio::sync::OwnedSemaphorePermit>,
+    (admitted, device): (Admitted, tokio::sync::OwnedSemaphorePermit),
     events: tokio::sync::watch::Sender<JobEvent>,
     cancel: tokio::sync::watch::Receiver<bool>,
     started: std::time::Instant,
@@ -210,11 +236,13 @@ pub(super) async fn render_and_store(
     let outcome = tokio::task::spawn_blocking(move || {
         span.in_scope(|| {
             if let Some(store) = &store {
-                if let Err(error) = store.start(&job_id) {
-                    tracing::warn!(%error, "cannot mark the job running in the store");
+                let started = store.blocking().start(&job_id);
+                store.health().observe(&started);
+                if let Err(error) = started {
+                    tracing::debug!(%error, "cannot mark the job running in the store");
                 }
             }
-            fetch_shared_uploads(&engine, store.as_deref(), &job)?;
+            fetch_shared_uploads(&engine, store.as_ref(), &job)?;
             let last_shared = std::sync::Mutex::new(std::time::Instant::now());
             let report = |done, total| {
                 progress.send_modify(|event| {
@@ -225,36 +253,94 @@ pub(super) async fn render_and_store(
                     let mut last = last_shared.lock().unwrap_or_else(|p| p.into_inner());
                     if last.elapsed() >= std::time::Duration::from_millis(250) {
                         *last = std::time::Instant::now();
-                        let _ = store.progress(&job_id, done, total);
+                        let _ = store.blocking().progress(&job_id, done, total);
                     }
                 }
             };
-            let rendered = engine.render_observed(&job, &Cancellable { progress: report, cancelled: || *cancel.borrow() })?;
-            if let Some(store) = &store {
-                let stored = store
-                    .succeed(&job_id, &job_json(&job_id, &rendered), &rendered.bytes)
-                    .map_err(|error| JobError::internal(format!("cannot store the result: {error}")))?;
-                if !stored {
-                    return Err(crate::render::cancelled_error());
-                }
-            }
-            Ok(rendered)
+            engine.render_observed(&job, &Cancellable { progress: report, cancelled: || *cancel.borrow() })
         })
     })
     .await
     .unwrap_or_else(|e| Err(JobError::internal(format!("render task failed: {e}"))));
     drop(running);
-    match outcome {
-        Ok(rendered) => {
-            state.job_finished(&id, &method, "ok", started.elapsed().as_secs_f64(), Some(&rendered));
-            tracing::info!(%id, total_ms = rendered.timings.total_ms, "job done");
-            state.jobs.keep(id, Arc::new(rendered));
-            events.send_modify(|event| event.finish("succeeded", None));
+    drop(device);
+    let rendered = match outcome {
+        Ok(rendered) => Arc::new(rendered),
+        Err(error) => {
+            finish_failed(state, &id, &method, error, started, &events).await;
+            drop(admitted);
+            return;
         }
-        Err(error) => finish_failed(state, &id, &method, error, started, &events).await,
+    };
+    if state.store.is_some() {
+        let (stored_id, stored) = (id.clone(), rendered.clone());
+        let record = Arc::new(job_json(&id, &rendered));
+        match persist(state, &id, "result", move |s| s.succeed(&stored_id, &record, &stored.bytes)).await {
+            Ok(true) => {}
+            // Cancelled through the store while it rendered: the client was told so.
+            Ok(false) => {
+                finish_failed(state, &id, &method, crate::render::cancelled_error(), started, &events).await;
+                drop(admitted);
+                return;
+            }
+            Err(error) if state.store.as_ref().is_some_and(|s| s.shared()) => {
+                // Left pending on the shared queue: another replica (or this one) claims it
+                // once the store is back, and renders it again.
+                tracing::error!(%id, %error, "gave up storing a finished result; the job stays claimable on the shared queue");
+                state.jobs.forget(&id);
+                drop(admitted);
+                return;
+            }
+            Err(error) => {
+                tracing::error!(%id, %error, "gave up storing a finished result; it is served from memory until a restart renders it again");
+            }
+        }
     }
-    // The queue places go only now: a drain that sees them back finds the job recorded.
-    drop(permits);
+    state.job_finished(&id, &method, "ok", started.elapsed().as_secs_f64(), Some(&rendered));
+    tracing::info!(%id, total_ms = rendered.timings.total_ms, "job done");
+    state.jobs.keep(id, rendered);
+    events.send_modify(|event| event.finish("succeeded", None));
+    // The queue place goes only now: a drain that sees it back finds the job recorded.
+    drop(admitted);
+}
+
+/// Writes a finished job's outcome to the store, retrying with backoff (0.25 s, doubling to
+/// 5 s) while the store is unavailable or full, for up to `--store-retry-secs` or until the
+/// daemon stops — so no accepted job fails because the store blinked. Err: the last error,
+/// once it gave up or met an error that retrying cannot cure.
+pub(super) async fn persist<T: Send + 'static>(
+    state: &AppState,
+    id: &str,
+    what: &'static str,
+    write: impl Fn(&dyn DurableStore) -> crate::store::StoreResult<T> + Clone + Send + 'static,
+) -> crate::store::StoreResult<T> {
+    let Some(store) = &state.store else { return Err(StoreError::Other(anyhow::anyhow!("no store"))) };
+    let give_up = std::time::Instant::now() + state.store_retry;
+    let mut stopping = state.stopping.subscribe();
+    let mut wait = std::time::Duration::from_millis(250);
+    let mut retried = false;
+    loop {
+        let attempt = write.clone();
+        match store.call(move |s| attempt(s)).await {
+            Err(error) if error.is_transient() && std::time::Instant::now() + wait < give_up && !*stopping.borrow() => {
+                if !retried {
+                    tracing::warn!(%id, %error, "cannot store the job's {what} yet; retrying until the store takes it");
+                    retried = true;
+                }
+                tokio::select! {
+                    _ = tokio::time::sleep(wait) => {}
+                    _ = stopping.wait_for(|stop| *stop) => {}
+                }
+                wait = (wait * 2).min(std::time::Duration::from_secs(5));
+            }
+            outcome => {
+                if retried && outcome.is_ok() {
+                    tracing::info!(%id, "stored the job's {what} after the store came back");
+                }
+                return outcome;
+            }
+        }
+    }
 }
 
 /// Records, stores and announces a job's failure (or cancellation).
@@ -276,11 +362,14 @@ pub(super) async fn finish_failed(
     events.send_modify(|event| event.finish(status, Some(detail)));
 }
 
+/// Stores a job's failure, retried as results are (`persist`).
 pub(super) async fn store_failure(state: &AppState, id: &str, detail: Value) {
-    let Some(store) = state.store.clone() else { return };
+    if state.store.is_none() {
+        return;
+    }
     let stored_id = id.to_owned();
-    if !matches!(tokio::task::spawn_blocking(move || store.fail(&stored_id, &detail)).await, Ok(Ok(()))) {
-        tracing::warn!(%id, "cannot store the job's failure");
+    if let Err(error) = persist(state, id, "failure", move |s| s.fail(&stored_id, &detail)).await {
+        tracing::warn!(%id, %error, "cannot store the job's failure");
     }
 }
 
@@ -350,14 +439,24 @@ pub(super) fn event_of(stored: &StoredJob) -> JobEvent {
 /// Polls the store for a job another replica runs, every 50 ms (one small GET: cheap for
 /// Redis, and what a client waits at most beyond the job), until it finishes, its record
 /// goes, or nobody listens any more.
-pub(super) async fn follow_stored(store: Arc<dyn DurableStore>, id: String, events: tokio::sync::watch::Sender<JobEvent>) {
+pub(super) async fn follow_stored(store: Store, id: String, events: tokio::sync::watch::Sender<JobEvent>) {
+    let mut wait = std::time::Duration::from_millis(50);
     loop {
-        tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+        tokio::time::sleep(wait).await;
         if events.receiver_count() == 0 {
             return;
         }
-        let (reader, job) = (store.clone(), id.clone());
-        let Ok(Ok(Some(stored))) = tokio::task::spawn_blocking(move || reader.get(&job)).await else { return };
+        let job = id.clone();
+        let stored = match store.call(move |s| s.get(&job)).await {
+            Ok(Some(stored)) => stored,
+            Ok(None) => return,
+            // The store blinked: keep following, less often, until it answers.
+            Err(_) => {
+                wait = std::time::Duration::from_secs(1);
+                continue;
+            }
+        };
+        wait = std::time::Duration::from_millis(50);
         let event = event_of(&stored);
         let finished = event.finished();
         events.send_if_modified(|current| {
@@ -414,11 +513,7 @@ pub(super) async fn job_image(State(state): State<Arc<AppState>>, Path(id): Path
     }
     let Some(store) = state.store.clone() else { return Err(unknown_job(&id)) };
     let image_id = id.clone();
-    let bytes = tokio::task::spawn_blocking(move || store.image(&image_id))
-        .await
-        .map_err(|e| JobError::internal(e.to_string()))?
-        .map_err(|error| JobError::internal(format!("the job store failed: {error}")))?
-        .ok_or_else(|| unknown_job(&id))?;
+    let bytes = store.call(move |s| s.image(&image_id)).await.map_err(store_error)?.ok_or_else(|| unknown_job(&id))?;
     let mime = if stored.result.as_ref().is_some_and(|r| r["format"] == "exr") { "image/x-exr" } else { "image/png" };
     Ok(([(header::CONTENT_TYPE, mime)], bytes).into_response())
 }

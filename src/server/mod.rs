@@ -4,12 +4,13 @@
 //! pool so the async workers keep answering health checks while the device is busy.
 
 pub mod auth;
+pub mod connections;
 mod dashboard;
 pub mod error;
 mod jobs;
 mod uploads;
 
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 use axum::body::Bytes;
@@ -30,9 +31,9 @@ use crate::light::BUILTIN_LIGHT_IMAGES;
 use crate::methods::REGISTRY;
 use crate::render::Cancellable;
 use crate::scene::builtin::BUILTIN_SCENES;
-use crate::store::{JobStore as DurableStore, StoredJob, MAX_ATTEMPTS};
+use crate::store::{new_job_id, JobStore as DurableStore, Store, StoreError, StoredJob, MAX_ATTEMPTS};
 use crate::uploads::{content_id, is_content_id, Kind};
-use error::ApiError;
+use error::{store_error, ApiError};
 use jobs::{
     abandoned, cancel_job, failure_detail, job_events, job_image, job_record, job_thumbnail, run_submitted, submit_job, work_shared_queue,
 };
@@ -47,6 +48,10 @@ pub const DEFAULT_RESULTS_TTL: std::time::Duration = std::time::Duration::from_s
 /// waits for an idle replica).
 const SHARED_QUEUE_POLL: std::time::Duration = std::time::Duration::from_millis(50);
 
+/// How long a finished render's outcome is retried while the store cannot take it, unless
+/// configured (`--store-retry-secs`).
+pub const DEFAULT_STORE_RETRY: std::time::Duration = std::time::Duration::from_secs(600);
+
 /// Finished jobs remembered for the dashboard's charts.
 const RECENT_JOBS: usize = 200;
 
@@ -60,7 +65,9 @@ pub struct AppState {
     /// The last finished jobs, for `/v1/stats` and the dashboard.
     recent: RecentJobs,
     /// Where submitted jobs and their results are kept durably (None: memory only).
-    store: Option<Arc<dyn DurableStore>>,
+    store: Option<Store>,
+    /// How long a finished job's outcome is retried while the store cannot take it.
+    store_retry: std::time::Duration,
     /// Set at shutdown: event streams end (clients reconnect elsewhere or after the restart),
     /// and with a durable store, jobs still waiting for the device stay queued there for the
     /// next start instead of holding the shutdown up.
@@ -70,8 +77,9 @@ pub struct AppState {
     /// Allowed cross-origin callers (None: CORS closed).
     cors: Option<tower_http::cors::CorsLayer>,
     ready: AtomicBool,
-    next_id: AtomicU64,
     started: std::time::SystemTime,
+    /// The client connections of `serve` (None: the router is driven directly).
+    connections: Option<Arc<connections::Tracker>>,
 }
 
 impl AppState {
@@ -84,12 +92,13 @@ impl AppState {
             results_kept,
             recent: RecentJobs::new(RECENT_JOBS),
             store: None,
+            store_retry: DEFAULT_STORE_RETRY,
             stopping: tokio::sync::watch::channel(false).0,
             auth: None,
             cors: None,
             engine,
             ready: AtomicBool::new(false),
-            next_id: AtomicU64::new(1),
+            connections: None,
             started: std::time::SystemTime::now(),
         }
     }
@@ -99,8 +108,19 @@ impl AppState {
     }
 
     /// Keeps submitted jobs and their results in `store`, so that they survive a restart.
-    pub fn with_store(self, store: Arc<dyn DurableStore>) -> Self {
+    pub fn with_store(self, store: Store) -> Self {
         Self { store: Some(store), ..self }
+    }
+
+    /// Reports these connections in `/metrics` and `/v1/stats`.
+    pub fn with_connections(self, tracker: Arc<connections::Tracker>) -> Self {
+        Self { connections: Some(tracker), ..self }
+    }
+
+    /// Retries storing a finished job's outcome for up to `retry` while the store cannot take
+    /// it (then gives up: see `jobs::persist`).
+    pub fn with_store_retry(self, retry: std::time::Duration) -> Self {
+        Self { store_retry: retry, ..self }
     }
 
     /// Requires one of these bearer tokens on `/v1` (and `/metrics` unless it is open).
@@ -190,7 +210,7 @@ impl AppState {
     /// Returns how many were resumed.
     pub async fn resume_unfinished(self: &Arc<Self>) -> anyhow::Result<usize> {
         let Some(store) = self.store.clone() else { return Ok(0) };
-        let unfinished = tokio::task::spawn_blocking(move || store.unfinished()).await??;
+        let unfinished = store.call(|s| s.unfinished()).await?;
         let mut resumed = 0;
         for stored in unfinished {
             let job = Job::from_json_limited(stored.job.to_string().as_bytes(), self.engine.limits());
@@ -198,7 +218,9 @@ impl AppState {
                 Ok(_) if stored.attempts >= MAX_ATTEMPTS => Some(abandoned(stored.attempts)),
                 Ok(job) => {
                     let admitted = self.queue.admit_waiting().await?;
-                    self.spawn_submitted(stored.id.clone(), job, admitted);
+                    let reservation =
+                        store.reserve_accepted(crate::output::max_result_bytes(job.output.width, job.output.height, job.output.format));
+                    self.spawn_submitted(stored.id.clone(), job, (admitted, Some(reservation)));
                     resumed += 1;
                     None
                 }
@@ -206,15 +228,16 @@ impl AppState {
             };
             if let Some(detail) = failure {
                 tracing::warn!(id = %stored.id, %detail, "stored job failed at resumption");
-                let store = self.store.clone();
-                tokio::task::spawn_blocking(move || store.map(|s| s.fail(&stored.id, &detail))).await?.transpose()?;
+                store.call(move |s| s.fail(&stored.id, &detail)).await?;
             }
         }
         Ok(resumed)
     }
 
-    /// Registers a submitted job's event channel and starts its life in the background.
-    fn spawn_submitted(self: &Arc<Self>, id: String, job: Job, admitted: tokio::sync::OwnedSemaphorePermit) {
+    /// Registers a submitted job's event channel and starts its life in the background; it
+    /// holds its place in the queue and the room promised to its result until its outcome is
+    /// stored.
+    fn spawn_submitted(self: &Arc<Self>, id: String, job: Job, admitted: Admitted) {
         let (events, _) = tokio::sync::watch::channel(JobEvent::status("queued"));
         let cancel = self.jobs.submit(id.clone(), events.clone());
         let state = self.clone();
@@ -241,12 +264,12 @@ impl AppState {
             let mut tick = tokio::time::interval(std::time::Duration::from_secs(30));
             loop {
                 tick.tick().await;
-                let store = store.clone();
-                match tokio::task::spawn_blocking(move || store.expire(ttl, max_image_bytes)).await {
-                    Ok(Ok((0, 0))) => {}
-                    Ok(Ok((records, images))) => tracing::info!(records, images, "expired stored results"),
-                    Ok(Err(error)) => tracing::warn!(%error, "expiring stored results failed"),
-                    Err(_) => {}
+                match store.call(move |s| s.expire(ttl, max_image_bytes)).await {
+                    Ok((0, 0)) => {}
+                    Ok((records, images)) => tracing::info!(records, images, "expired stored results"),
+                    // An outage is logged once by the store's health; other failures here.
+                    Err(StoreError::Unavailable(_)) => {}
+                    Err(error) => tracing::warn!(%error, "expiring stored results failed"),
                 }
             }
         });
@@ -256,12 +279,23 @@ impl AppState {
         self.ready.store(true, Ordering::SeqCst);
     }
 
-    /// A job id unique to this process: start time and a counter.
-    fn new_id(&self) -> String {
-        let epoch = self.started.duration_since(std::time::UNIX_EPOCH).map(|d| d.as_millis()).unwrap_or(0);
-        format!("{epoch:012x}{:08x}", self.next_id.fetch_add(1, Ordering::Relaxed))
+    /// Why the daemon cannot take submitted jobs now, if it cannot: its store does not
+    /// answer, or its disk is at the free-space margin.
+    fn store_trouble(&self) -> Option<&'static str> {
+        let health = self.store.as_ref()?.health();
+        if !health.available() {
+            Some("store unavailable")
+        } else if !health.room() {
+            Some("insufficient storage")
+        } else {
+            None
+        }
     }
 }
+
+/// What a submitted job holds until its outcome is stored: its place in the queue, and the
+/// room promised to its result on a local store's disk.
+pub(crate) type Admitted = (tokio::sync::OwnedSemaphorePermit, Option<crate::store::health::Reservation>);
 
 pub fn app(state: Arc<AppState>) -> Router {
     let body_limit = state.engine.limits().max_body_bytes;
@@ -359,18 +393,25 @@ pub async fn serve(config: ServeConfig, engine: Arc<Engine>) -> anyhow::Result<(
         "memory" => tracing::warn!("job store in memory: submitted jobs are lost when the daemon stops"),
         "embedded" => {
             let store = crate::store::EmbeddedStore::open(&config.data_dir)?;
-            tracing::info!(data_dir = %config.data_dir.display(), "job store: embedded");
-            state = state.with_store(Arc::new(store));
+            tracing::info!(data_dir = %config.data_dir.display(), min_free_bytes = config.min_free_bytes, "job store: embedded");
+            state = state.with_store(Store::new(Arc::new(store), "embedded", config.min_free_bytes));
         }
         url if url.starts_with("redis://") => {
             let claim_idle = std::time::Duration::from_secs_f64(config.claim_idle_secs.max(0.5));
             let store = crate::store::RedisStore::open(url, ttl, claim_idle)?;
             tracing::info!("job store: redis (shared queue; this replica takes jobs from it)");
-            state = state.with_store(Arc::new(store));
+            state = state.with_store(Store::new(Arc::new(store), "redis", 0));
         }
         other => anyhow::bail!("unknown --job-store `{other}` (embedded, memory or redis://HOST:PORT/DB)"),
     }
-    let state = Arc::new(state);
+    let tracker = connections::Tracker::new(config.connection_limits().within_fd_limit());
+    let state = Arc::new(
+        state.with_store_retry(std::time::Duration::from_secs_f64(config.store_retry_secs.max(0.0))).with_connections(tracker.clone()),
+    );
+    if let Some(store) = &state.store {
+        store.probe().await;
+        store.spawn_probe();
+    }
     let resumed = state.resume_unfinished().await?;
     if resumed > 0 {
         tracing::info!(resumed, "resumed jobs accepted before the last stop");
@@ -378,7 +419,9 @@ pub async fn serve(config: ServeConfig, engine: Arc<Engine>) -> anyhow::Result<(
     state.spawn_expiry(ttl, config.results_bytes);
     let listener = tokio::net::TcpListener::bind(config.listen).await?;
     let lavapipe_threads = std::env::var("LP_NUM_THREADS").unwrap_or_else(|_| "unset".into());
-    tracing::info!(address = %listener.local_addr()?, lavapipe_threads, "listening");
+    tracing::info!(address = %listener.local_addr()?, lavapipe_threads, max_connections = tracker.stats().max, "listening");
+    tracker.spawn_sweeper();
+    let listener = connections::TrackedListener::new(listener, tracker);
     let warm = state.clone();
     let no_warm_up = config.no_warm_up;
     let replica = std::env::var("HOSTNAME").ok().filter(|h| !h.is_empty()).unwrap_or_else(|| config.listen.to_string());
@@ -403,7 +446,10 @@ pub async fn serve(config: ServeConfig, engine: Arc<Engine>) -> anyhow::Result<(
         shutdown_signal().await;
         stopping.begin_shutdown();
     };
-    axum::serve(listener, app(state.clone())).with_graceful_shutdown(signal).await?;
+    let service = app(state.clone())
+        .layer(axum::middleware::from_fn(connections::track))
+        .into_make_service_with_connect_info::<connections::ConnRef>();
+    axum::serve(listener, service).with_graceful_shutdown(signal).await?;
     // Requests in flight have finished; jobs submitted with POST /v1/jobs may still run.
     if !state.drain(state.queue.deadline + std::time::Duration::from_secs(600)).await {
         tracing::warn!("shut down with submitted jobs unfinished");
@@ -441,13 +487,21 @@ fn body_error(state: &AppState, rejection: BytesRejection, unreadable: ErrorCode
     }
 }
 
+/// `GET /readyz`: 200 once warm, 503 while warming up, stopping, or unable to take submitted
+/// jobs (the store does not answer, or its disk is at the margin) — so a load balancer sends
+/// work elsewhere while `/healthz` stays 200 and nothing restarts a healthy process.
 async fn readyz(State(state): State<Arc<AppState>>) -> Response {
+    let unavailable = |status: &str| (StatusCode::SERVICE_UNAVAILABLE, Json(json!({"status": status}))).into_response();
     if *state.stopping.borrow() {
-        (StatusCode::SERVICE_UNAVAILABLE, Json(json!({"status": "stopping"}))).into_response()
-    } else if state.ready.load(Ordering::SeqCst) {
-        Json(json!({"status": "ready", "adapter": state.engine.gpu().adapter})).into_response()
+        unavailable("stopping")
+    } else if !state.ready.load(Ordering::SeqCst) {
+        unavailable("warming up")
+    } else if let Some(trouble) = state.store_trouble() {
+        let mut response = unavailable(trouble);
+        response.headers_mut().insert(header::RETRY_AFTER, HeaderValue::from_static("2"));
+        response
     } else {
-        (StatusCode::SERVICE_UNAVAILABLE, Json(json!({"status": "warming up"}))).into_response()
+        Json(json!({"status": "ready", "adapter": state.engine.gpu().adapter})).into_response()
     }
 }
 
@@ -542,7 +596,7 @@ async fn render_job(
     job: Job,
     permits: (tokio::sync::OwnedSemaphorePermit, tokio::sync::OwnedSemaphorePermit),
 ) -> Result<(String, Arc<Rendered>), JobError> {
-    let id = state.new_id();
+    let id = new_job_id();
     let span = tracing::info_span!("job", %id, method = %job.method.name);
     let cancel = Arc::new(AtomicBool::new(false));
     let _client = CancelOnDrop(cancel.clone());
@@ -552,7 +606,7 @@ async fn render_job(
         span.in_scope(|| {
             let started = std::time::Instant::now();
             let state = task_state;
-            fetch_shared_uploads(&state.engine, state.store.as_deref(), &job)?;
+            fetch_shared_uploads(&state.engine, state.store.as_ref(), &job)?;
             let observer = Cancellable {
                 progress: |done, total| tracing::debug!(done, total, "progress"),
                 cancelled: || cancel.load(Ordering::Relaxed),
@@ -576,6 +630,7 @@ async fn render_job(
 
 /// `GET /metrics`: Prometheus text format.
 async fn metrics(State(state): State<Arc<AppState>>) -> Response {
+    state.metrics.observe_service(state.store.as_ref().map(|s| s.health().status()), state.connections.as_ref().map(|c| c.stats()));
     let text = state.metrics.encode(&state.engine.stats());
     ([(header::CONTENT_TYPE, HeaderValue::from_static("text/plain; version=0.0.4; charset=utf-8"))], text).into_response()
 }
@@ -593,6 +648,8 @@ async fn stats(State(state): State<Arc<AppState>>) -> Json<Value> {
         "jobs_in_flight": state.metrics.in_flight(),
         "jobs_queued": state.metrics.queued(),
         "queue": {"capacity": state.queue_config.capacity, "concurrency": state.queue_config.concurrency},
+        "store": state.store.as_ref().map(|s| s.health().status()),
+        "connections": state.connections.as_ref().map(|c| c.stats()),
         "engine": state.engine.stats(),
         "jobs": {
             "per_minute": state.recent.per_minute(std::time::Duration::from_secs(60)),
@@ -606,6 +663,7 @@ fn job_json(id: &str, rendered: &Rendered) -> Value {
     json!({
         "id": id,
         "status": "succeeded",
+        "method": rendered.method,
         "width": rendered.width,
         "height": rendered.height,
         "format": rendered.format,

@@ -27,7 +27,9 @@ pub(super) async fn upload(state: Arc<AppState>, body: Result<Bytes, BytesReject
     let stored = move || {
         let receipt = engine.upload(kind, &bytes)?;
         if let Some(store) = shared {
-            store.put_upload(kind, &receipt.id, &bytes).map_err(|e| JobError::internal(format!("cannot share the upload: {e}")))?;
+            let shared = store.blocking().put_upload(kind, &receipt.id, &bytes);
+            store.health().observe(&shared);
+            shared.map_err(store_error)?;
         }
         Ok(receipt)
     };
@@ -51,9 +53,10 @@ pub(super) fn upload_routes(kind: Kind) -> axum::routing::MethodRouter<Arc<AppSt
             return StatusCode::OK;
         }
         let Some(store) = state.store.clone().filter(|s| s.shared()) else { return StatusCode::NOT_FOUND };
-        match tokio::task::spawn_blocking(move || store.has_upload(kind, &id)).await {
-            Ok(Ok(true)) => StatusCode::OK,
-            _ => StatusCode::NOT_FOUND,
+        match store.call(move |s| s.has_upload(kind, &id)).await {
+            Ok(true) => StatusCode::OK,
+            Ok(false) => StatusCode::NOT_FOUND,
+            Err(_) => StatusCode::SERVICE_UNAVAILABLE,
         }
     })
     .delete(move |state: State<Arc<AppState>>, id: Path<String>| delete_upload(kind, state, id))
@@ -88,7 +91,7 @@ pub(super) async fn delete_upload(kind: Kind, State(state): State<Arc<AppState>>
     let mut deleted = state.engine.delete_upload(kind, &id);
     if let Some(store) = state.store.clone().filter(|s| s.shared()) {
         let shared_id = id.clone();
-        deleted |= matches!(tokio::task::spawn_blocking(move || store.delete_upload(kind, &shared_id)).await, Ok(Ok(true)));
+        deleted |= matches!(store.call(move |s| s.delete_upload(kind, &shared_id)).await, Ok(true));
     }
     if deleted {
         StatusCode::NO_CONTENT.into_response()
@@ -99,7 +102,7 @@ pub(super) async fn delete_upload(kind: Kind, State(state): State<Arc<AppState>>
 
 /// Loads into the engine's cache the uploads a job names that this replica does not hold but
 /// the shared store does (another replica received them).
-pub(super) fn fetch_shared_uploads(engine: &Engine, store: Option<&dyn DurableStore>, job: &Job) -> Result<(), JobError> {
+pub(super) fn fetch_shared_uploads(engine: &Engine, store: Option<&Store>, job: &Job) -> Result<(), JobError> {
     let Some(store) = store.filter(|s| s.shared()) else { return Ok(()) };
     let light = job.light.image.as_ref();
     for (kind, asset) in [(Kind::Scene, Some(&job.scene)), (Kind::Light, light)] {
@@ -107,7 +110,9 @@ pub(super) fn fetch_shared_uploads(engine: &Engine, store: Option<&dyn DurableSt
         if engine.holds_upload(kind, id) {
             continue;
         }
-        match store.get_upload(kind, id) {
+        let fetched = store.blocking().get_upload(kind, id);
+        store.health().observe(&fetched);
+        match fetched {
             Ok(Some(bytes)) => {
                 engine.upload(kind, &bytes)?;
             }

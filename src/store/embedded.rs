@@ -1,155 +1,303 @@
-//! The one-machine job store on `redb` (a pure-Rust, crash-safe B-tree file: each commit is
-//! durable): a daemon killed at any moment and restarted on the same `--data-dir` finishes
-//! what it accepted and still serves what it finished. Finished records expire by age and
-//! the stored images by a byte budget.
+//! The one-machine job store: records in `redb` (a pure-Rust, crash-safe B-tree file: each
+//! commit is durable), result images as files beside it. A daemon killed at any moment and
+//! restarted on the same `--data-dir` finishes what it accepted and still serves what it
+//! finished. Finished records expire by age, the stored images by a byte budget and by the
+//! free-space margin of the disk.
 //!
 //! Why redb over SQLite: on this store's write pattern (per job: insert the record, update it,
 //! update it again with a 100 KB image; one durable commit each), 300 jobs on the 2-core
 //! machine ran at 707 jobs/s on redb and 750 on SQLite in WAL mode with `synchronous=FULL` —
 //! the same, and thousands of times what a renderer finishes — so the pure-Rust one wins on
 //! build time and on having no C code to fuzz.
+//!
+//! Why images are files: redb never returns freed pages to the file system and allocates
+//! large values in power-of-two runs, so a full disk could not be relieved by dropping old
+//! results; a deleted file frees its bytes at once, and its size is its cost.
+//!
+//! After an I/O error (a full disk, typically) redb refuses every later call until the
+//! database is opened again; this store drops it and opens it again on the next call, so it
+//! recovers by itself once the disk has room.
 
-use std::path::Path;
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
 use std::time::Duration;
 
 use redb::{Database, ReadableDatabase, ReadableTable, TableDefinition};
 use serde_json::Value;
 
-use super::{unix_ms, JobStore, StoredJob};
+use super::{unix_ms, JobStore, StoreError, StoreResult, StoredJob};
 
 /// Job records by id: `StoredJob` as JSON.
 const JOBS: TableDefinition<&str, &[u8]> = TableDefinition::new("jobs");
-/// Result images by job id.
+/// Result images by job id, as stores written before images became files kept them: read and
+/// expired, never written.
 const IMAGES: TableDefinition<&str, &[u8]> = TableDefinition::new("images");
 
-/// The one-machine store: `jobs.redb` under the data directory.
+/// The one-machine store: `jobs.redb` and `images/` under the data directory.
 pub struct EmbeddedStore {
-    db: Database,
+    dir: PathBuf,
+    /// None after an I/O error: opened again on the next call.
+    db: Mutex<Option<Database>>,
+}
+
+/// A redb error as a store error: I/O errors (and redb's refusal after one) are transient —
+/// `Full` when the disk has no space left — and mean the database must be opened again.
+fn classify(error: impl Into<redb::Error>) -> StoreError {
+    match error.into() {
+        redb::Error::Io(io) => io_error(io),
+        redb::Error::PreviousIo | redb::Error::DatabaseClosed => StoreError::Unavailable("an earlier I/O error closed the database".into()),
+        other => StoreError::Other(other.into()),
+    }
+}
+
+fn io_error(error: std::io::Error) -> StoreError {
+    if error.kind() == std::io::ErrorKind::StorageFull || error.raw_os_error() == Some(libc::ENOSPC) {
+        StoreError::Full(error.to_string())
+    } else {
+        StoreError::Unavailable(error.to_string())
+    }
+}
+
+/// Whether an error leaves redb refusing everything until it is opened again.
+fn needs_reopen(error: &StoreError) -> bool {
+    error.is_transient()
+}
+
+/// An image's file name is the job id; ids are made by `new_job_id` (hex digits), but one read
+/// from a request is checked before it names a file.
+fn safe_id(id: &str) -> bool {
+    !id.is_empty() && id.len() <= 64 && id.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'-' || b == b'_')
 }
 
 impl EmbeddedStore {
     /// Opens (or creates) the store in `dir`.
     pub fn open(dir: &Path) -> anyhow::Result<Self> {
-        std::fs::create_dir_all(dir).map_err(|e| anyhow::anyhow!("cannot create the data directory {}: {e}", dir.display()))?;
-        let path = dir.join("jobs.redb");
-        let db = Database::create(&path).map_err(|e| anyhow::anyhow!("cannot open the job store {}: {e}", path.display()))?;
-        // Create both tables so that readers never meet a missing one.
-        let txn = db.begin_write()?;
-        txn.open_table(JOBS)?;
-        txn.open_table(IMAGES)?;
-        txn.commit()?;
-        Ok(Self { db })
+        std::fs::create_dir_all(dir.join("images"))
+            .map_err(|e| anyhow::anyhow!("cannot create the data directory {}: {e}", dir.display()))?;
+        let store = Self { dir: dir.to_owned(), db: Mutex::new(None) };
+        store.with_db(|_| Ok(())).map_err(|e| anyhow::anyhow!("cannot open the job store {}: {e}", dir.display()))?;
+        store.remove_orphan_images()?;
+        Ok(store)
     }
 
-    /// Reads, changes and writes one job record in a single commit.
-    fn update(&self, id: &str, change: impl FnOnce(&mut StoredJob), image: Option<&[u8]>) -> anyhow::Result<()> {
-        let txn = self.db.begin_write()?;
-        {
-            let mut jobs = txn.open_table(JOBS)?;
-            let mut job: StoredJob = match jobs.get(id)? {
-                Some(bytes) => serde_json::from_slice(bytes.value())?,
-                None => anyhow::bail!("no job `{id}` in the store"),
-            };
-            change(&mut job);
-            if let Some(image) = image {
-                job.image_bytes = image.len() as u64;
-                txn.open_table(IMAGES)?.insert(id, image)?;
-            }
-            jobs.insert(id, serde_json::to_vec(&job)?.as_slice())?;
+    fn open_db(&self) -> StoreResult<Database> {
+        let db = Database::create(self.dir.join("jobs.redb")).map_err(classify)?;
+        // Create both tables so that readers never meet a missing one.
+        let txn = db.begin_write().map_err(classify)?;
+        txn.open_table(JOBS).map_err(classify)?;
+        txn.open_table(IMAGES).map_err(classify)?;
+        txn.commit().map_err(classify)?;
+        Ok(db)
+    }
+
+    /// Runs `f` on the database, opening it first when an earlier I/O error closed it, and
+    /// closing it when `f` meets one.
+    fn with_db<T>(&self, f: impl FnOnce(&Database) -> StoreResult<T>) -> StoreResult<T> {
+        let mut db = self.db.lock().unwrap_or_else(|p| p.into_inner());
+        if db.is_none() {
+            *db = Some(self.open_db()?);
+            tracing::debug!("job store opened");
         }
-        txn.commit()?;
+        let result = f(db.as_ref().expect("opened above"));
+        if let Err(error) = &result {
+            if needs_reopen(error) {
+                // Dropped now, so that the file lock is released before it is opened again.
+                *db = None;
+            }
+        }
+        result
+    }
+
+    fn image_path(&self, id: &str) -> PathBuf {
+        self.dir.join("images").join(id)
+    }
+
+    /// Writes an image durably under a temporary name, then renames it into place.
+    fn write_image(&self, id: &str, image: &[u8]) -> StoreResult<()> {
+        let part = self.dir.join("images").join(format!("{id}.part"));
+        let written = (|| {
+            let mut file = std::fs::File::create(&part)?;
+            file.write_all(image)?;
+            file.sync_all()?;
+            std::fs::rename(&part, self.image_path(id))
+        })();
+        written.map_err(|e| {
+            std::fs::remove_file(&part).ok();
+            io_error(e)
+        })
+    }
+
+    /// Image files whose job did not succeed (a crash between the file and its record) go.
+    fn remove_orphan_images(&self) -> anyhow::Result<()> {
+        let kept: std::collections::HashSet<String> =
+            self.all()?.into_iter().filter(|j| j.status == "succeeded" && j.image_bytes > 0).map(|j| j.id).collect();
+        for entry in std::fs::read_dir(self.dir.join("images"))? {
+            let entry = entry?;
+            if !kept.contains(entry.file_name().to_string_lossy().as_ref()) {
+                std::fs::remove_file(entry.path()).ok();
+            }
+        }
         Ok(())
     }
 
-    fn all(&self) -> anyhow::Result<Vec<StoredJob>> {
-        let txn = self.db.begin_read()?;
-        let jobs = txn.open_table(JOBS)?;
-        let mut all = Vec::new();
-        for entry in jobs.iter()? {
-            let (_, value) = entry?;
-            all.push(serde_json::from_slice::<StoredJob>(value.value())?);
+    /// Reads, changes and writes one job record in a single commit.
+    fn update(&self, id: &str, change: impl FnOnce(&mut StoredJob)) -> StoreResult<()> {
+        self.with_db(|db| {
+            let txn = db.begin_write().map_err(classify)?;
+            {
+                let mut jobs = txn.open_table(JOBS).map_err(classify)?;
+                let mut job: StoredJob = match jobs.get(id).map_err(classify)? {
+                    Some(bytes) => serde_json::from_slice(bytes.value())?,
+                    None => return Err(anyhow::anyhow!("no job `{id}` in the store").into()),
+                };
+                change(&mut job);
+                jobs.insert(id, serde_json::to_vec(&job)?.as_slice()).map_err(classify)?;
+            }
+            txn.commit().map_err(classify)
+        })
+    }
+
+    fn all(&self) -> StoreResult<Vec<StoredJob>> {
+        self.with_db(|db| {
+            let txn = db.begin_read().map_err(classify)?;
+            let jobs = txn.open_table(JOBS).map_err(classify)?;
+            let mut all = Vec::new();
+            for entry in jobs.iter().map_err(classify)? {
+                let (_, value) = entry.map_err(classify)?;
+                all.push(serde_json::from_slice::<StoredJob>(value.value())?);
+            }
+            Ok(all)
+        })
+    }
+
+    /// Removes these records entirely and these images (their records then say 0 bytes).
+    fn remove(&self, records: &[StoredJob], images: &[StoredJob]) -> StoreResult<()> {
+        self.with_db(|db| {
+            let txn = db.begin_write().map_err(classify)?;
+            {
+                let mut jobs = txn.open_table(JOBS).map_err(classify)?;
+                let mut old_images = txn.open_table(IMAGES).map_err(classify)?;
+                for job in records {
+                    jobs.remove(job.id.as_str()).map_err(classify)?;
+                    old_images.remove(job.id.as_str()).map_err(classify)?;
+                }
+                for job in images {
+                    old_images.remove(job.id.as_str()).map_err(classify)?;
+                    let mut record = job.clone();
+                    record.image_bytes = 0;
+                    jobs.insert(job.id.as_str(), serde_json::to_vec(&record)?.as_slice()).map_err(classify)?;
+                }
+            }
+            txn.commit().map_err(classify)
+        })?;
+        // Files go after the commit: a crash in between leaves orphans, removed at the next open.
+        for job in records.iter().chain(images) {
+            if safe_id(&job.id) {
+                std::fs::remove_file(self.image_path(&job.id)).ok();
+            }
         }
-        Ok(all)
+        Ok(())
+    }
+
+    /// Finished jobs, oldest finished first.
+    fn finished_oldest_first(&self) -> StoreResult<Vec<StoredJob>> {
+        let mut finished: Vec<StoredJob> = self.all()?.into_iter().filter(StoredJob::finished).collect();
+        finished.sort_by_key(|j| j.finished_unix_ms.unwrap_or(0));
+        Ok(finished)
     }
 }
 
 impl JobStore for EmbeddedStore {
-    fn accept(&self, id: &str, job: &Value) -> anyhow::Result<()> {
+    fn accept(&self, id: &str, job: &Value) -> StoreResult<()> {
         let record = StoredJob::queued(id, job);
-        let txn = self.db.begin_write()?;
-        txn.open_table(JOBS)?.insert(id, serde_json::to_vec(&record)?.as_slice())?;
-        txn.commit()?;
-        Ok(())
+        self.with_db(|db| {
+            let txn = db.begin_write().map_err(classify)?;
+            {
+                let mut jobs = txn.open_table(JOBS).map_err(classify)?;
+                if jobs.get(id).map_err(classify)?.is_some() {
+                    return Err(StoreError::Exists(id.to_owned()));
+                }
+                jobs.insert(id, serde_json::to_vec(&record)?.as_slice()).map_err(classify)?;
+            }
+            txn.commit().map_err(classify)
+        })
     }
 
-    fn start(&self, id: &str) -> anyhow::Result<()> {
-        self.update(
-            id,
-            |job| {
-                job.status = "running".into();
-                job.attempts += 1;
-            },
-            None,
-        )
+    fn start(&self, id: &str) -> StoreResult<()> {
+        self.update(id, |job| {
+            job.status = "running".into();
+            job.attempts += 1;
+        })
     }
 
-    fn succeed(&self, id: &str, result: &Value, image: &[u8]) -> anyhow::Result<bool> {
+    fn succeed(&self, id: &str, result: &Value, image: &[u8]) -> StoreResult<bool> {
         // A cancelled record stays cancelled (`JobStore::succeed`). One process uses this
         // store, so the read and the write below cannot be split by another writer's cancel.
         if self.get(id)?.is_some_and(|job| job.status == "cancelled") {
             return Ok(false);
         }
-        self.update(
-            id,
-            |job| {
-                job.status = "succeeded".into();
-                job.finished_unix_ms = Some(unix_ms());
-                job.result = Some(result.clone());
-            },
-            Some(image),
-        )?;
-        Ok(true)
+        if !safe_id(id) {
+            return Err(anyhow::anyhow!("job id `{id}` cannot name an image file").into());
+        }
+        // The image first: a record that says `succeeded` always has its image.
+        self.write_image(id, image)?;
+        let recorded = self.update(id, |job| {
+            job.status = "succeeded".into();
+            job.finished_unix_ms = Some(unix_ms());
+            job.result = Some(result.clone());
+            job.image_bytes = image.len() as u64;
+        });
+        if recorded.is_err() {
+            std::fs::remove_file(self.image_path(id)).ok();
+        }
+        recorded.map(|()| true)
     }
 
-    fn fail(&self, id: &str, error: &Value) -> anyhow::Result<()> {
-        self.update(
-            id,
-            |job| {
-                job.status = StoredJob::status_after(error).into();
-                job.finished_unix_ms = Some(unix_ms());
-                job.error = Some(error.clone());
-            },
-            None,
-        )
-    }
-
-    fn get(&self, id: &str) -> anyhow::Result<Option<StoredJob>> {
-        let txn = self.db.begin_read()?;
-        let jobs = txn.open_table(JOBS)?;
-        Ok(match jobs.get(id)? {
-            Some(bytes) => Some(serde_json::from_slice(bytes.value())?),
-            None => None,
+    fn fail(&self, id: &str, error: &Value) -> StoreResult<()> {
+        self.update(id, |job| {
+            job.status = StoredJob::status_after(error).into();
+            job.finished_unix_ms = Some(unix_ms());
+            job.error = Some(error.clone());
         })
     }
 
-    fn image(&self, id: &str) -> anyhow::Result<Option<Vec<u8>>> {
-        let txn = self.db.begin_read()?;
-        let images = txn.open_table(IMAGES)?;
-        Ok(images.get(id)?.map(|bytes| bytes.value().to_vec()))
+    fn get(&self, id: &str) -> StoreResult<Option<StoredJob>> {
+        self.with_db(|db| {
+            let txn = db.begin_read().map_err(classify)?;
+            let jobs = txn.open_table(JOBS).map_err(classify)?;
+            Ok(match jobs.get(id).map_err(classify)? {
+                Some(bytes) => Some(serde_json::from_slice(bytes.value())?),
+                None => None,
+            })
+        })
     }
 
-    fn unfinished(&self) -> anyhow::Result<Vec<StoredJob>> {
+    fn image(&self, id: &str) -> StoreResult<Option<Vec<u8>>> {
+        if safe_id(id) {
+            match std::fs::read(self.image_path(id)) {
+                Ok(bytes) => return Ok(Some(bytes)),
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+                Err(e) => return Err(io_error(e)),
+            }
+        }
+        self.with_db(|db| {
+            let txn = db.begin_read().map_err(classify)?;
+            let images = txn.open_table(IMAGES).map_err(classify)?;
+            Ok(images.get(id).map_err(classify)?.map(|bytes| bytes.value().to_vec()))
+        })
+    }
+
+    fn unfinished(&self) -> StoreResult<Vec<StoredJob>> {
         let mut jobs: Vec<StoredJob> = self.all()?.into_iter().filter(|j| !j.finished()).collect();
         jobs.sort_by(|a, b| (a.submitted_unix_ms, &a.id).cmp(&(b.submitted_unix_ms, &b.id)));
         Ok(jobs)
     }
 
-    fn expire(&self, max_age: Duration, max_image_bytes: u64) -> anyhow::Result<(usize, usize)> {
+    fn expire(&self, max_age: Duration, max_image_bytes: u64) -> StoreResult<(usize, usize)> {
         let now = unix_ms();
-        let mut finished: Vec<StoredJob> = self.all()?.into_iter().filter(StoredJob::finished).collect();
-        finished.sort_by_key(|j| j.finished_unix_ms.unwrap_or(0));
         let old = |j: &StoredJob| now.saturating_sub(j.finished_unix_ms.unwrap_or(0)) > max_age.as_millis() as u64;
-        let (expired, kept): (Vec<_>, Vec<_>) = finished.into_iter().partition(old);
+        let (expired, kept): (Vec<_>, Vec<_>) = self.finished_oldest_first()?.into_iter().partition(old);
         // Oldest images go first until the rest fit the budget; their records stay until they
         // expire by age (the image then answers 404 `not_found`).
         let mut image_total: u64 = kept.iter().map(|j| j.image_bytes).sum();
@@ -164,24 +312,51 @@ impl JobStore for EmbeddedStore {
         if expired.is_empty() && dropped_images.is_empty() {
             return Ok((0, 0));
         }
-        let txn = self.db.begin_write()?;
-        {
-            let mut jobs = txn.open_table(JOBS)?;
-            let mut images = txn.open_table(IMAGES)?;
-            for job in &expired {
-                jobs.remove(job.id.as_str())?;
-                images.remove(job.id.as_str())?;
-            }
-            for job in &dropped_images {
-                images.remove(job.id.as_str())?;
-                let mut record = job.clone();
-                record.image_bytes = 0;
-                jobs.insert(job.id.as_str(), serde_json::to_vec(&record)?.as_slice())?;
-            }
-        }
-        txn.commit()?;
+        self.remove(&expired, &dropped_images)?;
         Ok((expired.len(), dropped_images.len()))
     }
+
+    fn ping(&self) -> StoreResult<()> {
+        self.with_db(|db| {
+            let txn = db.begin_read().map_err(classify)?;
+            txn.open_table(JOBS).map_err(classify)?;
+            Ok(())
+        })
+    }
+
+    fn free_bytes(&self) -> Option<u64> {
+        available_bytes(&self.dir)
+    }
+
+    fn make_room(&self, wanted: u64) -> StoreResult<usize> {
+        let mut dropped = 0;
+        // Images first (they are nearly all of the bytes), oldest first, one commit each so
+        // that each file's space comes back before the next is weighed.
+        for job in self.finished_oldest_first()?.into_iter().filter(|j| j.image_bytes > 0) {
+            if self.free_bytes().unwrap_or(u64::MAX) >= wanted {
+                break;
+            }
+            self.remove(&[], std::slice::from_ref(&job))?;
+            dropped += 1;
+        }
+        Ok(dropped)
+    }
+}
+
+/// Bytes an unprivileged process may still write on the file system that holds `dir`.
+fn available_bytes(dir: &Path) -> Option<u64> {
+    use std::os::unix::ffi::OsStrExt as _;
+    let path = std::ffi::CString::new(dir.as_os_str().as_bytes()).ok()?;
+    let mut stats = std::mem::MaybeUninit::<libc::statvfs>::uninit();
+    // SAFETY: `path` is a NUL-terminated string and `stats` a buffer statvfs fills when it
+    // answers 0; it is read only then.
+    let stats = unsafe {
+        if libc::statvfs(path.as_ptr(), stats.as_mut_ptr()) != 0 {
+            return None;
+        }
+        stats.assume_init()
+    };
+    Some((stats.f_bavail as u64).saturating_mul(stats.f_frsize as u64))
 }
 
 #[cfg(test)]
@@ -221,6 +396,17 @@ mod tests {
     }
 
     #[test]
+    fn an_existing_id_is_refused_not_overwritten() {
+        let dir = temp_dir("exists");
+        let store = EmbeddedStore::open(&dir).unwrap();
+        store.accept("same", &serde_json::json!({"method": {"name": "hard"}})).unwrap();
+        let again = store.accept("same", &serde_json::json!({"method": {"name": "wedges"}}));
+        assert!(matches!(again, Err(StoreError::Exists(ref id)) if id == "same"), "{again:?}");
+        assert_eq!(store.get("same").unwrap().unwrap().job["method"]["name"], "hard");
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
     fn finished_jobs_expire_by_age_and_images_by_bytes() {
         let dir = temp_dir("expiry");
         let store = EmbeddedStore::open(&dir).unwrap();
@@ -239,6 +425,44 @@ mod tests {
         assert_eq!(store.expire(Duration::ZERO, u64::MAX).unwrap().0, 3);
         assert!(store.get("new").unwrap().is_none() && store.image("new").unwrap().is_none());
         assert_eq!(store.unfinished().unwrap().len(), 1);
+        assert_eq!(std::fs::read_dir(dir.join("images")).unwrap().count(), 0, "every image file went with its record");
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn an_image_without_a_recorded_success_is_removed_at_open() {
+        let dir = temp_dir("orphans");
+        {
+            let store = EmbeddedStore::open(&dir).unwrap();
+            store.accept("kept", &Value::Null).unwrap();
+            store.succeed("kept", &Value::Null, b"kept").unwrap();
+        }
+        // As after a crash between the image file and its record.
+        std::fs::write(dir.join("images/lost"), b"lost").unwrap();
+        std::fs::write(dir.join("images/half.part"), b"half").unwrap();
+        let store = EmbeddedStore::open(&dir).unwrap();
+        let mut files: Vec<String> =
+            std::fs::read_dir(dir.join("images")).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+        files.sort();
+        assert_eq!(files, ["kept"]);
+        assert_eq!(store.image("kept").unwrap().unwrap(), b"kept");
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn make_room_drops_the_oldest_images_first() {
+        let dir = temp_dir("room");
+        let store = EmbeddedStore::open(&dir).unwrap();
+        for id in ["first", "second"] {
+            store.accept(id, &Value::Null).unwrap();
+            store.succeed(id, &Value::Null, b"image").unwrap();
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        // Asking for more than any disk has drops every image, oldest first, and keeps records.
+        assert_eq!(store.make_room(u64::MAX).unwrap(), 2);
+        assert!(store.image("first").unwrap().is_none() && store.get("first").unwrap().unwrap().image_bytes == 0);
+        // Asking for nothing drops nothing.
+        assert_eq!(store.make_room(0).unwrap(), 0);
         std::fs::remove_dir_all(&dir).ok();
     }
 }

@@ -1,10 +1,12 @@
-//! The durable job store behind `POST /v1/jobs` (issue 10): every accepted job is written
-//! before its 202 is answered, and every finished one with its record and image. `JobStore`
-//! is the interface; `embedded` keeps it in a file on one machine, `redis` shares it between
-//! replicas (a stream with a consumer group as the queue, records and images with a TTL,
-//! uploads stored once for all of them).
+//! The durable job store behind `POST /v1/jobs`: every accepted job is written before its
+//! 202 is answered, and every finished one with its record and image. `JobStore` is the
+//! interface; `embedded` keeps it on one machine's disk, `redis` shares it between replicas (a
+//! stream with a consumer group as the queue, records and images with a TTL, uploads stored
+//! once for all of them). `health` watches a store for outages and a full disk and is the
+//! async way in for the server.
 
 pub mod embedded;
+pub mod health;
 pub mod redis;
 
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
@@ -13,6 +15,7 @@ use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
 pub use embedded::EmbeddedStore;
+pub use health::{Store, StoreHealth, StoreStatus};
 pub use redis::RedisStore;
 
 use crate::uploads::Kind;
@@ -75,6 +78,49 @@ impl StoredJob {
     }
 }
 
+/// Why a store operation failed. The server answers each kind differently: an unavailable
+/// store is retried (503 `store_unavailable` at admission, results kept and stored later), a
+/// full one refuses new work (507 `insufficient_storage`), an existing id is never
+/// overwritten.
+#[derive(Debug, thiserror::Error)]
+pub enum StoreError {
+    /// The store cannot be reached or cannot write right now (connection refused or dropped,
+    /// an I/O error, Redis loading its data): the same call may succeed later.
+    #[error("the job store is unavailable: {0}")]
+    Unavailable(String),
+    /// The store has no room for the write (no space left on its disk, Redis out of memory).
+    #[error("the job store is out of space: {0}")]
+    Full(String),
+    /// A job record with this id exists already; it is never overwritten.
+    #[error("a job `{0}` exists already")]
+    Exists(String),
+    /// Anything else: a record that does not parse, a job the store does not hold.
+    #[error(transparent)]
+    Other(#[from] anyhow::Error),
+}
+
+impl StoreError {
+    /// Whether the same call may succeed later, once the store is back or has room.
+    pub fn is_transient(&self) -> bool {
+        matches!(self, StoreError::Unavailable(_) | StoreError::Full(_))
+    }
+}
+
+impl From<serde_json::Error> for StoreError {
+    fn from(error: serde_json::Error) -> Self {
+        StoreError::Other(error.into())
+    }
+}
+
+pub type StoreResult<T> = Result<T, StoreError>;
+
+/// A new job id: 128 random bits (a UUIDv4 in its 32-digit hex form), so that replicas
+/// started in the same millisecond, and daemons restarted on the same store, never issue the
+/// same id; stores refuse an id they hold anyway (`StoreError::Exists`).
+pub fn new_job_id() -> String {
+    uuid::Uuid::new_v4().simple().to_string()
+}
+
 /// Milliseconds since the Unix epoch, now.
 pub fn unix_ms() -> u64 {
     SystemTime::now().duration_since(UNIX_EPOCH).map(|d| d.as_millis() as u64).unwrap_or(0)
@@ -84,26 +130,40 @@ pub fn unix_ms() -> u64 {
 /// local commit or a round trip): call it off the async workers.
 pub trait JobStore: Send + Sync {
     /// Records an accepted job as `queued` (and, in a shared store, queues it); durable when
-    /// it returns.
-    fn accept(&self, id: &str, job: &Value) -> anyhow::Result<()>;
+    /// it returns. An id the store holds already is refused (`StoreError::Exists`), never
+    /// overwritten.
+    fn accept(&self, id: &str, job: &Value) -> StoreResult<()>;
     /// Marks a job `running` and counts the attempt.
-    fn start(&self, id: &str) -> anyhow::Result<()>;
+    fn start(&self, id: &str) -> StoreResult<()>;
     /// Stores a success: its record and its image (and takes it off a shared queue). A job
     /// cancelled meanwhile (by a `DELETE` another replica received) stays cancelled — the
     /// client was told so — and the answer is `false`.
-    fn succeed(&self, id: &str, result: &Value, image: &[u8]) -> anyhow::Result<bool>;
+    fn succeed(&self, id: &str, result: &Value, image: &[u8]) -> StoreResult<bool>;
     /// Stores a failure with its error body — `cancelled` when the error's code says so
     /// (`StoredJob::status_after`) — and takes it off a shared queue, so no worker takes it.
-    fn fail(&self, id: &str, error: &Value) -> anyhow::Result<()>;
-    fn get(&self, id: &str) -> anyhow::Result<Option<StoredJob>>;
-    fn image(&self, id: &str) -> anyhow::Result<Option<Vec<u8>>>;
+    fn fail(&self, id: &str, error: &Value) -> StoreResult<()>;
+    fn get(&self, id: &str) -> StoreResult<Option<StoredJob>>;
+    fn image(&self, id: &str) -> StoreResult<Option<Vec<u8>>>;
     /// Jobs accepted but not finished (queued, or running when a daemon stopped), oldest
     /// first, for a restarted daemon to run. Shared stores answer none: their queue hands
     /// such jobs out again by itself.
-    fn unfinished(&self) -> anyhow::Result<Vec<StoredJob>>;
+    fn unfinished(&self) -> StoreResult<Vec<StoredJob>>;
     /// Drops finished jobs older than `max_age`, then the images of the oldest finished jobs
     /// until the images fit in `max_image_bytes`. Returns how many records and images went.
-    fn expire(&self, max_age: Duration, max_image_bytes: u64) -> anyhow::Result<(usize, usize)>;
+    fn expire(&self, max_age: Duration, max_image_bytes: u64) -> StoreResult<(usize, usize)>;
+
+    /// Checks that the store answers (reconnecting or reopening it when it had failed).
+    fn ping(&self) -> StoreResult<()>;
+    /// Bytes free for results on the store's own disk; None for a store that is not limited
+    /// by a local disk (Redis, whose memory is its operator's to size).
+    fn free_bytes(&self) -> Option<u64> {
+        None
+    }
+    /// Drops the oldest finished jobs (images first, then records) until `free_bytes` is at
+    /// least `wanted`, or nothing finished is left. Returns how many results went.
+    fn make_room(&self, _wanted: u64) -> StoreResult<usize> {
+        Ok(0)
+    }
 
     /// Whether the store is the queue, shared by several replicas: jobs are then taken with
     /// `next` by each replica's workers instead of being run where they were submitted.
@@ -111,12 +171,12 @@ pub trait JobStore: Send + Sync {
         false
     }
     /// Jobs accepted and not yet taken, across all replicas (shared stores).
-    fn queued(&self) -> anyhow::Result<u64> {
+    fn queued(&self) -> StoreResult<u64> {
         Ok(0)
     }
     /// The next job for `consumer`: one that a consumer which stopped answering left
     /// unfinished first, else a new one, waiting up to `wait` (shared stores).
-    fn next(&self, _consumer: &str, _wait: Duration) -> anyhow::Result<Option<StoredJob>> {
+    fn next(&self, _consumer: &str, _wait: Duration) -> StoreResult<Option<StoredJob>> {
         Ok(None)
     }
     /// How often a worker must call `heartbeat` to keep a job.
@@ -124,29 +184,29 @@ pub trait JobStore: Send + Sync {
         Duration::from_secs(3)
     }
     /// Keeps a job that `consumer` is rendering claimed by it (shared stores).
-    fn heartbeat(&self, _consumer: &str, _job: &StoredJob) -> anyhow::Result<()> {
+    fn heartbeat(&self, _consumer: &str, _job: &StoredJob) -> StoreResult<()> {
         Ok(())
     }
     /// Whether a job was cancelled through the store (by a replica other than the one that
     /// runs it: shared stores).
-    fn cancelled(&self, _id: &str) -> anyhow::Result<bool> {
+    fn cancelled(&self, _id: &str) -> StoreResult<bool> {
         Ok(false)
     }
     /// Records progress for readers on other replicas (shared stores).
-    fn progress(&self, _id: &str, _done: u64, _total: u64) -> anyhow::Result<()> {
+    fn progress(&self, _id: &str, _done: u64, _total: u64) -> StoreResult<()> {
         Ok(())
     }
     /// Uploaded bytes stored once for every replica (shared stores; the others keep none).
-    fn put_upload(&self, _kind: Kind, _id: &str, _bytes: &[u8]) -> anyhow::Result<()> {
+    fn put_upload(&self, _kind: Kind, _id: &str, _bytes: &[u8]) -> StoreResult<()> {
         Ok(())
     }
-    fn get_upload(&self, _kind: Kind, _id: &str) -> anyhow::Result<Option<Vec<u8>>> {
+    fn get_upload(&self, _kind: Kind, _id: &str) -> StoreResult<Option<Vec<u8>>> {
         Ok(None)
     }
-    fn has_upload(&self, _kind: Kind, _id: &str) -> anyhow::Result<bool> {
+    fn has_upload(&self, _kind: Kind, _id: &str) -> StoreResult<bool> {
         Ok(false)
     }
-    fn delete_upload(&self, _kind: Kind, _id: &str) -> anyhow::Result<bool> {
+    fn delete_upload(&self, _kind: Kind, _id: &str) -> StoreResult<bool> {
         Ok(false)
     }
 }

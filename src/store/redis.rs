@@ -9,6 +9,11 @@
 //! replica, each of which keeps its own LRU cache in front. A cancellation is a key of its
 //! own (`penumbra:cancel:ID`), written once and only read after: record updates are
 //! read-modify-write, so a progress report could otherwise overwrite a `cancelled` status.
+//!
+//! Outages: a connection that fails is dropped, and the next call opens a new one (creating
+//! the consumer group again if a Redis restarted without its data lost it); every failure to
+//! reach Redis is `StoreError::Unavailable`, which the server answers with 503 and retries.
+//! A replica may start before Redis does.
 
 use std::sync::Mutex;
 use std::time::Duration;
@@ -16,7 +21,7 @@ use std::time::Duration;
 use redis::{Commands, Connection};
 use serde_json::Value;
 
-use super::{unix_ms, JobStore, StoredJob};
+use super::{unix_ms, JobStore, StoreError, StoreResult, StoredJob};
 use crate::uploads::Kind;
 
 const QUEUE: &str = "penumbra:queue";
@@ -58,40 +63,76 @@ fn upload_key(kind: Kind, id: &str) -> String {
     format!("penumbra:upload:{kind}:{id}")
 }
 
+/// Records a job and queues it, unless a record with its id exists: one atomic step, so that
+/// neither a record without a queue entry nor an overwritten record can result.
+const ACCEPT: &str = r#"
+if redis.call('SET', KEYS[1], ARGV[1], 'NX') then
+  redis.call('XADD', KEYS[2], '*', 'id', ARGV[2])
+  return 1
+end
+return 0
+"#;
+
+/// A Redis error as a store error: not reaching Redis, or Redis not ready to serve (loading
+/// its data after a restart, unable to persist, a lost consumer group), is transient;
+/// Redis out of memory is `Full`.
+fn classify(error: redis::RedisError) -> StoreError {
+    let transient_codes = ["LOADING", "MASTERDOWN", "TRYAGAIN", "BUSY", "MISCONF", "NOGROUP", "READONLY"];
+    if error.code() == Some("OOM") {
+        StoreError::Full(error.to_string())
+    } else if error.is_io_error()
+        || error.is_connection_refusal()
+        || error.is_connection_dropped()
+        || error.is_timeout()
+        || error.code().is_some_and(|code| transient_codes.contains(&code))
+    {
+        StoreError::Unavailable(error.to_string())
+    } else {
+        StoreError::Other(error.into())
+    }
+}
+
 impl RedisStore {
-    /// Connects and creates the consumer group (and the stream) when they do not exist.
+    /// A store on the Redis at `url`. Redis need not be up yet: the queue's consumer group is
+    /// created on each new connection, so a replica that starts first, or outlives a Redis
+    /// restart, finds it once Redis answers.
     pub fn open(url: &str, ttl: Duration, claim_idle: Duration) -> anyhow::Result<Self> {
         let client = redis::Client::open(url).map_err(|e| anyhow::anyhow!("bad Redis URL `{url}`: {e}"))?;
         let claim_idle = claim_idle.max(Duration::from_millis(500));
         let store = Self { client, pool: Mutex::new(Vec::new()), ttl: ttl.max(Duration::from_secs(1)), claim_idle };
-        store.with(|c| match c.xgroup_create_mkstream::<_, _, _, ()>(QUEUE, GROUP, "0") {
-            Err(e) if e.code() == Some("BUSYGROUP") => Ok(()),
-            other => other,
-        })?;
+        if let Err(error) = store.ping() {
+            tracing::warn!(%error, "Redis does not answer yet; submitted jobs get 503 store_unavailable until it does");
+        }
         Ok(store)
+    }
+
+    /// A new connection, with timeouts, on which the consumer group (and the stream) exist.
+    fn connect(&self) -> redis::RedisResult<Connection> {
+        let mut c = self.client.get_connection_with_timeout(Duration::from_secs(2))?;
+        c.set_read_timeout(Some(Duration::from_secs(10)))?;
+        c.set_write_timeout(Some(Duration::from_secs(10)))?;
+        match c.xgroup_create_mkstream::<_, _, _, ()>(QUEUE, GROUP, "0") {
+            Err(e) if e.code() != Some("BUSYGROUP") => Err(e),
+            _ => Ok(c),
+        }
     }
 
     /// Runs `f` on a pooled connection (a new one when none is idle); a connection that
     /// failed is dropped rather than returned.
-    fn with<T>(&self, f: impl FnOnce(&mut Connection) -> redis::RedisResult<T>) -> anyhow::Result<T> {
+    fn with<T>(&self, f: impl FnOnce(&mut Connection) -> redis::RedisResult<T>) -> StoreResult<T> {
         let pooled = self.pool.lock().unwrap_or_else(|p| p.into_inner()).pop();
         let mut connection = match pooled {
             Some(c) => c,
-            None => {
-                let c = self.client.get_connection_with_timeout(Duration::from_secs(5))?;
-                c.set_read_timeout(Some(Duration::from_secs(30)))?;
-                c.set_write_timeout(Some(Duration::from_secs(30)))?;
-                c
-            }
+            None => self.connect().map_err(classify)?,
         };
         let result = f(&mut connection);
         if result.is_ok() {
             self.pool.lock().unwrap_or_else(|p| p.into_inner()).push(connection);
         }
-        Ok(result?)
+        result.map_err(classify)
     }
 
-    fn put_record(&self, job: &StoredJob, expire: bool) -> anyhow::Result<()> {
+    fn put_record(&self, job: &StoredJob, expire: bool) -> StoreResult<()> {
         let json = serde_json::to_vec(job)?;
         let key = job_key(&job.id);
         if expire {
@@ -101,14 +142,14 @@ impl RedisStore {
         }
     }
 
-    fn update(&self, id: &str, change: impl FnOnce(&mut StoredJob)) -> anyhow::Result<StoredJob> {
+    fn update(&self, id: &str, change: impl FnOnce(&mut StoredJob)) -> StoreResult<StoredJob> {
         let mut job = self.get(id)?.ok_or_else(|| anyhow::anyhow!("no job `{id}` in the store"))?;
         change(&mut job);
         Ok(job)
     }
 
     /// Stores a finished record (with its TTL) and takes its entry off the queue.
-    fn finish(&self, job: StoredJob, image: Option<&[u8]>) -> anyhow::Result<()> {
+    fn finish(&self, job: StoredJob, image: Option<&[u8]>) -> StoreResult<()> {
         let ttl = self.ttl.as_secs();
         let json = serde_json::to_vec(&job)?;
         self.with(|c| {
@@ -128,7 +169,7 @@ impl RedisStore {
 
     /// The job an entry carries, with the entry noted; None (and the entry dropped) when the
     /// record is gone or already finished (a replica finished it just before it died).
-    fn take(&self, consumer: &str, entry: &str, id: Option<String>) -> anyhow::Result<Option<StoredJob>> {
+    fn take(&self, consumer: &str, entry: &str, id: Option<String>) -> StoreResult<Option<StoredJob>> {
         let job = match id {
             Some(id) => self.get(&id)?,
             None => None,
@@ -149,14 +190,18 @@ impl RedisStore {
 }
 
 impl JobStore for RedisStore {
-    fn accept(&self, id: &str, job: &Value) -> anyhow::Result<()> {
+    fn accept(&self, id: &str, job: &Value) -> StoreResult<()> {
         let record = StoredJob::queued(id, job);
         let json = serde_json::to_vec(&record)?;
         // The record first: a worker that takes the entry always finds it.
-        self.with(|c| redis::pipe().atomic().set(job_key(id), json).ignore().xadd(QUEUE, "*", &[("id", id)]).ignore().query::<()>(c))
+        let created: i64 = self.with(|c| redis::cmd("EVAL").arg(ACCEPT).arg(2).arg(job_key(id)).arg(QUEUE).arg(json).arg(id).query(c))?;
+        if created == 0 {
+            return Err(StoreError::Exists(id.to_owned()));
+        }
+        Ok(())
     }
 
-    fn start(&self, id: &str) -> anyhow::Result<()> {
+    fn start(&self, id: &str) -> StoreResult<()> {
         let job = self.update(id, |job| {
             job.status = "running".into();
             job.attempts += 1;
@@ -164,7 +209,7 @@ impl JobStore for RedisStore {
         self.put_record(&job, false)
     }
 
-    fn succeed(&self, id: &str, result: &Value, image: &[u8]) -> anyhow::Result<bool> {
+    fn succeed(&self, id: &str, result: &Value, image: &[u8]) -> StoreResult<bool> {
         let cancelled = self.cancelled(id)?;
         let job = self.update(id, |job| {
             if cancelled {
@@ -186,7 +231,7 @@ impl JobStore for RedisStore {
         Ok(!cancelled)
     }
 
-    fn fail(&self, id: &str, error: &Value) -> anyhow::Result<()> {
+    fn fail(&self, id: &str, error: &Value) -> StoreResult<()> {
         if StoredJob::status_after(error) == "cancelled" {
             let ttl = self.ttl.as_secs();
             self.with(|c| c.set_ex::<_, _, ()>(cancel_key(id), 1, ttl))?;
@@ -199,7 +244,7 @@ impl JobStore for RedisStore {
         self.finish(job, None)
     }
 
-    fn get(&self, id: &str) -> anyhow::Result<Option<StoredJob>> {
+    fn get(&self, id: &str) -> StoreResult<Option<StoredJob>> {
         let bytes: Option<Vec<u8>> = self.with(|c| c.get(job_key(id)))?;
         Ok(match bytes {
             Some(bytes) => Some(serde_json::from_slice(&bytes)?),
@@ -207,24 +252,28 @@ impl JobStore for RedisStore {
         })
     }
 
-    fn image(&self, id: &str) -> anyhow::Result<Option<Vec<u8>>> {
+    fn image(&self, id: &str) -> StoreResult<Option<Vec<u8>>> {
         self.with(|c| c.get(image_key(id)))
     }
 
-    fn unfinished(&self) -> anyhow::Result<Vec<StoredJob>> {
+    fn unfinished(&self) -> StoreResult<Vec<StoredJob>> {
         Ok(Vec::new())
     }
 
-    fn expire(&self, _max_age: Duration, _max_image_bytes: u64) -> anyhow::Result<(usize, usize)> {
+    fn expire(&self, _max_age: Duration, _max_image_bytes: u64) -> StoreResult<(usize, usize)> {
         // Finished records and images carry their TTL; Redis drops them itself.
         Ok((0, 0))
+    }
+
+    fn ping(&self) -> StoreResult<()> {
+        self.with(|c| redis::cmd("PING").query::<()>(c))
     }
 
     fn shared(&self) -> bool {
         true
     }
 
-    fn queued(&self) -> anyhow::Result<u64> {
+    fn queued(&self) -> StoreResult<u64> {
         // Entries in the stream that no worker has taken: all of them less the pending ones.
         self.with(|c| {
             let length: u64 = c.xlen(QUEUE)?;
@@ -233,7 +282,7 @@ impl JobStore for RedisStore {
         })
     }
 
-    fn next(&self, consumer: &str, wait: Duration) -> anyhow::Result<Option<StoredJob>> {
+    fn next(&self, consumer: &str, wait: Duration) -> StoreResult<Option<StoredJob>> {
         // A dead replica's job first: entries no heartbeat renewed for CLAIM_IDLE.
         let claimed: redis::streams::StreamAutoClaimReply = self.with(|c| {
             c.xautoclaim_options(
@@ -265,11 +314,11 @@ impl JobStore for RedisStore {
         self.claim_idle / 5
     }
 
-    fn cancelled(&self, id: &str) -> anyhow::Result<bool> {
+    fn cancelled(&self, id: &str) -> StoreResult<bool> {
         self.with(|c| c.exists(cancel_key(id)))
     }
 
-    fn heartbeat(&self, consumer: &str, job: &StoredJob) -> anyhow::Result<()> {
+    fn heartbeat(&self, consumer: &str, job: &StoredJob) -> StoreResult<()> {
         let Some(entry) = &job.entry else { return Ok(()) };
         // Claiming one's own entry with no minimum idle time resets its idle time.
         self.with(|c| {
@@ -277,7 +326,7 @@ impl JobStore for RedisStore {
         })
     }
 
-    fn progress(&self, id: &str, done: u64, total: u64) -> anyhow::Result<()> {
+    fn progress(&self, id: &str, done: u64, total: u64) -> StoreResult<()> {
         let job = self.update(id, |job| {
             job.done = done;
             job.total = total;
@@ -285,20 +334,20 @@ impl JobStore for RedisStore {
         self.put_record(&job, false)
     }
 
-    fn put_upload(&self, kind: Kind, id: &str, bytes: &[u8]) -> anyhow::Result<()> {
+    fn put_upload(&self, kind: Kind, id: &str, bytes: &[u8]) -> StoreResult<()> {
         self.with(|c| c.set_ex::<_, _, ()>(upload_key(kind, id), bytes, UPLOAD_TTL.as_secs()))
     }
 
-    fn get_upload(&self, kind: Kind, id: &str) -> anyhow::Result<Option<Vec<u8>>> {
+    fn get_upload(&self, kind: Kind, id: &str) -> StoreResult<Option<Vec<u8>>> {
         // Reading renews the TTL: an upload in use never expires.
         self.with(|c| redis::cmd("GETEX").arg(upload_key(kind, id)).arg("EX").arg(UPLOAD_TTL.as_secs()).query(c))
     }
 
-    fn has_upload(&self, kind: Kind, id: &str) -> anyhow::Result<bool> {
+    fn has_upload(&self, kind: Kind, id: &str) -> StoreResult<bool> {
         self.with(|c| c.exists(upload_key(kind, id)))
     }
 
-    fn delete_upload(&self, kind: Kind, id: &str) -> anyhow::Result<bool> {
+    fn delete_upload(&self, kind: Kind, id: &str) -> StoreResult<bool> {
         self.with(|c| c.del::<_, u64>(upload_key(kind, id)).map(|n| n > 0))
     }
 }
