@@ -73,7 +73,7 @@ impl Metrics {
         let store = IntGaugeVec::new(
             Opts::new(
                 "store",
-                "Job store: available (1/0), room (1/0: its disk above the margin), free_bytes, min_free_bytes, reserved_bytes, outages",
+                "Job store: available (1/0), room (1/0: its disk above the margin), free_bytes, min_free_bytes, reserved_bytes, outages, waiting_writes (finished jobs whose outcome waits for it)",
             ),
             &["what"],
         )
@@ -138,6 +138,7 @@ impl Metrics {
                 ("min_free_bytes", s.min_free_bytes),
                 ("reserved_bytes", s.reserved_bytes),
                 ("outages", s.outages),
+                ("waiting_writes", s.waiting_writes),
             ] {
                 gauge(&self.store, what, value);
             }

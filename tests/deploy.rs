@@ -193,14 +193,42 @@ fn free_port() -> u16 {
 /// Debian's `redis-server` on a free loopback port, without persistence: (port, process).
 fn start_redis() -> (u16, Child) {
     let port = free_port();
+    (port, redis_server(port, &["--save", "", "--appendonly", "no"]))
+}
+
+/// `redis-server` on a loopback port with these settings, answering PING when it returns.
+fn redis_server(port: u16, settings: &[&str]) -> Child {
     let child = Child(
         Command::new("redis-server")
-            .args(["--port", &port.to_string(), "--bind", "127.0.0.1", "--save", "", "--appendonly", "no"])
+            .args(["--port", &port.to_string(), "--bind", "127.0.0.1"])
+            .args(settings)
             .stdout(std::process::Stdio::null())
             .spawn()
             .expect("redis-server (apt-get install redis-server)"),
     );
-    (port, child)
+    let ping = || Command::new("redis-cli").args(["-p", &port.to_string(), "PING"]).output().is_ok_and(|o| o.stdout.starts_with(b"PONG"));
+    assert!(wait_until(Duration::from_secs(20), ping).is_some(), "redis-server did not start");
+    child
+}
+
+/// `penumbra serve` on a loopback port with these flags (logs at `warn`, to nowhere).
+fn daemon(port: u16, flags: &[&str]) -> Child {
+    Child(
+        Command::new(env!("CARGO_BIN_EXE_penumbra"))
+            .args(["serve", "--listen", &format!("127.0.0.1:{port}")])
+            .args(flags)
+            .env_remove("HOSTNAME")
+            .env("PENUMBRA_LOG", "warn")
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap(),
+    )
+}
+
+/// Waits (up to a minute) for `/readyz` on a loopback port to answer 200.
+fn wait_ready(port: u16) {
+    let ready = || http("GET", &format!("http://127.0.0.1:{port}/readyz"), None).is_some_and(|(s, _)| s == 200);
+    assert!(wait_until(Duration::from_secs(60), ready).is_some(), "the daemon on {port} did not become ready");
 }
 
 fn redis_get(port: u16, key: &str) -> String {
@@ -225,30 +253,12 @@ impl Cluster {
         let work = std::env::temp_dir().join(format!("penumbra-cluster-{}-{}", std::process::id(), free_port()));
         std::fs::create_dir_all(work.join("nginx/tmp")).unwrap();
         let (redis_port, redis) = start_redis();
-        let ping = || {
-            Command::new("redis-cli").args(["-p", &redis_port.to_string(), "PING"]).output().is_ok_and(|o| o.stdout.starts_with(b"PONG"))
-        };
-        assert!(wait_until(Duration::from_secs(20), ping).is_some(), "redis-server did not start");
-
         let ports: Vec<u16> = (0..replicas).map(|_| free_port()).collect();
-        let children = ports
-            .iter()
-            .map(|port| {
-                Some(Child(
-                    Command::new(env!("CARGO_BIN_EXE_penumbra"))
-                        .args(["serve", "--no-warm-up", "--listen", &format!("127.0.0.1:{port}"), "--claim-idle-secs", "2"])
-                        .args(["--job-store", &format!("redis://127.0.0.1:{redis_port}/0")])
-                        .env_remove("HOSTNAME")
-                        .env("PENUMBRA_LOG", "warn")
-                        .stderr(std::process::Stdio::null())
-                        .spawn()
-                        .unwrap(),
-                ))
-            })
-            .collect();
-        for port in &ports {
-            let ready = || http("GET", &format!("http://127.0.0.1:{port}/readyz"), None).is_some_and(|(s, _)| s == 200);
-            assert!(wait_until(Duration::from_secs(60), ready).is_some(), "replica on {port} not ready");
+        let store = format!("redis://127.0.0.1:{redis_port}/0");
+        let children =
+            ports.iter().map(|&port| Some(daemon(port, &["--no-warm-up", "--claim-idle-secs", "2", "--job-store", &store]))).collect();
+        for &port in &ports {
+            wait_ready(port);
         }
 
         // deploy/nginx.conf with this cluster's addresses (three replicas are listed there).
@@ -398,16 +408,8 @@ fn cluster_figures() {
     let data = cluster.work.join("embedded");
     let port = free_port();
     let direct = format!("http://127.0.0.1:{port}");
-    let _single = Child(
-        Command::new(env!("CARGO_BIN_EXE_penumbra"))
-            .args(["serve", "--no-warm-up", "--listen", &format!("127.0.0.1:{port}"), "--data-dir"])
-            .arg(&data)
-            .env("PENUMBRA_LOG", "warn")
-            .stderr(std::process::Stdio::null())
-            .spawn()
-            .unwrap(),
-    );
-    assert!(wait_until(Duration::from_secs(60), || http("GET", &format!("{direct}/readyz"), None).is_some_and(|(s, _)| s == 200)).is_some());
+    let _single = daemon(port, &["--no-warm-up", "--data-dir", data.to_str().unwrap()]);
+    wait_ready(port);
     for _ in 0..3 {
         round_trip(&cluster.base);
         round_trip(&direct);
@@ -515,14 +517,7 @@ fn a_shared_job_that_keeps_killing_replicas_is_failed_with_a_reason() {
         store.start(&taken.id).unwrap();
     }
     let port = free_port();
-    let _replica = Child(
-        Command::new(env!("CARGO_BIN_EXE_penumbra"))
-            .args(["serve", "--no-warm-up", "--listen", &format!("127.0.0.1:{port}"), "--claim-idle-secs", "1", "--job-store", &url])
-            .env("PENUMBRA_LOG", "warn")
-            .stderr(std::process::Stdio::null())
-            .spawn()
-            .unwrap(),
-    );
+    let _replica = daemon(port, &["--no-warm-up", "--claim-idle-secs", "1", "--job-store", &url]);
     let failed = wait_until(Duration::from_secs(60), || store.get("poison").unwrap().is_some_and(|j| j.status == "failed"));
     assert!(failed.is_some(), "the poison job was not failed: {:?}", store.get("poison").unwrap());
     let record = store.get("poison").unwrap().unwrap();
@@ -532,4 +527,377 @@ fn a_shared_job_that_keeps_killing_replicas_is_failed_with_a_reason() {
     let (status, body) = http("GET", &format!("http://127.0.0.1:{port}/v1/jobs/poison"), None).unwrap();
     assert_eq!(status, 200);
     assert!(String::from_utf8_lossy(&body).contains("started 3 times"));
+}
+
+// Faults that real deployments meet: replicas started together, a Redis restart, a full data
+// disk, clients that stall. Each bounded in time and on loopback only.
+
+fn json(bytes: &[u8]) -> serde_json::Value {
+    serde_json::from_slice(bytes).unwrap_or_else(|e| panic!("not JSON ({e}): {}", String::from_utf8_lossy(bytes)))
+}
+
+/// An HTTP exchange that also returns the response's head (status line and headers).
+fn http_head(method: &str, url: &str, body: Option<&str>) -> Option<(u16, String, Vec<u8>)> {
+    let mut command = Command::new("curl");
+    command.args(["-s", "-i", "-m", "30", "-X", method, url]);
+    if let Some(body) = body {
+        command.args(["-H", "content-type: application/json", "-d", body]);
+    }
+    let output = command.output().ok()?.stdout;
+    let split = output.windows(4).position(|w| w == b"\r\n\r\n")?;
+    let head = String::from_utf8_lossy(&output[..split]).to_lowercase();
+    let status = head.split_whitespace().nth(1)?.parse().ok()?;
+    Some((status, head, output[split + 4..].to_vec()))
+}
+
+/// The width in a PNG's header.
+fn png_width(png: &[u8]) -> u32 {
+    assert!(png.starts_with(b"\x89PNG"), "not a PNG");
+    u32::from_be_bytes(png[16..20].try_into().unwrap())
+}
+
+/// A job's record from a daemon, once it has finished (succeeded, failed or cancelled).
+fn finished_record(base: &str, id: &str, limit: Duration) -> serde_json::Value {
+    let mut record = serde_json::Value::Null;
+    let finished = wait_until(limit, || {
+        record = http("GET", &format!("{base}/v1/jobs/{id}"), None).map(|(_, b)| json(&b)).unwrap_or_default();
+        matches!(record["status"].as_str(), Some("succeeded" | "failed" | "cancelled"))
+    });
+    assert!(finished.is_some(), "job {id} did not finish: {record}");
+    record
+}
+
+/// Two replicas started in the same moment on one Redis (as a Deployment starts its pods)
+/// take jobs from clients through both: every id is distinct, and every client reads back
+/// the job it asked for (method and size) through either replica.
+#[test]
+fn replicas_started_together_issue_distinct_ids_and_each_client_reads_its_own_job() {
+    let (redis_port, _redis) = start_redis();
+    let store = format!("redis://127.0.0.1:{redis_port}/0");
+    let ports = [free_port(), free_port()];
+    let _replicas: Vec<Child> = ports.iter().map(|&port| daemon(port, &["--no-warm-up", "--job-store", &store])).collect();
+    for &port in &ports {
+        wait_ready(port);
+    }
+    let methods = ["hard", "pcss", "brabec", "jfa-l", "jfa-e", "chun-oh", "wedges"];
+    // Each client asks for its own job: a method and a width no other client asks for.
+    let asked: Vec<(u16, &str, u32)> = (0..14).map(|k| (ports[k % 2], methods[k % methods.len()], 48 + 4 * k as u32)).collect();
+    let ids: Vec<String> = std::thread::scope(|scope| {
+        let clients: Vec<_> = asked
+            .iter()
+            .map(|&(port, method, width)| {
+                scope.spawn(move || {
+                    let job = format!(
+                        r#"{{"scene": {{"builtin": "torus"}}, "method": {{"name": "{method}"}}, "output": {{"width": {width}, "height": 40}}}}"#
+                    );
+                    let (status, body) = http("POST", &format!("http://127.0.0.1:{port}/v1/jobs"), Some(&job)).unwrap();
+                    assert_eq!(status, 202, "{}", String::from_utf8_lossy(&body));
+                    json(&body)["id"].as_str().unwrap().to_owned()
+                })
+            })
+            .collect();
+        clients.into_iter().map(|client| client.join().unwrap()).collect()
+    });
+    let distinct: std::collections::HashSet<&String> = ids.iter().collect();
+    assert_eq!(distinct.len(), ids.len(), "job ids collided: {ids:?}");
+    for (id, &(port, method, width)) in ids.iter().zip(&asked) {
+        // Read through the other replica: the shared store answers for both.
+        let other = format!("http://127.0.0.1:{}", if port == ports[0] { ports[1] } else { ports[0] });
+        let record = finished_record(&other, id, Duration::from_secs(180));
+        assert_eq!(
+            (record["status"].as_str(), record["method"].as_str(), record["width"].as_u64()),
+            (Some("succeeded"), Some(method), Some(u64::from(width))),
+            "{record}"
+        );
+        let (status, image) = http("GET", &format!("{other}/v1/jobs/{id}/image"), None).unwrap();
+        assert_eq!((status, png_width(&image)), (200, width), "job {id}");
+    }
+}
+
+/// Redis, persisting every write (AOF, `appendfsync always`), is SIGKILLed while two replicas
+/// work through a batch, and restarted on the same files: while it is gone, new jobs get 503
+/// `store_unavailable` with Retry-After and readiness is 503 while liveness stays 200; the
+/// replicas live on, and every job accepted before the outage succeeds and downloads.
+#[test]
+fn a_redis_restart_mid_batch_loses_no_accepted_job() {
+    let dir = std::env::temp_dir().join(format!("penumbra-redis-aof-{}-{}", std::process::id(), free_port()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let redis_port = free_port();
+    let persistent = ["--dir", dir.to_str().unwrap(), "--appendonly", "yes", "--appendfsync", "always", "--save", ""];
+    let mut redis = Some(redis_server(redis_port, &persistent));
+    let store = format!("redis://127.0.0.1:{redis_port}/0");
+    let ports = [free_port(), free_port()];
+    let mut replicas: Vec<Child> =
+        ports.iter().map(|&port| daemon(port, &["--no-warm-up", "--claim-idle-secs", "2", "--job-store", &store])).collect();
+    for &port in &ports {
+        wait_ready(port);
+    }
+    let base = |k: usize| format!("http://127.0.0.1:{}", ports[k % 2]);
+    let job = r#"{"scene": {"builtin": "occluder"}, "method": {"name": "reference", "samples": 192, "resolution": 256}, "output": {"width": 96, "height": 64}}"#;
+    let ids: Vec<String> = (0..12)
+        .map(|k| {
+            let (status, body) = http("POST", &format!("{}/v1/jobs", base(k)), Some(job)).unwrap();
+            assert_eq!(status, 202, "{}", String::from_utf8_lossy(&body));
+            json(&body)["id"].as_str().unwrap().to_owned()
+        })
+        .collect();
+    let succeeded = || {
+        ids.iter()
+            .filter(|id| http("GET", &format!("{}/v1/jobs/{id}", base(0)), None).is_some_and(|(_, b)| json(&b)["status"] == "succeeded"))
+            .count()
+    };
+    assert!(wait_until(Duration::from_secs(120), || succeeded() >= 2).is_some(), "the batch did not start");
+    assert!(succeeded() < ids.len(), "the batch finished before Redis could be killed");
+
+    drop(redis.take()); // SIGKILL
+    for k in 0..2 {
+        let unready = || http("GET", &format!("{}/readyz", base(k)), None).is_some_and(|(s, _)| s == 503);
+        assert!(wait_until(Duration::from_secs(10), unready).is_some(), "readiness stayed 200 without Redis");
+        assert_eq!(http("GET", &format!("{}/healthz", base(k)), None).map(|(s, _)| s), Some(200));
+        let (status, head, body) = http_head("POST", &format!("{}/v1/jobs", base(k)), Some(job)).unwrap();
+        assert_eq!((status, json(&body)["error"]["code"].as_str()), (503, Some("store_unavailable")), "{head}");
+        assert!(head.contains("\r\nretry-after: "), "{head}");
+    }
+    // Renders that finish meanwhile keep their results until Redis takes them.
+    let waiting = || {
+        (0..2).any(|k| {
+            http("GET", &format!("{}/v1/stats", base(k)), None).is_some_and(|(_, b)| json(&b)["store"]["waiting_writes"].as_u64() > Some(0))
+        })
+    };
+    assert!(wait_until(Duration::from_secs(30), waiting).is_some(), "no finished render waited for the store");
+    // Gone longer than the claim idle time, as an outage would be.
+    std::thread::sleep(Duration::from_secs(3));
+    for replica in &mut replicas {
+        assert!(matches!(replica.0.try_wait(), Ok(None)), "a replica died with Redis");
+    }
+    redis = Some(redis_server(redis_port, &persistent));
+    for &port in &ports {
+        wait_ready(port);
+    }
+    for (k, id) in ids.iter().enumerate() {
+        let record = finished_record(&base(k + 1), id, Duration::from_secs(240));
+        assert_eq!(record["status"], "succeeded", "job {id}: {record}");
+        let (status, image) = http("GET", &format!("{}/v1/jobs/{id}/image", base(k)), None).unwrap();
+        assert!(status == 200 && image.starts_with(b"\x89PNG"), "job {id} image: {status}");
+    }
+    drop(redis);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A tmpfs of the given size (`mount -t tmpfs`, as root), unmounted when dropped.
+struct Tmpfs(PathBuf);
+
+impl Tmpfs {
+    fn mount(size: &str) -> Self {
+        let dir = std::env::temp_dir().join(format!("penumbra-tmpfs-{}-{}", std::process::id(), free_port()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let mounted = Command::new("mount").args(["-t", "tmpfs", "-o", &format!("size={size}"), "tmpfs"]).arg(&dir).status();
+        assert!(mounted.is_ok_and(|s| s.success()), "mount -t tmpfs failed: this test runs as root, as CI does");
+        Self(dir)
+    }
+
+    /// Bytes free on it, as an unprivileged writer sees them.
+    fn free_bytes(&self) -> u64 {
+        let df = run(Command::new("df").args(["--output=avail", "-B1"]).arg(&self.0));
+        df.lines().nth(1).and_then(|l| l.trim().parse().ok()).expect("df's answer")
+    }
+
+    /// Writes zeros into `name` until the disk is full.
+    fn fill(&self, name: &str) {
+        use std::io::Write;
+        let mut ballast = std::fs::File::create(self.0.join(name)).unwrap();
+        let block = vec![0u8; 64 << 10];
+        while ballast.write_all(&block).is_ok() {}
+        let _ = ballast.sync_all();
+        assert!(self.free_bytes() < 64 << 10, "the disk is not full");
+    }
+}
+
+impl Drop for Tmpfs {
+    fn drop(&mut self) {
+        let _ = Command::new("umount").arg("-l").arg(&self.0).status();
+        std::fs::remove_dir_all(&self.0).ok();
+    }
+}
+
+/// The embedded store's data directory on a small disk. Admission refuses jobs (507
+/// `insufficient_storage`) before the disk is full, and every job it accepted succeeds. Then
+/// another tenant fills the disk while a job renders: the job is not failed, readiness and
+/// admission say why, and once the space is freed the daemon serves again — no restart.
+#[test]
+fn a_full_data_disk_refuses_new_jobs_loses_none_and_recovers_without_a_restart() {
+    let disk = Tmpfs::mount("6m");
+    let port = free_port();
+    let base = format!("http://127.0.0.1:{port}");
+    let _daemon = daemon(port, &["--no-warm-up", "--data-dir", disk.0.to_str().unwrap(), "--min-free-bytes", "1048576"]);
+    wait_ready(port);
+    let small = r#"{"scene": {"builtin": "torus"}, "output": {"width": 256, "height": 192}}"#;
+    let (mut accepted, mut refused, mut free_when_refused) = (Vec::new(), 0, u64::MAX);
+    for _ in 0..40 {
+        let (status, body) = http("POST", &format!("{base}/v1/jobs"), Some(small)).unwrap();
+        match status {
+            202 => accepted.push(json(&body)["id"].as_str().unwrap().to_owned()),
+            507 => {
+                assert_eq!(json(&body)["error"]["code"], "insufficient_storage");
+                refused += 1;
+                free_when_refused = free_when_refused.min(disk.free_bytes());
+            }
+            other => panic!("{other}: {}", String::from_utf8_lossy(&body)),
+        }
+    }
+    eprintln!("full disk: {} accepted, {refused} refused with ≥ {free_when_refused} bytes free", accepted.len());
+    assert!(!accepted.is_empty() && refused > 0, "{} accepted, {refused} refused", accepted.len());
+    assert!(free_when_refused >= 512 << 10, "refused only when the disk was nearly full ({free_when_refused} bytes free)");
+    for id in &accepted {
+        assert_eq!(finished_record(&base, id, Duration::from_secs(120))["status"], "succeeded", "job {id}");
+        let (status, image) = http("GET", &format!("{base}/v1/jobs/{id}/image"), None).unwrap();
+        assert!(status == 200 && image.starts_with(b"\x89PNG"), "job {id} image: {status}");
+    }
+
+    // Another tenant fills the disk while a job renders.
+    let slow = r#"{"scene": {"builtin": "occluder"}, "method": {"name": "reference", "samples": 1024, "resolution": 512}, "output": {"width": 128, "height": 96}}"#;
+    let (status, body) = http("POST", &format!("{base}/v1/jobs"), Some(slow)).unwrap();
+    assert_eq!(status, 202, "{}", String::from_utf8_lossy(&body));
+    let running = json(&body)["id"].as_str().unwrap().to_owned();
+    let started = wait_until(Duration::from_secs(60), || {
+        http("GET", &format!("{base}/v1/jobs/{running}"), None).is_some_and(|(_, b)| json(&b)["status"] == "running")
+    });
+    assert!(started.is_some(), "the slow job never started");
+    disk.fill("ballast");
+    let full =
+        || http("GET", &format!("{base}/readyz"), None).is_some_and(|(s, b)| s == 503 && json(&b)["status"] == "insufficient storage");
+    assert!(wait_until(Duration::from_secs(20), full).is_some(), "readiness did not say the disk is full");
+    // The daemon dropped the old results it could to regain its margin: fill what they freed.
+    disk.fill("ballast-2");
+    let (status, body) = http("POST", &format!("{base}/v1/jobs"), Some(small)).unwrap();
+    assert_eq!((status, json(&body)["error"]["code"].as_str()), (507, Some("insufficient_storage")));
+    // The slow job's result is rendered and waits for room, the job still `running`.
+    let store = || json(&http("GET", &format!("{base}/v1/stats"), None).unwrap().1)["store"].clone();
+    let waiting = wait_until(Duration::from_secs(180), || store()["waiting_writes"].as_u64() > Some(0));
+    assert!(waiting.is_some(), "the result never waited for the store: {}", store());
+    assert_eq!(http("GET", &format!("{base}/v1/jobs/{running}"), None).map(|(_, b)| json(&b)["status"].clone()), Some("running".into()));
+    assert_eq!((store()["kind"].as_str(), store()["room"].as_bool()), (Some("embedded"), Some(false)), "{}", store());
+    let metrics = String::from_utf8(http("GET", &format!("{base}/metrics"), None).unwrap().1).unwrap();
+    assert!(metrics.contains("penumbra_store{what=\"room\"} 0"), "{metrics}");
+
+    std::fs::remove_file(disk.0.join("ballast-2")).unwrap();
+    std::fs::remove_file(disk.0.join("ballast")).unwrap();
+    assert!(wait_until(Duration::from_secs(20), || http("GET", &format!("{base}/readyz"), None).is_some_and(|(s, _)| s == 200)).is_some());
+    let record = finished_record(&base, &running, Duration::from_secs(180));
+    assert_eq!(record["status"], "succeeded", "the job that ran while the disk was full: {record}");
+    let (status, image) = http("GET", &format!("{base}/v1/jobs/{running}/image"), None).unwrap();
+    assert!(status == 200 && image.starts_with(b"\x89PNG"), "{status}");
+    let (status, body) = http("POST", &format!("{base}/v1/jobs"), Some(small)).unwrap();
+    assert_eq!(status, 202, "{}", String::from_utf8_lossy(&body));
+    let id = json(&body)["id"].as_str().unwrap().to_owned();
+    assert_eq!(finished_record(&base, &id, Duration::from_secs(60))["status"], "succeeded");
+}
+
+/// The embedded store itself on a disk that fills: its writes fail as transient errors (never
+/// a panic), and once space returns it opens its database again by itself and has lost
+/// nothing it had committed.
+#[test]
+fn the_embedded_store_reopens_by_itself_after_its_disk_was_full() {
+    use penumbra::store::{EmbeddedStore, JobStore};
+    let disk = Tmpfs::mount("4m");
+    let store = EmbeddedStore::open(&disk.0).unwrap();
+    store.accept("before", &serde_json::json!({"method": {"name": "hard"}})).unwrap();
+    disk.fill("ballast");
+    // Records until a write fails: the database file must grow, and cannot.
+    let padding = serde_json::json!({"padding": "x".repeat(16 << 10)});
+    let failure = (0..400).find_map(|k| store.accept(&format!("job-{k}"), &padding).err()).expect("a write fails on a full disk");
+    assert!(failure.is_transient(), "{failure:?}");
+    // redb refuses everything after an I/O error: so does the store, as transient errors.
+    for _ in 0..3 {
+        if let Err(error) = store.get("before") {
+            assert!(error.is_transient(), "{error:?}");
+        }
+    }
+    std::fs::remove_file(disk.0.join("ballast")).unwrap();
+    store.ping().expect("the store opens its database again once there is room");
+    store.accept("after", &serde_json::json!({})).unwrap();
+    assert_eq!(store.get("before").unwrap().unwrap().job["method"]["name"], "hard");
+    assert!(store.get("after").unwrap().is_some());
+}
+
+/// 1,100 clients that send an upload's headers and one byte of its body, then stall, against
+/// a daemon under `ulimit -n 1024` (a common default): `/healthz` and a render answer within a
+/// second throughout, and the stalled connections are closed after the body timeout (or
+/// before, to make room at the connection cap).
+#[test]
+fn stalled_uploads_cannot_take_the_daemon_down() {
+    use std::io::{Read, Write};
+    let port = free_port();
+    let body_timeout_secs: u64 = 4;
+    let _daemon = Child(
+        Command::new("sh")
+            .args(["-c", "ulimit -n 1024 && exec \"$0\" \"$@\"", env!("CARGO_BIN_EXE_penumbra"), "serve"])
+            .args(["--listen", &format!("127.0.0.1:{port}"), "--job-store", "memory"])
+            .args(["--body-timeout-secs", &body_timeout_secs.to_string()])
+            .env("PENUMBRA_LOG", "warn")
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    wait_ready(port);
+    let base = format!("http://127.0.0.1:{port}");
+    let render = r#"{"scene": {"builtin": "torus"}, "output": {"width": 64, "height": 48}}"#;
+    let mut slowest: f64 = 0.0;
+    let mut answers_within_a_second = || {
+        for (method, path, body) in [("GET", "/healthz", None), ("POST", "/v1/render", Some(render))] {
+            let started = Instant::now();
+            let mut command = Command::new("curl");
+            command.args(["-s", "-m", "1", "-o", "/dev/null", "-w", "%{http_code}", "-X", method, &format!("{base}{path}")]);
+            if let Some(body) = body {
+                command.args(["-H", "content-type: application/json", "-d", body]);
+            }
+            let status = String::from_utf8(command.output().unwrap().stdout).unwrap();
+            assert_eq!(status, "200", "{method} {path} did not answer within a second");
+            slowest = slowest.max(started.elapsed().as_secs_f64());
+        }
+    };
+    answers_within_a_second();
+    let stall = b"POST /v1/scenes HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: model/gltf-binary\r\nContent-Length: 100000\r\n\r\nx";
+    let mut stalled = Vec::new();
+    for k in 0..1100 {
+        let mut stream = std::net::TcpStream::connect(("127.0.0.1", port)).unwrap();
+        stream.write_all(stall).unwrap();
+        stalled.push(stream);
+        if k % 100 == 99 {
+            answers_within_a_second();
+        }
+    }
+    let opened = Instant::now();
+    answers_within_a_second();
+    // Every stalled connection is closed by the server: end of stream (or a reset) on read.
+    let mut closed = 0;
+    for stream in &mut stalled {
+        stream.set_read_timeout(Some(Duration::from_secs(body_timeout_secs + 10))).unwrap();
+        let mut byte = [0u8; 1];
+        match stream.read(&mut byte) {
+            Ok(0) => closed += 1,
+            Err(e) if e.kind() == std::io::ErrorKind::ConnectionReset => closed += 1,
+            other => panic!("a stalled connection was not closed: {other:?}"),
+        }
+    }
+    let all_closed = opened.elapsed();
+    answers_within_a_second();
+    let metrics = String::from_utf8(http("GET", &format!("{base}/metrics"), None).unwrap().1).unwrap();
+    let gauge = |what: &str| {
+        metrics
+            .lines()
+            .find_map(|l| l.strip_prefix(&format!("penumbra_connections{{what=\"{what}\"}} ")))
+            .and_then(|v| v.parse::<u64>().ok())
+    };
+    eprintln!(
+        "stalled uploads: {closed} closed, the last {:.1} s after the 1,100th was opened; slowest answer {:.0} ms; cap {:?}, shed {:?}, body timeouts {:?}",
+        all_closed.as_secs_f64(),
+        slowest * 1e3,
+        gauge("max"),
+        gauge("shed"),
+        gauge("body_timeouts")
+    );
+    assert_eq!(closed, 1100);
+    assert!(gauge("max").is_some_and(|max| max <= 1024 - 128), "the cap is below the file-descriptor limit: {:?}", gauge("max"));
+    assert!(gauge("shed").unwrap_or(0) + gauge("body_timeouts").unwrap_or(0) >= 1100);
 }

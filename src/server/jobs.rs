@@ -318,14 +318,14 @@ pub(super) async fn persist<T: Send + 'static>(
     let give_up = std::time::Instant::now() + state.store_retry;
     let mut stopping = state.stopping.subscribe();
     let mut wait = std::time::Duration::from_millis(250);
-    let mut retried = false;
+    let mut waiting = None;
     loop {
         let attempt = write.clone();
         match store.call(move |s| attempt(s)).await {
             Err(error) if error.is_transient() && std::time::Instant::now() + wait < give_up && !*stopping.borrow() => {
-                if !retried {
+                if waiting.is_none() {
                     tracing::warn!(%id, %error, "cannot store the job's {what} yet; retrying until the store takes it");
-                    retried = true;
+                    waiting = Some(store.health().waiting_write());
                 }
                 tokio::select! {
                     _ = tokio::time::sleep(wait) => {}
@@ -334,7 +334,7 @@ pub(super) async fn persist<T: Send + 'static>(
                 wait = (wait * 2).min(std::time::Duration::from_secs(5));
             }
             outcome => {
-                if retried && outcome.is_ok() {
+                if waiting.is_some() && outcome.is_ok() {
                     tracing::info!(%id, "stored the job's {what} after the store came back");
                 }
                 return outcome;

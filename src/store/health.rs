@@ -26,6 +26,8 @@ pub struct StoreHealth {
     reserved_bytes: AtomicU64,
     /// Times the store went from answering to not answering.
     outages: AtomicU64,
+    /// Finished jobs whose outcome waits to be stored (retried while the store cannot take it).
+    waiting_writes: AtomicU64,
 }
 
 /// The store's state as `/v1/stats` reports it.
@@ -43,6 +45,8 @@ pub struct StoreStatus {
     /// Whether the disk is above its margin: new submitted jobs can be stored.
     pub room: bool,
     pub outages: u64,
+    /// Finished jobs whose outcome waits for the store (retried until it takes them).
+    pub waiting_writes: u64,
 }
 
 impl StoreHealth {
@@ -54,6 +58,7 @@ impl StoreHealth {
             min_free_bytes,
             reserved_bytes: AtomicU64::new(0),
             outages: AtomicU64::new(0),
+            waiting_writes: AtomicU64::new(0),
         }
     }
 
@@ -104,7 +109,23 @@ impl StoreHealth {
             reserved_bytes: self.reserved_bytes.load(Ordering::Relaxed),
             room: self.room(),
             outages: self.outages.load(Ordering::Relaxed),
+            waiting_writes: self.waiting_writes.load(Ordering::Relaxed),
         }
+    }
+
+    /// Counts a finished job's outcome as waiting for the store until the guard drops.
+    pub fn waiting_write(self: &Arc<Self>) -> WaitingWrite {
+        self.waiting_writes.fetch_add(1, Ordering::Relaxed);
+        WaitingWrite(self.clone())
+    }
+}
+
+/// One outcome waiting for the store (see `StoreHealth::waiting_write`).
+pub struct WaitingWrite(Arc<StoreHealth>);
+
+impl Drop for WaitingWrite {
+    fn drop(&mut self) {
+        self.0.waiting_writes.fetch_sub(1, Ordering::Relaxed);
     }
 }
 
@@ -134,7 +155,7 @@ impl Store {
         Self { inner, health: Arc::new(StoreHealth::new(kind, min_free_bytes)) }
     }
 
-    pub fn health(&self) -> &StoreHealth {
+    pub fn health(&self) -> &Arc<StoreHealth> {
         &self.health
     }
 
