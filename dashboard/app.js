@@ -131,6 +131,26 @@ function drawTiles(stats) {
   const e = stats.engine;
   setText("pools", ratio(e.targets_reused + e.readbacks_reused + e.derived_reused, e.targets_created + e.readbacks_created + e.derived_created));
   setText("resets", String(e.device_resets));
+  drawStore(stats.store, stats.connections);
+}
+
+// The job store's state: red while it does not answer or its disk is at the margin, with
+// the free space, the results waiting for it and the connections held.
+function drawStore(store, connections) {
+  const tile = document.getElementById("store-tile");
+  const held = connections ? ` · ${connections.open} connections` : "";
+  if (!store) {
+    setText("store", "memory");
+    setText("store-unit", `not durable${held}`);
+    tile.classList.remove("alarm");
+    return;
+  }
+  const state = !store.available ? "unavailable" : !store.room ? "disk full" : "ok";
+  setText("store", state);
+  const free = store.free_bytes === undefined ? store.kind : `${store.kind} · ${bytes(store.free_bytes)} free`;
+  const waiting = store.waiting_writes > 0 ? ` · ${store.waiting_writes} results waiting` : "";
+  setText("store-unit", `${free}${waiting}${held}`);
+  tile.classList.toggle("alarm", state !== "ok");
 }
 
 function drawHistory(stats) {

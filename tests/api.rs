@@ -919,6 +919,7 @@ async fn the_dashboard_draws_live_data_in_headless_chromium() {
     assert!(attribute("data-phases").contains("shadow_map"), "{body}");
     assert_eq!(dom.matches("/thumbnail\"").count(), 4, "a thumbnail per successful job");
     assert!(dom.contains("class=\"status ok\""), "the page reports the daemon live");
+    assert!(dom.contains("id=\"store\">memory<"), "the job-store tile says the router has no durable store");
     // The screenshot shows drawn charts: the accent colour of the bars and lines is there.
     let shot = image::open(&shot).expect("chromium wrote a PNG screenshot").to_rgb8();
     let accent = shot.pixels().filter(|p| p.0[0].abs_diff(0xf0) < 12 && p.0[1].abs_diff(0xb4) < 12 && p.0[2].abs_diff(0x29) < 12).count();
