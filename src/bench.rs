@@ -178,7 +178,7 @@ async fn measure_overhead(engine: &Arc<Engine>, client: &reqwest::Client, base: 
         let engine = engine.clone();
         let job = job.clone();
         let start = Instant::now();
-        tokio::task::spawn_blocking(move || engine.render(&job)).await??;
+        tokio::task::spawn_blocking(move || engine.render(&job, &())).await??;
         let library_ms = start.elapsed().as_secs_f64() * 1e3;
         let start = Instant::now();
         let response = client.post(format!("{base}/v1/render")).json(&bench_job()).send().await?;

@@ -185,16 +185,3 @@ pub struct ServeConfig {
     #[command(flatten)]
     pub render: RenderOptions,
 }
-
-impl ServeConfig {
-    /// The connection limits the flags ask for (before the file-descriptor limit lowers them).
-    pub fn connection_limits(&self) -> crate::server::connections::ConnectionLimits {
-        let secs = |s: f64| std::time::Duration::from_secs_f64(s.max(0.001));
-        crate::server::connections::ConnectionLimits {
-            max_connections: self.max_connections,
-            header_timeout: secs(self.header_timeout_secs),
-            body_timeout: secs(self.body_timeout_secs),
-            keep_alive_timeout: secs(self.keep_alive_secs),
-        }
-    }
-}

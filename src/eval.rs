@@ -261,9 +261,7 @@ pub fn run(engine: &Engine, options: &EvalOptions) -> anyhow::Result<EvalReport>
                 reference_job.method.params.insert("samples".into(), options.samples.into());
                 reference_job.method.params.insert("resolution".into(), shadow_map.into());
                 let (reference, reference_timings) = engine
-                    .render_raw_observed(&reference_job, &|done, total| {
-                        progress.set_message(format!("{case}: reference {done}/{total} samples"))
-                    })
+                    .render_frame(&reference_job, &|done, total| progress.set_message(format!("{case}: reference {done}/{total} samples")))
                     .with_context(|| format!("{case}: reference"))?;
                 progress.inc(1);
                 let mut case_rows = vec![row(scene, light, shadow_map, "reference", reference_timings, &reference, &reference)];
@@ -273,7 +271,7 @@ pub fn run(engine: &Engine, options: &EvalOptions) -> anyhow::Result<EvalReport>
                     for ((label, method), runs) in methods.iter().zip(&mut runs) {
                         progress.set_message(format!("{case}: {label} ({}/{})", repetition + 1, options.repeat));
                         let job = Job { method: method.clone(), ..base.clone() };
-                        let (frame, timings) = engine.render_raw(&job).map_err(|e| anyhow::anyhow!("{case}: {label}: {e}"))?;
+                        let (frame, timings) = engine.render_frame(&job, &()).map_err(|e| anyhow::anyhow!("{case}: {label}: {e}"))?;
                         runs.push(timings);
                         if repetition == 0 {
                             frames.push((label.clone(), frame));

@@ -11,9 +11,8 @@ use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value};
 
 use crate::error::{ErrorCode, JobError, JobResult};
+use crate::params::Cap;
 
-/// Limits on what one job may ask for. Every one is configurable (`Config`) and enforced
-/// before anything is allocated.
 /// Whether arrays and objects in `bytes` nest deeper than `max` (brackets inside strings do
 /// not count). A linear scan before any parsing: a hostile body is refused before it costs
 /// a deep recursion or an allocation.
@@ -48,6 +47,8 @@ fn nesting_exceeds(bytes: &[u8], max: usize) -> bool {
 /// own recursion limit of 128 would still allocate for a hostile body).
 pub const MAX_JSON_DEPTH: usize = 16;
 
+/// Limits on what one job may ask for. Every one is configurable (`serve --help`) and
+/// enforced before anything is allocated.
 #[derive(Debug, Clone, Serialize)]
 pub struct Limits {
     /// Largest output width or height in pixels.
@@ -76,13 +77,11 @@ pub struct Limits {
 }
 
 impl Limits {
-    /// The operator's cap on a method parameter, where there is one: the parameter's range
-    /// ends at the smaller of the method's own maximum and this.
-    pub fn param_cap(&self, param: &str) -> Option<(i64, &'static str)> {
-        match param {
-            "samples" => Some((i64::from(self.max_samples), "max_samples")),
-            "rounds" => Some((i64::from(self.max_rounds), "max_rounds")),
-            _ => None,
+    /// An operator cap on method parameters: its value and the flag that sets it.
+    pub fn cap(&self, cap: Cap) -> (i64, &'static str) {
+        match cap {
+            Cap::Samples => (i64::from(self.max_samples), "max_samples"),
+            Cap::Rounds => (i64::from(self.max_rounds), "max_rounds"),
         }
     }
 }
@@ -356,33 +355,10 @@ impl Job {
         })
     }
 
-    /// Range checks that need no scene: output and shadow-map sizes, exposure, ambient.
-    /// (Camera and light are checked once merged with the scene's defaults.)
+    /// Range checks that need neither a scene nor the methods' registry: output and
+    /// shadow-map sizes, exposure, ambient. The method, its parameters and built-in names are
+    /// checked by `engine::check_job`; camera and light once merged with the scene's defaults.
     pub fn validate(&self, limits: &Limits) -> JobResult<()> {
-        // The method and its parameters, under the operator's caps (a missing parameter
-        // counts with its default: a server capped below it needs the value given).
-        let method = crate::methods::find(&self.method.name)?;
-        let params = crate::methods::Params::parse(method.params(), &self.method.params)?;
-        for spec in method.params() {
-            let (Some((cap, limit)), crate::methods::ParamKind::Integer { .. }) = (limits.param_cap(spec.name), spec.kind) else {
-                continue;
-            };
-            let value = i64::from(params.u32(spec.name));
-            if value > cap {
-                return Err(JobError::field(
-                    ErrorCode::LimitExceeded,
-                    format!("method.{}", spec.name),
-                    format!("{value} exceeds this server's limit of {cap} ({limit})"),
-                ));
-            }
-        }
-        // Built-in assets are known now: a misspelt one is refused at submission, not later.
-        if let AssetRef::Builtin { name, params } = &self.scene {
-            crate::scene::builtin::parse(name, params, "scene", limits)?;
-        }
-        if let Some(AssetRef::Builtin { name, params }) = &self.light.image {
-            crate::light::LightImage::check_builtin(name, params, "light.image")?;
-        }
         let out = &self.output;
         check_dim("output.width", out.width, limits.max_output_dim)?;
         check_dim("output.height", out.height, limits.max_output_dim)?;

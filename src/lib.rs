@@ -16,13 +16,14 @@ pub mod job;
 pub mod jobs;
 pub mod light;
 pub mod methods;
-pub mod metrics;
 pub mod output;
+pub mod params;
 pub mod quality;
 pub mod render;
 pub mod scene;
 pub mod server;
 pub mod store;
+pub mod supervise;
 pub mod timing;
 pub mod uploads;
 

@@ -175,7 +175,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} samples {elapsed_precise}")
                     .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
             );
-            let rendered = engine.render_observed(&job, &|done, total| {
+            let rendered = engine.render(&job, &|done, total| {
                 if bar.is_hidden() {
                     bar.set_draw_target(indicatif::ProgressDrawTarget::stderr());
                 }

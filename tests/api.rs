@@ -778,10 +778,10 @@ fn a_lost_device_is_replaced_and_the_affected_job_retried() {
     let gpu = Arc::new(GpuContext::new(AdapterChoice::Auto).expect("a Vulkan adapter"));
     let engine = Engine::new(gpu, Limits::default(), PathPolicy::Deny);
     let job = penumbra::job::Job::from_json(small_job("png").to_string().as_bytes()).unwrap();
-    let before = engine.render(&job).expect("renders on the first device");
+    let before = engine.render(&job, &()).expect("renders on the first device");
 
     engine.gpu().simulate_loss();
-    let after_loss = engine.render(&job).expect("renders on a new device after a loss between jobs");
+    let after_loss = engine.render(&job, &()).expect("renders on a new device after a loss between jobs");
     assert_eq!(engine.device_resets(), 1);
     assert!(!engine.gpu().is_lost());
     assert_eq!(after_loss.bytes, before.bytes, "the new device renders the same image");
@@ -791,11 +791,11 @@ fn a_lost_device_is_replaced_and_the_affected_job_retried() {
     let mut reference = job.clone();
     reference.method.name = "reference".into();
     reference.method.params.insert("samples".into(), json!(8));
-    let clean = engine.render(&reference).expect("a reference render");
+    let clean = engine.render(&reference, &()).expect("a reference render");
     let lost_once = std::sync::atomic::AtomicBool::new(false);
     let current = engine.gpu();
     let retried = engine
-        .render_observed(&reference, &|_, _| {
+        .render(&reference, &|_, _| {
             if !lost_once.swap(true, std::sync::atomic::Ordering::SeqCst) {
                 current.simulate_loss();
             }
@@ -812,7 +812,7 @@ struct CancelAfter {
     heard: std::sync::atomic::AtomicUsize,
 }
 
-impl penumbra::render::Observer for CancelAfter {
+impl penumbra::supervise::Supervisor for CancelAfter {
     fn progress(&self, _done: u64, _total: u64) {
         self.heard.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
     }
@@ -830,16 +830,16 @@ fn a_cancelled_render_stops_at_its_next_batch_and_the_engine_renders_on() {
     reference.method.name = "reference".into();
     reference.method.params.extend([("samples".into(), json!(256)), ("resolution".into(), json!(128))]);
     let observer = CancelAfter { after: 1, heard: Default::default() };
-    let Err(error) = engine.render_observed(&reference, &observer) else { panic!("the render is cancelled") };
+    let Err(error) = engine.render(&reference, &observer) else { panic!("the render is cancelled") };
     assert_eq!(error.code, penumbra::error::ErrorCode::Cancelled);
     // 256 samples are 16 batches; a cancelled render stops after the first.
     assert_eq!(observer.heard.load(std::sync::atomic::Ordering::SeqCst), 1, "no batch runs after the cancel");
 
     // Cancelled before it reaches the device: nothing is rendered at all.
-    let error = engine.render_observed(&reference, &CancelAfter { after: 0, heard: Default::default() }).err().unwrap();
+    let error = engine.render(&reference, &CancelAfter { after: 0, heard: Default::default() }).err().unwrap();
     assert_eq!(error.code, penumbra::error::ErrorCode::Cancelled);
     let job = penumbra::job::Job::from_json(small_job("png").to_string().as_bytes()).unwrap();
-    assert_eq!(engine.render(&job).expect("the engine renders on").bytes, engine.render(&job).unwrap().bytes);
+    assert_eq!(engine.render(&job, &()).expect("the engine renders on").bytes, engine.render(&job, &()).unwrap().bytes);
 }
 
 #[tokio::test(flavor = "multi_thread")]

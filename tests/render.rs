@@ -6,7 +6,8 @@ mod common;
 use glam::{Vec2, Vec3};
 use penumbra::job::{AssetRef, Job, Limits, OutputFormat};
 use penumbra::light::{light_cells, unshadowed_irradiance, AreaLight, LightImage};
-use penumbra::methods::chun_oh::{light_regions, quadtree_probe};
+use penumbra::methods::chun_oh::quadtree_probe;
+use penumbra::methods::filter::light_regions;
 use serde_json::json;
 
 fn job(value: serde_json::Value) -> Job {
@@ -16,14 +17,14 @@ fn job(value: serde_json::Value) -> Job {
 #[test]
 fn golden_torus_hard() {
     let job = job(json!({"scene": {"builtin": "torus"}, "output": {"width": 256, "height": 192}}));
-    let rendered = common::engine().render(&job).unwrap();
+    let rendered = common::engine().render(&job, &()).unwrap();
     common::check_golden("torus-hard", &rendered.bytes, 0.01, 0.1);
 }
 
 #[test]
 fn golden_columns_hard() {
     let job = job(json!({"scene": {"builtin": "columns"}, "output": {"width": 256, "height": 192}}));
-    let rendered = common::engine().render(&job).unwrap();
+    let rendered = common::engine().render(&job, &()).unwrap();
     common::check_golden("columns-hard", &rendered.bytes, 0.01, 0.1);
 }
 
@@ -57,7 +58,7 @@ fn mean_rgb(color: &[[f32; 4]], width: usize, xs: std::ops::Range<usize>, ys: st
 fn light_image_lands_the_documented_way_round() {
     // The torus hides the centre; measure the strips along the image edges.
     let engine = common::engine();
-    let (frame, _) = engine.render_raw(&overhead_job("stripes")).unwrap();
+    let (frame, _) = engine.render_frame(&overhead_job("stripes"), &()).unwrap();
     let right = mean_rgb(&frame.color, 64, 58..64, 20..44);
     let left = mean_rgb(&frame.color, 64, 0..6, 20..44);
     // Column 0 (red, then yellow) is on +x, the right of the output; the last columns
@@ -68,7 +69,7 @@ fn light_image_lands_the_documented_way_round() {
 
     // `flame` is yellow-white at row 0 (top, +u = −z = top of the output) and deep red at the
     // bottom: the green/red ratio falls from the top edge to the bottom edge.
-    let (frame, _) = engine.render_raw(&overhead_job("flame")).unwrap();
+    let (frame, _) = engine.render_frame(&overhead_job("flame"), &()).unwrap();
     let top = mean_rgb(&frame.color, 64, 24..40, 0..6);
     let bottom = mean_rgb(&frame.color, 64, 24..40, 58..64);
     assert!(top.y / top.x > bottom.y / bottom.x + 0.1, "top {top} bottom {bottom}");
@@ -86,7 +87,7 @@ fn e0_on_the_gpu_matches_its_cpu_twin() {
         "light": light_json,
         "output": {"width": 33, "height": 33, "format": "exr"}
     }));
-    let (frame, _) = common::engine().render_raw(&job).unwrap();
+    let (frame, _) = common::engine().render_frame(&job, &()).unwrap();
     let light = AreaLight::new(Vec3::new(2.0, 1.5, 2.5), Vec3::new(0.3, -1.0, 0.2), Vec3::X, Vec2::new(1.5, 0.7), 10.0).unwrap();
     let cells = light_cells(&light, &LightImage::builtin("stripes", &Default::default(), "light.image").unwrap());
     let expected = unshadowed_irradiance(&light, &cells, Vec3::new(3.0, 0.0, 3.0), Vec3::Y) * 0.7 / std::f32::consts::PI;
@@ -103,8 +104,8 @@ fn e0_on_the_gpu_matches_its_cpu_twin() {
 fn second_identical_job_compiles_and_uploads_nothing() {
     let engine = common::engine();
     let job = job(json!({"scene": {"builtin": "crowd"}, "output": {"width": 32, "height": 32}}));
-    engine.render(&job).unwrap();
-    let warm = engine.render(&job).unwrap();
+    engine.render(&job, &()).unwrap();
+    let warm = engine.render(&job, &()).unwrap();
     assert_eq!(warm.timings.pipelines_compiled, 0, "{:?}", warm.timings);
     assert!(warm.timings.scene_cached);
     assert_eq!(warm.timings.scene_upload_bytes, 0);
@@ -116,7 +117,7 @@ fn second_identical_job_compiles_and_uploads_nothing() {
 #[test]
 fn hard_shadow_is_binary_and_present() {
     let job = job(json!({"scene": {"builtin": "torus"}, "output": {"width": 96, "height": 96, "format": "exr"}}));
-    let (frame, _) = common::engine().render_raw(&job).unwrap();
+    let (frame, _) = common::engine().render_frame(&job, &()).unwrap();
     let visibility = frame.visibility.unwrap();
     assert!(visibility.iter().all(|v| v[0] == 0.0 || v[0] == 1.0));
     assert!(visibility.iter().all(|v| v[0] == v[1] && v[1] == v[2]), "hard is a gray method");
@@ -160,7 +161,7 @@ fn gltf_renders_with_its_albedo() {
     }));
     job.scene = AssetRef::Path(path);
     job.output.format = OutputFormat::Exr;
-    let (frame, _) = common::engine().render_raw(&job).unwrap();
+    let (frame, _) = common::engine().render_frame(&job, &()).unwrap();
     std::fs::remove_dir_all(&dir).ok();
     // The leaf (green texture) is centred at (−0.8, 1, −0.8): up and left of the centre.
     // The red floor at (1, 0, 1), down and right, is lit and not under the leaf.
@@ -255,7 +256,7 @@ fn closed_form_error(method: serde_json::Value, image: &str) -> (f32, f32, Vec<(
         "method": method,
         "output": {"width": size, "height": size, "format": "exr"}
     }));
-    let (frame, _) = common::engine().render_raw(&job).unwrap();
+    let (frame, _) = common::engine().render_frame(&job, &()).unwrap();
     let light = AreaLight::new(Vec3::new(0.0, 3.0, 0.0), -Vec3::Y, -Vec3::Z, Vec2::ONE, 30.0).unwrap();
     let cells = light_cells(&light, &LightImage::builtin(image, &Default::default(), "f").unwrap());
     let camera = penumbra::render::Camera {
@@ -386,7 +387,7 @@ fn top_down(method: serde_json::Value, scene: serde_json::Value, light: serde_js
         "method": method,
         "output": {"width": 128, "height": 128, "format": "exr"}
     }));
-    common::engine().render_raw(&job).unwrap().0.visibility.unwrap()
+    common::engine().render_frame(&job, &()).unwrap().0.visibility.unwrap()
 }
 
 /// The output pixel that sees floor point (x, 0, z) in `top_down`.
@@ -459,7 +460,7 @@ fn brabec_adaptive_sampling_agrees_with_searching_every_pixel() {
     let render = |adaptive: bool| {
         let job = job(json!({"scene": {"builtin": "crowd"}, "method": {"name": "brabec", "adaptive": adaptive},
                              "output": {"width": 320, "height": 240, "format": "exr"}}));
-        common::engine().render_raw(&job).unwrap().0
+        common::engine().render_frame(&job, &()).unwrap().0
     };
     let (adaptive, exhaustive) = (render(true), render(false));
     let (a, e) = (adaptive.visibility.unwrap(), exhaustive.visibility.unwrap());
@@ -479,14 +480,14 @@ fn brabec_self_shadowing_is_lost_inside_one_object() {
     // but no outer penumbra from its own relief.
     let job = job(json!({"scene": {"builtin": "terrain", "triangles": 20000}, "method": {"name": "brabec"},
                          "output": {"width": 96, "height": 64, "format": "exr"}}));
-    let v = common::engine().render_raw(&job).unwrap().0.visibility.unwrap();
+    let v = common::engine().render_frame(&job, &()).unwrap().0.visibility.unwrap();
     assert!(v.iter().all(|p| p[0] <= 0.5 || p[0] == 1.0), "no outer penumbra within one object");
 }
 
 #[test]
 fn golden_crowd_brabec() {
     let job = job(json!({"scene": {"builtin": "crowd"}, "method": {"name": "brabec"}, "output": {"width": 256, "height": 192}}));
-    let rendered = common::engine().render(&job).unwrap();
+    let rendered = common::engine().render(&job, &()).unwrap();
     common::check_golden("crowd-brabec", &rendered.bytes, 0.01, 0.1);
 }
 
@@ -498,7 +499,7 @@ fn brabec_jitter_smooths_low_resolution_maps() {
         let job = job(json!({"scene": {"builtin": "occluder"}, "shadow_map": {"resolution": 64},
                              "method": {"name": "brabec", "jitter_texels": jitter},
                              "output": {"width": 128, "height": 96, "format": "exr"}}));
-        common::engine().render_raw(&job).unwrap().0.visibility.unwrap()
+        common::engine().render_frame(&job, &()).unwrap().0.visibility.unwrap()
     };
     let (plain, jittered) = (render(0.0), render(1.0));
     let distinct = |v: &[[f32; 3]]| {
@@ -554,7 +555,7 @@ fn jfa_l_colored_penumbra_and_standard_flooding() {
 fn golden_crowd_jfa_l() {
     let job = job(json!({"scene": {"builtin": "crowd"}, "light": {"image": {"builtin": "stripes"}}, "method": {"name": "jfa-l"},
                          "output": {"width": 256, "height": 192}}));
-    let rendered = common::engine().render(&job).unwrap();
+    let rendered = common::engine().render(&job, &()).unwrap();
     common::check_golden("crowd-jfa-l", &rendered.bytes, 0.01, 0.1);
 }
 
@@ -566,10 +567,10 @@ fn jfa_look_up_table_is_built_once_per_light() {
                          "method": {"name": "jfa-l"}, "output": {"width": 64, "height": 48, "format": "exr"}}));
     let engine = penumbra::engine::Engine::new(common::engine().gpu(), Limits::default(), penumbra::engine::PathPolicy::Deny);
     let created = engine.stats().derived_created;
-    let first = engine.render_raw(&job).unwrap().0.visibility.unwrap();
+    let first = engine.render_frame(&job, &()).unwrap().0.visibility.unwrap();
     assert!(engine.stats().derived_created > created, "the first job builds the table");
     let reused = engine.stats().derived_reused;
-    let second = engine.render_raw(&job).unwrap().0.visibility.unwrap();
+    let second = engine.render_frame(&job, &()).unwrap().0.visibility.unwrap();
     assert!(engine.stats().derived_reused > reused, "the second job reuses it");
     assert_eq!(first, second, "the kept table gives the same picture");
 }
@@ -604,7 +605,7 @@ fn umbra_holes(v: &[[f32; 3]], reference: &[[f32; 3]]) -> usize {
 fn jfa_e_remedies_against_jumping_too_far_leave_no_more_holes() {
     let render = |method: serde_json::Value| {
         let job = job(json!({"scene": {"builtin": "crowd"}, "method": method, "output": {"width": 192, "height": 144, "format": "exr"}}));
-        common::engine().render_raw(&job).unwrap().0.visibility.unwrap()
+        common::engine().render_frame(&job, &()).unwrap().0.visibility.unwrap()
     };
     let reference = render(json!({"name": "reference", "samples": 128}));
     let with = umbra_holes(&render(json!({"name": "jfa-e"})), &reference);
@@ -617,7 +618,7 @@ fn jfa_e_remedies_against_jumping_too_far_leave_no_more_holes() {
 fn golden_crowd_jfa_e() {
     let job = job(json!({"scene": {"builtin": "crowd"}, "light": {"image": {"builtin": "stripes"}}, "method": {"name": "jfa-e"},
                          "output": {"width": 256, "height": 192}}));
-    let rendered = common::engine().render(&job).unwrap();
+    let rendered = common::engine().render(&job, &()).unwrap();
     common::check_golden("crowd-jfa-e", &rendered.bytes, 0.01, 0.1);
 }
 
@@ -714,7 +715,7 @@ fn chun_oh_under_a_uniform_light_is_pcss_and_unsplit_it_is_pcss_everywhere() {
     let render = |method: serde_json::Value, light: &str| {
         let job = job(json!({"scene": {"builtin": "crowd"}, "light": {"image": {"builtin": light}}, "method": method,
                              "output": {"width": 160, "height": 120, "format": "exr"}}));
-        common::engine().render_raw(&job).unwrap().0
+        common::engine().render_frame(&job, &()).unwrap().0
     };
     let same = |a: &[[f32; 3]], b: &[[f32; 3]]| a.iter().zip(b).all(|(x, y)| x.iter().zip(y).all(|(p, q)| (p - q).abs() < 1e-5));
     let pcss = render(json!({"name": "pcss"}), "white");
@@ -762,14 +763,14 @@ fn pcss_penumbra_follows_the_reference() {
 #[test]
 fn golden_crowd_pcss() {
     let job = job(json!({"scene": {"builtin": "crowd"}, "method": {"name": "pcss"}, "output": {"width": 256, "height": 192}}));
-    common::check_golden("crowd-pcss", &common::engine().render(&job).unwrap().bytes, 0.01, 0.1);
+    common::check_golden("crowd-pcss", &common::engine().render(&job, &()).unwrap().bytes, 0.01, 0.1);
 }
 
 #[test]
 fn golden_crowd_chun_oh() {
     let job = job(json!({"scene": {"builtin": "crowd"}, "light": {"image": {"builtin": "flame"}}, "method": {"name": "chun-oh"},
                          "output": {"width": 256, "height": 192}}));
-    common::check_golden("crowd-chun-oh", &common::engine().render(&job).unwrap().bytes, 0.01, 0.1);
+    common::check_golden("crowd-chun-oh", &common::engine().render(&job, &()).unwrap().bytes, 0.01, 0.1);
 }
 
 // --- wedges ------------------------------------------------------------------------------
@@ -790,7 +791,7 @@ fn wedges_frame(method: serde_json::Value, camera: Option<serde_json::Value>) ->
         spec["scene"] = json!({"builtin": "occluder"});
         spec["camera"] = camera;
     }
-    common::engine().render_raw(&job(spec)).unwrap().0
+    common::engine().render_frame(&job(spec), &()).unwrap().0
 }
 
 #[test]
@@ -841,7 +842,7 @@ fn wedges_with_the_eye_inside_a_shadow_volume_use_z_fail_and_see_what_just_outsi
 #[test]
 fn golden_crowd_wedges() {
     let job = job(json!({"scene": {"builtin": "crowd"}, "method": {"name": "wedges"}, "output": {"width": 256, "height": 192}}));
-    common::check_golden("crowd-wedges", &common::engine().render(&job).unwrap().bytes, 0.01, 0.1);
+    common::check_golden("crowd-wedges", &common::engine().render(&job, &()).unwrap().bytes, 0.01, 0.1);
 }
 
 #[test]
@@ -850,10 +851,10 @@ fn a_steady_stream_of_jobs_allocates_nothing_new() {
     let engine = penumbra::engine::Engine::new(common::engine().gpu(), Limits::default(), penumbra::engine::PathPolicy::Deny);
     let job =
         job(json!({"scene": {"builtin": "torus"}, "method": {"name": "pcss"}, "output": {"width": 96, "height": 64, "format": "exr"}}));
-    engine.render(&job).unwrap();
+    engine.render(&job, &()).unwrap();
     let first = engine.stats();
     for _ in 0..3 {
-        engine.render(&job).unwrap();
+        engine.render(&job, &()).unwrap();
     }
     let later = engine.stats();
     assert_eq!(

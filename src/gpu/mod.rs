@@ -53,6 +53,23 @@ pub enum GpuError {
     NoAdapter(AdapterChoice),
     #[error("the adapter refused to create a device: {0}")]
     RequestDevice(#[from] wgpu::RequestDeviceError),
+    /// The device is gone (a driver reset, a removed GPU): the engine opens a new one.
+    #[error("the GPU device was lost")]
+    Lost,
+    /// Waiting for the GPU failed.
+    #[error("waiting for the GPU failed: {0}")]
+    Poll(String),
+    /// A buffer could not be mapped for reading.
+    #[error("a GPU buffer could not be read back: {0}")]
+    Map(String),
+}
+
+/// A GPU failure while rendering fails that one job, with a generic message towards its
+/// client (the details are logged where the error becomes a response).
+impl From<GpuError> for crate::error::JobError {
+    fn from(error: GpuError) -> Self {
+        crate::error::JobError::internal(format!("the renderer failed on the GPU: {error}"))
+    }
 }
 
 /// Device, queue and what we learned about the adapter. Lives until the device is lost; the
@@ -68,6 +85,8 @@ pub struct GpuContext {
     pub limits: wgpu::Limits,
     /// Whether passes can be timed with GPU timestamp queries.
     pub timestamps: bool,
+    /// Set by `fail_next_readback` (fault tests).
+    fail_next_readback: std::sync::atomic::AtomicBool,
 }
 
 impl GpuContext {
@@ -138,7 +157,7 @@ impl GpuContext {
             driver_info: info.driver_info,
             timestamps,
         };
-        Ok(Self { choice, lost, device, queue, adapter, limits, timestamps })
+        Ok(Self { choice, lost, device, queue, adapter, limits, timestamps, fail_next_readback: Default::default() })
     }
 
     /// Whether the device is gone: every later submission would fail or read back nothing.
@@ -155,9 +174,41 @@ impl GpuContext {
         self.lost.store(true, std::sync::atomic::Ordering::SeqCst);
     }
 
+    /// Makes the next readback fail as a failed buffer map would, for the fault test that a
+    /// GPU error fails one job and nothing else. Not for production paths.
+    #[doc(hidden)]
+    pub fn fail_next_readback(&self) {
+        self.fail_next_readback.store(true, std::sync::atomic::Ordering::SeqCst);
+    }
+
     /// Blocks until the GPU has finished everything submitted so far.
-    pub fn wait_idle(&self) {
-        // A failed poll means the device is lost; the next submission reports it.
-        let _ = self.device.poll(wgpu::PollType::wait_indefinitely());
+    pub fn wait_idle(&self) -> Result<(), GpuError> {
+        let polled = self.device.poll(wgpu::PollType::wait_indefinitely());
+        if self.is_lost() {
+            return Err(GpuError::Lost);
+        }
+        polled.map(drop).map_err(|e| GpuError::Poll(e.to_string()))
+    }
+
+    /// Maps `slices` for reading, waits for the GPU, and says whether every map succeeded.
+    pub fn map_for_reading(&self, slices: &[wgpu::BufferSlice<'_>]) -> Result<(), GpuError> {
+        let outcomes: Vec<std::sync::Arc<std::sync::Mutex<Option<Result<(), wgpu::BufferAsyncError>>>>> =
+            slices.iter().map(|_| Default::default()).collect();
+        for (slice, outcome) in slices.iter().zip(&outcomes) {
+            let outcome = outcome.clone();
+            slice.map_async(wgpu::MapMode::Read, move |result| *outcome.lock().unwrap_or_else(|p| p.into_inner()) = Some(result));
+        }
+        self.wait_idle()?;
+        if self.fail_next_readback.swap(false, std::sync::atomic::Ordering::SeqCst) {
+            return Err(GpuError::Map("injected readback failure".into()));
+        }
+        for outcome in &outcomes {
+            match outcome.lock().unwrap_or_else(|p| p.into_inner()).take() {
+                Some(Ok(())) => {}
+                Some(Err(error)) => return Err(GpuError::Map(error.to_string())),
+                None => return Err(GpuError::Map("the map did not complete".into())),
+            }
+        }
+        Ok(())
     }
 }

@@ -3,7 +3,7 @@
 //! from a `ReadbackPool`.
 
 use super::pool::ReadbackPool;
-use super::GpuContext;
+use super::{GpuContext, GpuError};
 
 pub struct Readback {
     pending: Vec<(wgpu::Buffer, u32, u32, u32)>, // buffer, padded row bytes, row bytes, rows
@@ -22,7 +22,8 @@ impl Readback {
         encoder: &mut wgpu::CommandEncoder,
         texture: &wgpu::Texture,
     ) -> usize {
-        let block = texture.format().block_copy_size(Some(wgpu::TextureAspect::All)).expect("colour format");
+        // Readbacks are of colour targets, which always have a block size.
+        let block = texture.format().block_copy_size(Some(wgpu::TextureAspect::All)).unwrap_or(16);
         let row_bytes = texture.width() * block;
         let padded = row_bytes.div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
         let buffer = pool.alloc(&gpu.device, u64::from(padded) * u64::from(texture.height()));
@@ -39,27 +40,25 @@ impl Readback {
     }
 
     /// Waits for the copies (submitted by the caller) and returns each texture's tightly
-    /// packed bytes, top row first; the buffers go back to `pool`.
-    pub fn finish(self, gpu: &GpuContext, pool: &mut ReadbackPool) -> Vec<Vec<u8>> {
-        for (buffer, ..) in &self.pending {
-            buffer.slice(..).map_async(wgpu::MapMode::Read, |_| {});
+    /// packed bytes, top row first. The buffers go back to `pool` unless a map failed (then
+    /// they are dropped: their state is unknown).
+    pub fn finish(self, gpu: &GpuContext, pool: &mut ReadbackPool) -> Result<Vec<Vec<u8>>, GpuError> {
+        let slices: Vec<wgpu::BufferSlice<'_>> = self.pending.iter().map(|(buffer, ..)| buffer.slice(..)).collect();
+        gpu.map_for_reading(&slices)?;
+        let mut images = Vec::with_capacity(self.pending.len());
+        for (buffer, padded, row_bytes, rows) in self.pending {
+            let mapped = buffer.slice(..).get_mapped_range().map_err(|e| GpuError::Map(e.to_string()))?;
+            let mut out = Vec::with_capacity((row_bytes * rows) as usize);
+            for row in 0..rows as usize {
+                let start = row * padded as usize;
+                out.extend_from_slice(&mapped[start..start + row_bytes as usize]);
+            }
+            drop(mapped);
+            buffer.unmap();
+            pool.release(buffer);
+            images.push(out);
         }
-        gpu.wait_idle();
-        self.pending
-            .into_iter()
-            .map(|(buffer, padded, row_bytes, rows)| {
-                let mapped = buffer.slice(..).get_mapped_range().expect("mapped for reading above");
-                let mut out = Vec::with_capacity((row_bytes * rows) as usize);
-                for row in 0..rows as usize {
-                    let start = row * padded as usize;
-                    out.extend_from_slice(&mapped[start..start + row_bytes as usize]);
-                }
-                drop(mapped);
-                buffer.unmap();
-                pool.release(buffer);
-                out
-            })
-            .collect()
+        Ok(images)
     }
 }
 
@@ -70,7 +69,7 @@ impl Default for Readback {
 }
 
 /// Copies a (small) storage buffer back to the CPU and waits for it.
-pub fn read_buffer(gpu: &GpuContext, buffer: &wgpu::Buffer) -> Vec<u8> {
+pub fn read_buffer(gpu: &GpuContext, buffer: &wgpu::Buffer) -> Result<Vec<u8>, GpuError> {
     let staging = gpu.device.create_buffer(&wgpu::BufferDescriptor {
         label: Some("Readback::staging"),
         size: buffer.size(),
@@ -80,9 +79,8 @@ pub fn read_buffer(gpu: &GpuContext, buffer: &wgpu::Buffer) -> Vec<u8> {
     let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("Readback::encoder") });
     encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, buffer.size());
     gpu.queue.submit([encoder.finish()]);
-    staging.slice(..).map_async(wgpu::MapMode::Read, |_| {});
-    gpu.wait_idle();
-    let bytes = staging.slice(..).get_mapped_range().expect("mapped for reading above").to_vec();
+    gpu.map_for_reading(&[staging.slice(..)])?;
+    let bytes = staging.slice(..).get_mapped_range().map_err(|e| GpuError::Map(e.to_string()))?.to_vec();
     staging.unmap();
-    bytes
+    Ok(bytes)
 }

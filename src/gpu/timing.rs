@@ -1,7 +1,7 @@
 //! GPU timestamps per pass, where the adapter has them (lavapipe does). Each pass asks for a
 //! scope; after the frame the timer resolves the queries and reports milliseconds per scope.
 
-use super::GpuContext;
+use super::{GpuContext, GpuError};
 
 /// Passes one frame may time. A frame with more passes times the first ones only.
 const MAX_SCOPES: u32 = 64;
@@ -71,10 +71,10 @@ impl GpuTimer {
     }
 
     /// Reads back this frame's scopes as (label, milliseconds). Blocks until the GPU is done.
-    pub fn read(&self, gpu: &GpuContext) -> Vec<(&'static str, f64)> {
-        let Some(queries) = &self.queries else { return Vec::new() };
+    pub fn read(&self, gpu: &GpuContext) -> Result<Vec<(&'static str, f64)>, GpuError> {
+        let Some(queries) = &self.queries else { return Ok(Vec::new()) };
         if self.labels.is_empty() {
-            return Vec::new();
+            return Ok(Vec::new());
         }
         let count = self.labels.len() as u32 * 2;
         let bytes = u64::from(count) * 8;
@@ -83,17 +83,17 @@ impl GpuTimer {
         encoder.copy_buffer_to_buffer(&self.resolve, 0, &self.readback, 0, bytes);
         gpu.queue.submit([encoder.finish()]);
         let slice = self.readback.slice(..bytes);
-        slice.map_async(wgpu::MapMode::Read, |_| {});
-        gpu.wait_idle();
-        let ticks: Vec<u64> = bytemuck::cast_slice(&slice.get_mapped_range().expect("mapped for reading above")).to_vec();
+        gpu.map_for_reading(&[slice])?;
+        let ticks: Vec<u64> = bytemuck::cast_slice(&slice.get_mapped_range().map_err(|e| GpuError::Map(e.to_string()))?).to_vec();
         self.readback.unmap();
-        self.labels
+        Ok(self
+            .labels
             .iter()
             .enumerate()
             .map(|(k, label)| {
                 let elapsed = ticks[2 * k + 1].saturating_sub(ticks[2 * k]);
                 (*label, elapsed as f64 * self.period_ns / 1e6)
             })
-            .collect()
+            .collect())
     }
 }

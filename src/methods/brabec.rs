@@ -21,66 +21,53 @@
 
 use wgpu::util::DeviceExt;
 
-use super::{Counters, MethodContext, ParamKind, ParamSpec, Params, ShadowMethod, BIAS_TEXELS, SLOPE_BIAS_TEXELS};
+use super::{Counters, MethodContext, Param, ParamSpec, Params, ShadowMethod, BIAS_TEXELS, SLOPE_BIAS_TEXELS};
+use crate::error::JobResult;
 use crate::gpu::layout;
 use crate::gpu::pool::PipelineKey;
 use crate::gpu::readback::read_buffer;
 
 pub struct Brabec;
 
+const MAX_RADIUS_TEXELS: Param<f32> =
+    Param::float("max_radius_texels", 32.0, 1.0, 256.0, "cap on the search radius r_max, shadow-map texels");
+const R_SCALE: Param<f32> =
+    Param::float("r_scale", -1.0, -1.0, 1e6, "paper's r_scale: texels of r_max per metre of P'z; −1 derives r_max from the light size");
+const R_BIAS: Param<f32> = Param::float("r_bias", -1.0, -1.0, 1e4, "paper's r_bias, texels; −1 derives r_max from the light size");
+const R_SHRINK: Param<f32> = Param::float(
+    "r_shrink",
+    -1.0,
+    -1.0,
+    1e6,
+    "paper's r_shrink: texels of r_max per metre of Δz on a hit; −1 derives it from the light size",
+);
+const MEET: Param<f32> = Param::float("meet", 0.5, 0.05, 0.95, "attenuation where inner and outer penumbra meet (§3.3)");
+const FALLOFF: Param<&str> =
+    Param::choice("falloff", "linear", &["linear", "sine"], "attenuation across the penumbra: linear (paper) or the sinusoid of its §6");
+const INNER_DEPTH: Param<&str> = Param::choice(
+    "inner_depth",
+    "blocker",
+    &["blocker", "paper"],
+    "Δz of the inner search: the occluder over P (no ring) or the paper's depth(lit) − z",
+);
+const ADAPTIVE: Param<bool> = Param::boolean("adaptive", true, "adaptive sampling with 4×4 blocks (§4.3); off searches every pixel");
+const OBJECT_IDS: Param<bool> = Param::boolean("object_ids", true, "object-id test (§3.2); off shows the self-shadowing it prevents");
+const JITTER_TEXELS: Param<f32> =
+    Param::float("jitter_texels", 0.0, 0.0, 1.0, "jitter of blocker positions for low-resolution maps (§4.3)");
+
 const PARAMS: &[ParamSpec] = &[
-    ParamSpec {
-        name: "max_radius_texels",
-        kind: ParamKind::Float { default: 32.0, min: 1.0, max: 256.0 },
-        doc: "cap on the search radius r_max, shadow-map texels",
-    },
-    ParamSpec {
-        name: "r_scale",
-        kind: ParamKind::Float { default: -1.0, min: -1.0, max: 1e6 },
-        doc: "paper's r_scale: texels of r_max per metre of P'z; −1 derives r_max from the light size",
-    },
-    ParamSpec {
-        name: "r_bias",
-        kind: ParamKind::Float { default: -1.0, min: -1.0, max: 1e4 },
-        doc: "paper's r_bias, texels; −1 derives r_max from the light size",
-    },
-    ParamSpec {
-        name: "r_shrink",
-        kind: ParamKind::Float { default: -1.0, min: -1.0, max: 1e6 },
-        doc: "paper's r_shrink: texels of r_max per metre of Δz on a hit; −1 derives it from the light size",
-    },
-    ParamSpec {
-        name: "meet",
-        kind: ParamKind::Float { default: 0.5, min: 0.05, max: 0.95 },
-        doc: "attenuation where inner and outer penumbra meet (§3.3)",
-    },
-    ParamSpec {
-        name: "falloff",
-        kind: ParamKind::Choice { default: "linear", options: &["linear", "sine"] },
-        doc: "attenuation across the penumbra: linear (paper) or the sinusoid of its §6",
-    },
-    ParamSpec {
-        name: "inner_depth",
-        kind: ParamKind::Choice { default: "blocker", options: &["blocker", "paper"] },
-        doc: "Δz of the inner search: the occluder over P (no ring) or the paper's depth(lit) − z",
-    },
-    ParamSpec {
-        name: "adaptive",
-        kind: ParamKind::Boolean { default: true },
-        doc: "adaptive sampling with 4×4 blocks (§4.3); off searches every pixel",
-    },
-    ParamSpec {
-        name: "object_ids",
-        kind: ParamKind::Boolean { default: true },
-        doc: "object-id test (§3.2); off shows the self-shadowing it prevents",
-    },
-    ParamSpec {
-        name: "jitter_texels",
-        kind: ParamKind::Float { default: 0.0, min: 0.0, max: 1.0 },
-        doc: "jitter of blocker positions for low-resolution maps (§4.3)",
-    },
-    BIAS_TEXELS,
-    SLOPE_BIAS_TEXELS,
+    MAX_RADIUS_TEXELS.spec,
+    R_SCALE.spec,
+    R_BIAS.spec,
+    R_SHRINK.spec,
+    MEET.spec,
+    FALLOFF.spec,
+    INNER_DEPTH.spec,
+    ADAPTIVE.spec,
+    OBJECT_IDS.spec,
+    JITTER_TEXELS.spec,
+    BIAS_TEXELS.spec,
+    SLOPE_BIAS_TEXELS.spec,
 ];
 
 /// Laid out as `BrabecParams` in `shaders/methods/brabec/common.wgsl`.
@@ -120,7 +107,7 @@ impl ShadowMethod for Brabec {
         PARAMS
     }
 
-    fn record(&self, ctx: &mut MethodContext<'_>, params: &Params) -> Counters {
+    fn record(&self, ctx: &mut MethodContext<'_>, params: &Params) -> JobResult<Counters> {
         let spec = ctx.spec;
         let light = &spec.light;
         let projection = ctx.projection;
@@ -131,26 +118,25 @@ impl ShadowMethod for Brabec {
         // of the light's area (the search is circular).
         let width_m = (light.size_m.x * light.size_m.y).sqrt();
         let k = width_m * spec.shadow_resolution as f32 / (2.0 * projection.tan_half);
-        let raw = |name| params.f32(name);
-        let derived_search = raw("r_scale") < 0.0 && raw("r_bias") < 0.0;
-        let derived_hit = raw("r_shrink") < 0.0;
-        let adaptive = params.bool("adaptive");
+        let derived_search = params.get(&R_SCALE) < 0.0 && params.get(&R_BIAS) < 0.0;
+        let derived_hit = params.get(&R_SHRINK) < 0.0;
+        let adaptive = params.get(&ADAPTIVE);
         let uniforms = Uniforms {
-            r_scale: raw("r_scale").max(0.0),
-            r_bias: raw("r_bias").max(0.0),
-            r_shrink: raw("r_shrink").max(0.0),
+            r_scale: params.get(&R_SCALE).max(0.0),
+            r_bias: params.get(&R_BIAS).max(0.0),
+            r_shrink: params.get(&R_SHRINK).max(0.0),
             k,
             d_near: projection.nearest,
-            max_radius: raw("max_radius_texels"),
-            meet: raw("meet"),
-            bias_texels: raw("bias_texels"),
-            slope_bias_texels: raw("slope_bias_texels"),
-            jitter: raw("jitter_texels"),
-            falloff: u32::from(params.choice("falloff") == "sine"),
-            inner_depth: u32::from(params.choice("inner_depth") == "paper"),
+            max_radius: params.get(&MAX_RADIUS_TEXELS),
+            meet: params.get(&MEET),
+            bias_texels: params.get(&BIAS_TEXELS),
+            slope_bias_texels: params.get(&SLOPE_BIAS_TEXELS),
+            jitter: params.get(&JITTER_TEXELS),
+            falloff: u32::from(params.get(&FALLOFF) == "sine"),
+            inner_depth: u32::from(params.get(&INNER_DEPTH) == "paper"),
             derived: [u32::from(derived_search), u32::from(derived_hit)],
             lattice_stride: if adaptive { BLOCK } else { 1 },
-            use_ids: u32::from(params.bool("object_ids")),
+            use_ids: u32::from(params.get(&OBJECT_IDS)),
         };
         let device = ctx.gpu.device.clone();
         let uniform_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
@@ -218,16 +204,16 @@ impl ShadowMethod for Brabec {
                 pass.dispatch_workgroups(x, y, 1);
             }
         }
-        ctx.flush();
-        let raw: Vec<u32> = bytemuck::cast_slice(&read_buffer(ctx.gpu, &counters)).to_vec();
+        ctx.flush()?;
+        let raw: Vec<u32> = bytemuck::cast_slice(&read_buffer(ctx.gpu, &counters)?).to_vec();
         let (searches, interpolated, radius_16, shaded) = (raw[0], raw[1], raw[2], raw[3]);
-        Counters::from([
+        Ok(Counters::from([
             ("pixels_shaded".to_owned(), f64::from(shaded)),
             ("searches".to_owned(), f64::from(searches)),
             ("pixels_interpolated".to_owned(), f64::from(interpolated)),
             ("searched_fraction".to_owned(), if shaded > 0 { f64::from(searches) / f64::from(shaded) } else { 0.0 }),
             ("avg_search_radius_texels".to_owned(), if searches > 0 { f64::from(radius_16) / 16.0 / f64::from(searches) } else { 0.0 }),
             ("k_texels".to_owned(), f64::from(k)),
-        ])
+        ]))
     }
 }

@@ -1,5 +1,5 @@
 //! Method `chun-oh` (Chun & Oh 2016, "An Efficient Soft Shadow Mapping for Area Lights in
-//! Various Shapes and Colors"): the PCSS filter of `pcss.rs`, adaptively subdivided like a
+//! Various Shapes and Colors"): the PCSS filter of `filter.rs`, adaptively subdivided like a
 //! quad tree where the shadow or the light is complex, each sub-region's visibility weighting
 //! the colour of the matching part of the light image (§3, Fig. 3). Shader:
 //! `shaders/methods/pcss/chun_oh.wgsl`.
@@ -16,37 +16,41 @@
 //!   if the shadow is not very changeful"); never below 4×4.
 //! - The light's colour statistics come from one pass over the image per light (the 21 regions
 //!   of the quadtree, with overlaps of fractional texels), kept for later jobs.
-//! - Orientation: a blocker displaced towards the shadow map's +u (the light's −r side) hides
-//!   the light's −r side, which DESIGN.md §1 puts at image column 0: filter column x maps to
-//!   image columns mirrored, filter row y to image rows as they are (`light_regions`).
-
-use std::sync::Arc;
+//! - Orientation: as `filter.rs` says.
 
 use wgpu::util::DeviceExt;
 
-use super::pcss::{self, FILTER_PARAMS};
-use super::{Counters, MethodContext, ParamKind, ParamSpec, Params, ShadowMethod};
-use crate::gpu::pool::DerivedKey;
-use crate::light::LightImage;
+use super::filter::{self, light_regions_buffer, Uniforms, FILTER_PARAMS, MODE_ADAPTIVE, MODE_FIXED};
+use super::{Counters, MethodContext, Param, ParamSpec, Params, ShadowMethod};
+use crate::error::JobResult;
 
 pub struct ChunOh;
 
+const MODE: Param<&str> = Param::choice(
+    "mode",
+    "adaptive",
+    &["adaptive", "fixed"],
+    "adaptive: split where variance asks (0–2 times, the paper's default); fixed: always 4×4 (Table 1)",
+);
+const THRESHOLD: Param<f32> = Param::float(
+    "threshold",
+    0.2244,
+    0.0,
+    0.25,
+    "visibility variance E − E² above which a region splits (§3; 0.25 is the maximum, so 0.25 never splits)",
+);
+const LIGHT_THRESHOLD: Param<f32> = Param::float(
+    "light_threshold",
+    0.05,
+    0.0,
+    1.0e6,
+    "relative colour variance of the light part a region maps to above which a partly shadowed region splits",
+);
+
 const PARAMS: &[ParamSpec] = &[
-    ParamSpec {
-        name: "mode",
-        kind: ParamKind::Choice { default: "adaptive", options: &["adaptive", "fixed"] },
-        doc: "adaptive: split where variance asks (0–2 times, the paper's default); fixed: always 4×4 (Table 1)",
-    },
-    ParamSpec {
-        name: "threshold",
-        kind: ParamKind::Float { default: 0.2244, min: 0.0, max: 0.25 },
-        doc: "visibility variance E − E² above which a region splits (§3; 0.25 is the maximum, so 0.25 never splits)",
-    },
-    ParamSpec {
-        name: "light_threshold",
-        kind: ParamKind::Float { default: 0.05, min: 0.0, max: 1.0e6 },
-        doc: "relative colour variance of the light part a region maps to above which a partly shadowed region splits",
-    },
+    MODE.spec,
+    THRESHOLD.spec,
+    LIGHT_THRESHOLD.spec,
     FILTER_PARAMS[0],
     FILTER_PARAMS[1],
     FILTER_PARAMS[2],
@@ -54,10 +58,6 @@ const PARAMS: &[ParamSpec] = &[
     FILTER_PARAMS[4],
     FILTER_PARAMS[5],
 ];
-
-/// `mode` values of `filter.wgsl`.
-const MODE_ADAPTIVE: u32 = 1;
-const MODE_FIXED: u32 = 2;
 
 impl ShadowMethod for ChunOh {
     fn name(&self) -> &'static str {
@@ -72,106 +72,18 @@ impl ShadowMethod for ChunOh {
         PARAMS
     }
 
-    fn record(&self, ctx: &mut MethodContext<'_>, params: &Params) -> Counters {
-        let mode = if params.choice("mode") == "fixed" { MODE_FIXED } else { MODE_ADAPTIVE };
-        let uniforms = pcss::Uniforms::new(ctx, params).subdividing(mode, params.f32("threshold"), params.f32("light_threshold"));
+    fn record(&self, ctx: &mut MethodContext<'_>, params: &Params) -> JobResult<Counters> {
+        let mode = if params.get(&MODE) == "fixed" { MODE_FIXED } else { MODE_ADAPTIVE };
+        let uniforms = Uniforms::new(ctx, params).subdividing(mode, params.get(&THRESHOLD), params.get(&LIGHT_THRESHOLD));
         let regions = light_regions_buffer(ctx);
-        let counts = pcss::run(ctx, "chun-oh", "methods/pcss/chun_oh.wgsl", uniforms, &regions);
+        let counts = filter::run(ctx, "chun-oh", "methods/pcss/chun_oh.wgsl", uniforms, &regions)?;
         let mut counters = counts.counters(u64::from(ctx.width) * u64::from(ctx.height));
         for (level, &count) in counts.levels.iter().enumerate() {
             counters.insert(format!("pixels_subdivided_{level}"), f64::from(count));
         }
         counters.insert("splits_forced_by_light".to_owned(), f64::from(counts.forced_by_light));
-        counters
+        Ok(counters)
     }
-}
-
-/// The frame's light quadtree table on the GPU, built once per light image.
-pub(super) fn light_regions_buffer(ctx: &mut MethodContext<'_>) -> Arc<wgpu::Buffer> {
-    let (device, image) = (&ctx.gpu.device, &ctx.spec.light_image);
-    ctx.derived.get_or_create(DerivedKey { name: "chun-oh.light_regions", fingerprint: image.fingerprint() }, || {
-        device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("ChunOh::light_regions"),
-            contents: bytemuck::cast_slice(&light_regions(image)),
-            usage: wgpu::BufferUsages::STORAGE,
-        })
-    })
-}
-
-/// Index of filter cell (x, y) of the 4×4 level, of quadrant (x, y) of the 2×2 level, and of
-/// the whole light, in `light_regions`' table.
-pub fn cell_index(x: usize, y: usize) -> usize {
-    y * 4 + x
-}
-pub fn quadrant_index(x: usize, y: usize) -> usize {
-    16 + y * 2 + x
-}
-pub const WHOLE: usize = 20;
-
-/// The light image over the filter's quadtree: for each region, rgb the emission integrated
-/// over the part of the light it maps to (as a fraction of the light's area, so the whole
-/// light's entry is its mean emission) and w that part's relative colour variance
-/// E[|e − ē|²] / |ē|² (0 for a uniform part or a black one). Regions are in filter order:
-/// filter cell (x, y) of the 4×4 level covers image columns s ∈ [1 − (x+1)/4, 1 − x/4]
-/// (mirrored, see the module comment) and rows t ∈ [y/4, (y+1)/4].
-pub fn light_regions(image: &LightImage) -> [[f32; 4]; 21] {
-    // Per 4×4 cell: Σ e·a, Σ |e|²·a, Σ a, with a the overlap area in unit-square terms.
-    let mut sum = [[0f64; 3]; 16];
-    let mut square = [0f64; 16];
-    let mut area = [0f64; 16];
-    // Overlap of texel k of n with quarter q of [0, 1].
-    let overlap = |k: u32, n: u32, q: u32| {
-        let (lo, hi) = (f64::from(k) / f64::from(n), f64::from(k + 1) / f64::from(n));
-        (hi.min(f64::from(q + 1) / 4.0) - lo.max(f64::from(q) / 4.0)).max(0.0)
-    };
-    for j in 0..image.height {
-        for i in 0..image.width {
-            let e = image.emission(i, j).as_dvec3();
-            for row in 0..4 {
-                let oy = overlap(j, image.height, row);
-                if oy == 0.0 {
-                    continue;
-                }
-                for quarter in 0..4 {
-                    let ox = overlap(i, image.width, quarter);
-                    if ox == 0.0 {
-                        continue;
-                    }
-                    let cell = cell_index(3 - quarter as usize, row as usize);
-                    let a = ox * oy;
-                    for c in 0..3 {
-                        sum[cell][c] += e[c] * a;
-                    }
-                    square[cell] += e.length_squared() * a;
-                    area[cell] += a;
-                }
-            }
-        }
-    }
-    let region = |cells: &[usize]| {
-        let total = |f: &dyn Fn(usize) -> f64| cells.iter().map(|&c| f(c)).sum::<f64>();
-        let a = total(&|c| area[c]).max(1e-300);
-        let rgb = [total(&|c| sum[c][0]), total(&|c| sum[c][1]), total(&|c| sum[c][2])];
-        let mean_sq = rgb.iter().map(|x| (x / a) * (x / a)).sum::<f64>();
-        let variance = (total(&|c| square[c]) / a - mean_sq).max(0.0);
-        let relative = if mean_sq > 0.0 { variance / mean_sq } else { 0.0 };
-        [rgb[0] as f32, rgb[1] as f32, rgb[2] as f32, relative as f32]
-    };
-    let mut table = [[0f32; 4]; 21];
-    for y in 0..4 {
-        for x in 0..4 {
-            table[cell_index(x, y)] = region(&[cell_index(x, y)]);
-        }
-    }
-    for y in 0..2 {
-        for x in 0..2 {
-            let cells =
-                [cell_index(2 * x, 2 * y), cell_index(2 * x + 1, 2 * y), cell_index(2 * x, 2 * y + 1), cell_index(2 * x + 1, 2 * y + 1)];
-            table[quadrant_index(x, y)] = region(&cells);
-        }
-    }
-    table[WHOLE] = region(&(0..16).collect::<Vec<_>>());
-    table
 }
 
 /// One synthetic tile's outcome in `quadtree_probe`.
@@ -195,7 +107,7 @@ pub fn quadtree_probe(
     threshold: f32,
     light_threshold: f32,
     cell_taps: u32,
-) -> Vec<ProbeResult> {
+) -> Result<Vec<ProbeResult>, crate::gpu::GpuError> {
     use crate::gpu::layout;
     let device = &gpu.device;
     let storage = |label, contents: &[u8], usage| {
@@ -248,55 +160,12 @@ pub fn quadtree_probe(
         pass.dispatch_workgroups((tiles.len() as u32).div_ceil(64), 1, 1);
     }
     gpu.queue.submit([encoder.finish()]);
-    let values: Vec<[f32; 4]> = bytemuck::cast_slice(&crate::gpu::readback::read_buffer(gpu, &results)).to_vec();
-    values
+    let values: Vec<[f32; 4]> = bytemuck::cast_slice(&crate::gpu::readback::read_buffer(gpu, &results)?).to_vec();
+    Ok(values
         .iter()
         .map(|v| {
             let code = v[3] as u32;
             ProbeResult { visibility: [v[0], v[1], v[2]], level: code % 4, forced: code / 4 }
         })
-        .collect()
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn builtin(name: &str) -> LightImage {
-        LightImage::builtin(name, &Default::default(), "f").unwrap()
-    }
-
-    #[test]
-    fn a_uniform_light_has_no_colour_variance_and_equal_parts() {
-        let table = light_regions(&builtin("white"));
-        for region in &table {
-            assert!(region[3].abs() < 1e-9, "{region:?}");
-        }
-        for cell in &table[..16] {
-            assert!((cell[0] - table[WHOLE][0] / 16.0).abs() < 1e-6);
-        }
-    }
-
-    #[test]
-    fn stripes_map_mirrored_columns_and_vary_in_colour() {
-        // `stripes`: 6 columns, red at column 0 (image left, the light's −r side). Filter
-        // column 3 maps to image columns s ∈ [0, 1/4]: all of the red stripe, half the next.
-        let image = builtin("stripes");
-        let table = light_regions(&image);
-        let red_total = table[WHOLE][0];
-        let right = table[cell_index(3, 0)];
-        let left = table[cell_index(0, 0)];
-        assert!(right[0] > left[0], "red lies in filter column 3: {right:?} vs {left:?}");
-        // Direct summation of the red in s ∈ [0, 1/4] (rows don't matter for a 6×1 image).
-        let red_quarter: f64 = (0..6000)
-            .map(|k| (k as f64 + 0.5) / 6000.0)
-            .filter(|s| *s < 0.25)
-            .map(|s| f64::from(image.emission(((s * 6.0) as u32).min(5), 0).x))
-            .sum::<f64>()
-            / 6000.0;
-        let column: f32 = (0..4).map(|y| table[cell_index(3, y)][0]).sum();
-        assert!((f64::from(column) - red_quarter).abs() < 1e-3, "{column} vs {red_quarter}");
-        assert!((table[..16].iter().map(|c| c[0]).sum::<f32>() - red_total).abs() < 1e-5, "cells partition the light");
-        assert!(table[WHOLE][3] > 0.5 && table[quadrant_index(1, 0)][3] > 0.05, "a colourful light varies");
-    }
+        .collect())
 }

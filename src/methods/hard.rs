@@ -5,12 +5,13 @@
 use wgpu::util::DeviceExt;
 
 use super::{Counters, MethodContext, ParamSpec, Params, ShadowMethod, BIAS_TEXELS, SLOPE_BIAS_TEXELS};
+use crate::error::JobResult;
 use crate::gpu::layout;
 use crate::gpu::pool::PipelineKey;
 
 pub struct Hard;
 
-const PARAMS: &[ParamSpec] = &[BIAS_TEXELS, SLOPE_BIAS_TEXELS];
+const PARAMS: &[ParamSpec] = &[BIAS_TEXELS.spec, SLOPE_BIAS_TEXELS.spec];
 
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
@@ -33,7 +34,7 @@ impl ShadowMethod for Hard {
         PARAMS
     }
 
-    fn record(&self, ctx: &mut MethodContext<'_>, params: &Params) -> Counters {
+    fn record(&self, ctx: &mut MethodContext<'_>, params: &Params) -> JobResult<Counters> {
         let pipeline = ctx.screen_pipeline(
             PipelineKey::new("hard"),
             "methods/hard.wgsl",
@@ -43,8 +44,8 @@ impl ShadowMethod for Hard {
         let uniforms = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("Hard::uniforms"),
             contents: bytemuck::bytes_of(&HardUniforms {
-                bias_texels: params.f32("bias_texels"),
-                slope_bias_texels: params.f32("slope_bias_texels"),
+                bias_texels: params.get(&BIAS_TEXELS),
+                slope_bias_texels: params.get(&SLOPE_BIAS_TEXELS),
                 _pad: [0.0; 2],
             }),
             usage: wgpu::BufferUsages::UNIFORM,
@@ -63,6 +64,6 @@ impl ShadowMethod for Hard {
         pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
         pass.set_bind_group(1, &outputs, &[]);
         pass.dispatch_workgroups(gx, gy, 1);
-        Counters::new()
+        Ok(Counters::new())
     }
 }

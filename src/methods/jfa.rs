@@ -24,7 +24,8 @@
 use wgpu::util::DeviceExt;
 
 use super::jfa_lut::{intensity_lut, LUT_SIZE};
-use super::{Counters, MethodContext, ParamKind, ParamSpec, Params, ShadowMethod, BIAS_TEXELS, SLOPE_BIAS_TEXELS};
+use super::{Cap, Counters, MethodContext, Param, ParamSpec, Params, ShadowMethod, BIAS_TEXELS, SLOPE_BIAS_TEXELS};
+use crate::error::JobResult;
 use crate::gpu::layout;
 use crate::gpu::pool::{DerivedKey, PipelineKey};
 use crate::gpu::readback::read_buffer;
@@ -32,50 +33,38 @@ use crate::gpu::readback::read_buffer;
 pub struct JfaL;
 pub struct JfaE;
 
-const ROUNDS: ParamSpec = ParamSpec {
-    name: "rounds",
-    kind: ParamKind::Integer { default: 6, min: 1, max: 13 },
-    doc: "jump-flooding rounds: occluders travel up to 2^rounds − 1 pixels (log2 of the resolution floods fully)",
-};
-const FLOODING: ParamSpec = ParamSpec {
-    name: "flooding",
-    kind: ParamKind::Choice { default: "jump", options: &["jump", "standard"] },
-    doc: "jump flooding, or standard flooding (step 1, 2^rounds − 1 rounds) for the paper's experiment",
-};
+const ROUNDS: Param<u32> = Param::integer(
+    "rounds",
+    6,
+    1,
+    13,
+    "jump-flooding rounds: occluders travel up to 2^rounds − 1 pixels (log2 of the resolution floods fully)",
+)
+.capped(Cap::Rounds);
+const FLOODING: Param<&str> = Param::choice(
+    "flooding",
+    "jump",
+    &["jump", "standard"],
+    "jump flooding, or standard flooding (step 1, 2^rounds − 1 rounds) for the paper's experiment",
+);
 
-const PARAMS_L: &[ParamSpec] = &[
-    ROUNDS,
-    FLOODING,
-    ParamSpec {
-        name: "silhouette_relative",
-        kind: ParamKind::Float { default: 0.01, min: 0.0, max: 1.0 },
-        doc: "a neighbour deeper by more than depth × this marks a silhouette pixel",
-    },
-    BIAS_TEXELS,
-    SLOPE_BIAS_TEXELS,
-];
+const SILHOUETTE_RELATIVE: Param<f32> =
+    Param::float("silhouette_relative", 0.01, 0.0, 1.0, "a neighbour deeper by more than depth × this marks a silhouette pixel");
+const BOUNDARY_RELATIVE: Param<f32> = Param::float(
+    "boundary_relative",
+    0.02,
+    0.0,
+    1.0,
+    "a lit neighbour closer in 3D than view depth × this makes a hard-shadow pixel a boundary pixel",
+);
+const SAME_OBJECT: Param<bool> = Param::boolean("same_object", true, "§5.2 remedy: flood only to pixels of the boundary pixel's object");
+const MIDPOINT: Param<bool> =
+    Param::boolean("midpoint", true, "§5.2 remedy: the midpoint towards the boundary pixel must already be in a penumbra");
 
-const PARAMS_E: &[ParamSpec] = &[
-    ROUNDS,
-    FLOODING,
-    ParamSpec {
-        name: "boundary_relative",
-        kind: ParamKind::Float { default: 0.02, min: 0.0, max: 1.0 },
-        doc: "a lit neighbour closer in 3D than view depth × this makes a hard-shadow pixel a boundary pixel",
-    },
-    ParamSpec {
-        name: "same_object",
-        kind: ParamKind::Boolean { default: true },
-        doc: "§5.2 remedy: flood only to pixels of the boundary pixel's object",
-    },
-    ParamSpec {
-        name: "midpoint",
-        kind: ParamKind::Boolean { default: true },
-        doc: "§5.2 remedy: the midpoint towards the boundary pixel must already be in a penumbra",
-    },
-    BIAS_TEXELS,
-    SLOPE_BIAS_TEXELS,
-];
+const PARAMS_L: &[ParamSpec] = &[ROUNDS.spec, FLOODING.spec, SILHOUETTE_RELATIVE.spec, BIAS_TEXELS.spec, SLOPE_BIAS_TEXELS.spec];
+
+const PARAMS_E: &[ParamSpec] =
+    &[ROUNDS.spec, FLOODING.spec, BOUNDARY_RELATIVE.spec, SAME_OBJECT.spec, MIDPOINT.spec, BIAS_TEXELS.spec, SLOPE_BIAS_TEXELS.spec];
 
 /// Laid out as `JfaParams` in `shaders/methods/jfa/common.wgsl`, one 256-byte slot per pass.
 #[repr(C)]
@@ -147,16 +136,16 @@ impl ShadowMethod for JfaL {
         PARAMS_L
     }
 
-    fn record(&self, ctx: &mut MethodContext<'_>, params: &Params) -> Counters {
-        let uniforms = Uniforms { silhouette_relative: params.f32("silhouette_relative"), ..common_uniforms(params) };
-        let (seeds, penumbra, steps, flooded) = flood(ctx, &LIGHT_SPACE, params, uniforms);
-        Counters::from([
+    fn record(&self, ctx: &mut MethodContext<'_>, params: &Params) -> JobResult<Counters> {
+        let uniforms = Uniforms { silhouette_relative: params.get(&SILHOUETTE_RELATIVE), ..common_uniforms(params) };
+        let (seeds, penumbra, steps, flooded) = flood(ctx, &LIGHT_SPACE, params, uniforms)?;
+        Ok(Counters::from([
             ("rounds".to_owned(), steps.len() as f64),
             ("max_reach_texels".to_owned(), f64::from(steps.iter().sum::<i32>())),
             ("silhouette_texels".to_owned(), f64::from(seeds)),
             ("penumbra_pixels".to_owned(), f64::from(penumbra)),
             ("flooded_tile_fraction".to_owned(), flooded),
-        ])
+        ]))
     }
 }
 
@@ -173,21 +162,21 @@ impl ShadowMethod for JfaE {
         PARAMS_E
     }
 
-    fn record(&self, ctx: &mut MethodContext<'_>, params: &Params) -> Counters {
+    fn record(&self, ctx: &mut MethodContext<'_>, params: &Params) -> JobResult<Counters> {
         let uniforms = Uniforms {
-            boundary_relative: params.f32("boundary_relative"),
-            same_object: u32::from(params.bool("same_object")),
-            midpoint: u32::from(params.bool("midpoint")),
+            boundary_relative: params.get(&BOUNDARY_RELATIVE),
+            same_object: u32::from(params.get(&SAME_OBJECT)),
+            midpoint: u32::from(params.get(&MIDPOINT)),
             ..common_uniforms(params)
         };
-        let (seeds, penumbra, steps, flooded) = flood(ctx, &EYE_SPACE, params, uniforms);
-        Counters::from([
+        let (seeds, penumbra, steps, flooded) = flood(ctx, &EYE_SPACE, params, uniforms)?;
+        Ok(Counters::from([
             ("rounds".to_owned(), steps.len() as f64),
             ("max_reach_pixels".to_owned(), f64::from(steps.iter().sum::<i32>())),
             ("boundary_pixels".to_owned(), f64::from(seeds)),
             ("penumbra_pixels".to_owned(), f64::from(penumbra)),
             ("flooded_tile_fraction".to_owned(), flooded),
-        ])
+        ]))
     }
 }
 
@@ -195,8 +184,8 @@ fn common_uniforms(params: &Params) -> Uniforms {
     Uniforms {
         step: 0,
         silhouette_relative: 0.0,
-        bias_texels: params.f32("bias_texels"),
-        slope_bias_texels: params.f32("slope_bias_texels"),
+        bias_texels: params.get(&BIAS_TEXELS),
+        slope_bias_texels: params.get(&SLOPE_BIAS_TEXELS),
         boundary_relative: 0.0,
         same_object: 0,
         midpoint: 0,
@@ -208,10 +197,10 @@ fn common_uniforms(params: &Params) -> Uniforms {
 
 /// Seeds, floods and shades; returns (seeds, penumbra pixels, step lengths, the fraction of
 /// tiles the rounds flooded rather than skipped).
-fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Uniforms) -> (u32, u32, Vec<i32>, f64) {
+fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Uniforms) -> JobResult<(u32, u32, Vec<i32>, f64)> {
     let device = ctx.gpu.device.clone();
     let grid = if which.light_space { (ctx.spec.shadow_resolution, ctx.spec.shadow_resolution) } else { (ctx.width, ctx.height) };
-    let steps = steps(params.u32("rounds"), params.choice("flooding") == "standard");
+    let steps = steps(params.get(&ROUNDS), params.get(&FLOODING) == "standard");
     let base = Uniforms { light_space: u32::from(which.light_space), ..base };
     // Slot 0: seed and final pass; slots 1…: one per round.
     let slots: Vec<Uniforms> = std::iter::once(0).chain(steps.iter().copied()).map(|step| Uniforms { step, ..base }).collect();
@@ -316,10 +305,10 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
         pass.set_bind_group(1, if result_in_a { &a_to_b } else { &b_to_a }, &[0]);
         pass.dispatch_workgroups(screen.0, screen.1, 1);
     }
-    ctx.flush();
-    let counts: Vec<u32> = bytemuck::cast_slice(&read_buffer(ctx.gpu, &counters)).to_vec();
+    ctx.flush()?;
+    let counts: Vec<u32> = bytemuck::cast_slice(&read_buffer(ctx.gpu, &counters)?).to_vec();
     let flooded = f64::from(counts[2]) / (f64::from(tile_count) * steps.len() as f64);
-    (counts[0], counts[1], steps, flooded)
+    Ok((counts[0], counts[1], steps, flooded))
 }
 
 /// The coloured intensity look-up table (`jfa_lut`) of this frame's light, on the GPU: a
@@ -338,7 +327,13 @@ fn lut_buffer(gpu: &crate::gpu::GpuContext, spec: &crate::render::FrameSpec) -> 
 /// approximates (Rong & Tan 2006 §3). Returns, per cell, the index of the seed it ended with
 /// (−1 for none). It runs `voronoi.wgsl`, which shares `jump_neighbour` with the shadow
 /// methods' floods, so testing it against brute force tests their communication pattern.
-pub fn voronoi(gpu: &crate::gpu::GpuContext, size: u32, seeds: &[(u32, u32)], rounds: u32, standard: bool) -> Vec<i32> {
+pub fn voronoi(
+    gpu: &crate::gpu::GpuContext,
+    size: u32,
+    seeds: &[(u32, u32)],
+    rounds: u32,
+    standard: bool,
+) -> Result<Vec<i32>, crate::gpu::GpuError> {
     let device = &gpu.device;
     let steps = steps(rounds, standard);
     // `VoronoiParams` in `voronoi.wgsl`: step, grid size (both non-negative, so i32 bits do).
@@ -422,7 +417,7 @@ pub fn voronoi(gpu: &crate::gpu::GpuContext, size: u32, seeds: &[(u32, u32)], ro
         }
     }
     gpu.queue.submit([encoder.finish()]);
-    bytemuck::cast_slice(&read_buffer(gpu, if result_in_a { &a } else { &b })).to_vec()
+    Ok(bytemuck::cast_slice(&read_buffer(gpu, if result_in_a { &a } else { &b })?).to_vec())
 }
 
 #[cfg(test)]

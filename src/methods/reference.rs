@@ -16,7 +16,8 @@
 
 use glam::Vec3;
 
-use super::{Counters, MethodContext, ParamKind, ParamSpec, Params, ShadowMethod};
+use super::{Cap, Counters, MethodContext, Param, ParamSpec, Params, ShadowMethod};
+use crate::error::JobResult;
 use crate::gpu::layout;
 use crate::gpu::pool::PipelineKey;
 use crate::gpu::shaders;
@@ -26,33 +27,15 @@ use crate::scene::Vertex;
 
 pub struct Reference;
 
-const PARAMS: &[ParamSpec] = &[
-    ParamSpec {
-        name: "samples",
-        kind: ParamKind::Integer { default: 256, min: 1, max: 4096 },
-        doc: "light samples (stratified, jittered); noise falls as 1/√samples",
-    },
-    ParamSpec {
-        name: "resolution",
-        kind: ParamKind::Integer { default: 1024, min: 64, max: 4096 },
-        doc: "side of each sample's distance map, texels",
-    },
-    ParamSpec {
-        name: "bias_texels",
-        kind: ParamKind::Float { default: 1.0, min: 0.0, max: 64.0 },
-        doc: "constant bias of the visibility test, in texels of the sample's map",
-    },
-    ParamSpec {
-        name: "slope_bias_texels",
-        kind: ParamKind::Float { default: 1.0, min: 0.0, max: 64.0 },
-        doc: "slope-scaled bias, texels × tanθ at the receiver",
-    },
-    ParamSpec {
-        name: "seed",
-        kind: ParamKind::Integer { default: 1, min: 0, max: 4_294_967_295 },
-        doc: "seed of the jitter within strata",
-    },
-];
+const SAMPLES: Param<u32> =
+    Param::integer("samples", 256, 1, 4096, "light samples (stratified, jittered); noise falls as 1/√samples").capped(Cap::Samples);
+const RESOLUTION: Param<u32> = Param::integer("resolution", 1024, 64, 4096, "side of each sample's distance map, texels");
+const BIAS_TEXELS: Param<f32> =
+    Param::float("bias_texels", 1.0, 0.0, 64.0, "constant bias of the visibility test, in texels of the sample's map");
+const SLOPE_BIAS_TEXELS: Param<f32> = Param::float("slope_bias_texels", 1.0, 0.0, 64.0, "slope-scaled bias, texels × tanθ at the receiver");
+const SEED: Param<u32> = Param::integer("seed", 1, 0, 4_294_967_295, "seed of the jitter within strata");
+
+const PARAMS: &[ParamSpec] = &[SAMPLES.spec, RESOLUTION.spec, BIAS_TEXELS.spec, SLOPE_BIAS_TEXELS.spec, SEED.spec];
 
 /// Samples recorded per submission; progress is reported between batches.
 const BATCH: usize = 16;
@@ -127,11 +110,11 @@ impl ShadowMethod for Reference {
         PARAMS
     }
 
-    fn record(&self, ctx: &mut MethodContext<'_>, params: &Params) -> Counters {
+    fn record(&self, ctx: &mut MethodContext<'_>, params: &Params) -> JobResult<Counters> {
         let device = ctx.gpu.device.clone();
         let spec = ctx.spec;
-        let resolution = params.u32("resolution");
-        let (samples, strata) = light_samples(&spec.light, &spec.light_image, params.u32("samples"), u64::from(params.u32("seed")));
+        let resolution = params.get(&RESOLUTION);
+        let (samples, strata) = light_samples(&spec.light, &spec.light_image, params.get(&SAMPLES), u64::from(params.get(&SEED)));
         let corners = ctx.scene.corners();
         let slots: Vec<SampleUniforms> = samples
             .iter()
@@ -142,7 +125,7 @@ impl ShadowMethod for Reference {
                     view_proj: projection.view_proj.to_cols_array_2d(),
                     position: sample.position.extend(1.0).to_array(),
                     radiance: sample.weight.extend(0.0).to_array(),
-                    params: [projection.tan_half, resolution as f32, params.f32("bias_texels"), params.f32("slope_bias_texels")],
+                    params: [projection.tan_half, resolution as f32, params.get(&BIAS_TEXELS), params.get(&SLOPE_BIAS_TEXELS)],
                 }
             })
             .collect();
@@ -239,11 +222,11 @@ impl ShadowMethod for Reference {
             }
             let done = k as u64 + 1;
             if done.is_multiple_of(BATCH as u64) || done == total {
-                ctx.flush();
-                ctx.observer.progress(done, total);
+                ctx.flush()?;
+                ctx.supervisor.progress(done, total);
                 // Cancelled: the renderer discards this frame, so the remaining batches
                 // would only keep the device from the next job.
-                if ctx.observer.cancelled() {
+                if ctx.supervisor.cancelled() {
                     break;
                 }
             }
@@ -256,11 +239,11 @@ impl ShadowMethod for Reference {
             pass.set_bind_group(1, &resolve_group, &[]);
             pass.dispatch_workgroups(gx, gy, 1);
         }
-        Counters::from([
+        Ok(Counters::from([
             ("samples".to_owned(), total as f64),
             ("samples_skipped_black".to_owned(), f64::from(strata) - total as f64),
             ("resolution".to_owned(), f64::from(resolution)),
-        ])
+        ]))
     }
 }
 

@@ -39,7 +39,8 @@
 use glam::{Mat4, Vec3, Vec4};
 use wgpu::util::DeviceExt;
 
-use super::{Counters, MethodContext, ParamKind, ParamSpec, Params, ShadowMethod};
+use super::{Counters, MethodContext, Param, ParamSpec, Params, ShadowMethod};
+use crate::error::JobResult;
 use crate::gpu::layout;
 use crate::gpu::pool::PipelineKey;
 use crate::gpu::readback::read_buffer;
@@ -47,33 +48,28 @@ use crate::scene::adjacency::SilhouetteEdge;
 
 pub struct Wedges;
 
-const PARAMS: &[ParamSpec] = &[
-    ParamSpec {
-        name: "tile",
-        kind: ParamKind::Integer { default: 8, min: 2, max: 256 },
-        doc: "side of the occlusion-culling tiles, pixels (§4; the paper sweeps 2…256, best 8–32)",
-    },
-    ParamSpec {
-        name: "culling",
-        kind: ParamKind::Boolean { default: true },
-        doc: "occlusion culling with the tiles' zmin and zmax (§4); false rasterises every tile a primitive's bounding box covers",
-    },
-    ParamSpec {
-        name: "volume",
-        kind: ParamKind::Choice { default: "auto", options: &["auto", "zpass", "zfail"] },
-        doc: "count shadow-volume crossings in front of the point (z-pass) or beyond it (z-fail, §5); auto picks z-fail when the eye is in shadow",
-    },
-    ParamSpec {
-        name: "object_ids",
-        kind: ParamKind::Boolean { default: true },
-        doc: "a receiver facing away from the light centre takes no shadow from its own object's volume and wedges: the horizon already hides that part of the light (E0)",
-    },
-    ParamSpec {
-        name: "passes",
-        kind: ParamKind::Choice { default: "three", options: &["three", "single"] },
-        doc: "three: umbra polygons, then wedges (§6.1); single: an edge's umbra and penumbra in one pass where both touch a tile (§6.2)",
-    },
-];
+const TILE: Param<u32> =
+    Param::integer("tile", 8, 2, 256, "side of the occlusion-culling tiles, pixels (§4; the paper sweeps 2…256, best 8–32)");
+const CULLING: Param<bool> = Param::boolean(
+    "culling",
+    true,
+    "occlusion culling with the tiles' zmin and zmax (§4); false rasterises every tile a primitive's bounding box covers",
+);
+const VOLUME: Param<&str> = Param::choice(
+    "volume",
+    "auto",
+    &["auto", "zpass", "zfail"],
+    "count shadow-volume crossings in front of the point (z-pass) or beyond it (z-fail, §5); auto picks z-fail when the eye is in shadow",
+);
+const OBJECT_IDS: Param<bool> = Param::boolean("object_ids", true, "a receiver facing away from the light centre takes no shadow from its own object's volume and wedges: the horizon already hides that part of the light (E0)");
+const PASSES: Param<&str> = Param::choice(
+    "passes",
+    "three",
+    &["three", "single"],
+    "three: umbra polygons, then wedges (§6.1); single: an edge's umbra and penumbra in one pass where both touch a tile (§6.2)",
+);
+
+const PARAMS: &[ParamSpec] = &[TILE.spec, CULLING.spec, VOLUME.spec, OBJECT_IDS.spec, PASSES.spec];
 
 /// Full light in the LI buffer's fixed point.
 const FULL: i32 = 1 << 16;
@@ -147,7 +143,7 @@ impl ShadowMethod for Wedges {
         PARAMS
     }
 
-    fn record(&self, ctx: &mut MethodContext<'_>, params: &Params) -> Counters {
+    fn record(&self, ctx: &mut MethodContext<'_>, params: &Params) -> JobResult<Counters> {
         // CPU time spent on the object-space set-up (silhouette, primitives, culling): the part
         // of the cost GPU timestamps do not see.
         let setup_start = std::time::Instant::now();
@@ -159,7 +155,7 @@ impl ShadowMethod for Wedges {
         let camera = &spec.camera;
         let view_proj = camera.view_proj(spec.width as f32 / spec.height as f32);
         let reach = 2.0 * ctx.scene.corners().iter().map(|p| p.distance(c)).fold(0.0f32, f32::max).max(1e-3);
-        let zfail = match params.choice("volume") {
+        let zfail = match params.get(&VOLUME) {
             "zfail" => true,
             "zpass" => false,
             _ => eye_in_shadow(&mesh, c, camera.eye),
@@ -205,8 +201,8 @@ impl ShadowMethod for Wedges {
             .collect();
 
         // Tile depth ranges from the GPU, then culling on the CPU.
-        let tile = params.u32("tile");
-        let culling = params.bool("culling");
+        let tile = params.get(&TILE);
+        let culling = params.get(&CULLING);
         let device = ctx.gpu.device.clone();
         let grid_size = (spec.width.div_ceil(tile), spec.height.div_ceil(tile));
         let tile_count = (grid_size.0 * grid_size.1) as usize;
@@ -215,7 +211,7 @@ impl ShadowMethod for Wedges {
             zfail: u32::from(zfail),
             full: FULL,
             polygon_count: polygons.len() as u32,
-            object_ids: u32::from(params.bool("object_ids")),
+            object_ids: u32::from(params.get(&OBJECT_IDS)),
             _pad: [0; 3],
         };
         let storage = |label, contents: &[u8]| {
@@ -305,8 +301,8 @@ impl ShadowMethod for Wedges {
             pass.set_bind_group(1, &group, &[]);
             pass.dispatch_workgroups((tile_count as u32).div_ceil(64), 1, 1);
         }
-        ctx.flush();
-        let depth_ranges: Vec<[f32; 2]> = bytemuck::cast_slice(&read_buffer(ctx.gpu, &ranges)).to_vec();
+        ctx.flush()?;
+        let depth_ranges: Vec<[f32; 2]> = bytemuck::cast_slice(&read_buffer(ctx.gpu, &ranges)?).to_vec();
         let culling_start = std::time::Instant::now();
         let grid = TileGrid::new(grid_size, tile, (spec.width, spec.height), &depth_ranges, camera, &view_proj);
 
@@ -334,7 +330,7 @@ impl ShadowMethod for Wedges {
         };
         let umbra_tiles: Vec<Vec<u32>> = umbra_footprints.iter().map(|f| survivors(f, true)).collect();
         let wedge_tiles: Vec<Vec<u32>> = wedge_footprints.iter().map(|f| survivors(f, false)).collect();
-        let single = params.choice("passes") == "single";
+        let single = params.get(&PASSES) == "single";
         let wedge_base = polygons.len() as u32;
         let item = |primitive, tile, both| WorkItem { primitive, tile, both, _pad: 0 };
         // Each pass: its pipeline and its items.
@@ -389,10 +385,10 @@ impl ShadowMethod for Wedges {
             pass.set_bind_group(1, &resolve_group, &[]);
             pass.dispatch_workgroups(screen.0, screen.1, 1);
         }
-        ctx.flush();
-        let counts: Vec<u32> = bytemuck::cast_slice(&read_buffer(ctx.gpu, &counters)).to_vec();
+        ctx.flush()?;
+        let counts: Vec<u32> = bytemuck::cast_slice(&read_buffer(ctx.gpu, &counters)?).to_vec();
         let stats = mesh.stats;
-        Counters::from([
+        Ok(Counters::from([
             ("silhouette_edges".to_owned(), silhouette.len() as f64),
             ("setup_cpu_ms".to_owned(), setup.as_secs_f64() * 1e3),
             ("volume_polygons".to_owned(), polygons.len() as f64),
@@ -405,7 +401,7 @@ impl ShadowMethod for Wedges {
             ("li_writes".to_owned(), f64::from(counts[1])),
             ("boundary_edges".to_owned(), stats.boundary_edges as f64),
             ("non_manifold_edges".to_owned(), stats.non_manifold_edges as f64),
-        ])
+        ]))
     }
 }
 

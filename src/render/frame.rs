@@ -10,7 +10,8 @@ use crate::error::{JobError, JobResult};
 use crate::gpu::scene::GpuScene;
 use crate::job::{Job, OutputFormat};
 use crate::light::{light_cells, AreaLight, LightCell, LightImage};
-use crate::methods::{self, Params, ShadowMethod};
+use crate::params::Params;
+use crate::render::method::ShadowMethod;
 
 /// The eye camera, complete and valid.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -77,14 +78,14 @@ impl LightProjection {
     }
 }
 
-/// Which images the caller needs back from the GPU.
+/// Which images beyond the colour the caller needs back from the GPU.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Readbacks {
+pub struct ExtraImages {
     pub visibility: bool,
     pub depth: bool,
 }
 
-impl Readbacks {
+impl ExtraImages {
     /// EXR carries visibility and depth; a comparison needs the visibility.
     pub fn for_job(job: &Job) -> Self {
         let exr = job.output.format == OutputFormat::Exr;
@@ -104,12 +105,13 @@ pub struct FrameSpec {
     pub width: u32,
     pub height: u32,
     pub ambient: Vec3,
-    pub readbacks: Readbacks,
+    pub extra_images: ExtraImages,
 }
 
 impl FrameSpec {
-    /// Merges the job over the scene's defaults and checks what the merge produced.
-    pub fn resolve(job: &Job, scene: &GpuScene, light_image: Arc<LightImage>) -> JobResult<Self> {
+    /// Merges the job over the scene's defaults and checks what the merge produced; `method`
+    /// is the job's method, looked up by the caller in the methods' registry.
+    pub fn resolve(job: &Job, scene: &GpuScene, light_image: Arc<LightImage>, method: &'static dyn ShadowMethod) -> JobResult<Self> {
         let d = &scene.defaults;
         let v3 = |v: Option<[f32; 3]>, default: Vec3| v.map(Vec3::from).unwrap_or(default);
         let camera = resolve_camera(
@@ -129,7 +131,6 @@ impl FrameSpec {
             l.size.map(Vec2::from).unwrap_or(d.light_size_m),
             l.intensity.unwrap_or(d.light_intensity),
         )?;
-        let method = methods::find(&job.method.name)?;
         let params = Params::parse(method.params(), &job.method.params)?;
         Ok(Self {
             camera,
@@ -142,7 +143,7 @@ impl FrameSpec {
             width: job.output.width,
             height: job.output.height,
             ambient: job.ambient.map(Vec3::from).unwrap_or(Vec3::ZERO),
-            readbacks: Readbacks::for_job(job),
+            extra_images: ExtraImages::for_job(job),
         })
     }
 }

@@ -5,13 +5,14 @@
 //! adapters without timestamp queries.
 
 pub mod frame;
+pub mod method;
 
 use std::sync::Arc;
 use std::time::Instant;
 
 use glam::Vec3;
 
-use crate::error::{ErrorCode, JobError, JobResult};
+use crate::error::JobResult;
 use crate::gpu::layout;
 use crate::gpu::pool::{DerivedResources, PipelineKey, PipelinePool, PooledTexture, ReadbackPool, TextureKey, TexturePool};
 use crate::gpu::readback::Readback;
@@ -20,50 +21,11 @@ use crate::gpu::shaders;
 use crate::gpu::timing::GpuTimer;
 use crate::gpu::GpuContext;
 use crate::light::{LightCell, E0_GRID};
-use crate::methods::{Counters, MethodContext};
+use crate::render::method::{Counters, MethodContext};
 use crate::scene::Vertex;
+use crate::supervise::{cancelled_error, Supervisor};
 use crate::timing::Timings;
-pub use frame::{Camera, FrameSpec, LightProjection, Readbacks};
-
-/// Watches a render in progress: hears the progress of long methods, and may stop the render
-/// between GPU submissions (a client that went away, a job cancelled by `DELETE`). Any
-/// `Fn(done, total)` is an observer that never cancels.
-pub trait Observer {
-    /// Steps done and steps in all of a long method (the reference's sample batches).
-    fn progress(&self, _done: u64, _total: u64) {}
-    /// Asked between phases and between a long method's batches: once it answers true the
-    /// render stops at the next such point and fails with `cancelled`.
-    fn cancelled(&self) -> bool {
-        false
-    }
-}
-
-impl<F: Fn(u64, u64)> Observer for F {
-    fn progress(&self, done: u64, total: u64) {
-        self(done, total)
-    }
-}
-
-/// An observer made of two closures: progress, and whether to stop (a flag another thread
-/// raises, typically).
-pub struct Cancellable<P, C> {
-    pub progress: P,
-    pub cancelled: C,
-}
-
-impl<P: Fn(u64, u64), C: Fn() -> bool> Observer for Cancellable<P, C> {
-    fn progress(&self, done: u64, total: u64) {
-        (self.progress)(done, total)
-    }
-    fn cancelled(&self) -> bool {
-        (self.cancelled)()
-    }
-}
-
-/// The error of a render stopped by its observer.
-pub fn cancelled_error() -> JobError {
-    JobError::new(ErrorCode::Cancelled, "the job was cancelled before it finished")
-}
+pub use frame::{Camera, ExtraImages, FrameSpec, LightProjection};
 
 /// The per-frame constants, laid out as `Frame` in `shaders/common/frame.wgsl`.
 #[repr(C)]
@@ -270,12 +232,18 @@ impl Renderer {
     }
 
     /// Renders one frame and records its phases in `timings`; stops between phases (and
-    /// between a long method's batches) once `observer` says the job is cancelled.
-    pub fn render(&mut self, scene: &GpuScene, spec: &FrameSpec, timings: &mut Timings, observer: &dyn Observer) -> JobResult<FrameOutput> {
+    /// between a long method's batches) once `supervisor` says the job is cancelled.
+    pub fn render(
+        &mut self,
+        scene: &GpuScene,
+        spec: &FrameSpec,
+        timings: &mut Timings,
+        supervisor: &dyn Supervisor,
+    ) -> JobResult<FrameOutput> {
         let compiled_before = self.pipelines.stats.created;
         self.timer.begin_frame();
         let targets = FrameTargets::alloc(&mut self.textures, &self.gpu.device, spec.width, spec.height, spec.shadow_resolution);
-        let frame = self.render_into(&targets, scene, spec, timings, observer);
+        let frame = self.render_into(&targets, scene, spec, timings, supervisor);
         // A cancelled frame gives its targets back too: the next job reuses them.
         targets.release(&mut self.textures);
         timings.pipelines_compiled += self.pipelines.stats.created - compiled_before;
@@ -288,31 +256,31 @@ impl Renderer {
         scene: &GpuScene,
         spec: &FrameSpec,
         timings: &mut Timings,
-        observer: &dyn Observer,
+        supervisor: &dyn Supervisor,
     ) -> JobResult<FrameOutput> {
         let gpu = self.gpu.clone();
         let device = &gpu.device;
-        let go_on = || if observer.cancelled() { Err(cancelled_error()) } else { Ok(()) };
+        let go_on = || if supervisor.cancelled() { Err(cancelled_error()) } else { Ok(()) };
         let projection = LightProjection::fit(&spec.light, &scene.corners());
         self.write_constants(spec, &projection);
         let encoder = || device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("Renderer::encoder") });
-        let submit = |encoder: wgpu::CommandEncoder| {
+        let submit = |encoder: wgpu::CommandEncoder| -> JobResult<()> {
             gpu.queue.submit([encoder.finish()]);
-            gpu.wait_idle();
+            Ok(gpu.wait_idle()?)
         };
 
         // Shadow map from the light centre.
         let start = Instant::now();
         let mut enc = encoder();
         self.record_shadow_map(&mut enc, scene, targets);
-        submit(enc);
+        submit(enc)?;
         let start = timings.phase("shadow_map", start);
         go_on()?;
 
         // Eye-space G-buffer.
         let mut enc = encoder();
         self.record_gbuffer(&mut enc, scene, targets);
-        submit(enc);
+        submit(enc)?;
         let start = timings.phase("gbuffer", start);
         go_on()?;
 
@@ -321,7 +289,7 @@ impl Renderer {
         // Unshadowed irradiance E0.
         let mut enc = encoder();
         self.record_e0(&mut enc, &inputs, targets, spec);
-        submit(enc);
+        submit(enc)?;
         let start = timings.phase("e0", start);
         go_on()?;
 
@@ -341,11 +309,11 @@ impl Renderer {
                 scene,
                 spec,
                 projection: &projection,
-                observer,
+                supervisor,
             };
-            spec.method.record(&mut ctx, &spec.params)
+            spec.method.record(&mut ctx, &spec.params)?
         };
-        submit(enc);
+        submit(enc)?;
         let start = timings.phase("method", start);
         // A long method stops recording its batches once cancelled; what it left is discarded.
         go_on()?;
@@ -353,7 +321,7 @@ impl Renderer {
         // Composite.
         let mut enc = encoder();
         self.record_composite(&mut enc, &inputs, targets, spec);
-        submit(enc);
+        submit(enc)?;
         let start = timings.phase("composite", start);
 
         // Readback of what the output format needs, and of the GPU timestamps.
@@ -361,12 +329,12 @@ impl Renderer {
         let mut readback = Readback::new();
         let pool = &mut self.readbacks;
         let color_index = readback.copy(&gpu, pool, &mut enc, &targets.color.texture);
-        let visibility_index = spec.readbacks.visibility.then(|| readback.copy(&gpu, pool, &mut enc, &targets.visibility.texture));
-        let e0_index = spec.readbacks.visibility.then(|| readback.copy(&gpu, pool, &mut enc, &targets.e0.texture));
-        let depth_index = spec.readbacks.depth.then(|| readback.copy(&gpu, pool, &mut enc, &targets.depth.texture));
+        let visibility_index = spec.extra_images.visibility.then(|| readback.copy(&gpu, pool, &mut enc, &targets.visibility.texture));
+        let e0_index = spec.extra_images.visibility.then(|| readback.copy(&gpu, pool, &mut enc, &targets.e0.texture));
+        let depth_index = spec.extra_images.depth.then(|| readback.copy(&gpu, pool, &mut enc, &targets.depth.texture));
         gpu.queue.submit([enc.finish()]);
-        let images = readback.finish(&gpu, pool);
-        let gpu_times = self.timer.read(&gpu);
+        let images = readback.finish(&gpu, pool)?;
+        let gpu_times = self.timer.read(&gpu)?;
         let color: Vec<[f32; 4]> = bytemuck::cast_slice(&images[color_index]).to_vec();
         // V = E/E0 is undefined where E0 = 0 (a surface facing away from the light, or behind
         // it): every method reports 1 there, so visibility metrics measure shadows only.

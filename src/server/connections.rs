@@ -61,6 +61,17 @@ impl Default for ConnectionLimits {
 }
 
 impl ConnectionLimits {
+    /// The limits the `serve` flags ask for (before the file-descriptor limit lowers them).
+    pub fn from_config(config: &crate::config::ServeConfig) -> Self {
+        let secs = |s: f64| Duration::from_secs_f64(s.max(0.001));
+        Self {
+            max_connections: config.max_connections,
+            header_timeout: secs(config.header_timeout_secs),
+            body_timeout: secs(config.body_timeout_secs),
+            keep_alive_timeout: secs(config.keep_alive_secs),
+        }
+    }
+
     /// The limits with `max_connections` lowered, when it must be, below the soft limit on
     /// open files (`ulimit -n`) less a reserve; a warning says so.
     pub fn within_fd_limit(mut self) -> Self {

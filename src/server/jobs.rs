@@ -123,7 +123,7 @@ pub(super) async fn run_submitted(
             tracing::info!(%id, "shutting down: the job stays queued in the store for the next start");
             return;
         }
-        Ok(_) = cancelled.wait_for(|c| *c) => Err(crate::render::cancelled_error()),
+        Ok(_) = cancelled.wait_for(|c| *c) => Err(crate::supervise::cancelled_error()),
     };
     drop(waiting);
     match device {
@@ -257,7 +257,7 @@ pub(super) async fn render_and_store(
                     }
                 }
             };
-            engine.render_observed(&job, &Cancellable { progress: report, cancelled: || *cancel.borrow() })
+            engine.render(&job, &Supervise { progress: report, cancelled: || *cancel.borrow() })
         })
     })
     .await
@@ -279,7 +279,7 @@ pub(super) async fn render_and_store(
             Ok(true) => {}
             // Cancelled through the store while it rendered: the client was told so.
             Ok(false) => {
-                finish_failed(state, &id, &method, crate::render::cancelled_error(), started, &events).await;
+                finish_failed(state, &id, &method, crate::supervise::cancelled_error(), started, &events).await;
                 drop(admitted);
                 return;
             }
@@ -485,7 +485,7 @@ pub(super) async fn cancel_job(State(state): State<Arc<AppState>>, Path(id): Pat
             if stored.finished() {
                 return Err(already_finished());
             }
-            let error = crate::render::cancelled_error();
+            let error = crate::supervise::cancelled_error();
             // A running job is counted where it runs, when it stops; a waiting one only here.
             if stored.status == "queued" {
                 state.job_finished(&id, stored.job["method"]["name"].as_str().unwrap_or(""), error.code.as_str(), 0.0, None);

@@ -8,6 +8,7 @@ pub mod connections;
 mod dashboard;
 pub mod error;
 mod jobs;
+pub mod metrics;
 mod uploads;
 
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -29,9 +30,9 @@ use crate::job::Job;
 use crate::jobs::{JobEvent, JobQueue, JobStore, JobSummary, RecentJobs};
 use crate::light::BUILTIN_LIGHT_IMAGES;
 use crate::methods::REGISTRY;
-use crate::render::Cancellable;
 use crate::scene::builtin::BUILTIN_SCENES;
 use crate::store::{new_job_id, JobStore as DurableStore, Store, StoreError, StoredJob, MAX_ATTEMPTS};
+use crate::supervise::Supervise;
 use crate::uploads::{content_id, is_content_id, Kind};
 use error::{store_error, ApiError};
 use jobs::{
@@ -57,7 +58,7 @@ const RECENT_JOBS: usize = 200;
 
 pub struct AppState {
     engine: Arc<Engine>,
-    metrics: crate::metrics::Metrics,
+    metrics: metrics::Metrics,
     queue: JobQueue,
     queue_config: QueueConfig,
     jobs: JobStore,
@@ -85,7 +86,7 @@ pub struct AppState {
 impl AppState {
     pub fn new(engine: Arc<Engine>, results_kept: usize) -> Self {
         Self {
-            metrics: crate::metrics::Metrics::new(&engine.gpu().adapter),
+            metrics: metrics::Metrics::new(&engine.gpu().adapter),
             queue: JobQueue::new(QueueConfig::default()),
             queue_config: QueueConfig::default(),
             jobs: JobStore::new(results_kept, DEFAULT_RESULTS_TTL),
@@ -365,7 +366,7 @@ async fn limits(State(state): State<Arc<AppState>>) -> Json<Value> {
 fn capped_params(specs: &[crate::methods::ParamSpec], limits: &crate::job::Limits) -> Value {
     let mut listed = json!(specs);
     for (spec, listed) in specs.iter().zip(listed.as_array_mut().into_iter().flatten()) {
-        if let (Some((cap, _)), Some(max)) = (limits.param_cap(spec.name), listed["max"].as_i64()) {
+        if let (Some((cap, _)), Some(max)) = (spec.cap.map(|c| limits.cap(c)), listed["max"].as_i64()) {
             listed["max"] = json!(max.min(cap));
         }
     }
@@ -404,7 +405,7 @@ pub async fn serve(config: ServeConfig, engine: Arc<Engine>) -> anyhow::Result<(
         }
         other => anyhow::bail!("unknown --job-store `{other}` (embedded, memory or redis://HOST:PORT/DB)"),
     }
-    let tracker = connections::Tracker::new(config.connection_limits().within_fd_limit());
+    let tracker = connections::Tracker::new(connections::ConnectionLimits::from_config(&config).within_fd_limit());
     let state = Arc::new(
         state.with_store_retry(std::time::Duration::from_secs_f64(config.store_retry_secs.max(0.0))).with_connections(tracker.clone()),
     );
@@ -607,11 +608,11 @@ async fn render_job(
             let started = std::time::Instant::now();
             let state = task_state;
             fetch_shared_uploads(&state.engine, state.store.as_ref(), &job)?;
-            let observer = Cancellable {
+            let observer = Supervise {
                 progress: |done, total| tracing::debug!(done, total, "progress"),
                 cancelled: || cancel.load(Ordering::Relaxed),
             };
-            let rendered = state.engine.render_observed(&job, &observer);
+            let rendered = state.engine.render(&job, &observer);
             // Its handler is gone with its client: the outcome is counted here.
             if matches!(&rendered, Err(error) if error.code == ErrorCode::Cancelled) {
                 tracing::info!("client went away: job cancelled mid-render");

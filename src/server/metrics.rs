@@ -6,10 +6,10 @@
 
 use prometheus::{Encoder, HistogramOpts, HistogramVec, IntCounter, IntCounterVec, IntGauge, IntGaugeVec, Opts, Registry, TextEncoder};
 
+use super::connections::ConnectionStats;
 use crate::engine::EngineStats;
 use crate::gpu::AdapterSummary;
 use crate::methods::REGISTRY;
-use crate::server::connections::ConnectionStats;
 use crate::store::StoreStatus;
 use crate::timing::Timings;
 

@@ -1,0 +1,142 @@
+//! The assets a job names — scenes and light images, built in, uploaded or read from disk —
+//! found in the engine's caches or loaded into them: the path policy that decides which files
+//! may be read, cache keys that change whenever an asset may have, and the GPU copies of
+//! scenes.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use super::{Engine, RenderState};
+use crate::error::{ErrorCode, JobError, JobResult};
+use crate::gpu::scene::GpuScene;
+use crate::job::AssetRef;
+use crate::light::LightImage;
+use crate::scene::{self, builtin};
+use crate::timing::Timings;
+use crate::uploads::{Asset, Kind};
+
+/// Where `{"path": ...}` assets may be read from.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum PathPolicy {
+    /// Any path (the CLI: the user reads their own files).
+    Any,
+    /// Only files inside this directory, after resolving symlinks (`serve --scene-dir`).
+    Under(PathBuf),
+    /// No paths at all (`serve` without `--scene-dir`).
+    Deny,
+}
+
+impl Engine {
+    /// Finds a scene in the cache or loads it and uploads it to the GPU.
+    pub(super) fn scene(&self, state: &mut RenderState, asset: &AssetRef, timings: &mut Timings) -> JobResult<Arc<GpuScene>> {
+        let key = self.asset_key(asset, Kind::Scene, "scene")?;
+        self.prune_gone_uploads(state);
+        if let Some(scene) = state.scenes.get(&key) {
+            timings.scene_cached = true;
+            return Ok(scene);
+        }
+        let loaded = match asset {
+            AssetRef::Builtin { name, params } => Arc::new(builtin::build(name, params, "scene", &self.limits)?),
+            AssetRef::Path(path) => {
+                let bytes = self.read_path(path, "scene.path")?;
+                Arc::new(scene::gltf::load(&bytes, &self.limits, "scene")?)
+            }
+            AssetRef::Id(id) => match self.uploaded(Kind::Scene, id, "scene.id")? {
+                Asset::Scene(scene) => scene,
+                Asset::Light(_) => return Err(not_uploaded(id, "scene.id")),
+            },
+        };
+        let gpu = state.renderer.gpu().clone();
+        let uploaded = GpuScene::upload(&gpu, &loaded, state.renderer.material_layout()).map_err(|error| {
+            tracing::warn!(%error, "a scene failed to upload to the GPU");
+            let first_line = error.to_string().lines().find(|l| !l.trim().is_empty()).unwrap_or("").trim().to_owned();
+            JobError::field(
+                ErrorCode::LimitExceeded,
+                "scene",
+                format!("the scene does not fit on this GPU ({}): {first_line}", gpu.adapter.name),
+            )
+        })?;
+        let uploaded = Arc::new(uploaded);
+        timings.scene_upload_bytes = uploaded.bytes;
+        state.scenes.insert(key, uploaded.clone());
+        Ok(uploaded)
+    }
+
+    /// Finds a light image in the cache or decodes it.
+    pub(super) fn light_image(&self, state: &mut RenderState, asset: &AssetRef) -> JobResult<Arc<LightImage>> {
+        let key = self.asset_key(asset, Kind::Light, "light.image")?;
+        if let Some(image) = state.lights.get(&key) {
+            return Ok(image);
+        }
+        let image = match asset {
+            AssetRef::Builtin { name, params } => Arc::new(LightImage::builtin(name, params, "light.image")?),
+            AssetRef::Path(path) => {
+                let bytes = self.read_path(path, "light.image.path")?;
+                Arc::new(LightImage::decode(&bytes, self.limits.max_light_image_dim, "light.image")?)
+            }
+            AssetRef::Id(id) => match self.uploaded(Kind::Light, id, "light.image.id")? {
+                Asset::Light(image) => image,
+                Asset::Scene(_) => return Err(not_uploaded(id, "light.image.id")),
+            },
+        };
+        state.lights.insert(key, image.clone());
+        Ok(image)
+    }
+
+    /// A cache key that changes whenever the asset's content may have changed.
+    pub(super) fn asset_key(&self, asset: &AssetRef, kind: Kind, field: &str) -> JobResult<String> {
+        match asset {
+            AssetRef::Builtin { name, params } => Ok(format!("builtin:{name}:{}", serde_json::Value::Object(params.clone()))),
+            AssetRef::Id(id) if self.holds_upload(kind, id) => Ok(format!("id:{id}")),
+            AssetRef::Id(id) => Err(not_uploaded(id, &format!("{field}.id"))),
+            AssetRef::Path(path) => {
+                let resolved = self.resolve_path(path, &format!("{field}.path"))?;
+                let meta = std::fs::metadata(&resolved).map_err(|_| not_readable(&format!("{field}.path")))?;
+                let modified =
+                    meta.modified().ok().and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok()).map(|d| d.as_nanos()).unwrap_or(0);
+                Ok(format!("path:{}:{}:{}", resolved.display(), meta.len(), modified))
+            }
+        }
+    }
+
+    /// Applies the path policy: canonical path inside the allowed directory, or an error
+    /// that does not reveal whether the file exists.
+    pub(super) fn resolve_path(&self, path: &Path, field: &str) -> JobResult<PathBuf> {
+        match &self.paths {
+            PathPolicy::Deny => {
+                Err(JobError::field(ErrorCode::PathNotAllowed, field, "this server reads no paths (start it with --scene-dir)"))
+            }
+            PathPolicy::Any => std::fs::canonicalize(path).map_err(|_| not_readable(field)),
+            PathPolicy::Under(dir) => {
+                let dir = std::fs::canonicalize(dir).map_err(|_| not_readable(field))?;
+                let joined = if path.is_absolute() { path.to_path_buf() } else { dir.join(path) };
+                match std::fs::canonicalize(&joined) {
+                    Ok(resolved) if resolved.starts_with(&dir) && resolved.is_file() => Ok(resolved),
+                    _ => Err(not_readable(field)),
+                }
+            }
+        }
+    }
+
+    fn read_path(&self, path: &Path, field: &str) -> JobResult<Vec<u8>> {
+        let resolved = self.resolve_path(path, field)?;
+        let meta = std::fs::metadata(&resolved).map_err(|_| not_readable(field))?;
+        if meta.len() > self.limits.max_body_bytes as u64 {
+            return Err(JobError::field(ErrorCode::LimitExceeded, field, format!("the file exceeds {} bytes", self.limits.max_body_bytes)));
+        }
+        std::fs::read(&resolved).map_err(|_| not_readable(field))
+    }
+}
+
+fn not_readable(field: &str) -> JobError {
+    JobError::field(ErrorCode::PathNotAllowed, field, "no readable file at this path in the allowed directory")
+}
+
+/// The error for an id this server does not hold (never uploaded, evicted or deleted).
+pub(super) fn not_uploaded(id: &str, field: &str) -> JobError {
+    JobError::field(
+        ErrorCode::NotUploaded,
+        field,
+        format!("no uploaded asset with id `{id}` of this kind on this server (never uploaded, evicted or deleted); upload it again"),
+    )
+}

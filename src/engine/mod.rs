@@ -1,0 +1,217 @@
+//! The engine: the warm state behind every interface. It owns the renderer (device,
+//! pipelines, target pool) and the caches of GPU scenes, decoded light images and reference
+//! frames, turns a `Job` into an encoded image with its timing breakdown, and is shared by the
+//! CLI (`penumbra render`) and the HTTP server alike, so both take exactly the same path.
+//!
+//! Frames go through the device one at a time (the renderer's targets and timer are per
+//! frame: `state`), but a job's CPU work around its frame — decoding its assets on a cache
+//! miss, comparing with the reference, encoding the image — runs outside that lock, so
+//! several jobs in progress overlap one's CPU work with another's frame.
+
+mod assets;
+mod check;
+mod device;
+mod lru;
+mod stats;
+mod uploads;
+
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
+
+pub use assets::PathPolicy;
+pub use check::check_job;
+pub use stats::EngineStats;
+pub use uploads::UploadReceipt;
+
+use crate::error::JobResult;
+use crate::gpu::scene::GpuScene;
+use crate::gpu::GpuContext;
+use crate::job::{AssetRef, Job, Limits, OutputFormat};
+use crate::light::LightImage;
+use crate::methods::Counters;
+use crate::quality::QualityReport;
+use crate::render::{FrameOutput, Renderer};
+use crate::supervise::Supervisor;
+use crate::timing::Timings;
+use crate::uploads::{Kind, UploadStore};
+use lru::Lru;
+
+/// A finished render: the encoded image and what it cost.
+#[derive(Debug, Clone)]
+pub struct Rendered {
+    /// The method that rendered it (`method.name` of the job).
+    pub method: String,
+    pub bytes: Vec<u8>,
+    pub format: OutputFormat,
+    pub width: u32,
+    pub height: u32,
+    pub timings: Timings,
+    pub counters: Counters,
+    /// Metrics against `reference`, when the job asked to `compare`.
+    pub quality: Option<QualityReport>,
+}
+
+/// Reference frames kept for `compare` (each is a few MB of floats).
+const REFERENCE_CACHE_ENTRIES: usize = 8;
+
+/// Most scenes kept on the GPU at once (least recently used ones are dropped first).
+const SCENE_CACHE_ENTRIES: usize = 16;
+
+/// Most decoded light images kept at once.
+const LIGHT_CACHE_ENTRIES: usize = 16;
+
+/// Default byte budget of the upload cache.
+pub const DEFAULT_CACHE_BYTES: u64 = 1 << 30;
+
+/// What the device is used with, one frame at a time: the renderer and the GPU copies of
+/// scenes; decoded light images beside them (their cache keys need the upload store's lock).
+struct RenderState {
+    renderer: Renderer,
+    scenes: Lru<String, Arc<GpuScene>>,
+    lights: Lru<String, Arc<LightImage>>,
+}
+
+pub struct Engine {
+    /// The device in use; replaced (under the state lock) when the device is lost.
+    gpu: std::sync::RwLock<Arc<GpuContext>>,
+    device_resets: std::sync::atomic::AtomicU64,
+    limits: Limits,
+    paths: PathPolicy,
+    uploads: Mutex<UploadStore>,
+    /// `stats()` as of the last time the renderer was free.
+    last_stats: Mutex<EngineStats>,
+    /// One frame at a time on the device.
+    state: Mutex<RenderState>,
+    references: Mutex<Lru<String, Arc<FrameOutput>>>,
+}
+
+impl Engine {
+    pub fn new(gpu: Arc<GpuContext>, limits: Limits, paths: PathPolicy) -> Self {
+        // Honoured as configured (a scene over the device's limit then fails its own job at
+        // upload), but said once, since it is almost certainly not what the operator meant.
+        let device_max = gpu.limits.max_texture_dimension_2d;
+        if limits.max_texture_dim > device_max {
+            tracing::warn!(max_texture_dim = limits.max_texture_dim, device_max, "textures above the device's limit will fail their jobs");
+        }
+        let state = RenderState {
+            renderer: Renderer::new(gpu.clone()),
+            scenes: Lru::new(SCENE_CACHE_ENTRIES),
+            lights: Lru::new(LIGHT_CACHE_ENTRIES),
+        };
+        Self {
+            gpu: std::sync::RwLock::new(gpu),
+            device_resets: Default::default(),
+            limits,
+            paths,
+            state: Mutex::new(state),
+            references: Mutex::new(Lru::new(REFERENCE_CACHE_ENTRIES)),
+            uploads: Mutex::new(UploadStore::new(DEFAULT_CACHE_BYTES)),
+            last_stats: Mutex::new(EngineStats::default()),
+        }
+    }
+
+    /// Sets the upload cache's byte budget (scenes count their CPU and GPU copies).
+    pub fn with_cache_budget(self, bytes: u64) -> Self {
+        Self { uploads: Mutex::new(UploadStore::new(bytes)), ..self }
+    }
+
+    /// The device in use now (another engine may share it: tests, several configurations).
+    pub fn gpu(&self) -> Arc<GpuContext> {
+        self.gpu.read().unwrap_or_else(|p| p.into_inner()).clone()
+    }
+
+    pub fn limits(&self) -> &Limits {
+        &self.limits
+    }
+
+    /// Checks a job before it is accepted to run later: everything `check_job` checks, and
+    /// that the files it names may be read (a 202 must not turn into `path_not_allowed`
+    /// later). With `uploads_here`, also that the uploads it names are held (a shared store
+    /// may hold them for another replica instead). An upload can still be evicted before the
+    /// job runs.
+    pub fn check(&self, job: &Job, uploads_here: bool) -> JobResult<()> {
+        check_job(job, &self.limits)?;
+        let light = job.light.image.as_ref();
+        for (kind, asset, field) in [(Kind::Scene, Some(&job.scene), "scene"), (Kind::Light, light, "light.image")] {
+            match asset {
+                Some(AssetRef::Path(path)) => drop(self.resolve_path(path, &format!("{field}.path"))?),
+                Some(AssetRef::Id(id)) if uploads_here && !self.holds_upload(kind, id) => {
+                    return Err(assets::not_uploaded(id, &format!("{field}.id")));
+                }
+                _ => {}
+            }
+        }
+        Ok(())
+    }
+
+    /// Renders a tiny frame with every method so that the first real job finds its
+    /// pipelines compiled and the default scene uploaded.
+    pub fn warm_up(&self) -> JobResult<()> {
+        for method in crate::methods::REGISTRY {
+            let mut job = Job::embedded_default();
+            job.method.name = method.name().into();
+            // The cheapest valid setting of every integer parameter (sample counts,
+            // resolutions): warm-up is about compiling pipelines, not about the picture.
+            for spec in method.params() {
+                if let crate::params::ParamKind::Integer { min, .. } = spec.kind {
+                    job.method.params.insert(spec.name.into(), min.into());
+                }
+            }
+            job.output.width = 8;
+            job.output.height = 8;
+            job.shadow_map.resolution = 64;
+            self.render(&job, &|_, _| {})?;
+        }
+        Ok(())
+    }
+
+    /// Checks, renders and encodes one job, reporting the progress of long methods to
+    /// `supervisor` (steps done, steps in all), which may also stop it.
+    pub fn render(&self, job: &Job, supervisor: &dyn Supervisor) -> JobResult<Rendered> {
+        let started = Instant::now();
+        let (frame, mut timings) = self.render_frame(job, supervisor)?;
+        // The frame is on the CPU: what follows runs outside the device lock.
+        let quality = if job.compare {
+            let start = Instant::now();
+            let reference = self.reference_for(job, supervisor)?;
+            let start = timings.phase("reference", start);
+            let report = crate::quality::compare(&frame, &reference, job.output.exposure);
+            timings.phase("quality", start);
+            Some(report)
+        } else {
+            None
+        };
+        let start = Instant::now();
+        let bytes = crate::output::encode(&frame, job.output.format, job.output.exposure)?;
+        timings.phase("encode", start);
+        timings.total_ms = started.elapsed().as_secs_f64() * 1e3;
+        Ok(Rendered {
+            method: job.method.name.clone(),
+            bytes,
+            format: job.output.format,
+            width: frame.width,
+            height: frame.height,
+            timings,
+            counters: frame.counters,
+            quality,
+        })
+    }
+
+    /// The reference frame for a job's scene, view, light and size, rendered once and
+    /// cached, so a sweep over methods renders it once.
+    pub fn reference_for(&self, job: &Job, supervisor: &dyn Supervisor) -> JobResult<Arc<FrameOutput>> {
+        let reference_job = job.reference_job();
+        let key = format!(
+            "{}|{}",
+            self.asset_key(&job.scene, Kind::Scene, "scene")?,
+            serde_json::to_string(&reference_job).map_err(|e| crate::error::JobError::internal(e.to_string()))?
+        );
+        if let Some(frame) = self.references.lock().unwrap_or_else(|p| p.into_inner()).get(&key) {
+            return Ok(frame);
+        }
+        let (frame, _) = self.render_frame(&reference_job, supervisor)?;
+        let frame = Arc::new(frame);
+        self.references.lock().unwrap_or_else(|p| p.into_inner()).insert(key, frame.clone());
+        Ok(frame)
+    }
+}

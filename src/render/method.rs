@@ -1,0 +1,89 @@
+//! The interface between the frame and the shadow methods (contract §2): a method is a
+//! `ShadowMethod` that records passes into the frame's command encoder through a
+//! `MethodContext` — the frame's inputs, the visibility target it fills, pools, the timer —
+//! and reports its counters. The renderer knows methods only through this trait; the methods'
+//! registry lives above it, with the methods.
+
+use std::collections::BTreeMap;
+use std::sync::Arc;
+
+use crate::error::JobResult;
+use crate::gpu::pool::{DerivedResources, PipelineKey, PipelinePool};
+use crate::gpu::scene::GpuScene;
+use crate::gpu::timing::GpuTimer;
+use crate::gpu::GpuContext;
+use crate::params::{ParamSpec, Params};
+use crate::render::{FrameInputs, FrameSpec, LightProjection};
+use crate::supervise::Supervisor;
+
+/// Method-specific counters (JFA rounds, searches skipped …), reported with the timings.
+pub type Counters = BTreeMap<String, f64>;
+
+/// What a method gets to record its passes.
+pub struct MethodContext<'a> {
+    pub gpu: &'a GpuContext,
+    pub pipelines: &'a mut PipelinePool,
+    /// Resources derived from the job's inputs and kept for later jobs (look-up tables).
+    pub derived: &'a mut DerivedResources,
+    /// Group 0 of every screen-space pass: frame constants, G-buffer, shadow map.
+    pub inputs: &'a FrameInputs,
+    /// Where the method writes its visibility: `rgba32float`, rgb = V per channel.
+    pub visibility: &'a wgpu::TextureView,
+    pub width: u32,
+    pub height: u32,
+    pub encoder: &'a mut wgpu::CommandEncoder,
+    pub timer: &'a mut GpuTimer,
+    /// The scene, for methods that draw it again (from light samples, as wedges …).
+    pub scene: &'a GpuScene,
+    /// The whole frame: light, light image, camera, sizes.
+    pub spec: &'a FrameSpec,
+    /// The shadow map's projection from the light centre, as the frame rendered it.
+    pub projection: &'a LightProjection,
+    /// Hears the progress of long methods (steps done, steps in all); a long method asks it
+    /// between batches whether to stop (`Supervisor::cancelled`).
+    pub supervisor: &'a dyn Supervisor,
+}
+
+impl MethodContext<'_> {
+    /// Submits what has been recorded so far and waits for it, leaving a fresh encoder:
+    /// for methods that run many passes and report progress between them.
+    pub fn flush(&mut self) -> JobResult<()> {
+        let fresh = self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("MethodContext::encoder") });
+        let done = std::mem::replace(self.encoder, fresh);
+        self.gpu.queue.submit([done.finish()]);
+        Ok(self.gpu.wait_idle()?)
+    }
+
+    /// A screen-space compute pipeline from the pool: group 0 the frame inputs, group 1 the
+    /// bindings listed in `io` (bind groups for it come from `get_bind_group_layout(1)`).
+    pub fn screen_pipeline(
+        &mut self,
+        key: PipelineKey,
+        shader: &'static str,
+        io: &[wgpu::BindGroupLayoutEntry],
+    ) -> Arc<wgpu::ComputePipeline> {
+        let device = &self.gpu.device;
+        let inputs_layout = &self.inputs.layout;
+        self.pipelines.compute(key, || {
+            let io_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(key.name), entries: io });
+            crate::render::screen_compute_pipeline(device, inputs_layout, key.name, shader, &io_layout)
+        })
+    }
+
+    /// Workgroup counts covering the output with 8×8 workgroups.
+    pub fn dispatch_size(&self) -> (u32, u32) {
+        (self.width.div_ceil(8), self.height.div_ceil(8))
+    }
+}
+
+pub trait ShadowMethod: Send + Sync {
+    /// The job name (`method.name`).
+    fn name(&self) -> &'static str;
+    /// One line for `GET /v1/methods`: what it is and where it comes from.
+    fn summary(&self) -> &'static str;
+    /// Parameters with their defaults and ranges.
+    fn params(&self) -> &'static [ParamSpec];
+    /// Records the passes that fill `ctx.visibility`.
+    /// Fails the job on a GPU error (a failed map or poll), never panics.
+    fn record(&self, ctx: &mut MethodContext<'_>, params: &Params) -> JobResult<Counters>;
+}
