@@ -69,4 +69,46 @@ mod tidy {
             assert!(text.starts_with("// "), "{name} must open with a comment saying what it is for");
         }
     }
+
+    /// Modules import downward only, as the layer table in ARCHITECTURE.md says: every
+    /// `crate::NAME` in a module names its own module or one of a lower layer.
+    #[test]
+    fn imports_go_down_the_layers() {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+        let architecture = std::fs::read_to_string(root.join("ARCHITECTURE.md")).unwrap();
+        let table = architecture.split("## Layers").nth(1).expect("ARCHITECTURE.md has a Layers section");
+        let mut layer_of = std::collections::HashMap::new();
+        for row in table.lines().take_while(|l| !l.starts_with("## ")) {
+            let cells: Vec<&str> = row.split('|').map(str::trim).collect();
+            let Some(layer) = cells.get(1).and_then(|c| c.parse::<u32>().ok()) else { continue };
+            for module in cells[2].split(',') {
+                layer_of.insert(module.trim().trim_matches('`').to_owned(), layer);
+            }
+        }
+        let src = root.join("src");
+        let mut violations = Vec::new();
+        for path in files(&src, "rs") {
+            let relative = path.strip_prefix(&src).unwrap();
+            let module = relative.iter().next().unwrap().to_string_lossy().trim_end_matches(".rs").to_owned();
+            if module == "lib" || module == "main" {
+                continue;
+            }
+            let own = *layer_of.get(&module).unwrap_or_else(|| panic!("module `{module}` is missing from the layer table"));
+            let text = std::fs::read_to_string(&path).unwrap();
+            for used in text.split("crate::").skip(1) {
+                let name: String = used.chars().take_while(|c| c.is_ascii_alphanumeric() || *c == '_').collect();
+                if name == module || name.is_empty() {
+                    continue;
+                }
+                let layer =
+                    *layer_of.get(&name).unwrap_or_else(|| panic!("{} uses `crate::{name}`, not in the layer table", relative.display()));
+                if layer >= own {
+                    violations.push(format!("{} (layer {own}) uses crate::{name} (layer {layer})", relative.display()));
+                }
+            }
+        }
+        violations.sort();
+        violations.dedup();
+        assert!(violations.is_empty(), "imports going up or across the layers:\n{}", violations.join("\n"));
+    }
 }

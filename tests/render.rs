@@ -635,7 +635,7 @@ fn jump_flooding_is_a_voronoi_flood() {
     for (size, count) in [(64u32, 12usize), (128, 40)] {
         let seeds: Vec<(u32, u32)> = (0..count).map(|_| (next(size), next(size))).collect();
         let rounds = size.trailing_zeros();
-        let flooded = penumbra::methods::jfa::voronoi(&gpu, size, &seeds, rounds, false);
+        let flooded = penumbra::methods::jfa::voronoi(&gpu, size, &seeds, rounds, false).unwrap();
         let d2 = |x: u32, y: u32, s: usize| {
             let (dx, dy) = (x as i64 - seeds[s].0 as i64, y as i64 - seeds[s].1 as i64);
             dx * dx + dy * dy
@@ -656,7 +656,7 @@ fn jump_flooding_is_a_voronoi_flood() {
         assert!(fraction > 0.99, "{fraction}");
     }
     // Standard flooding reaches only 2^rounds − 1 cells: with 3 rounds nothing beyond 7 cells.
-    let flooded = penumbra::methods::jfa::voronoi(&gpu, 32, &[(0, 0)], 3, true);
+    let flooded = penumbra::methods::jfa::voronoi(&gpu, 32, &[(0, 0)], 3, true).unwrap();
     assert_eq!(flooded[7 * 32 + 7], 0);
     assert_eq!(flooded[8 * 32 + 8], -1);
 }
@@ -686,7 +686,7 @@ fn chun_oh_quadtree_splits_by_visibility_variance_and_by_the_lights_colour() {
     // E = 0.75, variance 0.1875: below the threshold — only a colourful light splits it.
     let three_quarters = tile(|_| 3);
     let tiles = [lit, dark, half, fine, above, below, three_quarters];
-    let run = |regions, fixed| quadtree_probe(&gpu, &tiles, regions, fixed, 0.2244, 0.05, 2);
+    let run = |regions, fixed| quadtree_probe(&gpu, &tiles, regions, fixed, 0.2244, 0.05, 2).unwrap();
 
     let on_white = run(&white, false);
     let levels: Vec<u32> = on_white.iter().map(|r| r.level).collect();

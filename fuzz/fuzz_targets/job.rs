@@ -7,7 +7,7 @@ use penumbra::job::{Job, Limits};
 
 fuzz_target!(init: penumbra_fuzz_init(), |data: &[u8]| {
     if let Ok(job) = Job::from_json(data) {
-        let _ = job.validate(&Limits::default());
+        let _ = penumbra::engine::check_job(&job, &Limits::default());
     }
 });
 

@@ -20,10 +20,9 @@ use super::{Cap, Counters, MethodContext, Param, ParamSpec, Params, ShadowMethod
 use crate::error::JobResult;
 use crate::gpu::layout;
 use crate::gpu::pool::PipelineKey;
-use crate::gpu::shaders;
 use crate::light::{AreaLight, LightImage};
 use crate::render::LightProjection;
-use crate::scene::Vertex;
+use crate::render::{ScenePipeline, DEPTH_BUFFER_FORMAT};
 
 pub struct Reference;
 
@@ -155,8 +154,8 @@ impl ShadowMethod for Reference {
             wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
         )
         .create_view(&Default::default());
-        let depth = target("Reference::depth", wgpu::TextureFormat::Depth32Float, wgpu::TextureUsages::RENDER_ATTACHMENT)
-            .create_view(&Default::default());
+        let depth =
+            target("Reference::depth", DEPTH_BUFFER_FORMAT, wgpu::TextureUsages::RENDER_ATTACHMENT).create_view(&Default::default());
 
         let (depth_pipeline, accumulate_pipeline, resolve_pipeline) = self.pipelines(ctx);
         let slot_binding = |layout: &wgpu::BindGroupLayout, extra: &[wgpu::BindingResource]| {
@@ -257,45 +256,14 @@ impl Reference {
             device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(label), entries })
         };
         let depth = ctx.pipelines.render(PipelineKey::new("reference.sample_depth"), || {
-            let module = shaders::module(device, "methods/reference/sample_depth.wgsl");
             let sample_layout = bgl("Reference::sample_layout", &[layout::uniform_dynamic(0)]);
-            let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                label: Some("Reference::sample_depth_layout"),
-                bind_group_layouts: &[Some(&sample_layout)],
-                immediate_size: 0,
-            });
-            const POSITION: [wgpu::VertexAttribute; 1] = wgpu::vertex_attr_array![0 => Float32x3];
-            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some("Reference::sample_depth"),
-                layout: Some(&layout),
-                vertex: wgpu::VertexState {
-                    module: &module,
-                    entry_point: Some("vs_main"),
-                    compilation_options: Default::default(),
-                    buffers: &[Some(wgpu::VertexBufferLayout {
-                        array_stride: std::mem::size_of::<Vertex>() as u64,
-                        step_mode: wgpu::VertexStepMode::Vertex,
-                        attributes: &POSITION,
-                    })],
-                },
-                primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },
-                depth_stencil: Some(wgpu::DepthStencilState {
-                    format: wgpu::TextureFormat::Depth32Float,
-                    depth_write_enabled: Some(true),
-                    depth_compare: Some(wgpu::CompareFunction::Less),
-                    stencil: Default::default(),
-                    bias: Default::default(),
-                }),
-                multisample: Default::default(),
-                fragment: Some(wgpu::FragmentState {
-                    module: &module,
-                    entry_point: Some("fs_main"),
-                    compilation_options: Default::default(),
-                    targets: &[Some(wgpu::TextureFormat::R32Float.into())],
-                }),
-                multiview_mask: None,
-                cache: None,
-            })
+            let pipeline = ScenePipeline {
+                label: "Reference::sample_depth",
+                shader: "methods/reference/sample_depth.wgsl",
+                bind_group_layouts: &[&sample_layout],
+                targets: &[wgpu::TextureFormat::R32Float],
+            };
+            pipeline.build(device)
         });
         let accumulate = ctx.screen_pipeline(
             PipelineKey::new("reference.accumulate"),

@@ -4,8 +4,11 @@
 //! job; each phase is submitted and waited for on its own so its wall time is honest even on
 //! adapters without timestamp queries.
 
+mod draw;
 pub mod frame;
 pub mod method;
+mod passes;
+mod targets;
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -14,18 +17,19 @@ use glam::Vec3;
 
 use crate::error::JobResult;
 use crate::gpu::layout;
-use crate::gpu::pool::{DerivedResources, PipelineKey, PipelinePool, PooledTexture, ReadbackPool, TextureKey, TexturePool};
+use crate::gpu::pool::{DerivedResources, PipelinePool, ReadbackPool, TexturePool};
 use crate::gpu::readback::Readback;
 use crate::gpu::scene::GpuScene;
-use crate::gpu::shaders;
 use crate::gpu::timing::GpuTimer;
 use crate::gpu::GpuContext;
 use crate::light::{LightCell, E0_GRID};
 use crate::render::method::{Counters, MethodContext};
-use crate::scene::Vertex;
 use crate::supervise::{cancelled_error, Supervisor};
 use crate::timing::Timings;
+pub use draw::{vertex_layout, ScenePipeline, DEPTH_BUFFER_FORMAT};
 pub use frame::{Camera, ExtraImages, FrameSpec, LightProjection};
+pub use passes::screen_compute_pipeline;
+use targets::{FrameTargets, FLOAT_TARGET};
 
 /// The per-frame constants, laid out as `Frame` in `shaders/common/frame.wgsl`.
 #[repr(C)]
@@ -79,75 +83,6 @@ struct Layouts {
     inputs: wgpu::BindGroupLayout,
     e0_output: wgpu::BindGroupLayout,
     composite_io: wgpu::BindGroupLayout,
-}
-
-/// The frame's render targets, drawn from and returned to the pool.
-struct FrameTargets {
-    shadow_depth_buffer: PooledTexture,
-    shadow_depth: PooledTexture,
-    shadow_id: PooledTexture,
-    shadow_position: PooledTexture,
-    depth_buffer: PooledTexture,
-    position: PooledTexture,
-    normal: PooledTexture,
-    albedo: PooledTexture,
-    object_id: PooledTexture,
-    e0: PooledTexture,
-    visibility: PooledTexture,
-    color: PooledTexture,
-    depth: PooledTexture,
-}
-
-const SHADOW_DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Float;
-const ID_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Uint;
-const DEPTH_BUFFER_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
-const POSITION_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
-const NORMAL_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
-const ALBEDO_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
-const FLOAT_TARGET: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
-
-impl FrameTargets {
-    fn alloc(pool: &mut TexturePool, device: &wgpu::Device, width: u32, height: u32, shadow: u32) -> Self {
-        use wgpu::TextureUsages as U;
-        let attachment = U::RENDER_ATTACHMENT | U::TEXTURE_BINDING;
-        let storage = U::STORAGE_BINDING | U::TEXTURE_BINDING | U::COPY_SRC;
-        let mut get = |label, w, h, format, usage| pool.alloc(device, TextureKey { label, width: w, height: h, format, usage });
-        Self {
-            shadow_depth_buffer: get("FrameTargets::shadow_depth_buffer", shadow, shadow, DEPTH_BUFFER_FORMAT, U::RENDER_ATTACHMENT),
-            shadow_depth: get("FrameTargets::shadow_depth", shadow, shadow, SHADOW_DEPTH_FORMAT, attachment),
-            shadow_id: get("FrameTargets::shadow_id", shadow, shadow, ID_FORMAT, attachment),
-            shadow_position: get("FrameTargets::shadow_position", shadow, shadow, POSITION_FORMAT, attachment),
-            depth_buffer: get("FrameTargets::depth_buffer", width, height, DEPTH_BUFFER_FORMAT, U::RENDER_ATTACHMENT),
-            position: get("FrameTargets::position", width, height, POSITION_FORMAT, attachment),
-            normal: get("FrameTargets::normal", width, height, NORMAL_FORMAT, attachment),
-            albedo: get("FrameTargets::albedo", width, height, ALBEDO_FORMAT, attachment),
-            object_id: get("FrameTargets::object_id", width, height, ID_FORMAT, attachment),
-            e0: get("FrameTargets::e0", width, height, FLOAT_TARGET, storage),
-            visibility: get("FrameTargets::visibility", width, height, FLOAT_TARGET, storage),
-            color: get("FrameTargets::color", width, height, FLOAT_TARGET, storage),
-            depth: get("FrameTargets::depth", width, height, wgpu::TextureFormat::R32Float, storage),
-        }
-    }
-
-    fn release(self, pool: &mut TexturePool) {
-        for t in [
-            self.shadow_depth_buffer,
-            self.shadow_depth,
-            self.shadow_id,
-            self.shadow_position,
-            self.depth_buffer,
-            self.position,
-            self.normal,
-            self.albedo,
-            self.object_id,
-            self.e0,
-            self.visibility,
-            self.color,
-            self.depth,
-        ] {
-            pool.release(t);
-        }
-    }
 }
 
 pub struct Renderer {
@@ -375,127 +310,6 @@ impl Renderer {
         }
     }
 
-    fn draw_bind_group(&self, scene: &GpuScene) -> wgpu::BindGroup {
-        self.gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("Renderer::draw_bind_group"),
-            layout: &self.layouts.draw,
-            entries: &layout::entries(&[self.uniforms.as_entire_binding(), scene.materials.as_entire_binding()]),
-        })
-    }
-
-    fn record_shadow_map(&mut self, encoder: &mut wgpu::CommandEncoder, scene: &GpuScene, targets: &FrameTargets) {
-        let device = &self.gpu.device;
-        let draw_layout = &self.layouts.draw;
-        let pipeline = self.pipelines.render(PipelineKey::new("shadow_map"), || {
-            let module = shaders::module(device, "shadow_map.wgsl");
-            let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                label: Some("ShadowMap::pipeline_layout"),
-                bind_group_layouts: &[Some(draw_layout)],
-                immediate_size: 0,
-            });
-            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some("ShadowMap::pipeline"),
-                layout: Some(&layout),
-                vertex: wgpu::VertexState {
-                    module: &module,
-                    entry_point: Some("vs_main"),
-                    compilation_options: Default::default(),
-                    buffers: &[Some(vertex_layout())],
-                },
-                primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },
-                depth_stencil: Some(depth_state()),
-                multisample: Default::default(),
-                fragment: Some(wgpu::FragmentState {
-                    module: &module,
-                    entry_point: Some("fs_main"),
-                    compilation_options: Default::default(),
-                    targets: &[Some(SHADOW_DEPTH_FORMAT.into()), Some(ID_FORMAT.into()), Some(POSITION_FORMAT.into())],
-                }),
-                multiview_mask: None,
-                cache: None,
-            })
-        });
-        let bind_group = self.draw_bind_group(scene);
-        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some("ShadowMap::pass"),
-            color_attachments: &[
-                Some(clear_attachment(&targets.shadow_depth.view, f64::from(f32::MAX))),
-                Some(clear_attachment(&targets.shadow_id.view, f64::from(u32::MAX))),
-                Some(clear_attachment(&targets.shadow_position.view, 0.0)),
-            ],
-            depth_stencil_attachment: Some(depth_attachment(&targets.shadow_depth_buffer.view)),
-            timestamp_writes: self.timer.render_scope("shadow_map"),
-            occlusion_query_set: None,
-            multiview_mask: None,
-        });
-        pass.set_pipeline(&pipeline);
-        pass.set_bind_group(0, &bind_group, &[]);
-        pass.set_vertex_buffer(0, scene.vertex_buffer.slice(..));
-        pass.set_index_buffer(scene.index_buffer.slice(..), wgpu::IndexFormat::Uint32);
-        pass.draw_indexed(0..scene.index_count, 0, 0..1);
-    }
-
-    fn record_gbuffer(&mut self, encoder: &mut wgpu::CommandEncoder, scene: &GpuScene, targets: &FrameTargets) {
-        let device = &self.gpu.device;
-        let (draw_layout, material_layout) = (&self.layouts.draw, &self.layouts.material);
-        let pipeline = self.pipelines.render(PipelineKey::new("gbuffer"), || {
-            let module = shaders::module(device, "gbuffer.wgsl");
-            let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                label: Some("GBuffer::pipeline_layout"),
-                bind_group_layouts: &[Some(draw_layout), Some(material_layout)],
-                immediate_size: 0,
-            });
-            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some("GBuffer::pipeline"),
-                layout: Some(&layout),
-                vertex: wgpu::VertexState {
-                    module: &module,
-                    entry_point: Some("vs_main"),
-                    compilation_options: Default::default(),
-                    buffers: &[Some(vertex_layout())],
-                },
-                primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },
-                depth_stencil: Some(depth_state()),
-                multisample: Default::default(),
-                fragment: Some(wgpu::FragmentState {
-                    module: &module,
-                    entry_point: Some("fs_main"),
-                    compilation_options: Default::default(),
-                    targets: &[
-                        Some(POSITION_FORMAT.into()),
-                        Some(NORMAL_FORMAT.into()),
-                        Some(ALBEDO_FORMAT.into()),
-                        Some(ID_FORMAT.into()),
-                    ],
-                }),
-                multiview_mask: None,
-                cache: None,
-            })
-        });
-        let bind_group = self.draw_bind_group(scene);
-        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some("GBuffer::pass"),
-            color_attachments: &[
-                Some(clear_attachment(&targets.position.view, 0.0)),
-                Some(clear_attachment(&targets.normal.view, 0.0)),
-                Some(clear_attachment(&targets.albedo.view, 0.0)),
-                Some(clear_attachment(&targets.object_id.view, f64::from(u32::MAX))),
-            ],
-            depth_stencil_attachment: Some(depth_attachment(&targets.depth_buffer.view)),
-            timestamp_writes: self.timer.render_scope("gbuffer"),
-            occlusion_query_set: None,
-            multiview_mask: None,
-        });
-        pass.set_pipeline(&pipeline);
-        pass.set_bind_group(0, &bind_group, &[]);
-        pass.set_vertex_buffer(0, scene.vertex_buffer.slice(..));
-        pass.set_index_buffer(scene.index_buffer.slice(..), wgpu::IndexFormat::Uint32);
-        for draw in &scene.draws {
-            pass.set_bind_group(1, &scene.material_bind_groups[draw.material as usize], &[]);
-            pass.draw_indexed(draw.first_index..draw.first_index + draw.index_count, 0, 0..1);
-        }
-    }
-
     fn frame_inputs(&self, targets: &FrameTargets) -> FrameInputs {
         let view = wgpu::BindingResource::TextureView;
         let bind_group = self.gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
@@ -515,129 +329,8 @@ impl Renderer {
         });
         FrameInputs { layout: self.layouts.inputs.clone(), bind_group }
     }
-
-    fn screen_pipeline(
-        &mut self,
-        name: &'static str,
-        shader: &'static str,
-        io_layout: &wgpu::BindGroupLayout,
-    ) -> Arc<wgpu::ComputePipeline> {
-        let device = &self.gpu.device;
-        let inputs_layout = &self.layouts.inputs;
-        self.pipelines.compute(PipelineKey::new(name), || screen_compute_pipeline(device, inputs_layout, name, shader, io_layout))
-    }
-
-    fn record_e0(&mut self, encoder: &mut wgpu::CommandEncoder, inputs: &FrameInputs, targets: &FrameTargets, spec: &FrameSpec) {
-        let io_layout = self.layouts.e0_output.clone();
-        let pipeline = self.screen_pipeline("e0", "e0.wgsl", &io_layout);
-        let io = self.gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("E0::outputs"),
-            layout: &io_layout,
-            entries: &layout::entries(&[wgpu::BindingResource::TextureView(&targets.e0.view)]),
-        });
-        self.dispatch(encoder, "e0", &pipeline, inputs, &io, spec);
-    }
-
-    fn record_composite(&mut self, encoder: &mut wgpu::CommandEncoder, inputs: &FrameInputs, targets: &FrameTargets, spec: &FrameSpec) {
-        let io_layout = self.layouts.composite_io.clone();
-        let pipeline = self.screen_pipeline("composite", "composite.wgsl", &io_layout);
-        let view = wgpu::BindingResource::TextureView;
-        let io = self.gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("Composite::io"),
-            layout: &io_layout,
-            entries: &layout::entries(&[
-                view(&targets.e0.view),
-                view(&targets.visibility.view),
-                view(&targets.color.view),
-                view(&targets.depth.view),
-            ]),
-        });
-        self.dispatch(encoder, "composite", &pipeline, inputs, &io, spec);
-    }
-
-    fn dispatch(
-        &mut self,
-        encoder: &mut wgpu::CommandEncoder,
-        label: &'static str,
-        pipeline: &wgpu::ComputePipeline,
-        inputs: &FrameInputs,
-        io: &wgpu::BindGroup,
-        spec: &FrameSpec,
-    ) {
-        let mut pass = encoder
-            .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(label), timestamp_writes: self.timer.compute_scope(label) });
-        pass.set_pipeline(pipeline);
-        pass.set_bind_group(0, &inputs.bind_group, &[]);
-        pass.set_bind_group(1, io, &[]);
-        pass.dispatch_workgroups(spec.width.div_ceil(8), spec.height.div_ceil(8), 1);
-    }
-}
-
-/// A compute pipeline over the screen (8×8 workgroups, entry `main`): group 0 is the frame
-/// inputs (`shaders/common/frame_inputs.wgsl`), group 1 the pass's own bindings.
-pub fn screen_compute_pipeline(
-    device: &wgpu::Device,
-    inputs_layout: &wgpu::BindGroupLayout,
-    label: &'static str,
-    shader: &str,
-    io_layout: &wgpu::BindGroupLayout,
-) -> wgpu::ComputePipeline {
-    let module = shaders::module(device, shader);
-    let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-        label: Some(label),
-        bind_group_layouts: &[Some(inputs_layout), Some(io_layout)],
-        immediate_size: 0,
-    });
-    device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-        label: Some(label),
-        layout: Some(&layout),
-        module: &module,
-        entry_point: Some("main"),
-        compilation_options: Default::default(),
-        cache: None,
-    })
 }
 
 fn cell_to_gpu(cell: &LightCell) -> LightCellGpu {
     LightCellGpu { corners: cell.corners.map(|c| [c.x, c.y, c.z, 1.0]), radiance: [cell.radiance.x, cell.radiance.y, cell.radiance.z, 0.0] }
-}
-
-fn vertex_layout() -> wgpu::VertexBufferLayout<'static> {
-    const ATTRIBUTES: [wgpu::VertexAttribute; 5] =
-        wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x2, 3 => Uint32, 4 => Uint32];
-    wgpu::VertexBufferLayout {
-        array_stride: std::mem::size_of::<Vertex>() as u64,
-        step_mode: wgpu::VertexStepMode::Vertex,
-        attributes: &ATTRIBUTES,
-    }
-}
-
-fn depth_state() -> wgpu::DepthStencilState {
-    wgpu::DepthStencilState {
-        format: DEPTH_BUFFER_FORMAT,
-        depth_write_enabled: Some(true),
-        depth_compare: Some(wgpu::CompareFunction::Less),
-        stencil: Default::default(),
-        bias: Default::default(),
-    }
-}
-
-fn clear_attachment(view: &wgpu::TextureView, value: f64) -> wgpu::RenderPassColorAttachment<'_> {
-    wgpu::RenderPassColorAttachment {
-        view,
-        depth_slice: None,
-        resolve_target: None,
-        ops: wgpu::Operations {
-            load: wgpu::LoadOp::Clear(wgpu::Color { r: value, g: value, b: value, a: value }),
-            store: wgpu::StoreOp::Store,
-        },
-    }
-}
-
-fn depth_attachment(view: &wgpu::TextureView) -> wgpu::RenderPassDepthStencilAttachment<'_> {
-    wgpu::RenderPassDepthStencilAttachment {
-        view,
-        depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(1.0), store: wgpu::StoreOp::Store }),
-        stencil_ops: None,
-    }
 }

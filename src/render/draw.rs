@@ -1,0 +1,96 @@
+//! Drawing the scene's triangles: one pipeline builder for every pass that rasterises the
+//! scene (the shadow map, the G-buffer, the reference's per-sample depth maps), with the one
+//! vertex layout of `scene::Vertex`, depth testing, no culling (contract §1: back faces cast
+//! shadows), and the attachments those passes clear.
+
+use crate::gpu::shaders;
+use crate::scene::Vertex;
+
+/// The depth buffer of every scene-drawing pass.
+pub const DEPTH_BUFFER_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+
+/// A pipeline that draws the scene: `shader`'s `vs_main` and `fs_main`, these bind groups,
+/// these colour targets, and the depth test of `depth_state`.
+pub struct ScenePipeline<'a> {
+    pub label: &'static str,
+    pub shader: &'static str,
+    pub bind_group_layouts: &'a [&'a wgpu::BindGroupLayout],
+    pub targets: &'a [wgpu::TextureFormat],
+}
+
+impl ScenePipeline<'_> {
+    pub fn build(&self, device: &wgpu::Device) -> wgpu::RenderPipeline {
+        let module = shaders::module(device, self.shader);
+        let groups: Vec<Option<&wgpu::BindGroupLayout>> = self.bind_group_layouts.iter().map(|l| Some(*l)).collect();
+        let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some(self.label),
+            bind_group_layouts: &groups,
+            immediate_size: 0,
+        });
+        let targets: Vec<Option<wgpu::ColorTargetState>> = self.targets.iter().map(|f| Some((*f).into())).collect();
+        device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some(self.label),
+            layout: Some(&layout),
+            vertex: wgpu::VertexState {
+                module: &module,
+                entry_point: Some("vs_main"),
+                compilation_options: Default::default(),
+                buffers: &[Some(vertex_layout())],
+            },
+            primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },
+            depth_stencil: Some(depth_state()),
+            multisample: Default::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &module,
+                entry_point: Some("fs_main"),
+                compilation_options: Default::default(),
+                targets: &targets,
+            }),
+            multiview_mask: None,
+            cache: None,
+        })
+    }
+}
+
+/// `scene::Vertex` as the vertex shaders read it: position, normal, uv, object id, material.
+pub fn vertex_layout() -> wgpu::VertexBufferLayout<'static> {
+    const ATTRIBUTES: [wgpu::VertexAttribute; 5] =
+        wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x2, 3 => Uint32, 4 => Uint32];
+    wgpu::VertexBufferLayout {
+        array_stride: std::mem::size_of::<Vertex>() as u64,
+        step_mode: wgpu::VertexStepMode::Vertex,
+        attributes: &ATTRIBUTES,
+    }
+}
+
+fn depth_state() -> wgpu::DepthStencilState {
+    wgpu::DepthStencilState {
+        format: DEPTH_BUFFER_FORMAT,
+        depth_write_enabled: Some(true),
+        depth_compare: Some(wgpu::CompareFunction::Less),
+        stencil: Default::default(),
+        bias: Default::default(),
+    }
+}
+
+/// A colour attachment cleared to `value` in every channel.
+pub fn clear_attachment(view: &wgpu::TextureView, value: f64) -> wgpu::RenderPassColorAttachment<'_> {
+    wgpu::RenderPassColorAttachment {
+        view,
+        depth_slice: None,
+        resolve_target: None,
+        ops: wgpu::Operations {
+            load: wgpu::LoadOp::Clear(wgpu::Color { r: value, g: value, b: value, a: value }),
+            store: wgpu::StoreOp::Store,
+        },
+    }
+}
+
+/// A depth attachment cleared to the far plane.
+pub fn depth_attachment(view: &wgpu::TextureView) -> wgpu::RenderPassDepthStencilAttachment<'_> {
+    wgpu::RenderPassDepthStencilAttachment {
+        view,
+        depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(1.0), store: wgpu::StoreOp::Store }),
+        stencil_ops: None,
+    }
+}

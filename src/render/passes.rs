@@ -1,0 +1,178 @@
+//! The renderer's own passes, recorded into a phase's encoder: the light-space shadow map
+//! and the eye-space G-buffer (the scene drawn through `draw::ScenePipeline`), then the
+//! screen-space E0 and composite compute passes over the frame inputs.
+
+use std::sync::Arc;
+
+use super::draw::{clear_attachment, depth_attachment, ScenePipeline};
+use super::targets::{FrameTargets, ALBEDO_FORMAT, ID_FORMAT, NORMAL_FORMAT, POSITION_FORMAT, SHADOW_DEPTH_FORMAT};
+use super::{FrameInputs, FrameSpec, Renderer};
+use crate::gpu::layout;
+use crate::gpu::pool::PipelineKey;
+use crate::gpu::scene::GpuScene;
+use crate::gpu::shaders;
+
+impl Renderer {
+    fn draw_bind_group(&self, scene: &GpuScene) -> wgpu::BindGroup {
+        self.gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("Renderer::draw_bind_group"),
+            layout: &self.layouts.draw,
+            entries: &layout::entries(&[self.uniforms.as_entire_binding(), scene.materials.as_entire_binding()]),
+        })
+    }
+
+    pub(super) fn record_shadow_map(&mut self, encoder: &mut wgpu::CommandEncoder, scene: &GpuScene, targets: &FrameTargets) {
+        let device = &self.gpu.device;
+        let draw_layout = &self.layouts.draw;
+        let pipeline = self.pipelines.render(PipelineKey::new("shadow_map"), || {
+            let pipeline = ScenePipeline {
+                label: "ShadowMap::pipeline",
+                shader: "shadow_map.wgsl",
+                bind_group_layouts: &[draw_layout],
+                targets: &[SHADOW_DEPTH_FORMAT, ID_FORMAT, POSITION_FORMAT],
+            };
+            pipeline.build(device)
+        });
+        let bind_group = self.draw_bind_group(scene);
+        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("ShadowMap::pass"),
+            color_attachments: &[
+                Some(clear_attachment(&targets.shadow_depth.view, f64::from(f32::MAX))),
+                Some(clear_attachment(&targets.shadow_id.view, f64::from(u32::MAX))),
+                Some(clear_attachment(&targets.shadow_position.view, 0.0)),
+            ],
+            depth_stencil_attachment: Some(depth_attachment(&targets.shadow_depth_buffer.view)),
+            timestamp_writes: self.timer.render_scope("shadow_map"),
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        pass.set_pipeline(&pipeline);
+        pass.set_bind_group(0, &bind_group, &[]);
+        pass.set_vertex_buffer(0, scene.vertex_buffer.slice(..));
+        pass.set_index_buffer(scene.index_buffer.slice(..), wgpu::IndexFormat::Uint32);
+        pass.draw_indexed(0..scene.index_count, 0, 0..1);
+    }
+
+    pub(super) fn record_gbuffer(&mut self, encoder: &mut wgpu::CommandEncoder, scene: &GpuScene, targets: &FrameTargets) {
+        let device = &self.gpu.device;
+        let (draw_layout, material_layout) = (&self.layouts.draw, &self.layouts.material);
+        let pipeline = self.pipelines.render(PipelineKey::new("gbuffer"), || {
+            let pipeline = ScenePipeline {
+                label: "GBuffer::pipeline",
+                shader: "gbuffer.wgsl",
+                bind_group_layouts: &[draw_layout, material_layout],
+                targets: &[POSITION_FORMAT, NORMAL_FORMAT, ALBEDO_FORMAT, ID_FORMAT],
+            };
+            pipeline.build(device)
+        });
+        let bind_group = self.draw_bind_group(scene);
+        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("GBuffer::pass"),
+            color_attachments: &[
+                Some(clear_attachment(&targets.position.view, 0.0)),
+                Some(clear_attachment(&targets.normal.view, 0.0)),
+                Some(clear_attachment(&targets.albedo.view, 0.0)),
+                Some(clear_attachment(&targets.object_id.view, f64::from(u32::MAX))),
+            ],
+            depth_stencil_attachment: Some(depth_attachment(&targets.depth_buffer.view)),
+            timestamp_writes: self.timer.render_scope("gbuffer"),
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        pass.set_pipeline(&pipeline);
+        pass.set_bind_group(0, &bind_group, &[]);
+        pass.set_vertex_buffer(0, scene.vertex_buffer.slice(..));
+        pass.set_index_buffer(scene.index_buffer.slice(..), wgpu::IndexFormat::Uint32);
+        for draw in &scene.draws {
+            pass.set_bind_group(1, &scene.material_bind_groups[draw.material as usize], &[]);
+            pass.draw_indexed(draw.first_index..draw.first_index + draw.index_count, 0, 0..1);
+        }
+    }
+
+    fn screen_pipeline(
+        &mut self,
+        name: &'static str,
+        shader: &'static str,
+        io_layout: &wgpu::BindGroupLayout,
+    ) -> Arc<wgpu::ComputePipeline> {
+        let device = &self.gpu.device;
+        let inputs_layout = &self.layouts.inputs;
+        self.pipelines.compute(PipelineKey::new(name), || screen_compute_pipeline(device, inputs_layout, name, shader, io_layout))
+    }
+
+    pub(super) fn record_e0(&mut self, encoder: &mut wgpu::CommandEncoder, inputs: &FrameInputs, targets: &FrameTargets, spec: &FrameSpec) {
+        let io_layout = self.layouts.e0_output.clone();
+        let pipeline = self.screen_pipeline("e0", "e0.wgsl", &io_layout);
+        let io = self.gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("E0::outputs"),
+            layout: &io_layout,
+            entries: &layout::entries(&[wgpu::BindingResource::TextureView(&targets.e0.view)]),
+        });
+        self.dispatch(encoder, "e0", &pipeline, inputs, &io, spec);
+    }
+
+    pub(super) fn record_composite(
+        &mut self,
+        encoder: &mut wgpu::CommandEncoder,
+        inputs: &FrameInputs,
+        targets: &FrameTargets,
+        spec: &FrameSpec,
+    ) {
+        let io_layout = self.layouts.composite_io.clone();
+        let pipeline = self.screen_pipeline("composite", "composite.wgsl", &io_layout);
+        let view = wgpu::BindingResource::TextureView;
+        let io = self.gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("Composite::io"),
+            layout: &io_layout,
+            entries: &layout::entries(&[
+                view(&targets.e0.view),
+                view(&targets.visibility.view),
+                view(&targets.color.view),
+                view(&targets.depth.view),
+            ]),
+        });
+        self.dispatch(encoder, "composite", &pipeline, inputs, &io, spec);
+    }
+
+    fn dispatch(
+        &mut self,
+        encoder: &mut wgpu::CommandEncoder,
+        label: &'static str,
+        pipeline: &wgpu::ComputePipeline,
+        inputs: &FrameInputs,
+        io: &wgpu::BindGroup,
+        spec: &FrameSpec,
+    ) {
+        let mut pass = encoder
+            .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(label), timestamp_writes: self.timer.compute_scope(label) });
+        pass.set_pipeline(pipeline);
+        pass.set_bind_group(0, &inputs.bind_group, &[]);
+        pass.set_bind_group(1, io, &[]);
+        pass.dispatch_workgroups(spec.width.div_ceil(8), spec.height.div_ceil(8), 1);
+    }
+}
+
+/// A compute pipeline over the screen (8×8 workgroups, entry `main`): group 0 is the frame
+/// inputs (`shaders/common/frame_inputs.wgsl`), group 1 the pass's own bindings.
+pub fn screen_compute_pipeline(
+    device: &wgpu::Device,
+    inputs_layout: &wgpu::BindGroupLayout,
+    label: &'static str,
+    shader: &str,
+    io_layout: &wgpu::BindGroupLayout,
+) -> wgpu::ComputePipeline {
+    let module = shaders::module(device, shader);
+    let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some(label),
+        bind_group_layouts: &[Some(inputs_layout), Some(io_layout)],
+        immediate_size: 0,
+    });
+    device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some(label),
+        layout: Some(&layout),
+        module: &module,
+        entry_point: Some("main"),
+        compilation_options: Default::default(),
+        cache: None,
+    })
+}
