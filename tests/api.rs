@@ -806,6 +806,36 @@ fn a_lost_device_is_replaced_and_the_affected_job_retried() {
     assert_eq!(engine.stats().device_resets, 2);
 }
 
+/// A GPU error on the readback path (a buffer map that fails) fails that one job with a
+/// generic 500 and nothing else: no panic, the next job on the same device renders, and the
+/// daemon answers health checks throughout. The server has its own device, since the fault is
+/// injected into it.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_failed_readback_fails_one_job_and_the_daemon_serves_on() {
+    use penumbra::gpu::{AdapterChoice, GpuContext};
+    let gpu = Arc::new(GpuContext::new(AdapterChoice::Auto).expect("a Vulkan adapter"));
+    let engine = Arc::new(Engine::new(gpu, Limits::default(), PathPolicy::Deny));
+    let state = Arc::new(AppState::new(engine.clone(), 8));
+    state.set_ready();
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let base = format!("http://{}", listener.local_addr().unwrap());
+    tokio::spawn(async move { axum::serve(listener, app(state)).await.unwrap() });
+    let client = reqwest::Client::new();
+    let render = || client.post(format!("{base}/v1/render")).json(&small_job("png")).send();
+
+    engine.gpu().fail_next_readback();
+    let failed = render().await.unwrap();
+    assert_eq!(failed.status(), StatusCode::INTERNAL_SERVER_ERROR);
+    let body: Value = failed.json().await.unwrap();
+    assert_eq!(body["error"]["code"], "internal");
+    assert!(!body["error"]["message"].as_str().unwrap().contains("map"), "5xx bodies stay generic: {body}");
+    assert_eq!(client.get(format!("{base}/healthz")).send().await.unwrap().status(), StatusCode::OK);
+    let next = render().await.unwrap();
+    assert_eq!(next.status(), StatusCode::OK, "the next job renders on the same device");
+    assert!(next.bytes().await.unwrap().starts_with(b"\x89PNG"));
+    assert_eq!(engine.device_resets(), 0, "a failed map is not a lost device");
+}
+
 /// An observer that cancels the render once it has heard `after` progress reports.
 struct CancelAfter {
     after: usize,
