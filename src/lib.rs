@@ -7,6 +7,7 @@
 
 pub mod bench;
 pub mod client;
+pub mod color;
 pub mod config;
 pub mod engine;
 pub mod error;

@@ -4,9 +4,9 @@
 
 use std::io::Cursor;
 
+use crate::color::srgb8;
 use crate::error::{JobError, JobResult};
 use crate::job::OutputFormat;
-use crate::light::linear_to_srgb;
 use crate::render::FrameOutput;
 
 /// Encodes a frame in the requested format.
@@ -39,7 +39,7 @@ pub fn thumbnail(encoded: &[u8], size: u32) -> JobResult<Vec<u8>> {
         if image.width().max(image.height()) <= size { image } else { image.resize(size, size, image::imageops::FilterType::Triangle) };
     let rgb = if matches!(small, image::DynamicImage::ImageRgb32F(_) | image::DynamicImage::ImageRgba32F(_)) {
         let linear = small.to_rgb32f();
-        let bytes = linear.as_raw().iter().map(|&c| (linear_to_srgb(c) * 255.0 + 0.5) as u8).collect();
+        let bytes = linear.as_raw().iter().map(|&c| srgb8(c)).collect();
         image::RgbImage::from_raw(linear.width(), linear.height(), bytes).expect("buffer sized from the image")
     } else {
         small.to_rgb8()
@@ -54,7 +54,7 @@ fn encode_png(frame: &FrameOutput, exposure: f32) -> JobResult<Vec<u8>> {
     let mut rgba = Vec::with_capacity(frame.color.len() * 4);
     for [r, g, b, a] in &frame.color {
         for c in [r, g, b] {
-            rgba.push((linear_to_srgb(c * scale) * 255.0 + 0.5) as u8);
+            rgba.push(srgb8(c * scale));
         }
         rgba.push((a.clamp(0.0, 1.0) * 255.0 + 0.5) as u8);
     }

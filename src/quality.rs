@@ -10,7 +10,7 @@
 
 use serde::Serialize;
 
-use crate::light::linear_to_srgb;
+use crate::color::linear_to_srgb;
 use crate::render::FrameOutput;
 
 /// Visibility strictly between these bounds in some channel marks a penumbra pixel. The

@@ -1,0 +1,242 @@
+//! `penumbra eval`'s tables: `results.md` (cost, quality against the reference, the flooding
+//! experiment, the subdivision histogram, a sweep), `results.csv` and `results.json`.
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use super::{EvalReport, Row, Sweep};
+use crate::methods::Counters;
+use crate::timing::Timings;
+
+/// The render phases the cost tables list, in pass order.
+const PHASE_COLUMNS: [&str; 5] = ["shadow_map", "gbuffer", "e0", "method", "composite"];
+
+/// A row's time per phase in `PHASE_COLUMNS` order.
+fn phase_cells(t: &Timings) -> Vec<String> {
+    PHASE_COLUMNS.iter().map(|phase| gpu(t, phase)).collect()
+}
+
+fn gpu(t: &Timings, phase: &str) -> String {
+    t.get(phase).and_then(|p| p.gpu_ms.or(Some(p.cpu_ms))).map(|ms| format!("{ms:.1}")).unwrap_or_else(|| "-".into())
+}
+
+fn psnr(db: f64) -> String {
+    if db.is_finite() {
+        format!("{db:.1}")
+    } else {
+        "∞".into()
+    }
+}
+
+fn counters_text(counters: &Counters) -> String {
+    counters.iter().map(|(k, v)| format!("{k}={v}")).collect::<Vec<_>>().join(" ")
+}
+
+/// The method phase's time of a row: GPU time where measured, else wall time.
+pub(super) fn method_ms(row: &Row) -> f64 {
+    row.timings.get("method").map(|p| p.gpu_ms.unwrap_or(p.cpu_ms)).unwrap_or(0.0)
+}
+
+/// Writes `results.md`, `results.csv` and `results.json` into `out`.
+pub(super) fn write_tables(out: &Path, report: &EvalReport, methods: &[String], sweep: Option<&Sweep>) -> anyhow::Result<()> {
+    let mut md = String::new();
+    write_preamble(&mut md, report, methods)?;
+    write_cost(&mut md, report)?;
+    write_quality(&mut md, report)?;
+    write_flooding(&mut md, report)?;
+    write_subdivision(&mut md, report)?;
+    if let Some(sweep) = sweep {
+        write_sweep(&mut md, report, sweep)?;
+    }
+    std::fs::write(out.join("results.md"), md)?;
+    std::fs::write(out.join("results.csv"), csv(report)?)?;
+    std::fs::write(out.join("results.json"), serde_json::to_vec_pretty(report)?)?;
+    Ok(())
+}
+
+/// What the tables measure and how to read them.
+fn write_preamble(md: &mut String, report: &EvalReport, methods: &[String]) -> std::fmt::Result {
+    let a = &report.adapter;
+    writeln!(md, "# penumbra eval\n")?;
+    writeln!(md, "Adapter: {} ({}, {}), GPU timestamps: {}.\n", a.name, a.backend, a.device_type, a.timestamps)?;
+    writeln!(md, "Times are per phase in ms — GPU time where timestamps exist, else wall time — and the wall total;")?;
+    if report.repeat > 1 {
+        writeln!(md, "each the median of {} runs of every method, interleaved;", report.repeat)?;
+    }
+    writeln!(md, "`× hard` is the row's total over `hard`'s in the same case, the figure to quote. Quality is against")?;
+    writeln!(md, "`reference` (same scene, view, light, size): visibility (V) and displayed colour, whole frame and")?;
+    writeln!(
+        md,
+        "penumbra only (pixels with 0 < Vref < 1). Contact sheets `sheet-*.png`: reference then {} left to",
+        if methods.is_empty() { "no method".into() } else { methods.join(", ") }
+    )?;
+    writeln!(md, "right; below each, |V − Vref| (magma, black = 0, yellow = 1), below the reference Vref itself.\n")
+}
+
+/// Time per phase and the ratio to `hard`, per row.
+fn write_cost(md: &mut String, report: &EvalReport) -> std::fmt::Result {
+    writeln!(md, "## Cost\n")?;
+    writeln!(md, "| scene | light | size | map res | method | {} | total ms | × hard | counters |", PHASE_COLUMNS.join(" ms | ") + " ms")?;
+    writeln!(md, "|---|---|---|---:|---|{}---:|---:|---|", "---:|".repeat(PHASE_COLUMNS.len()))?;
+    for r in &report.rows {
+        writeln!(
+            md,
+            "| {} | {} | {}×{} | {} | {} | {} | {:.1} | {} | {} |",
+            r.scene,
+            r.light,
+            r.width,
+            r.height,
+            r.shadow_map,
+            r.method,
+            phase_cells(&r.timings).join(" | "),
+            r.timings.total_ms,
+            r.ratio_to_hard.map(|x| format!("{x:.2}")).unwrap_or_else(|| "-".into()),
+            counters_text(&r.counters)
+        )?;
+    }
+    Ok(())
+}
+
+/// Visibility and colour against the reference, whole frame and penumbra only.
+fn write_quality(md: &mut String, report: &EvalReport) -> std::fmt::Result {
+    writeln!(md, "\n## Quality against reference\n")?;
+    writeln!(md, "| scene | light | size | method | penumbra px | V RMSE | V MAE | V PSNR | V SSIM | V FLIP | V RMSE (penumbra) | V MAE (penumbra) | V PSNR (penumbra) | V SSIM (penumbra) | V FLIP (penumbra) | colour RMSE | colour PSNR | colour SSIM | colour FLIP | colour RMSE (penumbra) | colour FLIP (penumbra) |")?;
+    writeln!(md, "|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")?;
+    for r in &report.rows {
+        let (v, c) = (&r.quality.visibility, &r.quality.color);
+        writeln!(
+            md,
+            "| {} | {} | {}×{} | {} | {} | {:.4} | {:.4} | {} | {:.3} | {:.4} | {:.4} | {:.4} | {} | {:.3} | {:.4} | {:.4} | {} | {:.3} | {:.4} | {:.4} | {:.4} |",
+            r.scene, r.light, r.width, r.height, r.method, r.quality.penumbra_pixels,
+            v.whole.rmse, v.whole.mae, psnr(v.whole.psnr_db), v.whole.ssim, v.whole.flip,
+            v.penumbra.rmse, v.penumbra.mae, psnr(v.penumbra.psnr_db), v.penumbra.ssim, v.penumbra.flip,
+            c.whole.rmse, psnr(c.whole.psnr_db), c.whole.ssim, c.whole.flip, c.penumbra.rmse, c.penumbra.flip
+        )?;
+    }
+    Ok(())
+}
+
+/// Jump against standard flooding (Rong & Tan 2006, Fig. 4 and 7), when the suite ran both.
+fn write_flooding(md: &mut String, report: &EvalReport) -> std::fmt::Result {
+    if !report.flooding.is_empty() {
+        writeln!(md, "\n## Flooding experiment: jump against standard flooding\n")?;
+        writeln!(md, "Over the pixels either variant puts in a penumbra (Rong & Tan 2006, Fig. 4 and 7): fractions by |ΔV|, and parity (in a penumbra in one only).\n")?;
+        writeln!(md, "| case | method | penumbra px | < 0.05 | 0.05–0.1 | 0.1–0.2 | ≥ 0.2 | parity |")?;
+        writeln!(md, "|---|---|---:|---:|---:|---:|---:|---:|")?;
+        for f in &report.flooding {
+            writeln!(
+                md,
+                "| {} | {} | {} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} |",
+                f.case, f.method, f.penumbra_pixels, f.below_005, f.below_010, f.below_020, f.at_least_020, f.parity
+            )?;
+        }
+    }
+    Ok(())
+}
+
+/// `chun-oh`'s subdivision histogram (Chun & Oh 2016, Table 2), when the suite ran it.
+fn write_subdivision(md: &mut String, report: &EvalReport) -> std::fmt::Result {
+    let subdivided: Vec<&Row> = report.rows.iter().filter(|r| r.counters.contains_key("pixels_subdivided_0")).collect();
+    if !subdivided.is_empty() {
+        writeln!(md, "\n## Subdivision histogram\n")?;
+        writeln!(md, "Pixels by how often `chun-oh` split their filter (Chun & Oh 2016, Table 2), with shares of the frame.\n")?;
+        writeln!(
+            md,
+            "| scene | light | size | method | background | no subdivision | 1 subdivision | 2 subdivisions | splits forced by the light |"
+        )?;
+        writeln!(md, "|---|---|---|---|---:|---:|---:|---:|---:|")?;
+        for r in subdivided {
+            let total = f64::from(r.width) * f64::from(r.height);
+            let cell = |key: &str| {
+                let n = r.counters.get(key).copied().unwrap_or(0.0);
+                format!("{n:.0} ({:.2} %)", 100.0 * n / total)
+            };
+            writeln!(
+                md,
+                "| {} | {} | {}×{} | {} | {} | {} | {} | {} | {:.0} |",
+                r.scene,
+                r.light,
+                r.width,
+                r.height,
+                r.method,
+                cell("background_pixels"),
+                cell("pixels_subdivided_0"),
+                cell("pixels_subdivided_1"),
+                cell("pixels_subdivided_2"),
+                r.counters.get("splits_forced_by_light").copied().unwrap_or(0.0)
+            )?;
+        }
+    }
+    Ok(())
+}
+
+/// The rows of a parameter sweep, in the swept order.
+fn write_sweep(md: &mut String, report: &EvalReport, sweep: &Sweep) -> std::fmt::Result {
+    {
+        writeln!(md, "\n## Sweep of `{}` in `{}`\n", sweep.param, sweep.method)?;
+        writeln!(md, "Plots: `sweep-*.svg` (method ms and penumbra V RMSE against the value).\n")?;
+        writeln!(md, "| scene | light | size | {} | method ms | total ms | V RMSE (penumbra) | counters |", sweep.param)?;
+        writeln!(md, "|---|---|---|---:|---:|---:|---:|---|")?;
+        for (x, label) in &sweep.points {
+            for r in report.rows.iter().filter(|r| &r.method == label) {
+                writeln!(
+                    md,
+                    "| {} | {} | {}×{} | {x} | {:.1} | {:.1} | {:.4} | {} |",
+                    r.scene,
+                    r.light,
+                    r.width,
+                    r.height,
+                    method_ms(r),
+                    r.timings.total_ms,
+                    r.quality.visibility.penumbra.rmse,
+                    counters_text(&r.counters)
+                )?;
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Every row with every phase, metric and counter, for spreadsheets.
+fn csv(report: &EvalReport) -> Result<String, std::fmt::Error> {
+    let mut csv = String::from("scene,light,width,height,shadow_map,method,total_ms,ratio_to_hard");
+    for phase in PHASE_COLUMNS {
+        write!(csv, ",{phase}_ms")?;
+    }
+    csv.push_str(",penumbra_pixels");
+    for region in ["v_whole", "v_penumbra", "color_whole", "color_penumbra"] {
+        for metric in ["rmse", "mae", "psnr_db", "ssim", "flip"] {
+            write!(csv, ",{region}_{metric}")?;
+        }
+    }
+    csv.push_str(",counters\n");
+    for r in &report.rows {
+        write!(
+            csv,
+            "{},{},{},{},{},{},{:.3},{},{},{}",
+            r.scene,
+            r.light,
+            r.width,
+            r.height,
+            r.shadow_map,
+            r.method,
+            r.timings.total_ms,
+            r.ratio_to_hard.map(|x| format!("{x:.4}")).unwrap_or_default(),
+            phase_cells(&r.timings).join(","),
+            r.quality.penumbra_pixels
+        )?;
+        for m in [r.quality.visibility.whole, r.quality.visibility.penumbra, r.quality.color.whole, r.quality.color.penumbra] {
+            write!(
+                csv,
+                ",{:.6},{:.6},{},{:.6},{:.6}",
+                m.rmse,
+                m.mae,
+                if m.psnr_db.is_finite() { format!("{:.3}", m.psnr_db) } else { "inf".into() },
+                m.ssim,
+                m.flip
+            )?;
+        }
+        writeln!(csv, ",{}", counters_text(&r.counters).replace(' ', ";"))?;
+    }
+    Ok(csv)
+}

@@ -1,0 +1,219 @@
+//! Light images (contract §1): decoded PNG (sRGB) or EXR (linear) files and the built-in
+//! images, as linear RGBA, piecewise constant — one uniform sub-rectangle per texel.
+
+use std::io::Cursor;
+
+use glam::{Vec2, Vec3};
+use serde_json::{Map, Value};
+
+use crate::color::srgb_to_linear;
+use crate::error::{ErrorCode, JobError, JobResult};
+
+/// Names of the built-in light images, in the order `GET /v1/methods` lists them.
+pub const BUILTIN_LIGHT_IMAGES: &[&str] = &["white", "disk", "star", "stripes", "flame"];
+
+/// A light image in linear RGBA: piecewise constant, one uniform sub-rectangle per texel.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LightImage {
+    pub width: u32,
+    pub height: u32,
+    /// Row-major from the top row, linear RGB (not premultiplied) and alpha.
+    texels: Vec<[f32; 4]>,
+    /// A hash of the size and texels, computed once: keys what is derived from the image.
+    fingerprint: u64,
+}
+
+impl LightImage {
+    fn new(width: u32, height: u32, texels: Vec<[f32; 4]>) -> Self {
+        use std::hash::{Hash, Hasher};
+        let mut hasher = std::collections::hash_map::DefaultHasher::new();
+        (width, height).hash(&mut hasher);
+        for texel in &texels {
+            texel.map(f32::to_bits).hash(&mut hasher);
+        }
+        Self { width, height, texels, fingerprint: hasher.finish() }
+    }
+
+    /// A hash of the image's size and texels: keys what is derived from it and cached.
+    pub fn fingerprint(&self) -> u64 {
+        self.fingerprint
+    }
+
+    pub fn from_fn(width: u32, height: u32, f: impl Fn(f32, f32) -> [f32; 4]) -> Self {
+        let mut texels = Vec::with_capacity((width * height) as usize);
+        for j in 0..height {
+            for i in 0..width {
+                // Texel centre in [0,1]², s to the right, t downwards.
+                let s = (i as f32 + 0.5) / width as f32;
+                let t = (j as f32 + 0.5) / height as f32;
+                texels.push(f(s, t));
+            }
+        }
+        Self::new(width, height, texels)
+    }
+
+    /// Radiance weight of a texel: `rgb × alpha` (DESIGN.md §1).
+    pub fn emission(&self, i: u32, j: u32) -> Vec3 {
+        let [r, g, b, a] = self.texels[(j * self.width + i) as usize];
+        Vec3::new(r, g, b) * a
+    }
+
+    /// Mean emission over the whole image (what a gray method sees of the light's colour).
+    pub fn mean_emission(&self) -> Vec3 {
+        let mut sum = Vec3::ZERO;
+        for j in 0..self.height {
+            for i in 0..self.width {
+                sum += self.emission(i, j);
+            }
+        }
+        sum / (self.width * self.height) as f32
+    }
+
+    /// A built-in light image by name. Built-ins take no parameters yet; any given is an error.
+    /// Checks a built-in light image's name and (absent) parameters, at submission and before
+    /// building it.
+    pub fn check_builtin(name: &str, params: &Map<String, Value>, field: &str) -> JobResult<()> {
+        if let Some(key) = params.keys().next() {
+            return Err(JobError::field(
+                ErrorCode::UnknownField,
+                format!("{field}.{key}"),
+                format!("the built-in light image `{name}` takes no parameter `{key}`"),
+            ));
+        }
+        if !BUILTIN_LIGHT_IMAGES.contains(&name) {
+            return Err(JobError::field(
+                ErrorCode::UnknownBuiltin,
+                format!("{field}.builtin"),
+                format!("unknown built-in light image `{name}`; known: {}", BUILTIN_LIGHT_IMAGES.join(", ")),
+            ));
+        }
+        Ok(())
+    }
+
+    pub fn builtin(name: &str, params: &Map<String, Value>, field: &str) -> JobResult<Self> {
+        Self::check_builtin(name, params, field)?;
+        let white = [1.0, 1.0, 1.0, 1.0];
+        let black = [0.0, 0.0, 0.0, 0.0];
+        Ok(match name {
+            "white" => Self::from_fn(1, 1, |_, _| white),
+            "disk" => Self::from_fn(64, 64, |s, t| if Vec2::new(s - 0.5, t - 0.5).length() <= 0.5 { white } else { black }),
+            "star" => Self::from_fn(64, 64, |s, t| if inside_star(Vec2::new(s - 0.5, 0.5 - t)) { white } else { black }),
+            // Saturated bands left to right, so the image is asymmetric in both colour and
+            // position: the first band (red) is column 0, on the light's −r side.
+            "stripes" => {
+                const BANDS: [[f32; 4]; 6] = [
+                    [1.0, 0.0, 0.0, 1.0],
+                    [1.0, 1.0, 0.0, 1.0],
+                    [0.0, 1.0, 0.0, 1.0],
+                    [0.0, 1.0, 1.0, 1.0],
+                    [0.0, 0.0, 1.0, 1.0],
+                    [1.0, 0.0, 1.0, 1.0],
+                ];
+                Self::from_fn(6, 1, |s, _| BANDS[((s * 6.0) as usize).min(5)])
+            }
+            // A flame: a teardrop, deep red at the bottom to yellow-white at the top.
+            "flame" => Self::from_fn(32, 32, |s, t| {
+                let x = (s - 0.5) * 2.0;
+                let y = 1.0 - t; // 0 at the bottom row, 1 at the top row
+                let half_width = 0.9 * (1.0 - y).sqrt() * (y * 3.0).min(1.0);
+                if x.abs() > half_width {
+                    return black;
+                }
+                let heat = y.clamp(0.0, 1.0);
+                [1.0, 0.15 + 0.8 * heat, 0.02 + 0.5 * heat * heat, 1.0]
+            }),
+            _ => {
+                return Err(JobError::field(
+                    ErrorCode::UnknownBuiltin,
+                    format!("{field}.builtin"),
+                    format!("unknown built-in light image `{name}`; known: {}", BUILTIN_LIGHT_IMAGES.join(", ")),
+                ))
+            }
+        })
+    }
+
+    /// Decodes a PNG (sRGB, decoded to linear) or an EXR (linear) light image, refusing
+    /// images larger than `max_dim` from the header, before decoding the pixels.
+    pub fn decode(bytes: &[u8], max_dim: u32, field: &str) -> JobResult<Self> {
+        // Decoders are untrusted-input parsers too: `cargo fuzz` found a tiled EXR on which the
+        // `exr` crate overflows (a panic with overflow checks on). A panic is this job's
+        // `invalid_asset`, never a lost worker thread.
+        std::panic::catch_unwind(|| Self::decode_unchecked(bytes, max_dim, field))
+            .unwrap_or_else(|_| Err(JobError::field(ErrorCode::InvalidAsset, field, "the light image could not be decoded")))
+    }
+
+    fn decode_unchecked(bytes: &[u8], max_dim: u32, field: &str) -> JobResult<Self> {
+        let invalid = |message: String| JobError::field(ErrorCode::InvalidAsset, field, message);
+        let mut reader = image::ImageReader::new(Cursor::new(bytes))
+            .with_guessed_format()
+            .map_err(|e| invalid(format!("cannot read the light image: {e}")))?;
+        let format = reader.format();
+        if !matches!(format, Some(image::ImageFormat::Png | image::ImageFormat::OpenExr)) {
+            return Err(invalid("a light image must be a PNG or an OpenEXR file".into()));
+        }
+        let mut limits = image::Limits::default();
+        limits.max_image_width = Some(max_dim);
+        limits.max_image_height = Some(max_dim);
+        limits.max_alloc = Some(u64::from(max_dim) * u64::from(max_dim) * 16 * 2);
+        reader.limits(limits);
+        let decoded = reader.decode().map_err(|e| match e {
+            image::ImageError::Limits(_) => {
+                JobError::field(ErrorCode::LimitExceeded, field, format!("the light image exceeds {max_dim}×{max_dim} texels"))
+            }
+            other => invalid(format!("cannot decode the light image: {other}")),
+        })?;
+        let linear_input = format == Some(image::ImageFormat::OpenExr);
+        let rgba = decoded.into_rgba32f();
+        let (width, height) = rgba.dimensions();
+        let texels = rgba
+            .pixels()
+            .map(|p| {
+                let [r, g, b, a] = p.0;
+                let decode = |c: f32| if linear_input { c.max(0.0) } else { srgb_to_linear(c) };
+                let texel = [decode(r), decode(g), decode(b), a.clamp(0.0, 1.0)];
+                if texel.iter().all(|c| c.is_finite()) {
+                    texel
+                } else {
+                    [0.0; 4]
+                }
+            })
+            .collect();
+        Ok(Self::new(width, height, texels))
+    }
+}
+
+/// A five-pointed star with one point up, inscribed in the unit-diameter disk.
+fn inside_star(p: Vec2) -> bool {
+    let outer = 0.5;
+    let inner = 0.2;
+    let vertices: Vec<Vec2> = (0..10)
+        .map(|k| {
+            let angle = std::f32::consts::FRAC_PI_2 + k as f32 * std::f32::consts::PI / 5.0;
+            let radius = if k % 2 == 0 { outer } else { inner };
+            Vec2::new(angle.cos(), angle.sin()) * radius
+        })
+        .collect();
+    // Even-odd rule.
+    let mut inside = false;
+    for k in 0..vertices.len() {
+        let (a, b) = (vertices[k], vertices[(k + 1) % vertices.len()]);
+        if (a.y > p.y) != (b.y > p.y) && p.x < (b.x - a.x) * (p.y - a.y) / (b.y - a.y) + a.x {
+            inside = !inside;
+        }
+    }
+    inside
+}
+
+#[cfg(test)]
+mod fuzz_regressions {
+    use super::*;
+
+    /// `cargo fuzz run light_image` found this: a tiled EXR on which the `exr` crate panics
+    /// when built with overflow checks (as fuzz builds are); either way it is `invalid_asset`.
+    #[test]
+    fn a_malformed_tiled_exr_is_an_invalid_asset() {
+        let bytes = include_bytes!("../../fuzz/regressions/light_image-exr-tiles.exr");
+        let error = LightImage::decode(bytes, 64, "light.image").unwrap_err();
+        assert_eq!(error.code, ErrorCode::InvalidAsset, "{}", error.message);
+    }
+}

@@ -1,0 +1,227 @@
+//! The exact unshadowed irradiance E0 every method shares (contract §1): the light cut into
+//! uniform cells, and Lambert's closed form for a polygon clipped to the receiver's
+//! hemisphere — the CPU twin of `shaders/common/light.wgsl` and `shaders/e0.wgsl`.
+
+use glam::Vec3;
+
+use super::{AreaLight, LightImage};
+
+/// Most cells per side of the light grid E0 integrates over. Cells follow texel boundaries
+/// and cells of equal colour are merged, so E0 is exact for images of up to this many texels
+/// per side and for any image made of large uniform regions (`white`, `stripes`).
+pub const E0_GRID: u32 = 8;
+
+/// A uniform sub-rectangle of the light: corners in world space (counter-clockwise seen
+/// from the lit side) and its radiance `intensity × rgb × alpha`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LightCell {
+    pub corners: [Vec3; 4],
+    pub radiance: Vec3,
+}
+
+/// Splits the light into at most `E0_GRID`² texel-aligned cells with their mean radiance,
+/// merges neighbours of identical radiance into larger rectangles and drops black ones.
+/// The result integrates a piecewise-constant image exactly when every cell is uniform.
+pub fn light_cells(light: &AreaLight, image: &LightImage) -> Vec<LightCell> {
+    let gx = image.width.min(E0_GRID);
+    let gy = image.height.min(E0_GRID);
+    let col_edge = |k: u32| (k * image.width + gx / 2) / gx;
+    let row_edge = |k: u32| (k * image.height + gy / 2) / gy;
+    // Mean emission per grid cell.
+    let mut grid = vec![Vec3::ZERO; (gx * gy) as usize];
+    for cy in 0..gy {
+        for cx in 0..gx {
+            let (i0, i1, j0, j1) = (col_edge(cx), col_edge(cx + 1), row_edge(cy), row_edge(cy + 1));
+            let mut sum = Vec3::ZERO;
+            for j in j0..j1 {
+                for i in i0..i1 {
+                    sum += image.emission(i, j);
+                }
+            }
+            grid[(cy * gx + cx) as usize] = sum / ((i1 - i0) * (j1 - j0)).max(1) as f32;
+        }
+    }
+    // Runs of equal colour along each row, then runs of equal runs down the columns.
+    let mut rects: Vec<(u32, u32, u32, u32, Vec3)> = Vec::new(); // (cx0, cx1, cy0, cy1, colour)
+    for cy in 0..gy {
+        let mut cx = 0;
+        while cx < gx {
+            let colour = grid[(cy * gx + cx) as usize];
+            let mut end = cx + 1;
+            while end < gx && grid[(cy * gx + end) as usize] == colour {
+                end += 1;
+            }
+            match rects.iter_mut().find(|r| r.1 == end && r.0 == cx && r.3 == cy && r.4 == colour) {
+                Some(rect) => rect.3 = cy + 1,
+                None => rects.push((cx, end, cy, cy + 1, colour)),
+            }
+            cx = end;
+        }
+    }
+    rects
+        .into_iter()
+        .filter(|r| r.4.max_element() > 0.0)
+        .map(|(cx0, cx1, cy0, cy1, colour)| {
+            let s0 = col_edge(cx0) as f32 / image.width as f32;
+            let s1 = col_edge(cx1) as f32 / image.width as f32;
+            let t0 = row_edge(cy0) as f32 / image.height as f32;
+            let t1 = row_edge(cy1) as f32 / image.height as f32;
+            // (s0,t1) bottom-left, (s1,t1) bottom-right, (s1,t0) top-right, (s0,t0) top-left:
+            // counter-clockwise for a viewer on the lit side (right = +r, up = +u).
+            LightCell {
+                corners: [light.image_point(s0, t1), light.image_point(s1, t1), light.image_point(s1, t0), light.image_point(s0, t0)],
+                radiance: colour * light.intensity,
+            }
+        })
+        .collect()
+}
+
+/// `∫ cosθx dω` over a polygon seen from `x` with normal `nx`, after clipping the polygon
+/// to the hemisphere above x (Lambert's closed form for the vector irradiance: ½ Σ Θᵢ n·Γᵢ).
+/// The CPU twin of `polygon_irradiance` in `shaders/common/light.wgsl`.
+pub fn polygon_irradiance(x: Vec3, nx: Vec3, corners: &[Vec3; 4]) -> f32 {
+    const EPS: f32 = 1e-6;
+    let mut clipped: Vec<Vec3> = Vec::with_capacity(5);
+    for k in 0..4 {
+        let a = corners[k] - x;
+        let b = corners[(k + 1) % 4] - x;
+        let (da, db) = (a.dot(nx), b.dot(nx));
+        if da > EPS {
+            clipped.push(a);
+        }
+        if (da > EPS) != (db > EPS) {
+            let t = (EPS - da) / (db - da);
+            clipped.push(a + (b - a) * t);
+        }
+    }
+    if clipped.len() < 3 {
+        return 0.0;
+    }
+    let mut sum = 0.0;
+    for k in 0..clipped.len() {
+        let a = clipped[k].normalize();
+        let b = clipped[(k + 1) % clipped.len()].normalize();
+        let c = a.cross(b);
+        let len = c.length();
+        if len > 1e-12 {
+            sum += len.atan2(a.dot(b)) * nx.dot(c / len);
+        }
+    }
+    0.5 * sum.abs()
+}
+
+/// The unshadowed irradiance E0 at x (DESIGN.md §1), per channel: the sum over light cells.
+pub fn unshadowed_irradiance(light: &AreaLight, cells: &[LightCell], x: Vec3, nx: Vec3) -> Vec3 {
+    // One-sided emitter: only points on the lit side receive anything.
+    if (x - light.center).dot(light.n) <= 0.0 {
+        return Vec3::ZERO;
+    }
+    cells.iter().map(|c| c.radiance * polygon_irradiance(x, nx, &c.corners)).sum()
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::Vec2;
+    use serde_json::Map;
+
+    use super::*;
+
+    fn overhead_light(size: f32) -> AreaLight {
+        AreaLight::new(Vec3::new(0.0, 2.0, 0.0), -Vec3::Y, -Vec3::Z, Vec2::splat(size), 1.0).unwrap()
+    }
+
+    #[test]
+    fn frame_follows_design() {
+        let light = overhead_light(1.0);
+        assert!((light.n - -Vec3::Y).length() < 1e-6);
+        assert!((light.u - -Vec3::Z).length() < 1e-6);
+        // r = cross(u, n) = cross(−z, −y) = −x.
+        assert!((light.r - -Vec3::X).length() < 1e-6);
+        // Column 0 (s = 0) is on the −r side, i.e. +x; row 0 (t = 0) on +u, i.e. −z.
+        let top_left = light.image_point(0.0, 0.0);
+        assert!((top_left - Vec3::new(0.5, 2.0, -0.5)).length() < 1e-6);
+    }
+
+    #[test]
+    fn small_light_matches_point_source_law() {
+        // A tiny square light straight above: E ≈ L·A·cosθx·cosθy / d².
+        let light = overhead_light(0.01);
+        let cells = light_cells(&light, &LightImage::builtin("white", &Map::new(), "f").unwrap());
+        let e = unshadowed_irradiance(&light, &cells, Vec3::ZERO, Vec3::Y);
+        let expected = 1e-4 / 4.0;
+        assert!((e.x - expected).abs() / expected < 1e-3, "{e} vs {expected}");
+    }
+
+    #[test]
+    fn large_light_tends_to_pi() {
+        // An enormous light covers the whole hemisphere: ∫ cosθ dω = π.
+        let light = overhead_light(1e4);
+        let cells = light_cells(&light, &LightImage::builtin("white", &Map::new(), "f").unwrap());
+        let e = unshadowed_irradiance(&light, &cells, Vec3::ZERO, Vec3::Y);
+        assert!((e.x - std::f32::consts::PI).abs() < 1e-2, "{e}");
+    }
+
+    #[test]
+    fn horizon_clipping_agrees_with_quadrature() {
+        // A receiver tilted so that the light straddles its horizon.
+        let light = overhead_light(2.0);
+        let cells = light_cells(&light, &LightImage::builtin("white", &Map::new(), "f").unwrap());
+        let x = Vec3::new(0.3, 0.0, 0.1);
+        let nx = Vec3::new(1.0, 0.3, 0.0).normalize();
+        let analytic = unshadowed_irradiance(&light, &cells, x, nx).x;
+        // Midpoint quadrature of ∫ cosθx cosθy / d² dA.
+        let n = 400;
+        let mut sum = 0.0f64;
+        for j in 0..n {
+            for i in 0..n {
+                let y = light.image_point((i as f32 + 0.5) / n as f32, (j as f32 + 0.5) / n as f32);
+                let d = y - x;
+                let cx = nx.dot(d.normalize()).max(0.0);
+                let cy = light.n.dot(-d.normalize()).max(0.0);
+                sum += f64::from(cx * cy / d.length_squared());
+            }
+        }
+        let numeric = sum as f32 * light.area_m2() / (n * n) as f32;
+        assert!((analytic - numeric).abs() / numeric < 2e-3, "{analytic} vs {numeric}");
+    }
+
+    #[test]
+    fn cells_merge_uniform_regions_and_drop_black() {
+        let light = overhead_light(1.0);
+        let none = Map::new();
+        assert_eq!(light_cells(&light, &LightImage::builtin("white", &none, "f").unwrap()).len(), 1);
+        assert_eq!(light_cells(&light, &LightImage::builtin("stripes", &none, "f").unwrap()).len(), 6);
+        let disk = light_cells(&light, &LightImage::builtin("disk", &none, "f").unwrap());
+        assert!(disk.len() < 64 && !disk.is_empty());
+        // Total flux is preserved by merging: Σ radiance × area equals the image mean × area.
+        let image = LightImage::builtin("flame", &none, "f").unwrap();
+        let cells = light_cells(&light, &image);
+        let flux: Vec3 =
+            cells.iter().map(|c| c.radiance * (c.corners[1] - c.corners[0]).length() * (c.corners[3] - c.corners[0]).length()).sum();
+        assert!((flux - image.mean_emission()).length() < 1e-4, "{flux} vs {}", image.mean_emission());
+    }
+
+    #[test]
+    fn stripes_are_red_on_the_minus_r_side() {
+        // DESIGN.md §1: column 0 along −r. The first stripe is red, so the receiver point
+        // under the −r edge of the light gets more red than blue, and the +r edge the reverse.
+        let light = overhead_light(1.0);
+        let cells = light_cells(&light, &LightImage::builtin("stripes", &Map::new(), "f").unwrap());
+        let under_minus_r = unshadowed_irradiance(&light, &cells, -light.r * 0.8, Vec3::Y);
+        let under_plus_r = unshadowed_irradiance(&light, &cells, light.r * 0.8, Vec3::Y);
+        assert!(under_minus_r.x > under_minus_r.z);
+        assert!(under_plus_r.z > under_plus_r.x);
+    }
+
+    #[test]
+    fn degenerate_lights_name_the_field() {
+        let err = AreaLight::new(Vec3::ZERO, Vec3::ZERO, Vec3::Y, Vec2::ONE, 1.0).unwrap_err();
+        assert_eq!(err.field.as_deref(), Some("light.direction"));
+        let err = AreaLight::new(Vec3::ZERO, Vec3::Y, Vec3::Y, Vec2::ONE, 1.0).unwrap_err();
+        assert_eq!(err.field.as_deref(), Some("light.up"));
+        let err = AreaLight::new(Vec3::ZERO, Vec3::Y, Vec3::X, Vec2::new(1.0, 0.0), 1.0).unwrap_err();
+        assert_eq!(err.field.as_deref(), Some("light.size[1]"));
+        let err = AreaLight::new(Vec3::ZERO, Vec3::Y, Vec3::X, Vec2::ONE, -1.0).unwrap_err();
+        assert_eq!(err.field.as_deref(), Some("light.intensity"));
+    }
+}
