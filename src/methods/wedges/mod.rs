@@ -36,15 +36,18 @@
 //!   clips them (the role of the paper's infinite far plane).
 //! - Surfaces on their own volume's cap (every lit caster) count as outside it.
 
-use glam::{Mat4, Vec3, Vec4};
 use wgpu::util::DeviceExt;
+
+mod culling;
+mod geometry;
 
 use super::{Counters, MethodContext, Param, ParamSpec, Params, ShadowMethod};
 use crate::error::JobResult;
 use crate::gpu::layout;
 use crate::gpu::pool::PipelineKey;
 use crate::gpu::readback::read_buffer;
-use crate::scene::adjacency::SilhouetteEdge;
+use culling::{cull, TileGrid};
+use geometry::{eye_in_shadow, Volume};
 
 pub struct Wedges;
 
@@ -113,23 +116,6 @@ struct Uniforms {
     _pad: [u32; 3],
 }
 
-/// A primitive's footprint for culling: its screen bounding box in tiles, its NDC depth range,
-/// and the planes (world space, inside ≥ 0) that bound it.
-struct Footprint {
-    tiles_x: (u32, u32),
-    tiles_y: (u32, u32),
-    z: (f32, f32),
-    planes: Vec<Vec4>,
-}
-
-/// The tile grid with each tile's NDC box (x, y from its pixels, z from its depth range).
-struct TileGrid {
-    across: u32,
-    down: u32,
-    /// Per tile: (x0, x1, y0, y1, z0, z1) in NDC, or None for background only.
-    boxes: Vec<Option<[f32; 6]>>,
-}
-
 impl ShadowMethod for Wedges {
     fn name(&self) -> &'static str {
         "wedges"
@@ -161,44 +147,8 @@ impl ShadowMethod for Wedges {
             _ => eye_in_shadow(&mesh, c, camera.eye),
         };
 
-        // The light centre's shadow volume: a side quad per silhouette edge, and for z-fail its
-        // caps — the triangles facing the light (top) and the same pushed out to `reach` (bottom).
-        let extrude = |p: Vec3| c + (p - c) * (reach / (p - c).length().max(1e-6));
-        let mut polygons: Vec<[Vec3; 4]> = Vec::new();
-        let mut multiplicity: Vec<u32> = Vec::new();
-        let mut object: Vec<u32> = Vec::new();
-        for e in &silhouette {
-            // Always this order, never flipped per quad: (a − b) × (a' − b) is the outward
-            // normal (a' the extruded a), and neighbouring quads run their shared extruded
-            // edge in opposite directions, which the rasteriser's tie rule relies on; so do
-            // the caps with the quads' near and far edges.
-            polygons.push([e.b, e.a, extrude(e.a), extrude(e.b)]);
-            multiplicity.push(e.multiplicity);
-            object.push(e.object);
-        }
-        let mut caps = 0usize;
-        if zfail {
-            for (t, tri) in mesh.triangles.iter().enumerate() {
-                if mesh.faces(t, c) {
-                    let [a, b, d] = tri.map(|i| mesh.positions[i as usize]);
-                    polygons.push([a, b, d, d]);
-                    polygons.push([extrude(d), extrude(b), extrude(a), extrude(a)]);
-                    multiplicity.extend([1, 1]);
-                    object.extend([mesh.objects[t]; 2]);
-                    caps += 2;
-                }
-            }
-        }
-        let wedge_planes: Vec<Vec<Vec4>> = silhouette.iter().map(|e| tangent_planes(e, light)).collect();
-        let wedges: Vec<WedgeGpu> = silhouette
-            .iter()
-            .zip(&wedge_planes)
-            .map(|(e, planes)| WedgeGpu {
-                a: e.a.extend(e.multiplicity as f32).to_array(),
-                b: e.b.extend(e.object as f32).to_array(),
-                planes: [0, 1].map(|k| planes.get(k).copied().unwrap_or(Vec4::W).to_array()),
-            })
-            .collect();
+        let volume = Volume::build(&mesh, &silhouette, light, reach, zfail);
+        let Volume { polygons, multiplicity, object, caps, wedges, .. } = &volume;
 
         // Tile depth ranges from the GPU, then culling on the CPU.
         let tile = params.get(&TILE);
@@ -229,7 +179,7 @@ impl ShadowMethod for Wedges {
         });
         let polygon_data: Vec<PolygonGpu> = polygons
             .iter()
-            .zip(multiplicity.iter().zip(&object))
+            .zip(multiplicity.iter().zip(object))
             .map(|(p, (&m, &o))| PolygonGpu {
                 v: [
                     p[0].extend(m as f32).to_array(),
@@ -306,57 +256,11 @@ impl ShadowMethod for Wedges {
         let culling_start = std::time::Instant::now();
         let grid = TileGrid::new(grid_size, tile, (spec.width, spec.height), &depth_ranges, camera, &view_proj);
 
-        // Cull: every (primitive, tile) pair in the primitive's bounding box is tested.
-        let to_ndc = view_proj.inverse().transpose();
-        let mut tested = 0u64;
-        let umbra_footprints: Vec<Footprint> = polygons.iter().map(|p| footprint(&view_proj, p, Vec::new(), &grid)).collect();
-        let wedge_footprints: Vec<Footprint> = silhouette
-            .iter()
-            .zip(&wedge_planes)
-            .map(|(e, planes)| footprint(&view_proj, &wedge_hull(e, light, reach), planes.clone(), &grid))
-            .collect();
-        let mut survivors = |footprint: &Footprint, umbra: bool| -> Vec<u32> {
-            let mut kept = Vec::new();
-            for ty in footprint.tiles_y.0..footprint.tiles_y.1 {
-                for tx in footprint.tiles_x.0..footprint.tiles_x.1 {
-                    let t = ty * grid.across + tx;
-                    tested += 1;
-                    if !culling || survives(footprint, grid.boxes[t as usize], umbra, zfail, &to_ndc) {
-                        kept.push(t);
-                    }
-                }
-            }
-            kept
-        };
-        let umbra_tiles: Vec<Vec<u32>> = umbra_footprints.iter().map(|f| survivors(f, true)).collect();
-        let wedge_tiles: Vec<Vec<u32>> = wedge_footprints.iter().map(|f| survivors(f, false)).collect();
+        let work = cull(&volume, &silhouette, light, reach, &grid, &view_proj, culling, zfail);
         let single = params.get(&PASSES) == "single";
-        let wedge_base = polygons.len() as u32;
-        let item = |primitive, tile, both| WorkItem { primitive, tile, both, _pad: 0 };
-        // Each pass: its pipeline and its items.
-        let mut passes: Vec<(&wgpu::ComputePipeline, Vec<WorkItem>)> = Vec::new();
-        if single {
-            // An edge's side quad and wedge share the items of the tiles both touch.
-            let mut items = Vec::new();
-            for (i, quad_tiles) in umbra_tiles.iter().enumerate() {
-                let wedge = wedge_tiles.get(i);
-                for &t in quad_tiles {
-                    let both = wedge.is_some_and(|w| w.binary_search(&t).is_ok());
-                    items.push(item(i as u32, t, if both { i as u32 + 1 } else { 0 }));
-                }
-                if let Some(w) = wedge {
-                    items.extend(w.iter().filter(|t| quad_tiles.binary_search(t).is_err()).map(|&t| item(wedge_base + i as u32, t, 0)));
-                }
-            }
-            passes.push((&both_pipeline, items));
-        } else {
-            let umbra = umbra_tiles.iter().enumerate().flat_map(|(i, ts)| ts.iter().map(move |&t| item(i as u32, t, 0)));
-            let penumbra = wedge_tiles.iter().enumerate().flat_map(|(i, ts)| ts.iter().map(move |&t| item(wedge_base + i as u32, t, 0)));
-            passes.push((&umbra_pipeline, umbra.collect()));
-            passes.push((&penumbra_pipeline, penumbra.collect()));
-        }
+        let passes = work.passes(single, [&*umbra_pipeline, &*penumbra_pipeline, &*both_pipeline]);
         let kept: usize = passes.iter().map(|(_, items)| items.len()).sum::<usize>();
-        let rasterized = umbra_tiles.iter().chain(&wedge_tiles).map(Vec::len).sum::<usize>() as u64;
+        let (tested, rasterized) = (work.tested, work.rasterized());
 
         setup += culling_start.elapsed();
         ctx.encoder.clear_buffer(&li, 0, None);
@@ -392,7 +296,7 @@ impl ShadowMethod for Wedges {
             ("silhouette_edges".to_owned(), silhouette.len() as f64),
             ("setup_cpu_ms".to_owned(), setup.as_secs_f64() * 1e3),
             ("volume_polygons".to_owned(), polygons.len() as f64),
-            ("cap_polygons".to_owned(), caps as f64),
+            ("cap_polygons".to_owned(), *caps as f64),
             ("zfail".to_owned(), f64::from(u8::from(zfail))),
             ("tiles_tested".to_owned(), tested as f64),
             ("tiles_culled".to_owned(), (tested - rasterized) as f64),
@@ -402,179 +306,5 @@ impl ShadowMethod for Wedges {
             ("boundary_edges".to_owned(), stats.boundary_edges as f64),
             ("non_manifold_edges".to_owned(), stats.non_manifold_edges as f64),
         ]))
-    }
-}
-
-/// Whether the eye lies in the light centre's hard shadow: the segment from the eye to the
-/// centre passes through a light-facing triangle (then z-pass would count wrongly, §5).
-fn eye_in_shadow(mesh: &crate::scene::adjacency::EdgeMesh, c: Vec3, eye: Vec3) -> bool {
-    let dir = c - eye;
-    mesh.triangles.iter().enumerate().any(|(t, tri)| {
-        if !mesh.faces(t, c) {
-            return false;
-        }
-        // Möller–Trumbore, restricted to the open segment.
-        let [a, b, d] = tri.map(|i| mesh.positions[i as usize]);
-        let (e1, e2) = (b - a, d - a);
-        let h = dir.cross(e2);
-        let det = e1.dot(h);
-        if det.abs() < 1e-12 {
-            return false;
-        }
-        let s = eye - a;
-        let u = s.dot(h) / det;
-        let q = s.cross(e1);
-        let v = dir.dot(q) / det;
-        let t = e2.dot(q) / det;
-        u >= 0.0 && v >= 0.0 && u + v <= 1.0 && t > 1e-6 && t < 1.0 - 1e-6
-    })
-}
-
-/// Points whose convex hull holds the edge's wedge out to `reach`: the edge's ends and their
-/// shadows from the light's four corners.
-fn wedge_hull(e: &SilhouetteEdge, light: &crate::light::AreaLight, reach: f32) -> Vec<Vec3> {
-    let mut hull = vec![e.a, e.b];
-    for corner in light_corners(light) {
-        for p in [e.a, e.b] {
-            let d = p - corner;
-            hull.push(p + d * ((reach + (p - light.center).length()) / d.length().max(1e-6)));
-        }
-    }
-    hull
-}
-
-fn light_corners(light: &crate::light::AreaLight) -> [Vec3; 4] {
-    let (hw, hh) = (0.5 * light.size_m.x, 0.5 * light.size_m.y);
-    [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)].map(|(s, t)| light.center + light.r * (s * hw) + light.u * (t * hh))
-}
-
-/// The wedge's two planes through the edge's line that touch the light rectangle, as
-/// world-space planes with the wedge on their positive side. Empty when the line passes
-/// through the light (then every plane through it cuts the light, and only the bounding box
-/// bounds the wedge).
-fn tangent_planes(e: &SilhouetteEdge, light: &crate::light::AreaLight) -> Vec<Vec4> {
-    let corners = light_corners(light);
-    let dir = e.b - e.a;
-    let scale = dir.length() * light.size_m.max_element();
-    let mut planes = Vec::new();
-    for &y in &corners {
-        let n = dir.cross(y - e.a);
-        if n.length() <= 1e-9 * scale {
-            continue;
-        }
-        let sides: Vec<f32> = corners.iter().map(|&z| n.dot(z - e.a) / n.length()).collect();
-        let tolerance = 1e-6 * light.size_m.max_element();
-        let positive = sides.iter().all(|&s| s >= -tolerance);
-        let negative = sides.iter().all(|&s| s <= tolerance);
-        if positive == negative {
-            continue; // cuts the light, or lies in its plane
-        }
-        // The light on the positive side: the wedge is on the negative side of both.
-        let n = if positive { -n.normalize() } else { n.normalize() };
-        let plane = n.extend(-n.dot(e.a));
-        if planes.iter().all(|q: &Vec4| (q.truncate().dot(n) - 1.0).abs() > 1e-5) {
-            planes.push(plane);
-        }
-    }
-    if planes.len() == 2 {
-        planes
-    } else {
-        Vec::new()
-    }
-}
-
-impl TileGrid {
-    fn new(size: (u32, u32), tile: u32, pixels: (u32, u32), depth: &[[f32; 2]], camera: &crate::render::Camera, view_proj: &Mat4) -> Self {
-        let forward = camera.forward();
-        let ndc_z = |d: f32| {
-            let clip = *view_proj * (camera.eye + forward * d).extend(1.0);
-            clip.z / clip.w
-        };
-        let boxes = (0..size.0 * size.1)
-            .map(|t| {
-                let [zmin, zmax] = depth[t as usize];
-                if zmin > zmax {
-                    return None;
-                }
-                let (tx, ty) = (t % size.0, t / size.0);
-                let px = |x: u32| 2.0 * (x.min(pixels.0)) as f32 / pixels.0 as f32 - 1.0;
-                let py = |y: u32| 1.0 - 2.0 * (y.min(pixels.1)) as f32 / pixels.1 as f32;
-                Some([px(tx * tile), px((tx + 1) * tile), py((ty + 1) * tile), py(ty * tile), ndc_z(zmin), ndc_z(zmax)])
-            })
-            .collect();
-        Self { across: size.0, down: size.1, boxes }
-    }
-}
-
-/// A primitive's bounding box in tiles and NDC depth range; points behind the eye make it
-/// cover the whole screen and every depth.
-fn footprint(view_proj: &Mat4, points: &[Vec3], planes: Vec<Vec4>, grid: &TileGrid) -> Footprint {
-    let clips: Vec<Vec4> = points.iter().map(|p| *view_proj * p.extend(1.0)).collect();
-    if clips.iter().any(|c| c.w <= 1e-6) {
-        return Footprint { tiles_x: (0, grid.across), tiles_y: (0, grid.down), z: (f32::NEG_INFINITY, f32::INFINITY), planes };
-    }
-    let ndc: Vec<Vec3> = clips.iter().map(|c| c.truncate() / c.w).collect();
-    let min = ndc.iter().fold(Vec3::splat(f32::INFINITY), |m, p| m.min(*p));
-    let max = ndc.iter().fold(Vec3::splat(f32::NEG_INFINITY), |m, p| m.max(*p));
-    // NDC x → tile column, NDC y (up) → tile row (down).
-    let column = |x: f32| (((x * 0.5 + 0.5) * grid.across as f32).floor().max(0.0) as u32).min(grid.across);
-    let row = |y: f32| (((0.5 - y * 0.5) * grid.down as f32).floor().max(0.0) as u32).min(grid.down);
-    Footprint {
-        tiles_x: (column(min.x), (column(max.x) + 1).min(grid.across)),
-        tiles_y: (row(max.y), (row(min.y) + 1).min(grid.down)),
-        z: (min.z, max.z),
-        planes,
-    }
-}
-
-/// Occlusion culling of one primitive over one tile (§4): background tiles hold nothing; the
-/// quick rejection compares depth ranges — a volume polygon only with zmax (z-pass: it must
-/// lie in front of something) or zmin (z-fail: behind something), a wedge with both — and a
-/// wedge's planes, in screen space, are tested with the tile box's p-vertex (Fig. 7).
-fn survives(footprint: &Footprint, tile: Option<[f32; 6]>, umbra: bool, zfail: bool, to_ndc: &Mat4) -> bool {
-    let Some([x0, x1, y0, y1, z0, z1]) = tile else {
-        return false;
-    };
-    let (zmin, zmax) = footprint.z;
-    if umbra {
-        return if zfail { zmax >= z0 } else { zmin <= z1 };
-    }
-    if zmin > z1 || zmax < z0 {
-        return false;
-    }
-    footprint.planes.iter().all(|plane| {
-        let p = *to_ndc * *plane;
-        let vertex = Vec3::new(if p.x > 0.0 { x1 } else { x0 }, if p.y > 0.0 { y1 } else { y0 }, if p.z > 0.0 { z1 } else { z0 });
-        p.truncate().dot(vertex) + p.w >= 0.0
-    })
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::light::AreaLight;
-    use glam::Vec2;
-
-    #[test]
-    fn tangent_planes_touch_the_light_and_hold_the_wedge() {
-        // A light of 2 × 1 m at y = 3 facing down; an edge along z at height 1.
-        let light = AreaLight::new(Vec3::Y * 3.0, -Vec3::Y, -Vec3::Z, Vec2::new(2.0, 1.0), 1.0).unwrap();
-        let edge = SilhouetteEdge { a: Vec3::new(0.5, 1.0, -5.0), b: Vec3::new(0.5, 1.0, 5.0), multiplicity: 1, object: 0 };
-        let planes = tangent_planes(&edge, &light);
-        assert_eq!(planes.len(), 2);
-        let side = |plane: &Vec4, p: Vec3| plane.truncate().dot(p) + plane.w;
-        for plane in &planes {
-            // Every corner of the light on the non-positive side, one on the plane.
-            let values: Vec<f32> = light_corners(&light).iter().map(|&y| side(plane, y)).collect();
-            assert!(values.iter().all(|&v| v <= 1e-4), "{values:?}");
-            assert!(values.iter().any(|&v| v.abs() < 1e-4));
-        }
-        // Below the edge, on the floor straight under it: in the penumbra, inside both.
-        assert!(planes.iter().all(|p| side(p, Vec3::new(0.5, 0.0, 0.0)) >= 0.0));
-        // Far to the side on the floor: lit, outside one plane.
-        assert!(planes.iter().any(|p| side(p, Vec3::new(4.0, 0.0, 0.0)) < 0.0));
-        // An edge whose line passes through the light gives no planes.
-        let through = SilhouetteEdge { a: Vec3::new(0.0, 1.0, 0.0), b: Vec3::new(0.0, 5.0, 0.0), multiplicity: 1, object: 0 };
-        assert!(tangent_planes(&through, &light).is_empty());
     }
 }

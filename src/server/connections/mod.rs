@@ -10,24 +10,17 @@
 //! outside; the `track` middleware notes when a request's body is read and its answer sent;
 //! a sweeper closes what has waited too long.
 
+mod listener;
+mod track;
+
 use std::collections::HashMap;
-use std::io;
-use std::net::SocketAddr;
-use std::pin::Pin;
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicU8, Ordering};
 use std::sync::{Arc, Mutex};
-use std::task::{Context, Poll, Waker};
+use std::task::Waker;
 use std::time::{Duration, Instant};
 
-use axum::body::Body;
-use axum::extract::connect_info::Connected;
-use axum::extract::{ConnectInfo, Request};
-use axum::middleware::Next;
-use axum::response::Response;
-use axum::serve::IncomingStream;
-use http_body::Body as _;
-use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
-use tokio::net::{TcpListener, TcpStream};
+pub use listener::{TrackedListener, TrackedStream};
+pub use track::{track, ConnRef};
 
 /// File descriptors kept for everything but client connections: the GPU driver, the store,
 /// Redis connections, logs.
@@ -102,7 +95,7 @@ fn open_files_limit() -> Option<u64> {
 /// Where a connection's current exchange stands.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[repr(u8)]
-enum Phase {
+pub(super) enum Phase {
     /// Waiting for the first byte of a request (a new or a kept-alive connection).
     Idle,
     /// Bytes of a request head arrived; the head is not complete.
@@ -114,21 +107,21 @@ enum Phase {
 }
 
 /// One connection, as the listener, the middleware and the sweeper see it.
-struct Conn {
-    phase: AtomicU8,
+pub(super) struct Conn {
+    pub(super) phase: AtomicU8,
     /// Milliseconds since the tracker's epoch when the phase began.
-    since_ms: AtomicU64,
+    pub(super) since_ms: AtomicU64,
     /// Milliseconds since the tracker's epoch of the last bytes read.
-    read_ms: AtomicU64,
+    pub(super) read_ms: AtomicU64,
     /// Whether it has answered a request (idle from then on means kept alive).
-    answered: AtomicBool,
-    closed: AtomicBool,
+    pub(super) answered: AtomicBool,
+    pub(super) closed: AtomicBool,
     /// Woken when the connection is closed, so that a pending read sees it.
-    waker: Mutex<Option<Waker>>,
+    pub(super) waker: Mutex<Option<Waker>>,
 }
 
 impl Conn {
-    fn phase(&self) -> Phase {
+    pub(super) fn phase(&self) -> Phase {
         match self.phase.load(Ordering::Acquire) {
             0 => Phase::Idle,
             1 => Phase::Head,
@@ -137,20 +130,20 @@ impl Conn {
         }
     }
 
-    fn enter(&self, phase: Phase, now_ms: u64) {
+    pub(super) fn enter(&self, phase: Phase, now_ms: u64) {
         self.since_ms.store(now_ms, Ordering::Release);
         self.phase.store(phase as u8, Ordering::Release);
     }
 
     /// When it last heard from its client, for choosing whom to close at the cap.
-    fn last_heard_ms(&self) -> u64 {
+    pub(super) fn last_heard_ms(&self) -> u64 {
         match self.phase() {
             Phase::Body => self.read_ms.load(Ordering::Acquire),
             _ => self.since_ms.load(Ordering::Acquire),
         }
     }
 
-    fn close(&self) {
+    pub(super) fn close(&self) {
         self.closed.store(true, Ordering::Release);
         if let Some(waker) = self.waker.lock().unwrap_or_else(|p| p.into_inner()).take() {
             waker.wake();
@@ -172,14 +165,14 @@ pub struct ConnectionStats {
 
 /// Every open connection, the limits, and what was closed.
 pub struct Tracker {
-    limits: ConnectionLimits,
-    epoch: Instant,
-    next_id: AtomicU64,
-    open: Mutex<HashMap<u64, Arc<Conn>>>,
-    header_timeouts: AtomicU64,
-    body_timeouts: AtomicU64,
-    idle_timeouts: AtomicU64,
-    shed: AtomicU64,
+    pub(super) limits: ConnectionLimits,
+    pub(super) epoch: Instant,
+    pub(super) next_id: AtomicU64,
+    pub(super) open: Mutex<HashMap<u64, Arc<Conn>>>,
+    pub(super) header_timeouts: AtomicU64,
+    pub(super) body_timeouts: AtomicU64,
+    pub(super) idle_timeouts: AtomicU64,
+    pub(super) shed: AtomicU64,
 }
 
 impl Tracker {
@@ -196,11 +189,11 @@ impl Tracker {
         })
     }
 
-    fn now_ms(&self) -> u64 {
+    pub(super) fn now_ms(&self) -> u64 {
         self.epoch.elapsed().as_millis() as u64
     }
 
-    fn connections(&self) -> std::sync::MutexGuard<'_, HashMap<u64, Arc<Conn>>> {
+    pub(super) fn connections(&self) -> std::sync::MutexGuard<'_, HashMap<u64, Arc<Conn>>> {
         self.open.lock().unwrap_or_else(|p| p.into_inner())
     }
 
@@ -217,7 +210,7 @@ impl Tracker {
 
     /// Below the cap, nothing; at it, closes the connection that has waited longest on its
     /// client. False when every connection is busy answering (the new one must wait).
-    fn make_room(&self) -> bool {
+    pub(super) fn make_room(&self) -> bool {
         let open = self.connections();
         if (open.len() as u64) < self.limits.max_connections {
             return true;
@@ -235,7 +228,7 @@ impl Tracker {
         }
     }
 
-    fn register(self: &Arc<Self>) -> (u64, Arc<Conn>) {
+    pub(super) fn register(self: &Arc<Self>) -> (u64, Arc<Conn>) {
         let now = self.now_ms();
         let conn = Arc::new(Conn {
             phase: AtomicU8::new(Phase::Idle as u8),
@@ -286,233 +279,6 @@ impl Tracker {
                 tracker.sweep();
             }
         });
-    }
-}
-
-/// A TCP listener whose connections the tracker guards.
-pub struct TrackedListener {
-    listener: TcpListener,
-    tracker: Arc<Tracker>,
-}
-
-impl TrackedListener {
-    pub fn new(listener: TcpListener, tracker: Arc<Tracker>) -> Self {
-        Self { listener, tracker }
-    }
-}
-
-impl axum::serve::Listener for TrackedListener {
-    type Io = TrackedStream;
-    type Addr = SocketAddr;
-
-    async fn accept(&mut self) -> (Self::Io, Self::Addr) {
-        loop {
-            // At the cap with every connection busy answering: new clients wait in the
-            // kernel's backlog until one finishes.
-            while !self.tracker.make_room() {
-                tokio::time::sleep(Duration::from_millis(20)).await;
-            }
-            match self.listener.accept().await {
-                Ok((stream, address)) => {
-                    let (id, conn) = self.tracker.register();
-                    return (TrackedStream { stream, id, conn, tracker: self.tracker.clone() }, address);
-                }
-                Err(error) if matches!(error.raw_os_error(), Some(libc::EMFILE | libc::ENFILE)) => {
-                    // Out of descriptors despite the cap (other files open): shed one, retry.
-                    tracing::warn!(%error, "out of file descriptors; closing the longest-waiting connection");
-                    let tracker = &self.tracker;
-                    let oldest = tracker
-                        .connections()
-                        .values()
-                        .filter(|c| c.phase() != Phase::Busy && !c.closed.load(Ordering::Acquire))
-                        .min_by_key(|c| c.last_heard_ms())
-                        .cloned();
-                    if let Some(conn) = oldest {
-                        conn.close();
-                        tracker.shed.fetch_add(1, Ordering::Relaxed);
-                    }
-                    tokio::time::sleep(Duration::from_millis(20)).await;
-                }
-                Err(error) => {
-                    tracing::debug!(%error, "accept failed");
-                    tokio::time::sleep(Duration::from_millis(20)).await;
-                }
-            }
-        }
-    }
-
-    fn local_addr(&self) -> io::Result<Self::Addr> {
-        self.listener.local_addr()
-    }
-}
-
-/// A client connection that notes the bytes it reads and fails once closed by the tracker
-/// (hyper then drops it, which closes the socket).
-pub struct TrackedStream {
-    stream: TcpStream,
-    id: u64,
-    conn: Arc<Conn>,
-    tracker: Arc<Tracker>,
-}
-
-fn closed_error() -> io::Error {
-    io::Error::new(io::ErrorKind::TimedOut, "connection closed: its client was too slow, or idle, or room was needed")
-}
-
-impl AsyncRead for TrackedStream {
-    fn poll_read(mut self: Pin<&mut Self>, cx: &mut Context<'_>, buf: &mut ReadBuf<'_>) -> Poll<io::Result<()>> {
-        if self.conn.closed.load(Ordering::Acquire) {
-            return Poll::Ready(Err(closed_error()));
-        }
-        let before = buf.filled().len();
-        let polled = Pin::new(&mut self.stream).poll_read(cx, buf);
-        match &polled {
-            Poll::Ready(Ok(())) if buf.filled().len() > before => {
-                let now = self.tracker.now_ms();
-                self.conn.read_ms.store(now, Ordering::Release);
-                if self.conn.phase() == Phase::Idle {
-                    self.conn.enter(Phase::Head, now);
-                }
-            }
-            Poll::Pending => {
-                *self.conn.waker.lock().unwrap_or_else(|p| p.into_inner()) = Some(cx.waker().clone());
-                // Closed between the check above and the waker's registration: not missed.
-                if self.conn.closed.load(Ordering::Acquire) {
-                    return Poll::Ready(Err(closed_error()));
-                }
-            }
-            _ => {}
-        }
-        polled
-    }
-}
-
-impl AsyncWrite for TrackedStream {
-    fn poll_write(mut self: Pin<&mut Self>, cx: &mut Context<'_>, buf: &[u8]) -> Poll<io::Result<usize>> {
-        if self.conn.closed.load(Ordering::Acquire) {
-            return Poll::Ready(Err(closed_error()));
-        }
-        Pin::new(&mut self.stream).poll_write(cx, buf)
-    }
-
-    fn poll_write_vectored(mut self: Pin<&mut Self>, cx: &mut Context<'_>, bufs: &[io::IoSlice<'_>]) -> Poll<io::Result<usize>> {
-        if self.conn.closed.load(Ordering::Acquire) {
-            return Poll::Ready(Err(closed_error()));
-        }
-        Pin::new(&mut self.stream).poll_write_vectored(cx, bufs)
-    }
-
-    fn is_write_vectored(&self) -> bool {
-        self.stream.is_write_vectored()
-    }
-
-    fn poll_flush(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
-        Pin::new(&mut self.stream).poll_flush(cx)
-    }
-
-    fn poll_shutdown(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
-        Pin::new(&mut self.stream).poll_shutdown(cx)
-    }
-}
-
-impl Drop for TrackedStream {
-    fn drop(&mut self) {
-        self.tracker.connections().remove(&self.id);
-    }
-}
-
-/// The connection a request arrived on, for the `track` middleware (axum's connect info).
-#[derive(Clone)]
-pub struct ConnRef(Arc<Conn>, Arc<Tracker>);
-
-impl Connected<IncomingStream<'_, TrackedListener>> for ConnRef {
-    fn connect_info(stream: IncomingStream<'_, TrackedListener>) -> Self {
-        let io = stream.io();
-        Self(io.conn.clone(), io.tracker.clone())
-    }
-}
-
-/// Notes a request's progress on its connection: `Body` until its body is read, then `Busy`
-/// until its answer is sent, then `Idle`. Requests without a tracked connection (the router
-/// driven directly, in tests) pass untouched.
-pub async fn track(request: Request, next: Next) -> Response {
-    let Some(ConnectInfo(ConnRef(conn, tracker))) = request.extensions().get::<ConnectInfo<ConnRef>>().cloned() else {
-        return next.run(request).await;
-    };
-    let now = tracker.now_ms();
-    let (parts, body) = request.into_parts();
-    let body = if body.is_end_stream() {
-        conn.enter(Phase::Busy, now);
-        body
-    } else {
-        conn.enter(Phase::Body, now);
-        conn.read_ms.store(now, Ordering::Release);
-        Body::new(TrackedBody { body, conn: Some(conn.clone()), tracker: tracker.clone() })
-    };
-    let response = next.run(Request::from_parts(parts, body)).await;
-    // A handler may answer without reading the body (a refusal): the answer is what remains.
-    conn.enter(Phase::Busy, tracker.now_ms());
-    response.map(|body| Body::new(AnswerBody { body, conn, tracker }))
-}
-
-/// A request body that marks its connection `Busy` once it is read to the end.
-struct TrackedBody {
-    body: Body,
-    conn: Option<Arc<Conn>>,
-    tracker: Arc<Tracker>,
-}
-
-impl http_body::Body for TrackedBody {
-    type Data = axum::body::Bytes;
-    type Error = axum::Error;
-
-    fn poll_frame(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<Option<Result<http_body::Frame<Self::Data>, Self::Error>>> {
-        let polled = Pin::new(&mut self.body).poll_frame(cx);
-        if matches!(polled, Poll::Ready(None)) || self.body.is_end_stream() {
-            if let Some(conn) = self.conn.take() {
-                conn.enter(Phase::Busy, self.tracker.now_ms());
-            }
-        }
-        polled
-    }
-
-    fn is_end_stream(&self) -> bool {
-        self.body.is_end_stream()
-    }
-
-    fn size_hint(&self) -> http_body::SizeHint {
-        self.body.size_hint()
-    }
-}
-
-/// A response body that marks its connection `Idle` (kept alive) once sent or dropped.
-struct AnswerBody {
-    body: Body,
-    conn: Arc<Conn>,
-    tracker: Arc<Tracker>,
-}
-
-impl http_body::Body for AnswerBody {
-    type Data = axum::body::Bytes;
-    type Error = axum::Error;
-
-    fn poll_frame(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<Option<Result<http_body::Frame<Self::Data>, Self::Error>>> {
-        Pin::new(&mut self.body).poll_frame(cx)
-    }
-
-    fn is_end_stream(&self) -> bool {
-        self.body.is_end_stream()
-    }
-
-    fn size_hint(&self) -> http_body::SizeHint {
-        self.body.size_hint()
-    }
-}
-
-impl Drop for AnswerBody {
-    fn drop(&mut self) {
-        self.conn.answered.store(true, Ordering::Release);
-        self.conn.enter(Phase::Idle, self.tracker.now_ms());
     }
 }
 

@@ -1,0 +1,178 @@
+//! The wedges method's geometry on the CPU (Assarsson & Akenine-Möller 2003 §2–3): the light
+//! centre's shadow volume — a side quad per silhouette edge and, for z-fail, its caps — and a
+//! penumbra wedge per edge with the two planes through the edge that touch the light.
+
+use glam::{Vec3, Vec4};
+
+use super::WedgeGpu;
+use crate::light::AreaLight;
+use crate::scene::adjacency::{EdgeMesh, SilhouetteEdge};
+
+/// The primitives the rasteriser runs over: volume polygons (side quads, then caps) with
+/// their multiplicity and object, and one wedge per silhouette edge.
+pub(super) struct Volume {
+    pub polygons: Vec<[Vec3; 4]>,
+    pub multiplicity: Vec<u32>,
+    pub object: Vec<u32>,
+    /// Cap polygons among `polygons` (z-fail only).
+    pub caps: usize,
+    /// Per wedge, its tangent planes (world space, inside ≥ 0; none when the edge's line
+    /// crosses the light).
+    pub wedge_planes: Vec<Vec<Vec4>>,
+    pub wedges: Vec<WedgeGpu>,
+}
+
+impl Volume {
+    /// The volume of the silhouette seen from the light centre, extruded to `reach`.
+    pub fn build(mesh: &EdgeMesh, silhouette: &[SilhouetteEdge], light: &AreaLight, reach: f32, zfail: bool) -> Self {
+        let c = light.center;
+        // The light centre's shadow volume: a side quad per silhouette edge, and for z-fail its
+        // caps — the triangles facing the light (top) and the same pushed out to `reach` (bottom).
+        let extrude = |p: Vec3| c + (p - c) * (reach / (p - c).length().max(1e-6));
+        let mut polygons: Vec<[Vec3; 4]> = Vec::new();
+        let mut multiplicity: Vec<u32> = Vec::new();
+        let mut object: Vec<u32> = Vec::new();
+        for e in silhouette {
+            // Always this order, never flipped per quad: (a − b) × (a' − b) is the outward
+            // normal (a' the extruded a), and neighbouring quads run their shared extruded
+            // edge in opposite directions, which the rasteriser's tie rule relies on; so do
+            // the caps with the quads' near and far edges.
+            polygons.push([e.b, e.a, extrude(e.a), extrude(e.b)]);
+            multiplicity.push(e.multiplicity);
+            object.push(e.object);
+        }
+        let mut caps = 0usize;
+        if zfail {
+            for (t, tri) in mesh.triangles.iter().enumerate() {
+                if mesh.faces(t, c) {
+                    let [a, b, d] = tri.map(|i| mesh.positions[i as usize]);
+                    polygons.push([a, b, d, d]);
+                    polygons.push([extrude(d), extrude(b), extrude(a), extrude(a)]);
+                    multiplicity.extend([1, 1]);
+                    object.extend([mesh.objects[t]; 2]);
+                    caps += 2;
+                }
+            }
+        }
+        let wedge_planes: Vec<Vec<Vec4>> = silhouette.iter().map(|e| tangent_planes(e, light)).collect();
+        let wedges: Vec<WedgeGpu> = silhouette
+            .iter()
+            .zip(&wedge_planes)
+            .map(|(e, planes)| WedgeGpu {
+                a: e.a.extend(e.multiplicity as f32).to_array(),
+                b: e.b.extend(e.object as f32).to_array(),
+                planes: [0, 1].map(|k| planes.get(k).copied().unwrap_or(Vec4::W).to_array()),
+            })
+            .collect();
+
+        Self { polygons, multiplicity, object, caps, wedge_planes, wedges }
+    }
+}
+
+/// Whether the eye lies in the light centre's hard shadow: the segment from the eye to the
+/// centre passes through a light-facing triangle (then z-pass would count wrongly, §5).
+pub(super) fn eye_in_shadow(mesh: &EdgeMesh, c: Vec3, eye: Vec3) -> bool {
+    let dir = c - eye;
+    mesh.triangles.iter().enumerate().any(|(t, tri)| {
+        if !mesh.faces(t, c) {
+            return false;
+        }
+        // Möller–Trumbore, restricted to the open segment.
+        let [a, b, d] = tri.map(|i| mesh.positions[i as usize]);
+        let (e1, e2) = (b - a, d - a);
+        let h = dir.cross(e2);
+        let det = e1.dot(h);
+        if det.abs() < 1e-12 {
+            return false;
+        }
+        let s = eye - a;
+        let u = s.dot(h) / det;
+        let q = s.cross(e1);
+        let v = dir.dot(q) / det;
+        let t = e2.dot(q) / det;
+        u >= 0.0 && v >= 0.0 && u + v <= 1.0 && t > 1e-6 && t < 1.0 - 1e-6
+    })
+}
+
+/// Points whose convex hull holds the edge's wedge out to `reach`: the edge's ends and their
+/// shadows from the light's four corners.
+pub(super) fn wedge_hull(e: &SilhouetteEdge, light: &AreaLight, reach: f32) -> Vec<Vec3> {
+    let mut hull = vec![e.a, e.b];
+    for corner in light_corners(light) {
+        for p in [e.a, e.b] {
+            let d = p - corner;
+            hull.push(p + d * ((reach + (p - light.center).length()) / d.length().max(1e-6)));
+        }
+    }
+    hull
+}
+
+fn light_corners(light: &AreaLight) -> [Vec3; 4] {
+    let (hw, hh) = (0.5 * light.size_m.x, 0.5 * light.size_m.y);
+    [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)].map(|(s, t)| light.center + light.r * (s * hw) + light.u * (t * hh))
+}
+
+/// The wedge's two planes through the edge's line that touch the light rectangle, as
+/// world-space planes with the wedge on their positive side. Empty when the line passes
+/// through the light (then every plane through it cuts the light, and only the bounding box
+/// bounds the wedge).
+pub(super) fn tangent_planes(e: &SilhouetteEdge, light: &AreaLight) -> Vec<Vec4> {
+    let corners = light_corners(light);
+    let dir = e.b - e.a;
+    let scale = dir.length() * light.size_m.max_element();
+    let mut planes = Vec::new();
+    for &y in &corners {
+        let n = dir.cross(y - e.a);
+        if n.length() <= 1e-9 * scale {
+            continue;
+        }
+        let sides: Vec<f32> = corners.iter().map(|&z| n.dot(z - e.a) / n.length()).collect();
+        let tolerance = 1e-6 * light.size_m.max_element();
+        let positive = sides.iter().all(|&s| s >= -tolerance);
+        let negative = sides.iter().all(|&s| s <= tolerance);
+        if positive == negative {
+            continue; // cuts the light, or lies in its plane
+        }
+        // The light on the positive side: the wedge is on the negative side of both.
+        let n = if positive { -n.normalize() } else { n.normalize() };
+        let plane = n.extend(-n.dot(e.a));
+        if planes.iter().all(|q: &Vec4| (q.truncate().dot(n) - 1.0).abs() > 1e-5) {
+            planes.push(plane);
+        }
+    }
+    if planes.len() == 2 {
+        planes
+    } else {
+        Vec::new()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::light::AreaLight;
+    use glam::Vec2;
+
+    #[test]
+    fn tangent_planes_touch_the_light_and_hold_the_wedge() {
+        // A light of 2 × 1 m at y = 3 facing down; an edge along z at height 1.
+        let light = AreaLight::new(Vec3::Y * 3.0, -Vec3::Y, -Vec3::Z, Vec2::new(2.0, 1.0), 1.0).unwrap();
+        let edge = SilhouetteEdge { a: Vec3::new(0.5, 1.0, -5.0), b: Vec3::new(0.5, 1.0, 5.0), multiplicity: 1, object: 0 };
+        let planes = tangent_planes(&edge, &light);
+        assert_eq!(planes.len(), 2);
+        let side = |plane: &Vec4, p: Vec3| plane.truncate().dot(p) + plane.w;
+        for plane in &planes {
+            // Every corner of the light on the non-positive side, one on the plane.
+            let values: Vec<f32> = light_corners(&light).iter().map(|&y| side(plane, y)).collect();
+            assert!(values.iter().all(|&v| v <= 1e-4), "{values:?}");
+            assert!(values.iter().any(|&v| v.abs() < 1e-4));
+        }
+        // Below the edge, on the floor straight under it: in the penumbra, inside both.
+        assert!(planes.iter().all(|p| side(p, Vec3::new(0.5, 0.0, 0.0)) >= 0.0));
+        // Far to the side on the floor: lit, outside one plane.
+        assert!(planes.iter().any(|p| side(p, Vec3::new(4.0, 0.0, 0.0)) < 0.0));
+        // An edge whose line passes through the light gives no planes.
+        let through = SilhouetteEdge { a: Vec3::new(0.0, 1.0, 0.0), b: Vec3::new(0.0, 5.0, 0.0), multiplicity: 1, object: 0 };
+        assert!(tangent_planes(&through, &light).is_empty());
+    }
+}

@@ -1,0 +1,96 @@
+//! What the server says about itself: methods and limits, readiness, Prometheus metrics and
+//! the JSON stats the dashboard draws.
+
+use super::*;
+
+/// `GET /v1/limits`: every limit the server enforces, with its value (all configurable).
+pub(super) async fn limits(State(state): State<Arc<AppState>>) -> Json<Value> {
+    let limits = state.engine.limits();
+    Json(json!({
+        "max_body_bytes": limits.max_body_bytes,
+        "max_output_dim": limits.max_output_dim,
+        "max_output_pixels": limits.max_output_pixels,
+        "max_shadow_map_resolution": limits.max_shadow_map_resolution,
+        "max_triangles": limits.max_triangles,
+        "max_light_image_dim": limits.max_light_image_dim,
+        "max_texture_dim": limits.max_texture_dim,
+        "max_json_depth": limits.max_json_depth,
+        "max_vertices": limits.max_vertices,
+        "max_samples": limits.max_samples,
+        "max_rounds": limits.max_rounds,
+        "queue": state.queue_config.capacity,
+        "concurrency": state.queue_config.concurrency,
+        "deadline_secs": state.queue_config.deadline.as_secs_f64(),
+        "upload_cache_bytes": state.engine.upload_stats().budget_bytes,
+        "method_params": REGISTRY.iter().map(|m| (m.name().to_owned(), capped_params(m.params(), limits))).collect::<serde_json::Map<_, _>>(),
+    }))
+}
+
+/// A method's parameters as `/v1/limits` lists them: ranges ending at the operator's caps.
+fn capped_params(specs: &[crate::methods::ParamSpec], limits: &crate::job::Limits) -> Value {
+    let mut listed = json!(specs);
+    for (spec, listed) in specs.iter().zip(listed.as_array_mut().into_iter().flatten()) {
+        if let (Some((cap, _)), Some(max)) = (spec.cap.map(|c| limits.cap(c)), listed["max"].as_i64()) {
+            listed["max"] = json!(max.min(cap));
+        }
+    }
+    listed
+}
+
+/// `GET /readyz`: 200 once warm, 503 while warming up, stopping, or unable to take submitted
+/// jobs (the store does not answer, or its disk is at the margin) — so a load balancer sends
+/// work elsewhere while `/healthz` stays 200 and nothing restarts a healthy process.
+pub(super) async fn readyz(State(state): State<Arc<AppState>>) -> Response {
+    let unavailable = |status: &str| (StatusCode::SERVICE_UNAVAILABLE, Json(json!({"status": status}))).into_response();
+    if *state.stopping.borrow() {
+        unavailable("stopping")
+    } else if !state.ready.load(Ordering::SeqCst) {
+        unavailable("warming up")
+    } else if let Some(trouble) = state.store_trouble() {
+        let mut response = unavailable(trouble);
+        response.headers_mut().insert(header::RETRY_AFTER, HeaderValue::from_static("2"));
+        response
+    } else {
+        Json(json!({"status": "ready", "adapter": state.engine.gpu().adapter})).into_response()
+    }
+}
+
+pub(super) async fn methods() -> Json<Value> {
+    let methods: Vec<Value> = REGISTRY.iter().map(|m| json!({"name": m.name(), "summary": m.summary(), "params": m.params()})).collect();
+    Json(json!({
+        "methods": methods,
+        "scenes": BUILTIN_SCENES,
+        "light_images": BUILTIN_LIGHT_IMAGES,
+    }))
+}
+
+/// `GET /metrics`: Prometheus text format.
+pub(super) async fn metrics(State(state): State<Arc<AppState>>) -> Response {
+    state.metrics.observe_service(state.store.as_ref().map(|s| s.health().status()), state.connections.as_ref().map(|c| c.stats()));
+    let text = state.metrics.encode(&state.engine.stats());
+    ([(header::CONTENT_TYPE, HeaderValue::from_static("text/plain; version=0.0.4; charset=utf-8"))], text).into_response()
+}
+
+/// Jobs listed in `/v1/stats` (newest first).
+const STATS_RECENT: usize = 40;
+
+/// `GET /v1/stats`: what the dashboard draws — the engine's caches, pools and uploads, the
+/// queue, and the recent jobs with throughput, latency per method and phase breakdowns.
+pub(super) async fn stats(State(state): State<Arc<AppState>>) -> Json<Value> {
+    let uptime_s = state.started.elapsed().map(|d| d.as_secs_f64()).unwrap_or(0.0);
+    Json(json!({
+        "adapter": state.engine.gpu().adapter,
+        "uptime_s": uptime_s,
+        "jobs_in_flight": state.metrics.in_flight(),
+        "jobs_queued": state.metrics.queued(),
+        "queue": {"capacity": state.queue_config.capacity, "concurrency": state.queue_config.concurrency},
+        "store": state.store.as_ref().map(|s| s.health().status()),
+        "connections": state.connections.as_ref().map(|c| c.stats()),
+        "engine": state.engine.stats(),
+        "jobs": {
+            "per_minute": state.recent.per_minute(std::time::Duration::from_secs(60)),
+            "by_method": state.recent.latency_by_method(),
+            "recent": state.recent.newest(STATS_RECENT),
+        },
+    }))
+}
