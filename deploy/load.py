@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Load test of a real penumbra daemon on loopback (issue 11), bounded in clients and time.
+"""Load test of a real penumbra daemon on loopback, bounded in clients and time.
 
 Starts `penumbra serve` on a free 127.0.0.1 port, warms it up, then runs CLIENTS threads for
 SECONDS: a mix of synchronous renders (methods and sizes drawn from a fixed list), async jobs

@@ -1,4 +1,4 @@
-// Composite: Lo = ρ/π · (E0 ⊙ V + ambient) per pixel (DESIGN.md §1), alpha 1 where a surface
+// Composite: Lo = ρ/π · (E0 ⊙ V + ambient) per pixel (contract §1), alpha 1 where a surface
 // was hit, and the view depth (+∞ for background) for the EXR `depth` channel.
 
 #import common/frame_inputs.wgsl

@@ -1,4 +1,4 @@
-// The unshadowed irradiance E0 (DESIGN.md §1), identical for every method: Lambert's closed
+// The unshadowed irradiance E0 (contract §1), identical for every method: Lambert's closed
 // form over each uniform cell of the light image, times the cell's radiance, summed.
 
 #import common/frame_inputs.wgsl

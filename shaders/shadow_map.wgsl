@@ -1,7 +1,7 @@
 // Light-space shadow map, rendered from the centre of the area light: linear depth along the
 // light normal, the object id of the nearest surface (used by methods that need ids,
 // Brabec–Seidel §3.2 and Rong–Tan §5.2) and its world position (the "light space coordinate"
-// Rong–Tan §4.1 floods). No culling: back faces cast shadows too (DESIGN.md §1).
+// Rong–Tan §4.1 floods). No culling: back faces cast shadows too (contract §1).
 
 #import common/frame.wgsl
 

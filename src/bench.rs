@@ -1,5 +1,5 @@
 //! `penumbra bench-daemon`: what the daemon costs around a render, measured in one run on a
-//! real server over loopback (issue 8's benchmark; no timed test asserts any of it):
+//! real server over loopback (no timed test asserts any of it):
 //!
 //! - **overhead**: the same warm 512×512 `hard` job through the library and through HTTP,
 //!   interleaved, medians — what HTTP, queueing and the response add to the render;
@@ -40,6 +40,11 @@ pub struct BenchOptions {
     /// Vertices per side of each uploaded height-field scene.
     #[arg(long, default_value_t = 256)]
     pub scene_side: u32,
+    /// Device slots (`serve --concurrency`) to compare, each with 4 clients sending the same
+    /// jobs: frames take the device one at a time, so more slots overlap one job's CPU work
+    /// (scene look-up, encoding) with another's frame.
+    #[arg(long, value_delimiter = ',', default_value = "1,2")]
+    pub concurrency: Vec<u32>,
 }
 
 #[derive(Debug, Serialize)]
@@ -47,6 +52,8 @@ pub struct BenchReport {
     pub adapter: String,
     pub overhead: Overhead,
     pub throughput: Vec<Throughput>,
+    /// Throughput with 4 clients for each `--concurrency` compared.
+    pub by_concurrency: Vec<(u32, Throughput)>,
     pub memory: Memory,
 }
 
@@ -151,6 +158,18 @@ async fn run_async(gpu: Arc<GpuContext>, options: &BenchOptions) -> anyhow::Resu
         throughput.push(level);
     }
 
+    let mut by_concurrency = Vec::new();
+    for &slots in &options.concurrency {
+        let queue = QueueConfig { concurrency: slots.max(1), ..QueueConfig::default() };
+        let base = start_server(engine.clone(), queue).await?;
+        let level = measure_throughput(&client, &base, 4, options.jobs).await?;
+        eprintln!(
+            "concurrency {slots}, 4 clients: {:.2} jobs/s, p50 {:.0} ms, p99 {:.0} ms",
+            level.jobs_per_second, level.p50_ms, level.p99_ms
+        );
+        by_concurrency.push((slots, level));
+    }
+
     let memory = measure_memory(gpu.clone(), &client, options).await?;
     eprintln!(
         "memory: {} scenes of {:.1} MiB ({:.0} MiB uploaded, budget {:.0} MiB): RSS {:.0} → max {:.0} MiB; growth − budget = {:.0} MiB",
@@ -163,7 +182,7 @@ async fn run_async(gpu: Arc<GpuContext>, options: &BenchOptions) -> anyhow::Resu
         memory.rss_growth_over_budget_bytes as f64 / 1048576.0
     );
 
-    let report = BenchReport { adapter: gpu.adapter.name.clone(), overhead, throughput, memory };
+    let report = BenchReport { adapter: gpu.adapter.name.clone(), overhead, throughput, by_concurrency, memory };
     let path = options.out.join("daemon.json");
     std::fs::write(&path, serde_json::to_vec_pretty(&report)?)?;
     eprintln!("wrote {}", path.display());

@@ -136,7 +136,10 @@ pub struct ServeConfig {
     #[arg(long, env = "PENUMBRA_QUEUE", default_value_t = 64, value_parser = clap::value_parser!(u32).range(1..))]
     pub queue: u32,
 
-    /// Jobs on the device at once.
+    /// Jobs rendering at once. Frames go through the device one at a time (the renderer's
+    /// targets and timer are per frame); each further slot lets one job's CPU work — asset
+    /// look-up, encoding, comparing with the reference — overlap another's frame, and a job in
+    /// a slot may wait for the frames of the others (at most concurrency − 1).
     #[arg(long, env = "PENUMBRA_CONCURRENCY", default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
     pub concurrency: u32,
 

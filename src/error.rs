@@ -114,7 +114,7 @@ impl JobError {
 
     /// Whether the message may be shown to the client as it is: every error but a failure
     /// inside the renderer, whose details stay in the logs.
-    pub fn is_client_error(&self) -> bool {
+    pub fn message_is_public(&self) -> bool {
         self.code != ErrorCode::Internal
     }
 }

@@ -1,4 +1,4 @@
-//! The job contract (DESIGN.md §3): what a client asks for, parsed and validated.
+//! The job contract (contract §3): what a client asks for, parsed and validated.
 //!
 //! Parsing is strict: unknown fields are errors, and every error names the field by its
 //! dotted path so that a client can fix its request without reading server logs. Values that
@@ -173,7 +173,7 @@ pub struct CameraSpec {
     pub far: Option<f32>,
 }
 
-/// The area light (DESIGN.md §1); absent fields come from the scene's default light.
+/// The area light (contract §1); absent fields come from the scene's default light.
 #[derive(Debug, Clone, Default, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct LightSpec {
@@ -255,6 +255,42 @@ impl Default for OutputSpec {
     }
 }
 
+/// A submitted job's status (contract §3), as records and events carry it.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum JobStatus {
+    /// Accepted, waiting for the device.
+    #[default]
+    Queued,
+    Running,
+    Succeeded,
+    Failed,
+    Cancelled,
+}
+
+impl JobStatus {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            JobStatus::Queued => "queued",
+            JobStatus::Running => "running",
+            JobStatus::Succeeded => "succeeded",
+            JobStatus::Failed => "failed",
+            JobStatus::Cancelled => "cancelled",
+        }
+    }
+
+    /// Whether the job has ended: succeeded, failed or cancelled.
+    pub fn finished(self) -> bool {
+        matches!(self, JobStatus::Succeeded | JobStatus::Failed | JobStatus::Cancelled)
+    }
+}
+
+impl std::fmt::Display for JobStatus {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
 /// One render job, as sent by a client.
 #[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
@@ -271,7 +307,7 @@ pub struct Job {
     #[serde(default)]
     pub output: OutputSpec,
     /// Optional constant ambient irradiance added to every visible point, linear RGB.
-    /// DESIGN.md §1: no ambient term unless the job asks for one.
+    /// contract §1: no ambient term unless the job asks for one.
     #[serde(default)]
     pub ambient: Option<[f32; 3]>,
     /// Also render `reference` for the same scene, view and light (cached) and report

@@ -11,6 +11,7 @@ use tokio::sync::{watch, OwnedSemaphorePermit, Semaphore};
 
 use crate::engine::Rendered;
 use crate::error::{ErrorCode, JobError};
+use crate::job::JobStatus;
 
 /// The queue's shape: jobs admitted at once (waiting or running), jobs on the device at once,
 /// and how long a job may wait for the device.
@@ -101,8 +102,7 @@ impl JobQueue {
 /// The state of a submitted job as its events report it.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct JobEvent {
-    /// `queued`, `running`, `succeeded`, `failed` or `cancelled`.
-    pub status: &'static str,
+    pub status: JobStatus,
     /// Progress of long methods: steps done of all (samples for `reference`); 0 of 0 otherwise.
     pub done: u64,
     pub total: u64,
@@ -115,33 +115,33 @@ pub struct JobEvent {
 }
 
 impl JobEvent {
-    pub fn status(status: &'static str) -> Self {
+    pub fn status(status: JobStatus) -> Self {
         Self { status, done: 0, total: 0, error: None, finished_at: None }
     }
 
     /// Marks the job `succeeded`, `failed` or `cancelled` as of now.
-    pub fn finish(&mut self, status: &'static str, error: Option<Value>) {
+    pub fn finish(&mut self, status: JobStatus, error: Option<Value>) {
         self.status = status;
         self.error = error;
         self.finished_at = Some(Instant::now());
     }
 
     pub fn finished(&self) -> bool {
-        matches!(self.status, "succeeded" | "failed" | "cancelled")
+        self.status.finished()
     }
 }
 
 /// Finished renders (newest last) and submitted jobs' event channels. Both are bounded by the
 /// number of results kept (finished submissions go first, unfinished ones stay) and by age: a
 /// finished job is dropped `ttl` after it finished.
-pub struct JobStore {
+pub struct LiveJobs {
     results: Mutex<VecDeque<(String, Arc<Rendered>, Instant)>>,
     submitted: Mutex<VecDeque<Submitted>>,
     capacity: usize,
     ttl: Duration,
 }
 
-impl JobStore {
+impl LiveJobs {
     pub fn new(results_kept: usize, ttl: Duration) -> Self {
         Self { results: Mutex::new(VecDeque::new()), submitted: Mutex::new(VecDeque::new()), capacity: results_kept.max(1), ttl }
     }

@@ -1,4 +1,4 @@
-//! Quality of a method against `reference` (DESIGN.md §4): RMSE, PSNR, SSIM and FLIP on the
+//! Quality of a method against `reference` (contract §4): RMSE, PSNR, SSIM and FLIP on the
 //! colour image and on the visibility, over the whole frame and over the penumbra only
 //! (pixels where `0 < Vref < 1` in some channel — lit and umbra areas would otherwise
 //! dominate every score). SSIM comes from `image-compare`, FLIP from `nv-flip`.
@@ -21,7 +21,7 @@ const PENUMBRA_EPSILON: f32 = 1e-4;
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct Metrics {
     pub rmse: f64,
-    /// Mean absolute error (DESIGN.md §4 quotes "mean penumbra visibility error").
+    /// Mean absolute error (contract §4 quotes "mean penumbra visibility error").
     pub mae: f64,
     pub psnr_db: f64,
     pub ssim: f64,

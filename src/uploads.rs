@@ -1,4 +1,4 @@
-//! Uploaded scenes and light images (DESIGN.md §3): content-addressed — the id is a hash of
+//! Uploaded scenes and light images (contract §3): content-addressed — the id is a hash of
 //! the bytes, so the same upload twice is one entry and costs nothing the second time — and
 //! kept in one least-recently-used store under a byte budget, so memory stays bounded however
 //! many assets arrive. A scene counts its CPU copy and the GPU copy it will get (the engine
@@ -69,7 +69,7 @@ pub struct UploadStore {
     stats: UploadStats,
 }
 
-/// The content address of `bytes` (DESIGN.md §3): the lowercase hex SHA-256, so a client can
+/// The content address of `bytes` (contract §3): the lowercase hex SHA-256, so a client can
 /// compute it before uploading and ask whether the server holds it.
 pub fn content_id(bytes: &[u8]) -> String {
     Sha256::digest(bytes).iter().map(|b| format!("{b:02x}")).collect()

@@ -768,7 +768,7 @@ async fn draining_for_shutdown_waits_for_submitted_jobs_and_admits_no_more() {
     assert_eq!(client.get(format!("{base}/readyz")).send().await.unwrap().status(), StatusCode::SERVICE_UNAVAILABLE);
 }
 
-/// Device loss (DESIGN.md §3, issue 8): a device destroyed between jobs, and one destroyed in
+/// Device loss (contract §3): a device destroyed between jobs, and one destroyed in
 /// the middle of a job, are replaced; the affected job is retried once and comes out the same
 /// as before the loss, and the resets are counted. The engine has its own device: destroying
 /// the shared one would take every other test down.
@@ -994,12 +994,15 @@ fn the_daemon_benchmark_runs_and_reports() {
         jobs: 3,
         cache_mib: 2,
         scene_side: 24,
+        concurrency: vec![1, 2],
     };
     let report = penumbra::bench::run(common::engine().gpu(), &options).expect("the benchmark runs");
     assert!(report.overhead.library_median_ms > 0.0 && report.overhead.http_median_ms > 0.0);
     assert_eq!(report.throughput.len(), 2);
     assert!(report.throughput.iter().all(|t| t.other_statuses.is_empty() && t.jobs_per_second > 0.0), "{:?}", report.throughput);
     assert!(report.memory.scenes >= 10 && report.memory.evictions > 0, "{:?}", report.memory);
+    assert_eq!(report.by_concurrency.iter().map(|(slots, _)| *slots).collect::<Vec<_>>(), [1, 2]);
+    assert!(report.by_concurrency.iter().all(|(_, t)| t.other_statuses.is_empty()), "{:?}", report.by_concurrency);
     let written: Value = serde_json::from_slice(&std::fs::read(out.path().join("daemon.json")).unwrap()).unwrap();
     assert_eq!(written["throughput"][1]["clients"], 3);
 }
@@ -1009,7 +1012,7 @@ fn sha256_hex(bytes: &[u8]) -> String {
     sha2::Sha256::digest(bytes).iter().map(|b| format!("{b:02x}")).collect()
 }
 
-/// The embedded job store across a crash (issue 10): a daemon killed with SIGKILL while one
+/// The embedded job store across a crash: a daemon killed with SIGKILL while one
 /// submitted job renders and others wait, restarted on the same data directory, finishes
 /// every job it had accepted, and still serves the result it had finished before the kill.
 #[tokio::test(flavor = "multi_thread")]
@@ -1104,8 +1107,8 @@ async fn accepted_jobs_survive_sigkill_and_sigterm_and_finish_after_a_restart() 
     assert!(exit.success(), "a SIGTERM exits 0: {exit:?}");
     let stored = penumbra::store::EmbeddedStore::open(data.path()).unwrap();
     use penumbra::store::JobStore as _;
-    assert_eq!(stored.get(&accepted[0]).unwrap().unwrap().status, "succeeded", "the running job finished");
-    assert_eq!(stored.get(&accepted[2]).unwrap().unwrap().status, "queued", "a waiting job stayed queued");
+    assert_eq!(stored.get(&accepted[0]).unwrap().unwrap().status.as_str(), "succeeded", "the running job finished");
+    assert_eq!(stored.get(&accepted[2]).unwrap().unwrap().status.as_str(), "queued", "a waiting job stayed queued");
     drop(stored);
     let mut daemon = start();
     ready().await;
@@ -1138,7 +1141,7 @@ async fn a_job_that_keeps_killing_its_daemon_is_failed_with_a_reason() {
     assert_eq!(poison["status"], "failed");
     assert!(poison["error"]["message"].as_str().unwrap().contains("started 3 times"), "{poison}");
     client.get(format!("{base}/v1/jobs/plain/events")).send().await.unwrap().text().await.unwrap();
-    assert_eq!(store.get("plain").unwrap().unwrap().status, "succeeded");
+    assert_eq!(store.get("plain").unwrap().unwrap().status.as_str(), "succeeded");
 }
 
 /// `penumbra submit` against a live server: it uploads the job's local scene and light image
@@ -1196,7 +1199,7 @@ async fn submit_uploads_only_what_the_server_lacks_and_follows_progress() {
     assert!(String::from_utf8_lossy(&output.stderr).contains("unknown_builtin"), "{}", String::from_utf8_lossy(&output.stderr));
 }
 
-/// Access control (issue 11): with tokens configured, `/v1` and `/metrics` need one of them
+/// Access control: with tokens configured, `/v1` and `/metrics` need one of them
 /// (401 `unauthorized` with `WWW-Authenticate` otherwise), `/healthz`, `/readyz` and the
 /// dashboard's files stay open, the dashboard works with a token given in its URL fragment,
 /// CORS answers only configured origins, and `/v1/limits` lists the limits.

@@ -316,7 +316,7 @@ impl Drop for Cluster {
     }
 }
 
-/// The cluster on loopback (issue 10): Debian's `redis-server`, three replicas sharing it as
+/// The cluster on loopback: Debian's `redis-server`, three replicas sharing it as
 /// their job store, Debian's `nginx` in front with `deploy/nginx.conf`. A batch of async jobs
 /// goes through nginx; one replica is killed with SIGKILL while it renders; every job still
 /// ends `succeeded` and downloads through the survivors, and only the job the dead replica had
@@ -379,7 +379,7 @@ fn three_replicas_behind_nginx_share_redis_and_survive_a_sigkill() {
     assert_eq!(status, 409, "a cancelled job is finished");
 }
 
-/// The figures of the deploy issue's closing note, printed, never asserted (run by hand:
+/// The cluster's figures quoted in the README, printed, never asserted (run by hand:
 /// `cargo test --release --test deploy -- --ignored --nocapture cluster_figures`): what a
 /// small job costs through nginx and Redis against one replica on the embedded store, how
 /// many jobs per second each store sustains on its own, and the scene-cache hit rate across
@@ -518,7 +518,8 @@ fn a_shared_job_that_keeps_killing_replicas_is_failed_with_a_reason() {
     }
     let port = free_port();
     let _replica = daemon(port, &["--no-warm-up", "--claim-idle-secs", "1", "--job-store", &url]);
-    let failed = wait_until(Duration::from_secs(60), || store.get("poison").unwrap().is_some_and(|j| j.status == "failed"));
+    let failed =
+        wait_until(Duration::from_secs(60), || store.get("poison").unwrap().is_some_and(|j| j.status == penumbra::job::JobStatus::Failed));
     assert!(failed.is_some(), "the poison job was not failed: {:?}", store.get("poison").unwrap());
     let record = store.get("poison").unwrap().unwrap();
     assert_eq!(record.attempts, penumbra::store::MAX_ATTEMPTS, "it was not rendered again");

@@ -70,7 +70,7 @@ fn fuzz_targets_survive_their_time_budget() {
     }
 }
 
-/// API conformance (issue 11): `schemathesis` drives every operation of `api/openapi.json`
+/// API conformance: `schemathesis` drives every operation of `api/openapi.json`
 /// against the real daemon — examples, coverage, fuzzed and stateful sequences — and checks
 /// that nothing answers 5xx and every response matches the document (status, content type,
 /// headers, schema). Excluded: `positive_data_acceptance`, since a schema cannot say "a glTF
@@ -111,7 +111,7 @@ fn the_api_conforms_to_its_openapi_document_under_schemathesis() {
     assert!(output.status.success(), "schemathesis found failures:\n{report}\n{}", String::from_utf8_lossy(&output.stderr));
 }
 
-/// Load, bounded (issue 11): `deploy/load.py` drives the real daemon on loopback with 16
+/// Load, bounded: `deploy/load.py` drives the real daemon on loopback with 16
 /// clients mixing methods, sizes, uploads and async jobs; every answer is 200/201/202 or the
 /// documented 429, the daemon exits cleanly, and its resident memory does not climb once
 /// warm (the upload cache is kept small, so it is full early). The report and plot are kept in

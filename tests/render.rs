@@ -29,7 +29,7 @@ fn golden_columns_hard() {
 }
 
 /// A 4 m floor seen from straight above with image-up (−z) at the top of the output, lit by
-/// a low, wide light pointing down with `up = −z`. By DESIGN.md §1, r = cross(u, n) = −x, so
+/// a low, wide light pointing down with `up = −z`. By contract §1, r = cross(u, n) = −x, so
 /// image column 0 lies on +x (the right of the output) and row 0 on −z (the top).
 fn overhead_job(image: &str) -> Job {
     job(json!({

@@ -1,5 +1,5 @@
 // Per-frame constants shared by every pass: the eye camera, the area light's frame
-// (DESIGN.md §1) and the light-space projection of the shadow map. Mirrors
+// (contract §1) and the light-space projection of the shadow map. Mirrors
 // `render::FrameUniforms` field for field.
 
 struct Frame {

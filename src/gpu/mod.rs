@@ -190,10 +190,12 @@ impl GpuContext {
         polled.map(drop).map_err(|e| GpuError::Poll(e.to_string()))
     }
 
-    /// Maps `slices` for reading, waits for the GPU, and says whether every map succeeded.
+    /// Maps `slices` for reading and waits for the GPU; fails when a map reported an error.
+    /// A map whose callback has not run yet (another thread's poll may be running it) is not
+    /// an error here: reading the mapped range then says whether it is mapped.
     pub fn map_for_reading(&self, slices: &[wgpu::BufferSlice<'_>]) -> Result<(), GpuError> {
-        let outcomes: Vec<std::sync::Arc<std::sync::Mutex<Option<Result<(), wgpu::BufferAsyncError>>>>> =
-            slices.iter().map(|_| Default::default()).collect();
+        type Outcome = std::sync::Arc<std::sync::Mutex<Option<Result<(), wgpu::BufferAsyncError>>>>;
+        let outcomes: Vec<Outcome> = slices.iter().map(|_| Default::default()).collect();
         for (slice, outcome) in slices.iter().zip(&outcomes) {
             let outcome = outcome.clone();
             slice.map_async(wgpu::MapMode::Read, move |result| *outcome.lock().unwrap_or_else(|p| p.into_inner()) = Some(result));
@@ -203,10 +205,8 @@ impl GpuContext {
             return Err(GpuError::Map("injected readback failure".into()));
         }
         for outcome in &outcomes {
-            match outcome.lock().unwrap_or_else(|p| p.into_inner()).take() {
-                Some(Ok(())) => {}
-                Some(Err(error)) => return Err(GpuError::Map(error.to_string())),
-                None => return Err(GpuError::Map("the map did not complete".into())),
+            if let Some(Err(error)) = outcome.lock().unwrap_or_else(|p| p.into_inner()).take() {
+                return Err(GpuError::Map(error.to_string()));
             }
         }
         Ok(())

@@ -94,7 +94,7 @@ impl GpuScene {
                     mip_level_count: 1,
                     sample_count: 1,
                     dimension: wgpu::TextureDimension::D2,
-                    // sRGB storage: the sampler returns linear albedo (DESIGN.md §1).
+                    // sRGB storage: the sampler returns linear albedo (contract §1).
                     format: wgpu::TextureFormat::Rgba8UnormSrgb,
                     usage: wgpu::TextureUsages::TEXTURE_BINDING,
                     view_formats: &[],
@@ -142,12 +142,12 @@ impl GpuScene {
         (self.bounds_min + self.bounds_max) * 0.5
     }
 
-    /// The eight corners of the scene's bounding box.
     /// The scene's adjacency (welded vertices, edges with their triangles), built on first use.
     pub fn edge_mesh(&self) -> std::sync::Arc<EdgeMesh> {
         self.edge_mesh.get_or_init(|| std::sync::Arc::new(EdgeMesh::build(&self.positions, &self.indices, &self.vertex_objects))).clone()
     }
 
+    /// The eight corners of the scene's bounding box.
     pub fn corners(&self) -> [Vec3; 8] {
         let (a, b) = (self.bounds_min, self.bounds_max);
         [0, 1, 2, 3, 4, 5, 6, 7]

@@ -52,7 +52,7 @@ impl LightImage {
         Self::new(width, height, texels)
     }
 
-    /// Radiance weight of a texel: `rgb × alpha` (DESIGN.md §1).
+    /// Radiance weight of a texel: `rgb × alpha` (contract §1).
     pub fn emission(&self, i: u32, j: u32) -> Vec3 {
         let [r, g, b, a] = self.texels[(j * self.width + i) as usize];
         Vec3::new(r, g, b) * a
@@ -69,7 +69,6 @@ impl LightImage {
         sum / (self.width * self.height) as f32
     }
 
-    /// A built-in light image by name. Built-ins take no parameters yet; any given is an error.
     /// Checks a built-in light image's name and (absent) parameters, at submission and before
     /// building it.
     pub fn check_builtin(name: &str, params: &Map<String, Value>, field: &str) -> JobResult<()> {
@@ -90,6 +89,7 @@ impl LightImage {
         Ok(())
     }
 
+    /// A built-in light image by name. Built-ins take no parameters yet; any given is an error.
     pub fn builtin(name: &str, params: &Map<String, Value>, field: &str) -> JobResult<Self> {
         Self::check_builtin(name, params, field)?;
         let white = [1.0, 1.0, 1.0, 1.0];

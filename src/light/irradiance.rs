@@ -110,7 +110,7 @@ pub fn polygon_irradiance(x: Vec3, nx: Vec3, corners: &[Vec3; 4]) -> f32 {
     0.5 * sum.abs()
 }
 
-/// The unshadowed irradiance E0 at x (DESIGN.md §1), per channel: the sum over light cells.
+/// The unshadowed irradiance E0 at x (contract §1), per channel: the sum over light cells.
 pub fn unshadowed_irradiance(light: &AreaLight, cells: &[LightCell], x: Vec3, nx: Vec3) -> Vec3 {
     // One-sided emitter: only points on the lit side receive anything.
     if (x - light.center).dot(light.n) <= 0.0 {
@@ -203,7 +203,7 @@ mod tests {
 
     #[test]
     fn stripes_are_red_on_the_minus_r_side() {
-        // DESIGN.md §1: column 0 along −r. The first stripe is red, so the receiver point
+        // contract §1: column 0 along −r. The first stripe is red, so the receiver point
         // under the −r edge of the light gets more red than blue, and the +r edge the reverse.
         let light = overhead_light(1.0);
         let cells = light_cells(&light, &LightImage::builtin("stripes", &Map::new(), "f").unwrap());

@@ -1,4 +1,4 @@
-//! The area light (DESIGN.md §1): its frame, its RGBA image, the built-in images, and the
+//! The area light (contract §1): its frame, its RGBA image, the built-in images, and the
 //! exact unshadowed irradiance E0 that every method shares.
 //!
 //! Orientation is part of the contract: with `n = normalize(direction)`,
@@ -32,7 +32,7 @@ pub struct AreaLight {
 }
 
 impl AreaLight {
-    /// Builds the frame of DESIGN.md §1, or names the field that makes it degenerate.
+    /// Builds the frame of contract §1, or names the field that makes it degenerate.
     pub fn new(center: Vec3, direction: Vec3, up: Vec3, size_m: Vec2, intensity: f32) -> JobResult<Self> {
         let finite = |v: Vec3| v.is_finite();
         if !finite(center) {
@@ -60,7 +60,7 @@ impl AreaLight {
     }
 
     /// World position of image coordinates `(s, t)` ∈ [0,1]²: s to the right from column 0,
-    /// t downwards from row 0. Column 0 is at `−r`, row 0 at `+u` (DESIGN.md §1).
+    /// t downwards from row 0. Column 0 is at `−r`, row 0 at `+u` (contract §1).
     pub fn image_point(&self, s: f32, t: f32) -> Vec3 {
         self.center + self.r * ((s - 0.5) * self.size_m.x) + self.u * ((0.5 - t) * self.size_m.y)
     }

@@ -1,5 +1,5 @@
 //! Method `hard`: classic shadow mapping from the light centre with binary visibility — the
-//! baseline every soft method is measured against (DESIGN.md §2). Shader:
+//! baseline every soft method is measured against (contract §2). Shader:
 //! `shaders/methods/hard.wgsl`.
 
 use wgpu::util::DeviceExt;

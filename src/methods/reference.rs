@@ -1,4 +1,4 @@
-//! Method `reference`: the physically based visibility of DESIGN.md §1, `Vref = E/E0` per
+//! Method `reference`: the physically based visibility of contract §1, `Vref = E/E0` per
 //! channel, estimated from many point samples on the light. The ground truth every other
 //! method is measured against.
 //!
@@ -69,7 +69,7 @@ pub fn light_samples(light: &AreaLight, image: &LightImage, requested: u32, seed
         for i in 0..gx {
             let s = (i as f32 + rng.next_f32()) / gx as f32;
             let t = (j as f32 + rng.next_f32()) / gy as f32;
-            // Nearest texel: the image is piecewise constant (DESIGN.md §1).
+            // Nearest texel: the image is piecewise constant (contract §1).
             let ti = ((s * image.width as f32) as u32).min(image.width - 1);
             let tj = ((t * image.height as f32) as u32).min(image.height - 1);
             let emission = image.emission(ti, tj);

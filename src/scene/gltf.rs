@@ -1,7 +1,7 @@
 //! glTF 2.0 loading (`.gltf` with embedded `data:` buffers, and `.glb`) into a `Scene`.
 //!
 //! Every node holding a mesh is one object; ids are the rank of the node's index among the
-//! mesh nodes of the scene, so they are stable for a file (DESIGN.md §1). Only `data:` URIs
+//! mesh nodes of the scene, so they are stable for a file (contract §1). Only `data:` URIs
 //! and the GLB binary chunk are read: the loader never opens a file or a network address
 //! named inside a document, whoever sent it.
 

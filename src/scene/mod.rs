@@ -1,4 +1,4 @@
-//! Scenes: triangle meshes with per-object ids and Lambertian albedo (DESIGN.md §1), from
+//! Scenes: triangle meshes with per-object ids and Lambertian albedo (contract §1), from
 //! glTF 2.0 files or built-in generators, each with a default camera and light.
 //!
 //! A `Scene` is CPU data in the layout the GPU draws (one vertex buffer, one index buffer,

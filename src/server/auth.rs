@@ -1,4 +1,4 @@
-//! Access control (issue 11): optional bearer tokens on `/v1` and, unless opened, on
+//! Access control: optional bearer tokens on `/v1` and, unless opened, on
 //! `/metrics`; `/healthz`, `/readyz` and the dashboard's static files stay open (the page asks
 //! for a token and sends it itself). Tokens come from `--auth-token-file` (one per line) and
 //! are kept only as SHA-256 digests; a presented token is hashed and compared with every

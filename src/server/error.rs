@@ -56,7 +56,7 @@ pub fn store_error(error: crate::store::StoreError) -> JobError {
 /// The `error` object clients see for `error`: code, message (generic for internal errors,
 /// which are logged here in full), field. Shared by error responses and failed-job events.
 pub fn error_body(error: &JobError) -> serde_json::Value {
-    let message = if error.is_client_error() {
+    let message = if error.message_is_public() {
         error.message.clone()
     } else {
         tracing::error!(message = %error.message, "job failed inside the renderer");

@@ -1,4 +1,4 @@
-//! Submitted jobs (DESIGN.md §3): `POST /v1/jobs` answers 202 and renders in the background;
+//! Submitted jobs (contract §3): `POST /v1/jobs` answers 202 and renders in the background;
 //! records, server-sent events, images and thumbnails; `DELETE` cancels. With a shared store,
 //! each replica's workers take jobs from the store's queue and follow jobs run elsewhere.
 
@@ -16,7 +16,7 @@ pub(super) async fn job_record(State(state): State<Arc<AppState>>, Path(id): Pat
     }
     let stored = stored_job(&state, &id).await?.ok_or_else(|| unknown_job(&id))?;
     Ok(Json(match stored.result {
-        Some(result) if stored.status == "succeeded" => result,
+        Some(result) if stored.status == JobStatus::Succeeded => result,
         _ => json!({"id": id, "status": stored.status, "progress": {"done": stored.done, "total": stored.total}, "error": stored.error}),
     }))
 }
@@ -133,7 +133,7 @@ pub(super) async fn job_events(State(state): State<Arc<AppState>>, Path(id): Pat
             }
         }
         let event = receiver.borrow_and_update().clone();
-        let name = if event.finished() { event.status } else { "progress" };
+        let name = if event.finished() { event.status.as_str() } else { "progress" };
         let sse = Event::default().event(name).json_data(&event).unwrap_or_else(|_| Event::default().event(name));
         Some((Ok::<_, std::convert::Infallible>(sse), (receiver, stopping, event.finished(), false)))
     });
@@ -142,13 +142,7 @@ pub(super) async fn job_events(State(state): State<Arc<AppState>>, Path(id): Pat
 
 /// A stored job's state as an event.
 pub(super) fn event_of(stored: &StoredJob) -> JobEvent {
-    let status = match stored.status.as_str() {
-        "running" => "running",
-        "succeeded" => "succeeded",
-        "failed" => "failed",
-        "cancelled" => "cancelled",
-        _ => "queued",
-    };
+    let status = stored.status;
     let mut event = JobEvent::status(status);
     (event.done, event.total) = (stored.done, stored.total);
     if event.finished() {
@@ -208,7 +202,7 @@ pub(super) async fn cancel_job(State(state): State<Arc<AppState>>, Path(id): Pat
             }
             let error = crate::supervise::cancelled_error();
             // A running job is counted where it runs, when it stops; a waiting one only here.
-            if stored.status == "queued" {
+            if stored.status == JobStatus::Queued {
                 state.job_finished(&id, stored.job["method"]["name"].as_str().unwrap_or(""), error.code.as_str(), 0.0, None);
             }
             store_failure(&state, &id, failure_detail(&error)).await;
@@ -226,8 +220,8 @@ pub(super) async fn job_image(State(state): State<Arc<AppState>>, Path(id): Path
     unless_unfinished_here(&state, &id)?;
     // A result from the durable store: the bytes and the format its record names.
     let stored = stored_job(&state, &id).await?.ok_or_else(|| unknown_job(&id))?;
-    if stored.status != "succeeded" {
-        return Err(no_image(&id, &stored.status));
+    if stored.status != JobStatus::Succeeded {
+        return Err(no_image(&id, stored.status));
     }
     if stored.image_bytes == 0 {
         return Err(unknown_job(&id)); // Dropped under --results-bytes.
@@ -257,14 +251,14 @@ const THUMBNAIL_SIZE: u32 = 160;
 /// not 404, which would tell a client the job does not exist.
 fn unless_unfinished_here(state: &AppState, id: &str) -> Result<(), ApiError> {
     match state.jobs.submitted(id).map(|events| events.borrow().status) {
-        Some(status) if status != "succeeded" => Err(no_image(id, status)),
+        Some(status) if status != JobStatus::Succeeded => Err(no_image(id, status)),
         _ => Ok(()),
     }
 }
 
-fn no_image(id: &str, status: &str) -> ApiError {
+fn no_image(id: &str, status: JobStatus) -> ApiError {
     let message = match status {
-        "queued" | "running" => format!("job `{id}` is {status}; its image exists once it has succeeded"),
+        JobStatus::Queued | JobStatus::Running => format!("job `{id}` is {status}; its image exists once it has succeeded"),
         _ => format!("job `{id}` {status}; it has no image"),
     };
     ApiError(JobError::new(ErrorCode::Conflict, message))

@@ -1,4 +1,4 @@
-//! The HTTP service (DESIGN.md §3): `app(state)` builds the router, `serve` binds it, warms
+//! The HTTP service (contract §3): `app(state)` builds the router, `serve` binds it, warms
 //! the engine up and shuts down gracefully; synchronous renders, limits, stats and metrics
 //! are here, submitted jobs in `jobs`, uploads in `uploads`. Rendering runs on the blocking
 //! pool so the async workers keep answering health checks while the device is busy.
@@ -31,8 +31,8 @@ use serde_json::{json, Value};
 use crate::config::ServeConfig;
 use crate::engine::{Engine, Rendered};
 use crate::error::{ErrorCode, JobError};
-use crate::job::Job;
-use crate::jobs::{JobEvent, JobQueue, JobStore, JobSummary, RecentJobs};
+use crate::job::{Job, JobStatus};
+use crate::jobs::{JobEvent, JobQueue, JobSummary, LiveJobs, RecentJobs};
 use crate::light::BUILTIN_LIGHT_IMAGES;
 use crate::methods::REGISTRY;
 use crate::scene::builtin::BUILTIN_SCENES;

@@ -9,7 +9,7 @@ pub struct AppState {
     pub(super) metrics: metrics::Metrics,
     pub(super) queue: JobQueue,
     pub(super) queue_config: QueueConfig,
-    pub(super) jobs: JobStore,
+    pub(super) jobs: LiveJobs,
     pub(super) results_kept: usize,
     /// The last finished jobs, for `/v1/stats` and the dashboard.
     pub(super) recent: RecentJobs,
@@ -37,7 +37,7 @@ impl AppState {
             metrics: metrics::Metrics::new(&engine.gpu().adapter),
             queue: JobQueue::new(QueueConfig::default()),
             queue_config: QueueConfig::default(),
-            jobs: JobStore::new(results_kept, DEFAULT_RESULTS_TTL),
+            jobs: LiveJobs::new(results_kept, DEFAULT_RESULTS_TTL),
             results_kept,
             recent: RecentJobs::new(RECENT_JOBS),
             store: None,
@@ -102,7 +102,7 @@ impl AppState {
 
     /// Finished jobs (results, records and events) are dropped `ttl` after they finished.
     pub fn with_results_ttl(self, ttl: std::time::Duration) -> Self {
-        Self { jobs: JobStore::new(self.results_kept, ttl), ..self }
+        Self { jobs: LiveJobs::new(self.results_kept, ttl), ..self }
     }
 
     /// Records a finished job in the metrics and in the recent jobs the dashboard shows.
@@ -187,7 +187,7 @@ impl AppState {
     /// holds its place in the queue and the room promised to its result until its outcome is
     /// stored.
     pub(super) fn spawn_submitted(self: &Arc<Self>, id: String, job: Job, admitted: Admitted) {
-        let (events, _) = tokio::sync::watch::channel(JobEvent::status("queued"));
+        let (events, _) = tokio::sync::watch::channel(JobEvent::status(JobStatus::Queued));
         let cancel = self.jobs.submit(id.clone(), events.clone());
         let state = self.clone();
         tokio::spawn(async move { run_submitted(state, id, job, admitted, events, cancel).await });

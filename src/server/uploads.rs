@@ -1,4 +1,4 @@
-//! Uploads (DESIGN.md §3): `POST` a scene or light image for its content id, `PUT` it under
+//! Uploads (contract §3): `POST` a scene or light image for its content id, `PUT` it under
 //! the SHA-256 a client computed, `HEAD` to ask whether it is held, `DELETE` to drop it; and,
 //! with a shared store, fetching an upload another replica received.
 

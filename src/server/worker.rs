@@ -69,14 +69,14 @@ pub(super) async fn work_shared_queue(state: Arc<AppState>, consumer: String) {
         };
         let Ok(admitted) = state.queue.admit_waiting().await else { return };
         let started = std::time::Instant::now();
-        let (events, _) = tokio::sync::watch::channel(JobEvent::status("queued"));
+        let (events, _) = tokio::sync::watch::channel(JobEvent::status(JobStatus::Queued));
         let cancel = state.jobs.submit(stored.id.clone(), events.clone());
         let method = stored.job["method"]["name"].as_str().unwrap_or("hard").to_owned();
         let job = match Job::from_json_limited(stored.job.to_string().as_bytes(), state.engine.limits()) {
             Ok(_) if stored.attempts >= MAX_ATTEMPTS => {
                 let detail = abandoned(stored.attempts);
                 store_failure(&state, &stored.id, detail.clone()).await;
-                events.send_modify(|event| event.finish("failed", Some(detail)));
+                events.send_modify(|event| event.finish(JobStatus::Failed, Some(detail)));
                 continue;
             }
             Ok(job) => job,
@@ -129,7 +129,7 @@ pub(super) async fn render_and_store(
     started: std::time::Instant,
 ) {
     let method = job.method.name.clone();
-    events.send_replace(JobEvent::status("running"));
+    events.send_replace(JobEvent::status(JobStatus::Running));
     let running = state.metrics.job_running();
     if let Some(store) = &state.store {
         let running_id = id.clone();
@@ -191,7 +191,7 @@ pub(super) async fn render_and_store(
     state.job_finished(&id, &method, "ok", started.elapsed().as_secs_f64(), Some(&rendered));
     tracing::info!(%id, total_ms = rendered.timings.total_ms, "job done");
     state.jobs.keep(id, rendered);
-    events.send_modify(|event| event.finish("succeeded", None));
+    events.send_modify(|event| event.finish(JobStatus::Succeeded, None));
     // The queue place goes only now: a drain that sees it back finds the job recorded.
     drop(admitted);
 }
@@ -247,7 +247,7 @@ pub(super) async fn finish_failed(
     state.job_finished(id, method, error.code.as_str(), started.elapsed().as_secs_f64(), None);
     let detail = failure_detail(&error);
     let status = StoredJob::status_after(&detail);
-    if status == "cancelled" {
+    if status == JobStatus::Cancelled {
         tracing::info!(%id, "job cancelled");
     }
     store_failure(state, id, detail.clone()).await;

@@ -27,6 +27,7 @@ use redb::{Database, ReadableDatabase, ReadableTable, TableDefinition};
 use serde_json::Value;
 
 use super::{unix_ms, JobStore, StoreError, StoreResult, StoredJob};
+use crate::job::JobStatus;
 
 /// Job records by id: `StoredJob` as JSON.
 const JOBS: TableDefinition<&str, &[u8]> = TableDefinition::new("jobs");
@@ -131,7 +132,7 @@ impl EmbeddedStore {
     /// Image files whose job did not succeed (a crash between the file and its record) go.
     fn remove_orphan_images(&self) -> anyhow::Result<()> {
         let kept: std::collections::HashSet<String> =
-            self.all()?.into_iter().filter(|j| j.status == "succeeded" && j.image_bytes > 0).map(|j| j.id).collect();
+            self.all()?.into_iter().filter(|j| j.status == JobStatus::Succeeded && j.image_bytes > 0).map(|j| j.id).collect();
         for entry in std::fs::read_dir(self.dir.join("images"))? {
             let entry = entry?;
             if !kept.contains(entry.file_name().to_string_lossy().as_ref()) {
@@ -226,7 +227,7 @@ impl JobStore for EmbeddedStore {
 
     fn start(&self, id: &str) -> StoreResult<()> {
         self.update(id, |job| {
-            job.status = "running".into();
+            job.status = JobStatus::Running;
             job.attempts += 1;
         })
     }
@@ -234,7 +235,7 @@ impl JobStore for EmbeddedStore {
     fn succeed(&self, id: &str, result: &Value, image: &[u8]) -> StoreResult<bool> {
         // A cancelled record stays cancelled (`JobStore::succeed`). One process uses this
         // store, so the read and the write below cannot be split by another writer's cancel.
-        if self.get(id)?.is_some_and(|job| job.status == "cancelled") {
+        if self.get(id)?.is_some_and(|job| job.status == JobStatus::Cancelled) {
             return Ok(false);
         }
         if !safe_id(id) {
@@ -243,7 +244,7 @@ impl JobStore for EmbeddedStore {
         // The image first: a record that says `succeeded` always has its image.
         self.write_image(id, image)?;
         let recorded = self.update(id, |job| {
-            job.status = "succeeded".into();
+            job.status = JobStatus::Succeeded;
             job.finished_unix_ms = Some(unix_ms());
             job.result = Some(result.clone());
             job.image_bytes = image.len() as u64;
@@ -256,7 +257,7 @@ impl JobStore for EmbeddedStore {
 
     fn fail(&self, id: &str, error: &Value) -> StoreResult<()> {
         self.update(id, |job| {
-            job.status = StoredJob::status_after(error).into();
+            job.status = StoredJob::status_after(error);
             job.finished_unix_ms = Some(unix_ms());
             job.error = Some(error.clone());
         })
@@ -383,14 +384,14 @@ mod tests {
         }
         // As after a crash: a new process opens the same directory.
         let store = EmbeddedStore::open(&dir).unwrap();
-        let unfinished: Vec<(String, String, u32)> =
+        let unfinished: Vec<(String, JobStatus, u32)> =
             store.unfinished().unwrap().into_iter().map(|j| (j.id, j.status, j.attempts)).collect();
-        assert_eq!(unfinished, vec![("a".into(), "running".into(), 1), ("b".into(), "queued".into(), 0)]);
+        assert_eq!(unfinished, vec![("a".into(), JobStatus::Running, 1), ("b".into(), JobStatus::Queued, 0)]);
         let c = store.get("c").unwrap().unwrap();
-        assert_eq!((c.status.as_str(), c.image_bytes, c.result.unwrap()["width"].as_u64()), ("succeeded", 9, Some(4)));
+        assert_eq!((c.status, c.image_bytes, c.result.unwrap()["width"].as_u64()), (JobStatus::Succeeded, 9, Some(4)));
         assert_eq!(store.image("c").unwrap().unwrap(), b"png bytes");
         store.fail("b", &serde_json::json!({"code": "internal"})).unwrap();
-        assert_eq!(store.get("b").unwrap().unwrap().status, "failed");
+        assert_eq!(store.get("b").unwrap().unwrap().status, JobStatus::Failed);
         assert!(store.get("zzz").unwrap().is_none() && store.start("zzz").is_err());
         std::fs::remove_dir_all(&dir).ok();
     }

@@ -18,6 +18,7 @@ pub use embedded::EmbeddedStore;
 pub use health::{Store, StoreHealth, StoreStatus};
 pub use redis::RedisStore;
 
+use crate::job::JobStatus;
 use crate::uploads::Kind;
 
 /// Times a job may be started by a daemon that then died before finishing it; the next start
@@ -28,8 +29,7 @@ pub const MAX_ATTEMPTS: u32 = 3;
 #[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
 pub struct StoredJob {
     pub id: String,
-    /// `queued`, `running`, `succeeded`, `failed` or `cancelled` (DESIGN.md §3).
-    pub status: String,
+    pub status: JobStatus,
     /// The job as the client sent it (validated at submission).
     pub job: Value,
     pub submitted_unix_ms: u64,
@@ -61,19 +61,19 @@ pub struct StoredJob {
 impl StoredJob {
     /// A job just accepted: queued, submitted now.
     pub fn queued(id: &str, job: &Value) -> Self {
-        Self { id: id.to_owned(), status: "queued".into(), job: job.clone(), submitted_unix_ms: unix_ms(), ..Self::default() }
+        Self { id: id.to_owned(), status: JobStatus::Queued, job: job.clone(), submitted_unix_ms: unix_ms(), ..Self::default() }
     }
 
     pub fn finished(&self) -> bool {
-        matches!(self.status.as_str(), "succeeded" | "failed" | "cancelled")
+        self.status.finished()
     }
 
     /// The status a job ends in with `error`: `cancelled` for a cancellation, else `failed`.
-    pub fn status_after(error: &Value) -> &'static str {
+    pub fn status_after(error: &Value) -> JobStatus {
         if error["code"] == "cancelled" {
-            "cancelled"
+            JobStatus::Cancelled
         } else {
-            "failed"
+            JobStatus::Failed
         }
     }
 }

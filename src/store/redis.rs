@@ -22,6 +22,7 @@ use redis::{Commands, Connection};
 use serde_json::Value;
 
 use super::{unix_ms, JobStore, StoreError, StoreResult, StoredJob};
+use crate::job::JobStatus;
 use crate::uploads::Kind;
 
 const QUEUE: &str = "penumbra:queue";
@@ -203,7 +204,7 @@ impl JobStore for RedisStore {
 
     fn start(&self, id: &str) -> StoreResult<()> {
         let job = self.update(id, |job| {
-            job.status = "running".into();
+            job.status = JobStatus::Running;
             job.attempts += 1;
         })?;
         self.put_record(&job, false)
@@ -215,12 +216,12 @@ impl JobStore for RedisStore {
             if cancelled {
                 // The record may say `running` again (a progress report read it before the
                 // cancel): the cancel key decides.
-                job.status = "cancelled".into();
+                job.status = JobStatus::Cancelled;
                 job.finished_unix_ms = Some(unix_ms());
                 job.error =
                     Some(serde_json::json!({"code": "cancelled", "message": "the job was cancelled before it finished", "status": 409}));
             } else {
-                job.status = "succeeded".into();
+                job.status = JobStatus::Succeeded;
                 job.finished_unix_ms = Some(unix_ms());
                 job.result = Some(result.clone());
                 job.image_bytes = image.len() as u64;
@@ -232,12 +233,12 @@ impl JobStore for RedisStore {
     }
 
     fn fail(&self, id: &str, error: &Value) -> StoreResult<()> {
-        if StoredJob::status_after(error) == "cancelled" {
+        if StoredJob::status_after(error) == JobStatus::Cancelled {
             let ttl = self.ttl.as_secs();
             self.with(|c| c.set_ex::<_, _, ()>(cancel_key(id), 1, ttl))?;
         }
         let job = self.update(id, |job| {
-            job.status = StoredJob::status_after(error).into();
+            job.status = StoredJob::status_after(error);
             job.finished_unix_ms = Some(unix_ms());
             job.error = Some(error.clone());
         })?;

@@ -1,6 +1,6 @@
 // Method `reference`, per light sample: adds this sample's contribution to the two sums of
 // the ratio estimator, per pixel: Σ L·G·V (shadowed) and Σ L·G (unshadowed), with
-// G = cosθx·cosθy/|x−y|² and V from the sample's distance map (DESIGN.md §1).
+// G = cosθx·cosθy/|x−y|² and V from the sample's distance map (contract §1).
 
 #import common/frame_inputs.wgsl
 #import methods/reference/sample.wgsl

@@ -190,7 +190,7 @@ impl ShadowMethod for Wedges {
             })
             .collect();
         let polygon_buffer = storage("Wedges::polygons", bytemuck::cast_slice(&polygon_data));
-        let wedge_buffer = storage("Wedges::wedges", bytemuck::cast_slice(&wedges));
+        let wedge_buffer = storage("Wedges::wedges", bytemuck::cast_slice(wedges));
         let ranges = storage("Wedges::tile_ranges", &vec![0u8; tile_count * 8]);
         let li = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("Wedges::li"),
