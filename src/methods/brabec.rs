@@ -19,13 +19,10 @@
 //! derived from the light's size instead of the ad-hoc `r_scale`, `r_bias`, `r_shrink` (the
 //! paper's §6 future work), which remain as overrides.
 
-use wgpu::util::DeviceExt;
-
 use super::{Counters, MethodContext, Param, ParamSpec, Params, ShadowMethod, BIAS_TEXELS, SLOPE_BIAS_TEXELS};
 use crate::error::JobResult;
 use crate::gpu::layout;
 use crate::gpu::pool::PipelineKey;
-use crate::gpu::readback::read_buffer;
 
 pub struct Brabec;
 
@@ -139,11 +136,7 @@ impl ShadowMethod for Brabec {
             use_ids: u32::from(params.get(&OBJECT_IDS)),
         };
         let device = ctx.gpu.device.clone();
-        let uniform_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("Brabec::uniforms"),
-            contents: bytemuck::bytes_of(&uniforms),
-            usage: wgpu::BufferUsages::UNIFORM,
-        });
+        let uniform_buffer = ctx.uniforms("Brabec::uniforms", &uniforms);
         let pixels = u64::from(ctx.width) * u64::from(ctx.height);
         let state = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("Brabec::state"),
@@ -151,12 +144,7 @@ impl ShadowMethod for Brabec {
             usage: wgpu::BufferUsages::STORAGE,
             mapped_at_creation: false,
         });
-        let counters = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("Brabec::counters"),
-            size: 16,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
+        let counters = ctx.counters("Brabec::counters", 4);
         let io = [
             layout::uniform(0),
             layout::storage_read_write(1),
@@ -168,16 +156,16 @@ impl ShadowMethod for Brabec {
         let columns = ctx.screen_pipeline(PipelineKey::new("brabec.columns"), "methods/brabec/columns.wgsl", &io);
         let rows = ctx.screen_pipeline(PipelineKey::new("brabec.rows"), "methods/brabec/rows.wgsl", &io);
         let finish = ctx.screen_pipeline(PipelineKey::new("brabec.finish"), "methods/brabec/finish.wgsl", &io);
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("Brabec::bind_group"),
-            layout: &classify.get_bind_group_layout(1),
-            entries: &layout::entries(&[
+        let bind_group = ctx.bind(
+            "Brabec::bind_group",
+            &classify,
+            &[
                 uniform_buffer.as_entire_binding(),
                 state.as_entire_binding(),
                 counters.as_entire_binding(),
                 wgpu::BindingResource::TextureView(ctx.visibility),
-            ]),
-        });
+            ],
+        );
 
         let (w, h) = (ctx.width, ctx.height);
         let stride = uniforms.lattice_stride;
@@ -191,7 +179,6 @@ impl ShadowMethod for Brabec {
             passes.push((&rows, ((h * line_groups(w)).div_ceil(64), 1)));
         }
         passes.push((&finish, (w.div_ceil(8), h.div_ceil(8))));
-        ctx.encoder.clear_buffer(&counters, 0, None);
         {
             let mut pass = ctx.encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("Brabec::passes"),
@@ -204,8 +191,7 @@ impl ShadowMethod for Brabec {
                 pass.dispatch_workgroups(x, y, 1);
             }
         }
-        ctx.flush()?;
-        let raw: Vec<u32> = bytemuck::cast_slice(&read_buffer(ctx.gpu, &counters)?).to_vec();
+        let raw = ctx.read_counters(&counters)?;
         let (searches, interpolated, radius_16, shaded) = (raw[0], raw[1], raw[2], raw[3]);
         Ok(Counters::from([
             ("pixels_shaded".to_owned(), f64::from(shaded)),

@@ -24,7 +24,6 @@ use super::{Counters, MethodContext, Param, ParamSpec, Params, BIAS_TEXELS, SLOP
 use crate::error::JobResult;
 use crate::gpu::layout;
 use crate::gpu::pool::{DerivedKey, PipelineKey};
-use crate::gpu::readback::read_buffer;
 use crate::light::LightImage;
 
 /// Parameters both filter methods take, with the same meaning.
@@ -127,40 +126,20 @@ pub(super) fn run(
             layout::storage_read_write(3),
         ],
     );
-    let device = &ctx.gpu.device;
-    let uniform_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("Filter::uniforms"),
-        contents: bytemuck::bytes_of(&uniforms),
-        usage: wgpu::BufferUsages::UNIFORM,
-    });
-    let counters = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("Filter::counters"),
-        contents: &[0; 32],
-        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-    });
-    let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some("Filter::bind_group"),
-        layout: &pipeline.get_bind_group_layout(1),
-        entries: &layout::entries(&[
+    let uniform_buffer = ctx.uniforms("Filter::uniforms", &uniforms);
+    let counters = ctx.counters("Filter::counters", 8);
+    let bind_group = ctx.bind(
+        "Filter::bind_group",
+        &pipeline,
+        &[
             wgpu::BindingResource::TextureView(ctx.visibility),
             uniform_buffer.as_entire_binding(),
             light_regions.as_entire_binding(),
             counters.as_entire_binding(),
-        ]),
-    });
-    let (gx, gy) = ctx.dispatch_size();
-    {
-        let mut pass = ctx.encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some("Filter::pass"),
-            timestamp_writes: ctx.timer.compute_scope("method"),
-        });
-        pass.set_pipeline(&pipeline);
-        pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
-        pass.set_bind_group(1, &bind_group, &[]);
-        pass.dispatch_workgroups(gx, gy, 1);
-    }
-    ctx.flush()?;
-    let c: Vec<u32> = bytemuck::cast_slice(&read_buffer(ctx.gpu, &counters)?).to_vec();
+        ],
+    );
+    ctx.dispatch_screen("Filter::pass", &pipeline, &bind_group);
+    let c = ctx.read_counters(&counters)?;
     Ok(FilterCounts { levels: [c[0], c[1], c[2]], forced_by_light: c[3], filtered: c[4], covered: c[5] })
 }
 

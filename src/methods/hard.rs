@@ -2,8 +2,6 @@
 //! baseline every soft method is measured against (contract §2). Shader:
 //! `shaders/methods/hard.wgsl`.
 
-use wgpu::util::DeviceExt;
-
 use super::{Counters, MethodContext, ParamSpec, Params, ShadowMethod, BIAS_TEXELS, SLOPE_BIAS_TEXELS};
 use crate::error::JobResult;
 use crate::gpu::layout;
@@ -40,30 +38,13 @@ impl ShadowMethod for Hard {
             "methods/hard.wgsl",
             &[layout::storage_texture(0, wgpu::TextureFormat::Rgba32Float), layout::uniform(1)],
         );
-        let device = &ctx.gpu.device;
-        let uniforms = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("Hard::uniforms"),
-            contents: bytemuck::bytes_of(&HardUniforms {
-                bias_texels: params.get(&BIAS_TEXELS),
-                slope_bias_texels: params.get(&SLOPE_BIAS_TEXELS),
-                _pad: [0.0; 2],
-            }),
-            usage: wgpu::BufferUsages::UNIFORM,
-        });
-        let outputs = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("Hard::outputs"),
-            layout: &pipeline.get_bind_group_layout(1),
-            entries: &layout::entries(&[wgpu::BindingResource::TextureView(ctx.visibility), uniforms.as_entire_binding()]),
-        });
-        let (gx, gy) = ctx.dispatch_size();
-        let mut pass = ctx.encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some("Hard::pass"),
-            timestamp_writes: ctx.timer.compute_scope("method"),
-        });
-        pass.set_pipeline(&pipeline);
-        pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
-        pass.set_bind_group(1, &outputs, &[]);
-        pass.dispatch_workgroups(gx, gy, 1);
+        let uniforms = ctx.uniforms(
+            "Hard::uniforms",
+            &HardUniforms { bias_texels: params.get(&BIAS_TEXELS), slope_bias_texels: params.get(&SLOPE_BIAS_TEXELS), _pad: [0.0; 2] },
+        );
+        let outputs =
+            ctx.bind("Hard::outputs", &pipeline, &[wgpu::BindingResource::TextureView(ctx.visibility), uniforms.as_entire_binding()]);
+        ctx.dispatch_screen("Hard::pass", &pipeline, &outputs);
         Ok(Counters::new())
     }
 }

@@ -70,6 +70,55 @@ impl MethodContext<'_> {
         })
     }
 
+    /// A uniform buffer holding `value` (laid out as its WGSL struct).
+    pub fn uniforms<T: bytemuck::Pod>(&self, label: &'static str, value: &T) -> wgpu::Buffer {
+        use wgpu::util::DeviceExt as _;
+        self.gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(label),
+            contents: bytemuck::bytes_of(value),
+            usage: wgpu::BufferUsages::UNIFORM,
+        })
+    }
+
+    /// `words` zeroed u32 counters the shaders add to atomically, to be read back with
+    /// `read_counters`.
+    pub fn counters(&self, label: &'static str, words: usize) -> wgpu::Buffer {
+        use wgpu::util::DeviceExt as _;
+        self.gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(label),
+            contents: &vec![0u8; words * 4],
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        })
+    }
+
+    /// Runs what has been recorded and reads `counters` back.
+    pub fn read_counters(&mut self, counters: &wgpu::Buffer) -> JobResult<Vec<u32>> {
+        self.flush()?;
+        Ok(bytemuck::cast_slice(&crate::gpu::readback::read_buffer(self.gpu, counters)?).to_vec())
+    }
+
+    /// Group 1 of a screen pipeline: `resources` at bindings 0, 1, 2, … in order.
+    pub fn bind(&self, label: &'static str, pipeline: &wgpu::ComputePipeline, resources: &[wgpu::BindingResource<'_>]) -> wgpu::BindGroup {
+        self.gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some(label),
+            layout: &pipeline.get_bind_group_layout(1),
+            entries: &crate::gpu::layout::entries(resources),
+        })
+    }
+
+    /// One compute pass over the output (8×8 workgroups), timed as the method phase: the
+    /// frame inputs in group 0, `group` in group 1.
+    pub fn dispatch_screen(&mut self, label: &'static str, pipeline: &wgpu::ComputePipeline, group: &wgpu::BindGroup) {
+        let (gx, gy) = self.dispatch_size();
+        let mut pass = self
+            .encoder
+            .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(label), timestamp_writes: self.timer.compute_scope("method") });
+        pass.set_pipeline(pipeline);
+        pass.set_bind_group(0, &self.inputs.bind_group, &[]);
+        pass.set_bind_group(1, group, &[]);
+        pass.dispatch_workgroups(gx, gy, 1);
+    }
+
     /// Workgroup counts covering the output with 8×8 workgroups.
     pub fn dispatch_size(&self) -> (u32, u32) {
         (self.width.div_ceil(8), self.height.div_ceil(8))
