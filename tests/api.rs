@@ -6,7 +6,8 @@ mod common;
 
 use std::sync::Arc;
 
-use penumbra::engine::{Engine, PathPolicy};
+use common::daemon::{free_address, Daemon};
+use penumbra::engine::{Engine, PathPolicy, DEFAULT_CACHE_BYTES};
 use penumbra::job::Limits;
 use penumbra::server::{app, AppState};
 use reqwest::StatusCode;
@@ -14,28 +15,8 @@ use serde_json::{json, Value};
 
 /// Starts the real server on 127.0.0.1:0 with a small body limit and a scene directory.
 async fn start() -> (String, tempdir::Dir) {
-    let (base, dir, _) = start_with_engine().await;
+    let (base, dir, _, _) = start_configured(DEFAULT_CACHE_BYTES, |state| state).await;
     (base, dir)
-}
-
-async fn start_with_engine() -> (String, tempdir::Dir, Arc<Engine>) {
-    start_with_cache(penumbra::engine::DEFAULT_CACHE_BYTES).await
-}
-
-/// The same server with an upload cache of `cache_bytes`.
-async fn start_with_cache(cache_bytes: u64) -> (String, tempdir::Dir, Arc<Engine>) {
-    start_with(cache_bytes, penumbra::server::QueueConfig::default()).await
-}
-
-/// The same server with an upload cache of `cache_bytes` and the job queue `queue`.
-async fn start_with(cache_bytes: u64, queue: penumbra::server::QueueConfig) -> (String, tempdir::Dir, Arc<Engine>) {
-    let (base, dir, engine, _) = start_with_state(cache_bytes, queue).await;
-    (base, dir, engine)
-}
-
-/// `start_with`, also handing back the server's state.
-async fn start_with_state(cache_bytes: u64, queue: penumbra::server::QueueConfig) -> (String, tempdir::Dir, Arc<Engine>, Arc<AppState>) {
-    start_configured(cache_bytes, |state| state.with_queue(queue)).await
 }
 
 /// The server with an upload cache of `cache_bytes` and its state set up by `configure`.
@@ -436,7 +417,7 @@ async fn openapi_document_matches_the_server() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn compare_reports_quality_against_a_cached_reference() {
-    let (base, _dir, engine) = start_with_engine().await;
+    let (base, _dir, engine, _) = start_configured(DEFAULT_CACHE_BYTES, |state| state).await;
     let client = reqwest::Client::new();
     let mut job = small_job("png");
     job["compare"] = json!(true);
@@ -482,7 +463,7 @@ async fn uploads_are_content_addressed_cached_under_a_budget_and_rendered_by_id(
     let gltf = common::as_gltf_with_data_uri();
     // Room for one of the two (equal) test scenes, not both: the second evicts the first.
     let cost = 2 * penumbra::scene::gltf::load(&glb, &Limits::default(), "scene").unwrap().gpu_bytes();
-    let (base, dir, engine) = start_with_cache(cost + cost / 2).await;
+    let (base, dir, engine, _) = start_configured(cost + cost / 2, |state| state).await;
     let client = reqwest::Client::new();
     let upload = |path: &'static str, body: Vec<u8>| {
         let request = client.post(format!("{base}{path}")).body(body);
@@ -625,11 +606,6 @@ async fn wait_ready(base: &str) {
     panic!("the daemon at {base} did not become ready in 30 s");
 }
 
-/// A free port on 127.0.0.1, as `127.0.0.1:PORT`.
-fn free_address() -> String {
-    std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().to_string()
-}
-
 /// Polls `/metrics` (at most 30 s) until `ready` holds for its text.
 async fn wait_for_metrics(client: &reqwest::Client, base: &str, ready: impl Fn(&str) -> bool) {
     for _ in 0..600 {
@@ -673,7 +649,7 @@ async fn the_queue_is_bounded_has_a_deadline_and_drops_jobs_whose_client_left() 
     // Room for one job. With the device held, one job is admitted and waits; the next is
     // refused at once with 429 and Retry-After; once the device is free the first completes.
     let one = QueueConfig { capacity: 1, concurrency: 1, deadline: Duration::from_secs(60) };
-    let (base, _dir, _, state) = start_with_state(penumbra::engine::DEFAULT_CACHE_BYTES, one).await;
+    let (base, _dir, _, state) = start_configured(DEFAULT_CACHE_BYTES, |state| state.with_queue(one)).await;
     let held = state.try_hold_device().expect("the device is free");
     let waiting = tokio::spawn(render(&base));
     wait_for_stats(&client, &base, |s| s["jobs_queued"] == 1).await;
@@ -687,7 +663,7 @@ async fn the_queue_is_bounded_has_a_deadline_and_drops_jobs_whose_client_left() 
     // A job that cannot reach the device before the deadline fails with 503; one whose client
     // gives up while it waits is dropped, never rendered, and counted as cancelled.
     let short = QueueConfig { capacity: 8, concurrency: 1, deadline: Duration::from_secs(1) };
-    let (base, _dir, _, state) = start_with_state(penumbra::engine::DEFAULT_CACHE_BYTES, short).await;
+    let (base, _dir, _, state) = start_configured(DEFAULT_CACHE_BYTES, |state| state.with_queue(short)).await;
     let held = state.try_hold_device().expect("the device is free");
     let late = render(&base).await.unwrap();
     assert_eq!(late.status(), StatusCode::SERVICE_UNAVAILABLE);
@@ -747,7 +723,7 @@ async fn submitted_jobs_report_progress_as_server_sent_events_and_finish() {
 async fn draining_for_shutdown_waits_for_submitted_jobs_and_admits_no_more() {
     use std::time::Duration;
     let queue = penumbra::server::QueueConfig { capacity: 4, concurrency: 1, deadline: Duration::from_secs(60) };
-    let (base, _dir, _, state) = start_with_state(penumbra::engine::DEFAULT_CACHE_BYTES, queue).await;
+    let (base, _dir, _, state) = start_configured(DEFAULT_CACHE_BYTES, |state| state.with_queue(queue)).await;
     let client = reqwest::Client::new();
     let held = state.try_hold_device().expect("the device is free");
     let accepted: Value = client.post(format!("{base}/v1/jobs")).json(&small_job("png")).send().await.unwrap().json().await.unwrap();
@@ -893,7 +869,7 @@ async fn a_client_that_disconnects_mid_render_cancels_its_job_and_others_are_ser
 #[tokio::test(flavor = "multi_thread")]
 async fn finished_jobs_expire_after_their_time() {
     let ttl = std::time::Duration::from_millis(400);
-    let (base, _dir, _, _) = start_configured(penumbra::engine::DEFAULT_CACHE_BYTES, |state| state.with_results_ttl(ttl)).await;
+    let (base, _dir, _, _) = start_configured(DEFAULT_CACHE_BYTES, |state| state.with_results_ttl(ttl)).await;
     let client = reqwest::Client::new();
     let accepted: Value = client.post(format!("{base}/v1/jobs")).json(&small_job("png")).send().await.unwrap().json().await.unwrap();
     let record = format!("{base}{}", accepted["record"].as_str().unwrap());
@@ -1021,13 +997,7 @@ async fn accepted_jobs_survive_sigkill_and_sigterm_and_finish_after_a_restart() 
     let address = free_address();
     let base = format!("http://{address}");
     let start = || {
-        std::process::Command::new(env!("CARGO_BIN_EXE_penumbra"))
-            .args(["serve", "--listen", &address, "--no-warm-up", "--data-dir"])
-            .arg(data.path())
-            .env("PENUMBRA_LOG", "warn")
-            .stderr(std::process::Stdio::null())
-            .spawn()
-            .expect("the daemon starts")
+        common::daemon::serve_command(&address).arg("--no-warm-up").arg("--data-dir").arg(data.path()).spawn().expect("the daemon starts")
     };
     let client = reqwest::Client::new();
     let ready = || wait_ready(&base);
@@ -1134,7 +1104,7 @@ async fn a_job_that_keeps_killing_its_daemon_is_failed_with_a_reason() {
     store.accept("plain", &small_job("png")).unwrap();
     let shared: Arc<dyn JobStore> = store.clone();
     let (base, _dir, _, state) =
-        start_configured(penumbra::engine::DEFAULT_CACHE_BYTES, |s| s.with_store(penumbra::store::Store::new(shared, "embedded", 0))).await;
+        start_configured(DEFAULT_CACHE_BYTES, |s| s.with_store(penumbra::store::Store::new(shared, "embedded", 0))).await;
     assert_eq!(state.resume_unfinished().await.unwrap(), 1);
     let client = reqwest::Client::new();
     let poison: Value = client.get(format!("{base}/v1/jobs/poison")).send().await.unwrap().json().await.unwrap();
@@ -1207,7 +1177,7 @@ async fn submit_uploads_only_what_the_server_lacks_and_follows_progress() {
 async fn bearer_tokens_guard_the_api_and_cors_is_closed_unless_configured() {
     let tokens = ["first-token-0123456789abcdef", "second-token-0123456789abcdef"];
     let origins = vec!["https://tools.example".to_owned()];
-    let (base, _dir, _, _) = start_configured(penumbra::engine::DEFAULT_CACHE_BYTES, |state| {
+    let (base, _dir, _, _) = start_configured(DEFAULT_CACHE_BYTES, |state| {
         state.with_auth(penumbra::server::auth::Auth::new(&tokens, false)).with_cors_origins(&origins).unwrap()
     })
     .await;
@@ -1268,8 +1238,8 @@ fn tokens_never_reach_the_logs() {
     let token = "log-probe-token-5f1e0c9a7b";
     std::fs::write(dir.path().join("tokens"), format!("# the probe\n{token}\n")).unwrap();
     let address = free_address();
-    let mut daemon = std::process::Command::new(env!("CARGO_BIN_EXE_penumbra"))
-        .args(["serve", "--no-warm-up", "--job-store", "memory", "--listen", &address, "--auth-token-file"])
+    let mut daemon = common::daemon::serve_command(&address)
+        .args(["--no-warm-up", "--job-store", "memory", "--auth-token-file"])
         .arg(dir.path().join("tokens"))
         .env("PENUMBRA_LOG", "debug")
         .stderr(std::process::Stdio::piped())
@@ -1357,32 +1327,14 @@ async fn limits_are_flags_listed_and_enforced_with_the_field_named() {
 }
 
 /// `penumbra serve ARGS` (no warm-up, a free loopback port, `warn` logs) with extra
-/// environment variables, once ready: the process (killed when dropped) and its base URL.
-async fn serve(args: &[&str], env: &[(&str, &str)]) -> (KillOnDrop, String) {
+/// environment variables, once ready: the daemon (killed when dropped) and its base URL.
+async fn serve(args: &[&str], env: &[(&str, &str)]) -> (Daemon, String) {
     let address = free_address();
-    let daemon = KillOnDrop(
-        std::process::Command::new(env!("CARGO_BIN_EXE_penumbra"))
-            .args(["serve", "--no-warm-up", "--listen", &address])
-            .args(args)
-            .env("PENUMBRA_LOG", "warn")
-            .envs(env.iter().copied())
-            .stderr(std::process::Stdio::null())
-            .spawn()
-            .unwrap(),
-    );
-    let base = format!("http://{address}");
-    wait_ready(&base).await;
+    let mut command = common::daemon::serve_command(&address);
+    command.arg("--no-warm-up").args(args).envs(env.iter().copied());
+    let daemon = tokio::task::spawn_blocking(move || Daemon::start(command, &address)).await.unwrap();
+    let base = daemon.base.clone();
     (daemon, base)
-}
-
-/// A child process killed when the test ends, passed or not.
-struct KillOnDrop(std::process::Child);
-
-impl Drop for KillOnDrop {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
 }
 
 /// A job whose scene fails on the GPU (here a texture wider than the device allows, under an

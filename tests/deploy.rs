@@ -4,6 +4,8 @@
 //! over loopback, and on `docker stop` finishes its running job and exits 0. The tools come
 //! from `deploy/install-test-deps.sh` (the README's test command runs it first).
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::{Duration, Instant};
@@ -211,23 +213,15 @@ fn redis_server(port: u16, settings: &[&str]) -> Child {
     child
 }
 
-/// `penumbra serve` on a loopback port with these flags (logs at `warn`, to nowhere).
+/// `penumbra serve` on a loopback port with these flags (the shared harness's command; the
+/// replica name left to the listen address), not waited for: several start at once.
 fn daemon(port: u16, flags: &[&str]) -> Child {
-    Child(
-        Command::new(env!("CARGO_BIN_EXE_penumbra"))
-            .args(["serve", "--listen", &format!("127.0.0.1:{port}")])
-            .args(flags)
-            .env_remove("HOSTNAME")
-            .env("PENUMBRA_LOG", "warn")
-            .stderr(std::process::Stdio::null())
-            .spawn()
-            .unwrap(),
-    )
+    Child(common::daemon::serve_command(&format!("127.0.0.1:{port}")).args(flags).env_remove("HOSTNAME").spawn().unwrap())
 }
 
 /// Waits (up to a minute) for `/readyz` on a loopback port to answer 200.
 fn wait_ready(port: u16) {
-    let ready = || http("GET", &format!("http://127.0.0.1:{port}/readyz"), None).is_some_and(|(s, _)| s == 200);
+    let ready = || common::daemon::status(&format!("127.0.0.1:{port}"), "/readyz") == Some(200);
     assert!(wait_until(Duration::from_secs(60), ready).is_some(), "the daemon on {port} did not become ready");
 }
 

@@ -4,6 +4,8 @@
 //! decoder). Any crash fails the test and leaves its input in `fuzz/artifacts/TARGET/`: it
 //! then becomes a regression test in `tests/api.rs` or the module's own tests.
 
+mod common;
+
 use std::path::Path;
 use std::process::Command;
 
@@ -80,19 +82,8 @@ fn fuzz_targets_survive_their_time_budget() {
 fn the_api_conforms_to_its_openapi_document_under_schemathesis() {
     let schemathesis = tools_dir().join("bin/schemathesis");
     assert!(schemathesis.exists(), "{} is missing: run ./deploy/install-test-deps.sh", schemathesis.display());
-    let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
-    let mut daemon = Command::new(env!("CARGO_BIN_EXE_penumbra"))
-        .args(["serve", "--no-warm-up", "--job-store", "memory", "--listen", &format!("127.0.0.1:{port}")])
-        .env("PENUMBRA_LOG", "warn")
-        .stderr(std::process::Stdio::null())
-        .spawn()
-        .unwrap();
-    let base = format!("http://127.0.0.1:{port}");
-    let ready = (0..300).any(|_| {
-        std::thread::sleep(std::time::Duration::from_millis(100));
-        Command::new("curl").args(["-sf", &format!("{base}/readyz")]).output().is_ok_and(|o| o.status.success())
-    });
-    assert!(ready, "the daemon did not become ready");
+    let daemon = common::daemon::Daemon::spawn(&["--no-warm-up", "--job-store", "memory"]);
+    let base = daemon.base.clone();
     let examples = std::env::var("PENUMBRA_SCHEMATHESIS_EXAMPLES").unwrap_or_else(|_| "25".into());
     let output = Command::new(&schemathesis)
         .arg("run")
@@ -102,8 +93,7 @@ fn the_api_conforms_to_its_openapi_document_under_schemathesis() {
         .env("SCHEMATHESIS_HOOKS", "")
         .output()
         .unwrap();
-    let _ = daemon.kill();
-    let _ = daemon.wait();
+    drop(daemon);
     let report = String::from_utf8_lossy(&output.stdout);
     let summary: Vec<&str> =
         report.lines().filter(|l| l.contains("generated") || l.contains("Tested:") || l.contains("Selected:")).collect();

@@ -14,18 +14,30 @@ fn job(value: serde_json::Value) -> Job {
     Job::from_json(value.to_string().as_bytes()).unwrap()
 }
 
-#[test]
-fn golden_torus_hard() {
-    let job = job(json!({"scene": {"builtin": "torus"}, "output": {"width": 256, "height": 192}}));
-    let rendered = common::engine().render(&job, &()).unwrap();
-    common::check_golden("torus-hard", &rendered.bytes, 0.01, 0.1);
-}
+/// The golden images, declared as data: (name in `tests/golden/`, scene, light image — None
+/// for the scene's own — and method), each rendered at 256×192 and compared under FLIP (mean
+/// ≤ 0.01, 99th percentile ≤ 0.1).
+const GOLDEN: &[(&str, &str, Option<&str>, &str)] = &[
+    ("torus-hard", "torus", None, "hard"),
+    ("columns-hard", "columns", None, "hard"),
+    ("crowd-brabec", "crowd", None, "brabec"),
+    ("crowd-jfa-l", "crowd", Some("stripes"), "jfa-l"),
+    ("crowd-jfa-e", "crowd", Some("stripes"), "jfa-e"),
+    ("crowd-pcss", "crowd", None, "pcss"),
+    ("crowd-chun-oh", "crowd", Some("flame"), "chun-oh"),
+    ("crowd-wedges", "crowd", None, "wedges"),
+];
 
 #[test]
-fn golden_columns_hard() {
-    let job = job(json!({"scene": {"builtin": "columns"}, "output": {"width": 256, "height": 192}}));
-    let rendered = common::engine().render(&job, &()).unwrap();
-    common::check_golden("columns-hard", &rendered.bytes, 0.01, 0.1);
+fn golden_images_match_under_flip() {
+    for &(name, scene, light, method) in GOLDEN {
+        let mut value = json!({"scene": {"builtin": scene}, "method": {"name": method}, "output": {"width": 256, "height": 192}});
+        if let Some(light) = light {
+            value["light"] = json!({"image": {"builtin": light}});
+        }
+        let rendered = common::engine().render(&job(value), &()).unwrap();
+        common::check_golden(name, &rendered.bytes, 0.01, 0.1);
+    }
 }
 
 /// A 4 m floor seen from straight above with image-up (−z) at the top of the output, lit by
@@ -485,13 +497,6 @@ fn brabec_self_shadowing_is_lost_inside_one_object() {
 }
 
 #[test]
-fn golden_crowd_brabec() {
-    let job = job(json!({"scene": {"builtin": "crowd"}, "method": {"name": "brabec"}, "output": {"width": 256, "height": 192}}));
-    let rendered = common::engine().render(&job, &()).unwrap();
-    common::check_golden("crowd-brabec", &rendered.bytes, 0.01, 0.1);
-}
-
-#[test]
 fn brabec_jitter_smooths_low_resolution_maps() {
     // §4.3: with a coarse map many pixels warp into one texel; distances from the unrounded
     // position already vary, and jittered blocker positions break up the remaining steps.
@@ -552,14 +557,6 @@ fn jfa_l_colored_penumbra_and_standard_flooding() {
 }
 
 #[test]
-fn golden_crowd_jfa_l() {
-    let job = job(json!({"scene": {"builtin": "crowd"}, "light": {"image": {"builtin": "stripes"}}, "method": {"name": "jfa-l"},
-                         "output": {"width": 256, "height": 192}}));
-    let rendered = common::engine().render(&job, &()).unwrap();
-    common::check_golden("crowd-jfa-l", &rendered.bytes, 0.01, 0.1);
-}
-
-#[test]
 fn jfa_look_up_table_is_built_once_per_light() {
     // Its own engine: `stats()` answers the last free moment's counts while another test's
     // render holds the shared one, and no other test may build this table first.
@@ -612,14 +609,6 @@ fn jfa_e_remedies_against_jumping_too_far_leave_no_more_holes() {
     let without = umbra_holes(&render(json!({"name": "jfa-e", "same_object": false, "midpoint": false})), &reference);
     eprintln!("jfa-e umbra holes: {with} with the §5.2 remedies, {without} without");
     assert!(with <= without, "{with} holes with the remedies, {without} without");
-}
-
-#[test]
-fn golden_crowd_jfa_e() {
-    let job = job(json!({"scene": {"builtin": "crowd"}, "light": {"image": {"builtin": "stripes"}}, "method": {"name": "jfa-e"},
-                         "output": {"width": 256, "height": 192}}));
-    let rendered = common::engine().render(&job, &()).unwrap();
-    common::check_golden("crowd-jfa-e", &rendered.bytes, 0.01, 0.1);
 }
 
 #[test]
@@ -760,19 +749,6 @@ fn pcss_penumbra_follows_the_reference() {
     assert_eq!(pcss[top_down_pixel(2.3, 2.3)], [1.0; 3], "lit floor far from any blocker");
 }
 
-#[test]
-fn golden_crowd_pcss() {
-    let job = job(json!({"scene": {"builtin": "crowd"}, "method": {"name": "pcss"}, "output": {"width": 256, "height": 192}}));
-    common::check_golden("crowd-pcss", &common::engine().render(&job, &()).unwrap().bytes, 0.01, 0.1);
-}
-
-#[test]
-fn golden_crowd_chun_oh() {
-    let job = job(json!({"scene": {"builtin": "crowd"}, "light": {"image": {"builtin": "flame"}}, "method": {"name": "chun-oh"},
-                         "output": {"width": 256, "height": 192}}));
-    common::check_golden("crowd-chun-oh", &common::engine().render(&job, &()).unwrap().bytes, 0.01, 0.1);
-}
-
 // --- wedges ------------------------------------------------------------------------------
 
 #[test]
@@ -837,12 +813,6 @@ fn wedges_with_the_eye_inside_a_shadow_volume_use_z_fail_and_see_what_just_outsi
     let moved = differ(&inside, &outside);
     assert!(moved < 128 * 96 / 50, "{moved} pixels change for a 5 cm step of the eye");
     assert!(differ(&wrong, &outside) > 10 * moved.max(20), "z-pass from inside the volume inverts the shadows");
-}
-
-#[test]
-fn golden_crowd_wedges() {
-    let job = job(json!({"scene": {"builtin": "crowd"}, "method": {"name": "wedges"}, "output": {"width": 256, "height": 192}}));
-    common::check_golden("crowd-wedges", &common::engine().render(&job, &()).unwrap().bytes, 0.01, 0.1);
 }
 
 #[test]

@@ -1,8 +1,11 @@
-//! Helpers shared by the integration tests: one warm engine per test binary, EXR decoding,
+//! Helpers shared by the integration tests: one warm engine per test binary, the spawned
+//! daemon (`daemon.rs`), EXR decoding,
 //! golden-image comparison with FLIP in the style of wgpu's own test harness, and a small
 //! glTF scene as glTF JSON and as GLB.
 
 #![allow(dead_code)]
+
+pub mod daemon;
 
 use std::collections::HashMap;
 use std::io::Cursor;
