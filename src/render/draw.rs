@@ -73,6 +73,32 @@ fn depth_state() -> wgpu::DepthStencilState {
     }
 }
 
+/// Begins a pass that draws the scene: clears these attachments, sets `pipeline`, the frame's
+/// group 0 and the scene's vertex and index buffers; the caller issues the draws.
+pub fn begin_scene_pass<'e>(
+    encoder: &'e mut wgpu::CommandEncoder,
+    label: &'static str,
+    color_attachments: &[Option<wgpu::RenderPassColorAttachment<'_>>],
+    depth: &wgpu::TextureView,
+    timestamp_writes: Option<wgpu::RenderPassTimestampWrites<'_>>,
+    (pipeline, group0): (&wgpu::RenderPipeline, &wgpu::BindGroup),
+    scene: &crate::gpu::scene::GpuScene,
+) -> wgpu::RenderPass<'e> {
+    let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+        label: Some(label),
+        color_attachments,
+        depth_stencil_attachment: Some(depth_attachment(depth)),
+        timestamp_writes,
+        occlusion_query_set: None,
+        multiview_mask: None,
+    });
+    pass.set_pipeline(pipeline);
+    pass.set_bind_group(0, group0, &[]);
+    pass.set_vertex_buffer(0, scene.vertex_buffer.slice(..));
+    pass.set_index_buffer(scene.index_buffer.slice(..), wgpu::IndexFormat::Uint32);
+    pass
+}
+
 /// A colour attachment cleared to `value` in every channel.
 pub fn clear_attachment(view: &wgpu::TextureView, value: f64) -> wgpu::RenderPassColorAttachment<'_> {
     wgpu::RenderPassColorAttachment {

@@ -4,7 +4,7 @@
 
 use std::sync::Arc;
 
-use super::draw::{clear_attachment, depth_attachment, ScenePipeline};
+use super::draw::{begin_scene_pass, clear_attachment, ScenePipeline};
 use super::targets::{FrameTargets, ALBEDO_FORMAT, ID_FORMAT, NORMAL_FORMAT, POSITION_FORMAT, SHADOW_DEPTH_FORMAT};
 use super::{FrameInputs, FrameSpec, Renderer};
 use crate::gpu::layout;
@@ -34,22 +34,21 @@ impl Renderer {
             pipeline.build(device)
         });
         let bind_group = self.draw_bind_group(scene);
-        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some("ShadowMap::pass"),
-            color_attachments: &[
-                Some(clear_attachment(&targets.shadow_depth.view, f64::from(f32::MAX))),
-                Some(clear_attachment(&targets.shadow_id.view, f64::from(u32::MAX))),
-                Some(clear_attachment(&targets.shadow_position.view, 0.0)),
-            ],
-            depth_stencil_attachment: Some(depth_attachment(&targets.shadow_depth_buffer.view)),
-            timestamp_writes: self.timer.render_scope("shadow_map"),
-            occlusion_query_set: None,
-            multiview_mask: None,
-        });
-        pass.set_pipeline(&pipeline);
-        pass.set_bind_group(0, &bind_group, &[]);
-        pass.set_vertex_buffer(0, scene.vertex_buffer.slice(..));
-        pass.set_index_buffer(scene.index_buffer.slice(..), wgpu::IndexFormat::Uint32);
+        let colors = [
+            Some(clear_attachment(&targets.shadow_depth.view, f64::from(f32::MAX))),
+            Some(clear_attachment(&targets.shadow_id.view, f64::from(u32::MAX))),
+            Some(clear_attachment(&targets.shadow_position.view, 0.0)),
+        ];
+        let timestamps = self.timer.render_scope("shadow_map");
+        let mut pass = begin_scene_pass(
+            encoder,
+            "ShadowMap::pass",
+            &colors,
+            &targets.shadow_depth_buffer.view,
+            timestamps,
+            (&pipeline, &bind_group),
+            scene,
+        );
         pass.draw_indexed(0..scene.index_count, 0, 0..1);
     }
 
@@ -66,23 +65,15 @@ impl Renderer {
             pipeline.build(device)
         });
         let bind_group = self.draw_bind_group(scene);
-        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some("GBuffer::pass"),
-            color_attachments: &[
-                Some(clear_attachment(&targets.position.view, 0.0)),
-                Some(clear_attachment(&targets.normal.view, 0.0)),
-                Some(clear_attachment(&targets.albedo.view, 0.0)),
-                Some(clear_attachment(&targets.object_id.view, f64::from(u32::MAX))),
-            ],
-            depth_stencil_attachment: Some(depth_attachment(&targets.depth_buffer.view)),
-            timestamp_writes: self.timer.render_scope("gbuffer"),
-            occlusion_query_set: None,
-            multiview_mask: None,
-        });
-        pass.set_pipeline(&pipeline);
-        pass.set_bind_group(0, &bind_group, &[]);
-        pass.set_vertex_buffer(0, scene.vertex_buffer.slice(..));
-        pass.set_index_buffer(scene.index_buffer.slice(..), wgpu::IndexFormat::Uint32);
+        let colors = [
+            Some(clear_attachment(&targets.position.view, 0.0)),
+            Some(clear_attachment(&targets.normal.view, 0.0)),
+            Some(clear_attachment(&targets.albedo.view, 0.0)),
+            Some(clear_attachment(&targets.object_id.view, f64::from(u32::MAX))),
+        ];
+        let timestamps = self.timer.render_scope("gbuffer");
+        let mut pass =
+            begin_scene_pass(encoder, "GBuffer::pass", &colors, &targets.depth_buffer.view, timestamps, (&pipeline, &bind_group), scene);
         for draw in &scene.draws {
             pass.set_bind_group(1, &scene.material_bind_groups[draw.material as usize], &[]);
             pass.draw_indexed(draw.first_index..draw.first_index + draw.index_count, 0, 0..1);
