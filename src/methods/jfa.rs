@@ -28,7 +28,6 @@ use super::{Cap, Counters, MethodContext, Param, ParamSpec, Params, ShadowMethod
 use crate::error::JobResult;
 use crate::gpu::layout;
 use crate::gpu::pool::{DerivedKey, PipelineKey};
-use crate::gpu::readback::read_buffer;
 
 pub struct JfaL;
 pub struct JfaE;
@@ -239,12 +238,7 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
         usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
         mapped_at_creation: false,
     });
-    let counters = device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("Jfa::counters"),
-        size: 16,
-        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    });
+    let counters = ctx.counters("Jfa::counters", 4);
     let io = [
         layout::uniform_dynamic(0),
         layout::storage_read(1),
@@ -260,10 +254,10 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
     let finish = ctx.screen_pipeline(PipelineKey::new(which.finish.0), which.finish.1, &io);
     // Ping-pong: `a_to_b` reads a and writes b, `b_to_a` the reverse.
     let group = |src: &wgpu::Buffer, dst: &wgpu::Buffer| {
-        device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("Jfa::bind_group"),
-            layout: &seed.get_bind_group_layout(1),
-            entries: &layout::entries(&[
+        ctx.bind(
+            "Jfa::bind_group",
+            &seed,
+            &[
                 layout::slot_binding::<Uniforms>(&uniforms),
                 lut.as_entire_binding(),
                 src.as_entire_binding(),
@@ -272,13 +266,12 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
                 counters.as_entire_binding(),
                 flags.as_entire_binding(),
                 tiles.as_entire_binding(),
-            ]),
-        })
+            ],
+        )
     };
     let (a_to_b, b_to_a) = (group(&a, &b), group(&b, &a));
     // Rounds skip the tiles no record can reach and leave their cells as they are, so both
     // record buffers start empty (all zero) and the tile flags start clear.
-    ctx.encoder.clear_buffer(&counters, 0, None);
     ctx.encoder.clear_buffer(&b, 0, None);
     ctx.encoder.clear_buffer(&tiles, 0, None);
     let groups = (grid.0.div_ceil(TILE), grid.1.div_ceil(TILE));
@@ -305,8 +298,7 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
         pass.set_bind_group(1, if result_in_a { &a_to_b } else { &b_to_a }, &[0]);
         pass.dispatch_workgroups(screen.0, screen.1, 1);
     }
-    ctx.flush()?;
-    let counts: Vec<u32> = bytemuck::cast_slice(&read_buffer(ctx.gpu, &counters)?).to_vec();
+    let counts = ctx.read_counters(&counters)?;
     let flooded = f64::from(counts[2]) / (f64::from(tile_count) * steps.len() as f64);
     Ok((counts[0], counts[1], steps, flooded))
 }
@@ -417,7 +409,7 @@ pub fn voronoi(
         }
     }
     gpu.queue.submit([encoder.finish()]);
-    Ok(bytemuck::cast_slice(&read_buffer(gpu, if result_in_a { &a } else { &b })?).to_vec())
+    Ok(bytemuck::cast_slice(&crate::gpu::readback::read_buffer(gpu, if result_in_a { &a } else { &b })?).to_vec())
 }
 
 #[cfg(test)]
