@@ -4,7 +4,7 @@
 
 use glam::{Vec3, Vec4};
 
-use super::WedgeGpu;
+use super::{PolygonGpu, WedgeGpu};
 use crate::light::AreaLight;
 use crate::scene::adjacency::{EdgeMesh, SilhouetteEdge};
 
@@ -66,6 +66,22 @@ impl Volume {
             .collect();
 
         Self { polygons, multiplicity, object, caps, wedge_planes, wedges }
+    }
+
+    /// The volume polygons as the shaders read them (`VolumePolygon` in `common.wgsl`).
+    pub fn polygons_gpu(&self) -> Vec<PolygonGpu> {
+        self.polygons
+            .iter()
+            .zip(self.multiplicity.iter().zip(&self.object))
+            .map(|(p, (&m, &o))| PolygonGpu {
+                v: [
+                    p[0].extend(m as f32).to_array(),
+                    p[1].extend(o as f32).to_array(),
+                    p[2].extend(0.0).to_array(),
+                    p[3].extend(0.0).to_array(),
+                ],
+            })
+            .collect()
     }
 }
 

@@ -148,7 +148,7 @@ impl ShadowMethod for Wedges {
         };
 
         let volume = Volume::build(&mesh, &silhouette, light, reach, zfail);
-        let Volume { polygons, multiplicity, object, caps, wedges, .. } = &volume;
+        let Volume { polygons, caps, wedges, .. } = &volume;
 
         // Tile depth ranges from the GPU, then culling on the CPU.
         let tile = params.get(&TILE);
@@ -172,24 +172,8 @@ impl ShadowMethod for Wedges {
                 usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
             })
         };
-        let uniform_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("Wedges::uniforms"),
-            contents: bytemuck::bytes_of(&uniforms),
-            usage: wgpu::BufferUsages::UNIFORM,
-        });
-        let polygon_data: Vec<PolygonGpu> = polygons
-            .iter()
-            .zip(multiplicity.iter().zip(object))
-            .map(|(p, (&m, &o))| PolygonGpu {
-                v: [
-                    p[0].extend(m as f32).to_array(),
-                    p[1].extend(o as f32).to_array(),
-                    p[2].extend(0.0).to_array(),
-                    p[3].extend(0.0).to_array(),
-                ],
-            })
-            .collect();
-        let polygon_buffer = storage("Wedges::polygons", bytemuck::cast_slice(&polygon_data));
+        let uniform_buffer = ctx.uniforms("Wedges::uniforms", &uniforms);
+        let polygon_buffer = storage("Wedges::polygons", bytemuck::cast_slice(&volume.polygons_gpu()));
         let wedge_buffer = storage("Wedges::wedges", bytemuck::cast_slice(wedges));
         let ranges = storage("Wedges::tile_ranges", &vec![0u8; tile_count * 8]);
         let li = device.create_buffer(&wgpu::BufferDescriptor {
