@@ -100,7 +100,7 @@ pub struct ServeConfig {
 
     /// With a Redis store: seconds a job taken by a replica may go without its heartbeat
     /// before another replica claims it (the first is presumed dead).
-    #[arg(long, env = "PENUMBRA_CLAIM_IDLE_SECS", default_value_t = 15.0)]
+    #[arg(long, env = "PENUMBRA_CLAIM_IDLE_SECS", default_value_t = 15.0, value_parser = seconds)]
     pub claim_idle_secs: f64,
 
     /// Directory of the embedded job store.
@@ -120,11 +120,11 @@ pub struct ServeConfig {
     /// Seconds a finished job's outcome is retried while the store cannot take it (down, or
     /// its disk full); then a shared store's job is left for another replica to claim, and an
     /// embedded store's result is served from memory until a restart renders it again.
-    #[arg(long, env = "PENUMBRA_STORE_RETRY_SECS", default_value_t = 600.0)]
+    #[arg(long, env = "PENUMBRA_STORE_RETRY_SECS", default_value_t = 600.0, value_parser = seconds)]
     pub store_retry_secs: f64,
 
     /// Seconds a finished job's record, events and image stay readable.
-    #[arg(long, env = "PENUMBRA_RESULTS_TTL_SECS", default_value_t = 3600.0)]
+    #[arg(long, env = "PENUMBRA_RESULTS_TTL_SECS", default_value_t = 3600.0, value_parser = seconds)]
     pub results_ttl_secs: f64,
 
     /// Byte budget of the cache of uploaded scenes and light images (a scene counts its CPU
@@ -144,7 +144,7 @@ pub struct ServeConfig {
     pub concurrency: u32,
 
     /// Seconds a job may wait in the queue before it fails with 503 `deadline_exceeded`.
-    #[arg(long, env = "PENUMBRA_DEADLINE_SECS", default_value_t = 120.0)]
+    #[arg(long, env = "PENUMBRA_DEADLINE_SECS", default_value_t = 120.0, value_parser = seconds)]
     pub deadline_secs: f64,
 
     /// A file of bearer tokens (one per line, at least 16 characters; `#` comments): every
@@ -169,16 +169,16 @@ pub struct ServeConfig {
 
     /// Seconds a client may take to send a request's head, from its first byte (and a new
     /// connection to start its first request): nginx's `client_header_timeout`.
-    #[arg(long, env = "PENUMBRA_HEADER_TIMEOUT_SECS", default_value_t = 30.0)]
+    #[arg(long, env = "PENUMBRA_HEADER_TIMEOUT_SECS", default_value_t = 30.0, value_parser = seconds)]
     pub header_timeout_secs: f64,
 
     /// Seconds a client may go without sending more of a request body: nginx's
     /// `client_body_timeout`. The connection is closed.
-    #[arg(long, env = "PENUMBRA_BODY_TIMEOUT_SECS", default_value_t = 30.0)]
+    #[arg(long, env = "PENUMBRA_BODY_TIMEOUT_SECS", default_value_t = 30.0, value_parser = seconds)]
     pub body_timeout_secs: f64,
 
     /// Seconds an idle keep-alive connection stays open: nginx's `keepalive_timeout`.
-    #[arg(long, env = "PENUMBRA_KEEP_ALIVE_SECS", default_value_t = 75.0)]
+    #[arg(long, env = "PENUMBRA_KEEP_ALIVE_SECS", default_value_t = 75.0, value_parser = seconds)]
     pub keep_alive_secs: f64,
 
     /// Skip compiling pipelines and uploading the default scene before accepting jobs.
@@ -187,4 +187,24 @@ pub struct ServeConfig {
 
     #[command(flatten)]
     pub render: RenderOptions,
+}
+
+/// A duration flag in seconds: a finite number ≥ 0 (a duration that overflows, or is not a
+/// number, is refused when the flags are read rather than later).
+fn seconds(text: &str) -> Result<f64, String> {
+    match text.trim().parse::<f64>() {
+        Ok(s) if s.is_finite() && (0.0..=1e9).contains(&s) => Ok(s),
+        _ => Err(format!("`{text}` is not a number of seconds in [0, 1e9]")),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn durations_are_finite_and_not_negative() {
+        assert_eq!(super::seconds("2.5"), Ok(2.5));
+        for bad in ["inf", "NaN", "-1", "1e300", "soon"] {
+            assert!(super::seconds(bad).is_err(), "{bad}");
+        }
+    }
 }
