@@ -101,7 +101,12 @@ impl AsyncRead for TrackedStream {
                 }
             }
             Poll::Pending => {
-                *self.conn.waker.lock().unwrap_or_else(|p| p.into_inner()) = Some(cx.waker().clone());
+                let mut waker = self.conn.waker.lock().unwrap_or_else(|p| p.into_inner());
+                // Most polls come from the same task: clone its waker only when it changed.
+                if !waker.as_ref().is_some_and(|w| w.will_wake(cx.waker())) {
+                    *waker = Some(cx.waker().clone());
+                }
+                drop(waker);
                 // Closed between the check above and the waker's registration: not missed.
                 if self.conn.closed.load(Ordering::Acquire) {
                     return Poll::Ready(Err(closed_error()));
