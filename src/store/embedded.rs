@@ -20,7 +20,7 @@
 
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
-use std::sync::Mutex;
+use std::sync::RwLock;
 use std::time::Duration;
 
 use redb::{Database, ReadableDatabase, ReadableTable, TableDefinition};
@@ -39,7 +39,7 @@ const IMAGES: TableDefinition<&str, &[u8]> = TableDefinition::new("images");
 pub struct EmbeddedStore {
     dir: PathBuf,
     /// None after an I/O error: opened again on the next call.
-    db: Mutex<Option<Database>>,
+    db: RwLock<Option<Database>>,
 }
 
 /// A redb error as a store error: I/O errors (and redb's refusal after one) are transient —
@@ -76,7 +76,7 @@ impl EmbeddedStore {
     pub fn open(dir: &Path) -> anyhow::Result<Self> {
         std::fs::create_dir_all(dir.join("images"))
             .map_err(|e| anyhow::anyhow!("cannot create the data directory {}: {e}", dir.display()))?;
-        let store = Self { dir: dir.to_owned(), db: Mutex::new(None) };
+        let store = Self { dir: dir.to_owned(), db: RwLock::new(None) };
         store.with_db(|_| Ok(())).map_err(|e| anyhow::anyhow!("cannot open the job store {}: {e}", dir.display()))?;
         store.remove_orphan_images()?;
         Ok(store)
@@ -93,19 +93,28 @@ impl EmbeddedStore {
     }
 
     /// Runs `f` on the database, opening it first when an earlier I/O error closed it, and
-    /// closing it when `f` meets one.
+    /// closing it when `f` meets one. Calls share the database (redb orders its own writes);
+    /// only opening and closing it take the lock alone.
     fn with_db<T>(&self, f: impl FnOnce(&Database) -> StoreResult<T>) -> StoreResult<T> {
-        let mut db = self.db.lock().unwrap_or_else(|p| p.into_inner());
-        if db.is_none() {
-            *db = Some(self.open_db()?);
-            tracing::debug!("job store opened");
-        }
-        let result = f(db.as_ref().expect("opened above"));
-        if let Err(error) = &result {
-            if needs_reopen(error) {
-                // Dropped now, so that the file lock is released before it is opened again.
-                *db = None;
+        let mut shared = self.db.read().unwrap_or_else(|p| p.into_inner());
+        while shared.is_none() {
+            drop(shared);
+            let mut db = self.db.write().unwrap_or_else(|p| p.into_inner());
+            if db.is_none() {
+                *db = Some(self.open_db()?);
+                tracing::debug!("job store opened");
             }
+            drop(db);
+            shared = self.db.read().unwrap_or_else(|p| p.into_inner());
+        }
+        let result = match shared.as_ref() {
+            Some(db) => f(db),
+            None => Err(StoreError::Unavailable("the database closed".into())),
+        };
+        drop(shared);
+        if result.as_ref().is_err_and(needs_reopen) {
+            // Dropped now, so that the file lock is released before it is opened again.
+            *self.db.write().unwrap_or_else(|p| p.into_inner()) = None;
         }
         result
     }
