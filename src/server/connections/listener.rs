@@ -46,17 +46,7 @@ impl axum::serve::Listener for TrackedListener {
                 Err(error) if matches!(error.raw_os_error(), Some(libc::EMFILE | libc::ENFILE)) => {
                     // Out of descriptors despite the cap (other files open): shed one, retry.
                     tracing::warn!(%error, "out of file descriptors; closing the longest-waiting connection");
-                    let tracker = &self.tracker;
-                    let oldest = tracker
-                        .connections()
-                        .values()
-                        .filter(|c| c.phase() != Phase::Busy && !c.closed.load(Ordering::Acquire))
-                        .min_by_key(|c| c.last_heard_ms())
-                        .cloned();
-                    if let Some(conn) = oldest {
-                        conn.close();
-                        tracker.shed.fetch_add(1, Ordering::Relaxed);
-                    }
+                    self.tracker.shed_one();
                     tokio::time::sleep(Duration::from_millis(20)).await;
                 }
                 Err(error) => {

@@ -212,20 +212,27 @@ impl Tracker {
     /// client. False when every connection is busy answering (the new one must wait).
     pub(super) fn make_room(&self) -> bool {
         let open = self.connections();
-        if (open.len() as u64) < self.limits.max_connections {
-            return true;
-        }
+        (open.len() as u64) < self.limits.max_connections
+            || Self::shed_longest_waiting(&open, &self.shed)
+            // Closed ones are on their way out: their slots come back in a moment.
+            || open.values().any(|c| c.closed.load(Ordering::Acquire))
+    }
+
+    /// Closes the connection that has waited longest on its client (never one answering a
+    /// request), counting it as shed; false when there is none.
+    pub(super) fn shed_one(&self) -> bool {
+        Self::shed_longest_waiting(&self.connections(), &self.shed)
+    }
+
+    fn shed_longest_waiting(open: &HashMap<u64, Arc<Conn>>, shed: &AtomicU64) -> bool {
         let oldest =
             open.values().filter(|c| c.phase() != Phase::Busy && !c.closed.load(Ordering::Acquire)).min_by_key(|c| c.last_heard_ms());
-        match oldest {
-            Some(conn) => {
+        oldest
+            .inspect(|conn| {
                 conn.close();
-                self.shed.fetch_add(1, Ordering::Relaxed);
-                true
-            }
-            // Closed ones are on their way out: their slots come back in a moment.
-            None => open.values().any(|c| c.closed.load(Ordering::Acquire)),
-        }
+                shed.fetch_add(1, Ordering::Relaxed);
+            })
+            .is_some()
     }
 
     pub(super) fn register(self: &Arc<Self>) -> (u64, Arc<Conn>) {
