@@ -27,9 +27,7 @@ pub(super) async fn upload(state: Arc<AppState>, body: Result<Bytes, BytesReject
     let stored = move || {
         let receipt = engine.upload(kind, &bytes)?;
         if let Some(store) = shared {
-            let shared = store.blocking().put_upload(kind, &receipt.id, &bytes);
-            store.health().observe(&shared);
-            shared.map_err(store_error)?;
+            store.call_blocking(|s| s.put_upload(kind, &receipt.id, &bytes)).map_err(store_error)?;
         }
         Ok(receipt)
     };
@@ -110,9 +108,7 @@ pub(super) fn fetch_shared_uploads(engine: &Engine, store: Option<&Store>, job: 
         if engine.holds_upload(kind, id) {
             continue;
         }
-        let fetched = store.blocking().get_upload(kind, id);
-        store.health().observe(&fetched);
-        match fetched {
+        match store.call_blocking(|s| s.get_upload(kind, id)) {
             Ok(Some(bytes)) => {
                 engine.upload(kind, &bytes)?;
             }

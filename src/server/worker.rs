@@ -148,7 +148,7 @@ pub(super) async fn render_and_store(
             let mut last = last_shared.lock().unwrap_or_else(|p| p.into_inner());
             if last.elapsed() >= std::time::Duration::from_millis(250) {
                 *last = std::time::Instant::now();
-                let _ = store.blocking().progress(&job_id, done, total);
+                let _ = store.call_blocking(|s| s.progress(&job_id, done, total));
             }
         }
     };

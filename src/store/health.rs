@@ -164,20 +164,24 @@ impl Store {
         self.inner.shared()
     }
 
-    /// The store itself, for code already on the blocking pool; report outcomes with
-    /// `health().observe`.
+    /// The store itself, for what needs no answer (the heartbeat's period).
     pub fn blocking(&self) -> &dyn JobStore {
         self.inner.as_ref()
     }
 
-    /// Runs one blocking store call on the blocking pool and learns from its outcome.
-    pub async fn call<T: Send + 'static>(&self, f: impl FnOnce(&dyn JobStore) -> StoreResult<T> + Send + 'static) -> StoreResult<T> {
-        let inner = self.inner.clone();
-        let result = tokio::task::spawn_blocking(move || f(inner.as_ref()))
-            .await
-            .unwrap_or_else(|e| Err(StoreError::Other(anyhow::anyhow!("the store task failed: {e}"))));
+    /// One store call from code already on the blocking pool, learning from its outcome.
+    pub fn call_blocking<T>(&self, f: impl FnOnce(&dyn JobStore) -> StoreResult<T>) -> StoreResult<T> {
+        let result = f(self.inner.as_ref());
         self.health.observe(&result);
         result
+    }
+
+    /// Runs one blocking store call on the blocking pool and learns from its outcome.
+    pub async fn call<T: Send + 'static>(&self, f: impl FnOnce(&dyn JobStore) -> StoreResult<T> + Send + 'static) -> StoreResult<T> {
+        let store = self.clone();
+        tokio::task::spawn_blocking(move || store.call_blocking(f))
+            .await
+            .unwrap_or_else(|e| Err(StoreError::Other(anyhow::anyhow!("the store task failed: {e}"))))
     }
 
     /// Promises room for a result of `bytes` to a job being admitted: refused (`Full`) when
