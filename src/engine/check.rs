@@ -6,12 +6,13 @@
 use crate::error::{ErrorCode, JobError, JobResult};
 use crate::job::{AssetRef, Job, Limits};
 use crate::light::LightImage;
-use crate::methods;
+use crate::methods::{self, ShadowMethod};
 use crate::params::Params;
 
-/// Checks everything about `job` that needs no file, upload or GPU. A parameter left out
-/// counts with its default: a server capped below a default needs the value given.
-pub fn check_job(job: &Job, limits: &Limits) -> JobResult<()> {
+/// Checks everything about `job` that needs no file, upload or GPU, and answers its method
+/// and checked parameters. A parameter left out counts with its default: a server capped
+/// below a default needs the value given.
+pub fn check_job(job: &Job, limits: &Limits) -> JobResult<(&'static dyn ShadowMethod, Params)> {
     job.validate(limits)?;
     let method = methods::find(&job.method.name)?;
     let params = Params::parse(method.params(), &job.method.params)?;
@@ -34,7 +35,7 @@ pub fn check_job(job: &Job, limits: &Limits) -> JobResult<()> {
     if let Some(AssetRef::Builtin { name, params }) = &job.light.image {
         LightImage::check_builtin(name, params, "light.image")?;
     }
-    Ok(())
+    Ok((method, params))
 }
 
 #[cfg(test)]
@@ -66,7 +67,7 @@ mod tests {
             ),
         ];
         for (json, code, field) in cases {
-            let error = check_job(&job(json), &limits).unwrap_err();
+            let Err(error) = check_job(&job(json), &limits) else { panic!("{json} passed") };
             assert_eq!((error.code, error.field.as_deref()), (code, Some(field)), "{json}");
         }
         check_job(&job(r#"{"scene": {"builtin": "torus"}, "method": {"name": "reference", "samples": 64}}"#), &limits).unwrap();

@@ -9,7 +9,8 @@ use super::{check_job, Engine, RenderState};
 use crate::error::{JobError, JobResult};
 use crate::gpu::GpuContext;
 use crate::job::Job;
-use crate::methods;
+use crate::methods::ShadowMethod;
+use crate::params::Params;
 use crate::render::{FrameOutput, FrameSpec, Renderer};
 use crate::supervise::{cancelled_error, Supervisor};
 use crate::timing::Timings;
@@ -18,8 +19,7 @@ impl Engine {
     /// Checks and renders one job, returning the linear float frame (what `output::encode`
     /// turns into PNG or EXR, and what quality measurements compare) and its timings.
     pub fn render_frame(&self, job: &Job, supervisor: &dyn Supervisor) -> JobResult<(FrameOutput, Timings)> {
-        check_job(job, &self.limits)?;
-        let method = methods::find(&job.method.name)?;
+        let (method, params) = check_job(job, &self.limits)?;
         let mut state = self.state.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
         // Stopped while it waited for the device: nothing to render.
         if supervisor.cancelled() {
@@ -28,11 +28,11 @@ impl Engine {
         if state.renderer.gpu().is_lost() {
             self.recover_device(&mut state)?;
         }
-        match self.render_on_device(&mut state, job, method, supervisor) {
+        match self.render_on_device(&mut state, job, (method, &params), supervisor) {
             Err(_) if state.renderer.gpu().is_lost() => {
                 self.recover_device(&mut state)?;
                 tracing::warn!("retrying the job once on the new device");
-                self.render_on_device(&mut state, job, method, supervisor)
+                self.render_on_device(&mut state, job, (method, &params), supervisor)
             }
             outcome => outcome,
         }
@@ -42,7 +42,7 @@ impl Engine {
         &self,
         state: &mut RenderState,
         job: &Job,
-        method: &'static dyn methods::ShadowMethod,
+        method: (&'static dyn ShadowMethod, &Params),
         supervisor: &dyn Supervisor,
     ) -> JobResult<(FrameOutput, Timings)> {
         let mut timings = Timings::default();

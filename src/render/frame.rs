@@ -110,8 +110,13 @@ pub struct FrameSpec {
 
 impl FrameSpec {
     /// Merges the job over the scene's defaults and checks what the merge produced; `method`
-    /// is the job's method, looked up by the caller in the methods' registry.
-    pub fn resolve(job: &Job, scene: &GpuScene, light_image: Arc<LightImage>, method: &'static dyn ShadowMethod) -> JobResult<Self> {
+    /// is the job's method with its checked parameters (`engine::check_job`).
+    pub fn resolve(
+        job: &Job,
+        scene: &GpuScene,
+        light_image: Arc<LightImage>,
+        (method, params): (&'static dyn ShadowMethod, &Params),
+    ) -> JobResult<Self> {
         let d = &scene.defaults;
         let v3 = |v: Option<[f32; 3]>, default: Vec3| v.map(Vec3::from).unwrap_or(default);
         let camera = resolve_camera(
@@ -131,14 +136,13 @@ impl FrameSpec {
             l.size.map(Vec2::from).unwrap_or(d.light_size_m),
             l.intensity.unwrap_or(d.light_intensity),
         )?;
-        let params = Params::parse(method.params(), &job.method.params)?;
         Ok(Self {
             camera,
             cells: light_cells(&light, &light_image),
             light_image,
             light,
             method,
-            params,
+            params: params.clone(),
             shadow_resolution: job.shadow_map.resolution,
             width: job.output.width,
             height: job.output.height,
