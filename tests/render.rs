@@ -749,6 +749,68 @@ fn pcss_penumbra_follows_the_reference() {
     assert_eq!(pcss[top_down_pixel(2.3, 2.3)], [1.0; 3], "lit floor far from any blocker");
 }
 
+// --- coloured penumbrae -----------------------------------------------------------------
+
+/// A two-colour light image, red on its left half and blue on its right, as a PNG file.
+fn red_left_blue_right() -> std::path::PathBuf {
+    static PATH: std::sync::OnceLock<std::path::PathBuf> = std::sync::OnceLock::new();
+    PATH.get_or_init(|| {
+        let path = std::env::temp_dir().join(format!("penumbra-red-blue-{}.png", std::process::id()));
+        image::RgbaImage::from_fn(2, 1, |x, _| if x == 0 { image::Rgba([255, 0, 0, 255]) } else { image::Rgba([0, 0, 255, 255]) })
+            .save(&path)
+            .unwrap();
+        path
+    })
+    .clone()
+}
+
+/// Renders `method` and `reference` under the red-left, blue-right light over the occluder's
+/// straight edges and checks that, where the reference's penumbra is clearly red or clearly
+/// blue, the method's is the same colour — on both sides of the occluder, since the hidden
+/// half of the light is the red one on one side and the blue one on the other (the light's
+/// image left, column 0, lies along −r = +x here). Returns the mean |V − Vref| over those
+/// pixels, summed over red and blue (green has no emission to be visible).
+fn fringes_follow_the_reference(method: serde_json::Value) -> f32 {
+    let light = json!({"size": [1.2, 0.6], "image": {"path": red_left_blue_right()}});
+    let v = top_down(method.clone(), json!({"builtin": "occluder"}), light.clone());
+    let reference = top_down(json!({"name": "reference", "samples": 256}), json!({"builtin": "occluder"}), light);
+    let mut error = 0.0;
+    let mut count = 0;
+    for (side, xs) in [("−x", 0..64), ("+x", 64..128)] {
+        let colored: Vec<usize> = (0..128)
+            .flat_map(|y| xs.clone().map(move |x| y * 128 + x))
+            .filter(|&i| (reference[i][0] - reference[i][2]).abs() > 0.2)
+            .collect();
+        assert!(colored.len() > 40, "{side}: {} coloured penumbra pixels", colored.len());
+        let agree = colored.iter().filter(|&&i| (v[i][0] - v[i][2]).signum() == (reference[i][0] - reference[i][2]).signum()).count();
+        eprintln!("{method}: {side} side, {agree} of {} fringe pixels take the reference's hue", colored.len());
+        assert!(agree as f32 >= 0.9 * colored.len() as f32, "{method}, {side} side: {agree} of {} agree", colored.len());
+        error += colored.iter().map(|&i| [0, 2].map(|c| (v[i][c] - reference[i][c]).abs()).iter().sum::<f32>()).sum::<f32>();
+        count += colored.len();
+    }
+    error / count as f32
+}
+
+#[test]
+fn every_soft_method_colours_each_side_of_an_edge_with_the_hidden_half_missing() {
+    let gray = fringes_error(json!({"name": "pcss"}));
+    for method in ["brabec", "jfa-l", "jfa-e", "chun-oh", "wedges"] {
+        let error = fringes_follow_the_reference(json!({"name": method}));
+        eprintln!("{method}: mean |V − Vref| over the fringes {error:.3} (pcss, gray: {gray:.3})");
+        assert!(error < 0.6 * gray, "{method}: {error} against the gray baseline's {gray}");
+    }
+}
+
+/// The gray baseline's error over the same fringes (it cannot take their hue).
+fn fringes_error(method: serde_json::Value) -> f32 {
+    let light = json!({"size": [1.2, 0.6], "image": {"path": red_left_blue_right()}});
+    let v = top_down(method, json!({"builtin": "occluder"}), light.clone());
+    assert!(v.iter().all(|p| p[0] == p[2]), "a gray baseline");
+    let reference = top_down(json!({"name": "reference", "samples": 256}), json!({"builtin": "occluder"}), light);
+    let colored: Vec<usize> = (0..v.len()).filter(|&i| (reference[i][0] - reference[i][2]).abs() > 0.2).collect();
+    colored.iter().map(|&i| [0, 2].map(|c| (v[i][c] - reference[i][c]).abs()).iter().sum::<f32>()).sum::<f32>() / colored.len() as f32
+}
+
 // --- wedges ------------------------------------------------------------------------------
 
 #[test]
@@ -759,6 +821,20 @@ fn wedges_match_the_closed_form_penumbra_of_a_square_occluder() {
     // For one convex occluder the umbra volume and the wedges' irradiance shares are the closed
     // form itself, up to the LI buffer's fixed point (2⁻¹⁶) and float rounding.
     assert!(mean < 1e-3 && worst < 5e-3, "mean {mean}, worst {worst}, hard {hard}");
+}
+
+#[test]
+fn wedges_match_the_closed_form_per_channel_under_coloured_lights() {
+    // The colored twin: per channel, the closed form over the light's uniform cells. The
+    // radial table is exact along each direction; the directions' sampling of the region's
+    // hue is what remains (the gray share stays Lambert's).
+    for (image, bound) in [("stripes", 0.01), ("quadrants", 0.01)] {
+        let (mean, worst, pairs) = closed_form_error(json!({"name": "wedges"}), image);
+        let (gray, _, _) = closed_form_error(json!({"name": "pcss"}), image);
+        eprintln!("wedges vs closed form under {image}: mean penumbra error {mean:.4} (worst {worst:.4}); pcss {gray:.4}");
+        assert!(mean < bound, "{image}: mean {mean}, worst {worst}");
+        assert!(pairs.iter().any(|(v, _)| (v[0] - v[2]).abs() > 0.2), "{image}: the penumbra must be coloured");
+    }
 }
 
 fn wedges_frame(method: serde_json::Value, camera: Option<serde_json::Value>) -> penumbra::render::FrameOutput {

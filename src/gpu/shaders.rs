@@ -10,6 +10,7 @@ pub const SOURCES: &[(&str, &str)] = &[
     ("common/frame_inputs.wgsl", include_str!("../../shaders/common/frame_inputs.wgsl")),
     ("common/light.wgsl", include_str!("../../shaders/common/light.wgsl")),
     ("common/shadow.wgsl", include_str!("../../shaders/common/shadow.wgsl")),
+    ("common/edge_table.wgsl", include_str!("../../shaders/common/edge_table.wgsl")),
     ("shadow_map.wgsl", include_str!("../../shaders/shadow_map.wgsl")),
     ("gbuffer.wgsl", include_str!("../../shaders/gbuffer.wgsl")),
     ("e0.wgsl", include_str!("../../shaders/e0.wgsl")),

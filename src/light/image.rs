@@ -10,7 +10,7 @@ use crate::color::srgb_to_linear;
 use crate::error::{ErrorCode, JobError, JobResult};
 
 /// Names of the built-in light images, in the order `GET /v1/methods` lists them.
-pub const BUILTIN_LIGHT_IMAGES: &[&str] = &["white", "disk", "star", "stripes", "flame"];
+pub const BUILTIN_LIGHT_IMAGES: &[&str] = &["white", "disk", "star", "stripes", "flame", "quadrants"];
 
 /// A light image in linear RGBA: piecewise constant, one uniform sub-rectangle per texel.
 #[derive(Debug, Clone, PartialEq)]
@@ -121,6 +121,15 @@ impl LightImage {
                 }
                 let heat = y.clamp(0.0, 1.0);
                 [1.0, 0.15 + 0.8 * heat, 0.02 + 0.5 * heat * heat, 1.0]
+            }),
+            // Four saturated quadrants, one per corner, so that an edge in any direction
+            // hides a different mix of colours: red top-left, green top-right, blue
+            // bottom-left, yellow bottom-right.
+            "quadrants" => Self::from_fn(2, 2, |s, t| match (s < 0.5, t < 0.5) {
+                (true, true) => [1.0, 0.0, 0.0, 1.0],
+                (false, true) => [0.0, 1.0, 0.0, 1.0],
+                (true, false) => [0.0, 0.0, 1.0, 1.0],
+                (false, false) => [1.0, 1.0, 0.0, 1.0],
             }),
             _ => {
                 return Err(JobError::field(

@@ -9,6 +9,7 @@
 
 mod image;
 mod irradiance;
+pub mod tables;
 
 use glam::{Vec2, Vec3};
 

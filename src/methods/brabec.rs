@@ -9,7 +9,10 @@
 //!   warped position, optionally to jittered blocker positions (§4.3 sub-pixel accuracy).
 //! - `columns`, `rows`: the adaptive sampling of §4.3 — groups of 5 pixels along columns,
 //!   then rows, interpolated where ids and hard results agree, refined otherwise.
-//! - `finish`: visibility through the chosen fall-off.
+//! - `finish`: visibility through the chosen fall-off, coloured: the search also notes in which
+//!   direction it found its texel, which says what part of the light is hidden; the light's
+//!   edge table (`light::tables`) weighs the image's colours on each side (past the paper,
+//!   whose light is uniform; contract §1).
 //!
 //! Choices where the paper is vague or inconsistent, each in a comment at the code:
 //! the §3.3 pseudo-code's return values are inverted against §3.2's text (fixed: the hard edge
@@ -23,6 +26,7 @@ use super::{Counters, MethodContext, Param, ParamSpec, Params, ShadowMethod, BIA
 use crate::error::JobResult;
 use crate::gpu::layout;
 use crate::gpu::pool::PipelineKey;
+use crate::light::tables::{edge_table, is_uniform};
 
 pub struct Brabec;
 
@@ -86,6 +90,8 @@ struct Uniforms {
     derived: [u32; 2],
     lattice_stride: u32,
     use_ids: u32,
+    colored: u32,
+    _pad: [u32; 3],
 }
 
 /// Adaptive sampling's block side (§4.3: 4×4 is the paper's speed/quality trade-off).
@@ -134,13 +140,15 @@ impl ShadowMethod for Brabec {
             derived: [u32::from(derived_search), u32::from(derived_hit)],
             lattice_stride: if adaptive { BLOCK } else { 1 },
             use_ids: u32::from(params.get(&OBJECT_IDS)),
+            colored: u32::from(!is_uniform(&spec.light_image)),
+            _pad: [0; 3],
         };
         let device = ctx.gpu.device.clone();
         let uniform_buffer = ctx.uniforms("Brabec::uniforms", &uniforms);
         let pixels = u64::from(ctx.width) * u64::from(ctx.height);
         let state = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("Brabec::state"),
-            size: pixels * 8,
+            size: pixels * 16,
             usage: wgpu::BufferUsages::STORAGE,
             mapped_at_creation: false,
         });
@@ -150,12 +158,14 @@ impl ShadowMethod for Brabec {
             layout::storage_read_write(1),
             layout::storage_read_write(2),
             layout::storage_texture(3, wgpu::TextureFormat::Rgba32Float),
+            layout::storage_read(4),
         ];
         let classify = ctx.screen_pipeline(PipelineKey::new("brabec.classify"), "methods/brabec/classify.wgsl", &io);
         let lattice = ctx.screen_pipeline(PipelineKey::new("brabec.lattice"), "methods/brabec/lattice.wgsl", &io);
         let columns = ctx.screen_pipeline(PipelineKey::new("brabec.columns"), "methods/brabec/columns.wgsl", &io);
         let rows = ctx.screen_pipeline(PipelineKey::new("brabec.rows"), "methods/brabec/rows.wgsl", &io);
         let finish = ctx.screen_pipeline(PipelineKey::new("brabec.finish"), "methods/brabec/finish.wgsl", &io);
+        let edges = ctx.light_table("edge_table", edge_table);
         let bind_group = ctx.bind(
             "Brabec::bind_group",
             &classify,
@@ -164,6 +174,7 @@ impl ShadowMethod for Brabec {
                 state.as_entire_binding(),
                 counters.as_entire_binding(),
                 wgpu::BindingResource::TextureView(ctx.visibility),
+                edges.as_entire_binding(),
             ],
         );
 

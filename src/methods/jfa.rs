@@ -1,6 +1,6 @@
 //! Methods `jfa-l` and `jfa-e`: soft shadows by jump flooding (Rong & Tan 2006) in light
 //! space (§4) and in eye space (§5), with the intensity look-up of §3 made coloured
-//! (`jfa_lut`). Shaders: `shaders/methods/jfa/`. Both share one pass driver (`flood`): seed,
+//! (`light::tables`). Shaders: `shaders/methods/jfa/`. Both share one pass driver (`flood`): seed,
 //! `rounds` rounds of flooding between two record buffers, final pass.
 //!
 //! `jfa-l`: the shadow map (from the light centre) also stores each texel's world
@@ -12,7 +12,10 @@
 //! flooding (`flooding: "standard"`, step 1 for 2^rounds − 1 rounds, the same reach) is there
 //! for the paper's flooding experiment. `final_light.wgsl` shades eye pixels: hard shadow →
 //! 0, a flooded texel → the intensity recomputed from the eye point and the stored occluder,
-//! else 1. Only outer penumbrae, as in the paper.
+//! else 1. The paper has only outer penumbrae, so its umbrae are too large where penumbrae
+//! are wide; with `inner` (the default; past the paper) silhouettes also flood into the
+//! occluders' footprints by distance, and a pixel in hard shadow takes the inner-penumbra
+//! intensity of the silhouette its texel holds.
 //!
 //! `jfa-e`: `boundary.wgsl` finds eye pixels in hard shadow next to a lit pixel close in 3D
 //! (§5.1) and seeds them with the occluding silhouette point the light centre sees there;
@@ -20,14 +23,22 @@
 //! and the lowest outside (inner and outer penumbrae), with the two remedies of §5.2 against
 //! "jump too far" as switches (`same_object`, `midpoint`); `final_eye.wgsl` takes the stored
 //! intensity, else hard shadow → 0, else 1.
+//!
+//! Colour (contract §1): both final passes bound the visible part of the light by the line
+//! through q along the silhouette's own direction at the occluder point (read from the
+//! shadow map around it), and weigh each channel on its far side with the light's edge table.
+//! The paper's line orthogonal to c→q (`edge: "paper"`) is right only for the occluder point
+//! flooding would ideally keep; across edges parallel to a colour boundary of the light it
+//! tilts and paints a hue the light cannot cast there. Flooding still chooses its occluder
+//! by the paper's intensity.
 
 use wgpu::util::DeviceExt;
 
-use super::jfa_lut::{intensity_lut, LUT_SIZE};
+use crate::light::tables::edge_table;
 use super::{Cap, Counters, MethodContext, Param, ParamSpec, Params, ShadowMethod, BIAS_TEXELS, SLOPE_BIAS_TEXELS};
 use crate::error::JobResult;
 use crate::gpu::layout;
-use crate::gpu::pool::{DerivedKey, PipelineKey};
+use crate::gpu::pool::PipelineKey;
 
 pub struct JfaL;
 pub struct JfaE;
@@ -47,8 +58,13 @@ const FLOODING: Param<&str> = Param::choice(
     "jump flooding, or standard flooding (step 1, 2^rounds − 1 rounds) for the paper's experiment",
 );
 
-const SILHOUETTE_RELATIVE: Param<f32> =
-    Param::float("silhouette_relative", 0.01, 0.0, 1.0, "a neighbour deeper by more than depth × this marks a silhouette pixel");
+const SILHOUETTE_RELATIVE: Param<f32> = Param::float(
+    "silhouette_relative",
+    0.01,
+    0.0,
+    1.0,
+    "a shadow-map neighbour deeper by more than depth × this lies beyond a silhouette (jfa-l's seeds; both methods' edge directions)",
+);
 const BOUNDARY_RELATIVE: Param<f32> = Param::float(
     "boundary_relative",
     0.02,
@@ -60,10 +76,32 @@ const SAME_OBJECT: Param<bool> = Param::boolean("same_object", true, "§5.2 reme
 const MIDPOINT: Param<bool> =
     Param::boolean("midpoint", true, "§5.2 remedy: the midpoint towards the boundary pixel must already be in a penumbra");
 
-const PARAMS_L: &[ParamSpec] = &[ROUNDS.spec, FLOODING.spec, SILHOUETTE_RELATIVE.spec, BIAS_TEXELS.spec, SLOPE_BIAS_TEXELS.spec];
+const EDGE_MODEL: Param<&str> = Param::choice(
+    "edge",
+    "silhouette",
+    &["silhouette", "paper"],
+    "the occluder edge that bounds the visible light: the silhouette's own direction at the occluder point, or the paper's line orthogonal to c→q (§3)",
+);
+const INNER: Param<bool> = Param::boolean(
+    "inner",
+    true,
+    "inner penumbra: silhouettes flood into the occluders' footprints and hard-shadowed pixels take their intensity (past the paper; false is the paper's outer penumbra only)",
+);
 
-const PARAMS_E: &[ParamSpec] =
-    &[ROUNDS.spec, FLOODING.spec, BOUNDARY_RELATIVE.spec, SAME_OBJECT.spec, MIDPOINT.spec, BIAS_TEXELS.spec, SLOPE_BIAS_TEXELS.spec];
+const PARAMS_L: &[ParamSpec] =
+    &[ROUNDS.spec, FLOODING.spec, SILHOUETTE_RELATIVE.spec, EDGE_MODEL.spec, INNER.spec, BIAS_TEXELS.spec, SLOPE_BIAS_TEXELS.spec];
+
+const PARAMS_E: &[ParamSpec] = &[
+    ROUNDS.spec,
+    FLOODING.spec,
+    BOUNDARY_RELATIVE.spec,
+    SAME_OBJECT.spec,
+    MIDPOINT.spec,
+    SILHOUETTE_RELATIVE.spec,
+    EDGE_MODEL.spec,
+    BIAS_TEXELS.spec,
+    SLOPE_BIAS_TEXELS.spec,
+];
 
 /// Laid out as `JfaParams` in `shaders/methods/jfa/common.wgsl`, one 256-byte slot per pass.
 #[repr(C)]
@@ -77,8 +115,9 @@ struct Uniforms {
     same_object: u32,
     midpoint: u32,
     light_space: u32,
-    lut_size: u32,
-    _pad: [u32; 3],
+    edge_model: u32,
+    inner: u32,
+    _pad: [u32; 2],
 }
 
 /// The flood's workgroups are `TILE`² cells (`TILE` in `neighbours.wgsl`).
@@ -136,7 +175,7 @@ impl ShadowMethod for JfaL {
     }
 
     fn record(&self, ctx: &mut MethodContext<'_>, params: &Params) -> JobResult<Counters> {
-        let uniforms = Uniforms { silhouette_relative: params.get(&SILHOUETTE_RELATIVE), ..common_uniforms(params) };
+        let uniforms = Uniforms { inner: u32::from(params.get(&INNER)), ..common_uniforms(params) };
         let (seeds, penumbra, steps, flooded) = flood(ctx, &LIGHT_SPACE, params, uniforms)?;
         Ok(Counters::from([
             ("rounds".to_owned(), steps.len() as f64),
@@ -182,15 +221,16 @@ impl ShadowMethod for JfaE {
 fn common_uniforms(params: &Params) -> Uniforms {
     Uniforms {
         step: 0,
-        silhouette_relative: 0.0,
+        silhouette_relative: params.get(&SILHOUETTE_RELATIVE),
         bias_texels: params.get(&BIAS_TEXELS),
         slope_bias_texels: params.get(&SLOPE_BIAS_TEXELS),
         boundary_relative: 0.0,
         same_object: 0,
         midpoint: 0,
         light_space: 0,
-        lut_size: LUT_SIZE,
-        _pad: [0; 3],
+        edge_model: u32::from(params.get(&EDGE_MODEL) == "silhouette"),
+        inner: 0,
+        _pad: [0; 2],
     }
 }
 
@@ -206,15 +246,7 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
     let uniforms = layout::uniform_slots(&device, "Jfa::uniforms", &slots);
     // The look-up texture depends only on the light image and the light's shape; building it
     // integrates ~10⁴ samples per entry on the CPU, so it is kept for later jobs.
-    let fingerprint = {
-        use std::hash::{Hash, Hasher};
-        let mut hasher = std::collections::hash_map::DefaultHasher::new();
-        ctx.spec.light_image.fingerprint().hash(&mut hasher);
-        ctx.spec.light.size_m.to_array().map(f32::to_bits).hash(&mut hasher);
-        hasher.finish()
-    };
-    let (gpu, spec) = (ctx.gpu, ctx.spec);
-    let lut = ctx.derived.get_or_create(DerivedKey { name: "jfa.lut", fingerprint }, || lut_buffer(gpu, spec));
+    let lut = ctx.light_table("edge_table", edge_table);
     let records = |label| {
         device.create_buffer(&wgpu::BufferDescriptor {
             label: Some(label),
@@ -301,18 +333,6 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
     let counts = ctx.read_counters(&counters)?;
     let flooded = f64::from(counts[2]) / (f64::from(tile_count) * steps.len() as f64);
     Ok((counts[0], counts[1], steps, flooded))
-}
-
-/// The coloured intensity look-up table (`jfa_lut`) of this frame's light, on the GPU: a
-/// storage buffer rather than a texture, since lavapipe charges a texel fetch several times a
-/// buffer read and every flooding candidate does four (a bilinear look-up).
-fn lut_buffer(gpu: &crate::gpu::GpuContext, spec: &crate::render::FrameSpec) -> wgpu::Buffer {
-    let lut = intensity_lut(&spec.light, &spec.light_image);
-    gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("Jfa::lut"),
-        contents: bytemuck::cast_slice(&lut),
-        usage: wgpu::BufferUsages::STORAGE,
-    })
 }
 
 /// Jump flooding of nearest seeds over a `size`² grid: the Voronoi diagram the flooding pattern

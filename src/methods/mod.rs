@@ -8,7 +8,6 @@ pub mod chun_oh;
 pub mod filter;
 pub mod hard;
 pub mod jfa;
-pub mod jfa_lut;
 pub mod pcss;
 pub mod reference;
 pub mod wedges;

@@ -29,6 +29,9 @@ pub struct MethodContext<'a> {
     pub inputs: &'a FrameInputs,
     /// Where the method writes its visibility: `rgba32float`, rgb = V per channel.
     pub visibility: &'a wgpu::TextureView,
+    /// The unshadowed irradiance E0 per channel (`rgba32float`), already computed: a method
+    /// that works out blocked irradiance rather than a fraction divides by it.
+    pub e0: &'a wgpu::TextureView,
     pub width: u32,
     pub height: u32,
     pub encoder: &'a mut wgpu::CommandEncoder,
@@ -117,6 +120,32 @@ impl MethodContext<'_> {
         pass.set_bind_group(0, &self.inputs.bind_group, &[]);
         pass.set_bind_group(1, group, &[]);
         pass.dispatch_workgroups(gx, gy, 1);
+    }
+
+    /// A table derived from the light's image and size (`light::tables`) as a read-only
+    /// storage buffer, built on the CPU the first time a light is seen and kept for later jobs
+    /// under `name` (storage rather than a texture: lavapipe charges a texel fetch several
+    /// times a buffer read).
+    pub fn light_table(
+        &mut self,
+        name: &'static str,
+        build: fn(&crate::light::AreaLight, &crate::light::LightImage) -> Vec<[f32; 4]>,
+    ) -> Arc<wgpu::Buffer> {
+        use std::hash::{Hash, Hasher};
+        use wgpu::util::DeviceExt as _;
+        let mut hasher = std::collections::hash_map::DefaultHasher::new();
+        self.spec.light_image.fingerprint().hash(&mut hasher);
+        self.spec.light.size_m.to_array().map(f32::to_bits).hash(&mut hasher);
+        let key = crate::gpu::pool::DerivedKey { name, fingerprint: hasher.finish() };
+        let (gpu, spec) = (self.gpu, self.spec);
+        self.derived.get_or_create(key, || {
+            let table = build(&spec.light, &spec.light_image);
+            gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(name),
+                contents: bytemuck::cast_slice(&table),
+                usage: wgpu::BufferUsages::STORAGE,
+            })
+        })
     }
 
     /// Workgroup counts covering the output with 8×8 workgroups.

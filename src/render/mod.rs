@@ -237,6 +237,7 @@ impl Renderer {
                 derived: &mut self.derived,
                 inputs: &inputs,
                 visibility: &targets.visibility.view,
+                e0: &targets.e0.view,
                 width: spec.width,
                 height: spec.height,
                 encoder: &mut enc,

@@ -4,6 +4,7 @@
 
 #import common/frame_inputs.wgsl
 #import common/shadow.wgsl
+#import common/edge_table.wgsl
 
 struct BrabecParams {
     // Search radius in texels: r_max = r_scale·z + r_bias (paper), or derived from the light
@@ -25,11 +26,21 @@ struct BrabecParams {
     derived: vec2<u32>, // x: search radius derived, y: hit radius derived
     lattice_stride: u32, // 4 with adaptive sampling (4×4 blocks), 1 without
     use_ids: u32,        // 1: the object-id test of §3.2 (off only to show what it prevents)
+    colored: u32,        // 1: the light image is not uniform: weigh its colours with the edge table
 }
 
 struct PixelState {
     t: f32,   // penumbra coordinate: 0 umbra … meet at the hard edge … 1 lit; < 0 not yet known
     key: u32, // object id (blocker's where hard-shadowed, receiver's where lit) | hard << 31
+    // Light-plane direction (x along r, y along u) in which the search found its texel — the
+    // blocker (outer penumbra) or the lit surface (inner); (0, 0) where it found none.
+    toward: vec2<f32>,
+}
+
+// What the search found for one pixel.
+struct Found {
+    t: f32,
+    toward: vec2<f32>,
 }
 
 struct Counters {
@@ -43,6 +54,8 @@ struct Counters {
 @group(1) @binding(1) var<storage, read_write> state: array<PixelState>;
 @group(1) @binding(2) var<storage, read_write> counters: Counters;
 @group(1) @binding(3) var visibility_out: texture_storage_2d<rgba32float, write>;
+// The light's edge table (`light::tables::edge_table`, read through common/edge_table.wgsl).
+@group(1) @binding(4) var<storage, read> edge_table: array<vec4<f32>>;
 
 const UNKNOWN: f32 = -1.0;
 const BACKGROUND_KEY: u32 = 0x7ffffffeu;
@@ -107,14 +120,16 @@ fn jitter(t: vec2<i32>) -> vec2<f32> {
 // Outer (lit) pixels look for the nearest texel closer to the light than P that belongs to
 // another object; inner (hard-shadowed) pixels for the nearest lit texel of their own object.
 // Rings of growing Chebyshev radius are visited and the search stops once no closer texel
-// can follow, so its cost grows with the distance found, not with r_max.
-fn search(pixel: vec2<u32>) -> f32 {
+// can follow, so its cost grows with the distance found, not with r_max. Also returns the
+// direction of the texel found (`light_direction`).
+fn search(pixel: vec2<u32>) -> Found {
+    var out = Found(1.0, vec2<f32>(0.0));
     if !covered(pixel) {
-        return 1.0;
+        return out;
     }
     let w = warp(pixel);
     if !w.inside {
-        return 1.0;
+        return out;
     }
     let receiver = textureLoad(gbuf_id, pixel, 0).r;
     let r_max = search_radius(w.depth);
@@ -124,6 +139,7 @@ fn search(pixel: vec2<u32>) -> f32 {
     let base = vec2<i32>(floor(w.texel));
     var best = r_max;
     var best_depth = 0.0;
+    var best_texel = vec2<i32>(0);
     var found = false;
     let rings = i32(ceil(r_max)) + 1;
     for (var k = 0; k <= rings; k++) {
@@ -155,6 +171,7 @@ fn search(pixel: vec2<u32>) -> f32 {
                         if dist < best {
                             best = dist;
                             best_depth = d;
+                            best_texel = t;
                             found = true;
                         }
                     }
@@ -169,8 +186,10 @@ fn search(pixel: vec2<u32>) -> f32 {
         }
     }
     if !found {
-        return select(1.0, 0.0, w.hard);
+        out.t = select(1.0, 0.0, w.hard);
+        return out;
     }
+    out.toward = light_direction(textureLoad(gbuf_position, pixel, 0).xyz, w.depth, best_texel);
     var dz: f32;
     if !w.hard {
         dz = w.depth - best_depth;
@@ -186,9 +205,50 @@ fn search(pixel: vec2<u32>) -> f32 {
     // make the hard edge brightest; the text (§3.2: f rises from 0 at the blocker to 1) fixes
     // the intent: outside meet + (1 − meet)·f, inside meet·(1 − f).
     if w.hard {
-        return params.meet * (1.0 - f);
+        out.t = params.meet * (1.0 - f);
+    } else {
+        out.t = params.meet + (1.0 - params.meet) * f;
     }
-    return params.meet + (1.0 - params.meet) * f;
+    return out;
+}
+
+// The direction on the light plane, seen from receiver p (light depth `depth`), of what the
+// shadow map holds at `texel`: its point's offset from the ray c→p at its own depth. A point
+// beside that ray projects from p onto the light on the same side of c, so this is the side
+// of the light the blocker hides (outer penumbra) or the lit surface sees (inner).
+fn light_direction(p: vec3<f32>, depth: f32, texel: vec2<i32>) -> vec2<f32> {
+    let c = frame.light_center.xyz;
+    let point = textureLoad(shadow_position, texel, 0).xyz;
+    let on_ray = c + (p - c) * (dot(point - c, frame.light_n.xyz) / max(depth, 1e-6));
+    let offset = point - on_ray;
+    return vec2<f32>(dot(offset, frame.light_r.xyz), dot(offset, frame.light_u.xyz));
+}
+
+// Per-channel visibility of a pixel from its gray penumbra coordinate and the direction its
+// search found. Brabec & Seidel's search finds how far the hard edge is, not which part of
+// the light is hidden; the direction says which (contract §1: V per channel). The occluder's
+// edge is taken straight and orthogonal to that direction, crossing the light at λ = f·ρ
+// from the centre — f the pixel's place across its half of the penumbra (0 at the hard edge,
+// 1 at the outer end, or deep in the umbra for the inner half), ρ the light's extent that
+// way — so that the hard edge is the line through the centre and each end of the penumbra
+// the light's edge. The edge table gives each channel's share of the part left visible: the
+// centre's side for the outer half, the far side for the inner. Only the hue is taken from
+// it: each channel is the method's gray value times the channel's share over the
+// luminance-weighted share, so a uniform light keeps the paper's fall-off exactly.
+fn colored_visibility(v: f32, t: f32, toward: vec2<f32>) -> vec3<f32> {
+    let length_toward = length(toward);
+    if params.colored == 0u || length_toward <= 0.0 || t <= 0.0 || t >= 1.0 {
+        return vec3<f32>(v);
+    }
+    let e = toward / length_toward;
+    let outer = t >= params.meet;
+    let f = select(1.0 - t / params.meet, (t - params.meet) / (1.0 - params.meet), outer);
+    let share = edge_fraction(e, f);
+    let visible = select(vec4<f32>(1.0) - share, share, outer);
+    if visible.w <= 1e-4 {
+        return vec3<f32>(v);
+    }
+    return clamp(v * visible.rgb / visible.w, vec3<f32>(0.0), vec3<f32>(1.0));
 }
 
 // The key of the §4.3 interpolation test: ids and hard-shadow results must agree.
@@ -204,11 +264,19 @@ fn pixel_key(pixel: vec2<u32>) -> u32 {
     return (id & 0x7fffffffu) | select(0u, 0x80000000u, w.hard);
 }
 
+// Searches pixel `p` and keeps what it found.
+fn search_into(p: vec2<u32>) {
+    let found = search(p);
+    let i = state_index(p);
+    state[i].t = found.t;
+    state[i].toward = found.toward;
+}
+
 // Makes sure pixel `p` has its t, searching if it has none yet.
 fn ensure(p: vec2<u32>) -> f32 {
     let i = state_index(p);
     if state[i].t < 0.0 {
-        state[i].t = search(p);
+        search_into(p);
     }
     return state[i].t;
 }
@@ -240,10 +308,14 @@ fn refine(a: vec2<u32>, step: vec2<u32>, span: u32) {
         if same {
             let t0 = ensure(a + step * lo);
             let t1 = ensure(a + step * hi);
+            let d0 = state[state_index(a + step * lo)].toward;
+            let d1 = state[state_index(a + step * hi)].toward;
             for (var k = lo + 1u; k < hi; k++) {
                 let i = state_index(a + step * k);
                 if state[i].t < 0.0 {
-                    state[i].t = mix(t0, t1, f32(k - lo) / f32(hi - lo));
+                    let f = f32(k - lo) / f32(hi - lo);
+                    state[i].t = mix(t0, t1, f);
+                    state[i].toward = mix(d0, d1, f);
                     if key != BACKGROUND_KEY {
                         atomicAdd(&counters.interpolated, 1u);
                     }

@@ -13,8 +13,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     if any(id.xy * params.lattice_stride > last + vec2<u32>(params.lattice_stride - 1u)) {
         return;
     }
-    let i = state_index(pixel);
-    if state[i].t < 0.0 {
-        state[i].t = search(pixel);
+    if state[state_index(pixel)].t < 0.0 {
+        search_into(pixel);
     }
 }

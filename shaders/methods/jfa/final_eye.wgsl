@@ -15,7 +15,9 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     if (flag & COVERED) != 0u {
         let record = src[2u * (pixel.y * frame.sizes.x + pixel.x)];
         let inside = (flag & HARD) != 0u;
-        let i = intensity(textureLoad(gbuf_position, pixel, 0).xyz, record.xyz, inside);
+        let angle = src[2u * (pixel.y * frame.sizes.x + pixel.x) + 1u].w;
+        let normal = select(vec2<f32>(cos(angle), sin(angle)), vec2<f32>(0.0), angle == NO_NORMAL);
+        let i = final_intensity(textureLoad(gbuf_position, pixel, 0).xyz, record.xyz, inside, normal);
         if in_penumbra(record) && i.w > 0.0 {
             v = i.rgb;
             atomicAdd(&counters[1], 1u);

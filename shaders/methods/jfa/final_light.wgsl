@@ -1,6 +1,8 @@
 // Method `jfa-l`, §4.1 "Generating Final Image": hard shadow → 0; a penumbra-map hit →
 // the intensity recomputed from this eye pixel's own point and the stored occluder (not the
-// stored intensity, which would be blocky at the shadow map's resolution); else 1.
+// stored intensity, which would be blocky at the shadow map's resolution); else 1. With
+// `inner` on, a pixel in hard shadow takes the inner-penumbra intensity of the silhouette
+// point its texel holds (`flood_light.wgsl`), 0 where the ray through it misses the light.
 
 #import methods/jfa/common.wgsl
 
@@ -16,12 +18,19 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
         let ls = to_light_space(p);
         if ls.inside {
             let texel = shadow_texel(ls.uv);
+            let record = src[u32(texel.y) * frame.sizes.z + u32(texel.x)];
             if hard_shadowed(pixel) {
                 v = vec3<f32>(0.0);
+                if params.inner == 1u && !is_empty(record) {
+                    let i = final_intensity(p, record.xyz, true, silhouette_normal(record.xyz, 2));
+                    if i.w > 0.0 {
+                        v = i.rgb;
+                        atomicAdd(&counters[1], 1u);
+                    }
+                }
             } else {
-                let record = src[u32(texel.y) * frame.sizes.z + u32(texel.x)];
                 if in_penumbra(record) {
-                    let i = intensity(p, record.xyz, false);
+                    let i = final_intensity(p, record.xyz, false, silhouette_normal(record.xyz, 2));
                     if i.w > 0.0 {
                         v = i.rgb;
                         atomicAdd(&counters[1], 1u);

@@ -2,7 +2,11 @@
 // Each texel looks at its 8 neighbours at ±step, computes the intensity every occluder they
 // carry gives its own surface point, and keeps the occluder giving the minimum intensity —
 // the one that blocks the most light shapes the penumbra (§4.1). Occluders whose ray misses
-// the light are not taken and not passed on (§3).
+// the light are not taken and not passed on (§3) — except, with `inner` on (past the paper),
+// into the footprints of occluders: a texel no deeper than the occluder point keeps the
+// nearest silhouette point (key 2 + d/(d + 1), d in texels, below a seed's and above any
+// penumbra's), so that the final pass finds, for a receiver in hard shadow, the silhouette
+// whose edge bounds what it sees of the light (its inner penumbra).
 
 #import methods/jfa/common.wgsl
 
@@ -20,6 +24,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_
     var best = src[index];
     var best_key = key_of(best);
     let receiver = textureLoad(shadow_position, p, 0);
+    let receiver_depth = textureLoad(shadow_depth, p, 0).r;
     if receiver.w > 0.0 {
         for (var k = 0u; k < 9u; k++) {
             let n = jump_neighbour(p, k, params.step, vec2<i32>(res));
@@ -33,8 +38,16 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_
                 continue;
             }
             let i = intensity(receiver.xyz, candidate.xyz, false);
-            let key = luminance(i.rgb);
-            if i.w > 0.0 && key < best_key {
+            var key = luminance(i.rgb);
+            if i.w == 0.0 {
+                let occluder = to_light_space(candidate.xyz);
+                if params.inner == 0u || receiver_depth > occluder.depth * (1.0 + params.silhouette_relative) {
+                    continue;
+                }
+                let d = distance(occluder.uv * f32(res), vec2<f32>(p) + 0.5);
+                key = SEED_KEY + d / (d + 1.0);
+            }
+            if key < best_key {
                 best = packed(candidate.xyz, key);
                 best_key = key;
             }

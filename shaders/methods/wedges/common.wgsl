@@ -11,6 +11,11 @@ struct WedgeParams {
     full: i32,          // full light in the LI buffer's fixed point (the paper's 255)
     polygon_count: u32, // shadow-volume polygons; wedges follow them in the primitive index space
     object_ids: u32,    // 1: no shadow from a receiver's own object where it faces away from the light centre
+    channels: u32,      // LI values per pixel: 1 for a uniform light (gray), 3 for a coloured one (rgb)
+    color_angles: u32,  // directions per wedge over which a coloured light's emission is integrated
+    radial_angles: u32, // rows of the radial table
+    radial_stations: u32, // entries per row
+    total: vec4<f32>,   // rgb: each channel's emission integrated over the light (`light::tables`)
 }
 
 // A planar convex polygon of the shadow volume from the light centre (a side quad or, for
@@ -47,11 +52,17 @@ struct WorkItem {
 @group(1) @binding(1) var<storage, read> polygons: array<VolumePolygon>;
 @group(1) @binding(2) var<storage, read> wedges: array<Wedge>;
 @group(1) @binding(3) var<storage, read> work: array<WorkItem>;
-@group(1) @binding(4) var<storage, read_write> li: array<atomic<i32>>;
+@group(1) @binding(4) var<storage, read_write> li: array<atomic<i32>>; // `channels` per pixel
 @group(1) @binding(5) var<storage, read_write> tile_ranges: array<vec2<f32>>;
 // 0 depth reads, 1 LI writes.
 @group(1) @binding(6) var<storage, read_write> counters: array<atomic<u32>, 4>;
 @group(1) @binding(7) var visibility_out: texture_storage_2d<rgba32float, write>;
+// The light's radial table (`light::tables::radial_table`): per direction from the centre, the
+// emission integrated out to each station; w the distance to the rectangle's edge.
+@group(1) @binding(9) var<storage, read> radial: array<vec4<f32>>;
+// The unshadowed irradiance per channel: what a coloured wedge's blocked irradiance is a
+// fraction of.
+@group(1) @binding(10) var e0_in: texture_2d<f32>;
 // Per pixel, two vec4s written by `tiles.wgsl`: the surface point with, in w, the object whose
 // volume and wedges it ignores (NO_OBJECT: none; NOT_COVERED: background), then its normal.
 @group(1) @binding(8) var<storage, read_write> receivers: array<vec4<f32>>;

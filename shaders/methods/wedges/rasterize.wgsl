@@ -9,7 +9,8 @@
 //   crossing of the eye ray in front of the point (z-pass) or, with the signs reversed, beyond
 //   it (z-fail, §5 — with the volume's caps, correct with the eye inside a shadow);
 // - a penumbra wedge (`rasterizePenumbra`): where the silhouette edge, projected from the
-//   point onto the light, cuts the light rectangle, the light's share beyond it.
+//   point onto the light, cuts the light rectangle, the light's share beyond it — per channel
+//   of the light image's emission for a coloured light (`colored_share`).
 // The single-pass variant (§6.2) gives one item both halves of an edge.
 
 #import methods/wedges/common.wgsl
@@ -134,8 +135,9 @@ fn light_point(x: vec2<f32>) -> vec3<f32> {
 // clipped to the rectangle — is this edge's share, added where c' is outside the projected
 // occluder (outer penumbra) and removed where it is inside (inner). Returns that share as a
 // signed fraction of the irradiance the whole light gives p, times the multiplicity; 0
-// outside the wedge.
-fn wedge_share(w: Wedge, p: vec3<f32>, normal: vec3<f32>) -> f32 {
+// outside the wedge. Per channel (`colored_share`) for a coloured light, where `e0` is p's
+// unshadowed irradiance.
+fn wedge_share(w: Wedge, p: vec3<f32>, normal: vec3<f32>, e0: vec3<f32>) -> vec3<f32> {
     let c = frame.light_center.xyz;
     let n = frame.light_n.xyz;
     let half = 0.5 * vec2<f32>(frame.light_n.w, frame.light_u.w);
@@ -147,7 +149,7 @@ fn wedge_share(w: Wedge, p: vec3<f32>, normal: vec3<f32>) -> f32 {
     // Only the part of the edge between the light and p can hide the light from p.
     let limit = hp * (1.0 - 1e-4);
     if (ha >= limit && hb >= limit) || min(ha, hb) <= 0.0 {
-        return 0.0;
+        return vec3<f32>(0.0);
     }
     if ha >= limit {
         a = a + (b - a) * ((ha - limit) / (ha - hb));
@@ -164,12 +166,12 @@ fn wedge_share(w: Wedge, p: vec3<f32>, normal: vec3<f32>) -> f32 {
     // The share is empty unless the projected edge meets the rectangle (which is convex and
     // holds c'); a bounding-box test rejects most misses.
     if max(a2.x, b2.x) < -half.x || min(a2.x, b2.x) > half.x || max(a2.y, b2.y) < -half.y || min(a2.y, b2.y) > half.y {
-        return 0.0;
+        return vec3<f32>(0.0);
     }
     let d = b2 - a2;
     let side = cross2(d, -a2); // > 0: c' on the left of a' → b'
     if abs(side) <= 1e-9 * (dot(d, d) + dot(a2, a2)) {
-        return 0.0; // the edge passes through c': its sector is empty
+        return vec3<f32>(0.0); // the edge passes through c': its sector is empty
     }
     var poly = array<vec2<f32>, 8>(-half, vec2<f32>(half.x, -half.y), half, vec2<f32>(-half.x, half.y), vec2<f32>(0.0), vec2<f32>(0.0), vec2<f32>(0.0), vec2<f32>(0.0));
     var count = 4u;
@@ -181,7 +183,7 @@ fn wedge_share(w: Wedge, p: vec3<f32>, normal: vec3<f32>) -> f32 {
     count = clip(&poly, count, s * vec2<f32>(-a2.y, a2.x), 0.0);
     count = clip(&poly, count, -s * vec2<f32>(-b2.y, b2.x), 0.0);
     if count < 3u {
-        return 0.0;
+        return vec3<f32>(0.0);
     }
     var rect = array<vec2<f32>, 8>(-half, vec2<f32>(half.x, -half.y), half, vec2<f32>(-half.x, half.y), vec2<f32>(0.0), vec2<f32>(0.0), vec2<f32>(0.0), vec2<f32>(0.0));
     var whole = 0.0;
@@ -202,7 +204,91 @@ fn wedge_share(w: Wedge, p: vec3<f32>, normal: vec3<f32>) -> f32 {
         part = light_polygon_irradiance(&poly, count, p, normal);
         whole = light_polygon_irradiance(&rect, 4u, p, normal);
     }
-    return sign(side) * w.a.w * part / max(whole, 1e-30);
+    let weight = sign(side) * w.a.w;
+    if params.channels == 1u {
+        return vec3<f32>(weight * part / max(whole, 1e-30));
+    }
+    return weight * colored_share(&poly, count, a2, d, p, normal, part, below_horizon, e0);
+}
+
+// A coloured light's share of the region `poly` (light coordinates, c' at the origin, beyond
+// the line through `a2` along `d`), per channel: the blocked irradiance over E0 (contract §1:
+// V per channel). Lambert's formula gives the region's irradiance at unit radiance exactly
+// (`part`); what the image adds is the region's mean radiance, weighted as p weighs it
+// (cosines over squared distance). That mean comes from the radial table: the region is
+// bounded by rays from the centre, the edge's line and the rectangle, so along each of
+// `color_angles` directions across its angular span the emission between the line and the
+// rectangle's edge is two look-ups, exact for the piecewise-constant image; the directions
+// are midpoints of equal angular steps, each weighed by the kernel at its segment's middle.
+// The region's mean rather than its integral comes from these samples, so their error only
+// bends the hue: a uniform light gets back exactly Lambert's share.
+// Below the horizon (area weights, see `wedge_share`) the share is the region's emission over
+// the whole light's.
+fn colored_share(poly: ptr<function, array<vec2<f32>, 8>>, count: u32, a2: vec2<f32>, d: vec2<f32>, p: vec3<f32>, normal: vec3<f32>, part: f32, below_horizon: bool, e0: vec3<f32>) -> vec3<f32> {
+    // The region's angular span seen from c' (< π: the region lies beyond a line that misses
+    // c'), measured from the direction of its vertices' mean.
+    var g = vec2<f32>(0.0);
+    for (var k = 0u; k < count; k++) {
+        g += (*poly)[k];
+    }
+    g = normalize(g);
+    var lo = 0.0;
+    var hi = 0.0;
+    for (var k = 0u; k < count; k++) {
+        let v = (*poly)[k];
+        let rel = atan2(cross2(g, v), dot(g, v));
+        lo = min(lo, rel);
+        hi = max(hi, rel);
+    }
+    let base = atan2(g.y, g.x);
+    let line_normal = vec2<f32>(-d.y, d.x);
+    let line_offset = dot(line_normal, a2);
+    let half = 0.5 * vec2<f32>(frame.light_n.w, frame.light_u.w);
+    let n_light = frame.light_n.xyz;
+    let stations = f32(params.radial_stations - 1u);
+    var emitted = vec3<f32>(0.0);
+    var area = 0.0;
+    let steps = params.color_angles;
+    for (var j = 0u; j < steps; j++) {
+        let phi = base + lo + (hi - lo) * (f32(j) + 0.5) / f32(steps);
+        let e = vec2<f32>(cos(phi), sin(phi));
+        let reach = min(half.x / max(abs(e.x), 1e-9), half.y / max(abs(e.y), 1e-9));
+        // Where this ray crosses the edge's line into the region (never, if it runs away).
+        let along = dot(line_normal, e);
+        var enter = reach;
+        if along * line_offset > 0.0 {
+            enter = clamp(line_offset / along, 0.0, reach);
+        }
+        let s = enter / reach;
+        let turns = fract(phi / 6.28318531);
+        let row = (u32(round(turns * f32(params.radial_angles))) % params.radial_angles) * params.radial_stations;
+        let x = s * stations;
+        let i = min(u32(x), params.radial_stations - 2u);
+        let inner = mix(radial[row + i].rgb, radial[row + i + 1u].rgb, x - f32(i));
+        let segment_emission = radial[row + params.radial_stations - 1u].rgb - inner;
+        let segment_area = 0.5 * reach * reach * (1.0 - s * s);
+        var kernel = 1.0;
+        if !below_horizon {
+            let to_light = light_point(e * 0.5 * (enter + reach)) - p;
+            let r2 = dot(to_light, to_light);
+            kernel = max(dot(normal, to_light), 0.0) * max(-dot(n_light, to_light), 0.0) / (r2 * r2);
+        }
+        emitted += kernel * segment_emission;
+        area += kernel * segment_area;
+    }
+    if area <= 0.0 {
+        return vec3<f32>(0.0);
+    }
+    let mean_radiance = emitted / area; // per m² of the image's emission units
+    if below_horizon {
+        var region = 0.0;
+        for (var k = 0u; k < count; k++) {
+            region += 0.5 * cross2((*poly)[k], (*poly)[(k + 1u) % count]);
+        }
+        return abs(region) * mean_radiance / max(params.total.rgb, vec3<f32>(1e-30));
+    }
+    let blocked = part * frame.light_center.w * mean_radiance;
+    return select(vec3<f32>(0.0), blocked / e0, e0 > vec3<f32>(0.0));
 }
 
 
@@ -242,9 +328,11 @@ fn tile_pixel(origin: vec2<u32>, k: u32) -> i32 {
     return select(i32(at), -1, receivers[2u * at].w == NOT_COVERED);
 }
 
-fn add_light(at: u32, delta: i32) {
-    if delta != 0 {
-        atomicAdd(&li[at], delta);
+fn add_light(at: u32, delta: vec3<i32>) {
+    if any(delta != vec3<i32>(0)) {
+        for (var k = 0u; k < params.channels; k++) {
+            atomicAdd(&li[at * params.channels + k], delta[k]);
+        }
         atomicAdd(&counters[1], 1u);
     }
 }
@@ -259,14 +347,18 @@ fn umbra_delta(index: u32, at: u32) -> i32 {
 }
 
 // The penumbra term at receiver `at` for wedge `index`.
-fn penumbra_delta(index: u32, at: u32) -> i32 {
+fn penumbra_delta(index: u32, at: u32) -> vec3<i32> {
     let receiver = receivers[2u * at];
     let w = wedges[index];
     // §3: "if p is inside the wedge" — its plane equations first; most points of a tile the
     // wedge reaches lie outside it.
     let p = vec4<f32>(receiver.xyz, 1.0);
     if w.b.w == receiver.w || dot(w.front, p) < 0.0 || dot(w.back, p) < 0.0 {
-        return 0;
+        return vec3<i32>(0);
     }
-    return -i32(round(f32(params.full) * wedge_share(w, receiver.xyz, receivers[2u * at + 1u].xyz)));
+    var e0 = vec3<f32>(1.0);
+    if params.channels == 3u {
+        e0 = textureLoad(e0_in, vec2<u32>(at % frame.sizes.x, at / frame.sizes.x), 0).rgb;
+    }
+    return -vec3<i32>(round(f32(params.full) * wedge_share(w, receiver.xyz, receivers[2u * at + 1u].xyz, e0)));
 }

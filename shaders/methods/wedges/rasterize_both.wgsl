@@ -19,9 +19,9 @@ fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index
         if at < 0 {
             continue;
         }
-        var delta = 0;
+        var delta = vec3<i32>(0);
         if polygon {
-            delta += umbra_delta(job.primitive, u32(at));
+            delta += vec3<i32>(umbra_delta(job.primitive, u32(at)));
         }
         if wedge > 0u {
             delta += penumbra_delta(wedge - 1u, u32(at));

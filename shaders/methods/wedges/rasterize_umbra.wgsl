@@ -12,7 +12,7 @@ fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index
     for (var k = local; k < params.tile * params.tile; k += 64u) {
         let at = tile_pixel(item.origin, k);
         if at >= 0 {
-            add_light(u32(at), umbra_delta(item.job.primitive, u32(at)));
+            add_light(u32(at), vec3<i32>(umbra_delta(item.job.primitive, u32(at))));
         }
     }
 }

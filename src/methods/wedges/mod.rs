@@ -25,8 +25,14 @@
 //!   away where it is seen. Summed over a closed silhouette this is the exact covered area of
 //!   the light (the winding number changes by one at each edge), with no side planes to match
 //!   between neighbouring wedges. This is the arrangement of [2]; the paper's restructuring,
-//!   culling and z-fail apply to it unchanged (§8). The light is treated as a uniform
-//!   rectangle: the image's colours and shape reach the frame through E0 only.
+//!   culling and z-fail apply to it unchanged (§8).
+//! - A coloured (or shaped) light image (the paper's lights are uniform; contract §1 asks for
+//!   visibility per channel): the LI buffer holds three values per pixel, and a wedge takes
+//!   away from each channel the irradiance its region blocks — Lambert's exact share of the
+//!   region times the region's mean radiance, integrated from the light's radial table
+//!   (`light::tables`) along `color_angles` directions — over that channel's E0. The cost does
+//!   not grow with the image's texels; a uniform image keeps the one gray value and the exact
+//!   share.
 //! - Wedge culling uses the wedge's two tangent planes (through the edge, touching the light
 //!   rectangle: the wedge lies between them on the side away from the light) transformed to
 //!   screen space, tested with the n/p vertex of the tile's box (Fig. 7), after the quick
@@ -46,6 +52,7 @@ use crate::error::JobResult;
 use crate::gpu::layout;
 use crate::gpu::pool::PipelineKey;
 use crate::gpu::readback::read_buffer;
+use crate::light::tables::{is_uniform, radial_table, total_emission, RADIAL_ANGLES, RADIAL_STATIONS};
 use culling::{cull, TileGrid};
 use geometry::{eye_in_shadow, Volume};
 
@@ -72,7 +79,15 @@ const PASSES: Param<&str> = Param::choice(
     "three: umbra polygons, then wedges (§6.1); single: an edge's umbra and penumbra in one pass where both touch a tile (§6.2)",
 );
 
-const PARAMS: &[ParamSpec] = &[TILE.spec, CULLING.spec, VOLUME.spec, OBJECT_IDS.spec, PASSES.spec];
+const COLOR_ANGLES: Param<u32> = Param::integer(
+    "color_angles",
+    8,
+    1,
+    32,
+    "directions across a wedge's region along which a coloured light's emission is integrated (exact along each); a uniform light needs none",
+);
+
+const PARAMS: &[ParamSpec] = &[TILE.spec, CULLING.spec, VOLUME.spec, OBJECT_IDS.spec, PASSES.spec, COLOR_ANGLES.spec];
 
 /// Full light in the LI buffer's fixed point.
 const FULL: i32 = 1 << 16;
@@ -113,7 +128,12 @@ struct Uniforms {
     full: i32,
     polygon_count: u32,
     object_ids: u32,
+    channels: u32,
+    color_angles: u32,
+    radial_angles: u32,
+    radial_stations: u32,
     _pad: [u32; 3],
+    total: [f32; 4],
 }
 
 impl ShadowMethod for Wedges {
@@ -156,13 +176,19 @@ impl ShadowMethod for Wedges {
         let device = ctx.gpu.device.clone();
         let grid_size = (spec.width.div_ceil(tile), spec.height.div_ceil(tile));
         let tile_count = (grid_size.0 * grid_size.1) as usize;
+        let colored = !is_uniform(&spec.light_image);
         let uniforms = Uniforms {
             tile,
             zfail: u32::from(zfail),
             full: FULL,
             polygon_count: polygons.len() as u32,
             object_ids: u32::from(params.get(&OBJECT_IDS)),
+            channels: if colored { 3 } else { 1 },
+            color_angles: params.get(&COLOR_ANGLES),
+            radial_angles: RADIAL_ANGLES,
+            radial_stations: RADIAL_STATIONS,
             _pad: [0; 3],
+            total: total_emission(light, &spec.light_image).extend(0.0).to_array(),
         };
         let storage = |label, contents: &[u8]| {
             device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
@@ -178,7 +204,7 @@ impl ShadowMethod for Wedges {
         let ranges = storage("Wedges::tile_ranges", &vec![0u8; tile_count * 8]);
         let li = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("Wedges::li"),
-            size: u64::from(spec.width) * u64::from(spec.height) * 4,
+            size: u64::from(spec.width) * u64::from(spec.height) * 4 * u64::from(uniforms.channels),
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
@@ -199,12 +225,15 @@ impl ShadowMethod for Wedges {
             layout::storage_read_write(6),
             layout::storage_texture(7, wgpu::TextureFormat::Rgba32Float),
             layout::storage_read_write(8),
+            layout::storage_read(9),
+            layout::texture_float(10),
         ];
         let tiles_pipeline = ctx.screen_pipeline(PipelineKey::new("wedges.tiles"), "methods/wedges/tiles.wgsl", &io);
         let umbra_pipeline = ctx.screen_pipeline(PipelineKey::new("wedges.umbra"), "methods/wedges/rasterize_umbra.wgsl", &io);
         let penumbra_pipeline = ctx.screen_pipeline(PipelineKey::new("wedges.penumbra"), "methods/wedges/rasterize_penumbra.wgsl", &io);
         let both_pipeline = ctx.screen_pipeline(PipelineKey::new("wedges.both"), "methods/wedges/rasterize_both.wgsl", &io);
         let resolve = ctx.screen_pipeline(PipelineKey::new("wedges.resolve"), "methods/wedges/resolve.wgsl", &io);
+        let radial = if colored { ctx.light_table("wedges.radial", radial_table) } else { std::sync::Arc::new(storage("Wedges::no_radial", &[])) };
         let bind = |work: &wgpu::Buffer| {
             device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("Wedges::bind_group"),
@@ -219,6 +248,8 @@ impl ShadowMethod for Wedges {
                     counters.as_entire_binding(),
                     wgpu::BindingResource::TextureView(ctx.visibility),
                     receivers.as_entire_binding(),
+                    radial.as_entire_binding(),
+                    wgpu::BindingResource::TextureView(ctx.e0),
                 ]),
             })
         };
@@ -289,6 +320,7 @@ impl ShadowMethod for Wedges {
             ("li_writes".to_owned(), f64::from(counts[1])),
             ("boundary_edges".to_owned(), stats.boundary_edges as f64),
             ("non_manifold_edges".to_owned(), stats.non_manifold_edges as f64),
+            ("channels".to_owned(), f64::from(uniforms.channels)),
         ]))
     }
 }

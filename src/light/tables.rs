@@ -1,0 +1,289 @@
+//! Per-light tables of how each channel's emission is spread over the light (contract §1:
+//! visibility per channel), built once per light image and size on the CPU and kept by the
+//! methods that look them up:
+//!
+//! - `edge_table`, the intensity look-up of Rong & Tan 2006 (§3, §4.1), coloured: for a line
+//!   across the light, given by its direction from the centre and its distance, the part of
+//!   each channel's emission on the centre's side. `jfa-l`, `jfa-e` and `brabec` read it
+//!   (`shaders/common/edge_table.wgsl`).
+//! - `radial_table`: for each direction from the light centre, the emission integrated along
+//!   the ray out to each fraction of the way to the rectangle's edge — exact for the
+//!   piecewise-constant image. `wedges` integrates each channel over the region a wedge cuts
+//!   off with it (`shaders/methods/wedges/rasterize.wgsl`).
+
+use glam::Vec2;
+
+use super::{AreaLight, LightImage};
+
+/// Directions of the edge table's lines, over the full turn.
+pub const EDGE_ANGLES: u32 = 256;
+/// Distances per direction, at s = 0, 1/(n−1), …, 1 of the way to the rectangle's edge.
+pub const EDGE_STATIONS: u32 = 64;
+
+/// Sample points per side of the light integrating each entry (nearest texel): the lines cut
+/// through texels, so even a 1×1 image needs many.
+const EDGE_SAMPLES: u32 = 256;
+
+/// Bins of each direction's histogram of the samples' distances along it.
+const EDGE_BINS: usize = 2048;
+
+/// The edge table: the intensity look-up of Rong & Tan 2006 (§3, §4.1), coloured and indexed
+/// by the line rather than by a point of the light. Row i is the direction
+/// eᵢ = (cos φᵢ, sin φᵢ), φᵢ = 2π·i/EDGE_ANGLES, in light-local coordinates (x along r, y along
+/// u); entry j is the line orthogonal to eᵢ at distance λ = sⱼ·ρ(eᵢ) from the centre,
+/// sⱼ = j/(EDGE_STATIONS − 1), ρ the distance to the rectangle's edge along eᵢ. It holds in rgb
+/// the fraction of each channel's emission on the centre's side of that line (y·eᵢ < λ), in w
+/// the luminance-weighted fraction. A straight occluder edge projected onto the light is such
+/// a line: the part of the light it leaves visible is one side of it. Indexing by (direction,
+/// distance) rather than by a grid over the light keeps the direction exact next to the centre,
+/// where a grid's neighbouring texels hold lines of every orientation.
+pub fn edge_table(light: &AreaLight, image: &LightImage) -> Vec<[f32; 4]> {
+    let n = EDGE_SAMPLES;
+    // Emitting sample points in light-local metres with their emission.
+    let samples: Vec<(Vec2, glam::Vec3)> = (0..n)
+        .flat_map(|j| (0..n).map(move |i| (i, j)))
+        .filter_map(|(i, j)| {
+            let (s, t) = ((i as f32 + 0.5) / n as f32, (j as f32 + 0.5) / n as f32);
+            let texel = (((s * image.width as f32) as u32).min(image.width - 1), ((t * image.height as f32) as u32).min(image.height - 1));
+            let e = image.emission(texel.0, texel.1);
+            (e.max_element() > 0.0).then(|| (local(light, s, t), e))
+        })
+        .collect();
+    let total = samples.iter().fold(glam::Vec3::ZERO, |acc, (_, e)| acc + *e);
+    let luminance = |c: glam::Vec3| 0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z;
+    let half = light.size_m * 0.5;
+    let radius = half.length();
+    let row = |i: u32| -> Vec<[f32; 4]> {
+        let phi = std::f64::consts::TAU * f64::from(i) / f64::from(EDGE_ANGLES);
+        let e = Vec2::new(phi.cos() as f32, phi.sin() as f32);
+        // Cumulative emission along e, over [−radius, radius] in EDGE_BINS bins.
+        let mut bins = vec![glam::Vec3::ZERO; EDGE_BINS + 1];
+        let scale = EDGE_BINS as f32 / (2.0 * radius);
+        for (y, emission) in &samples {
+            let bin = (((y.dot(e) + radius) * scale) as usize).min(EDGE_BINS - 1);
+            bins[bin + 1] += *emission;
+        }
+        for k in 1..bins.len() {
+            let before = bins[k - 1];
+            bins[k] += before;
+        }
+        let reach = edge_distance(half, e);
+        (0..EDGE_STATIONS)
+            .map(|j| {
+                let lambda = reach * j as f32 / (EDGE_STATIONS - 1) as f32;
+                let x = ((lambda + radius) * scale).clamp(0.0, EDGE_BINS as f32);
+                let k = (x as usize).min(EDGE_BINS - 1);
+                let inside = bins[k].lerp(bins[k + 1], x - k as f32);
+                let gray = if luminance(total) > 0.0 { luminance(inside) / luminance(total) } else { 0.0 };
+                let fraction = |c: usize| if total[c] > 0.0 { inside[c] / total[c] } else { gray };
+                [fraction(0), fraction(1), fraction(2), gray]
+            })
+            .collect()
+    };
+    // 256 directions × ~6·10⁴ samples: the rows are shared among the CPU's cores.
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get()) as u32;
+    let rows_per_thread = EDGE_ANGLES.div_ceil(threads);
+    std::thread::scope(|scope| {
+        let workers: Vec<_> = (0..EDGE_ANGLES)
+            .step_by(rows_per_thread as usize)
+            .map(|first| {
+                let row = &row;
+                scope.spawn(move || (first..(first + rows_per_thread).min(EDGE_ANGLES)).flat_map(row).collect::<Vec<_>>())
+            })
+            .collect();
+        workers.into_iter().flat_map(|worker| worker.join().expect("an edge-table worker panicked")).collect()
+    })
+}
+
+/// Directions from the light centre in `radial_table`, over the full turn.
+pub const RADIAL_ANGLES: u32 = 1024;
+/// Radial stations per direction, at s = 0, 1/(n−1), …, 1 of the way to the rectangle's edge.
+pub const RADIAL_STATIONS: u32 = 64;
+
+/// Whether every texel emits the same radiance: then each channel's share of any region is
+/// its share of the area, and the methods skip the tables.
+pub fn is_uniform(image: &LightImage) -> bool {
+    let first = image.emission(0, 0);
+    (0..image.height).all(|j| (0..image.width).all(|i| image.emission(i, j) == first))
+}
+
+/// The radial table, `RADIAL_ANGLES` rows of `RADIAL_STATIONS` entries: row i is the
+/// direction φᵢ = 2π·i/RADIAL_ANGLES from the centre in light-local coordinates (x along r,
+/// y along u); entry j holds in rgb ∫₀^{sⱼ·ρ(φᵢ)} emission(ρ, φᵢ) ρ dρ — the polar area
+/// integral out to sⱼ = j/(RADIAL_STATIONS − 1) of the distance ρ(φᵢ) to the rectangle's
+/// edge — and in w that distance. Integrating a row's difference between two stations over
+/// φ gives the emission of the region between two curves around the centre, so the integral
+/// over any region bounded by rays from the centre and two curves costs a few look-ups per
+/// direction, however many texels the image has. Along each ray the integral is exact: the
+/// ray is cut where it crosses texel boundaries.
+pub fn radial_table(light: &AreaLight, image: &LightImage) -> Vec<[f32; 4]> {
+    let half = light.size_m * 0.5;
+    let (width, height) = (image.width, image.height);
+    let mut table = Vec::with_capacity((RADIAL_ANGLES * RADIAL_STATIONS) as usize);
+    let mut cuts: Vec<f32> = Vec::new();
+    for i in 0..RADIAL_ANGLES {
+        let phi = std::f64::consts::TAU * f64::from(i) / f64::from(RADIAL_ANGLES);
+        let e = Vec2::new(phi.cos() as f32, phi.sin() as f32);
+        let reach = edge_distance(half, e);
+        // Where the ray crosses texel columns and rows, and the stations.
+        cuts.clear();
+        for k in 1..width {
+            let x = (k as f32 / width as f32 - 0.5) * light.size_m.x;
+            let rho = x / e.x;
+            if rho > 0.0 && rho < reach {
+                cuts.push(rho);
+            }
+        }
+        for k in 1..height {
+            let y = (0.5 - k as f32 / height as f32) * light.size_m.y;
+            let rho = y / e.y;
+            if rho > 0.0 && rho < reach {
+                cuts.push(rho);
+            }
+        }
+        let stations = (0..RADIAL_STATIONS).map(|j| reach * j as f32 / (RADIAL_STATIONS - 1) as f32);
+        cuts.extend(stations.clone());
+        cuts.sort_by(f32::total_cmp);
+        // Accumulate piece by piece, recording the running sum at each station.
+        let mut sum = glam::Vec3::ZERO;
+        let mut last = 0.0f32;
+        let mut stations = stations.peekable();
+        for &rho in &cuts {
+            if rho > last {
+                let mid = e * (0.5 * (last + rho));
+                let s = (mid.x / light.size_m.x + 0.5).clamp(0.0, 1.0);
+                let t = (0.5 - mid.y / light.size_m.y).clamp(0.0, 1.0);
+                let texel = (((s * width as f32) as u32).min(width - 1), ((t * height as f32) as u32).min(height - 1));
+                sum += image.emission(texel.0, texel.1) * (0.5 * (rho * rho - last * last));
+                last = rho;
+            }
+            while stations.peek().is_some_and(|&station| station <= rho) {
+                stations.next();
+                table.push([sum.x, sum.y, sum.z, reach]);
+            }
+        }
+        // Float rounding can leave the last station (= reach) unmatched.
+        while stations.next().is_some() {
+            table.push([sum.x, sum.y, sum.z, reach]);
+        }
+    }
+    table
+}
+
+/// Distance from the centre of a rectangle of half-sides `half` to its edge along unit `e`.
+fn edge_distance(half: Vec2, e: Vec2) -> f32 {
+    let x = if e.x != 0.0 { half.x / e.x.abs() } else { f32::INFINITY };
+    let y = if e.y != 0.0 { half.y / e.y.abs() } else { f32::INFINITY };
+    x.min(y)
+}
+
+/// Each channel's emission integrated over the light, per square metre of image (rgb), in
+/// the units of `radial_table`.
+pub fn total_emission(light: &AreaLight, image: &LightImage) -> glam::Vec3 {
+    image.mean_emission() * light.area_m2()
+}
+
+/// Image coordinates (s right, t down) to light-local metres (x along r, y along u).
+fn local(light: &AreaLight, s: f32, t: f32) -> Vec2 {
+    Vec2::new((s - 0.5) * light.size_m.x, (0.5 - t) * light.size_m.y)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec3;
+
+    fn light(size: Vec2) -> AreaLight {
+        AreaLight::new(Vec3::Y * 3.0, -Vec3::Y, -Vec3::Z, size, 1.0).unwrap()
+    }
+
+    #[test]
+    fn radial_table_integrates_the_image_exactly() {
+        // Summed over all directions (trapezoid-free: each row is a thin sector of angle
+        // 2π/n), the last station holds the whole light's emission per channel.
+        let light = light(Vec2::new(1.6, 0.9));
+        for name in ["white", "stripes", "flame", "quadrants"] {
+            let image = LightImage::builtin(name, &Default::default(), "f").unwrap();
+            let table = radial_table(&light, &image);
+            let step = std::f32::consts::TAU / RADIAL_ANGLES as f32;
+            let mut sum = glam::Vec3::ZERO;
+            for i in 0..RADIAL_ANGLES {
+                let last = table[(i * RADIAL_STATIONS + RADIAL_STATIONS - 1) as usize];
+                sum += glam::Vec3::new(last[0], last[1], last[2]) * step;
+            }
+            let total = total_emission(&light, &image);
+            for k in 0..3 {
+                assert!((sum[k] - total[k]).abs() <= 0.01 * total.max_element(), "{name} channel {k}: {} vs {}", sum[k], total[k]);
+            }
+        }
+        // Along +x through `stripes` (six bands of 1.6/6 m; the right half holds cyan, blue
+        // and magenta), only the magenta band, x ∈ [0.5333, 0.8], emits red; all three blue.
+        let image = LightImage::builtin("stripes", &Default::default(), "f").unwrap();
+        let table = radial_table(&light, &image);
+        let row0 = &table[..RADIAL_STATIONS as usize];
+        let red = row0[RADIAL_STATIONS as usize - 1][0];
+        let expected = 0.5 * (0.8f32 * 0.8 - 0.53333 * 0.53333);
+        assert!((red - expected).abs() < 1e-4, "{red} vs {expected}");
+        assert_eq!(row0[RADIAL_STATIONS as usize - 1][3], 0.8);
+        assert!((row0[RADIAL_STATIONS as usize - 1][2] - 0.32).abs() < 1e-4);
+    }
+
+    #[test]
+    fn uniform_images_are_recognised() {
+        let builtin = |name| LightImage::builtin(name, &Default::default(), "f").unwrap();
+        assert!(is_uniform(&builtin("white")));
+        for name in ["disk", "star", "stripes", "flame", "quadrants"] {
+            assert!(!is_uniform(&builtin(name)), "{name}");
+        }
+    }
+
+    fn edge(table: &[[f32; 4]], i: u32, j: u32) -> [f32; 4] {
+        table[(i * EDGE_STATIONS + j) as usize]
+    }
+
+    #[test]
+    fn edge_table_fractions_match_direct_summation() {
+        // A uniform light: along +x (row 0) the centre's side of the line at x = s·w/2 holds
+        // (1 + s)/2 of the light; along −x (row 128) the same, mirrored.
+        let light = light(Vec2::new(2.0, 1.0));
+        let white = edge_table(&light, &LightImage::builtin("white", &Default::default(), "f").unwrap());
+        for j in [0, 10, 32, 63] {
+            let s = j as f32 / (EDGE_STATIONS - 1) as f32;
+            for i in [0, EDGE_ANGLES / 2] {
+                let got = edge(&white, i, j);
+                assert!((got[0] - (1.0 + s) / 2.0).abs() < 0.01 && got[3] == got[0], "row {i} station {j}: {got:?}");
+            }
+        }
+        // `stripes`: along +x a line near the right edge cuts off a sliver of magenta only,
+        // keeping all the green; along −x a line near the left edge cuts into the red band,
+        // keeping all the blue. Red, direct: the red bands are [0, 1/6] and [5/6, 1] of the
+        // width; the line at s = 0.9 along −x leaves x > −0.9 m, i.e. image s > 0.05.
+        let light = light(Vec2::new(3.0, 1.0));
+        let table = edge_table(&light, &LightImage::builtin("stripes", &Default::default(), "f").unwrap());
+        let right = edge(&table, 0, 60);
+        let left = edge(&table, EDGE_ANGLES / 2, 60);
+        assert!(right[1] > 0.999 && right[2] < 0.99, "green kept, magenta cut on the right: {right:?}");
+        assert!(left[0] < 0.97 && left[2] > 0.999, "red cut, blue kept on the left: {left:?}");
+        let s_line = 0.5 - 0.5 * 60.0 / 63.0; // image s of the line
+        let red_total = 2.0 / 6.0;
+        let red_visible = (1.0 / 6.0 - s_line) + 1.0 / 6.0;
+        assert!((left[0] - red_visible / red_total).abs() < 0.01, "{} vs {}", left[0], red_visible / red_total);
+    }
+
+    #[test]
+    fn edge_table_follows_the_image_orientation() {
+        // `quadrants`: red top-left, green top-right, blue bottom-left, yellow bottom-right.
+        // The line along +u (row 64, φ = π/2) close to the top edge keeps all the bottom half
+        // (blue, yellow) and cuts off a sliver of the top (red, green).
+        let light = light(Vec2::new(1.0, 1.0));
+        let table = edge_table(&light, &LightImage::builtin("quadrants", &Default::default(), "f").unwrap());
+        let up = edge(&table, EDGE_ANGLES / 4, 56);
+        assert!(up[2] > 0.999, "blue lies below: {up:?}");
+        // Red: the top-left quadrant (all its red) plus the yellow bottom-right; the line keeps
+        // the top quadrant's lower 56/63 and all the yellow: (56/63 + 1)/2.
+        assert!((up[0] - (56.0 / 63.0 + 1.0) / 2.0).abs() < 0.01, "{up:?}");
+        // Along +r near the right edge: green (top-right, and in the yellow) loses a sliver; blue none.
+        let right = edge(&table, 0, 56);
+        assert!(right[2] > 0.999 && right[1] < 0.95, "{right:?}");
+    }
+}
