@@ -23,6 +23,8 @@ pub struct Metrics {
     pub rmse: f64,
     /// Mean absolute error (contract §4 quotes "mean penumbra visibility error").
     pub mae: f64,
+    /// The same per channel (red, green, blue): where a coloured light's hue goes wrong.
+    pub mae_rgb: [f64; 3],
     pub psnr_db: f64,
     pub ssim: f64,
     pub flip: f64,
@@ -95,14 +97,14 @@ fn metrics(test: &Planar, reference: &Planar, mask: &[bool]) -> Metrics {
     let count = mask.iter().filter(|m| **m).count();
     if count == 0 {
         // No pixels in the region: nothing differs.
-        return Metrics { rmse: 0.0, mae: 0.0, psnr_db: f64::INFINITY, ssim: 1.0, flip: 0.0 };
+        return Metrics { rmse: 0.0, mae: 0.0, mae_rgb: [0.0; 3], psnr_db: f64::INFINITY, ssim: 1.0, flip: 0.0 };
     }
-    let (mut squared, mut absolute) = (0.0f64, 0.0f64);
+    let (mut squared, mut absolute) = (0.0f64, [0.0f64; 3]);
     for ((a, b), _) in test.rgb.iter().zip(&reference.rgb).zip(mask).filter(|(_, m)| **m) {
         for k in 0..3 {
             let d = f64::from(a[k] - b[k]);
             squared += d * d;
-            absolute += d.abs();
+            absolute[k] += d.abs();
         }
     }
     let samples = (count * 3) as f64;
@@ -124,7 +126,8 @@ fn metrics(test: &Planar, reference: &Planar, mask: &[bool]) -> Metrics {
         nv_flip::DEFAULT_PIXELS_PER_DEGREE,
     );
     let flip = masked_mean(flip_map.to_vec().into_iter().map(f64::from), mask);
-    Metrics { rmse, mae: absolute / samples, psnr_db: if rmse > 0.0 { -20.0 * rmse.log10() } else { f64::INFINITY }, ssim, flip }
+    let mae_rgb = absolute.map(|a| a / count as f64);
+    Metrics { rmse, mae: absolute.iter().sum::<f64>() / samples, mae_rgb, psnr_db: if rmse > 0.0 { -20.0 * rmse.log10() } else { f64::INFINITY }, ssim, flip }
 }
 
 fn masked_mean(values: impl Iterator<Item = f64>, mask: &[bool]) -> f64 {
@@ -199,6 +202,7 @@ mod tests {
         let report = compare(&test, &reference, 0.0);
         assert!((report.visibility.penumbra.rmse - 0.1).abs() < 1e-5, "{:?}", report.visibility.penumbra);
         assert!((report.visibility.penumbra.mae - 0.1).abs() < 1e-5);
+        assert!(report.visibility.penumbra.mae_rgb.iter().all(|m| (m - 0.1).abs() < 1e-5));
         assert!((report.visibility.penumbra.psnr_db - 20.0).abs() < 1e-3);
         let fraction = report.penumbra_pixels as f64 / (64.0 * 48.0);
         assert!((report.visibility.whole.rmse - 0.1 * fraction.sqrt()).abs() < 1e-5);

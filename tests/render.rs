@@ -346,6 +346,7 @@ fn eval_writes_the_tables_and_the_pictures() {
         out: out.clone(),
         sweep: Some("hard:slope_bias_texels=0,1,4".into()),
         repeat: 2,
+        colored: true,
     };
     let report = penumbra::eval::run(&common::engine(), &options).unwrap();
     // 2 lights × 2 shadow maps; per case the reference, hard, jfa-l both ways, chun-oh, three sweep points.
@@ -366,8 +367,16 @@ fn eval_writes_the_tables_and_the_pictures() {
         assert!(f.penumbra_pixels > 0 && (sum - 1.0).abs() < 1e-9, "{f:?}");
         assert_eq!(f.method, "jfa-l");
     }
+    // `stripes`' white twin is `white`, which the suite runs anyway: every method's error
+    // under `stripes` is set against its error under `white`, in each case.
+    assert_eq!(report.colored.len(), 2 * 7);
+    for c in &report.colored {
+        assert_eq!((c.light.as_str(), c.twin.as_str()), ("stripes", "white"));
+        assert!(c.ratio > 0.0 && (c.mae - c.mae_rgb.iter().sum::<f64>() / 3.0).abs() < 1e-9, "{c:?}");
+    }
     let md = std::fs::read_to_string(out.join("results.md")).unwrap();
     assert!(md.contains("the median of 2 runs"), "{md}");
+    assert!(md.contains("## Colour") && md.contains("| torus | stripes | chun-oh |"), "{md}");
     assert!(md.contains("## Subdivision histogram") && md.contains("| torus | stripes | 64×48 | chun-oh |"), "{md}");
     assert!(md.contains("| torus | stripes | 64×48 | 256 | jfa-l:flooding=\"standard\" |"), "{md}");
     assert!(md.contains("## Flooding experiment") && md.contains("## Sweep of `slope_bias_texels` in `hard`"), "{md}");
@@ -535,6 +544,25 @@ fn jfa_l_outer_penumbra_matches_the_reference_and_flags_only_penumbra() {
     let outer: Vec<usize> = (0..jfa.len()).filter(|&i| hard[i][0] == 1.0 && reference[i][0] < 1.0).collect();
     let mean = outer.iter().map(|&i| (jfa[i][0] - reference[i][0]).abs()).sum::<f32>() / outer.len() as f32;
     assert!(mean < 0.05, "mean |V − Vref| over {} outer-penumbra pixels: {mean}", outer.len());
+}
+
+#[test]
+fn jfa_l_inner_penumbra_follows_the_reference_and_off_is_the_paper() {
+    let light = json!({"size": [0.6, 0.6]});
+    let inner = top_down(json!({"name": "jfa-l"}), json!({"builtin": "occluder"}), light.clone());
+    let paper = top_down(json!({"name": "jfa-l", "inner": false}), json!({"builtin": "occluder"}), light.clone());
+    let reference = top_down(json!({"name": "reference", "samples": 256}), json!({"builtin": "occluder"}), light.clone());
+    let hard = top_down(json!({"name": "hard"}), json!({"builtin": "occluder"}), light);
+    // The inner penumbra: hidden from the light centre, partly lit in the reference.
+    let pixels: Vec<usize> = (0..inner.len()).filter(|&i| hard[i][0] == 0.0 && reference[i][0] > 0.0).collect();
+    assert!(pixels.len() > 100, "{} inner-penumbra pixels", pixels.len());
+    assert!(pixels.iter().all(|&i| paper[i] == [0.0; 3]), "the paper's jfa-l: hard shadow is umbra");
+    let error = |v: &[[f32; 3]]| pixels.iter().map(|&i| (v[i][0] - reference[i][0]).abs()).sum::<f32>() / pixels.len() as f32;
+    let (with, without) = (error(&inner), error(&paper));
+    eprintln!("jfa-l inner penumbra: mean |V − Vref| {with:.4} with, {without:.4} without");
+    assert!(with < 0.06 && with < 0.3 * without, "{with} with the inner penumbra, {without} without");
+    // Outside hard shadow the two agree.
+    assert!((0..inner.len()).filter(|&i| hard[i][0] == 1.0).all(|i| inner[i] == paper[i]));
 }
 
 #[test]

@@ -14,8 +14,8 @@ fn edge_entry(row: u32, x: f32) -> vec4<f32> {
 
 // The line orthogonal to unit direction `e` (light coordinates: x along r, y along u) at
 // fraction `s` ∈ [0, 1] of the way from the centre to the rectangle's edge: rgb the fraction of
-// each channel's emission on the centre's side, w the luminance-weighted fraction. Linear
-// between neighbouring directions and distances.
+// each channel's emission on the centre's side, w the same fraction of the light's white twin
+// (its shape alone). Linear between neighbouring directions and distances.
 fn edge_fraction(e: vec2<f32>, s: f32) -> vec4<f32> {
     let turns = fract(atan2(e.y, e.x) / 6.28318531 + 1.0);
     let y = turns * f32(EDGE_ANGLES);
@@ -39,4 +39,30 @@ fn edge_fraction_at(q: vec2<f32>) -> vec4<f32> {
     }
     let e = q / length_q;
     return edge_fraction(e, length_q / light_reach(e));
+}
+
+// The fraction of each channel's emission (w: of the white twin's) on the side {y : y·n < λ}
+// of a line with unit normal n at signed distance λ from the centre.
+fn fraction_within(n: vec2<f32>, lambda: f32) -> vec4<f32> {
+    if lambda >= 0.0 {
+        return edge_fraction(n, lambda / light_reach(n));
+    }
+    // {y·n < λ < 0} is the complement of the centre's side of the line along −n at −λ.
+    return vec4<f32>(1.0) - edge_fraction(-n, -lambda / light_reach(-n));
+}
+
+// The other side: {y : y·n > λ}.
+fn fraction_beyond(n: vec2<f32>, lambda: f32) -> vec4<f32> {
+    return vec4<f32>(1.0) - fraction_within(n, lambda);
+}
+
+// Per-channel visibility with the hue of `visible` (a model's fraction of each channel's
+// emission, w the white twin's fraction) and the level `v` a method computed for the light's
+// shape by its own means: each channel is v times the channel's share over the shape's, so a
+// uniform light keeps v exactly.
+fn with_hue(v: f32, visible: vec4<f32>) -> vec3<f32> {
+    if visible.w <= 1e-4 {
+        return vec3<f32>(v);
+    }
+    return clamp(v * visible.rgb / visible.w, vec3<f32>(0.0), vec3<f32>(1.0));
 }

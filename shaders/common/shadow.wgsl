@@ -36,3 +36,35 @@ fn shadow_texel(uv: vec2<f32>) -> vec2<i32> {
     let res = i32(frame.sizes.z);
     return clamp(vec2<i32>(floor(uv * f32(res))), vec2<i32>(0), vec2<i32>(res - 1));
 }
+
+// The direction, in light coordinates, in which the silhouette next to occluder point o
+// faces away from its occluder: from the shadow-map texels within `radius` of o's, those
+// deeper than o (by more than `relative` of its depth, or empty) against those that are not,
+// mapped from the map's axes to the light's. (0, 0) where they show no silhouette.
+fn silhouette_normal(o: vec3<f32>, radius: i32, relative: f32) -> vec2<f32> {
+    let ls = to_light_space(o);
+    let res = i32(frame.sizes.z);
+    let centre = shadow_texel(ls.uv);
+    let limit = ls.depth * (1.0 + max(relative, 1e-3));
+    var beyond = vec2<f32>(0.0);
+    for (var b = -radius; b <= radius; b++) {
+        for (var a = -radius; a <= radius; a++) {
+            let t = centre + vec2<i32>(a, b);
+            if (a == 0 && b == 0) || any(t < vec2<i32>(0)) || any(t >= vec2<i32>(res)) {
+                continue;
+            }
+            let deeper = textureLoad(shadow_position, t, 0).w == 0.0 || textureLoad(shadow_depth, t, 0).r > limit;
+            let offset = normalize(vec2<f32>(f32(a), f32(b)));
+            beyond += select(-offset, offset, deeper);
+        }
+    }
+    if dot(beyond, beyond) < 1e-6 {
+        return vec2<f32>(0.0);
+    }
+    // Texel offsets to light coordinates: how the map's uv moves along r and along u at o.
+    let step = texel_size_m(ls.depth);
+    let du = (to_light_space(o + frame.light_r.xyz * step).uv - ls.uv) * f32(res);
+    let dv = (to_light_space(o + frame.light_u.xyz * step).uv - ls.uv) * f32(res);
+    // A normal maps through the transpose of the map (r, u) → texels.
+    return normalize(vec2<f32>(dot(du, beyond), dot(dv, beyond)));
+}

@@ -33,9 +33,15 @@ pub struct EvalOptions {
     /// Built-in scenes, comma-separated.
     #[arg(long, value_delimiter = ',', default_value = "torus,crowd,columns,terrain")]
     pub scenes: Vec<String>,
-    /// Built-in light images, comma-separated.
+    /// Built-in light images, comma-separated, each optionally with parameters
+    /// (`flame:white=true`, its white twin).
     #[arg(long, value_delimiter = ',', default_value = "white,stripes")]
     pub lights: Vec<String>,
+    /// Also run each light's white twin (the same shape in white) where no listed light is
+    /// it, and report every method's penumbra error under the coloured light over its error
+    /// under the twin: what the colours cost each method.
+    #[arg(long)]
+    pub colored: bool,
     /// Methods, comma-separated, each optionally with parameters: `name:key=value:key=value`
     /// (values are JSON). Default: every registered method but `reference`.
     #[arg(long, value_delimiter = ',')]
@@ -124,6 +130,9 @@ pub struct EvalReport {
     pub rows: Vec<Row>,
     /// Jump against standard flooding, for every method run both ways (Rong & Tan 2006 §4.2).
     pub flooding: Vec<FloodingComparison>,
+    /// With `--colored`: each method's penumbra error under each coloured light against its
+    /// error under the light's white twin.
+    pub colored: Vec<ColoredRatio>,
     pub files: Vec<PathBuf>,
 }
 
@@ -140,6 +149,97 @@ pub struct FloodingComparison {
     pub below_020: f64,
     pub at_least_020: f64,
     pub parity: f64,
+}
+
+/// A light of the suite: its label (`name[:key=value…]`), what identifies its image, and the
+/// label of the light in the suite that is its white twin (itself when it is white).
+#[derive(Debug, Clone)]
+pub struct SuiteLight {
+    pub label: String,
+    identity: LightIdentity,
+    twin: String,
+}
+
+/// Images that light a scene the same way: a uniform image by its one emission, whatever its
+/// size (`white` and the white twin of `stripes`), any other by its fingerprint.
+#[derive(Debug, Clone, PartialEq)]
+enum LightIdentity {
+    Uniform([u32; 3]),
+    Image(u64),
+}
+
+impl LightIdentity {
+    fn of(image: &crate::light::LightImage) -> Self {
+        if crate::light::tables::is_uniform(image) {
+            LightIdentity::Uniform(image.emission(0, 0).to_array().map(f32::to_bits))
+        } else {
+            LightIdentity::Image(image.fingerprint())
+        }
+    }
+}
+
+/// The listed lights, plus (with `colored`) each one's white twin where no listed light has
+/// the twin's image.
+fn with_white_twins(labels: &[String], colored: bool) -> anyhow::Result<Vec<SuiteLight>> {
+    let image = |label: &str| -> anyhow::Result<crate::light::LightImage> {
+        let (name, params) = parse_named(label)?;
+        crate::light::LightImage::builtin(&name, &params, "light").map_err(|e| anyhow::anyhow!("light `{label}`: {}", e.message))
+    };
+    let mut lights: Vec<SuiteLight> =
+        labels.iter().map(|label| Ok(SuiteLight { label: label.clone(), identity: LightIdentity::of(&image(label)?), twin: String::new() })).collect::<anyhow::Result<_>>()?;
+    for k in 0..lights.len() {
+        let twin = LightIdentity::of(&image(&lights[k].label)?.white_twin());
+        let label = match lights.iter().find(|l| l.identity == twin) {
+            Some(found) => found.label.clone(),
+            None if colored => {
+                let (name, _) = parse_named(&lights[k].label)?;
+                let label = format!("{name}:white=true");
+                lights.push(SuiteLight { label: label.clone(), identity: twin, twin: label.clone() });
+                label
+            }
+            None => String::new(),
+        };
+        lights[k].twin = label;
+    }
+    Ok(lights)
+}
+
+/// A method's penumbra visibility error (mean |V − Vref|, and per channel) under a coloured
+/// light and under its white twin, in one scene, and their ratio.
+#[derive(Debug, Clone, Serialize)]
+pub struct ColoredRatio {
+    pub scene: String,
+    pub light: String,
+    pub twin: String,
+    pub method: String,
+    pub mae: f64,
+    pub mae_rgb: [f64; 3],
+    pub twin_mae: f64,
+    pub ratio: f64,
+}
+
+fn colored_ratios(rows: &[Row], lights: &[SuiteLight]) -> Vec<ColoredRatio> {
+    let mut out = Vec::new();
+    for row in rows.iter().filter(|r| r.method != "reference") {
+        let Some(light) = lights.iter().find(|l| l.label == row.light && l.twin != l.label && !l.twin.is_empty()) else { continue };
+        let twin = rows.iter().find(|t| {
+            t.scene == row.scene && t.light == light.twin && t.method == row.method && (t.width, t.height, t.shadow_map) == (row.width, row.height, row.shadow_map)
+        });
+        if let Some(twin) = twin {
+            let (mae, twin_mae) = (row.quality.visibility.penumbra.mae, twin.quality.visibility.penumbra.mae);
+            out.push(ColoredRatio {
+                scene: row.scene.clone(),
+                light: row.light.clone(),
+                twin: twin.light.clone(),
+                method: row.method.clone(),
+                mae,
+                mae_rgb: row.quality.visibility.penumbra.mae_rgb,
+                twin_mae,
+                ratio: if twin_mae > 0.0 { mae / twin_mae } else { f64::NAN },
+            });
+        }
+    }
+    out
 }
 
 /// The label of the jump-flooding twin of a standard-flooding method label, if it is one.
@@ -233,6 +333,8 @@ pub fn run(engine: &Engine, options: &EvalOptions) -> anyhow::Result<EvalReport>
         }
     }
     let sizes: Vec<(u32, u32)> = options.sizes.iter().map(|s| parse_size(s)).collect::<anyhow::Result<_>>()?;
+    let lights = with_white_twins(&options.lights, options.colored)?;
+    let options = &EvalOptions { lights: lights.iter().map(|l| l.label.clone()).collect(), ..options.clone() };
     std::fs::create_dir_all(&options.out).with_context(|| format!("cannot create {}", options.out.display()))?;
     engine.warm_up().context("warm-up")?;
 
@@ -251,13 +353,17 @@ pub fn run(engine: &Engine, options: &EvalOptions) -> anyhow::Result<EvalReport>
             for (&(width, height), &shadow_map) in sizes.iter().flat_map(|s| options.shadow_map.iter().map(move |m| (s, m))) {
                 let scene_label = sanitize(scene);
                 let case = if options.shadow_map.len() > 1 {
-                    format!("{scene_label}-{light}-{width}x{height}-map{shadow_map}")
+                    format!("{scene_label}-{}-{width}x{height}-map{shadow_map}", sanitize(light))
                 } else {
-                    format!("{scene_label}-{light}-{width}x{height}")
+                    format!("{scene_label}-{}-{width}x{height}", sanitize(light))
                 };
+                let (light_name, light_params) = parse_named(light)?;
                 let base = Job {
                     scene: scene_ref.clone(),
-                    light: crate::job::LightSpec { image: Some(AssetRef::builtin(light)), ..Default::default() },
+                    light: crate::job::LightSpec {
+                        image: Some(AssetRef::Builtin { name: light_name, params: light_params }),
+                        ..Default::default()
+                    },
                     shadow_map: crate::job::ShadowMapSpec { resolution: shadow_map },
                     output: crate::job::OutputSpec { width, height, format: OutputFormat::Exr, exposure: 0.0 },
                     ..Job::embedded_default()
@@ -315,7 +421,7 @@ pub fn run(engine: &Engine, options: &EvalOptions) -> anyhow::Result<EvalReport>
                     if by_map { |r| f64::from(r.shadow_map) } else { |r| f64::from(r.width) * f64::from(r.height) / 1e6 };
                 let x_desc = if by_map { "shadow-map resolution (texels per side)" } else { "output (megapixels)" };
                 let chosen: Vec<&Row> = rows.iter().filter(|r| &r.scene == scene && &r.light == light).collect();
-                let name = format!("scaling-{}-{light}.svg", sanitize(scene));
+                let name = format!("scaling-{}-{}.svg", sanitize(scene), sanitize(light));
                 files.push(plot_scaling(&options.out, &name, &format!("{scene}, {light}"), x_desc, &chosen, x, false)?);
             }
         }
@@ -329,7 +435,7 @@ pub fn run(engine: &Engine, options: &EvalOptions) -> anyhow::Result<EvalReport>
         }
         for light in &options.lights {
             let chosen: Vec<&Row> = rows.iter().filter(|r| r.scene.split(':').next() == Some(base) && &r.light == light).collect();
-            let name = format!("scaling-{base}-triangles-{light}.svg");
+            let name = format!("scaling-{base}-triangles-{}.svg", sanitize(light));
             files.push(plot_scaling(
                 &options.out,
                 &name,
@@ -341,7 +447,8 @@ pub fn run(engine: &Engine, options: &EvalOptions) -> anyhow::Result<EvalReport>
             )?);
         }
     }
-    let report = EvalReport { adapter: engine.gpu().adapter.clone(), repeat: options.repeat, rows, flooding, files };
+    let colored = if options.colored { colored_ratios(&rows, &lights) } else { Vec::new() };
+    let report = EvalReport { adapter: engine.gpu().adapter.clone(), repeat: options.repeat, rows, flooding, colored, files };
     write_tables(&options.out, &report, &methods.iter().map(|(l, _)| l.clone()).collect::<Vec<_>>(), sweep.as_ref())?;
     Ok(report)
 }

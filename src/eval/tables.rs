@@ -43,6 +43,7 @@ pub(super) fn write_tables(out: &Path, report: &EvalReport, methods: &[String], 
     write_preamble(&mut md, report, methods)?;
     write_cost(&mut md, report)?;
     write_quality(&mut md, report)?;
+    write_colored(&mut md, report)?;
     write_flooding(&mut md, report)?;
     write_subdivision(&mut md, report)?;
     if let Some(sweep) = sweep {
@@ -112,6 +113,55 @@ fn write_quality(md: &mut String, report: &EvalReport) -> std::fmt::Result {
             v.penumbra.rmse, v.penumbra.mae, psnr(v.penumbra.psnr_db), v.penumbra.ssim, v.penumbra.flip,
             c.whole.rmse, psnr(c.whole.psnr_db), c.whole.ssim, c.whole.flip, c.penumbra.rmse, c.penumbra.flip
         )?;
+    }
+    Ok(())
+}
+
+/// What the light's colours cost each method (`--colored`): penumbra error per channel under
+/// the coloured light, under its white twin, and the ratio — with the mean ratio per method
+/// over the scenes of each light, and over every coloured light.
+fn write_colored(md: &mut String, report: &EvalReport) -> std::fmt::Result {
+    if report.colored.is_empty() {
+        return Ok(());
+    }
+    writeln!(md, "\n## Colour\n")?;
+    writeln!(md, "Mean |V − Vref| over the reference's penumbra under each coloured light (per channel, and")?;
+    writeln!(md, "all three), under the light's white twin (the same shape in white), and their ratio:")?;
+    writeln!(md, "1 means the colours cost the method nothing; a gray method cannot get below about")?;
+    writeln!(md, "the error of exact gray visibility.\n")?;
+    writeln!(md, "| scene | light | method | V MAE R | V MAE G | V MAE B | V MAE | white twin | V MAE (twin) | colored |")?;
+    writeln!(md, "|---|---|---|---:|---:|---:|---:|---|---:|---:|")?;
+    for c in &report.colored {
+        writeln!(
+            md,
+            "| {} | {} | {} | {:.4} | {:.4} | {:.4} | {:.4} | {} | {:.4} | {:.2} |",
+            c.scene, c.light, c.method, c.mae_rgb[0], c.mae_rgb[1], c.mae_rgb[2], c.mae, c.twin, c.twin_mae, c.ratio
+        )?;
+    }
+    let mut methods: Vec<&str> = Vec::new();
+    let mut lights: Vec<&str> = Vec::new();
+    for c in &report.colored {
+        if !methods.contains(&c.method.as_str()) {
+            methods.push(&c.method);
+        }
+        if !lights.contains(&c.light.as_str()) {
+            lights.push(&c.light);
+        }
+    }
+    let mean = |f: &dyn Fn(&&super::ColoredRatio) -> bool| {
+        let chosen: Vec<f64> = report.colored.iter().filter(f).map(|c| c.ratio).filter(|r| r.is_finite()).collect();
+        if chosen.is_empty() {
+            "-".to_owned()
+        } else {
+            format!("{:.2}", chosen.iter().sum::<f64>() / chosen.len() as f64)
+        }
+    };
+    writeln!(md, "\nMean ratio over the scenes:\n")?;
+    writeln!(md, "| method | {} | all |", lights.join(" | "))?;
+    writeln!(md, "|---|{}---:|", "---:|".repeat(lights.len()))?;
+    for method in &methods {
+        let cells: Vec<String> = lights.iter().map(|light| mean(&|c: &&super::ColoredRatio| c.method == *method && c.light == *light)).collect();
+        writeln!(md, "| {method} | {} | {} |", cells.join(" | "), mean(&|c: &&super::ColoredRatio| c.method == *method))?;
     }
     Ok(())
 }

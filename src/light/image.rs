@@ -58,6 +58,11 @@ impl LightImage {
         Vec3::new(r, g, b) * a
     }
 
+    /// Alpha of a texel.
+    pub fn alpha(&self, i: u32, j: u32) -> f32 {
+        self.texels[(j * self.width + i) as usize][3]
+    }
+
     /// Mean emission over the whole image (what a gray method sees of the light's colour).
     pub fn mean_emission(&self) -> Vec3 {
         let mut sum = Vec3::ZERO;
@@ -69,15 +74,32 @@ impl LightImage {
         sum / (self.width * self.height) as f32
     }
 
-    /// Checks a built-in light image's name and (absent) parameters, at submission and before
-    /// building it.
+    /// The light's white twin: the same shape — alpha, and which texels emit at all — with
+    /// every emitting texel white. What a method's error under a coloured light is compared
+    /// with to measure what the colours cost it (`penumbra eval --colored`).
+    pub fn white_twin(&self) -> Self {
+        let texels = self
+            .texels
+            .iter()
+            .map(|&[r, g, b, a]| if r.max(g).max(b) > 0.0 { [1.0, 1.0, 1.0, a] } else { [0.0, 0.0, 0.0, a] })
+            .collect();
+        Self::new(self.width, self.height, texels)
+    }
+
+    /// Checks a built-in light image's name and parameters, at submission and before building
+    /// it. The one parameter is `white` (boolean): the image's white twin (`white_twin`).
     pub fn check_builtin(name: &str, params: &Map<String, Value>, field: &str) -> JobResult<()> {
-        if let Some(key) = params.keys().next() {
-            return Err(JobError::field(
-                ErrorCode::UnknownField,
-                format!("{field}.{key}"),
-                format!("the built-in light image `{name}` takes no parameter `{key}`"),
-            ));
+        for (key, value) in params {
+            if key != "white" {
+                return Err(JobError::field(
+                    ErrorCode::UnknownField,
+                    format!("{field}.{key}"),
+                    format!("the built-in light image `{name}` takes no parameter `{key}` (only `white`)"),
+                ));
+            }
+            if !value.is_boolean() {
+                return Err(JobError::field(ErrorCode::InvalidField, format!("{field}.{key}"), "`white` must be true or false"));
+            }
         }
         if !BUILTIN_LIGHT_IMAGES.contains(&name) {
             return Err(JobError::field(
@@ -89,9 +111,14 @@ impl LightImage {
         Ok(())
     }
 
-    /// A built-in light image by name. Built-ins take no parameters yet; any given is an error.
+    /// A built-in light image by name; `white: true` gives its white twin.
     pub fn builtin(name: &str, params: &Map<String, Value>, field: &str) -> JobResult<Self> {
         Self::check_builtin(name, params, field)?;
+        let image = Self::builtin_image(name, field)?;
+        Ok(if params.get("white") == Some(&Value::Bool(true)) { image.white_twin() } else { image })
+    }
+
+    fn builtin_image(name: &str, field: &str) -> JobResult<Self> {
         let white = [1.0, 1.0, 1.0, 1.0];
         let black = [0.0, 0.0, 0.0, 0.0];
         Ok(match name {

@@ -33,31 +33,32 @@ const EDGE_BINS: usize = 2048;
 /// u); entry j is the line orthogonal to eᵢ at distance λ = sⱼ·ρ(eᵢ) from the centre,
 /// sⱼ = j/(EDGE_STATIONS − 1), ρ the distance to the rectangle's edge along eᵢ. It holds in rgb
 /// the fraction of each channel's emission on the centre's side of that line (y·eᵢ < λ), in w
-/// the luminance-weighted fraction. A straight occluder edge projected onto the light is such
+/// the same fraction of the light's white twin (`LightImage::white_twin`: the shape alone) —
+/// what a method that estimates visibility without the colours is an estimate of. A straight occluder edge projected onto the light is such
 /// a line: the part of the light it leaves visible is one side of it. Indexing by (direction,
 /// distance) rather than by a grid over the light keeps the direction exact next to the centre,
 /// where a grid's neighbouring texels hold lines of every orientation.
 pub fn edge_table(light: &AreaLight, image: &LightImage) -> Vec<[f32; 4]> {
     let n = EDGE_SAMPLES;
-    // Emitting sample points in light-local metres with their emission.
-    let samples: Vec<(Vec2, glam::Vec3)> = (0..n)
+    // Emitting sample points in light-local metres with their emission (rgb) and their weight
+    // in the light's white twin (w: the texel's alpha).
+    let samples: Vec<(Vec2, glam::Vec4)> = (0..n)
         .flat_map(|j| (0..n).map(move |i| (i, j)))
         .filter_map(|(i, j)| {
             let (s, t) = ((i as f32 + 0.5) / n as f32, (j as f32 + 0.5) / n as f32);
             let texel = (((s * image.width as f32) as u32).min(image.width - 1), ((t * image.height as f32) as u32).min(image.height - 1));
             let e = image.emission(texel.0, texel.1);
-            (e.max_element() > 0.0).then(|| (local(light, s, t), e))
+            (e.max_element() > 0.0).then(|| (local(light, s, t), e.extend(image.alpha(texel.0, texel.1))))
         })
         .collect();
-    let total = samples.iter().fold(glam::Vec3::ZERO, |acc, (_, e)| acc + *e);
-    let luminance = |c: glam::Vec3| 0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z;
+    let total = samples.iter().fold(glam::Vec4::ZERO, |acc, (_, e)| acc + *e);
     let half = light.size_m * 0.5;
     let radius = half.length();
     let row = |i: u32| -> Vec<[f32; 4]> {
         let phi = std::f64::consts::TAU * f64::from(i) / f64::from(EDGE_ANGLES);
         let e = Vec2::new(phi.cos() as f32, phi.sin() as f32);
         // Cumulative emission along e, over [−radius, radius] in EDGE_BINS bins.
-        let mut bins = vec![glam::Vec3::ZERO; EDGE_BINS + 1];
+        let mut bins = vec![glam::Vec4::ZERO; EDGE_BINS + 1];
         let scale = EDGE_BINS as f32 / (2.0 * radius);
         for (y, emission) in &samples {
             let bin = (((y.dot(e) + radius) * scale) as usize).min(EDGE_BINS - 1);
@@ -74,9 +75,10 @@ pub fn edge_table(light: &AreaLight, image: &LightImage) -> Vec<[f32; 4]> {
                 let x = ((lambda + radius) * scale).clamp(0.0, EDGE_BINS as f32);
                 let k = (x as usize).min(EDGE_BINS - 1);
                 let inside = bins[k].lerp(bins[k + 1], x - k as f32);
-                let gray = if luminance(total) > 0.0 { luminance(inside) / luminance(total) } else { 0.0 };
-                let fraction = |c: usize| if total[c] > 0.0 { inside[c] / total[c] } else { gray };
-                [fraction(0), fraction(1), fraction(2), gray]
+                let shape = if total.w > 0.0 { inside.w / total.w } else { 0.0 };
+                // A channel the light does not emit takes the shape's fraction.
+                let fraction = |c: usize| if total[c] > 0.0 { inside[c] / total[c] } else { shape };
+                [fraction(0), fraction(1), fraction(2), shape]
             })
             .collect()
     };
@@ -199,8 +201,8 @@ mod tests {
 
     #[test]
     fn radial_table_integrates_the_image_exactly() {
-        // Summed over all directions (trapezoid-free: each row is a thin sector of angle
-        // 2π/n), the last station holds the whole light's emission per channel.
+        // Each row stands for a thin sector of angle 2π/n: summed over the rows, the last
+        // stations hold the whole light's emission per channel.
         let light = light(Vec2::new(1.6, 0.9));
         for name in ["white", "stripes", "flame", "quadrants"] {
             let image = LightImage::builtin(name, &Default::default(), "f").unwrap();
@@ -245,28 +247,28 @@ mod tests {
     fn edge_table_fractions_match_direct_summation() {
         // A uniform light: along +x (row 0) the centre's side of the line at x = s·w/2 holds
         // (1 + s)/2 of the light; along −x (row 128) the same, mirrored.
-        let light = light(Vec2::new(2.0, 1.0));
-        let white = edge_table(&light, &LightImage::builtin("white", &Default::default(), "f").unwrap());
+        let uniform = light(Vec2::new(2.0, 1.0));
+        let white = edge_table(&uniform, &LightImage::builtin("white", &Default::default(), "f").unwrap());
         for j in [0, 10, 32, 63] {
             let s = j as f32 / (EDGE_STATIONS - 1) as f32;
             for i in [0, EDGE_ANGLES / 2] {
                 let got = edge(&white, i, j);
-                assert!((got[0] - (1.0 + s) / 2.0).abs() < 0.01 && got[3] == got[0], "row {i} station {j}: {got:?}");
+                assert!((got[0] - (1.0 + s) / 2.0).abs() < 0.01 && (got[3] - got[0]).abs() < 1e-6, "row {i} station {j}: {got:?}");
             }
         }
         // `stripes`: along +x a line near the right edge cuts off a sliver of magenta only,
         // keeping all the green; along −x a line near the left edge cuts into the red band,
-        // keeping all the blue. Red, direct: the red bands are [0, 1/6] and [5/6, 1] of the
-        // width; the line at s = 0.9 along −x leaves x > −0.9 m, i.e. image s > 0.05.
-        let light = light(Vec2::new(3.0, 1.0));
-        let table = edge_table(&light, &LightImage::builtin("stripes", &Default::default(), "f").unwrap());
+        // keeping all the blue. Red, direct: red, yellow and magenta emit it ([0, 2/6] and
+        // [5/6, 1] of the width); the line at 60/63 of the way along −x leaves image s > s_line.
+        let wide = light(Vec2::new(3.0, 1.0));
+        let table = edge_table(&wide, &LightImage::builtin("stripes", &Default::default(), "f").unwrap());
         let right = edge(&table, 0, 60);
         let left = edge(&table, EDGE_ANGLES / 2, 60);
         assert!(right[1] > 0.999 && right[2] < 0.99, "green kept, magenta cut on the right: {right:?}");
         assert!(left[0] < 0.97 && left[2] > 0.999, "red cut, blue kept on the left: {left:?}");
         let s_line = 0.5 - 0.5 * 60.0 / 63.0; // image s of the line
-        let red_total = 2.0 / 6.0;
-        let red_visible = (1.0 / 6.0 - s_line) + 1.0 / 6.0;
+        let red_total = 3.0 / 6.0;
+        let red_visible = (2.0 / 6.0 - s_line) + 1.0 / 6.0;
         assert!((left[0] - red_visible / red_total).abs() < 0.01, "{} vs {}", left[0], red_visible / red_total);
     }
 
@@ -279,6 +281,8 @@ mod tests {
         let table = edge_table(&light, &LightImage::builtin("quadrants", &Default::default(), "f").unwrap());
         let up = edge(&table, EDGE_ANGLES / 4, 56);
         assert!(up[2] > 0.999, "blue lies below: {up:?}");
+        // The white twin is the uniform square: the same share of it as of the red.
+        assert!((up[3] - up[0]).abs() < 1e-6, "{up:?}");
         // Red: the top-left quadrant (all its red) plus the yellow bottom-right; the line keeps
         // the top quadrant's lower 56/63 and all the yellow: (56/63 + 1)/2.
         assert!((up[0] - (56.0 / 63.0 + 1.0) / 2.0).abs() < 0.01, "{up:?}");

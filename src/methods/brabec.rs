@@ -148,7 +148,7 @@ impl ShadowMethod for Brabec {
         let pixels = u64::from(ctx.width) * u64::from(ctx.height);
         let state = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("Brabec::state"),
-            size: pixels * 16,
+            size: pixels * 24,
             usage: wgpu::BufferUsages::STORAGE,
             mapped_at_creation: false,
         });

@@ -167,7 +167,7 @@ impl ShadowMethod for JfaL {
     }
 
     fn summary(&self) -> &'static str {
-        "Rong & Tan 2006 §4: silhouette pixels in the shadow map, jump flooding of occluders in light space, intensity by ray to the light through a (coloured) look-up texture; outer penumbra"
+        "Rong & Tan 2006 §4: silhouette pixels in the shadow map, jump flooding of occluders in light space, intensity by ray to the light through the coloured edge table; outer penumbra, and the inner one past the paper"
     }
 
     fn params(&self) -> &'static [ParamSpec] {
@@ -244,8 +244,8 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
     // Slot 0: seed and final pass; slots 1…: one per round.
     let slots: Vec<Uniforms> = std::iter::once(0).chain(steps.iter().copied()).map(|step| Uniforms { step, ..base }).collect();
     let uniforms = layout::uniform_slots(&device, "Jfa::uniforms", &slots);
-    // The look-up texture depends only on the light image and the light's shape; building it
-    // integrates ~10⁴ samples per entry on the CPU, so it is kept for later jobs.
+    // The coloured look-up depends only on the light image and the light's shape; building it
+    // integrates ~6·10⁴ samples per direction on the CPU, so it is kept for later jobs.
     let lut = ctx.light_table("edge_table", edge_table);
     let records = |label| {
         device.create_buffer(&wgpu::BufferDescriptor {

@@ -13,7 +13,8 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     let i = state_index(pixel);
     state[i].key = pixel_key(pixel);
     state[i].t = UNKNOWN;
-    state[i].toward = vec2<f32>(0.0);
+    state[i].normal = vec2<f32>(0.0);
+    state[i].edge = 0.0;
     if covered(pixel) {
         atomicAdd(&counters.shaded, 1u);
     }

@@ -32,15 +32,18 @@ struct BrabecParams {
 struct PixelState {
     t: f32,   // penumbra coordinate: 0 umbra … meet at the hard edge … 1 lit; < 0 not yet known
     key: u32, // object id (blocker's where hard-shadowed, receiver's where lit) | hard << 31
-    // Light-plane direction (x along r, y along u) in which the search found its texel — the
-    // blocker (outer penumbra) or the lit surface (inner); (0, 0) where it found none.
-    toward: vec2<f32>,
+    // The occluder edge's line across the light (light coordinates, x along r, y along u):
+    // its normal pointing away from the occluder, (0, 0) where the search found nothing, and
+    // its signed distance from the centre along it (`edge_line`).
+    normal: vec2<f32>,
+    edge: f32,
 }
 
 // What the search found for one pixel.
 struct Found {
     t: f32,
-    toward: vec2<f32>,
+    normal: vec2<f32>,
+    edge: f32,
 }
 
 struct Counters {
@@ -58,6 +61,9 @@ struct Counters {
 @group(1) @binding(4) var<storage, read> edge_table: array<vec4<f32>>;
 
 const UNKNOWN: f32 = -1.0;
+// A shadow-map texel deeper than an occluder point by more than this fraction of its depth
+// lies beyond the occluder's silhouette (`edge_line`).
+const SILHOUETTE_RELATIVE: f32 = 0.01;
 const BACKGROUND_KEY: u32 = 0x7ffffffeu;
 
 fn state_index(pixel: vec2<u32>) -> u32 {
@@ -120,10 +126,10 @@ fn jitter(t: vec2<i32>) -> vec2<f32> {
 // Outer (lit) pixels look for the nearest texel closer to the light than P that belongs to
 // another object; inner (hard-shadowed) pixels for the nearest lit texel of their own object.
 // Rings of growing Chebyshev radius are visited and the search stops once no closer texel
-// can follow, so its cost grows with the distance found, not with r_max. Also returns the
-// direction of the texel found (`light_direction`).
+// can follow, so its cost grows with the distance found, not with r_max. Under a coloured
+// light it also returns the occluder edge's line across the light (`edge_line`).
 fn search(pixel: vec2<u32>) -> Found {
-    var out = Found(1.0, vec2<f32>(0.0));
+    var out = Found(1.0, vec2<f32>(0.0), 0.0);
     if !covered(pixel) {
         return out;
     }
@@ -189,7 +195,7 @@ fn search(pixel: vec2<u32>) -> Found {
         out.t = select(1.0, 0.0, w.hard);
         return out;
     }
-    out.toward = light_direction(textureLoad(gbuf_position, pixel, 0).xyz, w.depth, best_texel);
+    let p = textureLoad(gbuf_position, pixel, 0).xyz;
     var dz: f32;
     if !w.hard {
         dz = w.depth - best_depth;
@@ -209,7 +215,51 @@ fn search(pixel: vec2<u32>) -> Found {
     } else {
         out.t = params.meet + (1.0 - params.meet) * f;
     }
+    if params.colored == 1u {
+        let line = edge_line(p, w, best_texel, f);
+        out.normal = line.xy;
+        out.edge = line.z;
+    }
     return out;
+}
+
+// The occluder's edge as a line across the light, seen from p: xy its unit normal pointing
+// away from the occluder, z its signed distance from the centre along it. The occluder point
+// next to the silhouette is the blocker found (outer penumbra), or the occluder texel next to
+// the lit one found, one step back towards p's own (inner). The ray from p through it meets
+// the light plane at q, on the edge's line; the line's direction is the silhouette's at that
+// point (`silhouette_normal`), or else orthogonal to the direction the search found its texel
+// in (`light_direction`). Where the ray fails (the point is not between p and the light), the
+// penumbra coordinate f places the line: at f of the light's extent that way.
+fn edge_line(p: vec3<f32>, w: Warped, found: vec2<i32>, f: f32) -> vec3<f32> {
+    let toward = light_direction(p, w.depth, found);
+    if dot(toward, toward) <= 0.0 {
+        return vec3<f32>(0.0);
+    }
+    let e = normalize(toward);
+    var texel = found;
+    if w.hard {
+        let back = w.texel - (vec2<f32>(found) + 0.5);
+        let step = select(vec2<i32>(sign(back)), vec2<i32>(0), abs(back) < vec2<f32>(0.5 * max(abs(back.x), abs(back.y))));
+        texel = clamp(found + step, vec2<i32>(0), vec2<i32>(i32(frame.sizes.z) - 1));
+    }
+    let occluder = textureLoad(shadow_position, texel, 0).xyz;
+    // The blocker lies towards e (outer), the lit surface towards e (inner): the occluder
+    // faces away along −e, respectively +e.
+    var normal = select(-e, e, w.hard);
+    let silhouette = silhouette_normal(occluder, 2, SILHOUETTE_RELATIVE);
+    if dot(silhouette, silhouette) > 0.0 {
+        normal = silhouette;
+    }
+    let c = frame.light_center.xyz;
+    let n = frame.light_n.xyz;
+    let height_p = dot(p - c, n);
+    let height_o = dot(occluder - p, n); // negative when the occluder lies between p and the light
+    if height_p <= 0.0 || height_o >= -1e-5 * height_p || -height_o >= height_p {
+        return vec3<f32>(normal, select(-1.0, 1.0, w.hard) * f * light_reach(normal));
+    }
+    let q = p + (occluder - p) * (height_p / -height_o) - c;
+    return vec3<f32>(normal, dot(vec2<f32>(dot(q, frame.light_r.xyz), dot(q, frame.light_u.xyz)), normal));
 }
 
 // The direction on the light plane, seen from receiver p (light depth `depth`), of what the
@@ -224,31 +274,17 @@ fn light_direction(p: vec3<f32>, depth: f32, texel: vec2<i32>) -> vec2<f32> {
     return vec2<f32>(dot(offset, frame.light_r.xyz), dot(offset, frame.light_u.xyz));
 }
 
-// Per-channel visibility of a pixel from its gray penumbra coordinate and the direction its
-// search found. Brabec & Seidel's search finds how far the hard edge is, not which part of
-// the light is hidden; the direction says which (contract §1: V per channel). The occluder's
-// edge is taken straight and orthogonal to that direction, crossing the light at λ = f·ρ
-// from the centre — f the pixel's place across its half of the penumbra (0 at the hard edge,
-// 1 at the outer end, or deep in the umbra for the inner half), ρ the light's extent that
-// way — so that the hard edge is the line through the centre and each end of the penumbra
-// the light's edge. The edge table gives each channel's share of the part left visible: the
-// centre's side for the outer half, the far side for the inner. Only the hue is taken from
-// it: each channel is the method's gray value times the channel's share over the
-// luminance-weighted share, so a uniform light keeps the paper's fall-off exactly.
-fn colored_visibility(v: f32, t: f32, toward: vec2<f32>) -> vec3<f32> {
-    let length_toward = length(toward);
-    if params.colored == 0u || length_toward <= 0.0 || t <= 0.0 || t >= 1.0 {
+// Per-channel visibility of a pixel from its level v, penumbra coordinate t and the
+// occluder edge's line its search found (`edge_line`). Brabec & Seidel's search finds how far
+// the hard edge is, not which part of the light is hidden; the line says which (contract §1:
+// V per channel): the edge table gives each channel's share of the light beyond it, away
+// from the occluder. Only the hue is taken from it (`with_hue`): a uniform light keeps the
+// paper's fall-off exactly.
+fn colored_visibility(v: f32, t: f32, normal: vec2<f32>, edge: f32) -> vec3<f32> {
+    if params.colored == 0u || dot(normal, normal) <= 0.0 || t <= 0.0 || t >= 1.0 {
         return vec3<f32>(v);
     }
-    let e = toward / length_toward;
-    let outer = t >= params.meet;
-    let f = select(1.0 - t / params.meet, (t - params.meet) / (1.0 - params.meet), outer);
-    let share = edge_fraction(e, f);
-    let visible = select(vec4<f32>(1.0) - share, share, outer);
-    if visible.w <= 1e-4 {
-        return vec3<f32>(v);
-    }
-    return clamp(v * visible.rgb / visible.w, vec3<f32>(0.0), vec3<f32>(1.0));
+    return with_hue(v, fraction_beyond(normalize(normal), edge));
 }
 
 // The key of the §4.3 interpolation test: ids and hard-shadow results must agree.
@@ -269,7 +305,8 @@ fn search_into(p: vec2<u32>) {
     let found = search(p);
     let i = state_index(p);
     state[i].t = found.t;
-    state[i].toward = found.toward;
+    state[i].normal = found.normal;
+    state[i].edge = found.edge;
 }
 
 // Makes sure pixel `p` has its t, searching if it has none yet.
@@ -308,14 +345,17 @@ fn refine(a: vec2<u32>, step: vec2<u32>, span: u32) {
         if same {
             let t0 = ensure(a + step * lo);
             let t1 = ensure(a + step * hi);
-            let d0 = state[state_index(a + step * lo)].toward;
-            let d1 = state[state_index(a + step * hi)].toward;
+            let d0 = state[state_index(a + step * lo)].normal;
+            let d1 = state[state_index(a + step * hi)].normal;
+            let e0 = state[state_index(a + step * lo)].edge;
+            let e1 = state[state_index(a + step * hi)].edge;
             for (var k = lo + 1u; k < hi; k++) {
                 let i = state_index(a + step * k);
                 if state[i].t < 0.0 {
                     let f = f32(k - lo) / f32(hi - lo);
                     state[i].t = mix(t0, t1, f);
-                    state[i].toward = mix(d0, d1, f);
+                    state[i].normal = mix(d0, d1, f);
+                    state[i].edge = mix(e0, e1, f);
                     if key != BACKGROUND_KEY {
                         atomicAdd(&counters.interpolated, 1u);
                     }

@@ -47,7 +47,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
             // The silhouette's direction at the occluder point, once per seed: the lit
             // neighbour's texel lies beyond the silhouette, so a window reaching it finds it.
             let reach_texels = distance(to_light_space(lit).uv, to_light_space(here.xyz).uv) * f32(frame.sizes.z);
-            let normal = silhouette_normal(occluder, clamp(i32(ceil(reach_texels)) + 1, 2, 8));
+            let normal = silhouette_normal(occluder, clamp(i32(ceil(reach_texels)) + 1, 2, 8), params.silhouette_relative);
             let angle = select(atan2(normal.y, normal.x), NO_NORMAL, dot(normal, normal) == 0.0);
             origin = vec4<f32>(vec2<f32>(pixel), id_bits, angle);
             mark_tile(vec2<i32>(pixel));

@@ -1,5 +1,5 @@
 // Methods `jfa-l` / `jfa-e` (Rong & Tan 2006): the flooded record, the per-round parameters,
-// and the intensity of a receiver for an occluder point through the look-up texture (§3).
+// and the intensity of a receiver for an occluder point through the coloured edge table (§3).
 // See `src/methods/jfa.rs`.
 
 #import common/frame_inputs.wgsl
@@ -146,68 +146,27 @@ fn intensity(p: vec3<f32>, o: vec3<f32>, inside: bool) -> vec4<f32> {
     return vec4<f32>(select(f, 1.0 - f, inside), 1.0);
 }
 
-// The direction, in light coordinates, in which the silhouette next to occluder point o
-// faces away from its occluder: from the shadow-map texels within `radius` of o's, those
-// deeper than o (by more than `silhouette_relative`, or empty) against those that are not,
-// mapped from the map's axes to the light's. (0, 0) where they show no silhouette.
-fn silhouette_normal(o: vec3<f32>, radius: i32) -> vec2<f32> {
-    let ls = to_light_space(o);
-    let res = i32(frame.sizes.z);
-    let centre = shadow_texel(ls.uv);
-    let limit = ls.depth * (1.0 + max(params.silhouette_relative, 1e-3));
-    var beyond = vec2<f32>(0.0);
-    for (var b = -radius; b <= radius; b++) {
-        for (var a = -radius; a <= radius; a++) {
-            let t = centre + vec2<i32>(a, b);
-            if (a == 0 && b == 0) || any(t < vec2<i32>(0)) || any(t >= vec2<i32>(res)) {
-                continue;
-            }
-            let deeper = textureLoad(shadow_position, t, 0).w == 0.0 || textureLoad(shadow_depth, t, 0).r > limit;
-            let offset = normalize(vec2<f32>(f32(a), f32(b)));
-            beyond += select(-offset, offset, deeper);
-        }
-    }
-    if dot(beyond, beyond) < 1e-6 {
-        return vec2<f32>(0.0);
-    }
-    // Texel offsets to light coordinates: how the map's uv moves along r and along u at o.
-    let step = texel_size_m(ls.depth);
-    let du = (to_light_space(o + frame.light_r.xyz * step).uv - ls.uv) * f32(res);
-    let dv = (to_light_space(o + frame.light_u.xyz * step).uv - ls.uv) * f32(res);
-    // A normal maps through the transpose of the map (r, u) → texels.
-    return normalize(vec2<f32>(dot(du, beyond), dot(dv, beyond)));
-}
-
-// The fraction of each channel's emission on the far side of the line {y : y·n = λ} from
-// the direction n points to: {y : y·n > λ}.
-fn fraction_beyond(n: vec2<f32>, lambda: f32) -> vec3<f32> {
-    // {y·n > λ} = {y·(−n) < −λ}: the centre's side of the line along −n when −λ ≥ 0.
-    if lambda <= 0.0 {
-        return edge_fraction(-n, -lambda / light_reach(-n)).rgb;
-    }
-    return vec3<f32>(1.0) - edge_fraction(n, lambda / light_reach(n)).rgb;
-}
-
 // The visibility the final passes give receiver p for occluder point o (p in o's penumbra,
-// `inside` where p is in hard shadow). With `edge_model` on, the occluder's edge is the line
-// through q along the silhouette's own direction at o, and the visible part is the light
-// beyond it, away from the occluder — the same half-plane for the inner and the outer
-// penumbra, and the same for every o along a straight edge, so it does not hang on which o
-// flooding kept. The paper's line orthogonal to c→q is exact only for the o whose q is the
-// foot of the perpendicular from c, which flooding finds only approximately; across an edge
-// parallel to one of the light's colour boundaries it tilts the line and paints a hue the
-// light cannot cast there. Off, or where the shadow map shows no silhouette around o, the
-// paper's line (§3). `normal` is `silhouette_normal` at o, or (0, 0).
+// `inside` where p is in hard shadow): the paper's intensity (§3), coloured. The paper's line
+// orthogonal to c→q is right only for the o whose q is the foot of the perpendicular from c,
+// which flooding finds only approximately; across an edge parallel to a colour boundary of
+// the light it tilts and paints a hue the light cannot cast there. With `edge_model` on, the
+// hue comes instead from the line through q along the silhouette's own direction at o, the
+// visible part being the light beyond it, away from the occluder — the same half-plane for
+// the inner and the outer penumbra, and for every o along a straight edge, so the hue does
+// not hang on which o flooding kept. The level stays the paper's for the light's white twin
+// (`with_hue`): measured against the reference under white lights, the silhouette line's own
+// level is worse, its noisier direction costing more than its better placement gains.
+// `normal` is `silhouette_normal` at o, or (0, 0), where the paper's line gives the hue too.
 fn final_intensity(p: vec3<f32>, o: vec3<f32>, inside: bool, normal: vec2<f32>) -> vec4<f32> {
     let hit = light_hit(p, o);
     if hit.w == 0.0 {
         return vec4<f32>(0.0);
     }
-    if params.edge_model == 1u {
-        if dot(normal, normal) > 0.0 {
-            return vec4<f32>(fraction_beyond(normal, dot(hit.xy, normal)), 1.0);
-        }
+    let f = edge_fraction_at(hit.xy);
+    let paper = select(f, vec4<f32>(1.0) - f, inside);
+    if params.edge_model == 1u && dot(normal, normal) > 0.0 {
+        return vec4<f32>(with_hue(paper.w, fraction_beyond(normal, dot(hit.xy, normal))), 1.0);
     }
-    let f = edge_fraction_at(hit.xy).rgb;
-    return vec4<f32>(select(f, 1.0 - f, inside), 1.0);
+    return vec4<f32>(paper.rgb, 1.0);
 }

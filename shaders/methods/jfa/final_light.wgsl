@@ -22,7 +22,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
             if hard_shadowed(pixel) {
                 v = vec3<f32>(0.0);
                 if params.inner == 1u && !is_empty(record) {
-                    let i = final_intensity(p, record.xyz, true, silhouette_normal(record.xyz, 2));
+                    let i = final_intensity(p, record.xyz, true, silhouette_normal(record.xyz, 2, params.silhouette_relative));
                     if i.w > 0.0 {
                         v = i.rgb;
                         atomicAdd(&counters[1], 1u);
@@ -30,7 +30,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
                 }
             } else {
                 if in_penumbra(record) {
-                    let i = final_intensity(p, record.xyz, false, silhouette_normal(record.xyz, 2));
+                    let i = final_intensity(p, record.xyz, false, silhouette_normal(record.xyz, 2, params.silhouette_relative));
                     if i.w > 0.0 {
                         v = i.rgb;
                         atomicAdd(&counters[1], 1u);
