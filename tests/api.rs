@@ -93,6 +93,14 @@ async fn health_methods_and_renders() {
     let hard = methods["methods"].as_array().unwrap().iter().find(|m| m["name"] == "hard").expect("hard listed");
     assert!(hard["params"].as_array().unwrap().iter().any(|p| p["name"] == "bias_texels" && p["default"].is_number()));
     assert!(methods["scenes"].as_array().unwrap().contains(&json!("terrain")));
+    assert!(methods["light_images"].as_array().unwrap().contains(&json!("quadrants")));
+    let param = |method: &str, name: &str| -> Value {
+        let method = methods["methods"].as_array().unwrap().iter().find(|m| m["name"] == method).unwrap();
+        method["params"].as_array().unwrap().iter().find(|p| p["name"] == name).cloned().unwrap_or_else(|| panic!("{name} listed"))
+    };
+    assert_eq!(param("wedges", "color_angles")["default"], 8);
+    assert_eq!(param("jfa-l", "inner")["default"], true);
+    assert_eq!(param("jfa-e", "edge")["default"], "silhouette");
 
     // PNG with a Server-Timing header naming every phase.
     let response = client.post(format!("{base}/v1/render")).json(&small_job("png")).send().await.unwrap();

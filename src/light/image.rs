@@ -253,3 +253,35 @@ mod fuzz_regressions {
         assert_eq!(error.code, ErrorCode::InvalidAsset, "{}", error.message);
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_white_twin_keeps_the_shape_and_drops_the_colours() {
+        let flame = LightImage::builtin("flame", &Map::new(), "light.image").unwrap();
+        let params = Map::from_iter([("white".to_owned(), Value::Bool(true))]);
+        let twin = LightImage::builtin("flame", &params, "light.image").unwrap();
+        assert_eq!(twin, flame.white_twin());
+        for j in 0..flame.height {
+            for i in 0..flame.width {
+                let (e, w) = (flame.emission(i, j), twin.emission(i, j));
+                assert_eq!(e.max_element() > 0.0, w.max_element() > 0.0, "texel ({i}, {j}) keeps whether it emits");
+                assert!(w == Vec3::ZERO || w == Vec3::ONE * flame.alpha(i, j), "texel ({i}, {j}) is white: {w}");
+            }
+        }
+        // `white: false` is the image itself.
+        let plain = LightImage::builtin("flame", &Map::from_iter([("white".to_owned(), Value::Bool(false))]), "light.image").unwrap();
+        assert_eq!(plain, flame);
+    }
+
+    #[test]
+    fn built_in_parameters_are_checked_by_name_and_type() {
+        let bad = |key: &str, value: Value| LightImage::builtin("stripes", &Map::from_iter([(key.to_owned(), value)]), "light.image").unwrap_err();
+        let unknown = bad("hue", Value::Bool(true));
+        assert_eq!((unknown.code, unknown.field.as_deref()), (ErrorCode::UnknownField, Some("light.image.hue")));
+        let wrong = bad("white", Value::from(1));
+        assert_eq!((wrong.code, wrong.field.as_deref()), (ErrorCode::InvalidField, Some("light.image.white")));
+    }
+}

@@ -6,10 +6,10 @@
 //!   across the light, given by its direction from the centre and its distance, the part of
 //!   each channel's emission on the centre's side. `jfa-l`, `jfa-e` and `brabec` read it
 //!   (`shaders/common/edge_table.wgsl`).
-//! - `radial_table`: for each direction from the light centre, the emission integrated along
-//!   the ray out to each fraction of the way to the rectangle's edge — exact for the
-//!   piecewise-constant image. `wedges` integrates each channel over the region a wedge cuts
-//!   off with it (`shaders/methods/wedges/rasterize.wgsl`).
+//! - `sector_table`: the emission of the sectors around the light centre, from direction 0
+//!   to each angle and out to each fraction of the way to the rectangle's edge — exact along
+//!   each ray for the piecewise-constant image. `wedges` integrates each channel over the
+//!   region a wedge cuts off with it (`shaders/methods/wedges/rasterize.wgsl`).
 
 use glam::Vec2;
 
@@ -97,10 +97,11 @@ pub fn edge_table(light: &AreaLight, image: &LightImage) -> Vec<[f32; 4]> {
     })
 }
 
-/// Directions from the light centre in `radial_table`, over the full turn.
-pub const RADIAL_ANGLES: u32 = 1024;
-/// Radial stations per direction, at s = 0, 1/(n−1), …, 1 of the way to the rectangle's edge.
-pub const RADIAL_STATIONS: u32 = 64;
+/// Angular steps of `sector_table` per turn; the table covers two turns (and one row more),
+/// so that any interval of angle starting in the first turn reads without wrapping.
+pub const SECTOR_ANGLES: u32 = 1024;
+/// Radial stations per angle, at s = 0, 1/(n−1), …, 1 of the way to the rectangle's edge.
+pub const SECTOR_STATIONS: u32 = 64;
 
 /// Whether every texel emits the same radiance: then each channel's share of any region is
 /// its share of the area, and the methods skip the tables.
@@ -109,47 +110,49 @@ pub fn is_uniform(image: &LightImage) -> bool {
     (0..image.height).all(|j| (0..image.width).all(|i| image.emission(i, j) == first))
 }
 
-/// The radial table, `RADIAL_ANGLES` rows of `RADIAL_STATIONS` entries: row i is the
-/// direction φᵢ = 2π·i/RADIAL_ANGLES from the centre in light-local coordinates (x along r,
-/// y along u); entry j holds in rgb ∫₀^{sⱼ·ρ(φᵢ)} emission(ρ, φᵢ) ρ dρ — the polar area
-/// integral out to sⱼ = j/(RADIAL_STATIONS − 1) of the distance ρ(φᵢ) to the rectangle's
-/// edge — and in w that distance. Integrating a row's difference between two stations over
-/// φ gives the emission of the region between two curves around the centre, so the integral
-/// over any region bounded by rays from the centre and two curves costs a few look-ups per
-/// direction, however many texels the image has. Along each ray the integral is exact: the
-/// ray is cut where it crosses texel boundaries.
-pub fn radial_table(light: &AreaLight, image: &LightImage) -> Vec<[f32; 4]> {
+/// The sector table, `2·SECTOR_ANGLES + 1` rows of `SECTOR_STATIONS` entries: entry (i, j) is
+/// the emission of the part of the light around its centre between the directions 0 and
+/// φᵢ = 2π·i/SECTOR_ANGLES (light-local, x along r, y along u, counter-clockwise) and out to
+/// sⱼ = j/(SECTOR_STATIONS − 1) of the distance ρ(φ) to the rectangle's edge:
+/// ∫₀^φᵢ ∫₀^{sⱼ·ρ(φ)} emission(ρ, φ) ρ dρ dφ in rgb, and in w the same area without the image
+/// (emission 1 everywhere). A region bounded by two rays from the centre and by a curve
+/// ρ = s(φ)·ρ(φ) then has the emission C(φ₁, s) − C(φ₀, s) where s is constant, and a curve
+/// that varies is followed in short steps: an image's colour boundaries (whatever their
+/// direction) are integrated exactly, what is approximated is only how s varies within a
+/// step. Along each ray the integral is exact (the ray is cut where it crosses texel
+/// boundaries); over angle each row adds the ray at its step's middle angle.
+pub fn sector_table(light: &AreaLight, image: &LightImage) -> Vec<[f32; 4]> {
     let half = light.size_m * 0.5;
     let (width, height) = (image.width, image.height);
-    let mut table = Vec::with_capacity((RADIAL_ANGLES * RADIAL_STATIONS) as usize);
+    let stations = SECTOR_STATIONS as usize;
+    let step = std::f64::consts::TAU / f64::from(SECTOR_ANGLES);
+    // One turn of rays at the steps' middle angles, each ray's running integral at the stations.
+    let mut rays: Vec<[f32; 4]> = Vec::with_capacity(SECTOR_ANGLES as usize * stations);
     let mut cuts: Vec<f32> = Vec::new();
-    for i in 0..RADIAL_ANGLES {
-        let phi = std::f64::consts::TAU * f64::from(i) / f64::from(RADIAL_ANGLES);
+    for i in 0..SECTOR_ANGLES {
+        let phi = step * (f64::from(i) + 0.5);
         let e = Vec2::new(phi.cos() as f32, phi.sin() as f32);
         let reach = edge_distance(half, e);
         // Where the ray crosses texel columns and rows, and the stations.
         cuts.clear();
         for k in 1..width {
-            let x = (k as f32 / width as f32 - 0.5) * light.size_m.x;
-            let rho = x / e.x;
+            let rho = (k as f32 / width as f32 - 0.5) * light.size_m.x / e.x;
             if rho > 0.0 && rho < reach {
                 cuts.push(rho);
             }
         }
         for k in 1..height {
-            let y = (0.5 - k as f32 / height as f32) * light.size_m.y;
-            let rho = y / e.y;
+            let rho = (0.5 - k as f32 / height as f32) * light.size_m.y / e.y;
             if rho > 0.0 && rho < reach {
                 cuts.push(rho);
             }
         }
-        let stations = (0..RADIAL_STATIONS).map(|j| reach * j as f32 / (RADIAL_STATIONS - 1) as f32);
-        cuts.extend(stations.clone());
+        let station = |j: usize| reach * j as f32 / (stations - 1) as f32;
+        cuts.extend((0..stations).map(station));
         cuts.sort_by(f32::total_cmp);
-        // Accumulate piece by piece, recording the running sum at each station.
         let mut sum = glam::Vec3::ZERO;
         let mut last = 0.0f32;
-        let mut stations = stations.peekable();
+        let mut next = 0;
         for &rho in &cuts {
             if rho > last {
                 let mid = e * (0.5 * (last + rho));
@@ -159,14 +162,30 @@ pub fn radial_table(light: &AreaLight, image: &LightImage) -> Vec<[f32; 4]> {
                 sum += image.emission(texel.0, texel.1) * (0.5 * (rho * rho - last * last));
                 last = rho;
             }
-            while stations.peek().is_some_and(|&station| station <= rho) {
-                stations.next();
-                table.push([sum.x, sum.y, sum.z, reach]);
+            while next < stations && station(next) <= rho {
+                let r = station(next);
+                rays.push([sum.x, sum.y, sum.z, 0.5 * r * r]);
+                next += 1;
             }
         }
         // Float rounding can leave the last station (= reach) unmatched.
-        while stations.next().is_some() {
-            table.push([sum.x, sum.y, sum.z, reach]);
+        while next < stations {
+            let r = station(next);
+            rays.push([sum.x, sum.y, sum.z, 0.5 * r * r]);
+            next += 1;
+        }
+    }
+    // Cumulative over angle, for two turns.
+    let rows = 2 * SECTOR_ANGLES as usize + 1;
+    let mut table = vec![[0.0f32; 4]; rows * stations];
+    let mut running = vec![[0.0f64; 4]; stations];
+    for i in 1..rows {
+        let ray = &rays[((i - 1) % SECTOR_ANGLES as usize) * stations..][..stations];
+        for j in 0..stations {
+            for k in 0..4 {
+                running[j][k] += f64::from(ray[j][k]) * step;
+                table[i * stations + j][k] = running[j][k] as f32;
+            }
         }
     }
     table
@@ -177,12 +196,6 @@ fn edge_distance(half: Vec2, e: Vec2) -> f32 {
     let x = if e.x != 0.0 { half.x / e.x.abs() } else { f32::INFINITY };
     let y = if e.y != 0.0 { half.y / e.y.abs() } else { f32::INFINITY };
     x.min(y)
-}
-
-/// Each channel's emission integrated over the light, per square metre of image (rgb), in
-/// the units of `radial_table`.
-pub fn total_emission(light: &AreaLight, image: &LightImage) -> glam::Vec3 {
-    image.mean_emission() * light.area_m2()
 }
 
 /// Image coordinates (s right, t down) to light-local metres (x along r, y along u).
@@ -199,35 +212,42 @@ mod tests {
         AreaLight::new(Vec3::Y * 3.0, -Vec3::Y, -Vec3::Z, size, 1.0).unwrap()
     }
 
+    fn sector(table: &[[f32; 4]], i: u32, j: u32) -> [f32; 4] {
+        table[(i * SECTOR_STATIONS + j) as usize]
+    }
+
     #[test]
-    fn radial_table_integrates_the_image_exactly() {
-        // Each row stands for a thin sector of angle 2π/n: summed over the rows, the last
-        // stations hold the whole light's emission per channel.
+    fn sector_table_integrates_the_image() {
+        // A full turn out to the edge holds the whole light: its emission per channel, and
+        // its area.
         let light = light(Vec2::new(1.6, 0.9));
+        let last = SECTOR_STATIONS - 1;
         for name in ["white", "stripes", "flame", "quadrants"] {
             let image = LightImage::builtin(name, &Default::default(), "f").unwrap();
-            let table = radial_table(&light, &image);
-            let step = std::f32::consts::TAU / RADIAL_ANGLES as f32;
-            let mut sum = glam::Vec3::ZERO;
-            for i in 0..RADIAL_ANGLES {
-                let last = table[(i * RADIAL_STATIONS + RADIAL_STATIONS - 1) as usize];
-                sum += glam::Vec3::new(last[0], last[1], last[2]) * step;
-            }
-            let total = total_emission(&light, &image);
+            let table = sector_table(&light, &image);
+            let turn = sector(&table, SECTOR_ANGLES, last);
+            let total = image.mean_emission() * light.area_m2();
             for k in 0..3 {
-                assert!((sum[k] - total[k]).abs() <= 0.01 * total.max_element(), "{name} channel {k}: {} vs {}", sum[k], total[k]);
+                assert!((turn[k] - total[k]).abs() <= 0.002 * total.max_element(), "{name} channel {k}: {} vs {}", turn[k], total[k]);
             }
+            assert!((turn[3] - light.area_m2()).abs() < 0.002 * light.area_m2(), "{name}: area {}", turn[3]);
+            // The second turn repeats the first.
+            let twice = sector(&table, 2 * SECTOR_ANGLES, last);
+            assert!((twice[0] - 2.0 * turn[0]).abs() < 1e-3 * turn[0].max(1e-3));
         }
-        // Along +x through `stripes` (six bands of 1.6/6 m; the right half holds cyan, blue
-        // and magenta), only the magenta band, x ∈ [0.5333, 0.8], emits red; all three blue.
-        let image = LightImage::builtin("stripes", &Default::default(), "f").unwrap();
-        let table = radial_table(&light, &image);
-        let row0 = &table[..RADIAL_STATIONS as usize];
-        let red = row0[RADIAL_STATIONS as usize - 1][0];
-        let expected = 0.5 * (0.8f32 * 0.8 - 0.53333 * 0.53333);
-        assert!((red - expected).abs() < 1e-4, "{red} vs {expected}");
-        assert_eq!(row0[RADIAL_STATIONS as usize - 1][3], 0.8);
-        assert!((row0[RADIAL_STATIONS as usize - 1][2] - 0.32).abs() < 1e-4);
+        // `quadrants`: the first quarter turn (x > 0, y > 0: right of the centre, towards the
+        // image's top) is the top-right quadrant, green only; the second the red top-left.
+        let image = LightImage::builtin("quadrants", &Default::default(), "f").unwrap();
+        let table = sector_table(&light, &image);
+        let quarter = light.area_m2() / 4.0;
+        let first = sector(&table, SECTOR_ANGLES / 4, last);
+        assert!(first[0] < 1e-6 && (first[1] - quarter).abs() < 1e-3 && first[2] < 1e-6, "{first:?}");
+        let second = sector(&table, SECTOR_ANGLES / 2, last);
+        assert!((second[0] - first[0] - quarter).abs() < 1e-3 && (second[1] - first[1]).abs() < 1e-6, "{second:?}");
+        // Halfway out, a quarter of the area: (1/2)² of the quarter.
+        let inner = sector(&table, SECTOR_ANGLES / 4, last / 2);
+        let s = (last / 2) as f32 / last as f32;
+        assert!((inner[3] - s * s * quarter).abs() < 1e-3, "{inner:?}");
     }
 
     #[test]

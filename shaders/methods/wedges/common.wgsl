@@ -13,9 +13,8 @@ struct WedgeParams {
     object_ids: u32,    // 1: no shadow from a receiver's own object where it faces away from the light centre
     channels: u32,      // LI values per pixel: 1 for a uniform light (gray), 3 for a coloured one (rgb)
     color_angles: u32,  // directions per wedge over which a coloured light's emission is integrated
-    radial_angles: u32, // rows of the radial table
+    radial_angles: u32, // angular steps per turn of the sector table (which holds two turns)
     radial_stations: u32, // entries per row
-    total: vec4<f32>,   // rgb: each channel's emission integrated over the light (`light::tables`)
 }
 
 // A planar convex polygon of the shadow volume from the light centre (a side quad or, for
@@ -57,8 +56,8 @@ struct WorkItem {
 // 0 depth reads, 1 LI writes.
 @group(1) @binding(6) var<storage, read_write> counters: array<atomic<u32>, 4>;
 @group(1) @binding(7) var visibility_out: texture_storage_2d<rgba32float, write>;
-// The light's radial table (`light::tables::radial_table`): per direction from the centre, the
-// emission integrated out to each station; w the distance to the rectangle's edge.
+// The light's sector table (`light::tables::sector_table`): the emission (w: area) of the
+// sectors from direction 0 to each angle, out to each station.
 @group(1) @binding(9) var<storage, read> radial: array<vec4<f32>>;
 // The unshadowed irradiance per channel: what a coloured wedge's blocked irradiance is a
 // fraction of.

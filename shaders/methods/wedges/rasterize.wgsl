@@ -214,16 +214,17 @@ fn wedge_share(w: Wedge, p: vec3<f32>, normal: vec3<f32>, e0: vec3<f32>) -> vec3
 // A coloured light's share of the region `poly` (light coordinates, c' at the origin, beyond
 // the line through `a2` along `d`), per channel: the blocked irradiance over E0 (contract §1:
 // V per channel). Lambert's formula gives the region's irradiance at unit radiance exactly
-// (`part`); what the image adds is the region's mean radiance, weighted as p weighs it
-// (cosines over squared distance). That mean comes from the radial table: the region is
-// bounded by rays from the centre, the edge's line and the rectangle, so along each of
-// `color_angles` directions across its angular span the emission between the line and the
-// rectangle's edge is two look-ups, exact for the piecewise-constant image; the directions
-// are midpoints of equal angular steps, each weighed by the kernel at its segment's middle.
-// The region's mean rather than its integral comes from these samples, so their error only
-// bends the hue: a uniform light gets back exactly Lambert's share.
-// Below the horizon (area weights, see `wedge_share`) the share is the region's emission over
-// the whole light's.
+// (`part`); what the image adds is the region's mean radiance, weighed as p weighs it
+// (cosines over squared distance). The region is bounded by rays from the centre, the edge's
+// line and the rectangle, so it is the sector between its extreme directions minus what lies
+// on c's side of the line. Its angular span is cut into `color_angles` steps; in each, the
+// line's distance is held at its value in the middle of the step and the sector table gives
+// the emission and the area between it and the rectangle's edge — the image's colour
+// boundaries, whatever their direction, are integrated exactly, only the line's drift within
+// a step is approximated — and the kernel at the step's middle weighs them. The mean comes
+// from these pieces, so their error only bends the hue: a uniform light gets back exactly
+// Lambert's share. Below the horizon (area weights, see `wedge_share`) the share is the
+// region's emission over the whole light's.
 fn colored_share(poly: ptr<function, array<vec2<f32>, 8>>, count: u32, a2: vec2<f32>, d: vec2<f32>, p: vec3<f32>, normal: vec3<f32>, part: f32, below_horizon: bool, e0: vec3<f32>) -> vec3<f32> {
     // The region's angular span seen from c' (< π: the region lies beyond a line that misses
     // c'), measured from the direction of its vertices' mean.
@@ -240,55 +241,72 @@ fn colored_share(poly: ptr<function, array<vec2<f32>, 8>>, count: u32, a2: vec2<
         lo = min(lo, rel);
         hi = max(hi, rel);
     }
-    let base = atan2(g.y, g.x);
+    // The first direction within the table's first turn; the span then stays in its two.
+    let start = fract((atan2(g.y, g.x) + lo) / TAU) * TAU;
+    let width = (hi - lo) / f32(params.color_angles);
     let line_normal = vec2<f32>(-d.y, d.x);
     let line_offset = dot(line_normal, a2);
     let half = 0.5 * vec2<f32>(frame.light_n.w, frame.light_u.w);
     let n_light = frame.light_n.xyz;
-    let stations = f32(params.radial_stations - 1u);
     var emitted = vec3<f32>(0.0);
     var area = 0.0;
-    let steps = params.color_angles;
-    for (var j = 0u; j < steps; j++) {
-        let phi = base + lo + (hi - lo) * (f32(j) + 0.5) / f32(steps);
-        let e = vec2<f32>(cos(phi), sin(phi));
+    var outer_before = sector(start, 1.0);
+    for (var j = 0u; j < params.color_angles; j++) {
+        let phi_a = start + width * f32(j);
+        let phi_b = phi_a + width;
+        let mid = phi_a + 0.5 * width;
+        let e = vec2<f32>(cos(mid), sin(mid));
         let reach = min(half.x / max(abs(e.x), 1e-9), half.y / max(abs(e.y), 1e-9));
-        // Where this ray crosses the edge's line into the region (never, if it runs away).
+        // Where this step's middle ray crosses the edge's line into the region (never, if it
+        // runs away from it).
         let along = dot(line_normal, e);
         var enter = reach;
         if along * line_offset > 0.0 {
             enter = clamp(line_offset / along, 0.0, reach);
         }
         let s = enter / reach;
-        let turns = fract(phi / 6.28318531);
-        let row = (u32(round(turns * f32(params.radial_angles))) % params.radial_angles) * params.radial_stations;
-        let x = s * stations;
-        let i = min(u32(x), params.radial_stations - 2u);
-        let inner = mix(radial[row + i].rgb, radial[row + i + 1u].rgb, x - f32(i));
-        let segment_emission = radial[row + params.radial_stations - 1u].rgb - inner;
-        let segment_area = 0.5 * reach * reach * (1.0 - s * s);
+        let outer_after = sector(phi_b, 1.0);
+        let piece = (outer_after - outer_before) - (sector(phi_b, s) - sector(phi_a, s));
+        outer_before = outer_after;
         var kernel = 1.0;
         if !below_horizon {
             let to_light = light_point(e * 0.5 * (enter + reach)) - p;
             let r2 = dot(to_light, to_light);
             kernel = max(dot(normal, to_light), 0.0) * max(-dot(n_light, to_light), 0.0) / (r2 * r2);
         }
-        emitted += kernel * segment_emission;
-        area += kernel * segment_area;
+        emitted += kernel * max(piece.rgb, vec3<f32>(0.0));
+        area += kernel * max(piece.w, 0.0);
     }
     if area <= 0.0 {
         return vec3<f32>(0.0);
     }
-    let mean_radiance = emitted / area; // per m² of the image's emission units
+    let mean_radiance = emitted / area; // the image's emission per m² of light
     if below_horizon {
         var region = 0.0;
         for (var k = 0u; k < count; k++) {
             region += 0.5 * cross2((*poly)[k], (*poly)[(k + 1u) % count]);
         }
-        return abs(region) * mean_radiance / max(params.total.rgb, vec3<f32>(1e-30));
+        let whole = sector(TAU, 1.0).rgb;
+        return abs(region) * mean_radiance / max(whole, vec3<f32>(1e-30));
     }
     let blocked = part * frame.light_center.w * mean_radiance;
     return select(vec3<f32>(0.0), blocked / e0, e0 > vec3<f32>(0.0));
+}
+
+const TAU: f32 = 6.28318531;
+
+// The sector table (`light::tables::sector_table`) at angle `phi` ∈ [0, 4π) and radial
+// fraction `s`, linear between its rows and stations: rgb the emission, w the area.
+fn sector(phi: f32, s: f32) -> vec4<f32> {
+    let rows = 2u * params.radial_angles;
+    let y = clamp(phi / TAU * f32(params.radial_angles), 0.0, f32(rows));
+    let i = min(u32(y), rows - 1u);
+    let x = clamp(s, 0.0, 1.0) * f32(params.radial_stations - 1u);
+    let j = min(u32(x), params.radial_stations - 2u);
+    let at = i * params.radial_stations + j;
+    let below = mix(radial[at], radial[at + 1u], x - f32(j));
+    let above = mix(radial[at + params.radial_stations], radial[at + params.radial_stations + 1u], x - f32(j));
+    return mix(below, above, y - f32(i));
 }
 
 

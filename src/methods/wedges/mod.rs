@@ -29,8 +29,8 @@
 //! - A coloured (or shaped) light image (the paper's lights are uniform; contract §1 asks for
 //!   visibility per channel): the LI buffer holds three values per pixel, and a wedge takes
 //!   away from each channel the irradiance its region blocks — Lambert's exact share of the
-//!   region times the region's mean radiance, integrated from the light's radial table
-//!   (`light::tables`) along `color_angles` directions — over that channel's E0. The cost does
+//!   region times the region's mean radiance, integrated from the light's sector table
+//!   (`light::tables`) in `color_angles` angular steps — over that channel's E0. The cost does
 //!   not grow with the image's texels; a uniform image keeps the one gray value and the exact
 //!   share.
 //! - Wedge culling uses the wedge's two tangent planes (through the edge, touching the light
@@ -52,7 +52,7 @@ use crate::error::JobResult;
 use crate::gpu::layout;
 use crate::gpu::pool::PipelineKey;
 use crate::gpu::readback::read_buffer;
-use crate::light::tables::{is_uniform, radial_table, total_emission, RADIAL_ANGLES, RADIAL_STATIONS};
+use crate::light::tables::{is_uniform, sector_table, SECTOR_ANGLES, SECTOR_STATIONS};
 use culling::{cull, TileGrid};
 use geometry::{eye_in_shadow, Volume};
 
@@ -84,7 +84,7 @@ const COLOR_ANGLES: Param<u32> = Param::integer(
     8,
     1,
     32,
-    "directions across a wedge's region along which a coloured light's emission is integrated (exact along each); a uniform light needs none",
+    "angular steps across a wedge's region in which a coloured light's emission is integrated (the image exactly, the edge's line held at each step's middle); a uniform light needs none",
 );
 
 const PARAMS: &[ParamSpec] = &[TILE.spec, CULLING.spec, VOLUME.spec, OBJECT_IDS.spec, PASSES.spec, COLOR_ANGLES.spec];
@@ -133,7 +133,6 @@ struct Uniforms {
     radial_angles: u32,
     radial_stations: u32,
     _pad: [u32; 3],
-    total: [f32; 4],
 }
 
 impl ShadowMethod for Wedges {
@@ -185,10 +184,9 @@ impl ShadowMethod for Wedges {
             object_ids: u32::from(params.get(&OBJECT_IDS)),
             channels: if colored { 3 } else { 1 },
             color_angles: params.get(&COLOR_ANGLES),
-            radial_angles: RADIAL_ANGLES,
-            radial_stations: RADIAL_STATIONS,
+            radial_angles: SECTOR_ANGLES,
+            radial_stations: SECTOR_STATIONS,
             _pad: [0; 3],
-            total: total_emission(light, &spec.light_image).extend(0.0).to_array(),
         };
         let storage = |label, contents: &[u8]| {
             device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
@@ -233,7 +231,7 @@ impl ShadowMethod for Wedges {
         let penumbra_pipeline = ctx.screen_pipeline(PipelineKey::new("wedges.penumbra"), "methods/wedges/rasterize_penumbra.wgsl", &io);
         let both_pipeline = ctx.screen_pipeline(PipelineKey::new("wedges.both"), "methods/wedges/rasterize_both.wgsl", &io);
         let resolve = ctx.screen_pipeline(PipelineKey::new("wedges.resolve"), "methods/wedges/resolve.wgsl", &io);
-        let radial = if colored { ctx.light_table("wedges.radial", radial_table) } else { std::sync::Arc::new(storage("Wedges::no_radial", &[])) };
+        let radial = if colored { ctx.light_table("wedges.sectors", sector_table) } else { std::sync::Arc::new(storage("Wedges::no_sectors", &[])) };
         let bind = |work: &wgpu::Buffer| {
             device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("Wedges::bind_group"),
