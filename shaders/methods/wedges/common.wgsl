@@ -13,8 +13,8 @@ struct WedgeParams {
     object_ids: u32,    // 1: no shadow from a receiver's own object where it faces away from the light centre
     channels: u32,      // LI values per pixel: 1 for a uniform light (gray), 3 for a coloured one (rgb)
     color_angles: u32,  // directions per wedge over which a coloured light's emission is integrated
-    radial_angles: u32, // angular steps per turn of the sector table (which holds two turns)
-    radial_stations: u32, // entries per row
+    sector_angles: u32, // angular steps per turn of the sector table (which holds two turns)
+    sector_stations: u32, // entries per row
 }
 
 // A planar convex polygon of the shadow volume from the light centre (a side quad or, for
@@ -58,7 +58,7 @@ struct WorkItem {
 @group(1) @binding(7) var visibility_out: texture_storage_2d<rgba32float, write>;
 // The light's sector table (`light::tables::sector_table`): the emission (w: area) of the
 // sectors from direction 0 to each angle, out to each station.
-@group(1) @binding(9) var<storage, read> radial: array<vec4<f32>>;
+@group(1) @binding(9) var<storage, read> sectors: array<vec4<f32>>;
 // The unshadowed irradiance per channel: what a coloured wedge's blocked irradiance is a
 // fraction of.
 @group(1) @binding(10) var e0_in: texture_2d<f32>;

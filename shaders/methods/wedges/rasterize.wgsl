@@ -298,14 +298,14 @@ const TAU: f32 = 6.28318531;
 // The sector table (`light::tables::sector_table`) at angle `phi` ∈ [0, 4π) and radial
 // fraction `s`, linear between its rows and stations: rgb the emission, w the area.
 fn sector(phi: f32, s: f32) -> vec4<f32> {
-    let rows = 2u * params.radial_angles;
-    let y = clamp(phi / TAU * f32(params.radial_angles), 0.0, f32(rows));
+    let rows = 2u * params.sector_angles;
+    let y = clamp(phi / TAU * f32(params.sector_angles), 0.0, f32(rows));
     let i = min(u32(y), rows - 1u);
-    let x = clamp(s, 0.0, 1.0) * f32(params.radial_stations - 1u);
-    let j = min(u32(x), params.radial_stations - 2u);
-    let at = i * params.radial_stations + j;
-    let below = mix(radial[at], radial[at + 1u], x - f32(j));
-    let above = mix(radial[at + params.radial_stations], radial[at + params.radial_stations + 1u], x - f32(j));
+    let x = clamp(s, 0.0, 1.0) * f32(params.sector_stations - 1u);
+    let j = min(u32(x), params.sector_stations - 2u);
+    let at = i * params.sector_stations + j;
+    let below = mix(sectors[at], sectors[at + 1u], x - f32(j));
+    let above = mix(sectors[at + params.sector_stations], sectors[at + params.sector_stations + 1u], x - f32(j));
     return mix(below, above, y - f32(i));
 }
 

@@ -130,8 +130,8 @@ struct Uniforms {
     object_ids: u32,
     channels: u32,
     color_angles: u32,
-    radial_angles: u32,
-    radial_stations: u32,
+    sector_angles: u32,
+    sector_stations: u32,
     _pad: [u32; 3],
 }
 
@@ -184,8 +184,8 @@ impl ShadowMethod for Wedges {
             object_ids: u32::from(params.get(&OBJECT_IDS)),
             channels: if colored { 3 } else { 1 },
             color_angles: params.get(&COLOR_ANGLES),
-            radial_angles: SECTOR_ANGLES,
-            radial_stations: SECTOR_STATIONS,
+            sector_angles: SECTOR_ANGLES,
+            sector_stations: SECTOR_STATIONS,
             _pad: [0; 3],
         };
         let storage = |label, contents: &[u8]| {
@@ -231,7 +231,7 @@ impl ShadowMethod for Wedges {
         let penumbra_pipeline = ctx.screen_pipeline(PipelineKey::new("wedges.penumbra"), "methods/wedges/rasterize_penumbra.wgsl", &io);
         let both_pipeline = ctx.screen_pipeline(PipelineKey::new("wedges.both"), "methods/wedges/rasterize_both.wgsl", &io);
         let resolve = ctx.screen_pipeline(PipelineKey::new("wedges.resolve"), "methods/wedges/resolve.wgsl", &io);
-        let radial = if colored { ctx.light_table("wedges.sectors", sector_table) } else { std::sync::Arc::new(storage("Wedges::no_sectors", &[])) };
+        let sectors = if colored { ctx.light_table("wedges.sectors", sector_table) } else { std::sync::Arc::new(storage("Wedges::no_sectors", &[])) };
         let bind = |work: &wgpu::Buffer| {
             device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("Wedges::bind_group"),
@@ -246,7 +246,7 @@ impl ShadowMethod for Wedges {
                     counters.as_entire_binding(),
                     wgpu::BindingResource::TextureView(ctx.visibility),
                     receivers.as_entire_binding(),
-                    radial.as_entire_binding(),
+                    sectors.as_entire_binding(),
                     wgpu::BindingResource::TextureView(ctx.e0),
                 ]),
             })
