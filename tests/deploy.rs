@@ -750,7 +750,9 @@ fn a_full_data_disk_refuses_new_jobs_loses_none_and_recovers_without_a_restart()
     }
 
     // Another tenant fills the disk while a job renders.
-    let slow = r#"{"scene": {"builtin": "occluder"}, "method": {"name": "reference", "samples": 1024, "resolution": 512}, "output": {"width": 128, "height": 96}}"#;
+    // Slow enough (several seconds alone, far more beside the other suites) that it cannot
+    // finish before the disk is full again, whatever the machine's load.
+    let slow = r#"{"scene": {"builtin": "occluder"}, "method": {"name": "reference", "samples": 4096, "resolution": 512}, "output": {"width": 128, "height": 96}}"#;
     let (status, body) = http("POST", &format!("{base}/v1/jobs"), Some(slow)).unwrap();
     assert_eq!(status, 202, "{}", String::from_utf8_lossy(&body));
     let running = json(&body)["id"].as_str().unwrap().to_owned();
