@@ -170,7 +170,7 @@ enum LightIdentity {
 
 impl LightIdentity {
     fn of(image: &crate::light::LightImage) -> Self {
-        if crate::light::tables::is_uniform(image) {
+        if image.is_uniform() {
             LightIdentity::Uniform(image.emission(0, 0).to_array().map(f32::to_bits))
         } else {
             LightIdentity::Image(image.fingerprint())

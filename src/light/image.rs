@@ -21,6 +21,8 @@ pub struct LightImage {
     texels: Vec<[f32; 4]>,
     /// A hash of the size and texels, computed once: keys what is derived from the image.
     fingerprint: u64,
+    /// Whether every texel emits the same radiance, computed once (`is_uniform`).
+    uniform: bool,
 }
 
 impl LightImage {
@@ -31,7 +33,15 @@ impl LightImage {
         for texel in &texels {
             texel.map(f32::to_bits).hash(&mut hasher);
         }
-        Self { width, height, texels, fingerprint: hasher.finish() }
+        let emission = |[r, g, b, a]: [f32; 4]| [r * a, g * a, b * a];
+        let uniform = texels.iter().all(|&t| emission(t) == emission(texels[0]));
+        Self { width, height, texels, fingerprint: hasher.finish(), uniform }
+    }
+
+    /// Whether every texel emits the same radiance: then each channel's share of any part of
+    /// the light is its share of the area, and the methods need no per-light tables.
+    pub fn is_uniform(&self) -> bool {
+        self.uniform
     }
 
     /// A hash of the image's size and texels: keys what is derived from it and cached.

@@ -103,13 +103,6 @@ pub const SECTOR_ANGLES: u32 = 1024;
 /// Radial stations per angle, at s = 0, 1/(n−1), …, 1 of the way to the rectangle's edge.
 pub const SECTOR_STATIONS: u32 = 64;
 
-/// Whether every texel emits the same radiance: then each channel's share of any region is
-/// its share of the area, and the methods skip the tables.
-pub fn is_uniform(image: &LightImage) -> bool {
-    let first = image.emission(0, 0);
-    (0..image.height).all(|j| (0..image.width).all(|i| image.emission(i, j) == first))
-}
-
 /// The sector table, `2·SECTOR_ANGLES + 1` rows of `SECTOR_STATIONS` entries: entry (i, j) is
 /// the emission of the part of the light around its centre between the directions 0 and
 /// φᵢ = 2π·i/SECTOR_ANGLES (light-local, x along r, y along u, counter-clockwise) and out to
@@ -253,9 +246,9 @@ mod tests {
     #[test]
     fn uniform_images_are_recognised() {
         let builtin = |name| LightImage::builtin(name, &Default::default(), "f").unwrap();
-        assert!(is_uniform(&builtin("white")));
+        assert!(builtin("white").is_uniform());
         for name in ["disk", "star", "stripes", "flame", "quadrants"] {
-            assert!(!is_uniform(&builtin(name)), "{name}");
+            assert!(!builtin(name).is_uniform(), "{name}");
         }
     }
 

@@ -9,10 +9,11 @@
 //!   warped position, optionally to jittered blocker positions (§4.3 sub-pixel accuracy).
 //! - `columns`, `rows`: the adaptive sampling of §4.3 — groups of 5 pixels along columns,
 //!   then rows, interpolated where ids and hard results agree, refined otherwise.
-//! - `finish`: visibility through the chosen fall-off, coloured: the search also notes in which
-//!   direction it found its texel, which says what part of the light is hidden; the light's
-//!   edge table (`light::tables`) weighs the image's colours on each side (past the paper,
-//!   whose light is uniform; contract §1).
+//! - `finish`: visibility through the chosen fall-off, coloured (past the paper, whose light
+//!   is uniform; contract §1): the search also notes what it found, and the ray from the
+//!   receiver through the occluder there, with the silhouette's direction, gives the occluder
+//!   edge's line across the light; the light's edge table (`light::tables`) gives each
+//!   channel's share beyond it, and the pixel keeps the paper's gray level with that hue.
 //!
 //! Choices where the paper is vague or inconsistent, each in a comment at the code:
 //! the §3.3 pseudo-code's return values are inverted against §3.2's text (fixed: the hard edge
@@ -26,7 +27,7 @@ use super::{Counters, MethodContext, Param, ParamSpec, Params, ShadowMethod, BIA
 use crate::error::JobResult;
 use crate::gpu::layout;
 use crate::gpu::pool::PipelineKey;
-use crate::light::tables::{edge_table, is_uniform};
+use crate::light::tables::edge_table;
 
 pub struct Brabec;
 
@@ -140,7 +141,7 @@ impl ShadowMethod for Brabec {
             derived: [u32::from(derived_search), u32::from(derived_hit)],
             lattice_stride: if adaptive { BLOCK } else { 1 },
             use_ids: u32::from(params.get(&OBJECT_IDS)),
-            colored: u32::from(!is_uniform(&spec.light_image)),
+            colored: u32::from(!spec.light_image.is_uniform()),
             _pad: [0; 3],
         };
         let device = ctx.gpu.device.clone();
@@ -165,7 +166,8 @@ impl ShadowMethod for Brabec {
         let columns = ctx.screen_pipeline(PipelineKey::new("brabec.columns"), "methods/brabec/columns.wgsl", &io);
         let rows = ctx.screen_pipeline(PipelineKey::new("brabec.rows"), "methods/brabec/rows.wgsl", &io);
         let finish = ctx.screen_pipeline(PipelineKey::new("brabec.finish"), "methods/brabec/finish.wgsl", &io);
-        let edges = ctx.light_table("edge_table", edge_table);
+        // A uniform light needs no table: its colours are its gray level.
+        let edges = if uniforms.colored == 1 { ctx.light_table("edge_table", edge_table) } else { std::sync::Arc::new(ctx.counters("Brabec::no_table", 4)) };
         let bind_group = ctx.bind(
             "Brabec::bind_group",
             &classify,

@@ -52,7 +52,7 @@ use crate::error::JobResult;
 use crate::gpu::layout;
 use crate::gpu::pool::PipelineKey;
 use crate::gpu::readback::read_buffer;
-use crate::light::tables::{is_uniform, sector_table, SECTOR_ANGLES, SECTOR_STATIONS};
+use crate::light::tables::{sector_table, SECTOR_ANGLES, SECTOR_STATIONS};
 use culling::{cull, TileGrid};
 use geometry::{eye_in_shadow, Volume};
 
@@ -175,7 +175,7 @@ impl ShadowMethod for Wedges {
         let device = ctx.gpu.device.clone();
         let grid_size = (spec.width.div_ceil(tile), spec.height.div_ceil(tile));
         let tile_count = (grid_size.0 * grid_size.1) as usize;
-        let colored = !is_uniform(&spec.light_image);
+        let colored = !spec.light_image.is_uniform();
         let uniforms = Uniforms {
             tile,
             zfail: u32::from(zfail),
