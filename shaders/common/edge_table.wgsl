@@ -24,12 +24,6 @@ fn edge_fraction(e: vec2<f32>, s: f32) -> vec4<f32> {
     return mix(edge_entry(row, x), edge_entry(row + 1u, x), y - f32(row));
 }
 
-// Distance from the light's centre to its rectangle's edge along unit direction `e`.
-fn light_reach(e: vec2<f32>) -> f32 {
-    let half = 0.5 * vec2<f32>(frame.light_n.w, frame.light_u.w);
-    return min(half.x / max(abs(e.x), 1e-9), half.y / max(abs(e.y), 1e-9));
-}
-
 // The same for the line through light point `q` (light coordinates) orthogonal to c→q: the
 // intensity look-up of Rong & Tan 2006 §3.
 fn edge_fraction_at(q: vec2<f32>) -> vec4<f32> {

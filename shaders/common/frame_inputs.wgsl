@@ -15,6 +15,28 @@
 @group(0) @binding(7) var<storage, read> light_cells: array<LightCell>;
 @group(0) @binding(8) var shadow_position: texture_2d<f32>; // world position seen from the light centre, w 1 where covered
 
+// Distance from the light's centre to its rectangle's edge along unit direction `e` (light
+// coordinates: x along r, y along u).
+fn light_reach(e: vec2<f32>) -> f32 {
+    let half = 0.5 * vec2<f32>(frame.light_n.w, frame.light_u.w);
+    return min(half.x / max(abs(e.x), 1e-9), half.y / max(abs(e.y), 1e-9));
+}
+
+// Where the ray from receiver p through point o (between p and the light plane) meets the
+// light plane, in light coordinates (c at the origin); z = 1 when it does, 0 when o does not
+// lie strictly between p and the plane.
+fn light_plane_hit(p: vec3<f32>, o: vec3<f32>) -> vec3<f32> {
+    let c = frame.light_center.xyz;
+    let n = frame.light_n.xyz;
+    let height_p = dot(p - c, n);
+    let height_o = dot(o - p, n); // negative when o lies between p and the light plane
+    if height_p <= 0.0 || height_o >= -1e-5 * height_p || -height_o >= height_p {
+        return vec3<f32>(0.0);
+    }
+    let q = p + (o - p) * (height_p / -height_o) - c;
+    return vec3<f32>(dot(q, frame.light_r.xyz), dot(q, frame.light_u.xyz), 1.0);
+}
+
 // True where the G-buffer holds a surface (not background) and the pixel is on screen.
 fn covered(pixel: vec2<u32>) -> bool {
     return all(pixel < frame.sizes.xy) && textureLoad(gbuf_normal, pixel, 0).w > 0.5;

@@ -102,4 +102,13 @@ mod tests {
                 .unwrap_or_else(|e| panic!("{name}: {e:?}"));
         }
     }
+
+    #[test]
+    fn the_edge_table_look_up_reads_the_table_as_it_is_built() {
+        // The WGSL hard-codes the table's shape (its callers bind it without uniforms).
+        use crate::light::tables::{EDGE_ANGLES, EDGE_STATIONS};
+        let wgsl = source("common/edge_table.wgsl").unwrap();
+        assert!(wgsl.contains(&format!("const EDGE_ANGLES: u32 = {EDGE_ANGLES}u;")), "EDGE_ANGLES");
+        assert!(wgsl.contains(&format!("const EDGE_STATIONS: u32 = {EDGE_STATIONS}u;")), "EDGE_STATIONS");
+    }
 }

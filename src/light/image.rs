@@ -68,6 +68,12 @@ impl LightImage {
         Vec3::new(r, g, b) * a
     }
 
+    /// The texel holding image point (s, t) ∈ [0, 1]² (s right, t down): the image is
+    /// piecewise constant, one uniform sub-rectangle per texel (contract §1).
+    pub fn texel_at(&self, s: f32, t: f32) -> (u32, u32) {
+        (((s * self.width as f32) as u32).min(self.width - 1), ((t * self.height as f32) as u32).min(self.height - 1))
+    }
+
     /// Alpha of a texel.
     pub fn alpha(&self, i: u32, j: u32) -> f32 {
         self.texels[(j * self.width + i) as usize][3]

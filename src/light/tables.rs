@@ -46,7 +46,7 @@ pub fn edge_table(light: &AreaLight, image: &LightImage) -> Vec<[f32; 4]> {
         .flat_map(|j| (0..n).map(move |i| (i, j)))
         .filter_map(|(i, j)| {
             let (s, t) = ((i as f32 + 0.5) / n as f32, (j as f32 + 0.5) / n as f32);
-            let texel = (((s * image.width as f32) as u32).min(image.width - 1), ((t * image.height as f32) as u32).min(image.height - 1));
+            let texel = image.texel_at(s, t);
             let e = image.emission(texel.0, texel.1);
             (e.max_element() > 0.0).then(|| (local(light, s, t), e.extend(image.alpha(texel.0, texel.1))))
         })
@@ -151,7 +151,7 @@ pub fn sector_table(light: &AreaLight, image: &LightImage) -> Vec<[f32; 4]> {
                 let mid = e * (0.5 * (last + rho));
                 let s = (mid.x / light.size_m.x + 0.5).clamp(0.0, 1.0);
                 let t = (0.5 - mid.y / light.size_m.y).clamp(0.0, 1.0);
-                let texel = (((s * width as f32) as u32).min(width - 1), ((t * height as f32) as u32).min(height - 1));
+                let texel = image.texel_at(s, t);
                 sum += image.emission(texel.0, texel.1) * (0.5 * (rho * rho - last * last));
                 last = rho;
             }

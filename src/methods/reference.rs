@@ -69,9 +69,7 @@ pub fn light_samples(light: &AreaLight, image: &LightImage, requested: u32, seed
         for i in 0..gx {
             let s = (i as f32 + rng.next_f32()) / gx as f32;
             let t = (j as f32 + rng.next_f32()) / gy as f32;
-            // Nearest texel: the image is piecewise constant (contract §1).
-            let ti = ((s * image.width as f32) as u32).min(image.width - 1);
-            let tj = ((t * image.height as f32) as u32).min(image.height - 1);
+            let (ti, tj) = image.texel_at(s, t);
             let emission = image.emission(ti, tj);
             if emission.max_element() <= 0.0 {
                 continue;

@@ -251,15 +251,11 @@ fn edge_line(p: vec3<f32>, w: Warped, found: vec2<i32>, f: f32) -> vec3<f32> {
     if dot(silhouette, silhouette) > 0.0 {
         normal = silhouette;
     }
-    let c = frame.light_center.xyz;
-    let n = frame.light_n.xyz;
-    let height_p = dot(p - c, n);
-    let height_o = dot(occluder - p, n); // negative when the occluder lies between p and the light
-    if height_p <= 0.0 || height_o >= -1e-5 * height_p || -height_o >= height_p {
+    let q = light_plane_hit(p, occluder);
+    if q.z == 0.0 {
         return vec3<f32>(normal, select(-1.0, 1.0, w.hard) * f * light_reach(normal));
     }
-    let q = p + (occluder - p) * (height_p / -height_o) - c;
-    return vec3<f32>(normal, dot(vec2<f32>(dot(q, frame.light_r.xyz), dot(q, frame.light_u.xyz)), normal));
+    return vec3<f32>(normal, dot(q.xy, normal));
 }
 
 // The direction on the light plane, seen from receiver p (light depth `depth`), of what the

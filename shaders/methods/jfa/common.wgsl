@@ -118,18 +118,9 @@ fn luminance(c: vec3<f32>) -> f32 {
 // coordinates (x along r, y along u, c at the origin); w = 1 when it meets the light
 // rectangle, else 0 (§3: then p is not in o's penumbra).
 fn light_hit(p: vec3<f32>, o: vec3<f32>) -> vec4<f32> {
-    let c = frame.light_center.xyz;
-    let n = frame.light_n.xyz;
-    let height_p = dot(p - c, n);
-    let height_o = dot(o - p, n); // negative when o lies between p and the light plane
-    if height_p <= 0.0 || height_o >= -1e-5 * height_p || -height_o >= height_p {
-        return vec4<f32>(0.0);
-    }
-    let q = p + (o - p) * (height_p / -height_o);
-    let x = dot(q - c, frame.light_r.xyz);
-    let y = dot(q - c, frame.light_u.xyz);
-    let on_light = abs(x) <= 0.5 * frame.light_n.w && abs(y) <= 0.5 * frame.light_u.w;
-    return vec4<f32>(x, y, 0.0, select(0.0, 1.0, on_light));
+    let q = light_plane_hit(p, o);
+    let on_light = q.z == 1.0 && abs(q.x) <= 0.5 * frame.light_n.w && abs(q.y) <= 0.5 * frame.light_u.w;
+    return vec4<f32>(q.xy, 0.0, select(0.0, 1.0, on_light));
 }
 
 // §3: shoot a ray from receiver p through occluder point o to the light plane. If it meets

@@ -246,7 +246,6 @@ fn colored_share(poly: ptr<function, array<vec2<f32>, 8>>, count: u32, a2: vec2<
     let width = (hi - lo) / f32(params.color_angles);
     let line_normal = vec2<f32>(-d.y, d.x);
     let line_offset = dot(line_normal, a2);
-    let half = 0.5 * vec2<f32>(frame.light_n.w, frame.light_u.w);
     let n_light = frame.light_n.xyz;
     var emitted = vec3<f32>(0.0);
     var area = 0.0;
@@ -256,7 +255,7 @@ fn colored_share(poly: ptr<function, array<vec2<f32>, 8>>, count: u32, a2: vec2<
         let phi_b = phi_a + width;
         let mid = phi_a + 0.5 * width;
         let e = vec2<f32>(cos(mid), sin(mid));
-        let reach = min(half.x / max(abs(e.x), 1e-9), half.y / max(abs(e.y), 1e-9));
+        let reach = light_reach(e);
         // Where this step's middle ray crosses the edge's line into the region (never, if it
         // runs away from it).
         let along = dot(line_normal, e);
