@@ -1,5 +1,6 @@
 // Composite: Lo = ρ/π · (E0 ⊙ V + ambient) per pixel (contract §1), alpha 1 where a surface
-// was hit, and the view depth (+∞ for background) for the EXR `depth` channel.
+// was hit, and the view depth (+∞ for background) for the EXR `depth` channel — or, for a
+// PNG alone, its 8-bit sRGB pixels directly.
 
 #import common/frame_inputs.wgsl
 
@@ -7,6 +8,7 @@
 @group(1) @binding(1) var visibility_in: texture_2d<f32>;
 @group(1) @binding(2) var color_out: texture_storage_2d<rgba32float, write>;
 @group(1) @binding(3) var depth_out: texture_storage_2d<r32float, write>;
+@group(1) @binding(4) var<storage, read_write> srgb8_out: array<u32>; // RGBA8, row-major
 
 const INV_PI: f32 = 0.31830988618;
 
@@ -21,10 +23,34 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
         textureStore(depth_out, pixel, vec4<f32>(bitcast<f32>(0x7f800000u)));
         return;
     }
+    textureStore(color_out, pixel, vec4<f32>(radiance(pixel), 1.0));
+    textureStore(depth_out, pixel, vec4<f32>(textureLoad(gbuf_position, pixel, 0).w));
+}
+
+fn radiance(pixel: vec2<u32>) -> vec3<f32> {
     let albedo = textureLoad(gbuf_albedo, pixel, 0).rgb;
     let e0 = textureLoad(e0_in, pixel, 0).rgb;
     let v = textureLoad(visibility_in, pixel, 0).rgb;
-    let radiance = albedo * INV_PI * (e0 * v + frame.ambient.rgb);
-    textureStore(color_out, pixel, vec4<f32>(radiance, 1.0));
-    textureStore(depth_out, pixel, vec4<f32>(textureLoad(gbuf_position, pixel, 0).w));
+    return albedo * INV_PI * (e0 * v + frame.ambient.rgb);
+}
+
+// The sRGB transfer function (IEC 61966-2-1), the GPU twin of `color::linear_to_srgb`.
+fn linear_to_srgb(c: vec3<f32>) -> vec3<f32> {
+    let x = clamp(c, vec3<f32>(0.0), vec3<f32>(1.0));
+    return select(1.055 * pow(x, vec3<f32>(1.0 / 2.4)) - 0.055, x * 12.92, x <= vec3<f32>(0.0031308));
+}
+
+// The PNG's pixels: radiance × 2^exposure (frame.ambient.w), sRGB-encoded, alpha = coverage;
+// what `output::encode` would make from the linear colour, without reading that back.
+@compute @workgroup_size(8, 8)
+fn srgb8(@builtin(global_invocation_id) id: vec3<u32>) {
+    let pixel = id.xy;
+    if any(pixel >= frame.sizes.xy) {
+        return;
+    }
+    var rgba = vec4<f32>(0.0);
+    if covered(pixel) {
+        rgba = vec4<f32>(linear_to_srgb(radiance(pixel) * frame.ambient.w), 1.0);
+    }
+    srgb8_out[pixel.y * frame.sizes.x + pixel.x] = pack4x8unorm(rgba);
 }

@@ -1,10 +1,211 @@
 // The unshadowed irradiance E0 (contract §1), identical for every method: Lambert's closed
-// form over each uniform cell of the light image, times the cell's radiance, summed.
+// form over each uniform cell of the light image, times the cell's radiance, summed —
+// evaluated exactly at the corners and the centre of 8×8-pixel blocks and interpolated
+// inside a block wherever the error measured at its centre, and a bound for what the centre
+// cannot see, keep it within E0_TOLERANCE of the exact sum; every other pixel is summed
+// exactly (contract §1, "E0").
+//
+// What is interpolated: below its horizon-free region, E0 = |n · Φ(x)| per channel, where
+// Φ = Σ radiance × ½ Σ Θᵢ Γᵢ is the light's vector irradiance — a smooth function of the
+// position alone, so it interpolates across the normal's discontinuities (box edges, facets).
+// Where the light straddles the receiver's horizon E0 depends on the normal through the
+// clipping; on a flat face (the four corners' normal equal to the pixel's) E0 itself is a
+// smooth function of position and is interpolated instead.
 
 #import common/frame_inputs.wgsl
 
 @group(1) @binding(0) var e0_out: texture_storage_2d<rgba32float, write>;
+@group(1) @binding(1) var<storage, read_write> corners: array<Corner>;
+@group(1) @binding(2) var<storage, read_write> blocks: array<vec4<f32>>;
 
+// Pixels per block side; mirrors `render::passes::E0_BLOCK`.
+const BLOCK: u32 = 8u;
+// The largest estimated relative error accepted for an interpolated pixel: the estimate is
+// the error measured at the block's centre (with a margin) plus a bound for positions off
+// the corners' surface; `penumbra bench` measures the actual error against the exact sum.
+const E0_TOLERANCE: f32 = 6e-4;
+// Where a quantity varies quadratically across a block, bilinear interpolation's error is
+// largest at the centre; the margin covers higher orders.
+const ERROR_MARGIN: f32 = 1.25;
+// |∇Φ| ≤ GRADIENT·|Φ|/dist, dist the distance to the light (a point light's Φ ∝ 1/r² has
+// |∇Φ| = 2|Φ|/r; the margin covers the area light's edges).
+const GRADIENT: f32 = 4.0;
+// A block whose centre could not be checked.
+const UNCHECKED: f32 = 1e30;
+
+struct Corner {
+    phi_r: vec4<f32>,    // xyz: Φ of the red channel; w: exact E0 (red) with the corner's own normal
+    phi_g: vec4<f32>,
+    phi_b: vec4<f32>,
+    position: vec4<f32>, // xyz: world position; w: 1 where the corner is a lit surface
+    normal: vec4<f32>,   // xyz: the G-buffer normal; w: view depth
+}
+
+// Distance from x to the light's rectangle.
+fn light_distance(x: vec3<f32>) -> f32 {
+    let q = x - frame.light_center.xyz;
+    let half = 0.5 * vec2<f32>(frame.light_n.w, frame.light_u.w);
+    let along = vec2<f32>(dot(q, frame.light_r.xyz), dot(q, frame.light_u.xyz));
+    let outside = abs(along) - min(abs(along), half);
+    return length(vec3<f32>(outside, dot(q, frame.light_n.xyz)));
+}
+
+// One-sided emitter: only the lit side of the light plane receives light.
+fn lit_side(x: vec3<f32>) -> bool {
+    return dot(x - frame.light_center.xyz, frame.light_n.xyz) > 0.0;
+}
+
+// The exact sum over the cells, clipped to x's hemisphere.
+fn exact_e0(x: vec3<f32>, nx: vec3<f32>) -> vec3<f32> {
+    var e0 = vec3<f32>(0.0);
+    for (var k = 0u; k < frame.sizes.w; k++) {
+        let cell = light_cells[k];
+        e0 += cell.radiance.rgb * polygon_irradiance(x, nx, cell.corners);
+    }
+    return e0;
+}
+
+fn corner_count() -> vec2<u32> {
+    return (frame.sizes.xy - 1u) / BLOCK + 2u;
+}
+
+fn corner_pixel(c: vec2<u32>) -> vec2<u32> {
+    return min(c * BLOCK, frame.sizes.xy - 1u);
+}
+
+// Φ per channel (columns) and the exact E0 with x's own normal (w of each column's vec4).
+fn exact_terms(x: vec3<f32>, nx: vec3<f32>, depth: f32) -> Corner {
+    var phi = mat3x3<f32>(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0));
+    var e0 = vec3<f32>(0.0);
+    for (var k = 0u; k < frame.sizes.w; k++) {
+        let cell = light_cells[k];
+        let terms = polygon_terms(x, nx, cell.corners);
+        phi += mat3x3<f32>(terms.xyz * cell.radiance.r, terms.xyz * cell.radiance.g, terms.xyz * cell.radiance.b);
+        e0 += cell.radiance.rgb * terms.w;
+    }
+    return Corner(vec4<f32>(phi[0], e0.r), vec4<f32>(phi[1], e0.g), vec4<f32>(phi[2], e0.b), vec4<f32>(x, 1.0), vec4<f32>(nx, depth));
+}
+
+fn no_corner() -> Corner {
+    return Corner(vec4<f32>(0.0), vec4<f32>(0.0), vec4<f32>(0.0), vec4<f32>(0.0), vec4<f32>(0.0));
+}
+
+// The exact terms at a pixel, or an invalid record where it holds no lit surface.
+fn pixel_terms(pixel: vec2<u32>) -> Corner {
+    if covered(pixel) {
+        let x = textureLoad(gbuf_position, pixel, 0);
+        if lit_side(x.xyz) {
+            return exact_terms(x.xyz, textureLoad(gbuf_normal, pixel, 0).xyz, x.w);
+        }
+    }
+    return no_corner();
+}
+
+// Pass 1: Φ per channel and the exact E0 at every block corner.
+@compute @workgroup_size(8, 8)
+fn block_corners(@builtin(global_invocation_id) id: vec3<u32>) {
+    let count = corner_count();
+    if any(id.xy >= count) {
+        return;
+    }
+    corners[id.y * count.x + id.x] = pixel_terms(corner_pixel(id.xy));
+}
+
+// A block's corners and a pixel's bilinear weights among them.
+struct Stencil {
+    c00: Corner,
+    c10: Corner,
+    c01: Corner,
+    c11: Corner,
+    w: vec4<f32>,
+}
+
+fn stencil(pixel: vec2<u32>) -> Stencil {
+    let count = corner_count();
+    let block = pixel / BLOCK;
+    let p0 = corner_pixel(block);
+    let p1 = corner_pixel(block + 1u);
+    let f = vec2<f32>(pixel - p0) / vec2<f32>(max(p1 - p0, vec2<u32>(1u)));
+    let row = block.y * count.x + block.x;
+    let c00 = corners[row];
+    let c10 = corners[row + 1u];
+    let c01 = corners[row + count.x];
+    let c11 = corners[row + count.x + 1u];
+    // Perspective-correct weights (bilinear over view depth): on a plane they put the blend
+    // of the corners' positions on the pixel's own position up to second order, where plain
+    // screen-space weights would be off by the projection's curvature.
+    let bilinear = vec4<f32>((1.0 - f.x) * (1.0 - f.y), f.x * (1.0 - f.y), (1.0 - f.x) * f.y, f.x * f.y);
+    let depth = max(vec4<f32>(c00.normal.w, c10.normal.w, c01.normal.w, c11.normal.w), vec4<f32>(1e-20));
+    let w = bilinear / depth;
+    return Stencil(c00, c10, c01, c11, w / (w.x + w.y + w.z + w.w));
+}
+
+fn all_valid(s: Stencil) -> bool {
+    return s.c00.position.w * s.c10.position.w * s.c01.position.w * s.c11.position.w > 0.0;
+}
+
+// The bilinear blend of the corners' records.
+fn blend(s: Stencil) -> Corner {
+    let w = s.w;
+    return Corner(
+        w.x * s.c00.phi_r + w.y * s.c10.phi_r + w.z * s.c01.phi_r + w.w * s.c11.phi_r,
+        w.x * s.c00.phi_g + w.y * s.c10.phi_g + w.z * s.c01.phi_g + w.w * s.c11.phi_g,
+        w.x * s.c00.phi_b + w.y * s.c10.phi_b + w.z * s.c01.phi_b + w.w * s.c11.phi_b,
+        w.x * s.c00.position + w.y * s.c10.position + w.z * s.c01.position + w.w * s.c11.position,
+        vec4<f32>(0.0),
+    );
+}
+
+// Largest distance of the corners' normals from nx: 0 on a flat face.
+fn bend(s: Stencil, nx: vec3<f32>) -> f32 {
+    return max(max(distance(s.c00.normal.xyz, nx), distance(s.c10.normal.xyz, nx)), max(distance(s.c01.normal.xyz, nx), distance(s.c11.normal.xyz, nx)));
+}
+
+fn phi_size(c: Corner) -> vec3<f32> {
+    return vec3<f32>(length(c.phi_r.xyz), length(c.phi_g.xyz), length(c.phi_b.xyz));
+}
+
+fn e0_of(c: Corner) -> vec3<f32> {
+    return vec3<f32>(c.phi_r.w, c.phi_g.w, c.phi_b.w);
+}
+
+fn max3(v: vec3<f32>) -> f32 {
+    return max(v.x, max(v.y, v.z));
+}
+
+// Pass 2: per block, the interpolation's actual error at its centre pixel, relative to
+// |Φ| (x), and the centre's distance from the corners' blended position (y).
+@compute @workgroup_size(8, 8)
+fn block_errors(@builtin(global_invocation_id) id: vec3<u32>) {
+    let count = corner_count() - 1u;
+    if any(id.xy >= count) {
+        return;
+    }
+    let centre = min(id.xy * BLOCK + BLOCK / 2u, frame.sizes.xy - 1u);
+    var error = vec4<f32>(UNCHECKED, 0.0, 0.0, 0.0);
+    let s = stencil(centre);
+    let exact = pixel_terms(centre);
+    if all_valid(s) && exact.position.w > 0.0 {
+        let mixed = blend(s);
+        let size = max(phi_size(exact), vec3<f32>(1e-30));
+        let phi_error = vec3<f32>(
+            distance(mixed.phi_r.xyz, exact.phi_r.xyz),
+            distance(mixed.phi_g.xyz, exact.phi_g.xyz),
+            distance(mixed.phi_b.xyz, exact.phi_b.xyz),
+        );
+        error = vec4<f32>(max3(phi_error / size), distance(mixed.position.xyz, exact.position.xyz), 0.0, 0.0);
+    }
+    blocks[id.y * count.x + id.x] = error;
+}
+
+// Whether the whole light rectangle lies above the plane through x with normal nx.
+fn light_above(x: vec3<f32>, nx: vec3<f32>) -> bool {
+    let c = dot(frame.light_center.xyz - x, nx);
+    let reach = 0.5 * (frame.light_n.w * abs(dot(frame.light_r.xyz, nx)) + frame.light_u.w * abs(dot(frame.light_u.xyz, nx)));
+    return c - reach > HORIZON_EPS;
+}
+
+// Pass 3: every pixel, interpolated from its block's corners where the estimate allows.
 @compute @workgroup_size(8, 8)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     let pixel = id.xy;
@@ -15,12 +216,49 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     if covered(pixel) {
         let x = textureLoad(gbuf_position, pixel, 0).xyz;
         let nx = textureLoad(gbuf_normal, pixel, 0).xyz;
-        // One-sided emitter: only the lit side of the light plane receives light.
-        if dot(x - frame.light_center.xyz, frame.light_n.xyz) > 0.0 {
-            for (var k = 0u; k < frame.sizes.w; k++) {
-                let cell = light_cells[k];
-                e0 += cell.radiance.rgb * polygon_irradiance(x, nx, cell.corners);
+        if lit_side(x) {
+            var done = false;
+            let block = pixel / BLOCK;
+            let checked = blocks[block.y * (corner_count().x - 1u) + block.x];
+            if checked.x < UNCHECKED {
+                let s = stencil(pixel);
+                let mixed = blend(s);
+                // The centre's error with a margin, plus what a position off the corners' surface
+                // (farther from it than the centre was) adds through Φ's gradient.
+                let off = max(distance(x, mixed.position.xyz) - checked.y, 0.0);
+                let relative = ERROR_MARGIN * checked.x + GRADIENT * off / light_distance(x);
+                let size = phi_size(mixed);
+                if light_above(x, nx) {
+                    e0 = abs(nx * mat3x3<f32>(mixed.phi_r.xyz, mixed.phi_g.xyz, mixed.phi_b.xyz));
+                    done = all(relative * size <= E0_TOLERANCE * e0);
+                } else {
+                    // The light straddles the horizon: on a flat face (the corners' normal the
+                    // pixel's) E0 is still smooth in the position and is blended itself.
+                    e0 = e0_of(mixed);
+                    done = all((relative + bend(s, nx)) * size <= E0_TOLERANCE * e0);
+                }
             }
+            if !done {
+                e0 = exact_e0(x, nx);
+            }
+        }
+    }
+    textureStore(e0_out, pixel, vec4<f32>(e0, 1.0));
+}
+
+// Every pixel summed exactly: lights of a cell or two (cheaper than the corners and the
+// check), and the yardstick the interpolation is measured against (`E0Mode::Exact`).
+@compute @workgroup_size(8, 8)
+fn exact(@builtin(global_invocation_id) id: vec3<u32>) {
+    let pixel = id.xy;
+    if any(pixel >= frame.sizes.xy) {
+        return;
+    }
+    var e0 = vec3<f32>(0.0);
+    if covered(pixel) {
+        let x = textureLoad(gbuf_position, pixel, 0).xyz;
+        if lit_side(x) {
+            e0 = exact_e0(x, textureLoad(gbuf_normal, pixel, 0).xyz);
         }
     }
     textureStore(e0_out, pixel, vec4<f32>(e0, 1.0));

@@ -87,6 +87,58 @@ fn light_image_lands_the_documented_way_round() {
     assert!(top.y / top.x > bottom.y / bottom.x + 0.1, "top {top} bottom {bottom}");
 }
 
+/// Contract §1 "E0": interpolated pixels stay within 1e-3 of the exact sum. Its own engine:
+/// the E0 mode is the renderer's, and the shared engine renders other tests' frames.
+#[test]
+fn e0_interpolation_stays_within_a_thousandth_of_the_exact_sum() {
+    let gpu = penumbra::gpu::GpuContext::new(penumbra::gpu::AdapterChoice::Auto).unwrap();
+    let engine = penumbra::engine::Engine::new(std::sync::Arc::new(gpu), Limits::default(), penumbra::engine::PathPolicy::Any);
+    for (scene, light) in [("crowd", "flame"), ("columns", "stripes"), ("torus", "quadrants")] {
+        let job = job(json!({"scene": {"builtin": scene}, "light": {"image": {"builtin": light}}, "method": {"name": "hard"},
+                             "output": {"width": 960, "height": 540, "format": "exr"}}));
+        let mut frames = Vec::new();
+        for mode in [penumbra::render::E0Mode::Exact, penumbra::render::E0Mode::Interpolated] {
+            engine.set_e0_mode(mode);
+            frames.push(engine.render_frame(&job, &()).unwrap().0.e0.unwrap());
+        }
+        let (exact, interpolated) = (&frames[0], &frames[1]);
+        let largest = exact.iter().flatten().fold(0.0f32, |m, &e| m.max(e));
+        let (mut worst, mut lit, mut differ) = (0.0f32, 0usize, 0usize);
+        for (e, i) in exact.iter().zip(interpolated) {
+            for k in 0..3 {
+                if e[k] > 1e-3 * largest {
+                    worst = worst.max((i[k] - e[k]).abs() / e[k]);
+                }
+            }
+            lit += usize::from(e[0] + e[1] + e[2] > 0.0);
+            differ += usize::from(e != i);
+        }
+        eprintln!("{scene}/{light}: worst {worst:e}, {differ} of {lit} lit pixels interpolated");
+        assert!(worst < 1e-3, "{scene}/{light}: interpolated E0 off by {worst:e} of the exact sum");
+        // The interpolation ran (the exact sum would agree bit for bit everywhere).
+        assert!(differ * 4 > lit, "{scene}/{light}: {differ} of {lit} lit pixels interpolated");
+    }
+}
+
+/// A PNG's pixels made on the GPU (`composite.wgsl`, `srgb8`) are what the CPU makes from the
+/// linear colour (`output::encode`), exposure included, to within one 8-bit step.
+#[test]
+fn png_pixels_made_on_the_gpu_match_the_cpu_transfer_function() {
+    let job = job(json!({"scene": {"builtin": "crowd"}, "light": {"image": {"builtin": "stripes"}}, "method": {"name": "pcss"},
+                         "ambient": [0.05, 0.05, 0.05], "output": {"width": 160, "height": 120, "exposure": 0.7}}));
+    let engine = common::engine();
+    let gpu_made = engine.render(&job, &()).unwrap().bytes;
+    let (frame, _) = engine.render_frame(&job, &()).unwrap();
+    assert!(!frame.color.is_empty(), "render_frame reads the linear colour back");
+    let cpu_made = penumbra::output::encode(&frame, OutputFormat::Png, 0.7).unwrap();
+    let decode = |bytes: &[u8]| image::load_from_memory(bytes).unwrap().to_rgba8().into_raw();
+    let (a, b) = (decode(&gpu_made), decode(&cpu_made));
+    assert_eq!(a.len(), b.len());
+    let worst = a.iter().zip(&b).map(|(x, y)| x.abs_diff(*y)).max().unwrap();
+    assert!(worst <= 1, "GPU and CPU sRGB differ by {worst} steps");
+    assert!(a.chunks(4).any(|p| p[3] == 0) && a.chunks(4).any(|p| p[3] == 255), "coverage in alpha");
+}
+
 #[test]
 fn e0_on_the_gpu_matches_its_cpu_twin() {
     // Pixel (16, 16) of a 33×33 view looking straight down at (3, 0, 3) sees exactly that

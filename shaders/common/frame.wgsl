@@ -12,6 +12,6 @@ struct Frame {
     light_u: vec4<f32>,      // xyz: unit image-up, w: height (along u) in m
     light_r: vec4<f32>,      // xyz: unit image-right = cross(u, n)
     light_proj: vec4<f32>,   // x: tan of the shadow frustum's half angle, y: unused, z: near, w: far
-    ambient: vec4<f32>,      // rgb: ambient irradiance asked for by the job
+    ambient: vec4<f32>,      // rgb: ambient irradiance asked for by the job; w: 2^exposure (PNG)
     sizes: vec4<u32>,        // x, y: output size; z: shadow-map resolution; w: light cell count
 }

@@ -11,7 +11,7 @@ use crate::gpu::GpuContext;
 use crate::job::Job;
 use crate::methods::ShadowMethod;
 use crate::params::Params;
-use crate::render::{FrameOutput, FrameSpec, Renderer};
+use crate::render::{ExtraImages, FrameOutput, FrameSpec, Renderer};
 use crate::supervise::{cancelled_error, Supervisor};
 use crate::timing::Timings;
 
@@ -19,6 +19,17 @@ impl Engine {
     /// Checks and renders one job, returning the linear float frame (what `output::encode`
     /// turns into PNG or EXR, and what quality measurements compare) and its timings.
     pub fn render_frame(&self, job: &Job, supervisor: &dyn Supervisor) -> JobResult<(FrameOutput, Timings)> {
+        self.render_frame_reading(job, supervisor, ExtraImages::for_job)
+    }
+
+    /// `render_frame`, reading back what `images` says the job needs (`Engine::render`
+    /// reads a PNG's 8-bit pixels only).
+    pub(super) fn render_frame_reading(
+        &self,
+        job: &Job,
+        supervisor: &dyn Supervisor,
+        images: fn(&Job) -> ExtraImages,
+    ) -> JobResult<(FrameOutput, Timings)> {
         let (method, params) = check_job(job, &self.limits)?;
         let mut state = self.state.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
         // Stopped while it waited for the device: nothing to render.
@@ -28,14 +39,20 @@ impl Engine {
         if state.renderer.gpu().is_lost() {
             self.recover_device(&mut state)?;
         }
-        match self.render_on_device(&mut state, job, (method, &params), supervisor) {
+        match self.render_on_device(&mut state, job, (method, &params), images, supervisor) {
             Err(_) if state.renderer.gpu().is_lost() => {
                 self.recover_device(&mut state)?;
                 tracing::warn!("retrying the job once on the new device");
-                self.render_on_device(&mut state, job, (method, &params), supervisor)
+                self.render_on_device(&mut state, job, (method, &params), images, supervisor)
             }
             outcome => outcome,
         }
+    }
+
+    /// How every later frame evaluates E0 (`penumbra bench` measures the interpolation
+    /// against the exact sum with it).
+    pub fn set_e0_mode(&self, mode: crate::render::E0Mode) {
+        self.state.lock().unwrap_or_else(|poisoned| poisoned.into_inner()).renderer.e0_mode = mode;
     }
 
     fn render_on_device(
@@ -43,6 +60,7 @@ impl Engine {
         state: &mut RenderState,
         job: &Job,
         method: (&'static dyn ShadowMethod, &Params),
+        images: fn(&Job) -> ExtraImages,
         supervisor: &dyn Supervisor,
     ) -> JobResult<(FrameOutput, Timings)> {
         let mut timings = Timings::default();
@@ -51,7 +69,7 @@ impl Engine {
         timings.scene_triangles = scene.triangles;
         let image_ref = job.light.image.clone().unwrap_or_else(|| scene.defaults.light_image.clone());
         let light_image = self.light_image(state, &image_ref)?;
-        let spec = FrameSpec::resolve(job, &scene, light_image, method)?;
+        let spec = FrameSpec { extra_images: images(job), ..FrameSpec::resolve(job, &scene, light_image, method)? };
         timings.phase("scene", start);
         // Validation errors inside wgpu are bugs in penumbra, never the client's fault; they
         // fail this job alone with a generic message and are logged in full. A failed map or

@@ -169,7 +169,7 @@ impl Engine {
     /// `supervisor` (steps done, steps in all), which may also stop it.
     pub fn render(&self, job: &Job, supervisor: &dyn Supervisor) -> JobResult<Rendered> {
         let started = Instant::now();
-        let (frame, mut timings) = self.render_frame(job, supervisor)?;
+        let (frame, mut timings) = self.render_frame_reading(job, supervisor, crate::render::ExtraImages::for_encoding)?;
         // The frame is on the CPU: what follows runs outside the device lock.
         let quality = if job.compare {
             let start = Instant::now();

@@ -39,6 +39,18 @@ impl Readback {
         self.pending.len() - 1
     }
 
+    /// Records a copy of a whole storage buffer (`COPY_SRC`) and returns its index in
+    /// `finish`'s result.
+    pub fn copy_buffer(&mut self, gpu: &GpuContext, pool: &mut ReadbackPool, encoder: &mut wgpu::CommandEncoder, source: &wgpu::Buffer) -> usize {
+        let size = source.size();
+        let buffer = pool.alloc(&gpu.device, size);
+        encoder.copy_buffer_to_buffer(source, 0, &buffer, 0, size);
+        // One "row" of the whole buffer: nothing to unpad.
+        let bytes = u32::try_from(size).expect("a frame's buffer fits in u32 bytes");
+        self.pending.push((buffer, bytes, bytes, 1));
+        self.pending.len() - 1
+    }
+
     /// Waits for the copies (submitted by the caller) and returns each texture's tightly
     /// packed bytes, top row first. The buffers go back to `pool` unless a map failed (then
     /// they are dropped: their state is unknown).

@@ -78,18 +78,30 @@ impl LightProjection {
     }
 }
 
-/// Which images beyond the colour the caller needs back from the GPU.
+/// Which images the caller needs back from the GPU.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct ExtraImages {
     pub visibility: bool,
     pub depth: bool,
+    /// The linear float colour (EXR, comparisons, callers that inspect the frame); without
+    /// it only the PNG's 8-bit sRGB pixels come back, made on the GPU (a quarter of the
+    /// bytes, and no per-pixel transfer function on the CPU).
+    pub float_color: bool,
 }
 
 impl ExtraImages {
-    /// EXR carries visibility and depth; a comparison needs the visibility.
+    /// EXR carries visibility and depth; a comparison needs the visibility. The linear
+    /// colour always comes back: what `Engine::render_frame`'s callers inspect.
     pub fn for_job(job: &Job) -> Self {
         let exr = job.output.format == OutputFormat::Exr;
-        Self { visibility: exr || job.compare, depth: exr }
+        Self { visibility: exr || job.compare, depth: exr, float_color: true }
+    }
+
+    /// What encoding the job's output needs, no more: a PNG without a comparison needs only
+    /// its 8-bit pixels.
+    pub fn for_encoding(job: &Job) -> Self {
+        let exr = job.output.format == OutputFormat::Exr;
+        Self { float_color: exr || job.compare, ..Self::for_job(job) }
     }
 }
 
@@ -105,6 +117,8 @@ pub struct FrameSpec {
     pub width: u32,
     pub height: u32,
     pub ambient: Vec3,
+    /// The PNG's exposure in stops (the 8-bit colour is made on the GPU).
+    pub exposure: f32,
     pub extra_images: ExtraImages,
 }
 
@@ -147,6 +161,7 @@ impl FrameSpec {
             width: job.output.width,
             height: job.output.height,
             ambient: job.ambient.map(Vec3::from).unwrap_or(Vec3::ZERO),
+            exposure: job.output.exposure,
             extra_images: ExtraImages::for_job(job),
         })
     }

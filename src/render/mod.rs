@@ -28,7 +28,7 @@ use crate::supervise::{cancelled_error, Supervisor};
 use crate::timing::Timings;
 pub use draw::{vertex_layout, ScenePipeline, DEPTH_BUFFER_FORMAT};
 pub use frame::{Camera, ExtraImages, FrameSpec, LightProjection};
-pub use passes::screen_compute_pipeline;
+pub use passes::{screen_compute_pipeline, E0Mode};
 use targets::{FrameTargets, FLOAT_TARGET};
 
 /// The per-frame constants, laid out as `Frame` in `shaders/common/frame.wgsl`.
@@ -66,12 +66,17 @@ pub struct FrameInputs {
 pub struct FrameOutput {
     pub width: u32,
     pub height: u32,
-    /// Linear radiance and coverage alpha, RGBA.
+    /// Linear radiance and coverage alpha, RGBA; empty when only `srgb8` was read back.
     pub color: Vec<[f32; 4]>,
+    /// The PNG's pixels, 8-bit sRGB RGBA after exposure, made on the GPU when the linear
+    /// colour was not asked for (`ExtraImages::float_color`).
+    pub srgb8: Option<Vec<u8>>,
     /// Per-channel visibility V (EXR and comparisons), 1 wherever E0 = 0.
     pub visibility: Option<Vec<[f32; 3]>>,
     /// View depth in metres, +∞ for background (EXR only).
     pub depth: Option<Vec<f32>>,
+    /// The unshadowed irradiance E0, whenever the visibility is read back.
+    pub e0: Option<Vec<[f32; 3]>>,
     pub counters: Counters,
 }
 
@@ -95,6 +100,8 @@ pub struct Renderer {
     layouts: Layouts,
     uniforms: wgpu::Buffer,
     cells: wgpu::Buffer,
+    /// How E0 is evaluated (interpolated unless a measurement asks for the exact sum).
+    pub e0_mode: E0Mode,
 }
 
 impl Renderer {
@@ -120,7 +127,7 @@ impl Renderer {
                     layout::texture_float(8),
                 ],
             ),
-            e0_output: bgl("Renderer::e0_output_layout", &[layout::storage_texture(0, FLOAT_TARGET)]),
+            e0_output: bgl("Renderer::e0_output_layout", &[layout::storage_texture(0, FLOAT_TARGET), layout::storage_read_write(1), layout::storage_read_write(2)]),
             composite_io: bgl(
                 "Renderer::composite_io_layout",
                 &[
@@ -128,6 +135,7 @@ impl Renderer {
                     layout::texture_float(1),
                     layout::storage_texture(2, FLOAT_TARGET),
                     layout::storage_texture(3, wgpu::TextureFormat::R32Float),
+                    layout::storage_read_write(4),
                 ],
             ),
         };
@@ -154,6 +162,7 @@ impl Renderer {
             layouts,
             uniforms,
             cells,
+            e0_mode: E0Mode::default(),
         }
     }
 
@@ -254,9 +263,17 @@ impl Renderer {
         // A long method stops recording its batches once cancelled; what it left is discarded.
         go_on()?;
 
-        // Composite.
+        // Composite: the linear colour, or straight to the PNG's 8-bit pixels.
+        let srgb8_buffer = (!spec.extra_images.float_color).then(|| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("Renderer::srgb8"),
+                size: u64::from(spec.width) * u64::from(spec.height) * 4,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            })
+        });
         let mut enc = encoder();
-        self.record_composite(&mut enc, &inputs, targets, spec);
+        self.record_composite(&mut enc, &inputs, targets, spec, srgb8_buffer.as_ref());
         submit(enc)?;
         let start = timings.phase("composite", start);
 
@@ -264,16 +281,27 @@ impl Renderer {
         let mut enc = encoder();
         let mut readback = Readback::new();
         let pool = &mut self.readbacks;
-        let color_index = readback.copy(&gpu, pool, &mut enc, &targets.color.texture);
+        let float_color = spec.extra_images.float_color;
+        let color_index = if float_color {
+            readback.copy(&gpu, pool, &mut enc, &targets.color.texture)
+        } else {
+            readback.copy_buffer(&gpu, pool, &mut enc, srgb8_buffer.as_ref().expect("made when the float colour is not read back"))
+        };
         let visibility_index = spec.extra_images.visibility.then(|| readback.copy(&gpu, pool, &mut enc, &targets.visibility.texture));
         let e0_index = spec.extra_images.visibility.then(|| readback.copy(&gpu, pool, &mut enc, &targets.e0.texture));
         let depth_index = spec.extra_images.depth.then(|| readback.copy(&gpu, pool, &mut enc, &targets.depth.texture));
         gpu.queue.submit([enc.finish()]);
         let images = readback.finish(&gpu, pool)?;
         let gpu_times = self.timer.read(&gpu)?;
-        let color: Vec<[f32; 4]> = bytemuck::cast_slice(&images[color_index]).to_vec();
+        let (color, srgb8) = if float_color {
+            (bytemuck::cast_slice(&images[color_index]).to_vec(), None)
+        } else {
+            let bytes = u64::from(spec.width) * u64::from(spec.height) * 4;
+            (Vec::new(), Some(images[color_index][..bytes as usize].to_vec()))
+        };
         // V = E/E0 is undefined where E0 = 0 (a surface facing away from the light, or behind
         // it): every method reports 1 there, so visibility metrics measure shadows only.
+        let e0 = e0_index.map(|e| bytemuck::cast_slice::<u8, [f32; 4]>(&images[e]).iter().map(|e| [e[0], e[1], e[2]]).collect());
         let visibility = visibility_index.zip(e0_index).map(|(v, e)| {
             let v: &[[f32; 4]] = bytemuck::cast_slice(&images[v]);
             let e: &[[f32; 4]] = bytemuck::cast_slice(&images[e]);
@@ -284,7 +312,7 @@ impl Renderer {
         for (label, ms) in gpu_times {
             timings.add_gpu(label, ms);
         }
-        Ok(FrameOutput { width: spec.width, height: spec.height, color, visibility, depth, counters })
+        Ok(FrameOutput { width: spec.width, height: spec.height, color, srgb8, visibility, depth, e0, counters })
     }
 
     fn write_constants(&self, spec: &FrameSpec, projection: &LightProjection) {
@@ -301,7 +329,7 @@ impl Renderer {
             light_u: v4(light.u, light.size_m.y),
             light_r: v4(light.r, 0.0),
             light_proj: [projection.tan_half, 0.0, projection.near, projection.far],
-            ambient: v4(spec.ambient, 0.0),
+            ambient: v4(spec.ambient, spec.exposure.exp2()),
             sizes: [spec.width, spec.height, spec.shadow_resolution, spec.cells.len() as u32],
         };
         self.gpu.queue.write_buffer(&self.uniforms, 0, bytemuck::bytes_of(&uniforms));

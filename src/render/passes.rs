@@ -12,6 +12,24 @@ use crate::gpu::pool::PipelineKey;
 use crate::gpu::scene::GpuScene;
 use crate::gpu::shaders;
 
+/// Pixels per side of the blocks whose corners E0 is summed at exactly (`shaders/e0.wgsl`).
+pub const E0_BLOCK: u32 = 8;
+
+/// How the E0 pass evaluates the light's cells.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum E0Mode {
+    /// Exact at block corners, interpolated inside blocks where the error estimate allows.
+    #[default]
+    Interpolated,
+    /// Exact at every pixel: the yardstick `penumbra bench` measures the interpolation with.
+    Exact,
+}
+/// Lights of at most this many cells get the exact sum at every pixel: the corners and their
+/// check cost more than they save.
+pub const E0_EXACT_CELLS: usize = 2;
+/// Bytes of one block corner's record (`Corner` in `shaders/e0.wgsl`).
+const E0_CORNER_BYTES: u64 = 5 * 16;
+
 impl Renderer {
     fn draw_bind_group(&self, scene: &GpuScene) -> wgpu::BindGroup {
         self.gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
@@ -91,26 +109,79 @@ impl Renderer {
         self.pipelines.compute(PipelineKey::new(name), || screen_compute_pipeline(device, inputs_layout, name, shader, io_layout))
     }
 
+    /// E0 (`shaders/e0.wgsl`). Under a light of more than `E0_EXACT_CELLS` cells, three
+    /// dispatches of one pass: the exact sum at the corners of `E0_BLOCK`-pixel blocks, the
+    /// interpolation's error at each block's centre, then every pixel, interpolated where the
+    /// error estimate allows; otherwise (or with `E0Mode::Exact`) the exact sum everywhere.
     pub(super) fn record_e0(&mut self, encoder: &mut wgpu::CommandEncoder, inputs: &FrameInputs, targets: &FrameTargets, spec: &FrameSpec) {
         let io_layout = self.layouts.e0_output.clone();
-        let pipeline = self.screen_pipeline("e0", "e0.wgsl", &io_layout);
-        let io = self.gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+        let device = &self.gpu.device;
+        let inputs_layout = &self.layouts.inputs;
+        let mut entry = |name: &'static str, entry: &'static str| {
+            self.pipelines.compute(PipelineKey::new(name), || screen_compute_entry(device, inputs_layout, name, "e0.wgsl", entry, &io_layout))
+        };
+        let interpolate = self.e0_mode == E0Mode::Interpolated && spec.cells.len() > E0_EXACT_CELLS;
+        let pipelines = if interpolate {
+            vec![entry("e0_corners", "block_corners"), entry("e0_errors", "block_errors"), entry("e0", "main")]
+        } else {
+            vec![entry("e0_exact", "exact")]
+        };
+        let corners = if interpolate { (spec.width - 1) / E0_BLOCK + 2 } else { 1 };
+        let rows = if interpolate { (spec.height - 1) / E0_BLOCK + 2 } else { 1 };
+        let buffer = |label, size| {
+            device.create_buffer(&wgpu::BufferDescriptor { label: Some(label), size, usage: wgpu::BufferUsages::STORAGE, mapped_at_creation: false })
+        };
+        let records = buffer("E0::corners", u64::from(corners * rows) * E0_CORNER_BYTES);
+        let errors = buffer("E0::block_errors", u64::from(corners.max(2) - 1) * u64::from(rows.max(2) - 1) * 16);
+        let io = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("E0::outputs"),
             layout: &io_layout,
-            entries: &layout::entries(&[wgpu::BindingResource::TextureView(&targets.e0.view)]),
+            entries: &layout::entries(&[
+                wgpu::BindingResource::TextureView(&targets.e0.view),
+                records.as_entire_binding(),
+                errors.as_entire_binding(),
+            ]),
         });
-        self.dispatch(encoder, "e0", &pipeline, inputs, &io, spec);
+        let mut pass = encoder
+            .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("e0"), timestamp_writes: self.timer.compute_scope("e0") });
+        pass.set_bind_group(0, &inputs.bind_group, &[]);
+        pass.set_bind_group(1, &io, &[]);
+        let screen = (spec.width.div_ceil(8), spec.height.div_ceil(8));
+        let sizes = if interpolate { vec![(corners.div_ceil(8), rows.div_ceil(8)), ((corners - 1).div_ceil(8), (rows - 1).div_ceil(8)), screen] } else { vec![screen] };
+        for (pipeline, (x, y)) in pipelines.iter().zip(sizes) {
+            pass.set_pipeline(pipeline);
+            pass.dispatch_workgroups(x, y, 1);
+        }
     }
 
+    /// The composite: linear colour and depth (`main`), or the PNG's 8-bit sRGB pixels into
+    /// `srgb8` (`srgb8`) when only those are read back.
     pub(super) fn record_composite(
         &mut self,
         encoder: &mut wgpu::CommandEncoder,
         inputs: &FrameInputs,
         targets: &FrameTargets,
         spec: &FrameSpec,
+        srgb8: Option<&wgpu::Buffer>,
     ) {
         let io_layout = self.layouts.composite_io.clone();
-        let pipeline = self.screen_pipeline("composite", "composite.wgsl", &io_layout);
+        let pipeline = match srgb8 {
+            None => self.screen_pipeline("composite", "composite.wgsl", &io_layout),
+            Some(_) => {
+                let (device, inputs_layout) = (&self.gpu.device, &self.layouts.inputs);
+                self.pipelines.compute(PipelineKey::new("composite_srgb8"), || {
+                    screen_compute_entry(device, inputs_layout, "composite_srgb8", "composite.wgsl", "srgb8", &io_layout)
+                })
+            }
+        };
+        let unused = srgb8.is_none().then(|| {
+            self.gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("Composite::unused_srgb8"),
+                size: 4,
+                usage: wgpu::BufferUsages::STORAGE,
+                mapped_at_creation: false,
+            })
+        });
         let view = wgpu::BindingResource::TextureView;
         let io = self.gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("Composite::io"),
@@ -120,6 +191,7 @@ impl Renderer {
                 view(&targets.visibility.view),
                 view(&targets.color.view),
                 view(&targets.depth.view),
+                srgb8.or(unused.as_ref()).expect("one of the two").as_entire_binding(),
             ]),
         });
         self.dispatch(encoder, "composite", &pipeline, inputs, &io, spec);
@@ -152,6 +224,18 @@ pub fn screen_compute_pipeline(
     shader: &str,
     io_layout: &wgpu::BindGroupLayout,
 ) -> wgpu::ComputePipeline {
+    screen_compute_entry(device, inputs_layout, label, shader, "main", io_layout)
+}
+
+/// `screen_compute_pipeline` with another entry point.
+fn screen_compute_entry(
+    device: &wgpu::Device,
+    inputs_layout: &wgpu::BindGroupLayout,
+    label: &'static str,
+    shader: &str,
+    entry: &str,
+    io_layout: &wgpu::BindGroupLayout,
+) -> wgpu::ComputePipeline {
     let module = shaders::module(device, shader);
     let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
         label: Some(label),
@@ -162,7 +246,7 @@ pub fn screen_compute_pipeline(
         label: Some(label),
         layout: Some(&layout),
         module: &module,
-        entry_point: Some("main"),
+        entry_point: Some(entry),
         compilation_options: Default::default(),
         cache: None,
     })
