@@ -40,6 +40,15 @@ enum Command {
         #[command(flatten)]
         options: RenderOptions,
     },
+    /// Measure what a 1080p frame costs, phase by phase, as users request it (warm, whole PNG
+    /// requests, every method on the built-in scenes under three lights) with each method's
+    /// penumbra error and the interpolated E0's error beside it: `bench.md`, `bench.json`.
+    Bench {
+        #[command(flatten)]
+        bench: penumbra::eval::bench::BenchOptions,
+        #[command(flatten)]
+        options: RenderOptions,
+    },
     /// Measure the daemon around the render: HTTP overhead, throughput under concurrent
     /// clients, memory under uploads of ten times the cache budget (a real loopback server).
     BenchDaemon {
@@ -120,6 +129,13 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             let engine = Engine::new(gpu, options.limits.limits(), PathPolicy::Any);
             let report = penumbra::eval::run(&engine, &suite)?;
             eprintln!("wrote {} rows and {} pictures to {}", report.rows.len(), report.files.len(), suite.out.display());
+            Ok(())
+        }
+        Command::Bench { bench, options } => {
+            let gpu = open_gpu(&options)?;
+            let engine = Engine::new(gpu, options.limits.limits(), PathPolicy::Any);
+            let report = penumbra::eval::bench::run(&engine, &bench)?;
+            eprintln!("wrote {} rows to {}", report.rows.len(), bench.out.join("bench.md").display());
             Ok(())
         }
         Command::BenchDaemon { bench, options } => {

@@ -385,6 +385,48 @@ fn reference_is_gray_under_white_and_colored_where_the_model_says() {
     assert!(agree as f32 >= 0.95 * colored.len() as f32, "{agree} of {} agree", colored.len());
 }
 
+/// `penumbra bench` in small (CI's form): every method and the timed reference per case, the
+/// floor summed from its phases, errors against the reference, E0 checked against the exact
+/// sum. Its own engine: the bench switches the renderer's E0 mode while it measures.
+#[test]
+fn bench_writes_its_phase_table_and_the_e0_check() {
+    let gpu = penumbra::gpu::GpuContext::new(penumbra::gpu::AdapterChoice::Auto).unwrap();
+    let engine = penumbra::engine::Engine::new(std::sync::Arc::new(gpu), Limits::default(), penumbra::engine::PathPolicy::Any);
+    let out = std::env::temp_dir().join(format!("penumbra-bench-{}", std::process::id()));
+    let options = penumbra::eval::bench::BenchOptions {
+        scenes: vec!["crowd".into()],
+        lights: vec!["white".into(), "flame".into()],
+        methods: Vec::new(),
+        size: "192x108".into(),
+        shadow_map: 256,
+        repeat: 2,
+        samples: 32,
+        reference_samples: 8,
+        out: out.clone(),
+    };
+    let report = penumbra::eval::bench::run(&engine, &options).unwrap();
+    let methods = penumbra::methods::REGISTRY.len(); // every method but reference, and the timed reference
+    assert_eq!(report.rows.len(), 2 * methods);
+    for row in &report.rows {
+        let phase = |name: &str| row.phases.iter().find(|(p, _)| p == name).map(|(_, ms)| *ms).unwrap();
+        let floor = phase("e0") + phase("composite") + phase("readback") + phase("encode");
+        assert!((row.floor_ms - floor).abs() < 1e-9 && phase("gbuffer") > 0.0 && row.whole_ms >= floor, "{row:?}");
+        assert!(row.penumbra_error > 0.0 && row.penumbra_error < 0.5, "{row:?}");
+    }
+    let hard = report.rows.iter().find(|r| r.method == "hard" && r.light == "flame").unwrap();
+    let wedges = report.rows.iter().find(|r| r.method == "wedges" && r.light == "flame").unwrap();
+    assert!(wedges.penumbra_error < hard.penumbra_error, "a soft method beats the hard shadow");
+    assert_eq!(report.e0.len(), 2);
+    for e in &report.e0 {
+        assert!(e.worst_relative < 1e-3, "{e:?}");
+    }
+    let md = std::fs::read_to_string(out.join("bench.md")).unwrap();
+    assert!(md.contains("## crowd, flame (") && md.contains("| reference (8 samples) |") && md.contains("## E0: interpolated"), "{md}");
+    let json: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("bench.json")).unwrap()).unwrap();
+    assert_eq!(json["rows"].as_array().unwrap().len(), 2 * methods);
+    std::fs::remove_dir_all(&out).ok();
+}
+
 #[test]
 fn eval_writes_the_tables_and_the_pictures() {
     let out = std::env::temp_dir().join(format!("penumbra-eval-{}", std::process::id()));

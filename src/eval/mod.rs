@@ -7,6 +7,7 @@
 //! pipeline compilation in any row) and every row reports its ratio to `hard` in the same
 //! case. Quote those ratios, not absolute times: these machines are noisy.
 
+pub mod bench;
 mod pictures;
 mod plots;
 mod tables;
