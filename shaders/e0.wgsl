@@ -205,61 +205,60 @@ fn light_above(x: vec3<f32>, nx: vec3<f32>) -> bool {
     return c - reach > HORIZON_EPS;
 }
 
-// Pass 3: every pixel, interpolated from its block's corners where the estimate allows.
-@compute @workgroup_size(8, 8)
-fn main(@builtin(global_invocation_id) id: vec3<u32>) {
-    let pixel = id.xy;
-    if any(pixel >= frame.sizes.xy) {
-        return;
+// E0 at one pixel: interpolated from its block's corners where the estimate allows, else
+// (or without `interpolate`) the exact sum.
+fn e0_at(pixel: vec2<u32>, interpolate: bool) -> vec3<f32> {
+    if !covered(pixel) {
+        return vec3<f32>(0.0);
     }
-    var e0 = vec3<f32>(0.0);
-    if covered(pixel) {
-        let x = textureLoad(gbuf_position, pixel, 0).xyz;
-        let nx = textureLoad(gbuf_normal, pixel, 0).xyz;
-        if lit_side(x) {
-            var done = false;
-            let block = pixel / BLOCK;
-            let checked = blocks[block.y * (corner_count().x - 1u) + block.x];
-            if checked.x < UNCHECKED {
-                let s = stencil(pixel);
-                let mixed = blend(s);
-                // The centre's error with a margin, plus what a position off the corners' surface
-                // (farther from it than the centre was) adds through Φ's gradient.
-                let off = max(distance(x, mixed.position.xyz) - checked.y, 0.0);
-                let relative = ERROR_MARGIN * checked.x + GRADIENT * off / light_distance(x);
-                let size = phi_size(mixed);
-                if light_above(x, nx) {
-                    e0 = abs(nx * mat3x3<f32>(mixed.phi_r.xyz, mixed.phi_g.xyz, mixed.phi_b.xyz));
-                    done = all(relative * size <= E0_TOLERANCE * e0);
-                } else {
-                    // The light straddles the horizon: on a flat face (the corners' normal the
-                    // pixel's) E0 is still smooth in the position and is blended itself.
-                    e0 = e0_of(mixed);
-                    done = all((relative + bend(s, nx)) * size <= E0_TOLERANCE * e0);
-                }
+    let x = textureLoad(gbuf_position, pixel, 0).xyz;
+    let nx = textureLoad(gbuf_normal, pixel, 0).xyz;
+    if !lit_side(x) {
+        return vec3<f32>(0.0);
+    }
+    if interpolate {
+        let block = pixel / BLOCK;
+        let checked = blocks[block.y * (corner_count().x - 1u) + block.x];
+        if checked.x < UNCHECKED {
+            let s = stencil(pixel);
+            let mixed = blend(s);
+            // The centre's error with a margin, plus what a position off the corners' surface
+            // (farther from it than the centre was) adds through Φ's gradient.
+            let off = max(distance(x, mixed.position.xyz) - checked.y, 0.0);
+            let relative = ERROR_MARGIN * checked.x + GRADIENT * off / light_distance(x);
+            let size = phi_size(mixed);
+            var e0: vec3<f32>;
+            var done: bool;
+            if light_above(x, nx) {
+                e0 = abs(nx * mat3x3<f32>(mixed.phi_r.xyz, mixed.phi_g.xyz, mixed.phi_b.xyz));
+                done = all(relative * size <= E0_TOLERANCE * e0);
+            } else {
+                // The light straddles the horizon: on a flat face (the corners' normal the
+                // pixel's) E0 is still smooth in the position and is blended itself.
+                e0 = e0_of(mixed);
+                done = all((relative + bend(s, nx)) * size <= E0_TOLERANCE * e0);
             }
-            if !done {
-                e0 = exact_e0(x, nx);
+            if done {
+                return e0;
             }
         }
     }
-    textureStore(e0_out, pixel, vec4<f32>(e0, 1.0));
+    return exact_e0(x, nx);
+}
+
+// Pass 3: every pixel, interpolated where the estimate allows.
+@compute @workgroup_size(8, 8)
+fn main(@builtin(global_invocation_id) id: vec3<u32>) {
+    if all(id.xy < frame.sizes.xy) {
+        textureStore(e0_out, id.xy, vec4<f32>(e0_at(id.xy, true), 1.0));
+    }
 }
 
 // Every pixel summed exactly: lights of a cell or two (cheaper than the corners and the
 // check), and the yardstick the interpolation is measured against (`E0Mode::Exact`).
 @compute @workgroup_size(8, 8)
 fn exact(@builtin(global_invocation_id) id: vec3<u32>) {
-    let pixel = id.xy;
-    if any(pixel >= frame.sizes.xy) {
-        return;
+    if all(id.xy < frame.sizes.xy) {
+        textureStore(e0_out, id.xy, vec4<f32>(e0_at(id.xy, false), 1.0));
     }
-    var e0 = vec3<f32>(0.0);
-    if covered(pixel) {
-        let x = textureLoad(gbuf_position, pixel, 0).xyz;
-        if lit_side(x) {
-            e0 = exact_e0(x, textureLoad(gbuf_normal, pixel, 0).xyz);
-        }
-    }
-    textureStore(e0_out, pixel, vec4<f32>(e0, 1.0));
 }
