@@ -291,21 +291,21 @@ impl Renderer {
         let e0_index = spec.extra_images.visibility.then(|| readback.copy(&gpu, pool, &mut enc, &targets.e0.texture));
         let depth_index = spec.extra_images.depth.then(|| readback.copy(&gpu, pool, &mut enc, &targets.depth.texture));
         gpu.queue.submit([enc.finish()]);
-        let images = readback.finish(&gpu, pool)?;
+        let mut images = readback.finish(&gpu, pool)?;
         let gpu_times = self.timer.read(&gpu)?;
         let (color, srgb8) = if float_color {
             (bytemuck::cast_slice(&images[color_index]).to_vec(), None)
         } else {
-            let bytes = u64::from(spec.width) * u64::from(spec.height) * 4;
-            (Vec::new(), Some(images[color_index][..bytes as usize].to_vec()))
+            // The srgb8 buffer holds exactly the frame's RGBA8 pixels: taken, not copied.
+            (Vec::new(), Some(std::mem::take(&mut images[color_index])))
         };
         // V = E/E0 is undefined where E0 = 0 (a surface facing away from the light, or behind
         // it): every method reports 1 there, so visibility metrics measure shadows only.
-        let e0 = e0_index.map(|e| bytemuck::cast_slice::<u8, [f32; 4]>(&images[e]).iter().map(|e| [e[0], e[1], e[2]]).collect());
-        let visibility = visibility_index.zip(e0_index).map(|(v, e)| {
+        let e0: Option<Vec<[f32; 3]>> =
+            e0_index.map(|e| bytemuck::cast_slice::<u8, [f32; 4]>(&images[e]).iter().map(|e| [e[0], e[1], e[2]]).collect());
+        let visibility = visibility_index.zip(e0.as_ref()).map(|(v, e)| {
             let v: &[[f32; 4]] = bytemuck::cast_slice(&images[v]);
-            let e: &[[f32; 4]] = bytemuck::cast_slice(&images[e]);
-            v.iter().zip(e).map(|(v, e)| if e[0] == 0.0 && e[1] == 0.0 && e[2] == 0.0 { [1.0; 3] } else { [v[0], v[1], v[2]] }).collect()
+            v.iter().zip(e).map(|(v, e)| if *e == [0.0; 3] { [1.0; 3] } else { [v[0], v[1], v[2]] }).collect()
         });
         let depth = depth_index.map(|i| bytemuck::cast_slice::<u8, f32>(&images[i]).to_vec());
         timings.phase("readback", start);
