@@ -79,9 +79,9 @@ fn exact_terms(x: vec3<f32>, nx: vec3<f32>, depth: f32) -> Corner {
     var e0 = vec3<f32>(0.0);
     for (var k = 0u; k < frame.sizes.w; k++) {
         let cell = light_cells[k];
-        let terms = polygon_terms(x, nx, cell.corners);
-        phi += mat3x3<f32>(terms.xyz * cell.radiance.r, terms.xyz * cell.radiance.g, terms.xyz * cell.radiance.b);
-        e0 += cell.radiance.rgb * terms.w;
+        let phi_cell = polygon_vector(x, cell.corners);
+        phi += mat3x3<f32>(phi_cell * cell.radiance.r, phi_cell * cell.radiance.g, phi_cell * cell.radiance.b);
+        e0 += cell.radiance.rgb * polygon_irradiance(x, nx, cell.corners);
     }
     return Corner(vec4<f32>(phi[0], e0.r), vec4<f32>(phi[1], e0.g), vec4<f32>(phi[2], e0.b), vec4<f32>(x, 1.0), vec4<f32>(nx, depth));
 }

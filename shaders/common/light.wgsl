@@ -16,10 +16,10 @@ fn edge_vector(a: vec3<f32>, b: vec3<f32>) -> vec3<f32> {
     return select(vec3<f32>(0.0), c * (atan2(len, dot(a, b)) / len), len > 1e-12);
 }
 
-// An edge a→b of the polygon (relative to x, heights da, db above the receiver's plane)
-// clipped to the half-space above it; returns the clipped edge's Θ Γ. `cut` receives the
-// crossing point where the edge leaves (xy… in `exit`) or enters (`entry`) that half-space.
-struct ClippedEdge {
+// The polygon clipped to the half-space above a receiver's plane, accumulated edge by edge:
+// the clipped edges' Θ Γ, and where the boundary leaves (`exit`) and re-enters (`entry`)
+// that half-space.
+struct ClippedEdges {
     sum: vec3<f32>,
     exit: vec3<f32>,
     entry: vec3<f32>,
@@ -27,32 +27,28 @@ struct ClippedEdge {
 
 const HORIZON_EPS: f32 = 1e-6;
 
-fn clip_edge(e: ptr<function, ClippedEdge>, a: vec3<f32>, b: vec3<f32>, ua: vec3<f32>, ub: vec3<f32>, da: f32, db: f32) {
+// Adds edge a→b (relative to x, unit directions ua, ub, heights da, db above the plane),
+// clipped to the half-space. Straight-line code with selects rather than branches: lavapipe
+// runs both sides of every branch that differs between neighbouring pixels, so the crossing
+// point and one edge term, always computed, cost less than three guarded edge terms.
+fn clip_edge(e: ptr<function, ClippedEdges>, a: vec3<f32>, b: vec3<f32>, ua: vec3<f32>, ub: vec3<f32>, da: f32, db: f32) {
     let above_a = da > HORIZON_EPS;
     let above_b = db > HORIZON_EPS;
-    if above_a && above_b {
-        (*e).sum += edge_vector(ua, ub);
-    } else if above_a != above_b {
-        let q = normalize(a + (b - a) * ((HORIZON_EPS - da) / (db - da)));
-        if above_a {
-            (*e).sum += edge_vector(ua, q);
-            (*e).exit = q;
-        } else {
-            (*e).sum += edge_vector(q, ub);
-            (*e).entry = q;
-        }
-    }
+    let rise = select(db - da, 1.0, db == da); // only used where the edge crosses, i.e. da ≠ db
+    let q = normalize(a + (b - a) * ((HORIZON_EPS - da) / rise));
+    let term = edge_vector(select(q, ua, above_a), select(q, ub, above_b));
+    (*e).sum += select(vec3<f32>(0.0), term, above_a || above_b);
+    (*e).exit = select((*e).exit, q, above_a && !above_b);
+    (*e).entry = select((*e).entry, q, above_b && !above_a);
 }
 
-// Lambert's closed form for one quad seen from x (normal nx): xyz = ½ Σ Θᵢ Γᵢ, the vector
-// irradiance of the whole quad (independent of nx; its sign follows the corners' winding),
-// and w = ∫ cosθx dω over the quad clipped to the hemisphere above x, ½ |Σ Θᵢ (nx · Γᵢ)|.
-// Where the quad lies wholly above x's horizon, w = |nx · xyz|. Written edge by edge,
-// without an array of clipped vertices: a convex quad cut by a plane leaves it at most once
-// and re-enters at most once, so the clipped polygon is the clipped edges plus one edge
-// along the horizon from the exit to the entry point. (A dynamically indexed local array
-// costs a memory round trip per lane on lavapipe; this form is about half the time.)
-fn polygon_terms(x: vec3<f32>, nx: vec3<f32>, corners: array<vec4<f32>, 4>) -> vec4<f32> {
+// ∫ cosθx dω over the quad seen from x (normal nx), clipped to the hemisphere above x:
+// ½ |Σ Θᵢ (nx · Γᵢ)| over the clipped polygon's edges. A convex quad cut by a plane leaves it
+// at most once and re-enters at most once, so the clipped polygon is the clipped edges plus
+// one edge along the horizon from the exit to the entry point; written without an array of
+// clipped vertices (a dynamically indexed local array costs a memory round trip per lane on
+// lavapipe). Five edge terms whatever the clipping.
+fn polygon_irradiance(x: vec3<f32>, nx: vec3<f32>, corners: array<vec4<f32>, 4>) -> f32 {
     let p0 = corners[0].xyz - x;
     let p1 = corners[1].xyz - x;
     let p2 = corners[2].xyz - x;
@@ -61,24 +57,24 @@ fn polygon_terms(x: vec3<f32>, nx: vec3<f32>, corners: array<vec4<f32>, 4>) -> v
     let u1 = normalize(p1);
     let u2 = normalize(p2);
     let u3 = normalize(p3);
-    let whole = 0.5 * (edge_vector(u0, u1) + edge_vector(u1, u2) + edge_vector(u2, u3) + edge_vector(u3, u0));
     let d = vec4<f32>(dot(p0, nx), dot(p1, nx), dot(p2, nx), dot(p3, nx));
-    if all(d > vec4<f32>(HORIZON_EPS)) {
-        return vec4<f32>(whole, abs(dot(nx, whole)));
-    }
-    if all(d <= vec4<f32>(HORIZON_EPS)) {
-        return vec4<f32>(whole, 0.0);
-    }
-    var e = ClippedEdge(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0));
+    var e = ClippedEdges(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0));
     clip_edge(&e, p0, p1, u0, u1, d.x, d.y);
     clip_edge(&e, p1, p2, u1, u2, d.y, d.z);
     clip_edge(&e, p2, p3, u2, u3, d.z, d.w);
     clip_edge(&e, p3, p0, u3, u0, d.w, d.x);
-    let sum = e.sum + edge_vector(e.exit, e.entry);
-    return vec4<f32>(whole, 0.5 * abs(dot(nx, sum)));
+    let crossed = any(d > vec4<f32>(HORIZON_EPS)) && any(d <= vec4<f32>(HORIZON_EPS));
+    let sum = e.sum + select(vec3<f32>(0.0), edge_vector(e.exit, e.entry), crossed);
+    return 0.5 * abs(dot(nx, sum));
 }
 
-// ∫ cosθx dω over the quad seen from x (normal nx), clipped to the upper hemisphere.
-fn polygon_irradiance(x: vec3<f32>, nx: vec3<f32>, corners: array<vec4<f32>, 4>) -> f32 {
-    return polygon_terms(x, nx, corners).w;
+// The vector irradiance of the whole quad seen from x, ½ Σ Θᵢ Γᵢ (its sign follows the
+// corners' winding; independent of any normal): where the quad lies wholly above x's
+// horizon, `polygon_irradiance` is |nx · it|.
+fn polygon_vector(x: vec3<f32>, corners: array<vec4<f32>, 4>) -> vec3<f32> {
+    let u0 = normalize(corners[0].xyz - x);
+    let u1 = normalize(corners[1].xyz - x);
+    let u2 = normalize(corners[2].xyz - x);
+    let u3 = normalize(corners[3].xyz - x);
+    return 0.5 * (edge_vector(u0, u1) + edge_vector(u1, u2) + edge_vector(u2, u3) + edge_vector(u3, u0));
 }
