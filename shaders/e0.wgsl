@@ -2,8 +2,8 @@
 // form over each uniform cell of the light image, times the cell's radiance, summed —
 // evaluated exactly at the corners and the centre of 8×8-pixel blocks and interpolated
 // inside a block wherever the error measured at its centre, and a bound for what the centre
-// cannot see, keep it within E0_TOLERANCE of the exact sum; every other pixel is summed
-// exactly (contract §1, "E0").
+// cannot see, keep it within E0_TOLERANCE of the exact sum; every other pixel is listed and
+// summed exactly by a compacted pass of its own (contract §1, "E0").
 //
 // What is interpolated: below its horizon-free region, E0 = |n · Φ(x)| per channel, where
 // Φ = Σ radiance × ½ Σ Θᵢ Γᵢ is the light's vector irradiance — a smooth function of the
@@ -17,6 +17,17 @@
 @group(1) @binding(0) var e0_out: texture_storage_2d<rgba32float, write>;
 @group(1) @binding(1) var<storage, read_write> corners: array<Corner>;
 @group(1) @binding(2) var<storage, read_write> blocks: array<vec4<f32>>;
+@group(1) @binding(3) var<storage, read_write> fallback: Fallback;
+@group(1) @binding(4) var<storage, read_write> fallback_groups: array<u32, 3>; // indirect dispatch
+
+// The pixels the interpolation did not accept, summed exactly by a pass of their own: on
+// lavapipe a branch costs its code in every pixel of an 8-wide SIMD group that any of them
+// takes, so an exact sum inside the per-pixel pass would cost every pixel at least one cell,
+// and all of the cells wherever a neighbour falls back.
+struct Fallback {
+    count: atomic<u32>,
+    pixels: array<u32>, // y × width + x
+}
 
 // Pixels per block side; mirrors `render::passes::E0_BLOCK`.
 const BLOCK: u32 = 8u;
@@ -205,52 +216,81 @@ fn light_above(x: vec3<f32>, nx: vec3<f32>) -> bool {
     return c - reach > HORIZON_EPS;
 }
 
-// E0 at one pixel: interpolated from its block's corners where the estimate allows, else
-// (or without `interpolate`) the exact sum.
-fn e0_at(pixel: vec2<u32>, interpolate: bool) -> vec3<f32> {
+// E0 at one pixel interpolated from its block's corners: xyz, and w = 1 where the estimate
+// accepts it (or the pixel receives no light), 0 where it must be summed exactly.
+fn interpolated_e0(pixel: vec2<u32>) -> vec4<f32> {
+    let x = textureLoad(gbuf_position, pixel, 0).xyz;
+    let nx = textureLoad(gbuf_normal, pixel, 0).xyz;
+    if !covered(pixel) || !lit_side(x) {
+        return vec4<f32>(0.0, 0.0, 0.0, 1.0);
+    }
+    let block = pixel / BLOCK;
+    let checked = blocks[block.y * (corner_count().x - 1u) + block.x];
+    let s = stencil(pixel);
+    let mixed = blend(s);
+    // The centre's error with a margin, plus what a position off the corners' surface
+    // (farther from it than the centre was) adds through Φ's gradient.
+    let off = max(distance(x, mixed.position.xyz) - checked.y, 0.0);
+    let relative = ERROR_MARGIN * checked.x + GRADIENT * off / light_distance(x);
+    let size = phi_size(mixed);
+    var e0: vec3<f32>;
+    var done: bool;
+    if light_above(x, nx) {
+        e0 = abs(nx * mat3x3<f32>(mixed.phi_r.xyz, mixed.phi_g.xyz, mixed.phi_b.xyz));
+        done = all(relative * size <= E0_TOLERANCE * e0);
+    } else {
+        // The light straddles the horizon: on a flat face (the corners' normal the pixel's) E0
+        // is still smooth in the position and is blended itself.
+        e0 = e0_of(mixed);
+        done = all((relative + bend(s, nx)) * size <= E0_TOLERANCE * e0);
+    }
+    return vec4<f32>(e0, select(0.0, 1.0, done && checked.x < UNCHECKED));
+}
+
+// The exact sum at one pixel.
+fn exact_at(pixel: vec2<u32>) -> vec3<f32> {
     if !covered(pixel) {
         return vec3<f32>(0.0);
     }
     let x = textureLoad(gbuf_position, pixel, 0).xyz;
-    let nx = textureLoad(gbuf_normal, pixel, 0).xyz;
     if !lit_side(x) {
         return vec3<f32>(0.0);
     }
-    if interpolate {
-        let block = pixel / BLOCK;
-        let checked = blocks[block.y * (corner_count().x - 1u) + block.x];
-        if checked.x < UNCHECKED {
-            let s = stencil(pixel);
-            let mixed = blend(s);
-            // The centre's error with a margin, plus what a position off the corners' surface
-            // (farther from it than the centre was) adds through Φ's gradient.
-            let off = max(distance(x, mixed.position.xyz) - checked.y, 0.0);
-            let relative = ERROR_MARGIN * checked.x + GRADIENT * off / light_distance(x);
-            let size = phi_size(mixed);
-            var e0: vec3<f32>;
-            var done: bool;
-            if light_above(x, nx) {
-                e0 = abs(nx * mat3x3<f32>(mixed.phi_r.xyz, mixed.phi_g.xyz, mixed.phi_b.xyz));
-                done = all(relative * size <= E0_TOLERANCE * e0);
-            } else {
-                // The light straddles the horizon: on a flat face (the corners' normal the
-                // pixel's) E0 is still smooth in the position and is blended itself.
-                e0 = e0_of(mixed);
-                done = all((relative + bend(s, nx)) * size <= E0_TOLERANCE * e0);
-            }
-            if done {
-                return e0;
-            }
-        }
-    }
-    return exact_e0(x, nx);
+    return exact_e0(x, textureLoad(gbuf_normal, pixel, 0).xyz);
 }
 
-// Pass 3: every pixel, interpolated where the estimate allows.
+// Pass 3: every pixel, interpolated where the estimate allows; the others are listed.
 @compute @workgroup_size(8, 8)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     if all(id.xy < frame.sizes.xy) {
-        textureStore(e0_out, id.xy, vec4<f32>(e0_at(id.xy, true), 1.0));
+        let e0 = interpolated_e0(id.xy);
+        if e0.w > 0.0 {
+            textureStore(e0_out, id.xy, vec4<f32>(e0.xyz, 1.0));
+        } else {
+            fallback.pixels[atomicAdd(&fallback.count, 1u)] = id.y * frame.sizes.x + id.x;
+        }
+    }
+}
+
+// Workgroups of `FALLBACK_GROUP` per side of a dispatch's grid.
+const FALLBACK_GROUP: u32 = 64u;
+const MAX_GROUPS: u32 = 65535u;
+
+// Pass 4: the size of pass 5's dispatch.
+@compute @workgroup_size(1)
+fn fallback_size() {
+    let groups = (atomicLoad(&fallback.count) + FALLBACK_GROUP - 1u) / FALLBACK_GROUP;
+    fallback_groups = array<u32, 3>(min(groups, MAX_GROUPS), (groups + MAX_GROUPS - 1u) / MAX_GROUPS, 1u);
+}
+
+// Pass 5: the listed pixels, summed exactly.
+@compute @workgroup_size(64)
+fn fallback_exact(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) lane: u32) {
+    let i = (group.y * MAX_GROUPS + group.x) * FALLBACK_GROUP + lane;
+    if i < atomicLoad(&fallback.count) {
+        let index = fallback.pixels[i];
+        let pixel = vec2<u32>(index % frame.sizes.x, index / frame.sizes.x);
+        textureStore(e0_out, pixel, vec4<f32>(exact_at(pixel), 1.0));
     }
 }
 
@@ -259,6 +299,6 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
 @compute @workgroup_size(8, 8)
 fn exact(@builtin(global_invocation_id) id: vec3<u32>) {
     if all(id.xy < frame.sizes.xy) {
-        textureStore(e0_out, id.xy, vec4<f32>(e0_at(id.xy, false), 1.0));
+        textureStore(e0_out, id.xy, vec4<f32>(exact_at(id.xy), 1.0));
     }
 }

@@ -127,7 +127,16 @@ impl Renderer {
                     layout::texture_float(8),
                 ],
             ),
-            e0_output: bgl("Renderer::e0_output_layout", &[layout::storage_texture(0, FLOAT_TARGET), layout::storage_read_write(1), layout::storage_read_write(2)]),
+            e0_output: bgl(
+                "Renderer::e0_output_layout",
+                &[
+                    layout::storage_texture(0, FLOAT_TARGET),
+                    layout::storage_read_write(1),
+                    layout::storage_read_write(2),
+                    layout::storage_read_write(3),
+                    layout::storage_read_write(4),
+                ],
+            ),
             composite_io: bgl(
                 "Renderer::composite_io_layout",
                 &[

@@ -109,10 +109,11 @@ impl Renderer {
         self.pipelines.compute(PipelineKey::new(name), || screen_compute_pipeline(device, inputs_layout, name, shader, io_layout))
     }
 
-    /// E0 (`shaders/e0.wgsl`). Under a light of more than `E0_EXACT_CELLS` cells, three
-    /// dispatches of one pass: the exact sum at the corners of `E0_BLOCK`-pixel blocks, the
-    /// interpolation's error at each block's centre, then every pixel, interpolated where the
-    /// error estimate allows; otherwise (or with `E0Mode::Exact`) the exact sum everywhere.
+    /// E0 (`shaders/e0.wgsl`). Under a light of more than `E0_EXACT_CELLS` cells: the exact
+    /// sum at the corners of `E0_BLOCK`-pixel blocks, the interpolation's error at each
+    /// block's centre, every pixel interpolated where the error estimate allows and listed
+    /// otherwise, then the listed pixels summed exactly (an indirect dispatch sized on the
+    /// GPU); otherwise (or with `E0Mode::Exact`) the exact sum everywhere.
     pub(super) fn record_e0(&mut self, encoder: &mut wgpu::CommandEncoder, inputs: &FrameInputs, targets: &FrameTargets, spec: &FrameSpec) {
         let io_layout = self.layouts.e0_output.clone();
         let device = &self.gpu.device;
@@ -121,36 +122,57 @@ impl Renderer {
             self.pipelines.compute(PipelineKey::new(name), || screen_compute_entry(device, inputs_layout, name, "e0.wgsl", entry, &io_layout))
         };
         let interpolate = self.e0_mode == E0Mode::Interpolated && spec.cells.len() > E0_EXACT_CELLS;
-        let pipelines = if interpolate {
-            vec![entry("e0_corners", "block_corners"), entry("e0_errors", "block_errors"), entry("e0", "main")]
-        } else {
-            vec![entry("e0_exact", "exact")]
-        };
         let corners = if interpolate { (spec.width - 1) / E0_BLOCK + 2 } else { 1 };
         let rows = if interpolate { (spec.height - 1) / E0_BLOCK + 2 } else { 1 };
-        let buffer = |label, size| {
-            device.create_buffer(&wgpu::BufferDescriptor { label: Some(label), size, usage: wgpu::BufferUsages::STORAGE, mapped_at_creation: false })
+        let pixels = if interpolate { u64::from(spec.width) * u64::from(spec.height) } else { 0 };
+        let buffer = |label, size: u64, usage: wgpu::BufferUsages| {
+            device.create_buffer(&wgpu::BufferDescriptor { label: Some(label), size, usage: wgpu::BufferUsages::STORAGE | usage, mapped_at_creation: false })
         };
-        let records = buffer("E0::corners", u64::from(corners * rows) * E0_CORNER_BYTES);
-        let errors = buffer("E0::block_errors", u64::from(corners.max(2) - 1) * u64::from(rows.max(2) - 1) * 16);
-        let io = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("E0::outputs"),
-            layout: &io_layout,
-            entries: &layout::entries(&[
-                wgpu::BindingResource::TextureView(&targets.e0.view),
-                records.as_entire_binding(),
-                errors.as_entire_binding(),
-            ]),
-        });
+        let records = buffer("E0::corners", u64::from(corners * rows) * E0_CORNER_BYTES, wgpu::BufferUsages::empty());
+        let errors = buffer("E0::block_errors", u64::from(corners.max(2) - 1) * u64::from(rows.max(2) - 1) * 16, wgpu::BufferUsages::empty());
+        // The count, then the listed pixels (at most every pixel).
+        let fallback = buffer("E0::fallback", 4 * (1 + pixels.max(1)), wgpu::BufferUsages::COPY_DST);
+        let fallback_groups = buffer("E0::fallback_groups", 12, wgpu::BufferUsages::INDIRECT);
+        encoder.clear_buffer(&fallback, 0, Some(4));
+        // The last dispatch reads its size from `fallback_groups`, which may then not be bound
+        // for writing: it gets a stand-in.
+        let stand_in = buffer("E0::fallback_groups_stand_in", 12, wgpu::BufferUsages::empty());
+        let bind = |groups: &wgpu::Buffer| {
+            device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("E0::outputs"),
+                layout: &io_layout,
+                entries: &layout::entries(&[
+                    wgpu::BindingResource::TextureView(&targets.e0.view),
+                    records.as_entire_binding(),
+                    errors.as_entire_binding(),
+                    fallback.as_entire_binding(),
+                    groups.as_entire_binding(),
+                ]),
+            })
+        };
+        let io = bind(&fallback_groups);
+        let screen = (spec.width.div_ceil(8), spec.height.div_ceil(8));
         let mut pass = encoder
             .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("e0"), timestamp_writes: self.timer.compute_scope("e0") });
         pass.set_bind_group(0, &inputs.bind_group, &[]);
         pass.set_bind_group(1, &io, &[]);
-        let screen = (spec.width.div_ceil(8), spec.height.div_ceil(8));
-        let sizes = if interpolate { vec![(corners.div_ceil(8), rows.div_ceil(8)), ((corners - 1).div_ceil(8), (rows - 1).div_ceil(8)), screen] } else { vec![screen] };
-        for (pipeline, (x, y)) in pipelines.iter().zip(sizes) {
-            pass.set_pipeline(pipeline);
-            pass.dispatch_workgroups(x, y, 1);
+        if interpolate {
+            let steps = [
+                (entry("e0_corners", "block_corners"), (corners.div_ceil(8), rows.div_ceil(8))),
+                (entry("e0_errors", "block_errors"), ((corners - 1).div_ceil(8), (rows - 1).div_ceil(8))),
+                (entry("e0", "main"), screen),
+                (entry("e0_fallback_size", "fallback_size"), (1, 1)),
+            ];
+            for (pipeline, (x, y)) in &steps {
+                pass.set_pipeline(pipeline);
+                pass.dispatch_workgroups(*x, *y, 1);
+            }
+            pass.set_bind_group(1, &bind(&stand_in), &[]);
+            pass.set_pipeline(&entry("e0_fallback", "fallback_exact"));
+            pass.dispatch_workgroups_indirect(&fallback_groups, 0);
+        } else {
+            pass.set_pipeline(&entry("e0_exact", "exact"));
+            pass.dispatch_workgroups(screen.0, screen.1, 1);
         }
     }
 
