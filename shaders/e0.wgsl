@@ -13,21 +13,15 @@
 // smooth function of position and is interpolated instead.
 
 #import common/frame_inputs.wgsl
+#import common/pixel_list.wgsl
 
 @group(1) @binding(0) var e0_out: texture_storage_2d<rgba32float, write>;
 @group(1) @binding(1) var<storage, read_write> corners: array<Corner>;
 @group(1) @binding(2) var<storage, read_write> blocks: array<vec4<f32>>;
-@group(1) @binding(3) var<storage, read_write> fallback: Fallback;
+// The pixels the interpolation did not accept, summed exactly by a pass of their own
+// (common/pixel_list.wgsl says why).
+@group(1) @binding(3) var<storage, read_write> fallback: PixelList;
 @group(1) @binding(4) var<storage, read_write> fallback_groups: array<u32, 3>; // indirect dispatch
-
-// The pixels the interpolation did not accept, summed exactly by a pass of their own: on
-// lavapipe a branch costs its code in every pixel of an 8-wide SIMD group that any of them
-// takes, so an exact sum inside the per-pixel pass would cost every pixel at least one cell,
-// and all of the cells wherever a neighbour falls back.
-struct Fallback {
-    count: atomic<u32>,
-    pixels: array<u32>, // y × width + x
-}
 
 // Pixels per block side; mirrors `render::passes::E0_BLOCK`.
 const BLOCK: u32 = 8u;
@@ -267,29 +261,23 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
         if e0.w > 0.0 {
             textureStore(e0_out, id.xy, vec4<f32>(e0.xyz, 1.0));
         } else {
-            fallback.pixels[atomicAdd(&fallback.count, 1u)] = id.y * frame.sizes.x + id.x;
+            fallback.pixels[atomicAdd(&fallback.count, 1u)] = list_index(id.xy);
         }
     }
 }
 
-// Workgroups of `FALLBACK_GROUP` per side of a dispatch's grid.
-const FALLBACK_GROUP: u32 = 64u;
-const MAX_GROUPS: u32 = 65535u;
-
 // Pass 4: the size of pass 5's dispatch.
 @compute @workgroup_size(1)
 fn fallback_size() {
-    let groups = (atomicLoad(&fallback.count) + FALLBACK_GROUP - 1u) / FALLBACK_GROUP;
-    fallback_groups = array<u32, 3>(min(groups, MAX_GROUPS), (groups + MAX_GROUPS - 1u) / MAX_GROUPS, 1u);
+    fallback_groups = list_dispatch(atomicLoad(&fallback.count));
 }
 
 // Pass 5: the listed pixels, summed exactly.
 @compute @workgroup_size(64)
 fn fallback_exact(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) lane: u32) {
-    let i = (group.y * MAX_GROUPS + group.x) * FALLBACK_GROUP + lane;
+    let i = list_position(group, lane);
     if i < atomicLoad(&fallback.count) {
-        let index = fallback.pixels[i];
-        let pixel = vec2<u32>(index % frame.sizes.x, index / frame.sizes.x);
+        let pixel = listed_pixel(fallback.pixels[i]);
         textureStore(e0_out, pixel, vec4<f32>(exact_at(pixel), 1.0));
     }
 }

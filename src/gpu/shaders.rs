@@ -11,6 +11,7 @@ pub const SOURCES: &[(&str, &str)] = &[
     ("common/light.wgsl", include_str!("../../shaders/common/light.wgsl")),
     ("common/shadow.wgsl", include_str!("../../shaders/common/shadow.wgsl")),
     ("common/edge_table.wgsl", include_str!("../../shaders/common/edge_table.wgsl")),
+    ("common/pixel_list.wgsl", include_str!("../../shaders/common/pixel_list.wgsl")),
     ("shadow_map.wgsl", include_str!("../../shaders/shadow_map.wgsl")),
     ("gbuffer.wgsl", include_str!("../../shaders/gbuffer.wgsl")),
     ("e0.wgsl", include_str!("../../shaders/e0.wgsl")),
@@ -49,10 +50,15 @@ pub const SOURCES: &[(&str, &str)] = &[
     ("methods/reference/resolve.wgsl", include_str!("../../shaders/methods/reference/resolve.wgsl")),
 ];
 
-/// Shaders that are pipelines' entry files: everything but the imported pieces
-/// (`common/` and a method's shared `sample.wgsl`-style includes, which declare no entry).
+/// Shaders that are pipelines' entry files: those that declare an entry point and that no
+/// other shader imports (an imported file may hold entries that need what its importer
+/// defines, as `methods/pcss/filter.wgsl` needs `filtered_visibility`).
 pub fn entry_shaders() -> impl Iterator<Item = &'static str> {
-    SOURCES.iter().filter(|(_, text)| text.contains("@vertex") || text.contains("@compute")).map(|(name, _)| *name)
+    SOURCES
+        .iter()
+        .filter(|(_, text)| text.contains("@vertex") || text.contains("@compute"))
+        .filter(|(name, _)| !SOURCES.iter().any(|(_, text)| text.lines().any(|line| line.trim() == format!("#import {name}"))))
+        .map(|(name, _)| *name)
 }
 
 pub(crate) fn source(name: &str) -> Option<&'static str> {

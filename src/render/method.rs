@@ -65,11 +65,22 @@ impl MethodContext<'_> {
         shader: &'static str,
         io: &[wgpu::BindGroupLayoutEntry],
     ) -> Arc<wgpu::ComputePipeline> {
+        self.screen_entry(key, shader, "main", io)
+    }
+
+    /// `screen_pipeline` with another entry point than `main`.
+    pub fn screen_entry(
+        &mut self,
+        key: PipelineKey,
+        shader: &'static str,
+        entry: &'static str,
+        io: &[wgpu::BindGroupLayoutEntry],
+    ) -> Arc<wgpu::ComputePipeline> {
         let device = &self.gpu.device;
         let inputs_layout = &self.inputs.layout;
         self.pipelines.compute(key, || {
             let io_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(key.name), entries: io });
-            crate::render::screen_compute_pipeline(device, inputs_layout, key.name, shader, &io_layout)
+            crate::render::screen_compute_entry(device, inputs_layout, key.name, shader, entry, &io_layout)
         })
     }
 

@@ -250,7 +250,7 @@ pub fn screen_compute_pipeline(
 }
 
 /// `screen_compute_pipeline` with another entry point.
-fn screen_compute_entry(
+pub fn screen_compute_entry(
     device: &wgpu::Device,
     inputs_layout: &wgpu::BindGroupLayout,
     label: &'static str,

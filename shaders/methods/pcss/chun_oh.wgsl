@@ -1,6 +1,6 @@
-// Method `chun-oh` (Chun & Oh 2016 §3): the PCSS filter (`filter.wgsl`), then the adaptive
-// quadtree over its tests (`quadtree.wgsl`): sub-region visibility × the colour of the
-// matching part of the light image, for coloured penumbrae.
+// Method `chun-oh` (Chun & Oh 2016 §3): the PCSS filter (`filter.wgsl`, whose passes these
+// are), then the adaptive quadtree over its tests (`quadtree.wgsl`): sub-region visibility ×
+// the colour of the matching part of the light image, for coloured penumbrae.
 
 #import methods/pcss/filter.wgsl
 #import methods/pcss/quadtree.wgsl
@@ -9,26 +9,20 @@ fn light_region(i: u32) -> vec4<f32> {
     return light_regions[i];
 }
 
-@compute @workgroup_size(8, 8)
-fn main(@builtin(global_invocation_id) id: vec3<u32>) {
-    let pixel = id.xy;
-    if any(pixel >= frame.sizes.xy) {
-        return;
+// No blocker found: fully lit, nothing to split.
+fn unblocked_visibility() -> vec3<f32> {
+    return coloured_visibility(Subdivision(light_region(WHOLE).rgb, 0u, 0u), 1.0);
+}
+
+fn filtered_visibility(f: Filter) -> vec3<f32> {
+    if !f.found_blocker {
+        atomicAdd(&counters[0], 1u);
+        return unblocked_visibility();
     }
-    var v = vec3<f32>(1.0);
-    if covered(pixel) {
-        let f = run_filter(pixel);
-        let e0 = f32(f.lit) / f32(f.taps);
-        var s = Subdivision(e0 * light_region(WHOLE).rgb, 0u, 0u);
-        // No blocker found: fully lit, nothing to split.
-        if f.found_blocker {
-            s = subdivide(e0, QuadtreeParams(params.mode, params.threshold, params.light_threshold, params.lattice / 4u));
-            atomicAdd(&counters[4], 1u);
-            atomicAdd(&counters[3], s.forced);
-        }
-        atomicAdd(&counters[s.level], 1u);
-        atomicAdd(&counters[5], 1u);
-        v = coloured_visibility(s, e0);
-    }
-    textureStore(visibility_out, pixel, vec4<f32>(v, 1.0));
+    let e0 = f32(f.lit) / f32(f.taps);
+    let s = subdivide(e0, QuadtreeParams(params.mode, params.threshold, params.light_threshold, params.lattice / 4u));
+    atomicAdd(&counters[4], 1u);
+    atomicAdd(&counters[3], s.forced);
+    atomicAdd(&counters[s.level], 1u);
+    return coloured_visibility(s, e0);
 }

@@ -1,0 +1,34 @@
+// A list of pixels for a compacted pass, and the indirect dispatch that walks it. On lavapipe
+// a branch costs its code in every pixel of an 8-wide SIMD group that any of them takes, so
+// work only a few pixels need is not branched to inside a per-pixel pass: those pixels are
+// appended here and a dispatch sized on the GPU runs over them alone. Needs `frame`
+// (common/frame_inputs.wgsl).
+
+struct PixelList {
+    count: atomic<u32>,
+    pixels: array<u32>, // y × width + x
+}
+
+// Lanes per workgroup of a listed dispatch, and the grid's width in workgroups (Vulkan's
+// guaranteed minimum per dimension).
+const LIST_GROUP: u32 = 64u;
+const LIST_MAX_GROUPS: u32 = 65535u;
+
+fn list_index(pixel: vec2<u32>) -> u32 {
+    return pixel.y * frame.sizes.x + pixel.x;
+}
+
+fn listed_pixel(index: u32) -> vec2<u32> {
+    return vec2<u32>(index % frame.sizes.x, index / frame.sizes.x);
+}
+
+// The workgroup grid of a dispatch over `count` listed pixels.
+fn list_dispatch(count: u32) -> array<u32, 3> {
+    let groups = (count + LIST_GROUP - 1u) / LIST_GROUP;
+    return array<u32, 3>(min(groups, LIST_MAX_GROUPS), (groups + LIST_MAX_GROUPS - 1u) / LIST_MAX_GROUPS, 1u);
+}
+
+// The list position a lane of a listed dispatch works on (may be past the count).
+fn list_position(group: vec3<u32>, lane: u32) -> u32 {
+    return (group.y * LIST_MAX_GROUPS + group.x) * LIST_GROUP + lane;
+}
