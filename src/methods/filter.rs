@@ -108,8 +108,8 @@ impl Uniforms {
 }
 
 /// Records the filter passes of `pcss` or `chun-oh` (`filter.wgsl`) and reads their counters
-/// back: the shadow map's min-depth pyramid, the per-pixel test that lists the pixels whose
-/// blocker search might find something, and the search and filter over that list alone.
+/// back: the shadow map copied into a buffer, the per-pixel pass that lists the covered pixels
+/// inside the shadow frustum, and the search and filter over that list alone.
 /// `light_regions` is the light's quadtree table (`light_regions`), 21 `vec4`s.
 pub(super) fn run(
     ctx: &mut MethodContext<'_>,
@@ -126,19 +126,16 @@ pub(super) fn run(
         layout::storage_read_write(4),
         layout::storage_read_write(5),
         layout::storage_read_write(6),
-        layout::uniform(7),
     ];
     let mut entry = |variant: u32, entry: &'static str| ctx.screen_entry(PipelineKey { name, variant }, shader, entry, &io);
-    let (build, classify, size, filter) = (entry(0, "min_depth_level"), entry(1, "classify"), entry(2, "listed_size"), entry(3, "filter_listed"));
+    let (build, classify, size, filter) = (entry(0, "copy_map"), entry(1, "classify"), entry(2, "listed_size"), entry(3, "filter_listed"));
 
     let device = &ctx.gpu.device;
     let buffer = |label, size: u64, usage: wgpu::BufferUsages| {
         device.create_buffer(&wgpu::BufferDescriptor { label: Some(label), size, usage: wgpu::BufferUsages::STORAGE | usage, mapped_at_creation: false })
     };
     let side = ctx.spec.shadow_resolution;
-    let levels = pyramid_levels(side);
-    let pyramid_words: u64 = (1..=levels).map(|level| u64::from(side.div_ceil(1 << level)).pow(2)).sum();
-    let pyramid = buffer("Filter::pyramid", 4 * pyramid_words, wgpu::BufferUsages::empty());
+    let map_depth = buffer("Filter::map_depth", 4 * u64::from(side).pow(2), wgpu::BufferUsages::empty());
     let pixels = u64::from(ctx.width) * u64::from(ctx.height);
     let listed = buffer("Filter::listed", 4 * (1 + pixels), wgpu::BufferUsages::COPY_DST);
     let groups = buffer("Filter::listed_groups", 12, wgpu::BufferUsages::INDIRECT);
@@ -148,7 +145,7 @@ pub(super) fn run(
     ctx.encoder.clear_buffer(&listed, 0, Some(4));
     let uniform_buffer = ctx.uniforms("Filter::uniforms", &uniforms);
     let counters = ctx.counters("Filter::counters", 8);
-    let bind = |pipeline: &wgpu::ComputePipeline, groups: &wgpu::Buffer, level: &wgpu::Buffer| {
+    let bind = |pipeline: &wgpu::ComputePipeline, groups: &wgpu::Buffer| {
         ctx.bind(
             "Filter::bind_group",
             pipeline,
@@ -159,15 +156,12 @@ pub(super) fn run(
                 counters.as_entire_binding(),
                 listed.as_entire_binding(),
                 groups.as_entire_binding(),
-                pyramid.as_entire_binding(),
-                level.as_entire_binding(),
+                map_depth.as_entire_binding(),
             ],
         )
     };
-    let level_buffers: Vec<wgpu::Buffer> = (1..=levels).map(|level| ctx.uniforms("Filter::pyramid_level", &[level, 0, 0, 0])).collect();
-    let build_groups: Vec<wgpu::BindGroup> = level_buffers.iter().map(|level| bind(&build, &groups, level)).collect();
-    let (classify_group, size_group, filter_group) =
-        (bind(&classify, &groups, &level_buffers[0]), bind(&size, &groups, &level_buffers[0]), bind(&filter, &stand_in, &level_buffers[0]));
+    let (build_group, classify_group, size_group, filter_group) =
+        (bind(&build, &groups), bind(&classify, &groups), bind(&size, &groups), bind(&filter, &stand_in));
     let (gx, gy) = ctx.dispatch_size();
     {
         let mut pass = ctx
@@ -175,11 +169,8 @@ pub(super) fn run(
             .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(name), timestamp_writes: ctx.timer.compute_scope("method") });
         pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
         pass.set_pipeline(&build);
-        for (level, group) in (1..=levels).zip(&build_groups) {
-            let level_side = side.div_ceil(1 << level);
-            pass.set_bind_group(1, group, &[]);
-            pass.dispatch_workgroups(level_side.div_ceil(8), level_side.div_ceil(8), 1);
-        }
+        pass.set_bind_group(1, &build_group, &[]);
+        pass.dispatch_workgroups(side.div_ceil(8), side.div_ceil(8), 1);
         pass.set_pipeline(&classify);
         pass.set_bind_group(1, &classify_group, &[]);
         pass.dispatch_workgroups(gx, gy, 1);
@@ -192,12 +183,6 @@ pub(super) fn run(
     }
     let c = ctx.read_counters(&counters)?;
     Ok(FilterCounts { levels: [c[0], c[1], c[2]], forced_by_light: c[3], filtered: c[4], covered: c[5] })
-}
-
-/// Levels of the min-depth pyramid above a shadow map of `side`²: up to the one of one texel
-/// (at least one).
-fn pyramid_levels(side: u32) -> u32 {
-    side.next_power_of_two().trailing_zeros().max(1)
 }
 
 /// The frame's light quadtree table on the GPU, built once per light image.

@@ -3,10 +3,9 @@
 // the blockers' average depth, and a lattice of shadow tests over that filter, counted per
 // cell of its 4×4 quadtree (for chun-oh) with a few popcounts per row. See `src/methods/pcss.rs`.
 //
-// The passes (`src/methods/filter.rs`): a min-depth pyramid of the shadow map; per pixel, a
-// test that proves from it that the blocker search would find nothing (those pixels are lit
-// and written at once), the others listed; then the search and the filter over the listed
-// pixels alone (common/pixel_list.wgsl says why). The importing method defines
+// The passes (`src/methods/filter.rs`): the shadow map copied into a buffer; per pixel, the
+// uncovered ones and those outside the shadow frustum written at once, the others listed; then
+// the search and the filter over the listed pixels alone (common/pixel_list.wgsl says why). The importing method defines
 // `unblocked_visibility()` and `filtered_visibility(filter)`, which also counts the pixel.
 
 #import common/frame_inputs.wgsl
@@ -40,11 +39,8 @@ struct FilterParams {
 // The pixels the search cannot be skipped for, and the dispatch over them.
 @group(1) @binding(4) var<storage, read_write> listed: PixelList;
 @group(1) @binding(5) var<storage, read_write> listed_groups: array<u32, 3>;
-// The shadow map's min-depth pyramid: levels 1, 2, … (level L has ⌈S / 2^L⌉² texels, each the
-// nearest depth of the 2^L × 2^L map texels it covers), one after the other.
-@group(1) @binding(6) var<storage, read_write> pyramid: array<f32>;
-// The pyramid level a `min_depth_level` dispatch builds (x).
-@group(1) @binding(7) var<uniform> pyramid_level: vec4<u32>;
+// The shadow map's depths, row after row (`copy_map`).
+@group(1) @binding(6) var<storage, read_write> map_depth: array<f32>;
 
 const MODE_PCSS: u32 = 0u;
 
@@ -89,7 +85,8 @@ fn tap_depth(uv: vec2<f32>) -> f32 {
     if any(uv < vec2<f32>(0.0)) || any(uv >= vec2<f32>(1.0)) {
         return 1e30;
     }
-    return textureLoad(shadow_depth, shadow_texel(uv), 0).r;
+    let t = vec2<u32>(shadow_texel(uv));
+    return map_depth[t.y * frame.sizes.z + t.x];
 }
 
 // PCSS steps 1–3 (Fernando 2005; Chun & Oh §3 "filter size computation"): search the cone's
@@ -159,100 +156,18 @@ fn run_filter(pixel: vec2<u32>) -> Filter {
     return f;
 }
 
-// The side of pyramid level `level` (level 0 is the shadow map itself).
-fn level_side(level: u32) -> u32 {
-    return (frame.sizes.z + (1u << level) - 1u) >> level;
-}
-
-// Where pyramid level `level` ≥ 1 starts.
-fn level_offset(level: u32) -> u32 {
-    var offset = 0u;
-    for (var l = 1u; l < level; l++) {
-        offset += level_side(l) * level_side(l);
-    }
-    return offset;
-}
-
-// Pass 1, once per level from 1 up: each texel the nearest of the four below it (empty
-// shadow-map texels hold f32::MAX, so they never win).
+// Pass 1: the shadow map's depths copied into a plain buffer, which the search and the
+// filter read instead of the texture: on lavapipe a storage-buffer load is a plain gather and
+// a texel fetch is not (format, robustness), and these two loops are nearly all loads.
 @compute @workgroup_size(8, 8)
-fn min_depth_level(@builtin(global_invocation_id) id: vec3<u32>) {
-    let level = pyramid_level.x;
-    let side = level_side(level);
-    if any(id.xy >= vec2<u32>(side)) {
-        return;
+fn copy_map(@builtin(global_invocation_id) id: vec3<u32>) {
+    if all(id.xy < vec2<u32>(frame.sizes.z)) {
+        map_depth[id.y * frame.sizes.z + id.x] = textureLoad(shadow_depth, id.xy, 0).r;
     }
-    let below = level_side(level - 1u);
-    let below_offset = level_offset(max(level, 2u) - 1u);
-    var nearest = 3.4e38;
-    for (var k = 0u; k < 4u; k++) {
-        let c = min(2u * id.xy + vec2<u32>(k & 1u, k >> 1u), vec2<u32>(below - 1u));
-        // Straight-line code rather than a branch on the level (lavapipe would run both).
-        let from_map = textureLoad(shadow_depth, vec2<i32>(c), 0).r;
-        let from_level = pyramid[below_offset + c.y * below + c.x];
-        nearest = min(nearest, select(from_level, from_map, level == 1u));
-    }
-    pyramid[level_offset(level) + id.y * side + id.x] = nearest;
 }
 
-// The nearest shadow-map depth over the texels [lo, hi] (inclusive, inside the map), or
-// nearer: the four texels of the first level at which the rectangle spans at most two.
-fn nearest_depth(lo: vec2<u32>, hi: vec2<u32>) -> f32 {
-    let span = max(hi.x - lo.x, hi.y - lo.y);
-    // span < 2^level, so lo >> level and hi >> level are equal or adjacent.
-    let level = select(firstLeadingBit(span) + 1u, 1u, span < 2u);
-    let side = level_side(level);
-    let offset = level_offset(level);
-    let a = lo >> vec2<u32>(level);
-    let b = hi >> vec2<u32>(level);
-    let d0 = min(pyramid[offset + a.y * side + a.x], pyramid[offset + a.y * side + b.x]);
-    let d1 = min(pyramid[offset + b.y * side + a.x], pyramid[offset + b.y * side + b.x]);
-    return min(d0, d1);
-}
-
-// Whether `run_filter`'s blocker search at this pixel certainly finds nothing. A tap is a
-// blocker when its depth is below the receiver-plane depth there less the bias, and
-// `receiver_plane_depth` is either the pixel's depth d or a plane depth below 2d. Over a
-// rectangle on which the plane's facing keeps its sign, the plane depth num / facing is
-// monotonic in the facing, which is affine in uv, so its largest value is at a corner; with
-// a sign change 2d bounds it. If no map texel under the search's taps (widened by a texel for
-// rounding) is nearer than that bound less the bias, no tap is a blocker: the proof is exact,
-// so the listed pass finds the same pixels lit that the search would.
-fn search_is_empty(p: vec3<f32>, normal: vec3<f32>, ls: LightSpace) -> bool {
-    let d = ls.depth;
-    let bias = depth_bias(p, normal, d, params.bias_texels, params.slope_bias_texels);
-    let res = f32(frame.sizes.z);
-    let texel = 1.0 / res;
-    let search = clamp(cone_half_extent(d, min(params.nearest, d)), vec2<f32>(0.5 * texel), vec2<f32>(params.max_search_texels * texel));
-    // The outermost taps sit (1 − 1/n)·search from the centre.
-    let n = f32(params.search_taps);
-    let reach = (1.0 - 1.0 / n) * search + texel;
-    let lo_uv = ls.uv - reach;
-    let hi_uv = ls.uv + reach;
-    let last = vec2<f32>(res - 1.0);
-    let lo = vec2<u32>(clamp(floor(lo_uv * res), vec2<f32>(0.0), last));
-    let hi = vec2<u32>(clamp(floor(hi_uv * res), vec2<f32>(0.0), last));
-
-    let num = dot(p - frame.light_center.xyz, normal);
-    var facing_min = 1e30;
-    var facing_max = -1e30;
-    var plane_max = 0.0;
-    for (var k = 0u; k < 4u; k++) {
-        let uv = select(lo_uv, hi_uv, vec2<bool>((k & 1u) != 0u, (k & 2u) != 0u));
-        let tangent = -(uv - 0.5) * 2.0 * frame.light_proj.x;
-        let w = frame.light_n.xyz + tangent.x * frame.light_r.xyz + tangent.y * frame.light_u.xyz;
-        let facing = dot(w, normal);
-        facing_min = min(facing_min, facing);
-        facing_max = max(facing_max, facing);
-        plane_max = max(plane_max, num / facing);
-    }
-    let one_sign = facing_min > 0.0 || facing_max < 0.0;
-    let bound = select(2.0 * d, max(d, min(plane_max, 2.0 * d)), one_sign);
-    // A relative margin for the rounding of the taps' own plane depths.
-    return nearest_depth(lo, hi) >= bound * (1.0 + 1e-5) - bias;
-}
-
-// Pass 2, every pixel: uncovered and provably unblocked pixels written, the others listed.
+// Pass 2, every pixel: uncovered pixels and those outside the shadow frustum written, the
+// others listed.
 @compute @workgroup_size(8, 8)
 fn classify(@builtin(global_invocation_id) id: vec3<u32>) {
     let pixel = id.xy;
@@ -266,7 +181,7 @@ fn classify(@builtin(global_invocation_id) id: vec3<u32>) {
     let p = textureLoad(gbuf_position, pixel, 0).xyz;
     let ls = to_light_space(p);
     // Outside the shadow frustum the filter has nothing to test: lit.
-    if !ls.inside || search_is_empty(p, textureLoad(gbuf_normal, pixel, 0).xyz, ls) {
+    if !ls.inside {
         textureStore(visibility_out, pixel, vec4<f32>(unblocked_visibility(), 1.0));
         atomicAdd(&counters[0], 1u);
         atomicAdd(&counters[5], 1u);
