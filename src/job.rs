@@ -161,6 +161,77 @@ impl From<AssetRef> for Map<String, Value> {
     }
 }
 
+/// The job's scene: the asset, and whether a floor is added under it (contract §3).
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(try_from = "Map<String, Value>", into = "Map<String, Value>")]
+pub struct SceneRef {
+    pub asset: AssetRef,
+    pub floor: Option<FloorSpec>,
+}
+
+impl From<AssetRef> for SceneRef {
+    fn from(asset: AssetRef) -> Self {
+        SceneRef { asset, floor: None }
+    }
+}
+
+impl TryFrom<Map<String, Value>> for SceneRef {
+    type Error = String;
+
+    fn try_from(mut map: Map<String, Value>) -> Result<Self, String> {
+        let floor = match map.remove("floor") {
+            None | Some(Value::Bool(false)) => None,
+            Some(Value::Bool(true)) => Some(FloorSpec::default()),
+            Some(value @ Value::Object(_)) => {
+                let floor: FloorSpec = serde_json::from_value(value).map_err(|e| format!("`floor`: {e}"))?;
+                floor.check().map_err(|e| format!("`floor`: {e}"))?;
+                Some(floor)
+            }
+            Some(_) => return Err("`floor` must be true, false or {\"albedo\": [r, g, b], \"margin\": m}".into()),
+        };
+        Ok(SceneRef { asset: AssetRef::try_from(map)?, floor })
+    }
+}
+
+impl From<SceneRef> for Map<String, Value> {
+    fn from(scene: SceneRef) -> Self {
+        let mut map = Map::from(scene.asset);
+        if let Some(floor) = scene.floor {
+            map.insert("floor".into(), serde_json::to_value(floor).unwrap_or(Value::Bool(true)));
+        }
+        map
+    }
+}
+
+/// A receiving ground plane under the scene's bounds: a square centred under them, wider
+/// than them by `margin` times the scene's bounding radius on every side (contract §3).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct FloorSpec {
+    /// Lambertian albedo, linear RGB in [0, 1].
+    pub albedo: [f32; 3],
+    /// How far the floor reaches past the bounds, in bounding radii (0–100).
+    pub margin: f32,
+}
+
+impl Default for FloorSpec {
+    fn default() -> Self {
+        FloorSpec { albedo: [0.8, 0.8, 0.8], margin: 2.0 }
+    }
+}
+
+impl FloorSpec {
+    fn check(&self) -> Result<(), String> {
+        if !self.albedo.iter().all(|a| (0.0..=1.0).contains(a)) {
+            return Err(format!("albedo {:?} must lie in [0, 1]", self.albedo));
+        }
+        if !(0.0..=100.0).contains(&self.margin) {
+            return Err(format!("margin {} must lie in [0, 100]", self.margin));
+        }
+        Ok(())
+    }
+}
+
 /// The eye camera; absent fields come from the scene's default view.
 #[derive(Debug, Clone, Default, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
@@ -295,7 +366,7 @@ impl std::fmt::Display for JobStatus {
 #[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct Job {
-    pub scene: AssetRef,
+    pub scene: SceneRef,
     #[serde(default)]
     pub camera: CameraSpec,
     #[serde(default)]
@@ -320,7 +391,7 @@ impl Job {
     /// The job the CLI renders when it is given none: the `torus` scene with hard shadows.
     pub fn embedded_default() -> Self {
         Self {
-            scene: AssetRef::builtin("torus"),
+            scene: AssetRef::builtin("torus").into(),
             camera: CameraSpec::default(),
             light: LightSpec::default(),
             method: MethodSpec::default(),

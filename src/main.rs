@@ -199,6 +199,9 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 bar.set_position(done);
             })?;
             bar.finish_and_clear();
+            for warning in &rendered.warnings {
+                eprintln!("warning: {warning}");
+            }
             std::fs::write(&output, &rendered.bytes)?;
             print_timings(&rendered.timings);
             if let Some(path) = timings_json {

@@ -159,7 +159,7 @@ mod tests {
                 visibility.push([v; 3]);
             }
         }
-        FrameOutput { width, height, color, srgb8: None, visibility: Some(visibility), depth: None, e0: None, counters: Default::default() }
+        FrameOutput { width, height, color, srgb8: None, visibility: Some(visibility), depth: None, e0: None, counters: Default::default(), warnings: Vec::new() }
     }
 
     /// A soft edge: lit on the left, umbra on the right, a penumbra from 0.75 to 0.25 between

@@ -223,7 +223,7 @@ fn gltf_renders_with_its_albedo() {
         "light": {"center": [1.5, 3, 1.5], "direction": [0, -1, 0], "up": [0, 0, -1], "size": [0.5, 0.5], "intensity": 40},
         "output": {"width": 64, "height": 64, "format": "exr"}
     }));
-    job.scene = AssetRef::Path(path);
+    job.scene = AssetRef::Path(path).into();
     job.output.format = OutputFormat::Exr;
     let (frame, _) = common::engine().render_frame(&job, &()).unwrap();
     std::fs::remove_dir_all(&dir).ok();

@@ -9,7 +9,7 @@ use std::sync::Arc;
 use super::{Engine, RenderState};
 use crate::error::{ErrorCode, JobError, JobResult};
 use crate::gpu::scene::GpuScene;
-use crate::job::AssetRef;
+use crate::job::{AssetRef, SceneRef};
 use crate::light::LightImage;
 use crate::scene::{self, builtin};
 use crate::timing::Timings;
@@ -27,9 +27,10 @@ pub enum PathPolicy {
 }
 
 impl Engine {
-    /// Finds a scene in the cache or loads it and uploads it to the GPU.
-    pub(super) fn scene(&self, state: &mut RenderState, asset: &AssetRef, timings: &mut Timings) -> JobResult<Arc<GpuScene>> {
-        let key = self.asset_key(asset, Kind::Scene, "scene")?;
+    /// Finds a scene in the cache or loads it (with its floor) and uploads it to the GPU.
+    pub(super) fn scene(&self, state: &mut RenderState, scene: &SceneRef, timings: &mut Timings) -> JobResult<Arc<GpuScene>> {
+        let key = self.scene_key(scene)?;
+        let asset = &scene.asset;
         self.prune_gone_uploads(state);
         if let Some(scene) = state.scenes.get(&key) {
             timings.scene_cached = true;
@@ -38,13 +39,25 @@ impl Engine {
         let loaded = match asset {
             AssetRef::Builtin { name, params } => Arc::new(builtin::build(name, params, "scene", &self.limits)?),
             AssetRef::Path(path) => {
-                let bytes = self.read_path(path, "scene.path")?;
-                Arc::new(scene::gltf::load(&bytes, &self.limits, "scene")?)
+                let (resolved, bytes) = self.read_path(path, "scene.path")?;
+                // The document's relative URIs are read from beside it, inside the same
+                // directory as the document itself (contract §3).
+                let root = match &self.paths {
+                    PathPolicy::Under(dir) => Some(std::fs::canonicalize(dir).map_err(|_| not_readable("scene.path"))?),
+                    PathPolicy::Any | PathPolicy::Deny => None,
+                };
+                let folder = resolved.parent().unwrap_or(Path::new("/"));
+                let resources = scene::gltf::Resources::Beside { folder, confined_to: root.as_deref() };
+                Arc::new(scene::gltf::load_from(&bytes, &self.limits, "scene", resources)?)
             }
             AssetRef::Id(id) => match self.uploaded(Kind::Scene, id, "scene.id")? {
                 Asset::Scene(scene) => scene,
                 Asset::Light(_) => return Err(not_uploaded(id, "scene.id")),
             },
+        };
+        let loaded = match &scene.floor {
+            Some(floor) => Arc::new(loaded.with_floor(floor)),
+            None => loaded,
         };
         let gpu = state.renderer.gpu().clone();
         let uploaded = GpuScene::upload(&gpu, &loaded, state.renderer.material_layout()).map_err(|error| {
@@ -71,7 +84,7 @@ impl Engine {
         let image = match asset {
             AssetRef::Builtin { name, params } => Arc::new(LightImage::builtin(name, params, "light.image")?),
             AssetRef::Path(path) => {
-                let bytes = self.read_path(path, "light.image.path")?;
+                let (_, bytes) = self.read_path(path, "light.image.path")?;
                 Arc::new(LightImage::decode(&bytes, self.limits.max_light_image_dim, "light.image")?)
             }
             AssetRef::Id(id) => match self.uploaded(Kind::Light, id, "light.image.id")? {
@@ -81,6 +94,15 @@ impl Engine {
         };
         state.lights.insert(key, image.clone());
         Ok(image)
+    }
+
+    /// The cache key of a job's scene: its asset's, and its floor.
+    pub(super) fn scene_key(&self, scene: &SceneRef) -> JobResult<String> {
+        let key = self.asset_key(&scene.asset, Kind::Scene, "scene")?;
+        Ok(match &scene.floor {
+            Some(floor) => format!("{key}:floor:{:?}:{}", floor.albedo, floor.margin),
+            None => key,
+        })
     }
 
     /// A cache key that changes whenever the asset's content may have changed.
@@ -118,13 +140,15 @@ impl Engine {
         }
     }
 
-    fn read_path(&self, path: &Path, field: &str) -> JobResult<Vec<u8>> {
+    /// Reads a file the path policy allows; answers its canonical path with its bytes.
+    fn read_path(&self, path: &Path, field: &str) -> JobResult<(PathBuf, Vec<u8>)> {
         let resolved = self.resolve_path(path, field)?;
         let meta = std::fs::metadata(&resolved).map_err(|_| not_readable(field))?;
         if meta.len() > self.limits.max_body_bytes as u64 {
             return Err(JobError::field(ErrorCode::LimitExceeded, field, format!("the file exceeds {} bytes", self.limits.max_body_bytes)));
         }
-        std::fs::read(&resolved).map_err(|_| not_readable(field))
+        let bytes = std::fs::read(&resolved).map_err(|_| not_readable(field))?;
+        Ok((resolved, bytes))
     }
 }
 

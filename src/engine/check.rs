@@ -29,7 +29,7 @@ pub fn check_job(job: &Job, limits: &Limits) -> JobResult<(&'static dyn ShadowMe
         }
     }
     // Built-in assets are known now: a misspelt one is refused at submission, not later.
-    if let AssetRef::Builtin { name, params } = &job.scene {
+    if let AssetRef::Builtin { name, params } = &job.scene.asset {
         crate::scene::builtin::parse(name, params, "scene", limits)?;
     }
     if let Some(AssetRef::Builtin { name, params }) = &job.light.image {

@@ -49,6 +49,8 @@ pub struct Rendered {
     pub counters: Counters,
     /// Metrics against `reference`, when the job asked to `compare`.
     pub quality: Option<QualityReport>,
+    /// What penumbra left out of the scene or repaired in it (contract §3).
+    pub warnings: Vec<String>,
 }
 
 /// Reference frames kept for `compare` (each is a few MB of floats).
@@ -132,7 +134,7 @@ impl Engine {
     pub fn check(&self, job: &Job, uploads_here: bool) -> JobResult<()> {
         check_job(job, &self.limits)?;
         let light = job.light.image.as_ref();
-        for (kind, asset, field) in [(Kind::Scene, Some(&job.scene), "scene"), (Kind::Light, light, "light.image")] {
+        for (kind, asset, field) in [(Kind::Scene, Some(&job.scene.asset), "scene"), (Kind::Light, light, "light.image")] {
             match asset {
                 Some(AssetRef::Path(path)) => drop(self.resolve_path(path, &format!("{field}.path"))?),
                 Some(AssetRef::Id(id)) if uploads_here && !self.holds_upload(kind, id) => {
@@ -194,6 +196,7 @@ impl Engine {
             timings,
             counters: frame.counters,
             quality,
+            warnings: frame.warnings,
         })
     }
 
@@ -203,7 +206,7 @@ impl Engine {
         let reference_job = job.reference_job();
         let key = format!(
             "{}|{}",
-            self.asset_key(&job.scene, Kind::Scene, "scene")?,
+            self.scene_key(&job.scene)?,
             serde_json::to_string(&reference_job).map_err(|e| crate::error::JobError::internal(e.to_string()))?
         );
         if let Some(frame) = self.references.lock().unwrap_or_else(|p| p.into_inner()).get(&key) {

@@ -137,7 +137,7 @@ pub fn run(engine: &Engine, options: &BenchOptions) -> anyhow::Result<BenchRepor
             let case = format!("{scene}, {light}");
             let (light_name, light_params) = parse_named(light)?;
             let base = Job {
-                scene: parse_scene(scene)?,
+                scene: parse_scene(scene)?.into(),
                 light: crate::job::LightSpec { image: Some(AssetRef::Builtin { name: light_name, params: light_params }), ..Default::default() },
                 shadow_map: crate::job::ShadowMapSpec { resolution: options.shadow_map },
                 output: crate::job::OutputSpec { width, height, format: OutputFormat::Png, exposure: 0.0 },

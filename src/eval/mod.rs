@@ -360,7 +360,7 @@ pub fn run(engine: &Engine, options: &EvalOptions) -> anyhow::Result<EvalReport>
                 };
                 let (light_name, light_params) = parse_named(light)?;
                 let base = Job {
-                    scene: scene_ref.clone(),
+                    scene: scene_ref.clone().into(),
                     light: crate::job::LightSpec {
                         image: Some(AssetRef::Builtin { name: light_name, params: light_params }),
                         ..Default::default()

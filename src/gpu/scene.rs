@@ -29,6 +29,8 @@ pub struct GpuScene {
     pub bounds_min: Vec3,
     pub bounds_max: Vec3,
     pub defaults: SceneDefaults,
+    /// `Scene::warnings`: reported with every frame of this scene.
+    pub warnings: Vec<String>,
     /// Bytes uploaded for this scene (buffers and textures).
     pub bytes: u64,
     /// The triangles on the CPU as well, for object-space methods (`wedges`).
@@ -130,6 +132,7 @@ impl GpuScene {
             bounds_min: scene.bounds_min,
             bounds_max: scene.bounds_max,
             defaults: scene.defaults.clone(),
+            warnings: scene.warnings.clone(),
             bytes: scene.gpu_bytes(),
             positions: scene.vertices.iter().map(|v| Vec3::from(v.position)).collect(),
             vertex_objects: scene.vertices.iter().map(|v| v.object_id).collect(),

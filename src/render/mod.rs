@@ -78,6 +78,8 @@ pub struct FrameOutput {
     /// The unshadowed irradiance E0, whenever the visibility is read back.
     pub e0: Option<Vec<[f32; 3]>>,
     pub counters: Counters,
+    /// The scene's warnings (`Scene::warnings`), for the job's answer.
+    pub warnings: Vec<String>,
 }
 
 struct Layouts {
@@ -321,7 +323,8 @@ impl Renderer {
         for (label, ms) in gpu_times {
             timings.add_gpu(label, ms);
         }
-        Ok(FrameOutput { width: spec.width, height: spec.height, color, srgb8, visibility, depth, e0, counters })
+        let warnings = scene.warnings.clone();
+        Ok(FrameOutput { width: spec.width, height: spec.height, color, srgb8, visibility, depth, e0, counters, warnings })
     }
 
     fn write_constants(&self, spec: &FrameSpec, projection: &LightProjection) {

@@ -1,12 +1,16 @@
-//! glTF 2.0 loading (`.gltf` with embedded `data:` buffers, and `.glb`) into a `Scene`.
+//! glTF 2.0 loading (`.gltf`, with its resources embedded or beside it, and `.glb`) into a
+//! `Scene`.
 //!
 //! Every node holding a mesh is one object; ids are the rank of the node's index among the
-//! mesh nodes of the scene, so they are stable for a file (contract §1). Only `data:` URIs
-//! and the GLB binary chunk are read: the loader never opens a file or a network address
-//! named inside a document, whoever sent it.
+//! mesh nodes of the scene, so they are stable for a file (contract §1). An uploaded document
+//! is read alone (`data:` URIs and the GLB binary chunk); one read from disk may name files
+//! by relative URI, which are read from its folder and never from outside the directory the
+//! server may read (contract §3). No document ever makes the loader open an absolute path,
+//! a `file:` URI or a network address.
 
 use std::collections::{BTreeMap, HashMap};
 use std::io::Cursor;
+use std::path::{Component, Path, PathBuf};
 
 use base64::Engine as _;
 use glam::{Mat4, Vec2, Vec3};
@@ -15,11 +19,31 @@ use super::{fitted_defaults, Material, MeshData, Scene, SceneBuilder, TextureDat
 use crate::error::{ErrorCode, JobError, JobResult};
 use crate::job::Limits;
 
-/// Loads a glTF or GLB document from bytes. `field` names the job field for errors.
+/// Where the files a document names by URI may be read from (contract §3).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Resources<'a> {
+    /// A self-contained document (an upload): `data:` URIs and the GLB binary chunk only.
+    Embedded,
+    /// A document read from disk: URIs relative to it are read from `folder`, its own
+    /// folder; with `confined_to` (`serve --scene-dir`) never from outside that directory,
+    /// symlinks resolved. Both paths are canonical.
+    Beside { folder: &'a Path, confined_to: Option<&'a Path> },
+}
+
+/// Loads a self-contained glTF or GLB document from bytes. `field` names the job field for
+/// errors.
 pub fn load(bytes: &[u8], limits: &Limits, field: &str) -> JobResult<Scene> {
+    load_from(bytes, limits, field, Resources::Embedded)
+}
+
+/// Loads a glTF or GLB document whose URIs are read as `resources` says.
+pub fn load_from(bytes: &[u8], limits: &Limits, field: &str, resources: Resources<'_>) -> JobResult<Scene> {
     // The gltf crate validates indices into the document, but a hostile file is still
     // untrusted input: a panic anywhere in decoding becomes a clean error for this job.
-    match std::panic::catch_unwind(|| load_unchecked(bytes, limits, field)) {
+    match std::panic::catch_unwind(|| {
+        let uris = UriReader { resources, limits, field, read: std::cell::Cell::new(0) };
+        load_unchecked(bytes, limits, field, &uris)
+    }) {
         Ok(result) => result,
         Err(_) => Err(invalid(field, "the glTF document could not be decoded")),
     }
@@ -55,7 +79,7 @@ fn check_glb_container(bytes: &[u8], field: &str) -> JobResult<()> {
     Ok(())
 }
 
-fn load_unchecked(bytes: &[u8], limits: &Limits, field: &str) -> JobResult<Scene> {
+fn load_unchecked(bytes: &[u8], limits: &Limits, field: &str, uris: &UriReader<'_>) -> JobResult<Scene> {
     check_glb_container(bytes, field)?;
     let gltf = gltf::Gltf::from_slice(bytes).map_err(|e| invalid(field, format!("not a valid glTF 2.0 document: {e}")))?;
     let buffers = gltf
@@ -64,7 +88,7 @@ fn load_unchecked(bytes: &[u8], limits: &Limits, field: &str) -> JobResult<Scene
         .map(|buffer| {
             let data = match buffer.source() {
                 gltf::buffer::Source::Bin => gltf.blob.clone().ok_or_else(|| invalid(field, "GLB binary chunk missing"))?,
-                gltf::buffer::Source::Uri(uri) => decode_data_uri(uri, field)?,
+                gltf::buffer::Source::Uri(uri) => uris.read(uri)?,
             };
             if buffer.length() > limits.max_body_bytes {
                 return Err(JobError::field(
@@ -112,6 +136,7 @@ fn load_unchecked(bytes: &[u8], limits: &Limits, field: &str) -> JobResult<Scene
     instances.sort_by_key(|(n, _)| n.index());
 
     let mut builder = SceneBuilder::default();
+    warn_of_what_is_ignored(&gltf.document, &mut builder);
     for &node_index in &mesh_nodes {
         let node = gltf.document.nodes().nth(node_index).expect("index from this document");
         builder.begin_object(node.name().map(str::to_owned).unwrap_or_else(|| format!("node-{node_index}")));
@@ -119,6 +144,7 @@ fn load_unchecked(bytes: &[u8], limits: &Limits, field: &str) -> JobResult<Scene
     let mut materials: BTreeMap<Option<usize>, u32> = BTreeMap::new();
     let mut textures: HashMap<usize, usize> = HashMap::new();
     let mut skipped_primitives = 0usize;
+    let mut untextured: Vec<String> = Vec::new();
     let (mut vertices, mut declared_triangles) = (0u64, 0u64);
     for (node, world) in &instances {
         let object_id = id_of[&node.index()];
@@ -177,6 +203,9 @@ fn load_unchecked(bytes: &[u8], limits: &Limits, field: &str) -> JobResult<Scene
                 .and_then(|info| reader.read_tex_coords(info.tex_coord()))
                 .map(|uv| uv.into_f32().map(Vec2::from).collect())
                 .unwrap_or_default();
+            if let Some(info) = texture_info.as_ref().filter(|_| uvs.len() != positions.len()) {
+                untextured.push(format!("mesh {} (TEXCOORD_{})", mesh.index(), info.tex_coord()));
+            }
             let material_key = primitive.material().index();
             let material = match materials.get(&material_key) {
                 Some(&m) => m,
@@ -187,7 +216,7 @@ fn load_unchecked(bytes: &[u8], limits: &Limits, field: &str) -> JobResult<Scene
                             let slot = match textures.get(&image.index()) {
                                 Some(&slot) => slot,
                                 None => {
-                                    let data = decode_texture(&image, &buffers, limits, field)?;
+                                    let data = decode_texture(&image, &buffers, uris)?;
                                     let slot = builder.add_texture(data);
                                     textures.insert(image.index(), slot);
                                     slot
@@ -211,20 +240,165 @@ fn load_unchecked(bytes: &[u8], limits: &Limits, field: &str) -> JobResult<Scene
             builder.add_mesh(object_id, &mesh_data, *world, material);
         }
     }
-    if skipped_primitives > 0 {
-        tracing::debug!(skipped_primitives, "glTF primitives without triangles were left out");
-    }
     if builder.triangle_count() == 0 {
-        return Err(invalid(field, "the scene holds no triangles"));
+        let why = match (skipped_primitives, instances.len()) {
+            (0, 0) => "its scene has no node with a mesh".to_owned(),
+            (0, _) => "its meshes have no triangles".to_owned(),
+            (n, _) => format!("its {n} primitive(s) draw points or lines, which cast no area shadow"),
+        };
+        return Err(invalid(field, format!("the scene holds no triangles: {why}")));
+    }
+    if skipped_primitives > 0 {
+        builder.warn(format!("{skipped_primitives} primitive(s) of points or lines were left out: they cast no area shadow"));
+    }
+    if !untextured.is_empty() {
+        untextured.dedup();
+        let list = untextured.join(", ");
+        builder.warn(format!("base-colour textures without the texture coordinates they name are drawn in their first texel's colour: {list}"));
     }
     Ok(builder.finish(fitted_defaults))
 }
 
-/// Decodes an RFC 2397 `data:` URI with base64 content; every other URI is refused.
-fn decode_data_uri(uri: &str, field: &str) -> JobResult<Vec<u8>> {
-    let Some(rest) = uri.strip_prefix("data:") else {
-        return Err(invalid(field, "only data: URIs are accepted inside an uploaded scene (no files, no network)"));
-    };
+/// Records in the scene's warnings what the document holds that penumbra does not draw
+/// (contract §3: listed, never dropped silently). Extensions a document *requires* and
+/// penumbra lacks never get here: the gltf crate refuses them.
+fn warn_of_what_is_ignored(document: &gltf::Document, builder: &mut SceneBuilder) {
+    for name in document.extensions_used() {
+        builder.warn(format!("extension `{name}` is ignored: penumbra draws geometry and the base colour"));
+    }
+    let mut features = std::collections::BTreeSet::new();
+    for material in document.materials() {
+        if material.emissive_factor() != [0.0; 3] || material.emissive_texture().is_some() {
+            features.insert("emission");
+        }
+        if material.normal_texture().is_some() {
+            features.insert("normal textures");
+        }
+        if material.occlusion_texture().is_some() {
+            features.insert("occlusion textures");
+        }
+        if material.pbr_metallic_roughness().metallic_roughness_texture().is_some() {
+            features.insert("metallic-roughness textures");
+        }
+        if material.alpha_mode() != gltf::material::AlphaMode::Opaque {
+            features.insert("alpha blending and masking");
+        }
+    }
+    if !features.is_empty() {
+        let list: Vec<&str> = features.into_iter().collect();
+        builder.warn(format!("material features ignored ({}): surfaces are Lambertian with their base colour", list.join(", ")));
+    }
+    if document.animations().next().is_some() {
+        builder.warn("animations are ignored: the scene is drawn at rest");
+    }
+    if document.skins().next().is_some() {
+        builder.warn("skins are ignored: skinned meshes are drawn in their bind pose");
+    }
+    if document.meshes().flat_map(|m| m.primitives()).any(|p| p.morph_targets().next().is_some()) {
+        builder.warn("morph targets are ignored: meshes are drawn in their base shape");
+    }
+    if document.cameras().next().is_some() {
+        builder.warn("the file's cameras are not used: the job's camera, or one fitted to the scene, is");
+    }
+}
+
+/// Reads what a document's URIs name, as its `Resources` allow, within one budget for the
+/// whole document: a scene from disk may hold no more than an upload may (`max_body_bytes`).
+struct UriReader<'a> {
+    resources: Resources<'a>,
+    limits: &'a Limits,
+    field: &'a str,
+    read: std::cell::Cell<u64>,
+}
+
+impl UriReader<'_> {
+    fn read(&self, uri: &str) -> JobResult<Vec<u8>> {
+        if let Some(rest) = uri.strip_prefix("data:") {
+            return decode_data_uri(rest, self.field);
+        }
+        let Resources::Beside { folder, confined_to } = self.resources else {
+            return Err(invalid(
+                self.field,
+                format!(
+                    "URI `{uri}`: an uploaded scene must be self-contained (data: URIs or one GLB); \
+                     pack a multi-file glTF into one GLB first (`penumbra submit` does)"
+                ),
+            ));
+        };
+        let refused = |why: &str| JobError::field(ErrorCode::PathNotAllowed, self.field, format!("URI `{uri}`: {why}"));
+        let relative = relative_uri_path(uri).map_err(refused)?;
+        // Judged on the path as written first, so that a refusal says nothing about what
+        // exists outside the directory; then again with symlinks resolved.
+        let outside = "leads outside the directory this server reads scenes from";
+        let joined = lexical_join(folder, &relative).ok_or_else(|| refused(outside))?;
+        if confined_to.is_some_and(|root| !joined.starts_with(root)) {
+            return Err(refused(outside));
+        }
+        let resolved = std::fs::canonicalize(&joined)
+            .ok()
+            .filter(|p| p.is_file())
+            .ok_or_else(|| invalid(self.field, format!("URI `{uri}`: no file `{}` beside the document", relative.display())))?;
+        if confined_to.is_some_and(|root| !resolved.starts_with(root)) {
+            return Err(refused(outside));
+        }
+        let length = std::fs::metadata(&resolved).map(|m| m.len()).unwrap_or(u64::MAX);
+        let budget = self.limits.max_body_bytes as u64;
+        if self.read.get().saturating_add(length) > budget {
+            let message = format!("URI `{uri}`: the document's files exceed {budget} bytes together (max_body_bytes)");
+            return Err(JobError::field(ErrorCode::LimitExceeded, self.field, message));
+        }
+        let bytes = std::fs::read(&resolved).map_err(|e| invalid(self.field, format!("URI `{uri}`: cannot read: {e}")))?;
+        self.read.set(self.read.get() + bytes.len() as u64);
+        Ok(bytes)
+    }
+}
+
+/// The path a relative URI reference names (glTF 2.0 §3.2 "URIs": relative to the document,
+/// percent-encoded as RFC 3986 says), or why it is not one penumbra reads: URIs with a
+/// scheme (`file:`, `http:` …), network-path (`//host/…`) and absolute references.
+fn relative_uri_path(uri: &str) -> Result<PathBuf, &'static str> {
+    let scheme_end = uri.find([':', '/', '?', '#']);
+    if let Some(end) = scheme_end.filter(|&end| uri[end..].starts_with(':')) {
+        let scheme = &uri[..end];
+        if scheme.starts_with(|c: char| c.is_ascii_alphabetic())
+            && scheme.chars().all(|c| c.is_ascii_alphanumeric() || matches!(c, '+' | '-' | '.'))
+        {
+            return Err("only paths relative to the document are read (no file: or network URIs)");
+        }
+    }
+    // A query or fragment is not part of the file's name (`#` in a name is written `%23`).
+    let path = &uri[..uri.find(['?', '#']).unwrap_or(uri.len())];
+    let decoded = percent_encoding::percent_decode_str(path).decode_utf8().map_err(|_| "not UTF-8 once percent-decoded")?;
+    if decoded.is_empty() || decoded.contains('\0') {
+        return Err("not a file name");
+    }
+    if decoded.starts_with('/') || decoded.starts_with('\\') {
+        return Err("absolute paths are not read; only paths relative to the document");
+    }
+    Ok(PathBuf::from(decoded.as_ref()))
+}
+
+/// `folder` joined with `relative`, `.` and `..` applied as written (no file is touched);
+/// `None` if it climbs above the filesystem's root or names a root of its own.
+fn lexical_join(folder: &Path, relative: &Path) -> Option<PathBuf> {
+    let mut joined = folder.to_path_buf();
+    for component in relative.components() {
+        match component {
+            Component::Normal(name) => joined.push(name),
+            Component::CurDir => {}
+            Component::ParentDir => {
+                if !joined.pop() {
+                    return None;
+                }
+            }
+            Component::RootDir | Component::Prefix(_) => return None,
+        }
+    }
+    Some(joined)
+}
+
+/// Decodes the rest of an RFC 2397 `data:` URI (after `data:`) with base64 content.
+fn decode_data_uri(rest: &str, field: &str) -> JobResult<Vec<u8>> {
     let Some((header, payload)) = rest.split_once(',') else {
         return Err(invalid(field, "malformed data: URI"));
     };
@@ -234,7 +408,8 @@ fn decode_data_uri(uri: &str, field: &str) -> JobResult<Vec<u8>> {
     base64::engine::general_purpose::STANDARD.decode(payload.trim()).map_err(|e| invalid(field, format!("bad base64 in data: URI: {e}")))
 }
 
-fn decode_texture(image: &gltf::Image, buffers: &[Vec<u8>], limits: &Limits, field: &str) -> JobResult<TextureData> {
+fn decode_texture(image: &gltf::Image, buffers: &[Vec<u8>], uris: &UriReader<'_>) -> JobResult<TextureData> {
+    let (limits, field) = (uris.limits, uris.field);
     let bytes: Vec<u8> = match image.source() {
         gltf::image::Source::View { view, .. } => {
             let buffer = &buffers[view.buffer().index()];
@@ -243,7 +418,7 @@ fn decode_texture(image: &gltf::Image, buffers: &[Vec<u8>], limits: &Limits, fie
                 .ok_or_else(|| invalid(field, "an image's buffer view lies outside its buffer"))?
                 .to_vec()
         }
-        gltf::image::Source::Uri { uri, .. } => decode_data_uri(uri, field)?,
+        gltf::image::Source::Uri { uri, .. } => uris.read(uri)?,
     };
     let mut reader = image::ImageReader::new(Cursor::new(bytes))
         .with_guessed_format()
@@ -283,6 +458,12 @@ pub fn glb(document: &serde_json::Value, bin: &[u8]) -> Vec<u8> {
 /// set by `seed`: distinct bytes for every seed, for benchmarks and load tests that need many
 /// different scenes of a chosen size.
 pub fn height_field_glb(n: u32, seed: u32) -> Vec<u8> {
+    let (document, bin) = height_field(n, seed);
+    glb(&document, &bin)
+}
+
+/// The glTF document of `height_field_glb` and its binary buffer (buffer 0, without `uri`).
+fn height_field(n: u32, seed: u32) -> (serde_json::Value, Vec<u8>) {
     let n = n.max(2);
     let mut bin = Vec::new();
     let (fx, fz) = (1.0 + (seed % 7) as f32, 1.0 + (seed / 7 % 5) as f32);
@@ -322,7 +503,7 @@ pub fn height_field_glb(n: u32, seed: u32) -> Vec<u8> {
             {"bufferView": 1, "componentType": 5125, "count": 6 * (n - 1) * (n - 1), "type": "SCALAR"}
         ]
     });
-    glb(&document, &bin)
+    (document, bin)
 }
 
 #[cfg(test)]
@@ -382,5 +563,99 @@ mod tests {
         let scene = load(&bytes, &Limits::default(), "scene").expect("a valid GLB");
         assert_eq!(scene.indices.len(), 3 * 2 * 8 * 8);
         assert_ne!(bytes, height_field_glb(9, 4));
+    }
+
+    /// A folder `root` holding a height field as `box.gltf` beside `mesh data.bin`, a
+    /// `secret.bin` outside it, and `root/link.bin`, a symlink to the secret.
+    struct MultiFile {
+        top: PathBuf,
+        root: PathBuf,
+        bin: Vec<u8>,
+    }
+
+    impl MultiFile {
+        fn new(name: &str) -> Self {
+            let top = std::env::temp_dir().join(format!("penumbra-uris-{name}-{}", std::process::id()));
+            let _ = std::fs::remove_dir_all(&top);
+            let root = top.join("root");
+            std::fs::create_dir_all(root.join("sub")).unwrap();
+            let (_, bin) = height_field(5, 2);
+            std::fs::write(root.join("mesh data.bin"), &bin).unwrap();
+            std::fs::write(top.join("secret.bin"), &bin).unwrap();
+            std::os::unix::fs::symlink(top.join("secret.bin"), root.join("link.bin")).unwrap();
+            let root = std::fs::canonicalize(root).unwrap();
+            MultiFile { top, root, bin }
+        }
+
+        /// The height field's document with buffer 0 read from `uri`.
+        fn document(&self, uri: &str) -> Vec<u8> {
+            let (mut document, _) = height_field(5, 2);
+            document["buffers"][0]["uri"] = uri.into();
+            serde_json::to_vec(&document).unwrap()
+        }
+
+        fn load(&self, uri: &str, confined: bool, limits: &Limits) -> JobResult<Scene> {
+            let resources = Resources::Beside { folder: &self.root, confined_to: confined.then_some(self.root.as_path()) };
+            load_from(&self.document(uri), limits, "scene", resources)
+        }
+    }
+
+    impl Drop for MultiFile {
+        fn drop(&mut self) {
+            let _ = std::fs::remove_dir_all(&self.top);
+        }
+    }
+
+    #[test]
+    fn relative_uris_are_read_beside_the_document_percent_decoded() {
+        let files = MultiFile::new("beside");
+        let triangles = 3 * 2 * 4 * 4;
+        for uri in ["mesh%20data.bin", "./mesh%20data.bin", "sub/../mesh%20data.bin", "mesh%20data.bin?v=2"] {
+            let scene = files.load(uri, true, &Limits::default()).unwrap_or_else(|e| panic!("{uri}: {e}"));
+            assert_eq!(scene.indices.len(), triangles, "{uri}");
+        }
+        // The same document uploaded is refused, naming the URI and the way out.
+        let error = load(&files.document("mesh%20data.bin"), &Limits::default(), "body").unwrap_err();
+        assert_eq!((error.code, error.field.as_deref()), (ErrorCode::InvalidAsset, Some("body")));
+        assert!(error.message.contains("`mesh%20data.bin`") && error.message.contains("GLB"), "{}", error.message);
+        // A missing file is named; so is a document whose files outgrow the upload limit.
+        let error = files.load("missing.bin", true, &Limits::default()).unwrap_err();
+        assert_eq!(error.code, ErrorCode::InvalidAsset);
+        assert!(error.message.contains("`missing.bin`"), "{}", error.message);
+        let small = Limits { max_body_bytes: files.bin.len() - 1, ..Limits::default() };
+        assert_eq!(files.load("mesh%20data.bin", true, &small).unwrap_err().code, ErrorCode::LimitExceeded);
+    }
+
+    #[test]
+    fn uris_leading_outside_the_scene_directory_are_refused_naming_the_uri() {
+        let files = MultiFile::new("escapes");
+        let secret = files.top.join("secret.bin");
+        let absolute = secret.display().to_string();
+        let file_uri = format!("file://{absolute}");
+        let escapes = [
+            "../secret.bin",
+            "sub/../../secret.bin",
+            "%2e%2e/secret.bin",
+            "..%2fsecret.bin",
+            "link.bin", // a symlink out of the directory
+            absolute.as_str(),
+            file_uri.as_str(),
+            "http://127.0.0.1:1/secret.bin",
+            "//127.0.0.1/secret.bin",
+            "C:/secret.bin",
+        ];
+        for uri in escapes {
+            let error = files.load(uri, true, &Limits::default()).unwrap_err();
+            assert_eq!((error.code, error.field.as_deref()), (ErrorCode::PathNotAllowed, Some("scene")), "{uri}: {}", error.message);
+            assert!(error.message.contains(&format!("`{uri}`")), "{uri}: {}", error.message);
+        }
+        // Unconfined (the CLI reads its user's own files), `..` and symlinks are followed,
+        // but absolute, `file:` and network URIs are still not.
+        for uri in ["../secret.bin", "link.bin"] {
+            files.load(uri, false, &Limits::default()).unwrap_or_else(|e| panic!("{uri}: {e}"));
+        }
+        for uri in [absolute.as_str(), file_uri.as_str(), "http://127.0.0.1:1/secret.bin"] {
+            assert_eq!(files.load(uri, false, &Limits::default()).unwrap_err().code, ErrorCode::PathNotAllowed, "{uri}");
+        }
     }
 }

@@ -153,6 +153,7 @@ pub(super) fn job_json(id: &str, rendered: &Rendered) -> Value {
         "timings": rendered.timings,
         "counters": rendered.counters,
         "quality": rendered.quality,
+        "warnings": rendered.warnings,
         "image": format!("/v1/jobs/{id}/image"),
     })
 }

@@ -103,7 +103,7 @@ pub(super) async fn delete_upload(kind: Kind, State(state): State<Arc<AppState>>
 pub(super) fn fetch_shared_uploads(engine: &Engine, store: Option<&Store>, job: &Job) -> Result<(), JobError> {
     let Some(store) = store.filter(|s| s.shared()) else { return Ok(()) };
     let light = job.light.image.as_ref();
-    for (kind, asset) in [(Kind::Scene, Some(&job.scene)), (Kind::Light, light)] {
+    for (kind, asset) in [(Kind::Scene, Some(&job.scene.asset)), (Kind::Light, light)] {
         let Some(crate::job::AssetRef::Id(id)) = asset else { continue };
         if engine.holds_upload(kind, id) {
             continue;
