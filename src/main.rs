@@ -71,7 +71,9 @@ enum Command {
     },
     /// Render one job to a PNG or EXR file, without a server.
     Render {
-        /// The job (JSON, see api/examples/). Without it: the built-in `torus` scene, `hard`.
+        /// The job (JSON, see api/examples/), or a scene file (`.gltf`, `.glb`) to render on a
+        /// floor with the fitted camera and light (contract §3). Without it: the built-in
+        /// `torus` scene, `hard`.
         job: Option<PathBuf>,
         /// Output file; the extension (.png or .exr) picks the format.
         #[arg(short, long)]
@@ -175,6 +177,16 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         }
         Command::Render { job, output, timings_json, options } => {
             let mut job = match &job {
+                Some(path) if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("gltf") || e.eq_ignore_ascii_case("glb")) => {
+                    // Soft shadows on a floor, camera and light fitted: what the file looks like.
+                    let mut job = Job::embedded_default();
+                    job.scene = penumbra::job::SceneRef {
+                        asset: penumbra::job::AssetRef::Path(path.clone()),
+                        floor: Some(penumbra::job::FloorSpec::default()),
+                    };
+                    job.method.name = "pcss".into();
+                    job
+                }
                 Some(path) => {
                     let bytes = std::fs::read(path).map_err(|e| anyhow::anyhow!("cannot read {}: {e}", path.display()))?;
                     Job::from_json(&bytes)?

@@ -29,6 +29,8 @@ pub struct Timings {
     pub scene_upload_bytes: u64,
     /// Triangles in the job's scene (object-space methods' cost follows them).
     pub scene_triangles: u64,
+    /// Textures in the job's scene (base colours read from its file).
+    pub scene_textures: u64,
 }
 
 impl Timings {

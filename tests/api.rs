@@ -378,6 +378,23 @@ fn cli_renders_the_embedded_default_and_example_jobs() {
     let (_, _, channels) = common::decode_exr(&std::fs::read(&exr).unwrap());
     assert!(channels.contains_key("visibility.G"));
 
+    // A scene file instead of a job: staged on a floor, its shadow in view, warnings said.
+    let (mut document, bin) = common::test_gltf();
+    std::fs::write(dir.path().join("tri.bin"), &bin).unwrap();
+    document["buffers"][0]["uri"] = "tri.bin".into();
+    document["extensionsUsed"] = json!(["KHR_materials_emissive_strength"]);
+    std::fs::write(dir.path().join("tri.gltf"), document.to_string()).unwrap();
+    let staged = dir.path().join("staged.exr");
+    let output = std::process::Command::new(exe)
+        .args(["render", dir.path().join("tri.gltf").to_str().unwrap(), "-o", staged.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    assert!(String::from_utf8_lossy(&output.stderr).contains("warning: extension `KHR_materials_emissive_strength` is ignored"));
+    let (_, _, channels) = common::decode_exr(&std::fs::read(&staged).unwrap());
+    let shadowed = channels["visibility.R"].iter().filter(|&&v| v < 0.5).count();
+    assert!(shadowed > 100, "the shadow on the floor is in view: {shadowed} pixels");
+
     // A bad job: one clear line and a non-zero exit.
     let bad = dir.path().join("bad.json");
     std::fs::write(&bad, r#"{"scene": {"builtin": "torus"}, "method": {"name": "nope"}}"#).unwrap();
@@ -1460,4 +1477,215 @@ async fn submitted_jobs_can_be_cancelled_waiting_or_running() {
     assert_eq!(finished.json::<Value>().await.unwrap()["error"]["code"], "conflict");
     assert_eq!(cancel("0".repeat(32)).await.unwrap().status(), StatusCode::NOT_FOUND);
     wait_for_metrics(&client, &base, |text| cancelled_jobs(text) == 2).await;
+}
+
+/// The glTF 2.0 samples Debian ships in `assimp-testmodels` — others' files, valid and
+/// deliberately broken — judged by Khronos' gltf-validator (`tests/gltf/validate.js`) and
+/// served from `--scene-dir`. Every file the validator passes that requires no extension and
+/// holds triangles renders by path on a floor: the validator's triangles plus the floor's two,
+/// its textures, a cast shadow in view; and through `penumbra submit` (a `.gltf` and its files
+/// packed into one GLB) to the same pixels. Every other file is refused with a 4xx whose
+/// message names the problem, or renders with `warnings` naming what was repaired or ignored.
+/// The daemon serves a valid job after all of them. The thumbnails of what rendered are
+/// tiled into `gltf-corpus.png` under the test's target folder (the README's contact sheet).
+#[tokio::test(flavor = "multi_thread")]
+async fn the_assimp_gltf2_corpus_renders_with_shadows_or_is_refused_by_name() {
+    let corpus = std::env::var_os("PENUMBRA_GLTF_CORPUS").map_or_else(|| "/usr/share/assimp/models/glTF2".into(), std::path::PathBuf::from);
+    assert!(corpus.is_dir(), "{} is missing: run deploy/install-test-deps.sh (assimp-testmodels)", corpus.display());
+    let tools = std::env::var_os("PENUMBRA_TOOLS")
+        .map_or_else(|| std::path::Path::new(&std::env::var("HOME").unwrap()).join(".cache/penumbra-tools"), std::path::PathBuf::from);
+    let validator = tools.join("node/node_modules/gltf-validator");
+    assert!(validator.is_dir(), "{} is missing: run deploy/install-test-deps.sh", validator.display());
+    let mut files = Vec::new();
+    let mut folders = vec![corpus.clone()];
+    while let Some(folder) = folders.pop() {
+        for entry in std::fs::read_dir(folder).unwrap().map(Result::unwrap) {
+            let path = entry.path();
+            if path.is_dir() {
+                folders.push(path);
+            } else if path.extension().is_some_and(|e| e == "gltf" || e == "glb") {
+                files.push(path);
+            }
+        }
+    }
+    files.sort();
+    assert!(files.len() >= 40, "the corpus has {} files", files.len());
+    let validated = std::process::Command::new("node")
+        .arg(concat!(env!("CARGO_MANIFEST_DIR"), "/tests/gltf/validate.js"))
+        .args(&files)
+        .env("GLTF_VALIDATOR", &validator)
+        .output()
+        .expect("node runs");
+    assert!(validated.status.success(), "{}", String::from_utf8_lossy(&validated.stderr));
+    let verdicts: Vec<Value> = validated.stdout.split(|&b| b == b'\n').filter(|l| !l.is_empty()).map(|l| serde_json::from_slice(l).unwrap()).collect();
+    assert_eq!(verdicts.len(), files.len());
+
+    let (_daemon, base) = serve(&["--scene-dir", corpus.to_str().unwrap()], &[]).await;
+    let client = reqwest::Client::new();
+    let work = tempdir::Dir::new();
+    let (width, height) = (160u32, 120u32);
+    let mut thumbnails = Vec::new();
+    let (mut rendered, mut refused, mut repaired) = (0, 0, 0);
+    for (file, verdict) in files.iter().zip(&verdicts) {
+        let relative = file.strip_prefix(&corpus).unwrap().to_str().unwrap();
+        let required: Vec<&str> = verdict["required"].as_array().unwrap().iter().map(|r| r.as_str().unwrap()).collect();
+        let triangles = verdict["triangles"].as_u64().unwrap();
+        let valid = verdict["errors"] == 0;
+        let job = json!({"scene": {"path": relative, "floor": true}, "method": {"name": "pcss"},
+                         "output": {"width": width, "height": height, "format": "exr"}});
+        let response =
+            client.post(format!("{base}/v1/render")).header("accept", "application/json").json(&job).send().await.unwrap();
+        let status = response.status();
+        let answer: Value = response.json().await.unwrap();
+        if !status.is_success() {
+            assert!(status.is_client_error(), "{relative}: {status} {answer}");
+            let message = answer["error"]["message"].as_str().unwrap();
+            assert_eq!(answer["error"]["field"], "scene", "{relative}: {answer}");
+            assert!(!valid || !required.is_empty() || triangles == 0, "{relative}: the validator passes it, it has {triangles} triangles, yet {answer}");
+            for extension in &required {
+                assert!(message.contains(extension), "{relative}: the refusal does not name {extension}: {message}");
+            }
+            if valid && required.is_empty() {
+                assert!(message.contains("no triangles"), "{relative}: {message}");
+            }
+            refused += 1;
+            continue;
+        }
+        let warnings = answer["warnings"].as_array().unwrap();
+        if !valid {
+            // Rendered despite the validator's errors: only with the repair said.
+            assert!(!warnings.is_empty(), "{relative}: the validator finds {} and penumbra says nothing: {answer}", verdict["codes"]);
+            repaired += 1;
+        } else {
+            assert!(required.is_empty(), "{relative} requires {required:?} and rendered");
+            // The validator counts each mesh once; penumbra draws each node's instance of it.
+            let drawn = answer["timings"]["scene_triangles"].as_u64().unwrap() - 2; // the floor
+            if meshes_instanced_once(file) {
+                assert_eq!(drawn, triangles, "{relative}: triangles");
+            } else {
+                assert!(drawn > triangles, "{relative}: {drawn} triangles drawn, {triangles} in its meshes");
+            }
+            assert_eq!(answer["timings"]["scene_textures"].as_u64().unwrap() > 0, verdict["textures"].as_bool().unwrap(), "{relative}: textures");
+        }
+        let image = client.get(format!("{base}{}", answer["image"].as_str().unwrap())).send().await.unwrap().bytes().await.unwrap();
+        let (_, _, channels) = common::decode_exr(&image);
+        // A cast shadow in view: pixels the scene darkens by half or more (V is 1 where E0 = 0,
+        // so faces turned from the light do not count).
+        let shadowed = (0..(width * height) as usize)
+            .filter(|&i| ["visibility.R", "visibility.G", "visibility.B"].iter().any(|c| channels[*c][i] < 0.5))
+            .count();
+        assert!(shadowed * 200 >= (width * height) as usize, "{relative}: {shadowed} shadowed pixels");
+        thumbnails.push(image::RgbaImage::from_fn(width, height, |x, y| {
+            let i = (y * width + x) as usize;
+            let [r, g, b] = ["R", "G", "B"].map(|c| (channels[c][i].clamp(0.0, 1.0).powf(1.0 / 2.2) * 255.0) as u8);
+            image::Rgba([r, g, b, 255])
+        }));
+        rendered += 1;
+
+        if valid {
+            // The same scene through the client, packed into one GLB and uploaded.
+            let job = json!({"scene": {"path": file, "floor": true}, "method": {"name": "pcss"}, "output": {"width": width, "height": height}});
+            let job_file = work.path().join("job.json");
+            std::fs::write(&job_file, job.to_string()).unwrap();
+            let out = work.path().join("submitted.exr");
+            let args = [job_file.as_os_str(), "--server".as_ref(), base.as_ref(), "--quiet".as_ref(), "-o".as_ref(), out.as_os_str()];
+            let args: Vec<std::ffi::OsString> = args.iter().map(|a| a.to_os_string()).collect();
+            let output = tokio::task::spawn_blocking(move || {
+                std::process::Command::new(env!("CARGO_BIN_EXE_penumbra")).arg("submit").args(args).output().unwrap()
+            })
+            .await
+            .unwrap();
+            assert!(output.status.success(), "{relative} through submit: {}", String::from_utf8_lossy(&output.stderr));
+            let (_, _, submitted) = common::decode_exr(&std::fs::read(&out).unwrap());
+            for channel in ["R", "G", "B", "visibility.R"] {
+                let worst = channels[channel].iter().zip(&submitted[channel]).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+                assert!(worst <= 1e-5, "{relative}: submitted and by-path renders differ by {worst} in {channel}");
+            }
+        }
+    }
+    eprintln!("glTF corpus: {rendered} rendered ({repaired} of them repaired, with warnings), {refused} refused");
+    assert!(rendered >= 20 && refused >= 10 && repaired >= 3, "rendered {rendered}, refused {refused}, repaired {repaired}");
+    // The daemon serves on after all of them.
+    let response = client.post(format!("{base}/v1/render")).json(&small_job("png")).send().await.unwrap();
+    assert_eq!(response.status(), StatusCode::OK);
+
+    let columns = 6;
+    let rows = thumbnails.len().div_ceil(columns) as u32;
+    let mut sheet = image::RgbaImage::from_pixel(columns as u32 * width, rows * height, image::Rgba([255, 255, 255, 255]));
+    for (k, thumbnail) in thumbnails.iter().enumerate() {
+        image::imageops::replace(&mut sheet, thumbnail, (k % columns) as i64 * width as i64, (k / columns) as i64 * height as i64);
+    }
+    sheet.save(std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("gltf-corpus.png")).unwrap();
+}
+
+/// Whether no mesh of a glTF or GLB file is named by two nodes.
+fn meshes_instanced_once(file: &std::path::Path) -> bool {
+    let bytes = std::fs::read(file).unwrap();
+    let json = if bytes.starts_with(b"glTF") {
+        let length = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
+        &bytes[20..20 + length]
+    } else {
+        &bytes[..]
+    };
+    let document: Value = serde_json::from_slice(json).unwrap();
+    let meshes: Vec<u64> = document["nodes"].as_array().into_iter().flatten().filter_map(|n| n["mesh"].as_u64()).collect();
+    meshes.iter().collect::<std::collections::HashSet<_>>().len() == meshes.len()
+}
+
+/// A `.gltf` read by path names its files by URI relative to it (percent-encoded), read from
+/// beside it inside `--scene-dir` only: `..` out of the directory, absolute paths, `file:`,
+/// network URIs and symlinks leading out are refused with a 403 naming the URI, and the same
+/// document uploaded is refused as not self-contained (contract §3).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn relative_uris_are_read_inside_the_scene_directory_only() {
+    let (base, dir) = start().await;
+    let outside = tempdir::Dir::new();
+    let (document, bin) = common::test_gltf();
+    let model = dir.path().join("model");
+    std::fs::create_dir_all(&model).unwrap();
+    std::fs::write(model.join("mesh data.bin"), &bin).unwrap();
+    let secret = outside.path().join("secret.bin");
+    std::fs::write(&secret, &bin).unwrap();
+    std::os::unix::fs::symlink(&secret, model.join("link.bin")).unwrap();
+    let outside_name = outside.path().file_name().unwrap().to_str().unwrap().to_owned();
+    let with_uri = |uri: &str| {
+        let mut document = document.clone();
+        document["buffers"][0]["uri"] = uri.into();
+        serde_json::to_vec(&document).unwrap()
+    };
+    let client = reqwest::Client::new();
+    let render = |name: String| {
+        let client = client.clone();
+        let job = json!({"scene": {"path": format!("model/{name}"), "floor": true}, "output": {"width": 64, "height": 48}});
+        let url = format!("{base}/v1/render");
+        async move { client.post(url).json(&job).send().await.unwrap() }
+    };
+
+    std::fs::write(model.join("ok.gltf"), with_uri("mesh%20data.bin")).unwrap();
+    let response = render("ok.gltf".into()).await;
+    assert_eq!(response.status(), StatusCode::OK);
+
+    let escapes = [
+        format!("../../{outside_name}/secret.bin"),
+        format!("..%2F..%2F{outside_name}%2Fsecret.bin"),
+        secret.display().to_string(),
+        format!("file://{}", secret.display()),
+        "http://127.0.0.1:9/secret.bin".to_owned(),
+        "//127.0.0.1/secret.bin".to_owned(),
+        "link.bin".to_owned(),
+    ];
+    for (k, uri) in escapes.iter().enumerate() {
+        let name = format!("escape-{k}.gltf");
+        std::fs::write(model.join(&name), with_uri(uri)).unwrap();
+        let response = render(name).await;
+        assert_eq!(response.status(), StatusCode::FORBIDDEN, "{uri}");
+        let body: Value = response.json().await.unwrap();
+        assert_eq!((body["error"]["code"].as_str(), body["error"]["field"].as_str()), (Some("path_not_allowed"), Some("scene")), "{uri}");
+        assert!(body["error"]["message"].as_str().unwrap().contains(&format!("`{uri}`")), "{uri}: {body}");
+    }
+
+    let response = client.post(format!("{base}/v1/scenes")).body(with_uri("mesh%20data.bin")).send().await.unwrap();
+    assert_eq!(response.status(), StatusCode::UNPROCESSABLE_ENTITY);
+    let body: Value = response.json().await.unwrap();
+    assert!(body["error"]["message"].as_str().unwrap().contains("self-contained"), "{body}");
 }

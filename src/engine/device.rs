@@ -67,6 +67,7 @@ impl Engine {
         let start = Instant::now();
         let scene = self.scene(state, &job.scene, &mut timings)?;
         timings.scene_triangles = scene.triangles;
+        timings.scene_textures = scene.textures;
         let image_ref = job.light.image.clone().unwrap_or_else(|| scene.defaults.light_image.clone());
         let light_image = self.light_image(state, &image_ref)?;
         let spec = FrameSpec { extra_images: images(job), ..FrameSpec::resolve(job, &scene, light_image, method)? };

@@ -7,7 +7,8 @@ use wgpu::util::DeviceExt;
 
 use super::GpuContext;
 use crate::scene::adjacency::EdgeMesh;
-use crate::scene::{DrawRange, Scene, SceneDefaults};
+use crate::light::AreaLight;
+use crate::scene::{DrawRange, OnFloor, Scene, SceneDefaults};
 
 /// A material's constant part as the G-buffer shader reads it.
 #[repr(C)]
@@ -25,12 +26,15 @@ pub struct GpuScene {
     pub material_bind_groups: Vec<wgpu::BindGroup>,
     pub draws: Vec<DrawRange>,
     pub triangles: u64,
+    pub textures: u64,
     pub object_count: u32,
     pub bounds_min: Vec3,
     pub bounds_max: Vec3,
     pub defaults: SceneDefaults,
     /// `Scene::warnings`: reported with every frame of this scene.
     pub warnings: Vec<String>,
+    /// `Scene::on_floor`: what `shadow_fit_points` frames instead of the whole floor.
+    pub on_floor: Option<OnFloor>,
     /// Bytes uploaded for this scene (buffers and textures).
     pub bytes: u64,
     /// The triangles on the CPU as well, for object-space methods (`wedges`).
@@ -128,11 +132,13 @@ impl GpuScene {
             material_bind_groups,
             draws: scene.draws.clone(),
             triangles: scene.triangle_count(),
+            textures: scene.textures.len() as u64,
             object_count: scene.objects.len() as u32,
             bounds_min: scene.bounds_min,
             bounds_max: scene.bounds_max,
             defaults: scene.defaults.clone(),
             warnings: scene.warnings.clone(),
+            on_floor: scene.on_floor,
             bytes: scene.gpu_bytes(),
             positions: scene.vertices.iter().map(|v| Vec3::from(v.position)).collect(),
             vertex_objects: scene.vertices.iter().map(|v| v.object_id).collect(),
@@ -152,8 +158,37 @@ impl GpuScene {
 
     /// The eight corners of the scene's bounding box.
     pub fn corners(&self) -> [Vec3; 8] {
-        let (a, b) = (self.bounds_min, self.bounds_max);
-        [0, 1, 2, 3, 4, 5, 6, 7]
-            .map(|k| Vec3::new(if k & 1 == 0 { a.x } else { b.x }, if k & 2 == 0 { a.y } else { b.y }, if k & 4 == 0 { a.z } else { b.z }))
+        box_corners(self.bounds_min, self.bounds_max)
     }
+
+    /// The points a shadow map's frustum from `light` must hold (`LightProjection::fit`): the
+    /// scene's bounds, or, on a floor added under the scene (contract §3), what stands on it
+    /// and the part of the floor it can shadow from some point of the light — the corners of
+    /// its bounds cast from the light's corners and centre onto the floor. The floor reaches
+    /// well past the scene; the rest of it is lit whichever way (every method takes a point
+    /// outside the frustum as lit), and framing it all would spread the map's texels thin.
+    /// A light not above everything on the floor gets the whole bounds.
+    pub fn shadow_fit_points(&self, light: &AreaLight) -> Vec<Vec3> {
+        let Some(on_floor) = self.on_floor else { return self.corners().to_vec() };
+        let standing = box_corners(on_floor.bounds_min, on_floor.bounds_max);
+        let half = 0.5 * light.size_m;
+        let light_points = [(-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0), (0.0, 0.0)]
+            .map(|(s, t)| light.center + light.r * (s * half.x) + light.u * (t * half.y));
+        let mut points = standing.to_vec();
+        for from in light_points {
+            for corner in standing {
+                if from.y <= corner.y + 1e-6 * (1.0 + corner.y.abs()) {
+                    return self.corners().to_vec();
+                }
+                let cast = from + (corner - from) * ((from.y - on_floor.height) / (from.y - corner.y));
+                points.push(cast.clamp(self.bounds_min, self.bounds_max));
+            }
+        }
+        points
+    }
+}
+
+/// The eight corners of the box [a, b].
+fn box_corners(a: Vec3, b: Vec3) -> [Vec3; 8] {
+    [0, 1, 2, 3, 4, 5, 6, 7].map(|k| Vec3::new(if k & 1 == 0 { a.x } else { b.x }, if k & 2 == 0 { a.y } else { b.y }, if k & 4 == 0 { a.z } else { b.z }))
 }

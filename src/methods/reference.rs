@@ -112,7 +112,7 @@ impl ShadowMethod for Reference {
         let spec = ctx.spec;
         let resolution = params.get(&RESOLUTION);
         let (samples, strata) = light_samples(&spec.light, &spec.light_image, params.get(&SAMPLES), u64::from(params.get(&SEED)));
-        let corners = ctx.scene.corners();
+        let corners = ctx.scene.shadow_fit_points(&spec.light);
         let slots: Vec<SampleUniforms> = samples
             .iter()
             .map(|sample| {

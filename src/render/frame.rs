@@ -52,14 +52,16 @@ pub struct LightProjection {
 const MAX_LIGHT_HALF_ANGLE_DEG: f32 = 80.0;
 
 impl LightProjection {
-    /// Fits the frustum to the part of the scene's bounding box in front of the light.
-    pub fn fit(light: &AreaLight, corners: &[Vec3; 8]) -> Self {
+    /// Fits the frustum to the part of `points` in front of the light: the corners of the
+    /// scene's bounding box, or what `GpuScene::shadow_fit_points` says must be in view.
+    pub fn fit(light: &AreaLight, points: &[Vec3]) -> Self {
         let tan_max = MAX_LIGHT_HALF_ANGLE_DEG.to_radians().tan();
-        let radius = ((corners[7] - corners[0]) * 0.5).length().max(1e-3);
+        let (lo, hi) = points.iter().fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
+        let radius = ((hi - lo) * 0.5).length().max(1e-3);
         let mut tan_half: f32 = 0.05;
         let mut far: f32 = 0.0;
         let mut min_depth = f32::INFINITY;
-        for p in corners {
+        for p in points {
             let d = *p - light.center;
             let depth = d.dot(light.n);
             far = far.max(depth);

@@ -216,7 +216,7 @@ impl Renderer {
         let gpu = self.gpu.clone();
         let device = &gpu.device;
         let go_on = || if supervisor.cancelled() { Err(cancelled_error()) } else { Ok(()) };
-        let projection = LightProjection::fit(&spec.light, &scene.corners());
+        let projection = LightProjection::fit(&spec.light, &scene.shadow_fit_points(&spec.light));
         self.write_constants(spec, &projection);
         let encoder = || device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("Renderer::encoder") });
         let submit = |encoder: wgpu::CommandEncoder| -> JobResult<()> {

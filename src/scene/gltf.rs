@@ -81,7 +81,19 @@ fn check_glb_container(bytes: &[u8], field: &str) -> JobResult<()> {
 
 fn load_unchecked(bytes: &[u8], limits: &Limits, field: &str, uris: &UriReader<'_>) -> JobResult<Scene> {
     check_glb_container(bytes, field)?;
-    let gltf = gltf::Gltf::from_slice(bytes).map_err(|e| invalid(field, format!("not a valid glTF 2.0 document: {e}")))?;
+    let not_valid = |e: gltf::Error| invalid(field, format!("not a valid glTF 2.0 document: {e}"));
+    let parsed = gltf::Gltf::from_slice_without_validation(bytes)
+        .or_else(|error| with_scene_nodes(bytes).map_or(Err(error), |patched| gltf::Gltf::from_slice_without_validation(&patched)));
+    let gltf::Gltf { document, blob } = parsed.map_err(not_valid)?;
+    // Checked before the document's indices: a required extension such as Draco changes
+    // what they mean, and the gltf crate's validation would report its symptoms instead.
+    if let Some(name) = document.extensions_required().next() {
+        return Err(invalid(
+            field,
+            format!("the document requires extension `{name}`, which penumbra does not support (it reads plain glTF 2.0 meshes)"),
+        ));
+    }
+    let gltf = gltf::Gltf { document: gltf::Document::from_json(document.into_json()).map_err(not_valid)?, blob };
     let buffers = gltf
         .document
         .buffers()
@@ -259,6 +271,21 @@ fn load_unchecked(bytes: &[u8], limits: &Limits, field: &str, uris: &UriReader<'
     Ok(builder.finish(fitted_defaults))
 }
 
+/// The gltf crate requires `nodes` in every scene, which glTF 2.0 makes optional (§5.29, a
+/// scene without nodes is valid and empty): a JSON document whose scenes leave it out,
+/// with empty lists in their place. `None` if nothing was left out.
+fn with_scene_nodes(bytes: &[u8]) -> Option<Vec<u8>> {
+    let mut document: serde_json::Value = serde_json::from_slice(bytes).ok()?;
+    let mut patched = false;
+    for scene in document.get_mut("scenes")?.as_array_mut()?.iter_mut().filter_map(serde_json::Value::as_object_mut) {
+        if !scene.contains_key("nodes") {
+            scene.insert("nodes".into(), serde_json::json!([]));
+            patched = true;
+        }
+    }
+    patched.then(|| serde_json::to_vec(&document).ok()).flatten()
+}
+
 /// Records in the scene's warnings what the document holds that penumbra does not draw
 /// (contract §3: listed, never dropped silently). Extensions a document *requires* and
 /// penumbra lacks never get here: the gltf crate refuses them.
@@ -430,6 +457,69 @@ fn decode_texture(image: &gltf::Image, buffers: &[Vec<u8>], uris: &UriReader<'_>
     let decoded = reader.decode().map_err(|e| invalid(field, format!("cannot decode texture: {e}")))?;
     let rgba = decoded.into_rgba8();
     Ok(TextureData { width: rgba.width(), height: rgba.height(), rgba8: rgba.into_raw() })
+}
+
+/// Packs a `.gltf` document read from `folder`, and the files its relative URIs name, into one
+/// self-contained GLB (contract §3: what a client uploads). Every buffer becomes part of the
+/// BIN chunk, its views moved by where it landed; every image named by a file becomes a
+/// buffer view of it. URIs follow the loader's rule for a document from disk
+/// (`Resources::Beside`, unconfined: the client reads its user's files) and its budget. A GLB,
+/// or a document that names no file, is returned as it is.
+pub fn pack(bytes: &[u8], folder: &Path, limits: &Limits, field: &str) -> JobResult<Vec<u8>> {
+    use serde_json::Value;
+    let names_a_file = |item: &Value| item.get("uri").and_then(Value::as_str).is_some_and(|uri| !uri.starts_with("data:"));
+    if bytes.starts_with(b"glTF") {
+        return Ok(bytes.to_vec());
+    }
+    let mut document: Value = serde_json::from_slice(bytes).map_err(|e| invalid(field, format!("not a glTF 2.0 document: {e}")))?;
+    let items = |document: &Value, key: &str| document.get(key).and_then(Value::as_array).cloned().unwrap_or_default();
+    if !items(&document, "buffers").iter().chain(&items(&document, "images")).any(names_a_file) {
+        return Ok(bytes.to_vec());
+    }
+    let uris = UriReader { resources: Resources::Beside { folder, confined_to: None }, limits, field, read: std::cell::Cell::new(0) };
+    let mut bin = Vec::new();
+    let mut starts = Vec::new();
+    for (index, buffer) in items(&document, "buffers").iter().enumerate() {
+        let length = buffer.get("byteLength").and_then(Value::as_u64).ok_or_else(|| invalid(field, format!("buffer {index} has no byteLength")))?;
+        let uri = buffer.get("uri").and_then(Value::as_str).ok_or_else(|| invalid(field, format!("buffer {index} of a .gltf has no uri")))?;
+        let data = uris.read(uri)?;
+        let data = data.get(..length as usize).ok_or_else(|| invalid(field, format!("buffer {index} is shorter than its declared length")))?;
+        starts.push(bin.len() as u64);
+        bin.extend_from_slice(data);
+        // Views keep their alignment (at most 4 bytes per component) if every buffer starts on 4.
+        bin.resize(bin.len().next_multiple_of(4), 0);
+    }
+    let mut views = items(&document, "bufferViews");
+    for (index, view) in views.iter_mut().enumerate() {
+        let buffer = view.get("buffer").and_then(Value::as_u64).and_then(|b| starts.get(b as usize));
+        let start = *buffer.ok_or_else(|| invalid(field, format!("buffer view {index} names no buffer of the document")))?;
+        let offset = view.get("byteOffset").and_then(Value::as_u64).unwrap_or(0);
+        view["buffer"] = 0.into();
+        view["byteOffset"] = (start + offset).into();
+    }
+    let mut images = items(&document, "images");
+    for image in images.iter_mut().filter(|image| names_a_file(image)) {
+        let uri = image["uri"].as_str().unwrap_or_default().to_owned();
+        let data = uris.read(&uri)?;
+        let mime = match data.as_slice() {
+            [0x89, b'P', b'N', b'G', ..] => "image/png",
+            [0xFF, 0xD8, ..] => "image/jpeg",
+            _ => return Err(invalid(field, format!("image `{uri}` is neither PNG nor JPEG (glTF 2.0 §3.8.2)"))),
+        };
+        views.push(serde_json::json!({"buffer": 0, "byteOffset": bin.len(), "byteLength": data.len()}));
+        bin.extend_from_slice(&data);
+        bin.resize(bin.len().next_multiple_of(4), 0);
+        let object = image.as_object_mut().expect("an image with a uri is an object");
+        object.remove("uri");
+        object.insert("bufferView".into(), (views.len() - 1).into());
+        object.insert("mimeType".into(), mime.into());
+    }
+    document["buffers"] = serde_json::json!([{"byteLength": bin.len()}]);
+    document["bufferViews"] = views.into();
+    if !images.is_empty() {
+        document["images"] = images.into();
+    }
+    Ok(glb(&document, &bin))
 }
 
 /// Packs a glTF document and its binary buffer into one GLB file (glTF 2.0 §4.4: a 12-byte
@@ -624,6 +714,36 @@ mod tests {
         assert!(error.message.contains("`missing.bin`"), "{}", error.message);
         let small = Limits { max_body_bytes: files.bin.len() - 1, ..Limits::default() };
         assert_eq!(files.load("mesh%20data.bin", true, &small).unwrap_err().code, ErrorCode::LimitExceeded);
+    }
+
+    /// What `penumbra submit` uploads: the document and its files as one GLB, which loads
+    /// alone to the same scene; an image file becomes a view of the BIN chunk.
+    #[test]
+    fn a_multi_file_document_packs_into_one_self_contained_glb() {
+        let files = MultiFile::new("pack");
+        let mut png = Vec::new();
+        image::RgbaImage::from_pixel(2, 2, image::Rgba([200, 100, 50, 255]))
+            .write_to(&mut Cursor::new(&mut png), image::ImageFormat::Png)
+            .unwrap();
+        std::fs::write(files.root.join("sub/tex ture.png"), &png).unwrap();
+        let mut document: serde_json::Value = serde_json::from_slice(&files.document("mesh%20data.bin")).unwrap();
+        document["images"] = serde_json::json!([{"uri": "sub/tex%20ture.png"}]);
+        let bytes = serde_json::to_vec(&document).unwrap();
+
+        let packed = pack(&bytes, &files.root, &Limits::default(), "scene").unwrap();
+        let scene = load(&packed, &Limits::default(), "scene").expect("self-contained");
+        assert_eq!(scene.indices.len(), 3 * 2 * 4 * 4);
+        let glb = gltf::Gltf::from_slice(&packed).unwrap();
+        let image = glb.document.images().next().unwrap();
+        let gltf::image::Source::View { view, mime_type } = image.source() else { panic!("the image is still a file") };
+        assert_eq!(mime_type, "image/png");
+        let blob = glb.blob.as_deref().unwrap();
+        assert_eq!(&blob[view.offset()..view.offset() + view.length()], png.as_slice());
+        // A GLB, or a document naming no file, is left as it is; a missing file is named.
+        let glb_bytes = height_field_glb(3, 1);
+        assert_eq!(pack(&glb_bytes, &files.root, &Limits::default(), "scene").unwrap(), glb_bytes);
+        let error = pack(&files.document("gone.bin"), &files.root, &Limits::default(), "scene").unwrap_err();
+        assert!(error.message.contains("`gone.bin`"), "{}", error.message);
     }
 
     #[test]

@@ -77,6 +77,16 @@ pub struct Scene {
     /// What penumbra left out of the file or repaired in it, for the client to read in the
     /// job's answer (contract §3: never silently).
     pub warnings: Vec<String>,
+    /// With a floor (`with_floor`): the bounds of what stands on it, and the floor's height.
+    pub on_floor: Option<OnFloor>,
+}
+
+/// What stands on a floor added under a scene: only it casts shadows on the floor.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OnFloor {
+    pub bounds_min: Vec3,
+    pub bounds_max: Vec3,
+    pub height: f32,
 }
 
 impl Scene {
@@ -118,6 +128,7 @@ impl Scene {
         out.indices.extend([0, 1, 2, 0, 2, 3].map(|k| base + k));
         out.bounds_min = min.min(Vec3::new(x0, y, z0));
         out.bounds_max = max.max(Vec3::new(x1, y, z1));
+        out.on_floor = Some(OnFloor { bounds_min: min, bounds_max: max, height: y });
         out
     }
 
@@ -288,6 +299,7 @@ impl SceneBuilder {
             bounds_max,
             defaults: defaults(bounds_min, bounds_max),
             warnings: self.warnings,
+            on_floor: None,
         }
     }
 }
@@ -295,9 +307,10 @@ impl SceneBuilder {
 /// The view and light a scene from a file gets where a job names none (contract §3), fitted
 /// to its bounds — centre c, bounding radius r — so that the scene and the shadow it casts on
 /// a floor under it (`Scene::with_floor`) are both in view:
-/// - the light, a 0.5 r square, sits 3 r from c towards (0.5, 1, 0.6) — in front, to the
-///   right and above, 38° off the vertical — and faces c: the faces the camera sees are lit,
-///   and the shadow falls behind and to the left;
+/// - the light, a 0.5 r square, sits 3 r from c towards (0.8, 1, 0.35) — above, to the right
+///   and a little in front, 41° off the vertical — and faces c: the top and the front the
+///   camera sees are lit, and the shadow falls to the left and a little behind, beside the
+///   object as the camera sees it rather than hidden behind it;
 /// - the camera looks from the front and above, along (0, 0.8, 1.6), at the centre of the
 ///   bounds joined with the shadow's footprint (the top corners of the bounds cast from the
 ///   light's centre onto the bounds' lowest height), from where the sphere around both fills
@@ -305,7 +318,7 @@ impl SceneBuilder {
 pub fn fitted_defaults(min: Vec3, max: Vec3) -> SceneDefaults {
     let center = (min + max) * 0.5;
     let radius = ((max - min) * 0.5).length().max(1e-3);
-    let towards_light = Vec3::new(0.5, 1.0, 0.6).normalize();
+    let towards_light = Vec3::new(0.8, 1.0, 0.35).normalize();
     let light_center = center + towards_light * 3.0 * radius;
     let light_direction = -towards_light;
     // The image's up: the light's side away from the camera, kept square to its direction.
@@ -315,7 +328,7 @@ pub fn fitted_defaults(min: Vec3, max: Vec3) -> SceneDefaults {
     let (mut lo, mut hi) = (min, max);
     for corner in [(min.x, min.z), (min.x, max.z), (max.x, min.z), (max.x, max.z)] {
         let top = Vec3::new(corner.0, max.y, corner.1);
-        // The light's centre is above every top corner (3 r · 0.79 > r), so the ray reaches
+        // The light's centre is above every top corner (3 r · 0.75 > r), so the ray reaches
         // the floor's height beyond the corner.
         let t = (light_center.y - min.y) / (light_center.y - top.y).max(1e-6 * radius);
         let shadow = light_center + (top - light_center) * t;
@@ -336,7 +349,7 @@ pub fn fitted_defaults(min: Vec3, max: Vec3) -> SceneDefaults {
         light_up,
         light_size_m: Vec2::splat(0.5 * radius),
         // Radiance; the light's solid angle from c, A/d² = 0.25/9, is scale-free, so this
-        // gives a floor under the scene an irradiance near 2.
+        // gives a floor under the scene an irradiance near 1.5 (2 × cos 41°).
         light_intensity: 72.0,
         light_image: AssetRef::builtin("white"),
     }
