@@ -1664,6 +1664,16 @@ async fn relative_uris_are_read_inside_the_scene_directory_only() {
     std::fs::write(model.join("ok.gltf"), with_uri("mesh%20data.bin")).unwrap();
     let response = render("ok.gltf".into()).await;
     assert_eq!(response.status(), StatusCode::OK);
+    // Cached while its files stay as they are; a changed .bin is a new scene.
+    let cached = || async {
+        let job = json!({"scene": {"path": "model/ok.gltf", "floor": true}, "output": {"width": 64, "height": 48}});
+        let response = client.post(format!("{base}/v1/render")).header("accept", "application/json").json(&job).send().await.unwrap();
+        response.json::<Value>().await.unwrap()["timings"]["scene_cached"].as_bool().unwrap()
+    };
+    assert!(cached().await);
+    std::fs::write(model.join("mesh data.bin"), [&bin[..], &[0u8; 4]].concat()).unwrap();
+    assert!(!cached().await, "the .bin changed");
+    assert!(cached().await);
 
     let escapes = [
         format!("../../{outside_name}/secret.bin"),

@@ -114,9 +114,17 @@ impl Engine {
             AssetRef::Path(path) => {
                 let resolved = self.resolve_path(path, &format!("{field}.path"))?;
                 let meta = std::fs::metadata(&resolved).map_err(|_| not_readable(&format!("{field}.path")))?;
-                let modified =
-                    meta.modified().ok().and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok()).map(|d| d.as_nanos()).unwrap_or(0);
-                Ok(format!("path:{}:{}:{}", resolved.display(), meta.len(), modified))
+                let mut key = format!("path:{}:{}", resolved.display(), stamp(&meta));
+                // A .gltf's files change without it: each one it names is part of the key.
+                if kind == Kind::Scene && resolved.extension().is_some_and(|e| e.eq_ignore_ascii_case("gltf")) {
+                    let bytes = std::fs::read(&resolved).map_err(|_| not_readable(&format!("{field}.path")))?;
+                    let folder = resolved.parent().unwrap_or(Path::new("/"));
+                    for file in scene::gltf::files_named(&bytes, folder) {
+                        let stamp = std::fs::metadata(&file).map_or_else(|_| "missing".to_owned(), |meta| stamp(&meta));
+                        key.push_str(&format!("|{}:{stamp}", file.display()));
+                    }
+                }
+                Ok(key)
             }
         }
     }
@@ -150,6 +158,12 @@ impl Engine {
         let bytes = std::fs::read(&resolved).map_err(|_| not_readable(field))?;
         Ok((resolved, bytes))
     }
+}
+
+/// A file's length and modification time: they change when its content does.
+fn stamp(meta: &std::fs::Metadata) -> String {
+    let modified = meta.modified().ok().and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok()).map_or(0, |d| d.as_nanos());
+    format!("{}:{modified}", meta.len())
 }
 
 fn not_readable(field: &str) -> JobError {

@@ -329,6 +329,34 @@ fn warn_of_what_is_ignored(document: &gltf::Document, builder: &mut SceneBuilder
     }
 }
 
+/// The files a glTF JSON document names by relative URI, beside it in `folder` (`..` applied
+/// as written, nothing opened): what its scene also depends on, for cache keys. URIs the
+/// loader would refuse are left out (the load reports them).
+pub fn files_named(bytes: &[u8], folder: &Path) -> Vec<PathBuf> {
+    #[derive(serde::Deserialize)]
+    struct Named<'a> {
+        #[serde(borrow, default)]
+        uri: Option<std::borrow::Cow<'a, str>>,
+    }
+    #[derive(serde::Deserialize)]
+    struct Document<'a> {
+        #[serde(borrow, default)]
+        buffers: Vec<Named<'a>>,
+        #[serde(borrow, default)]
+        images: Vec<Named<'a>>,
+    }
+    let Ok(document) = serde_json::from_slice::<Document>(bytes) else { return Vec::new() };
+    document
+        .buffers
+        .iter()
+        .chain(&document.images)
+        .filter_map(|named| named.uri.as_deref())
+        .filter(|uri| !uri.starts_with("data:"))
+        .filter_map(|uri| relative_uri_path(uri).ok())
+        .filter_map(|relative| lexical_join(folder, &relative))
+        .collect()
+}
+
 /// Reads what a document's URIs name, as its `Resources` allow, within one budget for the
 /// whole document: a scene from disk may hold no more than an upload may (`max_body_bytes`).
 struct UriReader<'a> {
