@@ -1698,4 +1698,13 @@ async fn relative_uris_are_read_inside_the_scene_directory_only() {
     assert_eq!(response.status(), StatusCode::UNPROCESSABLE_ENTITY);
     let body: Value = response.json().await.unwrap();
     assert!(body["error"]["message"].as_str().unwrap().contains("self-contained"), "{body}");
+    // Packed into one GLB it uploads, and the receipt says what penumbra will ignore.
+    let mut document: Value = serde_json::from_slice(&with_uri("mesh%20data.bin")).unwrap();
+    document["extensionsUsed"] = json!(["KHR_texture_transform"]);
+    let packed =
+        penumbra::scene::gltf::pack(&serde_json::to_vec(&document).unwrap(), &model, &Limits::default(), "scene").unwrap();
+    let response = client.post(format!("{base}/v1/scenes")).body(packed).send().await.unwrap();
+    assert_eq!(response.status(), StatusCode::CREATED);
+    let receipt: Value = response.json().await.unwrap();
+    assert!(receipt["warnings"][0].as_str().unwrap().contains("KHR_texture_transform"), "{receipt}");
 }

@@ -14,12 +14,21 @@ use crate::scene;
 use crate::uploads::{content_id, Asset, Kind, UploadStats, UploadStore};
 
 /// What an upload answers: the asset's id, whether this upload stored it (false: the same
-/// bytes were already there), and what it costs the cache.
+/// bytes were already there), what it costs the cache, and a scene's warnings (what penumbra
+/// will leave out of it or repaired: `Scene::warnings`).
 #[derive(Debug, Clone, Serialize)]
 pub struct UploadReceipt {
     pub id: String,
     pub created: bool,
     pub cache_bytes: u64,
+    pub warnings: Vec<String>,
+}
+
+fn warnings_of(asset: &Asset) -> Vec<String> {
+    match asset {
+        Asset::Scene(scene) => scene.warnings.clone(),
+        Asset::Light(_) => Vec::new(),
+    }
 }
 
 impl Engine {
@@ -38,19 +47,21 @@ impl Engine {
     pub fn upload(&self, kind: Kind, bytes: &[u8]) -> JobResult<UploadReceipt> {
         let id = content_id(bytes);
         if self.lock_uploads().touch(kind, &id) {
-            return Ok(UploadReceipt { id, created: false, cache_bytes: 0 });
+            let warnings = self.lock_uploads().get(kind, &id).map(|asset| warnings_of(&asset)).unwrap_or_default();
+            return Ok(UploadReceipt { id, created: false, cache_bytes: 0, warnings });
         }
         let asset = match kind {
             Kind::Scene => Asset::Scene(Arc::new(scene::gltf::load(bytes, &self.limits, "body")?)),
             Kind::Light => Asset::Light(Arc::new(LightImage::decode(bytes, self.limits.max_light_image_dim, "body")?)),
         };
+        let warnings = warnings_of(&asset);
         if self.lock_uploads().touch(asset.kind(), &id) {
-            return Ok(UploadReceipt { id, created: false, cache_bytes: 0 });
+            return Ok(UploadReceipt { id, created: false, cache_bytes: 0, warnings });
         }
         let cache_bytes = asset.cost();
         self.lock_uploads().insert(id.clone(), asset)?;
         self.prune_if_free();
-        Ok(UploadReceipt { id, created: true, cache_bytes })
+        Ok(UploadReceipt { id, created: true, cache_bytes, warnings })
     }
 
     /// Whether the server holds the upload `id` of this kind (`HEAD /v1/scenes/{id}`).
