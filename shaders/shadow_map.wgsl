@@ -35,3 +35,9 @@ struct FsOut {
 fn fs_main(in: VsOut) -> FsOut {
     return FsOut(in.depth, in.object_id, vec4<f32>(in.world, 1.0));
 }
+
+// Depth alone, for methods that read nothing else of the shadow map.
+@fragment
+fn fs_depth(in: VsOut) -> @location(0) f32 {
+    return in.depth;
+}

@@ -20,6 +20,10 @@ struct HardUniforms {
 }
 
 impl ShadowMethod for Hard {
+    fn reads_light_surfaces(&self) -> bool {
+        false
+    }
+
     fn name(&self) -> &'static str {
         "hard"
     }

@@ -95,6 +95,10 @@ impl SplitMix64 {
 }
 
 impl ShadowMethod for Reference {
+    fn reads_light_surfaces(&self) -> bool {
+        false
+    }
+
     fn name(&self) -> &'static str {
         "reference"
     }
@@ -256,6 +260,7 @@ impl Reference {
         let depth = ctx.pipelines.render(PipelineKey::new("reference.sample_depth"), || {
             let sample_layout = bgl("Reference::sample_layout", &[layout::uniform_dynamic(0)]);
             let pipeline = ScenePipeline {
+                fragment: "fs_main",
                 label: "Reference::sample_depth",
                 shader: "methods/reference/sample_depth.wgsl",
                 bind_group_layouts: &[&sample_layout],

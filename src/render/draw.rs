@@ -9,11 +9,13 @@ use crate::scene::Vertex;
 /// The depth buffer of every scene-drawing pass.
 pub const DEPTH_BUFFER_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 
-/// A pipeline that draws the scene: `shader`'s `vs_main` and `fs_main`, these bind groups,
+/// A pipeline that draws the scene: `shader`'s `vs_main` and its `fragment` entry, these bind groups,
 /// these colour targets, and the depth test of `depth_state`.
 pub struct ScenePipeline<'a> {
     pub label: &'static str,
     pub shader: &'static str,
+    /// The fragment entry point (`fs_main` unless a shader has several).
+    pub fragment: &'static str,
     pub bind_group_layouts: &'a [&'a wgpu::BindGroupLayout],
     pub targets: &'a [wgpu::TextureFormat],
 }
@@ -42,7 +44,7 @@ impl ScenePipeline<'_> {
             multisample: Default::default(),
             fragment: Some(wgpu::FragmentState {
                 module: &module,
-                entry_point: Some("fs_main"),
+                entry_point: Some(self.fragment),
                 compilation_options: Default::default(),
                 targets: &targets,
             }),

@@ -227,7 +227,7 @@ impl Renderer {
         // Shadow map from the light centre.
         let start = Instant::now();
         let mut enc = encoder();
-        self.record_shadow_map(&mut enc, scene, targets);
+        self.record_shadow_map(&mut enc, scene, targets, spec.method.reads_light_surfaces());
         submit(enc)?;
         let start = timings.phase("shadow_map", start);
         go_on()?;

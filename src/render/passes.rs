@@ -39,24 +39,34 @@ impl Renderer {
         })
     }
 
-    pub(super) fn record_shadow_map(&mut self, encoder: &mut wgpu::CommandEncoder, scene: &GpuScene, targets: &FrameTargets) {
+    /// The shadow map from the light's centre: depth, and with `surfaces` the object ids and
+    /// world positions too (`ShadowMethod::reads_light_surfaces`).
+    pub(super) fn record_shadow_map(
+        &mut self,
+        encoder: &mut wgpu::CommandEncoder,
+        scene: &GpuScene,
+        targets: &FrameTargets,
+        surfaces: bool,
+    ) {
         let device = &self.gpu.device;
         let draw_layout = &self.layouts.draw;
-        let pipeline = self.pipelines.render(PipelineKey::new("shadow_map"), || {
-            let pipeline = ScenePipeline {
-                label: "ShadowMap::pipeline",
-                shader: "shadow_map.wgsl",
-                bind_group_layouts: &[draw_layout],
-                targets: &[SHADOW_DEPTH_FORMAT, ID_FORMAT, POSITION_FORMAT],
+        let key = PipelineKey { name: "shadow_map", variant: u32::from(surfaces) };
+        let pipeline = self.pipelines.render(key, || {
+            let (fragment, targets): (_, &[wgpu::TextureFormat]) = if surfaces {
+                ("fs_main", &[SHADOW_DEPTH_FORMAT, ID_FORMAT, POSITION_FORMAT])
+            } else {
+                ("fs_depth", &[SHADOW_DEPTH_FORMAT])
             };
+            let pipeline = ScenePipeline { label: "ShadowMap::pipeline", shader: "shadow_map.wgsl", fragment, bind_group_layouts: &[draw_layout], targets };
             pipeline.build(device)
         });
         let bind_group = self.draw_bind_group(scene);
-        let colors = [
+        let all = [
             Some(clear_attachment(&targets.shadow_depth.view, f64::from(f32::MAX))),
             Some(clear_attachment(&targets.shadow_id.view, f64::from(u32::MAX))),
             Some(clear_attachment(&targets.shadow_position.view, 0.0)),
         ];
+        let colors = if surfaces { &all[..] } else { &all[..1] };
         let timestamps = self.timer.render_scope("shadow_map");
         let mut pass = begin_scene_pass(
             encoder,
@@ -75,6 +85,7 @@ impl Renderer {
         let (draw_layout, material_layout) = (&self.layouts.draw, &self.layouts.material);
         let pipeline = self.pipelines.render(PipelineKey::new("gbuffer"), || {
             let pipeline = ScenePipeline {
+                fragment: "fs_main",
                 label: "GBuffer::pipeline",
                 shader: "gbuffer.wgsl",
                 bind_group_layouts: &[draw_layout, material_layout],

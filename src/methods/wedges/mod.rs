@@ -136,6 +136,10 @@ struct Uniforms {
 }
 
 impl ShadowMethod for Wedges {
+    fn reads_light_surfaces(&self) -> bool {
+        false
+    }
+
     fn name(&self) -> &'static str {
         "wedges"
     }
