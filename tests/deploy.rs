@@ -727,6 +727,22 @@ fn a_full_data_disk_refuses_new_jobs_loses_none_and_recovers_without_a_restart()
     let _daemon = daemon(port, &["--no-warm-up", "--data-dir", disk.0.to_str().unwrap(), "--min-free-bytes", "1048576"]);
     wait_ready(port);
     let small = r#"{"scene": {"builtin": "torus"}, "output": {"width": 256, "height": 192}}"#;
+    // Slow enough (several seconds alone, far more beside the other suites) that it cannot
+    // finish before the disk is full again, whatever the machine's load.
+    let slow = r#"{"scene": {"builtin": "occluder"}, "method": {"name": "reference", "samples": 4096, "resolution": 512}, "output": {"width": 128, "height": 96}}"#;
+    let submit_running = |job: &str| {
+        let (status, body) = http("POST", &format!("{base}/v1/jobs"), Some(job)).unwrap();
+        assert_eq!(status, 202, "{}", String::from_utf8_lossy(&body));
+        let id = json(&body)["id"].as_str().unwrap().to_owned();
+        let started = wait_until(Duration::from_secs(60), || {
+            http("GET", &format!("{base}/v1/jobs/{id}"), None).is_some_and(|(_, b)| json(&b)["status"] == "running")
+        });
+        assert!(started.is_some(), "the slow job never started");
+        id
+    };
+    // The device busy with a slow job, so that the burst below queues — and its promises
+    // fill the disk — however fast the machine renders the small jobs.
+    let blocker = submit_running(slow);
     let (mut accepted, mut refused, mut free_when_refused) = (Vec::new(), 0, u64::MAX);
     for _ in 0..40 {
         let (status, body) = http("POST", &format!("{base}/v1/jobs"), Some(small)).unwrap();
@@ -743,6 +759,7 @@ fn a_full_data_disk_refuses_new_jobs_loses_none_and_recovers_without_a_restart()
     eprintln!("full disk: {} accepted, {refused} refused with ≥ {free_when_refused} bytes free", accepted.len());
     assert!(!accepted.is_empty() && refused > 0, "{} accepted, {refused} refused", accepted.len());
     assert!(free_when_refused >= 512 << 10, "refused only when the disk was nearly full ({free_when_refused} bytes free)");
+    assert_eq!(http("DELETE", &format!("{base}/v1/jobs/{blocker}"), None).map(|(s, _)| s), Some(202), "cancelling the blocker");
     for id in &accepted {
         assert_eq!(finished_record(&base, id, Duration::from_secs(120))["status"], "succeeded", "job {id}");
         let (status, image) = http("GET", &format!("{base}/v1/jobs/{id}/image"), None).unwrap();
@@ -750,16 +767,7 @@ fn a_full_data_disk_refuses_new_jobs_loses_none_and_recovers_without_a_restart()
     }
 
     // Another tenant fills the disk while a job renders.
-    // Slow enough (several seconds alone, far more beside the other suites) that it cannot
-    // finish before the disk is full again, whatever the machine's load.
-    let slow = r#"{"scene": {"builtin": "occluder"}, "method": {"name": "reference", "samples": 4096, "resolution": 512}, "output": {"width": 128, "height": 96}}"#;
-    let (status, body) = http("POST", &format!("{base}/v1/jobs"), Some(slow)).unwrap();
-    assert_eq!(status, 202, "{}", String::from_utf8_lossy(&body));
-    let running = json(&body)["id"].as_str().unwrap().to_owned();
-    let started = wait_until(Duration::from_secs(60), || {
-        http("GET", &format!("{base}/v1/jobs/{running}"), None).is_some_and(|(_, b)| json(&b)["status"] == "running")
-    });
-    assert!(started.is_some(), "the slow job never started");
+    let running = submit_running(slow);
     disk.fill("ballast");
     let full =
         || http("GET", &format!("{base}/readyz"), None).is_some_and(|(s, b)| s == 503 && json(&b)["status"] == "insufficient storage");
