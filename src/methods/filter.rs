@@ -25,6 +25,7 @@ use crate::error::JobResult;
 use crate::gpu::layout;
 use crate::gpu::pool::{DerivedKey, PipelineKey};
 use crate::light::LightImage;
+use crate::render::PixelListBuffers;
 
 /// Parameters both filter methods take, with the same meaning.
 const SEARCH_TAPS: Param<u32> = Param::integer("search_taps", 8, 1, 16, "blocker-search taps per side of the search region");
@@ -137,12 +138,7 @@ pub(super) fn run(
     let side = ctx.spec.shadow_resolution;
     let map_depth = buffer("Filter::map_depth", 4 * u64::from(side).pow(2), wgpu::BufferUsages::empty());
     let pixels = u64::from(ctx.width) * u64::from(ctx.height);
-    let listed = buffer("Filter::listed", 4 * (1 + pixels), wgpu::BufferUsages::COPY_DST);
-    let groups = buffer("Filter::listed_groups", 12, wgpu::BufferUsages::INDIRECT);
-    // The last dispatch reads its size from `groups`, which may then not be bound for
-    // writing: it gets a stand-in.
-    let stand_in = buffer("Filter::listed_groups_stand_in", 12, wgpu::BufferUsages::empty());
-    ctx.encoder.clear_buffer(&listed, 0, Some(4));
+    let listed = PixelListBuffers::new(device, ctx.encoder, "Filter", pixels);
     let uniform_buffer = ctx.uniforms("Filter::uniforms", &uniforms);
     let counters = ctx.counters("Filter::counters", 8);
     let bind = |pipeline: &wgpu::ComputePipeline, groups: &wgpu::Buffer| {
@@ -154,14 +150,14 @@ pub(super) fn run(
                 uniform_buffer.as_entire_binding(),
                 light_regions.as_entire_binding(),
                 counters.as_entire_binding(),
-                listed.as_entire_binding(),
+                listed.list.as_entire_binding(),
                 groups.as_entire_binding(),
                 map_depth.as_entire_binding(),
             ],
         )
     };
     let (build_group, classify_group, size_group, filter_group) =
-        (bind(&build, &groups), bind(&classify, &groups), bind(&size, &groups), bind(&filter, &stand_in));
+        (bind(&build, &listed.groups), bind(&classify, &listed.groups), bind(&size, &listed.groups), bind(&filter, &listed.stand_in));
     let (gx, gy) = ctx.dispatch_size();
     {
         let mut pass = ctx
@@ -179,7 +175,7 @@ pub(super) fn run(
         pass.dispatch_workgroups(1, 1, 1);
         pass.set_pipeline(&filter);
         pass.set_bind_group(1, &filter_group, &[]);
-        pass.dispatch_workgroups_indirect(&groups, 0);
+        pass.dispatch_workgroups_indirect(&listed.groups, 0);
     }
     let c = ctx.read_counters(&counters)?;
     Ok(FilterCounts { levels: [c[0], c[1], c[2]], forced_by_light: c[3], filtered: c[4], covered: c[5] })

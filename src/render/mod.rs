@@ -8,6 +8,7 @@ mod draw;
 pub mod frame;
 pub mod method;
 mod passes;
+mod pixel_list;
 mod targets;
 
 use std::sync::Arc;
@@ -29,6 +30,7 @@ use crate::timing::Timings;
 pub use draw::{vertex_layout, ScenePipeline, DEPTH_BUFFER_FORMAT};
 pub use frame::{Camera, ExtraImages, FrameSpec, LightProjection};
 pub use passes::{screen_compute_entry, screen_compute_pipeline, E0Mode};
+pub use pixel_list::PixelListBuffers;
 use targets::{FrameTargets, FLOAT_TARGET};
 
 /// The per-frame constants, laid out as `Frame` in `shaders/common/frame.wgsl`.

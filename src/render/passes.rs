@@ -6,7 +6,7 @@ use std::sync::Arc;
 
 use super::draw::{begin_scene_pass, clear_attachment, ScenePipeline};
 use super::targets::{FrameTargets, ALBEDO_FORMAT, ID_FORMAT, NORMAL_FORMAT, POSITION_FORMAT, SHADOW_DEPTH_FORMAT};
-use super::{FrameInputs, FrameSpec, Renderer};
+use super::{FrameInputs, FrameSpec, PixelListBuffers, Renderer};
 use crate::gpu::layout;
 use crate::gpu::pool::PipelineKey;
 use crate::gpu::scene::GpuScene;
@@ -141,13 +141,8 @@ impl Renderer {
         };
         let records = buffer("E0::corners", u64::from(corners * rows) * E0_CORNER_BYTES, wgpu::BufferUsages::empty());
         let errors = buffer("E0::block_errors", u64::from(corners.max(2) - 1) * u64::from(rows.max(2) - 1) * 16, wgpu::BufferUsages::empty());
-        // The count, then the listed pixels (at most every pixel).
-        let fallback = buffer("E0::fallback", 4 * (1 + pixels.max(1)), wgpu::BufferUsages::COPY_DST);
-        let fallback_groups = buffer("E0::fallback_groups", 12, wgpu::BufferUsages::INDIRECT);
-        encoder.clear_buffer(&fallback, 0, Some(4));
-        // The last dispatch reads its size from `fallback_groups`, which may then not be bound
-        // for writing: it gets a stand-in.
-        let stand_in = buffer("E0::fallback_groups_stand_in", 12, wgpu::BufferUsages::empty());
+        // The pixels the interpolation refuses (at most every pixel).
+        let fallback = PixelListBuffers::new(device, encoder, "E0", pixels);
         let bind = |groups: &wgpu::Buffer| {
             device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("E0::outputs"),
@@ -156,12 +151,12 @@ impl Renderer {
                     wgpu::BindingResource::TextureView(&targets.e0.view),
                     records.as_entire_binding(),
                     errors.as_entire_binding(),
-                    fallback.as_entire_binding(),
+                    fallback.list.as_entire_binding(),
                     groups.as_entire_binding(),
                 ]),
             })
         };
-        let io = bind(&fallback_groups);
+        let io = bind(&fallback.groups);
         let screen = (spec.width.div_ceil(8), spec.height.div_ceil(8));
         let mut pass = encoder
             .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("e0"), timestamp_writes: self.timer.compute_scope("e0") });
@@ -178,9 +173,9 @@ impl Renderer {
                 pass.set_pipeline(pipeline);
                 pass.dispatch_workgroups(*x, *y, 1);
             }
-            pass.set_bind_group(1, &bind(&stand_in), &[]);
+            pass.set_bind_group(1, &bind(&fallback.stand_in), &[]);
             pass.set_pipeline(&entry("e0_fallback", "fallback_exact"));
-            pass.dispatch_workgroups_indirect(&fallback_groups, 0);
+            pass.dispatch_workgroups_indirect(&fallback.groups, 0);
         } else {
             pass.set_pipeline(&entry("e0_exact", "exact"));
             pass.dispatch_workgroups(screen.0, screen.1, 1);
