@@ -104,13 +104,20 @@ pub fn entries<'a>(resources: &[wgpu::BindingResource<'a>]) -> Vec<wgpu::BindGro
 /// alignment every adapter accepts.
 pub const UNIFORM_SLOT: u64 = 256;
 
-/// A uniform buffer with one `UNIFORM_SLOT`-sized slot per item (one zeroed slot when there
-/// are none), for passes that bind the same layout with a different offset each time.
+/// Distance between the slots of `T`s in a `uniform_slots` buffer: `T`'s size rounded up to
+/// whole `UNIFORM_SLOT`s.
+fn slot_stride<T>() -> u64 {
+    (std::mem::size_of::<T>() as u64).next_multiple_of(UNIFORM_SLOT)
+}
+
+/// A uniform buffer with one slot per item (one zeroed slot when there are none), for passes
+/// that bind the same layout with a different offset each time.
 pub fn uniform_slots<T: bytemuck::Pod>(device: &wgpu::Device, label: &str, items: &[T]) -> wgpu::Buffer {
     use wgpu::util::DeviceExt;
-    let mut bytes = vec![0u8; items.len().max(1) * UNIFORM_SLOT as usize];
+    let stride = slot_stride::<T>() as usize;
+    let mut bytes = vec![0u8; items.len().max(1) * stride];
     for (k, item) in items.iter().enumerate() {
-        let start = k * UNIFORM_SLOT as usize;
+        let start = k * stride;
         bytes[start..start + std::mem::size_of::<T>()].copy_from_slice(bytemuck::bytes_of(item));
     }
     device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
@@ -120,9 +127,15 @@ pub fn uniform_slots<T: bytemuck::Pod>(device: &wgpu::Device, label: &str, items
     })
 }
 
-/// The dynamic offset of slot `k` in a `uniform_slots` buffer.
+/// The dynamic offset of slot `k` in a `uniform_slots` buffer of items up to `UNIFORM_SLOT`
+/// bytes.
 pub fn slot_offset(k: usize) -> u32 {
     (k as u64 * UNIFORM_SLOT) as u32
+}
+
+/// The dynamic offset of slot `k` in a `uniform_slots` buffer of `T`s.
+pub fn slot_offset_of<T>(k: usize) -> u32 {
+    (k as u64 * slot_stride::<T>()) as u32
 }
 
 /// A binding of one `T`-sized slot of a `uniform_slots` buffer (the offset comes at draw time).

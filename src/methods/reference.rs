@@ -5,8 +5,11 @@
 //! Samples are stratified over the light rectangle (a grid matching its aspect) and jittered
 //! within each stratum; a sample that lands on a black or transparent texel has no weight and
 //! costs nothing. For each sample the scene is drawn into a distance map from the sample
-//! point (`sample_depth.wgsl`) and every pixel adds `L·G·V` and `L·G` to two sums
-//! (`accumulate.wgsl`); `resolve.wgsl` divides them. Numerator and denominator share the same
+//! point (`sample_depth.wgsl`), copied into a layer of a plain buffer; once per batch of up to
+//! eight samples every pixel adds the batch's `L·G·V` and `L·G` to two sums
+//! (`accumulate.wgsl`), and `resolve.wgsl` divides them. Batching changes only the order of
+//! the additions (the same samples, maps and tests); it took the 64-sample reference at 1080p
+//! on lavapipe from 2.0 s to 1.3 s. Numerator and denominator share the same
 //! samples, so lit and umbra pixels are exact and the noise lives only in the penumbra.
 //!
 //! Bias controls: the visibility test forgives `bias_texels + slope_bias_texels·tanθ` texels
@@ -15,6 +18,8 @@
 //! test in `tests/render.rs` shows the error shrinking).
 
 use glam::Vec3;
+
+use bytemuck::Zeroable as _;
 
 use super::{Cap, Counters, MethodContext, Param, ParamSpec, Params, ShadowMethod};
 use crate::error::JobResult;
@@ -36,8 +41,31 @@ const SEED: Param<u32> = Param::integer("seed", 1, 0, 4_294_967_295, "seed of th
 
 const PARAMS: &[ParamSpec] = &[SAMPLES.spec, RESOLUTION.spec, BIAS_TEXELS.spec, SLOPE_BIAS_TEXELS.spec, SEED.spec];
 
-/// Samples recorded per submission; progress is reported between batches.
-const BATCH: usize = 16;
+/// Samples recorded per submission; progress is reported between submissions.
+const BATCH: u64 = 16;
+
+/// Memory the distance maps of one accumulate batch may take: 8 maps at the default 1024²,
+/// one at 4096².
+const BATCH_MAP_BYTES: u64 = 64 << 20;
+
+/// The most samples one accumulate pass reads; mirrors `BATCH` in `accumulate.wgsl`.
+const BATCH_SAMPLES: usize = 8;
+
+/// Distance maps drawn before one accumulate pass reads them all: more per pass reads the
+/// G-buffer and updates the sums less often, fewer keeps the maps' memory bounded.
+fn batch_layers(resolution: u32) -> u32 {
+    let map_bytes = u64::from(resolution) * u64::from(resolution) * 4;
+    (BATCH_MAP_BYTES / map_bytes).clamp(1, BATCH_SAMPLES as u64) as u32
+}
+
+/// One accumulate pass's samples, laid out as `Batch` in `accumulate.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct BatchUniforms {
+    count: u32,
+    pad: [u32; 3],
+    samples: [SampleUniforms; BATCH_SAMPLES],
+}
 
 /// One light sample, laid out as `LightSample` in `shaders/methods/reference/sample.wgsl`.
 #[repr(C)]
@@ -47,6 +75,7 @@ struct SampleUniforms {
     position: [f32; 4],
     radiance: [f32; 4],
     params: [f32; 4],
+    row: [u32; 4],
 }
 
 /// A point on the light and its weight: `L(y)` times the area of its stratum.
@@ -117,6 +146,7 @@ impl ShadowMethod for Reference {
         let resolution = params.get(&RESOLUTION);
         let (samples, strata) = light_samples(&spec.light, &spec.light_image, params.get(&SAMPLES), u64::from(params.get(&SEED)));
         let corners = ctx.scene.shadow_fit_points(&spec.light);
+        let row_texels = (4 * resolution).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) / 4;
         let slots: Vec<SampleUniforms> = samples
             .iter()
             .map(|sample| {
@@ -127,10 +157,22 @@ impl ShadowMethod for Reference {
                     position: sample.position.extend(1.0).to_array(),
                     radiance: sample.weight.extend(0.0).to_array(),
                     params: [projection.tan_half, resolution as f32, params.get(&BIAS_TEXELS), params.get(&SLOPE_BIAS_TEXELS)],
+                    row: [row_texels, 0, 0, 0],
                 }
             })
             .collect();
         let uniform_buffer = layout::uniform_slots(&device, "Reference::samples", &slots);
+        let layers = batch_layers(resolution).min(slots.len().max(1) as u32);
+        let batches: Vec<BatchUniforms> = slots
+            .chunks(layers as usize)
+            .map(|chunk| {
+                let mut batch = BatchUniforms::zeroed();
+                batch.count = chunk.len() as u32;
+                batch.samples[..chunk.len()].copy_from_slice(chunk);
+                batch
+            })
+            .collect();
+        let batch_buffer = layout::uniform_slots(&device, "Reference::batches", &batches);
         let pixels = u64::from(ctx.width) * u64::from(ctx.height);
         let sums = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("Reference::sums"),
@@ -153,27 +195,38 @@ impl ShadowMethod for Reference {
         let distance = target(
             "Reference::distance",
             wgpu::TextureFormat::R32Float,
-            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
-        )
-        .create_view(&Default::default());
+            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+        );
+        let distance_view = distance.create_view(&Default::default());
+        // Each sample's map is copied into its layer of a plain buffer, which the accumulate
+        // pass reads: on lavapipe a storage-buffer load is a plain gather and a texel fetch is
+        // not (format, robustness), and that one tap was nearly all of a sample's cost.
+        let row_bytes = (4 * resolution).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
+        let layer_bytes = u64::from(row_bytes) * u64::from(resolution);
+        let distances = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("Reference::distances"),
+            size: layer_bytes * u64::from(layers),
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
         let depth =
             target("Reference::depth", DEPTH_BUFFER_FORMAT, wgpu::TextureUsages::RENDER_ATTACHMENT).create_view(&Default::default());
 
         let (depth_pipeline, accumulate_pipeline, resolve_pipeline) = self.pipelines(ctx);
-        let slot_binding = |layout: &wgpu::BindGroupLayout, extra: &[wgpu::BindingResource]| {
-            let mut resources = vec![layout::slot_binding::<SampleUniforms>(&uniform_buffer)];
-            resources.extend_from_slice(extra);
-            device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("Reference::bind_group"),
-                layout,
-                entries: &layout::entries(&resources),
-            })
-        };
-        let depth_group = slot_binding(&depth_pipeline.get_bind_group_layout(0), &[]);
-        let accumulate_group = slot_binding(
-            &accumulate_pipeline.get_bind_group_layout(1),
-            &[wgpu::BindingResource::TextureView(&distance), sums.as_entire_binding()],
-        );
+        let depth_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("Reference::sample"),
+            layout: &depth_pipeline.get_bind_group_layout(0),
+            entries: &layout::entries(&[layout::slot_binding::<SampleUniforms>(&uniform_buffer)]),
+        });
+        let accumulate_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("Reference::accumulate"),
+            layout: &accumulate_pipeline.get_bind_group_layout(1),
+            entries: &layout::entries(&[
+                layout::slot_binding::<BatchUniforms>(&batch_buffer),
+                distances.as_entire_binding(),
+                sums.as_entire_binding(),
+            ]),
+        });
         let resolve_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("Reference::resolve"),
             layout: &resolve_pipeline.get_bind_group_layout(1),
@@ -183,13 +236,14 @@ impl ShadowMethod for Reference {
         ctx.encoder.clear_buffer(&sums, 0, None);
         let (gx, gy) = ctx.dispatch_size();
         let total = samples.len() as u64;
-        for (k, _) in samples.iter().enumerate() {
-            let offset = layout::slot_offset(k);
-            {
+        let mut before = 0;
+        for (b, batch) in batches.iter().enumerate() {
+            for layer in 0..batch.count {
+                let k = before as usize + layer as usize;
                 let mut pass = ctx.encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
                     label: Some("Reference::sample_depth"),
                     color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                        view: &distance,
+                        view: &distance_view,
                         depth_slice: None,
                         resolve_target: None,
                         ops: wgpu::Operations {
@@ -207,10 +261,23 @@ impl ShadowMethod for Reference {
                     multiview_mask: None,
                 });
                 pass.set_pipeline(&depth_pipeline);
-                pass.set_bind_group(0, &depth_group, &[offset]);
+                pass.set_bind_group(0, &depth_group, &[layout::slot_offset(k)]);
                 pass.set_vertex_buffer(0, ctx.scene.vertex_buffer.slice(..));
                 pass.set_index_buffer(ctx.scene.index_buffer.slice(..), wgpu::IndexFormat::Uint32);
                 pass.draw_indexed(0..ctx.scene.index_count, 0, 0..1);
+                drop(pass);
+                ctx.encoder.copy_texture_to_buffer(
+                    distance.as_image_copy(),
+                    wgpu::TexelCopyBufferInfo {
+                        buffer: &distances,
+                        layout: wgpu::TexelCopyBufferLayout {
+                            offset: u64::from(layer) * layer_bytes,
+                            bytes_per_row: Some(row_bytes),
+                            rows_per_image: Some(resolution),
+                        },
+                    },
+                    wgpu::Extent3d { width: resolution, height: resolution, depth_or_array_layers: 1 },
+                );
             }
             {
                 let mut pass = ctx
@@ -218,11 +285,13 @@ impl ShadowMethod for Reference {
                     .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("Reference::accumulate"), timestamp_writes: None });
                 pass.set_pipeline(&accumulate_pipeline);
                 pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
-                pass.set_bind_group(1, &accumulate_group, &[offset]);
+                pass.set_bind_group(1, &accumulate_group, &[layout::slot_offset_of::<BatchUniforms>(b)]);
                 pass.dispatch_workgroups(gx, gy, 1);
             }
-            let done = k as u64 + 1;
-            if done.is_multiple_of(BATCH as u64) || done == total {
+            let done = before + u64::from(batch.count);
+            let flush = done / BATCH > before / BATCH || done == total;
+            before = done;
+            if flush {
                 ctx.flush()?;
                 ctx.supervisor.progress(done, total);
                 // Cancelled: the renderer discards this frame, so the remaining batches
@@ -271,7 +340,7 @@ impl Reference {
         let accumulate = ctx.screen_pipeline(
             PipelineKey::new("reference.accumulate"),
             "methods/reference/accumulate.wgsl",
-            &[layout::uniform_dynamic(0), layout::texture_float(1), layout::storage_read_write(2)],
+            &[layout::uniform_dynamic(0), layout::storage_read(1), layout::storage_read_write(2)],
         );
         let resolve = ctx.screen_pipeline(
             PipelineKey::new("reference.resolve"),
