@@ -3,8 +3,7 @@
 
 #import methods/brabec/common.wgsl
 
-@compute @workgroup_size(64)
-fn main(@builtin(global_invocation_id) id: vec3<u32>) {
+fn refine_group(id: vec3<u32>, marking: bool) {
     let size = frame.sizes.xy;
     // Lattice columns: every 4th, plus the last one when it is not already among them.
     let columns = (size.x - 1u) / 4u + 1u + select(0u, 1u, (size.x - 1u) % 4u != 0u);
@@ -20,5 +19,17 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     if y1 <= y0 {
         return;
     }
-    refine(vec2<u32>(x, y0), vec2<u32>(0u, 1u), y1 - y0);
+    refine(vec2<u32>(x, y0), vec2<u32>(0u, 1u), y1 - y0, marking);
+}
+
+// Before the search pass: lists the pixels the refinement will need searched.
+@compute @workgroup_size(64)
+fn mark_searches(@builtin(global_invocation_id) id: vec3<u32>) {
+    refine_group(id, true);
+}
+
+// After it: interpolates.
+@compute @workgroup_size(64)
+fn main(@builtin(global_invocation_id) id: vec3<u32>) {
+    refine_group(id, false);
 }

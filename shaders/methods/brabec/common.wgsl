@@ -5,6 +5,7 @@
 #import common/frame_inputs.wgsl
 #import common/shadow.wgsl
 #import common/edge_table.wgsl
+#import common/pixel_list.wgsl
 
 struct BrabecParams {
     // Search radius in texels: r_max = r_scale·z + r_bias (paper), or derived from the light
@@ -51,6 +52,7 @@ struct Counters {
     interpolated: atomic<u32>,
     radius_sum_16: atomic<u32>, // Σ search radius × 16 (fixed point)
     shaded: atomic<u32>,
+    unresolved: atomic<u32>, // pixels left without t: a bug if ever not 0
 }
 
 @group(1) @binding(0) var<uniform> params: BrabecParams;
@@ -59,8 +61,66 @@ struct Counters {
 @group(1) @binding(3) var visibility_out: texture_storage_2d<rgba32float, write>;
 // The light's edge table (`light::tables::edge_table`, read through common/edge_table.wgsl).
 @group(1) @binding(4) var<storage, read> edge_table: array<vec4<f32>>;
+// Per block of the light depth map, what a search needs to know to skip it (summary.wgsl).
+@group(1) @binding(5) var<storage, read_write> summary: array<BlockSummary>;
+
+// The pixels to search, appended by the lattice and the marking passes; one compacted pass
+// searches them all (common/pixel_list.wgsl says why).
+@group(1) @binding(6) var<storage, read_write> to_search: PixelList;
+@group(1) @binding(7) var<storage, read_write> search_groups: array<u32, 3>; // indirect dispatch
+
+// The light depth map's depth (bits) and object id per texel, copied by the summary pass: the
+// search reads them here, where a storage-buffer load is a plain gather and a texel fetch on
+// lavapipe is not (format, robustness), and the search is nearly all loads.
+@group(1) @binding(8) var<storage, read_write> map_texels: array<vec2<u32>>;
+
+struct BlockSummary {
+    near: f32,   // the block's smallest depth
+    far: f32,    // its largest
+    object: u32, // the id every texel of it holds, or MIXED
+    pad: u32,
+}
+
+// Texels per side of a summary block; mirrors `methods::brabec::SUMMARY_BLOCK`.
+const SUMMARY_BLOCK: i32 = 8;
+const MIXED: u32 = 0xffffffffu;
+
+fn summary_blocks() -> i32 {
+    return (i32(frame.sizes.z) + SUMMARY_BLOCK - 1) / SUMMARY_BLOCK;
+}
+
+// Whether any texel in [lo, hi] (inclusive, inside the map) can be a hit of the search from
+// w (receiver id `receiver`): the hit tests of `search` applied to each block's bounds. A
+// search proved empty here returns what the ring search would without a hit. This is not in
+// the paper: its searches all run to r_max, and on a CPU rasteriser the searches of lit
+// pixels far from any occluder were most of the method's cost.
+fn may_hit(w: Warped, receiver: u32, lo: vec2<i32>, hi: vec2<i32>) -> bool {
+    let blocks = summary_blocks();
+    let b0 = lo / SUMMARY_BLOCK;
+    let b1 = hi / SUMMARY_BLOCK;
+    let limit = w.depth - w.bias;
+    for (var by = b0.y; by <= b1.y; by++) {
+        for (var bx = b0.x; bx <= b1.x; bx++) {
+            let s = summary[by * blocks + bx];
+            var possible: bool;
+            if w.hard {
+                let same_object = s.object == receiver || s.object == MIXED || params.use_ids == 0u;
+                possible = s.far >= limit && same_object;
+            } else {
+                let other_object = s.object != receiver || params.use_ids == 0u;
+                possible = s.near < limit && other_object;
+            }
+            if possible {
+                return true;
+            }
+        }
+    }
+    return false;
+}
 
 const UNKNOWN: f32 = -1.0;
+// t of a pixel listed for the search pass.
+const MARKED: f32 = -2.0;
 // A shadow-map texel deeper than an occluder point by more than this fraction of its depth
 // lies beyond the occluder's silhouette (`edge_line`).
 const SILHOUETTE_RELATIVE: f32 = 0.01;
@@ -148,6 +208,12 @@ fn search(pixel: vec2<u32>) -> Found {
     var best_texel = vec2<i32>(0);
     var found = false;
     let rings = i32(ceil(r_max)) + 1;
+    let lo = max(base - rings, vec2<i32>(0));
+    let hi = min(base + rings, vec2<i32>(res - 1));
+    if any(lo > hi) || !may_hit(w, receiver, lo, hi) {
+        out.t = select(1.0, 0.0, w.hard);
+        return out;
+    }
     for (var k = 0; k <= rings; k++) {
         // Texel centres on ring k lie at least k − 0.5 texels from P'.
         if f32(k) - 0.5 > best {
@@ -162,8 +228,9 @@ fn search(pixel: vec2<u32>) -> Found {
                 }
                 let t = base + vec2<i32>(dx, dy);
                 if all(t >= vec2<i32>(0)) && all(t < vec2<i32>(res)) {
-                    let d = textureLoad(shadow_depth, t, 0).r;
-                    let id = textureLoad(shadow_id, t, 0).r;
+                    let texel = map_texels[t.y * res + t.x];
+                    let d = bitcast<f32>(texel.x);
+                    let id = texel.y;
                     var hit: bool;
                     let same_object = id == receiver || params.use_ids == 0u;
                     let other_object = id != receiver || params.use_ids == 0u;
@@ -305,19 +372,31 @@ fn search_into(p: vec2<u32>) {
     state[i].edge = found.edge;
 }
 
-// Makes sure pixel `p` has its t, searching if it has none yet.
-fn ensure(p: vec2<u32>) -> f32 {
+// Lists pixel `p` for the search pass unless it has its t or is listed already. Each marking
+// pass lists a pixel from one invocation only (its lattice point, or a middle pixel of its own
+// 5-pixel group), so the check needs no atomics.
+fn mark(p: vec2<u32>) {
     let i = state_index(p);
-    if state[i].t < 0.0 {
-        search_into(p);
+    if state[i].t == UNKNOWN {
+        state[i].t = MARKED;
+        to_search.pixels[atomicAdd(&to_search.count, 1u)] = list_index(p);
     }
-    return state[i].t;
+}
+
+// Pixel `p`'s t, which the interpolation reads only where the search pass or an earlier
+// interpolation gave it one. Not a search on demand: on lavapipe the search's code inlined
+// into a pass costs that pass dearly even where no lane runs it (rows 165 → 29 ms at 1080p).
+fn known(p: vec2<u32>) -> f32 {
+    return state[state_index(p)].t;
 }
 
 // §4.3 adaptive sampling along one line from pixel `a` to pixel `b` (at most 4 apart, both
 // known): interpolate the inner pixels where ids and hard results agree, otherwise search the
-// middle pixel and repeat on both halves.
-fn refine(a: vec2<u32>, step: vec2<u32>, span: u32) {
+// middle pixel and repeat on both halves. Which pixels are searched depends on the keys
+// alone, so it runs twice: `marking` lists them (for the compacted search pass), then the
+// interpolation runs with every t it reads known. In one pass, one lane of an 8-wide SIMD
+// group searching kept the other seven waiting; the results are the same.
+fn refine(a: vec2<u32>, step: vec2<u32>, span: u32, marking: bool) {
     var stack_lo: array<u32, 4>;
     var stack_hi: array<u32, 4>;
     var top = 1u;
@@ -338,9 +417,12 @@ fn refine(a: vec2<u32>, step: vec2<u32>, span: u32) {
         for (var k = lo + 1u; k <= hi; k++) {
             same = same && state[state_index(a + step * k)].key == key;
         }
-        if same {
-            let t0 = ensure(a + step * lo);
-            let t1 = ensure(a + step * hi);
+        if same && marking {
+            // Nothing to list: the ends are lattice pixels (columns), or pixels of lattice
+            // columns (rows), whose t the columns' interpolation has before the rows' runs.
+        } else if same {
+            let t0 = known(a + step * lo);
+            let t1 = known(a + step * hi);
             let d0 = state[state_index(a + step * lo)].normal;
             let d1 = state[state_index(a + step * hi)].normal;
             let e0 = state[state_index(a + step * lo)].edge;
@@ -359,7 +441,9 @@ fn refine(a: vec2<u32>, step: vec2<u32>, span: u32) {
             }
         } else {
             let mid = (lo + hi) / 2u;
-            ensure(a + step * mid);
+            if marking {
+                mark(a + step * mid); // searched before the interpolation reads it
+            }
             stack_lo[top] = lo;
             stack_hi[top] = mid;
             stack_lo[top + 1u] = mid;

@@ -11,8 +11,11 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let i = state_index(pixel);
+    // The lattice, the search and the interpolation give every pixel its t; one without is
+    // counted (the renderer logs it) and shown lit.
     if state[i].t < 0.0 {
-        search_into(pixel); // not reached by the lattice or the interpolation passes
+        atomicAdd(&counters.unresolved, 1u);
+        state[i].t = 1.0;
     }
     let t = state[i].t;
     var v = clamp(t, 0.0, 1.0);

@@ -1,6 +1,6 @@
-// Method `brabec`, pass 2: the search (§3.3) at the pixels adaptive sampling always
+// Method `brabec`, pass 2: lists for the search (§3.3) the pixels adaptive sampling always
 // searches — every 4th pixel of every 4th row, plus the last row and column — or, with
-// `adaptive` off, at every pixel (dispatched over the whole image).
+// `adaptive` off, every pixel (dispatched over the whole image).
 
 #import methods/brabec/common.wgsl
 
@@ -13,7 +13,5 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     if any(id.xy * params.lattice_stride > last + vec2<u32>(params.lattice_stride - 1u)) {
         return;
     }
-    if state[state_index(pixel)].t < 0.0 {
-        search_into(pixel);
-    }
+    mark(pixel);
 }

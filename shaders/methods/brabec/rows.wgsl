@@ -3,8 +3,7 @@
 
 #import methods/brabec/common.wgsl
 
-@compute @workgroup_size(64)
-fn main(@builtin(global_invocation_id) id: vec3<u32>) {
+fn refine_group(id: vec3<u32>, marking: bool) {
     let size = frame.sizes.xy;
     let groups = (size.x + 2u) / 4u;
     let y = id.x / groups;
@@ -17,5 +16,17 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     if x1 <= x0 {
         return;
     }
-    refine(vec2<u32>(x0, y), vec2<u32>(1u, 0u), x1 - x0);
+    refine(vec2<u32>(x0, y), vec2<u32>(1u, 0u), x1 - x0, marking);
+}
+
+// Before the search pass: lists the pixels the refinement will need searched.
+@compute @workgroup_size(64)
+fn mark_searches(@builtin(global_invocation_id) id: vec3<u32>) {
+    refine_group(id, true);
+}
+
+// After it: interpolates.
+@compute @workgroup_size(64)
+fn main(@builtin(global_invocation_id) id: vec3<u32>) {
+    refine_group(id, false);
 }

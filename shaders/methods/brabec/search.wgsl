@@ -1,0 +1,17 @@
+// Method `brabec`: the search (§3.2, §3.3) of every pixel the lattice and the marking passes
+// listed, in one compacted dispatch sized on the GPU.
+
+#import methods/brabec/common.wgsl
+
+@compute @workgroup_size(1)
+fn listed_size() {
+    search_groups = list_dispatch(atomicLoad(&to_search.count));
+}
+
+@compute @workgroup_size(64)
+fn search_listed(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) lane: u32) {
+    let i = list_position(group, lane);
+    if i < atomicLoad(&to_search.count) {
+        search_into(listed_pixel(to_search.pixels[i]));
+    }
+}
