@@ -41,6 +41,13 @@ const SEED: Param<u32> = Param::integer("seed", 1, 0, 4_294_967_295, "seed of th
 
 const PARAMS: &[ParamSpec] = &[SAMPLES.spec, RESOLUTION.spec, BIAS_TEXELS.spec, SLOPE_BIAS_TEXELS.spec, SEED.spec];
 
+/// The unit of a sample's distance map (its depth 1.0), metres: twice the distance to the
+/// frustum's farthest corner, so every point the map can hold is nearer and a receiver just
+/// past the far plane still tests as lit against an empty texel.
+fn distance_unit(projection: &LightProjection) -> f32 {
+    2.0 * projection.far * (1.0 + 2.0 * projection.tan_half * projection.tan_half).sqrt()
+}
+
 /// Samples recorded per submission; progress is reported between submissions.
 const BATCH: u64 = 16;
 
@@ -154,7 +161,7 @@ impl ShadowMethod for Reference {
                 let projection = LightProjection::fit(&at_sample, &corners);
                 SampleUniforms {
                     view_proj: projection.view_proj.to_cols_array_2d(),
-                    position: sample.position.extend(1.0).to_array(),
+                    position: sample.position.extend(distance_unit(&projection)).to_array(),
                     radiance: sample.weight.extend(0.0).to_array(),
                     params: [projection.tan_half, resolution as f32, params.get(&BIAS_TEXELS), params.get(&SLOPE_BIAS_TEXELS)],
                     row: [row_texels, 0, 0, 0],
@@ -192,11 +199,8 @@ impl ShadowMethod for Reference {
                 view_formats: &[],
             })
         };
-        let distance = target(
-            "Reference::distance",
-            wgpu::TextureFormat::R32Float,
-            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
-        );
+        // The distance map is the depth buffer itself (`sample_depth.wgsl`).
+        let distance = target("Reference::distance", DEPTH_BUFFER_FORMAT, wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC);
         let distance_view = distance.create_view(&Default::default());
         // Each sample's map is copied into its layer of a plain buffer, which the accumulate
         // pass reads: on lavapipe a storage-buffer load is a plain gather and a texel fetch is
@@ -209,9 +213,6 @@ impl ShadowMethod for Reference {
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let depth =
-            target("Reference::depth", DEPTH_BUFFER_FORMAT, wgpu::TextureUsages::RENDER_ATTACHMENT).create_view(&Default::default());
-
         let (depth_pipeline, accumulate_pipeline, resolve_pipeline) = self.pipelines(ctx);
         let depth_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("Reference::sample"),
@@ -242,18 +243,10 @@ impl ShadowMethod for Reference {
                 let k = before as usize + layer as usize;
                 let mut pass = ctx.encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
                     label: Some("Reference::sample_depth"),
-                    color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                        view: &distance_view,
-                        depth_slice: None,
-                        resolve_target: None,
-                        ops: wgpu::Operations {
-                            load: wgpu::LoadOp::Clear(wgpu::Color { r: f64::from(f32::MAX), g: 0.0, b: 0.0, a: 0.0 }),
-                            store: wgpu::StoreOp::Store,
-                        },
-                    })],
+                    color_attachments: &[],
                     depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                        view: &depth,
-                        depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(1.0), store: wgpu::StoreOp::Discard }),
+                        view: &distance_view,
+                        depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(1.0), store: wgpu::StoreOp::Store }),
                         stencil_ops: None,
                     }),
                     timestamp_writes: None,
@@ -267,7 +260,7 @@ impl ShadowMethod for Reference {
                 pass.draw_indexed(0..ctx.scene.index_count, 0, 0..1);
                 drop(pass);
                 ctx.encoder.copy_texture_to_buffer(
-                    distance.as_image_copy(),
+                    wgpu::TexelCopyTextureInfo { aspect: wgpu::TextureAspect::DepthOnly, ..distance.as_image_copy() },
                     wgpu::TexelCopyBufferInfo {
                         buffer: &distances,
                         layout: wgpu::TexelCopyBufferLayout {
@@ -333,7 +326,7 @@ impl Reference {
                 label: "Reference::sample_depth",
                 shader: "methods/reference/sample_depth.wgsl",
                 bind_group_layouts: &[&sample_layout],
-                targets: &[wgpu::TextureFormat::R32Float],
+                targets: &[],
             };
             pipeline.build(device)
         });

@@ -48,7 +48,7 @@ fn add_sample(sums: ptr<function, Sums>, x: vec3<f32>, n: vec3<f32>, layer: u32,
     if clip.w > 0.0 && all(uv >= vec2<f32>(0.0)) && all(uv < vec2<f32>(1.0)) {
         let res = light_sample.params.y;
         let texel = min(vec2<u32>(uv * res), vec2<u32>(u32(res) - 1u));
-        let nearest = distances[(layer * u32(res) + texel.y) * light_sample.row.x + texel.x];
+        let nearest = distances[(layer * u32(res) + texel.y) * light_sample.row.x + texel.x] * light_sample.position.w;
         // Bias in texels of this sample's map at the receiver, constant plus slope-scaled:
         // it shrinks with resolution, so the estimate converges to true visibility.
         let texel_m = 2.0 * dist * cos_y * light_sample.params.x / res;
