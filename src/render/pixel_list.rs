@@ -16,6 +16,11 @@ impl PixelListBuffers {
     /// Buffers for at most `capacity` pixels, labelled `{owner}::list…`; the count is cleared
     /// on `encoder` before anything appends.
     pub fn new(device: &wgpu::Device, encoder: &mut wgpu::CommandEncoder, owner: &str, capacity: u64) -> Self {
+        Self::new_of(device, encoder, owner, capacity, 4)
+    }
+
+    /// `new` for a list of `entry_bytes`-sized entries (a multiple of 4).
+    pub fn new_of(device: &wgpu::Device, encoder: &mut wgpu::CommandEncoder, owner: &str, capacity: u64, entry_bytes: u64) -> Self {
         let buffer = |field: &str, size: u64, usage: wgpu::BufferUsages| {
             device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(&format!("{owner}::{field}")),
@@ -24,7 +29,8 @@ impl PixelListBuffers {
                 mapped_at_creation: false,
             })
         };
-        let list = buffer("list", 4 * (1 + capacity.max(1)), wgpu::BufferUsages::COPY_DST);
+        // The count, padded to the entries' alignment, then the entries.
+        let list = buffer("list", entry_bytes.max(4) * (1 + capacity.max(1)), wgpu::BufferUsages::COPY_DST);
         encoder.clear_buffer(&list, 0, Some(4));
         let groups = buffer("list_groups", 12, wgpu::BufferUsages::INDIRECT);
         let stand_in = buffer("list_groups_stand_in", 12, wgpu::BufferUsages::empty());

@@ -65,6 +65,15 @@ struct WorkItem {
 // Per pixel, two vec4s written by `tiles.wgsl`: the surface point with, in w, the object whose
 // volume and wedges it ignores (NO_OBJECT: none; NOT_COVERED: background), then its normal.
 @group(1) @binding(8) var<storage, read_write> receivers: array<vec4<f32>>;
+// The penumbra pass's (work item, pixel of its tile) pairs whose point lies inside the wedge,
+// listed by `mark_inside` and shaded by `shade_listed` (rasterize_penumbra.wgsl says why).
+@group(1) @binding(11) var<storage, read_write> inside: PairList;
+@group(1) @binding(12) var<storage, read_write> inside_groups: array<u32, 3>; // indirect dispatch
+
+struct PairList {
+    count: atomic<u32>,
+    pairs: array<vec2<u32>>, // x: work item, y: pixel of its tile
+}
 
 const NO_OBJECT: f32 = -1.0;
 const NOT_COVERED: f32 = -2.0;

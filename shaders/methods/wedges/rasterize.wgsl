@@ -363,14 +363,19 @@ fn umbra_delta(index: u32, at: u32) -> i32 {
     return -params.full * volume_crossing(polygons[index], frame.eye.xyz, receiver.xyz);
 }
 
+// §3: "if p is inside the wedge" — its plane equations, and not the wedge's own object.
+fn inside_wedge(index: u32, at: u32) -> bool {
+    let receiver = receivers[2u * at];
+    let w = wedges[index];
+    let p = vec4<f32>(receiver.xyz, 1.0);
+    return w.b.w != receiver.w && dot(w.front, p) >= 0.0 && dot(w.back, p) >= 0.0;
+}
+
 // The penumbra term at receiver `at` for wedge `index`.
 fn penumbra_delta(index: u32, at: u32) -> vec3<i32> {
     let receiver = receivers[2u * at];
     let w = wedges[index];
-    // §3: "if p is inside the wedge" — its plane equations first; most points of a tile the
-    // wedge reaches lie outside it.
-    let p = vec4<f32>(receiver.xyz, 1.0);
-    if w.b.w == receiver.w || dot(w.front, p) < 0.0 || dot(w.back, p) < 0.0 {
+    if !inside_wedge(index, at) {
         return vec3<i32>(0);
     }
     var e0 = vec3<f32>(1.0);

@@ -1,7 +1,12 @@
 // Method `wedges`, three-pass variant (§6.1), the penumbra pass: wedges over their tiles
-// (`rasterize.wgsl`).
+// (`rasterize.wgsl`). Most points of a tile a wedge reaches lie outside it, and lavapipe runs
+// the whole share computation for all 8 lanes of a SIMD group if one lane needs it; so the
+// pass first lists the (item, pixel) pairs inside their wedge (`mark_inside`), then shades
+// only those (`shade_listed`, an indirect dispatch sized on the GPU), a chunk of items at a
+// time. `main` shades every pixel of each item, as the paper's pass does.
 
 #import methods/wedges/rasterize.wgsl
+#import common/pixel_list.wgsl
 
 @compute @workgroup_size(64)
 fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) local: u32) {
@@ -16,4 +21,47 @@ fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index
             add_light(u32(at), penumbra_delta(wedge, u32(at)));
         }
     }
+}
+
+// Lists the pixels of each item's tile that lie inside its wedge.
+@compute @workgroup_size(64)
+fn mark_inside(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) local: u32) {
+    let item = tile_item(group, local);
+    if !item.valid {
+        return;
+    }
+    let index = group.y * 65535u + group.x;
+    let wedge = item.job.primitive - params.polygon_count;
+    for (var k = local; k < params.tile * params.tile; k += 64u) {
+        let at = tile_pixel(item.origin, k);
+        if at >= 0 && inside_wedge(wedge, u32(at)) {
+            inside.pairs[atomicAdd(&inside.count, 1u)] = vec2<u32>(index, k);
+        }
+    }
+}
+
+// The size of `shade_listed`'s dispatch.
+@compute @workgroup_size(1)
+fn inside_size() {
+    inside_groups = list_dispatch(atomicLoad(&inside.count));
+}
+
+// The listed pairs: each one's share of the light.
+@compute @workgroup_size(64)
+fn shade_listed(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) lane: u32) {
+    let i = list_position(group, lane);
+    if i < atomicLoad(&inside.count) {
+        let pair = inside.pairs[i];
+        let job = work[pair.x];
+        let tiles = tile_grid();
+        let origin = vec2<u32>(job.tile % tiles.x, job.tile / tiles.x) * params.tile;
+        let at = u32(tile_pixel(origin, pair.y));
+        add_light(at, penumbra_delta(job.primitive - params.polygon_count, at));
+    }
+}
+
+// Empties the list for the next chunk.
+@compute @workgroup_size(1)
+fn inside_reset() {
+    atomicStore(&inside.count, 0u);
 }

@@ -58,6 +58,9 @@ use geometry::{eye_in_shadow, Volume};
 
 pub struct Wedges;
 
+/// Most (item, pixel) pairs the penumbra pass lists at once (8 bytes each).
+const INSIDE_PAIRS: u64 = 1 << 21;
+
 const TILE: Param<u32> =
     Param::integer("tile", 8, 2, 256, "side of the occlusion-culling tiles, pixels (§4; the paper sweeps 2…256, best 8–32)");
 const CULLING: Param<bool> = Param::boolean(
@@ -229,14 +232,25 @@ impl ShadowMethod for Wedges {
             layout::storage_read_write(8),
             layout::storage_read(9),
             layout::texture_float(10),
+            layout::storage_read_write(11),
+            layout::storage_read_write(12),
         ];
         let tiles_pipeline = ctx.screen_pipeline(PipelineKey::new("wedges.tiles"), "methods/wedges/tiles.wgsl", &io);
         let umbra_pipeline = ctx.screen_pipeline(PipelineKey::new("wedges.umbra"), "methods/wedges/rasterize_umbra.wgsl", &io);
         let penumbra_pipeline = ctx.screen_pipeline(PipelineKey::new("wedges.penumbra"), "methods/wedges/rasterize_penumbra.wgsl", &io);
         let both_pipeline = ctx.screen_pipeline(PipelineKey::new("wedges.both"), "methods/wedges/rasterize_both.wgsl", &io);
         let resolve = ctx.screen_pipeline(PipelineKey::new("wedges.resolve"), "methods/wedges/resolve.wgsl", &io);
+        let mut entry = |name: &'static str, entry: &'static str| {
+            ctx.screen_entry(PipelineKey::new(name), "methods/wedges/rasterize_penumbra.wgsl", entry, &io)
+        };
+        let (mark, size, shade, reset) =
+            (entry("wedges.inside", "mark_inside"), entry("wedges.inside_size", "inside_size"), entry("wedges.shade", "shade_listed"), entry("wedges.inside_reset", "inside_reset"));
         let sectors = if colored { ctx.light_table("wedges.sectors", sector_table) } else { std::sync::Arc::new(storage("Wedges::no_sectors", &[])) };
-        let bind = |work: &wgpu::Buffer| {
+        let tile_pixels = u64::from(tile) * u64::from(tile);
+        // The penumbra pass lists the pixels inside each wedge, a chunk of items at a time.
+        let inside_items = (INSIDE_PAIRS / tile_pixels).max(1) as usize;
+        let inside = crate::render::PixelListBuffers::new_of(&device, ctx.encoder, "Wedges::inside", inside_items as u64 * tile_pixels, 8);
+        let bind = |work: &wgpu::Buffer, inside_groups: &wgpu::Buffer| {
             device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("Wedges::bind_group"),
                 layout: &tiles_pipeline.get_bind_group_layout(1),
@@ -252,13 +266,15 @@ impl ShadowMethod for Wedges {
                     receivers.as_entire_binding(),
                     sectors.as_entire_binding(),
                     wgpu::BindingResource::TextureView(ctx.e0),
+                    inside.list.as_entire_binding(),
+                    inside_groups.as_entire_binding(),
                 ]),
             })
         };
         let no_work = storage("Wedges::no_work", &[]);
         let mut setup = setup_start.elapsed();
         {
-            let group = bind(&no_work);
+            let group = bind(&no_work, &inside.groups);
             let mut pass = ctx.encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("Wedges::tiles"),
                 timestamp_writes: ctx.timer.compute_scope("method"),
@@ -281,13 +297,18 @@ impl ShadowMethod for Wedges {
 
         setup += culling_start.elapsed();
         ctx.encoder.clear_buffer(&li, 0, None);
-        // Work lists go to the GPU in chunks a storage binding can hold, in pass order.
+        // Work lists go to the GPU in chunks a storage binding can hold, in pass order; the
+        // penumbra pass's in chunks whose pixels the inside list can hold.
         let max_items = (device.limits().max_storage_buffer_binding_size as usize / std::mem::size_of::<WorkItem>()).min(1 << 22);
-        let chunks: Vec<(&wgpu::ComputePipeline, &[WorkItem])> =
-            passes.iter().flat_map(|(pipeline, items)| items.chunks(max_items).map(move |chunk| (*pipeline, chunk))).collect();
-        let groups: Vec<wgpu::BindGroup> =
-            chunks.iter().map(|(_, items)| bind(&storage("Wedges::work", bytemuck::cast_slice(items)))).collect();
-        let resolve_group = bind(&no_work);
+        let chunks: Vec<(&wgpu::ComputePipeline, &[WorkItem])> = passes
+            .iter()
+            .flat_map(|(pipeline, items)| {
+                let size = if std::ptr::eq(*pipeline, &*penumbra_pipeline) { inside_items.min(max_items) } else { max_items };
+                items.chunks(size).map(move |chunk| (*pipeline, chunk))
+            })
+            .collect();
+        let works: Vec<wgpu::Buffer> = chunks.iter().map(|(_, items)| storage("Wedges::work", bytemuck::cast_slice(items))).collect();
+        let resolve_group = bind(&no_work, &inside.groups);
         let screen = ctx.dispatch_size();
         {
             let mut pass = ctx.encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
@@ -295,12 +316,26 @@ impl ShadowMethod for Wedges {
                 timestamp_writes: ctx.timer.compute_scope("method"),
             });
             pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
-            for ((pipeline, items), group) in chunks.iter().zip(&groups) {
+            for ((pipeline, items), work) in chunks.iter().zip(&works) {
                 // One workgroup per item, in rows of at most 65 535.
                 let n = items.len() as u32;
-                pass.set_pipeline(pipeline);
-                pass.set_bind_group(1, group, &[]);
-                pass.dispatch_workgroups(n.min(65535), n.div_ceil(65535), 1);
+                let group = bind(work, &inside.groups);
+                pass.set_bind_group(1, &group, &[]);
+                if std::ptr::eq(*pipeline, &*penumbra_pipeline) {
+                    pass.set_pipeline(&mark);
+                    pass.dispatch_workgroups(n.min(65535), n.div_ceil(65535), 1);
+                    pass.set_pipeline(&size);
+                    pass.dispatch_workgroups(1, 1, 1);
+                    pass.set_bind_group(1, &bind(work, &inside.stand_in), &[]);
+                    pass.set_pipeline(&shade);
+                    pass.dispatch_workgroups_indirect(&inside.groups, 0);
+                    pass.set_bind_group(1, &group, &[]);
+                    pass.set_pipeline(&reset);
+                    pass.dispatch_workgroups(1, 1, 1);
+                } else {
+                    pass.set_pipeline(pipeline);
+                    pass.dispatch_workgroups(n.min(65535), n.div_ceil(65535), 1);
+                }
             }
             pass.set_pipeline(&resolve);
             pass.set_bind_group(1, &resolve_group, &[]);
