@@ -127,7 +127,7 @@ impl Renderer {
                     layout::texture_uint(4),
                     layout::texture_float(5),
                     layout::texture_uint(6),
-                    layout::storage_read(7),
+                    layout::uniform(7),
                     layout::texture_float(8),
                 ],
             ),
@@ -161,7 +161,7 @@ impl Renderer {
         let cells = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("Renderer::cells"),
             size: (E0_GRID * E0_GRID) as u64 * std::mem::size_of::<LightCellGpu>() as u64,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
         let timer = GpuTimer::new(&gpu);
