@@ -590,6 +590,19 @@ fn brabec_adaptive_sampling_agrees_with_searching_every_pixel() {
 }
 
 #[test]
+fn brabec_gives_every_pixel_its_penumbra_coordinate_at_any_size() {
+    // The lattice, the listed searches and the interpolation must reach every pixel, whatever
+    // the frame's size against the 4×4 blocks; the finish pass counts any it finds without.
+    for (width, height) in [(1, 1), (2, 5), (7, 3), (5, 9), (321, 241)] {
+        let job = job(json!({"scene": {"builtin": "crowd"}, "method": {"name": "brabec"},
+                             "output": {"width": width, "height": height, "format": "exr"}}));
+        let frame = common::engine().render_frame(&job, &()).unwrap().0;
+        assert!(!frame.counters.contains_key("pixels_unresolved"), "{width}×{height}: {:?}", frame.counters);
+        assert!(frame.visibility.unwrap().iter().all(|v| v.iter().all(|c| (0.0..=1.0).contains(c))));
+    }
+}
+
+#[test]
 fn brabec_self_shadowing_is_lost_inside_one_object() {
     // The documented price of the id test (§3.4): a single-object landscape gets hard shadows
     // but no outer penumbra from its own relief.
