@@ -280,12 +280,20 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
         layout::storage_read_write(5),
         layout::storage_read_write(6),
         layout::storage_read_write(7),
+        layout::storage_read_write(8),
+        layout::storage_read_write(9),
     ];
     let seed = ctx.screen_pipeline(PipelineKey::new(which.seed.0), which.seed.1, &io);
+    // jfa-e lists its boundary pixels and seeds them in a compacted pass (boundary.wgsl).
+    let boundary = (!which.light_space).then(|| {
+        let mut entry = |name, entry| ctx.screen_entry(PipelineKey::new(name), which.seed.1, entry, &io);
+        [entry("jfa-e.boundary.mark", "mark_boundary"), entry("jfa-e.boundary.size", "boundary_size"), entry("jfa-e.boundary.seed", "seed_listed")]
+    });
+    let listed = crate::render::PixelListBuffers::new(&device, ctx.encoder, "Jfa::boundary", if which.light_space { 0 } else { u64::from(grid.0) * u64::from(grid.1) });
     let round = ctx.screen_pipeline(PipelineKey::new(which.round.0), which.round.1, &io);
     let finish = ctx.screen_pipeline(PipelineKey::new(which.finish.0), which.finish.1, &io);
     // Ping-pong: `a_to_b` reads a and writes b, `b_to_a` the reverse.
-    let group = |src: &wgpu::Buffer, dst: &wgpu::Buffer| {
+    let group_with = |src: &wgpu::Buffer, dst: &wgpu::Buffer, listed_groups: &wgpu::Buffer| {
         ctx.bind(
             "Jfa::bind_group",
             &seed,
@@ -298,9 +306,14 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
                 counters.as_entire_binding(),
                 flags.as_entire_binding(),
                 tiles.as_entire_binding(),
+                listed.list.as_entire_binding(),
+                listed_groups.as_entire_binding(),
             ],
         )
     };
+    let group = |src: &wgpu::Buffer, dst: &wgpu::Buffer| group_with(src, dst, &listed.groups);
+    // The boundary seeds write a (as the seed pass does), the indirect grid bound as its stand-in.
+    let seeding = group_with(&b, &a, &listed.stand_in);
     let (a_to_b, b_to_a) = (group(&a, &b), group(&b, &a));
     // Rounds skip the tiles no record can reach and leave their cells as they are, so both
     // record buffers start empty (all zero) and the tile flags start clear.
@@ -318,6 +331,15 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
         pass.set_pipeline(&seed);
         pass.set_bind_group(1, &b_to_a, &[0]);
         pass.dispatch_workgroups(groups.0, groups.1, 1);
+        if let Some([mark, size, seed_listed]) = &boundary {
+            for (pipeline, (x, y)) in [(mark, groups), (size, (1, 1))] {
+                pass.set_pipeline(pipeline);
+                pass.dispatch_workgroups(x, y, 1);
+            }
+            pass.set_pipeline(seed_listed);
+            pass.set_bind_group(1, &seeding, &[0]);
+            pass.dispatch_workgroups_indirect(&listed.groups, 0);
+        }
         pass.set_pipeline(&round);
         let mut result_in_a = true;
         for k in 0..steps.len() {

@@ -2,9 +2,20 @@
 // whose surface point is close in 3D (not a depth discontinuity) is a boundary pixel; it seeds
 // the flood with the occluding silhouette point — what the light centre sees at its light-space
 // position — its own inner-penumbra intensity, and the silhouette's direction there.
+//
+// Three steps rather than one pass: every pixel's flags (covered, hard shadow) first, so that
+// the boundary test reads its neighbours' flags instead of repeating their hard-shadow tests;
+// then the boundary pixels are listed, and only they compute their seed (lavapipe runs a
+// branch's code for all 8 lanes of a SIMD group if one lane takes it). Same seeds.
 
 #import methods/jfa/common.wgsl
+#import common/pixel_list.wgsl
 
+// The boundary pixels: list index << 4 | the lit neighbour (3·(b + 1) + a + 1) that made it one.
+@group(1) @binding(8) var<storage, read_write> boundary: PixelList;
+@group(1) @binding(9) var<storage, read_write> boundary_groups: array<u32, 3>; // indirect dispatch
+
+// Step 1, every pixel: its flags, and an empty record.
 @compute @workgroup_size(8, 8)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     let pixel = id.xy;
@@ -12,49 +23,77 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     if any(pixel >= size) {
         return;
     }
-    var record = vec4<f32>(0.0);
-    var origin = vec4<f32>(0.0);
     let is_covered = covered(pixel);
     let hard = is_covered && hard_shadowed(pixel);
     flags[pixel.y * size.x + pixel.x] = select(0u, COVERED, is_covered) | select(0u, HARD, hard);
-    if hard {
-        let here = textureLoad(gbuf_position, pixel, 0);
-        let reach = here.w * params.boundary_relative;
-        var boundary = false;
-        var lit = here.xyz;
-        for (var b = -1; b <= 1; b++) {
-            for (var a = -1; a <= 1; a++) {
-                let n = vec2<i32>(pixel) + vec2<i32>(a, b);
-                if any(n < vec2<i32>(0)) || any(n >= vec2<i32>(size)) {
-                    continue;
-                }
-                let m = vec2<u32>(n);
-                let there = textureLoad(gbuf_position, m, 0).xyz;
-                if covered(m) && !hard_shadowed(m) && distance(there, here.xyz) < reach {
-                    boundary = true;
-                    lit = there;
-                }
+    let index = 2u * (pixel.y * size.x + pixel.x);
+    dst[index] = vec4<f32>(0.0);
+    dst[index + 1u] = vec4<f32>(0.0);
+}
+
+// Step 2, every pixel: lists those in hard shadow with a lit, covered neighbour close in 3D
+// (the last such neighbour in scan order is the one remembered).
+@compute @workgroup_size(8, 8)
+fn mark_boundary(@builtin(global_invocation_id) id: vec3<u32>) {
+    let pixel = id.xy;
+    let size = frame.sizes.xy;
+    if any(pixel >= size) || (flags[pixel.y * size.x + pixel.x] & HARD) == 0u {
+        return;
+    }
+    let here = textureLoad(gbuf_position, pixel, 0);
+    let reach = here.w * params.boundary_relative;
+    var lit = 16u;
+    for (var b = -1; b <= 1; b++) {
+        for (var a = -1; a <= 1; a++) {
+            let n = vec2<i32>(pixel) + vec2<i32>(a, b);
+            if any(n < vec2<i32>(0)) || any(n >= vec2<i32>(size)) {
+                continue;
+            }
+            let m = vec2<u32>(n);
+            let flag = flags[m.y * size.x + m.x];
+            let there = textureLoad(gbuf_position, m, 0).xyz;
+            if (flag & (COVERED | HARD)) == COVERED && distance(there, here.xyz) < reach {
+                lit = u32(3 * (b + 1) + a + 1);
             }
         }
-        if boundary {
-            let texel = shadow_texel(to_light_space(here.xyz).uv);
-            let occluder = textureLoad(shadow_position, texel, 0).xyz;
-            let i = intensity(here.xyz, occluder, true);
-            // A seed whose own ray misses the light still passes its occluder on.
-            let key = select(SEED_KEY, 1.0 - luminance(i.rgb), i.w > 0.0);
-            let id_bits = f32(textureLoad(gbuf_id, pixel, 0).r);
-            record = packed(occluder, key);
-            // The silhouette's direction at the occluder point, once per seed: the lit
-            // neighbour's texel lies beyond the silhouette, so a window reaching it finds it.
-            let reach_texels = distance(to_light_space(lit).uv, to_light_space(here.xyz).uv) * f32(frame.sizes.z);
-            let normal = silhouette_normal(occluder, clamp(i32(ceil(reach_texels)) + 1, 2, 8), params.silhouette_relative);
-            let angle = select(atan2(normal.y, normal.x), NO_NORMAL, dot(normal, normal) == 0.0);
-            origin = vec4<f32>(vec2<f32>(pixel), id_bits, angle);
-            mark_tile(vec2<i32>(pixel));
-            atomicAdd(&counters[0], 1u);
-        }
     }
-    let index = 2u * (pixel.y * size.x + pixel.x);
-    dst[index] = record;
-    dst[index + 1u] = origin;
+    if lit < 16u {
+        boundary.pixels[atomicAdd(&boundary.count, 1u)] = list_index(pixel) << 4u | lit;
+    }
+}
+
+// Step 3a: the size of step 3's dispatch.
+@compute @workgroup_size(1)
+fn boundary_size() {
+    boundary_groups = list_dispatch(atomicLoad(&boundary.count));
+}
+
+// Step 3, the listed boundary pixels: their seeds.
+@compute @workgroup_size(64)
+fn seed_listed(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) lane: u32) {
+    let i = list_position(group, lane);
+    if i >= atomicLoad(&boundary.count) {
+        return;
+    }
+    let entry = boundary.pixels[i];
+    let pixel = listed_pixel(entry >> 4u);
+    let neighbour = vec2<i32>(i32(entry & 15u) % 3 - 1, i32(entry & 15u) / 3 - 1);
+    let here = textureLoad(gbuf_position, pixel, 0);
+    let lit = textureLoad(gbuf_position, vec2<u32>(vec2<i32>(pixel) + neighbour), 0).xyz;
+    let texel = shadow_texel(to_light_space(here.xyz).uv);
+    let occluder = textureLoad(shadow_position, texel, 0).xyz;
+    let intensity_here = intensity(here.xyz, occluder, true);
+    // A seed whose own ray misses the light still passes its occluder on.
+    let key = select(SEED_KEY, 1.0 - luminance(intensity_here.rgb), intensity_here.w > 0.0);
+    let id_bits = f32(textureLoad(gbuf_id, pixel, 0).r);
+    // The silhouette's direction at the occluder point, once per seed: the lit neighbour's
+    // texel lies beyond the silhouette, so a window reaching it finds it.
+    let reach_texels = distance(to_light_space(lit).uv, to_light_space(here.xyz).uv) * f32(frame.sizes.z);
+    let normal = silhouette_normal(occluder, clamp(i32(ceil(reach_texels)) + 1, 2, 8), params.silhouette_relative);
+    let angle = select(atan2(normal.y, normal.x), NO_NORMAL, dot(normal, normal) == 0.0);
+    let index = 2u * (pixel.y * frame.sizes.x + pixel.x);
+    dst[index] = packed(occluder, key);
+    dst[index + 1u] = vec4<f32>(vec2<f32>(pixel), id_bits, angle);
+    mark_tile(vec2<i32>(pixel));
+    atomicAdd(&counters[0], 1u);
 }
