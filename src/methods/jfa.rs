@@ -282,6 +282,8 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
         layout::storage_read_write(7),
         layout::storage_read_write(8),
         layout::storage_read_write(9),
+        layout::storage_read_write(10),
+        layout::storage_read_write(11),
     ];
     let seed = ctx.screen_pipeline(PipelineKey::new(which.seed.0), which.seed.1, &io);
     // jfa-e lists its boundary pixels and seeds them in a compacted pass (boundary.wgsl).
@@ -292,8 +294,13 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
     let listed = crate::render::PixelListBuffers::new(&device, ctx.encoder, "Jfa::boundary", if which.light_space { 0 } else { u64::from(grid.0) * u64::from(grid.1) });
     let round = ctx.screen_pipeline(PipelineKey::new(which.round.0), which.round.1, &io);
     let finish = ctx.screen_pipeline(PipelineKey::new(which.finish.0), which.finish.1, &io);
+    // The final pass lists the pixels it shades by an occluder and shades them in a compacted
+    // pass (final_light.wgsl, final_eye.wgsl).
+    let shading = [("size", "shaded_size"), ("shade", "shade_listed")]
+        .map(|(name, entry)| ctx.screen_entry(PipelineKey { name: which.finish.0, variant: if name == "size" { 1 } else { 2 } }, which.finish.1, entry, &io));
+    let shaded = crate::render::PixelListBuffers::new(&device, ctx.encoder, "Jfa::shaded", u64::from(ctx.width) * u64::from(ctx.height));
     // Ping-pong: `a_to_b` reads a and writes b, `b_to_a` the reverse.
-    let group_with = |src: &wgpu::Buffer, dst: &wgpu::Buffer, listed_groups: &wgpu::Buffer| {
+    let group_with = |src: &wgpu::Buffer, dst: &wgpu::Buffer, listed_groups: &wgpu::Buffer, shaded_groups: &wgpu::Buffer| {
         ctx.bind(
             "Jfa::bind_group",
             &seed,
@@ -308,12 +315,17 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
                 tiles.as_entire_binding(),
                 listed.list.as_entire_binding(),
                 listed_groups.as_entire_binding(),
+                shaded.list.as_entire_binding(),
+                shaded_groups.as_entire_binding(),
             ],
         )
     };
-    let group = |src: &wgpu::Buffer, dst: &wgpu::Buffer| group_with(src, dst, &listed.groups);
+    let group = |src: &wgpu::Buffer, dst: &wgpu::Buffer| group_with(src, dst, &listed.groups, &shaded.groups);
     // The boundary seeds write a (as the seed pass does), the indirect grid bound as its stand-in.
-    let seeding = group_with(&b, &a, &listed.stand_in);
+    let seeding = group_with(&b, &a, &listed.stand_in, &shaded.groups);
+    // The rounds alternate from a; the final passes read the last one's output.
+    let (result, other) = if steps.len() % 2 == 0 { (&a, &b) } else { (&b, &a) };
+    let final_shading = group_with(result, other, &listed.groups, &shaded.stand_in);
     let (a_to_b, b_to_a) = (group(&a, &b), group(&b, &a));
     // Rounds skip the tiles no record can reach and leave their cells as they are, so both
     // record buffers start empty (all zero) and the tile flags start clear.
@@ -351,6 +363,12 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
         pass.set_pipeline(&finish);
         pass.set_bind_group(1, if result_in_a { &a_to_b } else { &b_to_a }, &[0]);
         pass.dispatch_workgroups(screen.0, screen.1, 1);
+        let [size, shade] = &shading;
+        pass.set_pipeline(size);
+        pass.dispatch_workgroups(1, 1, 1);
+        pass.set_pipeline(shade);
+        pass.set_bind_group(1, &final_shading, &[0]);
+        pass.dispatch_workgroups_indirect(&shaded.groups, 0);
     }
     let counts = ctx.read_counters(&counters)?;
     let flooded = f64::from(counts[2]) / (f64::from(tile_count) * steps.len() as f64);
