@@ -30,6 +30,7 @@ pub const SOURCES: &[(&str, &str)] = &[
     ("methods/jfa/voronoi.wgsl", include_str!("../../shaders/methods/jfa/voronoi.wgsl")),
     ("methods/jfa/silhouette.wgsl", include_str!("../../shaders/methods/jfa/silhouette.wgsl")),
     ("methods/jfa/flood_light.wgsl", include_str!("../../shaders/methods/jfa/flood_light.wgsl")),
+    ("methods/jfa/shading.wgsl", include_str!("../../shaders/methods/jfa/shading.wgsl")),
     ("methods/jfa/final_light.wgsl", include_str!("../../shaders/methods/jfa/final_light.wgsl")),
     ("methods/jfa/boundary.wgsl", include_str!("../../shaders/methods/jfa/boundary.wgsl")),
     ("methods/jfa/flood_eye.wgsl", include_str!("../../shaders/methods/jfa/flood_eye.wgsl")),

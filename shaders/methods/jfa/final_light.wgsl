@@ -4,18 +4,12 @@
 // `inner` on, a pixel in hard shadow takes the inner-penumbra intensity of the silhouette
 // point its texel holds (`flood_light.wgsl`), 0 where the ray through it misses the light.
 //
-// The pixels that need the intensity (a few percent of a frame) are listed and shaded by an
-// indirect dispatch of their own: lavapipe runs a branch's code — here the intensity and a
-// 5×5 silhouette window — for all 8 lanes of a SIMD group if one lane takes it.
+// The pixels that need the intensity are listed and shaded by an indirect dispatch of their
+// own (shading.wgsl says why).
 
-#import methods/jfa/common.wgsl
-#import common/pixel_list.wgsl
+#import methods/jfa/shading.wgsl
 
-// The pixels to shade: list index << 1 | 1 where the pixel is in hard shadow.
-@group(1) @binding(10) var<storage, read_write> shaded: PixelList;
-@group(1) @binding(11) var<storage, read_write> shaded_groups: array<u32, 3>; // indirect dispatch
-
-// The record the flood left at pixel `pixel`'s texel, and whether it lies in the shadow map.
+// The record the flood left at the shadow-map texel of point p (empty outside the map).
 fn texel_record(p: vec3<f32>) -> vec4<f32> {
     let ls = to_light_space(p);
     if !ls.inside {
@@ -40,7 +34,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
             let hard = hard_shadowed(pixel);
             let needed = select(in_penumbra(record), params.inner == 1u && !is_empty(record), hard);
             if needed {
-                shaded.pixels[atomicAdd(&shaded.count, 1u)] = list_index(pixel) << 1u | u32(hard);
+                list_for_shading(pixel, hard);
                 return;
             }
             v = select(v, vec3<f32>(0.0), hard);
@@ -49,30 +43,16 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     textureStore(visibility_out, pixel, vec4<f32>(v, 1.0));
 }
 
-// The size of `shade_listed`'s dispatch.
-@compute @workgroup_size(1)
-fn shaded_size() {
-    shaded_groups = list_dispatch(atomicLoad(&shaded.count));
-}
-
 // The listed pixels: the intensity for the occluder their texel holds (inner penumbra where in
-// hard shadow), or 0 / 1 where the ray through it misses the light.
+// hard shadow).
 @compute @workgroup_size(64)
 fn shade_listed(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) lane: u32) {
-    let i = list_position(group, lane);
-    if i >= atomicLoad(&shaded.count) {
+    let listed = listed_for_shading(group, lane);
+    if listed.z > 1u {
         return;
     }
-    let entry = shaded.pixels[i];
-    let pixel = listed_pixel(entry >> 1u);
-    let hard = (entry & 1u) == 1u;
-    let p = textureLoad(gbuf_position, pixel, 0).xyz;
+    let p = textureLoad(gbuf_position, listed.xy, 0).xyz;
     let record = texel_record(p);
-    let intensity = final_intensity(p, record.xyz, hard, silhouette_normal(record.xyz, 2, params.silhouette_relative));
-    var v = select(vec3<f32>(1.0), vec3<f32>(0.0), hard);
-    if intensity.w > 0.0 {
-        v = intensity.rgb;
-        atomicAdd(&counters[1], 1u);
-    }
-    textureStore(visibility_out, pixel, vec4<f32>(v, 1.0));
+    let hard = listed.z == 1u;
+    store_shaded(listed.xy, hard, final_intensity(p, record.xyz, hard, silhouette_normal(record.xyz, 2, params.silhouette_relative)));
 }

@@ -1,0 +1,44 @@
+// Methods `jfa-l`, `jfa-e`, final passes: the pixels shaded by the occluder the flood left
+// them, listed by each final pass's `main` and shaded by its `shade_listed`, an indirect
+// dispatch of their own: lavapipe runs a branch's code — the intensity, and for `jfa-l` a 5×5
+// silhouette window — for all 8 lanes of a SIMD group if one lane takes it, and these pixels
+// are a few percent of a frame.
+
+#import methods/jfa/common.wgsl
+#import common/pixel_list.wgsl
+
+// The pixels to shade: list index << 1 | 1 where the pixel is in hard shadow.
+@group(1) @binding(10) var<storage, read_write> shaded: PixelList;
+@group(1) @binding(11) var<storage, read_write> shaded_groups: array<u32, 3>; // indirect dispatch
+
+fn list_for_shading(pixel: vec2<u32>, hard: bool) {
+    shaded.pixels[atomicAdd(&shaded.count, 1u)] = list_index(pixel) << 1u | u32(hard);
+}
+
+// The size of `shade_listed`'s dispatch.
+@compute @workgroup_size(1)
+fn shaded_size() {
+    shaded_groups = list_dispatch(atomicLoad(&shaded.count));
+}
+
+// A listed pixel (xy) and whether it is in hard shadow (z), for lane `lane` of workgroup
+// `group` of `shade_listed`; z = 2 past the list's end.
+fn listed_for_shading(group: vec3<u32>, lane: u32) -> vec3<u32> {
+    let i = list_position(group, lane);
+    if i >= atomicLoad(&shaded.count) {
+        return vec3<u32>(0u, 0u, 2u);
+    }
+    let entry = shaded.pixels[i];
+    return vec3<u32>(listed_pixel(entry >> 1u), entry & 1u);
+}
+
+// A shaded pixel's visibility: the intensity where the ray through its occluder meets the
+// light, else 0 in hard shadow and 1 outside.
+fn store_shaded(pixel: vec2<u32>, hard: bool, intensity: vec4<f32>) {
+    var v = select(vec3<f32>(1.0), vec3<f32>(0.0), hard);
+    if intensity.w > 0.0 {
+        v = intensity.rgb;
+        atomicAdd(&counters[1], 1u);
+    }
+    textureStore(visibility_out, pixel, vec4<f32>(v, 1.0));
+}
