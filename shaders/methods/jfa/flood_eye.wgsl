@@ -7,71 +7,106 @@
 
 #import methods/jfa/common.wgsl
 
+// A key no candidate can take.
+const NO_KEY: f32 = 1e30;
+
+// What a pixel needs to weigh its neighbours' records.
+struct Receiver {
+    p: vec2<i32>,
+    here: vec3<f32>,
+    object: f32,
+    inside: bool,
+    own: vec4<f32>, // the record the pixel holds already
+}
+
+// The jump neighbour k's record index (2 vec4s a record), or −1 where there is none.
+fn neighbour_record(r: Receiver, k: u32) -> i32 {
+    let n = jump_neighbour(r.p, k, params.step, vec2<i32>(frame.sizes.xy));
+    return select(i32(2u * (u32(n.y) * frame.sizes.x + u32(n.x))), -1, n.x < 0);
+}
+
+// The key neighbour k's occluder gives this pixel, or NO_KEY where it cannot be taken: no
+// record, the occluder the pixel holds already (whose key it has), another object's (with
+// `same_object`), or one whose ray misses the light.
+fn candidate_key(r: Receiver, k: u32) -> f32 {
+    let at = neighbour_record(r, k);
+    if at < 0 {
+        return NO_KEY;
+    }
+    let candidate = src[at];
+    if is_empty(candidate) || all(candidate.xyz == r.own.xyz) {
+        return NO_KEY;
+    }
+    if params.same_object == 1u && src[at + 1].z != r.object {
+        return NO_KEY;
+    }
+    let i = intensity(r.here, candidate.xyz, r.inside);
+    return select(select(luminance(i.rgb), 1.0 - luminance(i.rgb), r.inside), NO_KEY, i.w == 0.0);
+}
+
+// §5.2's continuity check, read as: the midpoint between the boundary pixel and this one must
+// itself be in a penumbra of the same occluder. Asking instead whether the midpoint already
+// holds a record would depend on the order jump flooding reaches pixels (far ones first) and
+// cut real penumbrae.
+fn midpoint_holds(r: Receiver, k: u32) -> bool {
+    let at = neighbour_record(r, k);
+    let mid = vec2<u32>((vec2<i32>(src[at + 1].xy) + r.p) / 2);
+    let mid_flag = flags[mid.y * frame.sizes.x + mid.x];
+    if (mid_flag & COVERED) == 0u {
+        return false;
+    }
+    return intensity(textureLoad(gbuf_position, mid, 0).xyz, src[at].xyz, (mid_flag & HARD) != 0u).w > 0.0;
+}
+
 @compute @workgroup_size(8, 8)
 fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) local: u32, @builtin(workgroup_id) group: vec3<u32>) {
     if !tile_in_reach(local, group.xy) {
         return;
     }
     let pixel = id.xy;
-    let size = vec2<i32>(frame.sizes.xy);
     if any(pixel >= frame.sizes.xy) {
         return;
     }
-    let p = vec2<i32>(pixel);
     let index = 2u * (pixel.y * frame.sizes.x + pixel.x);
     var best = src[index];
     var best_origin = src[index + 1u];
-    var best_key = key_of(best);
     let flag = flags[pixel.y * frame.sizes.x + pixel.x];
     if (flag & COVERED) != 0u {
-        let here = textureLoad(gbuf_position, pixel, 0).xyz;
-        let object = f32(textureLoad(gbuf_id, pixel, 0).r);
-        let inside = (flag & HARD) != 0u;
-        for (var k = 0u; k < 9u; k++) {
-            let n = jump_neighbour(p, k, params.step, size);
-            if n.x < 0 {
-                continue;
-            }
-            let at = 2u * (u32(n.y) * frame.sizes.x + u32(n.x));
-            let candidate = src[at];
-            // The occluder held already has its key for this pixel: whatever its origin, the
-            // same occluder gives the same key and would not replace it.
-            if is_empty(candidate) || all(candidate.xyz == best.xyz) {
-                continue;
-            }
-            let origin = src[at + 1u];
-            if params.same_object == 1u && origin.z != object {
-                continue;
-            }
-            let i = intensity(here, candidate.xyz, inside);
-            let key = select(luminance(i.rgb), 1.0 - luminance(i.rgb), inside);
-            if i.w == 0.0 || key >= best_key {
-                continue;
-            }
-            // Only a candidate that would win pays for the midpoint check.
-            if params.midpoint == 1u {
-                // §5.2's continuity check, read as: the midpoint between the boundary pixel
-                // and this one must itself be in a penumbra of the same occluder. Asking
-                // instead whether the midpoint already holds a record would depend on the
-                // order jump flooding reaches pixels (far ones first) and cut real penumbrae.
-                let mid = vec2<u32>((vec2<i32>(origin.xy) + p) / 2);
-                let mid_flag = flags[mid.y * frame.sizes.x + mid.x];
-                if (mid_flag & COVERED) == 0u {
-                    continue;
-                }
-                let at_mid = intensity(textureLoad(gbuf_position, mid, 0).xyz, candidate.xyz, (mid_flag & HARD) != 0u);
-                if at_mid.w == 0.0 {
-                    continue;
+        let r = Receiver(vec2<i32>(pixel), textureLoad(gbuf_position, pixel, 0).xyz, f32(textureLoad(gbuf_id, pixel, 0).r), (flag & HARD) != 0u, best);
+        // The neighbour taken is the one of least key below the pixel's own (the first of
+        // equal keys) whose midpoint holds: what a scan keeping a running minimum would keep,
+        // but with the midpoint checked for that neighbour alone — and, should it fail, for
+        // the next in (key, neighbour) order — instead of for every better candidate met on
+        // the way (on a CPU rasteriser every lane pays for every check any lane makes).
+        var after_key = -NO_KEY; // the (key, neighbour) order's lower bound, exclusive
+        var after_k = -1;
+        loop {
+            var chosen = -1;
+            var chosen_key = key_of(best);
+            for (var k = 0u; k < 9u; k++) {
+                let key = candidate_key(r, k);
+                let after = key > after_key || (key == after_key && i32(k) > after_k);
+                if after && key < chosen_key {
+                    chosen = i32(k);
+                    chosen_key = key;
                 }
             }
-            best = packed(candidate.xyz, key);
-            best_origin = origin;
-            best_key = key;
+            if chosen < 0 {
+                break;
+            }
+            if params.midpoint == 0u || midpoint_holds(r, u32(chosen)) {
+                let at = neighbour_record(r, u32(chosen));
+                best = packed(src[at].xyz, chosen_key);
+                best_origin = src[at + 1];
+                break;
+            }
+            after_key = chosen_key;
+            after_k = chosen;
         }
     }
     dst[index] = best;
     dst[index + 1u] = best_origin;
     if !is_empty(best) {
-        mark_tile(p);
+        mark_tile(vec2<i32>(pixel));
     }
 }
