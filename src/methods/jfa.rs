@@ -296,8 +296,8 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
     let finish = ctx.screen_pipeline(PipelineKey::new(which.finish.0), which.finish.1, &io);
     // The final pass lists the pixels it shades by an occluder and shades them in a compacted
     // pass (final_light.wgsl, final_eye.wgsl).
-    let shading = [("size", "shaded_size"), ("shade", "shade_listed")]
-        .map(|(name, entry)| ctx.screen_entry(PipelineKey { name: which.finish.0, variant: if name == "size" { 1 } else { 2 } }, which.finish.1, entry, &io));
+    let shading = [(1, "shaded_size"), (2, "shade_listed")]
+        .map(|(variant, entry)| ctx.screen_entry(PipelineKey { name: which.finish.0, variant }, which.finish.1, entry, &io));
     let shaded = crate::render::PixelListBuffers::new(&device, ctx.encoder, "Jfa::shaded", u64::from(ctx.width) * u64::from(ctx.height));
     // Ping-pong: `a_to_b` reads a and writes b, `b_to_a` the reverse.
     let group_with = |src: &wgpu::Buffer, dst: &wgpu::Buffer, listed_groups: &wgpu::Buffer, shaded_groups: &wgpu::Buffer| {
@@ -323,9 +323,11 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
     let group = |src: &wgpu::Buffer, dst: &wgpu::Buffer| group_with(src, dst, &listed.groups, &shaded.groups);
     // The boundary seeds write a (as the seed pass does), the indirect grid bound as its stand-in.
     let seeding = group_with(&b, &a, &listed.stand_in, &shaded.groups);
-    // The rounds alternate from a; the final passes read the last one's output.
-    let (result, other) = if steps.len() % 2 == 0 { (&a, &b) } else { (&b, &a) };
-    let final_shading = group_with(result, other, &listed.groups, &shaded.stand_in);
+    // The seeds are in a and each round reads the other buffer: the final passes read a after
+    // an even number of rounds.
+    let result_in_a = steps.len().is_multiple_of(2);
+    let final_shading =
+        if result_in_a { group_with(&a, &b, &listed.groups, &shaded.stand_in) } else { group_with(&b, &a, &listed.groups, &shaded.stand_in) };
     let (a_to_b, b_to_a) = (group(&a, &b), group(&b, &a));
     // Rounds skip the tiles no record can reach and leave their cells as they are, so both
     // record buffers start empty (all zero) and the tile flags start clear.
@@ -353,12 +355,10 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
             pass.dispatch_workgroups_indirect(&listed.groups, 0);
         }
         pass.set_pipeline(&round);
-        let mut result_in_a = true;
         for k in 0..steps.len() {
             let offset = layout::slot_offset(k + 1);
-            pass.set_bind_group(1, if result_in_a { &a_to_b } else { &b_to_a }, &[offset]);
+            pass.set_bind_group(1, if k.is_multiple_of(2) { &a_to_b } else { &b_to_a }, &[offset]);
             pass.dispatch_workgroups(groups.0, groups.1, 1);
-            result_in_a = !result_in_a;
         }
         pass.set_pipeline(&finish);
         pass.set_bind_group(1, if result_in_a { &a_to_b } else { &b_to_a }, &[0]);

@@ -70,7 +70,8 @@ fn batch_layers(resolution: u32) -> u32 {
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 struct BatchUniforms {
     count: u32,
-    pad: [u32; 3],
+    row_texels: u32,
+    pad: [u32; 2],
     samples: [SampleUniforms; BATCH_SAMPLES],
 }
 
@@ -82,7 +83,6 @@ struct SampleUniforms {
     position: [f32; 4],
     radiance: [f32; 4],
     params: [f32; 4],
-    row: [u32; 4],
 }
 
 /// A point on the light and its weight: `L(y)` times the area of its stratum.
@@ -153,7 +153,6 @@ impl ShadowMethod for Reference {
         let resolution = params.get(&RESOLUTION);
         let (samples, strata) = light_samples(&spec.light, &spec.light_image, params.get(&SAMPLES), u64::from(params.get(&SEED)));
         let corners = ctx.scene.shadow_fit_points(&spec.light);
-        let row_texels = (4 * resolution).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) / 4;
         let slots: Vec<SampleUniforms> = samples
             .iter()
             .map(|sample| {
@@ -164,17 +163,22 @@ impl ShadowMethod for Reference {
                     position: sample.position.extend(distance_unit(&projection)).to_array(),
                     radiance: sample.weight.extend(0.0).to_array(),
                     params: [projection.tan_half, resolution as f32, params.get(&BIAS_TEXELS), params.get(&SLOPE_BIAS_TEXELS)],
-                    row: [row_texels, 0, 0, 0],
                 }
             })
             .collect();
         let uniform_buffer = layout::uniform_slots(&device, "Reference::samples", &slots);
+        // Each sample's map is copied into its layer of a plain buffer, in rows padded for the
+        // copy, which the accumulate pass reads: a storage-buffer load on lavapipe is a plain
+        // gather, a texel fetch adds format and robustness handling.
+        let row_bytes = (4 * resolution).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
+        let layer_bytes = u64::from(row_bytes) * u64::from(resolution);
         let layers = batch_layers(resolution).min(slots.len().max(1) as u32);
         let batches: Vec<BatchUniforms> = slots
             .chunks(layers as usize)
             .map(|chunk| {
                 let mut batch = BatchUniforms::zeroed();
                 batch.count = chunk.len() as u32;
+                batch.row_texels = row_bytes / 4;
                 batch.samples[..chunk.len()].copy_from_slice(chunk);
                 batch
             })
@@ -202,11 +206,6 @@ impl ShadowMethod for Reference {
         // The distance map is the depth buffer itself (`sample_depth.wgsl`).
         let distance = target("Reference::distance", DEPTH_BUFFER_FORMAT, wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC);
         let distance_view = distance.create_view(&Default::default());
-        // Each sample's map is copied into its layer of a plain buffer, which the accumulate
-        // pass reads: on lavapipe a storage-buffer load is a plain gather and a texel fetch is
-        // not (format, robustness), and that one tap was nearly all of a sample's cost.
-        let row_bytes = (4 * resolution).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
-        let layer_bytes = u64::from(row_bytes) * u64::from(resolution);
         let distances = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("Reference::distances"),
             size: layer_bytes * u64::from(layers),

@@ -71,7 +71,7 @@ impl Renderer {
         let mut pass = begin_scene_pass(
             encoder,
             "ShadowMap::pass",
-            &colors,
+            colors,
             &targets.shadow_depth_buffer.view,
             timestamps,
             (&pipeline, &bind_group),

@@ -15,12 +15,13 @@
 const BATCH: u32 = 8u;
 
 struct Batch {
-    count: u32, // samples in the batch (1..=BATCH); sample k has layer k of `distances`
+    count: u32,      // samples in the batch (1..=BATCH); sample k has layer k of `distances`
+    row_texels: u32, // texels per row of a layer (rows padded for the copy)
     samples: array<LightSample, BATCH>,
 }
 
 @group(1) @binding(0) var<uniform> batch: Batch;
-// The batch's distance maps, one after the other, each `resolution` rows of `row.x` texels.
+// The batch's distance maps, one after the other, each `resolution` rows of `row_texels`.
 @group(1) @binding(1) var<storage, read> distances: array<f32>;
 @group(1) @binding(2) var<storage, read_write> sums: array<vec4<f32>>; // 2 per pixel
 
@@ -48,7 +49,7 @@ fn add_sample(sums: ptr<function, Sums>, x: vec3<f32>, n: vec3<f32>, layer: u32,
     if clip.w > 0.0 && all(uv >= vec2<f32>(0.0)) && all(uv < vec2<f32>(1.0)) {
         let res = light_sample.params.y;
         let texel = min(vec2<u32>(uv * res), vec2<u32>(u32(res) - 1u));
-        let nearest = distances[(layer * u32(res) + texel.y) * light_sample.row.x + texel.x] * light_sample.position.w;
+        let nearest = distances[(layer * u32(res) + texel.y) * batch.row_texels + texel.x] * light_sample.position.w;
         // Bias in texels of this sample's map at the receiver, constant plus slope-scaled:
         // it shrinks with resolution, so the estimate converges to true visibility.
         let texel_m = 2.0 * dist * cos_y * light_sample.params.x / res;

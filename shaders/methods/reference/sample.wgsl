@@ -6,5 +6,4 @@ struct LightSample {
     position: vec4<f32>,    // xyz: the sample point on the light; w: the distance map's unit (depth 1), metres
     radiance: vec4<f32>,    // rgb: L(y) × stratum area, the sample's weight in the estimator
     params: vec4<f32>,      // x: tan of the frustum half angle, y: resolution, z: bias texels, w: slope bias texels
-    row: vec4<u32>,         // x: texels per row of a distance map copied into a buffer (rows padded for the copy)
 }
