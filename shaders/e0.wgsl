@@ -17,11 +17,10 @@
 
 @group(1) @binding(0) var e0_out: texture_storage_2d<rgba32float, write>;
 @group(1) @binding(1) var<storage, read_write> corners: array<Corner>;
-@group(1) @binding(2) var<storage, read_write> blocks: array<vec4<f32>>;
 // The pixels the interpolation did not accept, summed exactly by a pass of their own
 // (common/pixel_list.wgsl says why).
-@group(1) @binding(3) var<storage, read_write> fallback: PixelList;
-@group(1) @binding(4) var<storage, read_write> fallback_groups: array<u32, 3>; // indirect dispatch
+@group(1) @binding(2) var<storage, read_write> fallback: PixelList;
+@group(1) @binding(3) var<storage, read_write> fallback_groups: array<u32, 3>; // indirect dispatch
 
 // Pixels per block side; mirrors `render::passes::E0_BLOCK`.
 const BLOCK: u32 = 8u;
@@ -116,6 +115,20 @@ fn block_corners(@builtin(global_invocation_id) id: vec3<u32>) {
     corners[id.y * count.x + id.x] = pixel_terms(corner_pixel(id.xy));
 }
 
+// A block's four corner records.
+struct Block {
+    c00: Corner,
+    c10: Corner,
+    c01: Corner,
+    c11: Corner,
+}
+
+fn load_block(block: vec2<u32>) -> Block {
+    let row = block.y * corner_count().x + block.x;
+    let below = row + corner_count().x;
+    return Block(corners[row], corners[row + 1u], corners[below], corners[below + 1u]);
+}
+
 // A block's corners and a pixel's bilinear weights among them.
 struct Stencil {
     c00: Corner,
@@ -125,24 +138,18 @@ struct Stencil {
     w: vec4<f32>,
 }
 
-fn stencil(pixel: vec2<u32>) -> Stencil {
-    let count = corner_count();
+fn stencil(pixel: vec2<u32>, b: Block) -> Stencil {
     let block = pixel / BLOCK;
     let p0 = corner_pixel(block);
     let p1 = corner_pixel(block + 1u);
     let f = vec2<f32>(pixel - p0) / vec2<f32>(max(p1 - p0, vec2<u32>(1u)));
-    let row = block.y * count.x + block.x;
-    let c00 = corners[row];
-    let c10 = corners[row + 1u];
-    let c01 = corners[row + count.x];
-    let c11 = corners[row + count.x + 1u];
     // Perspective-correct weights (bilinear over view depth): on a plane they put the blend
     // of the corners' positions on the pixel's own position up to second order, where plain
     // screen-space weights would be off by the projection's curvature.
     let bilinear = vec4<f32>((1.0 - f.x) * (1.0 - f.y), f.x * (1.0 - f.y), (1.0 - f.x) * f.y, f.x * f.y);
-    let depth = max(vec4<f32>(c00.normal.w, c10.normal.w, c01.normal.w, c11.normal.w), vec4<f32>(1e-20));
+    let depth = max(vec4<f32>(b.c00.normal.w, b.c10.normal.w, b.c01.normal.w, b.c11.normal.w), vec4<f32>(1e-20));
     let w = bilinear / depth;
-    return Stencil(c00, c10, c01, c11, w / (w.x + w.y + w.z + w.w));
+    return Stencil(b.c00, b.c10, b.c01, b.c11, w / (w.x + w.y + w.z + w.w));
 }
 
 fn all_valid(s: Stencil) -> bool {
@@ -178,17 +185,12 @@ fn max3(v: vec3<f32>) -> f32 {
     return max(v.x, max(v.y, v.z));
 }
 
-// Pass 2: per block, the interpolation's actual error at its centre pixel, relative to
-// |Φ| (x), and the centre's distance from the corners' blended position (y).
-@compute @workgroup_size(8, 8)
-fn block_errors(@builtin(global_invocation_id) id: vec3<u32>) {
-    let count = corner_count() - 1u;
-    if any(id.xy >= count) {
-        return;
-    }
-    let centre = min(id.xy * BLOCK + BLOCK / 2u, frame.sizes.xy - 1u);
-    var error = vec4<f32>(UNCHECKED, 0.0, 0.0, 0.0);
-    let s = stencil(centre);
+// The interpolation's actual error at a block's centre pixel, relative to |Φ| (x), and the
+// centre's distance from the corners' blended position (y); x is UNCHECKED where the centre
+// or a corner holds no lit surface.
+fn block_error(block: vec2<u32>, b: Block) -> vec2<f32> {
+    let centre = min(block * BLOCK + BLOCK / 2u, frame.sizes.xy - 1u);
+    let s = stencil(centre, b);
     let exact = pixel_terms(centre);
     if all_valid(s) && exact.position.w > 0.0 {
         let mixed = blend(s);
@@ -198,9 +200,9 @@ fn block_errors(@builtin(global_invocation_id) id: vec3<u32>) {
             distance(mixed.phi_g.xyz, exact.phi_g.xyz),
             distance(mixed.phi_b.xyz, exact.phi_b.xyz),
         );
-        error = vec4<f32>(max3(phi_error / size), distance(mixed.position.xyz, exact.position.xyz), 0.0, 0.0);
+        return vec2<f32>(max3(phi_error / size), distance(mixed.position.xyz, exact.position.xyz));
     }
-    blocks[id.y * count.x + id.x] = error;
+    return vec2<f32>(UNCHECKED, 0.0);
 }
 
 // Whether the whole light rectangle lies above the plane through x with normal nx.
@@ -212,15 +214,13 @@ fn light_above(x: vec3<f32>, nx: vec3<f32>) -> bool {
 
 // E0 at one pixel interpolated from its block's corners: xyz, and w = 1 where the estimate
 // accepts it (or the pixel receives no light), 0 where it must be summed exactly.
-fn interpolated_e0(pixel: vec2<u32>) -> vec4<f32> {
+fn interpolated_e0(pixel: vec2<u32>, b: Block, checked: vec2<f32>) -> vec4<f32> {
     let x = textureLoad(gbuf_position, pixel, 0).xyz;
     let nx = textureLoad(gbuf_normal, pixel, 0).xyz;
     if !covered(pixel) || !lit_side(x) {
         return vec4<f32>(0.0, 0.0, 0.0, 1.0);
     }
-    let block = pixel / BLOCK;
-    let checked = blocks[block.y * (corner_count().x - 1u) + block.x];
-    let s = stencil(pixel);
+    let s = stencil(pixel, b);
     let mixed = blend(s);
     // The centre's error with a margin, plus what a position off the corners' surface
     // (farther from it than the centre was) adds through Φ's gradient.
@@ -253,26 +253,42 @@ fn exact_at(pixel: vec2<u32>) -> vec3<f32> {
     return exact_e0(x, textureLoad(gbuf_normal, pixel, 0).xyz);
 }
 
-// Pass 3: every pixel, interpolated where the estimate allows; the others are listed.
-@compute @workgroup_size(8, 8)
-fn main(@builtin(global_invocation_id) id: vec3<u32>) {
-    if all(id.xy < frame.sizes.xy) {
-        let e0 = interpolated_e0(id.xy);
-        if e0.w > 0.0 {
-            textureStore(e0_out, id.xy, vec4<f32>(e0.xyz, 1.0));
-        } else {
-            fallback.pixels[atomicAdd(&fallback.count, 1u)] = list_index(id.xy);
+// Pass 2, one invocation per block (a row of blocks per workgroup row): the centre checks
+// the interpolation, then each of the block's pixels is interpolated where the estimate
+// allows and listed otherwise. One invocation loads the block's 20 corner vectors for its 64
+// pixels: on lavapipe a storage load is a gather lane by lane whatever the lanes read, so
+// loading them per pixel cost more than the interpolation itself.
+@compute @workgroup_size(64)
+fn interpolate_blocks(@builtin(global_invocation_id) id: vec3<u32>) {
+    let block = id.xy;
+    if any(block >= corner_count() - 1u) {
+        return;
+    }
+    let b = load_block(block);
+    let checked = block_error(block, b);
+    let origin = block * BLOCK;
+    for (var y = 0u; y < BLOCK; y++) {
+        for (var x = 0u; x < BLOCK; x++) {
+            let pixel = origin + vec2<u32>(x, y);
+            if all(pixel < frame.sizes.xy) {
+                let e0 = interpolated_e0(pixel, b, checked);
+                if e0.w > 0.0 {
+                    textureStore(e0_out, pixel, vec4<f32>(e0.xyz, 1.0));
+                } else {
+                    fallback.pixels[atomicAdd(&fallback.count, 1u)] = list_index(pixel);
+                }
+            }
         }
     }
 }
 
-// Pass 4: the size of pass 5's dispatch.
+// Pass 3: the size of pass 4's dispatch.
 @compute @workgroup_size(1)
 fn fallback_size() {
     fallback_groups = list_dispatch(atomicLoad(&fallback.count));
 }
 
-// Pass 5: the listed pixels, summed exactly.
+// Pass 4: the listed pixels, summed exactly.
 @compute @workgroup_size(64)
 fn fallback_exact(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) lane: u32) {
     let i = list_position(group, lane);

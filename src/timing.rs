@@ -15,6 +15,17 @@ pub struct Phase {
     /// GPU milliseconds between the phase's first and last timestamp, where supported.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub gpu_ms: Option<f64>,
+    /// GPU time of each of the phase's passes — of each dispatch, where the adapter writes
+    /// timestamps inside passes — summed over repeats of the same pass (batches, chunks).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub passes: Vec<PassTiming>,
+}
+
+/// The GPU time of one pass (or dispatch) of a phase.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct PassTiming {
+    pub name: &'static str,
+    pub gpu_ms: f64,
 }
 
 #[derive(Debug, Clone, Default, Serialize, PartialEq)]
@@ -37,14 +48,19 @@ impl Timings {
     /// Records that phase `name` ran from `start` until now and returns now.
     pub fn phase(&mut self, name: &'static str, start: Instant) -> Instant {
         let now = Instant::now();
-        self.phases.push(Phase { name, cpu_ms: (now - start).as_secs_f64() * 1e3, gpu_ms: None });
+        self.phases.push(Phase { name, cpu_ms: (now - start).as_secs_f64() * 1e3, gpu_ms: None, passes: Vec::new() });
         now
     }
 
-    /// Adds GPU time measured for a phase (summed when a phase has several passes).
-    pub fn add_gpu(&mut self, name: &str, ms: f64) {
+    /// Adds GPU time measured for pass `pass` of phase `name` to the phase's total and to
+    /// the pass's own entry.
+    pub fn add_gpu(&mut self, name: &str, pass: &'static str, ms: f64) {
         if let Some(phase) = self.phases.iter_mut().find(|p| p.name == name) {
             *phase.gpu_ms.get_or_insert(0.0) += ms;
+            match phase.passes.iter_mut().find(|p| p.name == pass) {
+                Some(entry) => entry.gpu_ms += ms,
+                None => phase.passes.push(PassTiming { name: pass, gpu_ms: ms }),
+            }
         }
     }
 

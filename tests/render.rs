@@ -412,6 +412,17 @@ fn bench_writes_its_phase_table_and_the_e0_check() {
         let floor = phase("e0") + phase("composite") + phase("readback") + phase("encode");
         assert!((row.floor_ms - floor).abs() < 1e-9 && phase("gbuffer") > 0.0 && row.whole_ms >= floor, "{row:?}");
         assert!(row.penumbra_error > 0.0 && row.penumbra_error < 0.5, "{row:?}");
+        if engine.gpu().timestamps {
+            // Each pass (each dispatch, where timestamps can be written inside passes) is
+            // listed under its phase; the GPU-timed phases are the sums of their passes.
+            let passes = |of: &str| row.passes.iter().filter(|(p, _, _)| p == of).map(|(_, _, ms)| *ms).sum::<f64>();
+            for name in ["gbuffer", "e0", "composite"] {
+                assert!((passes(name) - phase(name)).abs() < 1e-6 * phase(name).max(1.0), "{name}: {row:?}");
+            }
+            let names: Vec<&str> = row.passes.iter().map(|(_, pass, _)| pass.as_str()).collect();
+            let e0_passes: &[&str] = if row.light == "flame" { &["e0_corners", "e0_interpolate", "e0_fallback"] } else { &["e0"] };
+            assert!(e0_passes.iter().all(|p| names.contains(p)) || !engine.gpu().timestamps_inside_passes, "{names:?}");
+        }
     }
     let hard = report.rows.iter().find(|r| r.method == "hard" && r.light == "flame").unwrap();
     let wedges = report.rows.iter().find(|r| r.method == "wedges" && r.light == "flame").unwrap();
@@ -422,6 +433,7 @@ fn bench_writes_its_phase_table_and_the_e0_check() {
     }
     let md = std::fs::read_to_string(out.join("bench.md")).unwrap();
     assert!(md.contains("## crowd, flame (") && md.contains("| reference (8 samples) |") && md.contains("## E0: interpolated"), "{md}");
+    assert!(!engine.gpu().timestamps || md.contains("GPU ms per pass"), "{md}");
     let json: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("bench.json")).unwrap()).unwrap();
     assert_eq!(json["rows"].as_array().unwrap().len(), 2 * methods);
     std::fs::remove_dir_all(&out).ok();

@@ -78,6 +78,9 @@ pub struct BenchRow {
     pub penumbra_error: f64,
     pub frame_error: f64,
     pub triangles: u64,
+    /// Median GPU ms of each pass (of each dispatch, where timestamps can be written inside
+    /// passes) as (phase, pass, ms), in recording order.
+    pub passes: Vec<(String, String, f64)>,
 }
 
 /// How the interpolated E0 compares with the exact sum in one case.
@@ -220,6 +223,7 @@ fn bench_row(scene: &str, light: &str, method: &str, runs: Vec<Timings>, penumbr
         penumbra_error,
         frame_error,
         triangles: median.scene_triangles,
+        passes: median.phases.iter().flat_map(|p| p.passes.iter().map(|q| (p.name.to_owned(), q.name.to_owned(), q.gpu_ms))).collect(),
     }
 }
 
@@ -306,7 +310,7 @@ fn markdown(report: &BenchReport) -> Result<String, std::fmt::Error> {
         writeln!(md, "## {scene}, {light} ({triangles} triangles)\n")?;
         writeln!(md, "| method | shadow map | G-buffer | E0 | method | composite | readback | encode | floor | whole | ÷ G-buffer | penumbra error |")?;
         writeln!(md, "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")?;
-        for row in rows {
+        for row in &rows {
             let phases: Vec<String> = row.phases.iter().map(|(_, ms)| format!("{ms:.0}")).collect();
             writeln!(
                 md,
@@ -320,6 +324,7 @@ fn markdown(report: &BenchReport) -> Result<String, std::fmt::Error> {
             )?;
         }
         writeln!(md)?;
+        passes_markdown(&mut md, &rows)?;
     }
     writeln!(md, "## E0: interpolated against the exact sum\n")?;
     writeln!(md, "Relative error over pixels and channels with E0 > 1e-3 × the frame's largest (contract §1: at most 1e-3).\n")?;
@@ -340,4 +345,25 @@ fn markdown(report: &BenchReport) -> Result<String, std::fmt::Error> {
         )?;
     }
     Ok(md)
+}
+
+/// Where each row's E0 and method phases go, pass by pass (dispatch by dispatch where the
+/// adapter times inside passes): the list to read before choosing what to speed up.
+fn passes_markdown(md: &mut String, rows: &[&BenchRow]) -> std::fmt::Result {
+    if rows.iter().all(|r| r.passes.is_empty()) {
+        return Ok(());
+    }
+    writeln!(md, "GPU ms per pass (medians), E0 then the method:\n")?;
+    for row in rows {
+        let list: Vec<String> = row
+            .passes
+            .iter()
+            .filter(|(phase, _, _)| phase == "e0" || phase == "method")
+            .map(|(_, pass, ms)| format!("{pass} {ms:.1}"))
+            .collect();
+        if !list.is_empty() {
+            writeln!(md, "- {}: {}", row.method, list.join(" · "))?;
+        }
+    }
+    writeln!(md)
 }

@@ -479,6 +479,11 @@ fn median_timings(mut runs: Vec<Timings>) -> Timings {
             all.push(gpu);
             phase.gpu_ms = Some(median(all));
         }
+        for pass in &mut phase.passes {
+            let mut all: Vec<f64> = same.iter().filter_map(|p| p.passes.iter().find(|q| q.name == pass.name)).map(|q| q.gpu_ms).collect();
+            all.push(pass.gpu_ms);
+            pass.gpu_ms = median(all);
+        }
     }
     result
 }
@@ -506,7 +511,10 @@ mod tests {
 
     fn timings(method_ms: f64, gpu_ms: Option<f64>) -> Timings {
         Timings {
-            phases: vec![Phase { name: "gbuffer", cpu_ms: 1.0, gpu_ms: None }, Phase { name: "method", cpu_ms: method_ms, gpu_ms }],
+            phases: vec![
+                Phase { name: "gbuffer", cpu_ms: 1.0, gpu_ms: None, passes: Vec::new() },
+                Phase { name: "method", cpu_ms: method_ms, gpu_ms, passes: Vec::new() },
+            ],
             ..Default::default()
         }
     }

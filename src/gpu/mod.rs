@@ -85,6 +85,9 @@ pub struct GpuContext {
     pub limits: wgpu::Limits,
     /// Whether passes can be timed with GPU timestamp queries.
     pub timestamps: bool,
+    /// Whether timestamps can also be written between a pass's dispatches, so each dispatch
+    /// is timed on its own (`GpuTimer::mark`).
+    pub timestamps_inside_passes: bool,
     /// Set by `fail_next_readback` (fault tests).
     fail_next_readback: std::sync::atomic::AtomicBool,
 }
@@ -123,9 +126,13 @@ impl GpuContext {
             .ok_or(GpuError::NoAdapter(choice))?;
         let info = adapter.get_info();
         let timestamps = adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY);
+        let timestamps_inside_passes = timestamps && adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY_INSIDE_PASSES);
         let mut required_features = wgpu::Features::empty();
         if timestamps {
             required_features |= wgpu::Features::TIMESTAMP_QUERY;
+        }
+        if timestamps_inside_passes {
+            required_features |= wgpu::Features::TIMESTAMP_QUERY_INSIDE_PASSES;
         }
         // Ask for what the adapter has: large shadow maps and outputs need more than the
         // WebGPU defaults, and penumbra enforces its own (smaller) limits per job.
@@ -157,7 +164,7 @@ impl GpuContext {
             driver_info: info.driver_info,
             timestamps,
         };
-        Ok(Self { choice, lost, device, queue, adapter, limits, timestamps, fail_next_readback: Default::default() })
+        Ok(Self { choice, lost, device, queue, adapter, limits, timestamps, timestamps_inside_passes, fail_next_readback: Default::default() })
     }
 
     /// Whether the device is gone: every later submission would fail or read back nothing.

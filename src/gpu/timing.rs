@@ -1,16 +1,37 @@
 //! GPU timestamps per pass, where the adapter has them (lavapipe does). Each pass asks for a
-//! scope; after the frame the timer resolves the queries and reports milliseconds per scope.
+//! scope named by its phase and its own label; where timestamps may also be written inside
+//! a pass, `mark` after each dispatch times the dispatches one by one. After the frame the
+//! timer resolves the queries and reports milliseconds per phase and per pass.
 
 use super::{GpuContext, GpuError};
 
-/// Passes one frame may time. A frame with more passes times the first ones only.
-const MAX_SCOPES: u32 = 64;
+/// Timestamps one frame may write. A frame with more times its first passes only.
+const MAX_QUERIES: u32 = 512;
+
+/// One timed pass: where its begin and end timestamps are, and the marks written inside it.
+struct Scope {
+    phase: &'static str,
+    pass: &'static str,
+    begin: u32,
+    /// (dispatch name, query index), in the order they were written.
+    marks: Vec<(&'static str, u32)>,
+}
+
+/// GPU time of one pass (or one dispatch inside it) of a phase.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PassTime {
+    pub phase: &'static str,
+    pub pass: &'static str,
+    pub ms: f64,
+}
 
 pub struct GpuTimer {
     queries: Option<wgpu::QuerySet>,
+    inside_passes: bool,
     resolve: wgpu::Buffer,
     readback: wgpu::Buffer,
-    labels: Vec<&'static str>,
+    scopes: Vec<Scope>,
+    used: u32,
     period_ns: f64,
 }
 
@@ -20,10 +41,10 @@ impl GpuTimer {
             gpu.device.create_query_set(&wgpu::QuerySetDescriptor {
                 label: Some("GpuTimer::queries"),
                 ty: wgpu::QueryType::Timestamp,
-                count: MAX_SCOPES * 2,
+                count: MAX_QUERIES,
             })
         });
-        let size = u64::from(MAX_SCOPES) * 2 * 8;
+        let size = u64::from(MAX_QUERIES) * 8;
         let resolve = gpu.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("GpuTimer::resolve"),
             size,
@@ -36,64 +57,102 @@ impl GpuTimer {
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        Self { queries, resolve, readback, labels: Vec::new(), period_ns: f64::from(gpu.queue.get_timestamp_period()) }
+        Self {
+            queries,
+            inside_passes: gpu.timestamps_inside_passes,
+            resolve,
+            readback,
+            scopes: Vec::new(),
+            used: 0,
+            period_ns: f64::from(gpu.queue.get_timestamp_period()),
+        }
     }
 
     /// Starts a new frame: forgets the previous frame's scopes.
     pub fn begin_frame(&mut self) {
-        self.labels.clear();
+        self.scopes.clear();
+        self.used = 0;
     }
 
-    fn next_pair(&mut self, label: &'static str) -> Option<(&wgpu::QuerySet, u32)> {
-        let queries = self.queries.as_ref()?;
-        let index = self.labels.len() as u32;
-        if index >= MAX_SCOPES {
-            return None;
+    /// `count` fresh query indices, or None when timestamps are off or the frame ran out.
+    fn take(&mut self, count: u32) -> Option<u32> {
+        self.queries.as_ref()?;
+        (self.used + count <= MAX_QUERIES).then(|| {
+            self.used += count;
+            self.used - count
+        })
+    }
+
+    fn open(&mut self, phase: &'static str, pass: &'static str) -> Option<(&wgpu::QuerySet, u32)> {
+        let begin = self.take(2)?;
+        self.scopes.push(Scope { phase, pass, begin, marks: Vec::new() });
+        Some((self.queries.as_ref()?, begin))
+    }
+
+    /// Timestamps for a render pass of `phase` labelled `pass`.
+    pub fn render_scope(&mut self, phase: &'static str, pass: &'static str) -> Option<wgpu::RenderPassTimestampWrites<'_>> {
+        self.open(phase, pass).map(|(query_set, i)| wgpu::RenderPassTimestampWrites {
+            query_set,
+            beginning_of_pass_write_index: Some(i),
+            end_of_pass_write_index: Some(i + 1),
+        })
+    }
+
+    /// Timestamps for a compute pass of `phase` labelled `pass`.
+    pub fn compute_scope(&mut self, phase: &'static str, pass: &'static str) -> Option<wgpu::ComputePassTimestampWrites<'_>> {
+        self.open(phase, pass).map(|(query_set, i)| wgpu::ComputePassTimestampWrites {
+            query_set,
+            beginning_of_pass_write_index: Some(i),
+            end_of_pass_write_index: Some(i + 1),
+        })
+    }
+
+    /// Ends the dispatch `name` inside the compute pass opened last: its time runs from the
+    /// previous mark (or the pass's beginning). Does nothing where the adapter cannot write
+    /// timestamps inside passes; the pass is then timed as a whole.
+    pub fn mark(&mut self, pass: &mut wgpu::ComputePass<'_>, name: &'static str) {
+        if !self.inside_passes || self.scopes.is_empty() {
+            return;
         }
-        self.labels.push(label);
-        Some((queries, index * 2))
+        let Some(index) = self.take(1) else { return };
+        let (Some(queries), Some(scope)) = (&self.queries, self.scopes.last_mut()) else { return };
+        pass.write_timestamp(queries, index);
+        scope.marks.push((name, index));
     }
 
-    pub fn render_scope(&mut self, label: &'static str) -> Option<wgpu::RenderPassTimestampWrites<'_>> {
-        self.next_pair(label).map(|(query_set, i)| wgpu::RenderPassTimestampWrites {
-            query_set,
-            beginning_of_pass_write_index: Some(i),
-            end_of_pass_write_index: Some(i + 1),
-        })
-    }
-
-    pub fn compute_scope(&mut self, label: &'static str) -> Option<wgpu::ComputePassTimestampWrites<'_>> {
-        self.next_pair(label).map(|(query_set, i)| wgpu::ComputePassTimestampWrites {
-            query_set,
-            beginning_of_pass_write_index: Some(i),
-            end_of_pass_write_index: Some(i + 1),
-        })
-    }
-
-    /// Reads back this frame's scopes as (label, milliseconds). Blocks until the GPU is done.
-    pub fn read(&self, gpu: &GpuContext) -> Result<Vec<(&'static str, f64)>, GpuError> {
+    /// Reads back this frame's passes (dispatches, where marked) in the order they were
+    /// recorded, as milliseconds. Blocks until the GPU is done.
+    pub fn read(&self, gpu: &GpuContext) -> Result<Vec<PassTime>, GpuError> {
         let Some(queries) = &self.queries else { return Ok(Vec::new()) };
-        if self.labels.is_empty() {
+        if self.used == 0 {
             return Ok(Vec::new());
         }
-        let count = self.labels.len() as u32 * 2;
-        let bytes = u64::from(count) * 8;
+        let bytes = u64::from(self.used) * 8;
         let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("GpuTimer::encoder") });
-        encoder.resolve_query_set(queries, 0..count, &self.resolve, 0);
+        encoder.resolve_query_set(queries, 0..self.used, &self.resolve, 0);
         encoder.copy_buffer_to_buffer(&self.resolve, 0, &self.readback, 0, bytes);
         gpu.queue.submit([encoder.finish()]);
         let slice = self.readback.slice(..bytes);
         gpu.map_for_reading(&[slice])?;
         let ticks: Vec<u64> = bytemuck::cast_slice(&slice.get_mapped_range().map_err(|e| GpuError::Map(e.to_string()))?).to_vec();
         self.readback.unmap();
-        Ok(self
-            .labels
-            .iter()
-            .enumerate()
-            .map(|(k, label)| {
-                let elapsed = ticks[2 * k + 1].saturating_sub(ticks[2 * k]);
-                (*label, elapsed as f64 * self.period_ns / 1e6)
-            })
-            .collect())
+        let ms = |from: u32, to: u32| ticks[to as usize].saturating_sub(ticks[from as usize]) as f64 * self.period_ns / 1e6;
+        let mut times = Vec::new();
+        for scope in &self.scopes {
+            let end = scope.begin + 1;
+            if scope.marks.is_empty() {
+                times.push(PassTime { phase: scope.phase, pass: scope.pass, ms: ms(scope.begin, end) });
+                continue;
+            }
+            // Each dispatch from the previous mark; whatever follows the last mark (barriers,
+            // the pass's end) is counted with it, so the dispatches add up to the pass.
+            let mut from = scope.begin;
+            for (k, &(name, index)) in scope.marks.iter().enumerate() {
+                let to = if k + 1 == scope.marks.len() { end } else { index };
+                times.push(PassTime { phase: scope.phase, pass: name, ms: ms(from, to) });
+                from = index;
+            }
+        }
+        Ok(times)
     }
 }

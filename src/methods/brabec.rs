@@ -233,35 +233,38 @@ impl ShadowMethod for Brabec {
         // list them first, one compacted pass searches them all, then the refinement
         // interpolates (`refine` in common.wgsl says why).
         let mut listing = vec![
-            (&summarize, (summary_side.div_ceil(8), summary_side.div_ceil(8))),
-            (&classify, (w.div_ceil(8), h.div_ceil(8))),
-            (&lattice, (lattice_size.0.div_ceil(8), lattice_size.1.div_ceil(8))),
+            ("brabec_summary", &summarize, (summary_side.div_ceil(8), summary_side.div_ceil(8))),
+            ("brabec_classify", &classify, (w.div_ceil(8), h.div_ceil(8))),
+            ("brabec_lattice", &lattice, (lattice_size.0.div_ceil(8), lattice_size.1.div_ceil(8))),
         ];
         let mut interpolation = vec![];
         if adaptive {
-            listing.extend([(&mark_columns, column_groups), (&mark_rows, row_groups)]);
-            interpolation.extend([(&columns, column_groups), (&rows, row_groups)]);
+            listing.extend([("brabec_list_columns", &mark_columns, column_groups), ("brabec_list_rows", &mark_rows, row_groups)]);
+            interpolation.extend([("brabec_columns", &columns, column_groups), ("brabec_rows", &rows, row_groups)]);
         }
-        listing.push((&list_size, (1, 1)));
-        interpolation.push((&finish, (w.div_ceil(8), h.div_ceil(8))));
+        listing.push(("brabec_search_size", &list_size, (1, 1)));
+        interpolation.push(("brabec_finish", &finish, (w.div_ceil(8), h.div_ceil(8))));
         {
             let mut pass = ctx.encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("Brabec::passes"),
-                timestamp_writes: ctx.timer.compute_scope("method"),
+                timestamp_writes: ctx.timer.compute_scope("method", "Brabec::passes"),
             });
             pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
             pass.set_bind_group(1, &bind_group, &[]);
-            for (pipeline, (x, y)) in listing {
+            for (name, pipeline, (x, y)) in listing {
                 pass.set_pipeline(pipeline);
                 pass.dispatch_workgroups(x, y, 1);
+                ctx.timer.mark(&mut pass, name);
             }
             pass.set_pipeline(&search);
             pass.set_bind_group(1, &search_group, &[]);
             pass.dispatch_workgroups_indirect(&to_search.groups, 0);
+            ctx.timer.mark(&mut pass, "brabec_search");
             pass.set_bind_group(1, &bind_group, &[]);
-            for (pipeline, (x, y)) in interpolation {
+            for (name, pipeline, (x, y)) in interpolation {
                 pass.set_pipeline(pipeline);
                 pass.dispatch_workgroups(x, y, 1);
+                ctx.timer.mark(&mut pass, name);
             }
         }
         let raw = ctx.read_counters(&counters)?;

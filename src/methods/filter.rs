@@ -162,20 +162,24 @@ pub(super) fn run(
     {
         let mut pass = ctx
             .encoder
-            .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(name), timestamp_writes: ctx.timer.compute_scope("method") });
+            .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(name), timestamp_writes: ctx.timer.compute_scope("method", name) });
         pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
         pass.set_pipeline(&build);
         pass.set_bind_group(1, &build_group, &[]);
         pass.dispatch_workgroups(side.div_ceil(8), side.div_ceil(8), 1);
+        ctx.timer.mark(&mut pass, "filter_copy_map");
         pass.set_pipeline(&classify);
         pass.set_bind_group(1, &classify_group, &[]);
         pass.dispatch_workgroups(gx, gy, 1);
+        ctx.timer.mark(&mut pass, "filter_classify");
         pass.set_pipeline(&size);
         pass.set_bind_group(1, &size_group, &[]);
         pass.dispatch_workgroups(1, 1, 1);
+        ctx.timer.mark(&mut pass, "filter_listed_size");
         pass.set_pipeline(&filter);
         pass.set_bind_group(1, &filter_group, &[]);
         pass.dispatch_workgroups_indirect(&listed.groups, 0);
+        ctx.timer.mark(&mut pass, "filter_search_and_filter");
     }
     let c = ctx.read_counters(&counters)?;
     Ok(FilterCounts { levels: [c[0], c[1], c[2]], forced_by_light: c[3], filtered: c[4], covered: c[5] })

@@ -338,37 +338,44 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
     {
         let mut pass = ctx.encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("Jfa::passes"),
-            timestamp_writes: ctx.timer.compute_scope("method"),
+            timestamp_writes: ctx.timer.compute_scope("method", "Jfa::passes"),
         });
         pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
         // Seeds go to a.
         pass.set_pipeline(&seed);
         pass.set_bind_group(1, &b_to_a, &[0]);
         pass.dispatch_workgroups(groups.0, groups.1, 1);
+        ctx.timer.mark(&mut pass, "jfa_seed");
         if let Some([mark, size, seed_listed]) = &boundary {
-            for (pipeline, (x, y)) in [(mark, groups), (size, (1, 1))] {
+            for (name, pipeline, (x, y)) in [("jfa_boundary", mark, groups), ("jfa_boundary_size", size, (1, 1))] {
                 pass.set_pipeline(pipeline);
                 pass.dispatch_workgroups(x, y, 1);
+                ctx.timer.mark(&mut pass, name);
             }
             pass.set_pipeline(seed_listed);
             pass.set_bind_group(1, &seeding, &[0]);
             pass.dispatch_workgroups_indirect(&listed.groups, 0);
+            ctx.timer.mark(&mut pass, "jfa_seed_boundary");
         }
         pass.set_pipeline(&round);
         for k in 0..steps.len() {
             let offset = layout::slot_offset(k + 1);
             pass.set_bind_group(1, if k.is_multiple_of(2) { &a_to_b } else { &b_to_a }, &[offset]);
             pass.dispatch_workgroups(groups.0, groups.1, 1);
+            ctx.timer.mark(&mut pass, "jfa_rounds");
         }
         pass.set_pipeline(&finish);
         pass.set_bind_group(1, if result_in_a { &a_to_b } else { &b_to_a }, &[0]);
         pass.dispatch_workgroups(screen.0, screen.1, 1);
+        ctx.timer.mark(&mut pass, "jfa_final");
         let [size, shade] = &shading;
         pass.set_pipeline(size);
         pass.dispatch_workgroups(1, 1, 1);
+        ctx.timer.mark(&mut pass, "jfa_shaded_size");
         pass.set_pipeline(shade);
         pass.set_bind_group(1, &final_shading, &[0]);
         pass.dispatch_workgroups_indirect(&shaded.groups, 0);
+        ctx.timer.mark(&mut pass, "jfa_shade");
     }
     let counts = ctx.read_counters(&counters)?;
     let flooded = f64::from(counts[2]) / (f64::from(tile_count) * steps.len() as f64);

@@ -126,7 +126,7 @@ impl MethodContext<'_> {
         let (gx, gy) = self.dispatch_size();
         let mut pass = self
             .encoder
-            .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(label), timestamp_writes: self.timer.compute_scope("method") });
+            .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(label), timestamp_writes: self.timer.compute_scope("method", label) });
         pass.set_pipeline(pipeline);
         pass.set_bind_group(0, &self.inputs.bind_group, &[]);
         pass.set_bind_group(1, group, &[]);

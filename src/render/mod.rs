@@ -138,7 +138,6 @@ impl Renderer {
                     layout::storage_read_write(1),
                     layout::storage_read_write(2),
                     layout::storage_read_write(3),
-                    layout::storage_read_write(4),
                 ],
             ),
             composite_io: bgl(
@@ -322,8 +321,8 @@ impl Renderer {
         });
         let depth = depth_index.map(|i| bytemuck::cast_slice::<u8, f32>(&images[i]).to_vec());
         timings.phase("readback", start);
-        for (label, ms) in gpu_times {
-            timings.add_gpu(label, ms);
+        for time in gpu_times {
+            timings.add_gpu(time.phase, time.pass, time.ms);
         }
         let warnings = scene.warnings.clone();
         Ok(FrameOutput { width: spec.width, height: spec.height, color, srgb8, visibility, depth, e0, counters, warnings })

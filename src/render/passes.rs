@@ -67,7 +67,7 @@ impl Renderer {
             Some(clear_attachment(&targets.shadow_position.view, 0.0)),
         ];
         let colors = if surfaces { &all[..] } else { &all[..1] };
-        let timestamps = self.timer.render_scope("shadow_map");
+        let timestamps = self.timer.render_scope("shadow_map", "ShadowMap::pass");
         let mut pass = begin_scene_pass(
             encoder,
             "ShadowMap::pass",
@@ -100,7 +100,7 @@ impl Renderer {
             Some(clear_attachment(&targets.albedo.view, 0.0)),
             Some(clear_attachment(&targets.object_id.view, f64::from(u32::MAX))),
         ];
-        let timestamps = self.timer.render_scope("gbuffer");
+        let timestamps = self.timer.render_scope("gbuffer", "GBuffer::pass");
         let mut pass =
             begin_scene_pass(encoder, "GBuffer::pass", &colors, &targets.depth_buffer.view, timestamps, (&pipeline, &bind_group), scene);
         for draw in &scene.draws {
@@ -121,10 +121,10 @@ impl Renderer {
     }
 
     /// E0 (`shaders/e0.wgsl`). Under a light of more than `E0_EXACT_CELLS` cells: the exact
-    /// sum at the corners of `E0_BLOCK`-pixel blocks, the interpolation's error at each
-    /// block's centre, every pixel interpolated where the error estimate allows and listed
-    /// otherwise, then the listed pixels summed exactly (an indirect dispatch sized on the
-    /// GPU); otherwise (or with `E0Mode::Exact`) the exact sum everywhere.
+    /// sum at the corners of `E0_BLOCK`-pixel blocks; per block, the interpolation's error at
+    /// its centre, and each of its pixels interpolated where the error estimate allows and
+    /// listed otherwise; then the listed pixels summed exactly (an indirect dispatch sized on
+    /// the GPU). Otherwise (or with `E0Mode::Exact`) the exact sum everywhere.
     pub(super) fn record_e0(&mut self, encoder: &mut wgpu::CommandEncoder, inputs: &FrameInputs, targets: &FrameTargets, spec: &FrameSpec) {
         let io_layout = self.layouts.e0_output.clone();
         let device = &self.gpu.device;
@@ -140,7 +140,6 @@ impl Renderer {
             device.create_buffer(&wgpu::BufferDescriptor { label: Some(label), size, usage: wgpu::BufferUsages::STORAGE | usage, mapped_at_creation: false })
         };
         let records = buffer("E0::corners", u64::from(corners * rows) * E0_CORNER_BYTES, wgpu::BufferUsages::empty());
-        let errors = buffer("E0::block_errors", u64::from(corners.max(2) - 1) * u64::from(rows.max(2) - 1) * 16, wgpu::BufferUsages::empty());
         // The pixels the interpolation refuses (at most every pixel).
         let fallback = PixelListBuffers::new(device, encoder, "E0", pixels);
         let bind = |groups: &wgpu::Buffer| {
@@ -150,7 +149,6 @@ impl Renderer {
                 entries: &layout::entries(&[
                     wgpu::BindingResource::TextureView(&targets.e0.view),
                     records.as_entire_binding(),
-                    errors.as_entire_binding(),
                     fallback.list.as_entire_binding(),
                     groups.as_entire_binding(),
                 ]),
@@ -159,23 +157,25 @@ impl Renderer {
         let io = bind(&fallback.groups);
         let screen = (spec.width.div_ceil(8), spec.height.div_ceil(8));
         let mut pass = encoder
-            .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("e0"), timestamp_writes: self.timer.compute_scope("e0") });
+            .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("e0"), timestamp_writes: self.timer.compute_scope("e0", "e0") });
         pass.set_bind_group(0, &inputs.bind_group, &[]);
         pass.set_bind_group(1, &io, &[]);
         if interpolate {
             let steps = [
-                (entry("e0_corners", "block_corners"), (corners.div_ceil(8), rows.div_ceil(8))),
-                (entry("e0_errors", "block_errors"), ((corners - 1).div_ceil(8), (rows - 1).div_ceil(8))),
-                (entry("e0", "main"), screen),
-                (entry("e0_fallback_size", "fallback_size"), (1, 1)),
+                ("e0_corners", "block_corners", (corners.div_ceil(8), rows.div_ceil(8))),
+                // One invocation per block, 64 blocks of a row per workgroup.
+                ("e0_interpolate", "interpolate_blocks", ((corners - 1).div_ceil(64), rows - 1)),
+                ("e0_fallback_size", "fallback_size", (1, 1)),
             ];
-            for (pipeline, (x, y)) in &steps {
-                pass.set_pipeline(pipeline);
-                pass.dispatch_workgroups(*x, *y, 1);
+            for (name, entry_point, (x, y)) in steps {
+                pass.set_pipeline(&entry(name, entry_point));
+                pass.dispatch_workgroups(x, y, 1);
+                self.timer.mark(&mut pass, name);
             }
             pass.set_bind_group(1, &bind(&fallback.stand_in), &[]);
             pass.set_pipeline(&entry("e0_fallback", "fallback_exact"));
             pass.dispatch_workgroups_indirect(&fallback.groups, 0);
+            self.timer.mark(&mut pass, "e0_fallback");
         } else {
             pass.set_pipeline(&entry("e0_exact", "exact"));
             pass.dispatch_workgroups(screen.0, screen.1, 1);
@@ -235,7 +235,7 @@ impl Renderer {
         spec: &FrameSpec,
     ) {
         let mut pass = encoder
-            .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(label), timestamp_writes: self.timer.compute_scope(label) });
+            .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(label), timestamp_writes: self.timer.compute_scope(label, label) });
         pass.set_pipeline(pipeline);
         pass.set_bind_group(0, &inputs.bind_group, &[]);
         pass.set_bind_group(1, io, &[]);

@@ -277,7 +277,7 @@ impl ShadowMethod for Wedges {
             let group = bind(&no_work, &inside.groups);
             let mut pass = ctx.encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("Wedges::tiles"),
-                timestamp_writes: ctx.timer.compute_scope("method"),
+                timestamp_writes: ctx.timer.compute_scope("method", "Wedges::tiles"),
             });
             pass.set_pipeline(&tiles_pipeline);
             pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
@@ -313,7 +313,7 @@ impl ShadowMethod for Wedges {
         {
             let mut pass = ctx.encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("Wedges::rasterize"),
-                timestamp_writes: ctx.timer.compute_scope("method"),
+                timestamp_writes: ctx.timer.compute_scope("method", "Wedges::rasterize"),
             });
             pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
             for ((pipeline, items), work) in chunks.iter().zip(&works) {
@@ -324,22 +324,27 @@ impl ShadowMethod for Wedges {
                 if std::ptr::eq(*pipeline, &*penumbra_pipeline) {
                     pass.set_pipeline(&mark);
                     pass.dispatch_workgroups(n.min(65535), n.div_ceil(65535), 1);
+                    ctx.timer.mark(&mut pass, "wedges_penumbra_inside");
                     pass.set_pipeline(&size);
                     pass.dispatch_workgroups(1, 1, 1);
                     pass.set_bind_group(1, &bind(work, &inside.stand_in), &[]);
                     pass.set_pipeline(&shade);
                     pass.dispatch_workgroups_indirect(&inside.groups, 0);
+                    ctx.timer.mark(&mut pass, "wedges_penumbra_shade");
                     pass.set_bind_group(1, &group, &[]);
                     pass.set_pipeline(&reset);
                     pass.dispatch_workgroups(1, 1, 1);
+                    ctx.timer.mark(&mut pass, "wedges_penumbra_reset");
                 } else {
                     pass.set_pipeline(pipeline);
                     pass.dispatch_workgroups(n.min(65535), n.div_ceil(65535), 1);
+                    ctx.timer.mark(&mut pass, if std::ptr::eq(*pipeline, &*umbra_pipeline) { "wedges_umbra" } else { "wedges_both" });
                 }
             }
             pass.set_pipeline(&resolve);
             pass.set_bind_group(1, &resolve_group, &[]);
             pass.dispatch_workgroups(screen.0, screen.1, 1);
+            ctx.timer.mark(&mut pass, "wedges_resolve");
         }
         ctx.flush()?;
         let counts: Vec<u32> = bytemuck::cast_slice(&read_buffer(ctx.gpu, &counters)?).to_vec();
