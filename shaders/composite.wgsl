@@ -4,10 +4,10 @@
 
 #import common/frame_inputs.wgsl
 
-@group(1) @binding(0) var e0_in: texture_2d<f32>;
-@group(1) @binding(1) var visibility_in: texture_2d<f32>;
-@group(1) @binding(2) var color_out: texture_storage_2d<rgba32float, write>;
-@group(1) @binding(3) var depth_out: texture_storage_2d<r32float, write>;
+@group(1) @binding(0) var<storage, read> e0_in: array<vec4<f32>>;
+@group(1) @binding(1) var<storage, read> visibility_in: array<vec4<f32>>;
+@group(1) @binding(2) var<storage, read_write> color_out: array<vec4<f32>>;
+@group(1) @binding(3) var<storage, read_write> depth_out: array<f32>;
 @group(1) @binding(4) var<storage, read_write> srgb8_out: array<u32>; // RGBA8, row-major
 
 const INV_PI: f32 = 0.31830988618;
@@ -19,18 +19,18 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     if !covered(pixel) {
-        textureStore(color_out, pixel, vec4<f32>(0.0));
-        textureStore(depth_out, pixel, vec4<f32>(bitcast<f32>(0x7f800000u)));
+        color_out[pixel_index(pixel)] = vec4<f32>(0.0);
+        depth_out[pixel_index(pixel)] = bitcast<f32>(0x7f800000u);
         return;
     }
-    textureStore(color_out, pixel, vec4<f32>(radiance(pixel), 1.0));
-    textureStore(depth_out, pixel, vec4<f32>(textureLoad(gbuf_position, pixel, 0).w));
+    color_out[pixel_index(pixel)] = vec4<f32>(radiance(pixel), 1.0);
+    depth_out[pixel_index(pixel)] = textureLoad(gbuf_position, pixel, 0).w;
 }
 
 fn radiance(pixel: vec2<u32>) -> vec3<f32> {
     let albedo = textureLoad(gbuf_albedo, pixel, 0).rgb;
-    let e0 = textureLoad(e0_in, pixel, 0).rgb;
-    let v = textureLoad(visibility_in, pixel, 0).rgb;
+    let e0 = e0_in[pixel_index(pixel)].rgb;
+    let v = visibility_in[pixel_index(pixel)].rgb;
     return albedo * INV_PI * (e0 * v + frame.ambient.rgb);
 }
 

@@ -15,7 +15,7 @@
 #import common/frame_inputs.wgsl
 #import common/pixel_list.wgsl
 
-@group(1) @binding(0) var e0_out: texture_storage_2d<rgba32float, write>;
+@group(1) @binding(0) var<storage, read_write> e0_out: array<vec4<f32>>;
 @group(1) @binding(1) var<storage, read_write> corners: array<Corner>;
 // The pixels the interpolation did not accept, summed exactly by a pass of their own
 // (common/pixel_list.wgsl says why).
@@ -273,9 +273,9 @@ fn interpolate_blocks(@builtin(global_invocation_id) id: vec3<u32>) {
             if all(pixel < frame.sizes.xy) {
                 let e0 = interpolated_e0(pixel, b, checked);
                 if e0.w > 0.0 {
-                    textureStore(e0_out, pixel, vec4<f32>(e0.xyz, 1.0));
+                    e0_out[pixel_index(pixel)] = vec4<f32>(e0.xyz, 1.0);
                 } else {
-                    fallback.pixels[atomicAdd(&fallback.count, 1u)] = list_index(pixel);
+                    fallback.pixels[atomicAdd(&fallback.count, 1u)] = pixel_index(pixel);
                 }
             }
         }
@@ -294,7 +294,7 @@ fn fallback_exact(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invoca
     let i = list_position(group, lane);
     if i < atomicLoad(&fallback.count) {
         let pixel = listed_pixel(fallback.pixels[i]);
-        textureStore(e0_out, pixel, vec4<f32>(exact_at(pixel), 1.0));
+        e0_out[pixel_index(pixel)] = vec4<f32>(exact_at(pixel), 1.0);
     }
 }
 
@@ -303,6 +303,6 @@ fn fallback_exact(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invoca
 @compute @workgroup_size(8, 8)
 fn exact(@builtin(global_invocation_id) id: vec3<u32>) {
     if all(id.xy < frame.sizes.xy) {
-        textureStore(e0_out, id.xy, vec4<f32>(exact_at(id.xy), 1.0));
+        e0_out[pixel_index(id.xy)] = vec4<f32>(exact_at(id.xy), 1.0);
     }
 }

@@ -41,3 +41,9 @@ fn light_plane_hit(p: vec3<f32>, o: vec3<f32>) -> vec3<f32> {
 fn covered(pixel: vec2<u32>) -> bool {
     return all(pixel < frame.sizes.xy) && textureLoad(gbuf_normal, pixel, 0).w > 0.5;
 }
+
+// The element of a screen-space image (E0, visibility, colour: `render::targets`, storage
+// buffers rather than storage textures) that holds pixel (x, y): rows from the top.
+fn pixel_index(pixel: vec2<u32>) -> u32 {
+    return pixel.y * frame.sizes.x + pixel.x;
+}

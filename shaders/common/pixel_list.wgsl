@@ -6,17 +6,13 @@
 
 struct PixelList {
     count: atomic<u32>,
-    pixels: array<u32>, // y × width + x
+    pixels: array<u32>, // pixel_index(pixel)
 }
 
 // Lanes per workgroup of a listed dispatch, and the grid's width in workgroups (Vulkan's
 // guaranteed minimum per dimension).
 const LIST_GROUP: u32 = 64u;
 const LIST_MAX_GROUPS: u32 = 65535u;
-
-fn list_index(pixel: vec2<u32>) -> u32 {
-    return pixel.y * frame.sizes.x + pixel.x;
-}
 
 fn listed_pixel(index: u32) -> vec2<u32> {
     return vec2<u32>(index % frame.sizes.x, index / frame.sizes.x);

@@ -9,7 +9,7 @@ struct HardParams {
     slope_bias_texels: f32,
 }
 
-@group(1) @binding(0) var visibility_out: texture_storage_2d<rgba32float, write>;
+@group(1) @binding(0) var<storage, read_write> visibility_out: array<vec4<f32>>;
 @group(1) @binding(1) var<uniform> params: HardParams;
 
 @compute @workgroup_size(8, 8)
@@ -29,5 +29,5 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
             v = select(0.0, 1.0, ls.depth - bias <= blocker);
         }
     }
-    textureStore(visibility_out, pixel, vec4<f32>(v, v, v, 1.0));
+    visibility_out[pixel_index(pixel)] = vec4<f32>(v, v, v, 1.0);
 }

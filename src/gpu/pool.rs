@@ -135,6 +135,53 @@ impl TexturePool {
     }
 }
 
+/// What a pooled storage buffer is: enough to decide whether a free one can be reused.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct BufferKey {
+    pub label: &'static str,
+    pub size: u64,
+    pub usage: wgpu::BufferUsages,
+}
+
+/// A storage buffer from the pool.
+pub struct PooledBuffer {
+    pub key: BufferKey,
+    pub buffer: wgpu::Buffer,
+}
+
+/// Free per-frame storage buffers (the screen-space images) by key, kept like render targets:
+/// at most `max_free_per_key` idle ones of a key.
+pub struct BufferPool {
+    free: HashMap<BufferKey, Vec<PooledBuffer>>,
+    max_free_per_key: usize,
+    pub stats: PoolStats,
+}
+
+impl Default for BufferPool {
+    fn default() -> Self {
+        Self { free: HashMap::new(), max_free_per_key: 2, stats: PoolStats::default() }
+    }
+}
+
+impl BufferPool {
+    pub fn alloc(&mut self, device: &wgpu::Device, key: BufferKey) -> PooledBuffer {
+        if let Some(buffer) = self.free.get_mut(&key).and_then(Vec::pop) {
+            self.stats.reused += 1;
+            return buffer;
+        }
+        self.stats.created += 1;
+        let buffer = device.create_buffer(&wgpu::BufferDescriptor { label: Some(key.label), size: key.size, usage: key.usage, mapped_at_creation: false });
+        PooledBuffer { key, buffer }
+    }
+
+    pub fn release(&mut self, buffer: PooledBuffer) {
+        let list = self.free.entry(buffer.key).or_default();
+        if list.len() < self.max_free_per_key {
+            list.push(buffer);
+        }
+    }
+}
+
 /// Free readback (MAP_READ) buffers by size: the readbacks of a steady stream of same-sized
 /// jobs reuse them instead of allocating. At most `max_free_per_size` idle ones per size.
 pub struct ReadbackPool {

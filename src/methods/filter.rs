@@ -120,7 +120,7 @@ pub(super) fn run(
     light_regions: &wgpu::Buffer,
 ) -> JobResult<FilterCounts> {
     let io = [
-        layout::storage_texture(0, wgpu::TextureFormat::Rgba32Float),
+        layout::storage_read_write(0),
         layout::uniform(1),
         layout::storage_read(2),
         layout::storage_read_write(3),
@@ -146,7 +146,7 @@ pub(super) fn run(
             "Filter::bind_group",
             pipeline,
             &[
-                wgpu::BindingResource::TextureView(ctx.visibility),
+                ctx.visibility.as_entire_binding(),
                 uniform_buffer.as_entire_binding(),
                 light_regions.as_entire_binding(),
                 counters.as_entire_binding(),

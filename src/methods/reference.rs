@@ -230,7 +230,7 @@ impl ShadowMethod for Reference {
         let resolve_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("Reference::resolve"),
             layout: &resolve_pipeline.get_bind_group_layout(1),
-            entries: &layout::entries(&[sums.as_entire_binding(), wgpu::BindingResource::TextureView(ctx.visibility)]),
+            entries: &layout::entries(&[sums.as_entire_binding(), ctx.visibility.as_entire_binding()]),
         });
 
         ctx.encoder.clear_buffer(&sums, 0, None);
@@ -337,7 +337,7 @@ impl Reference {
         let resolve = ctx.screen_pipeline(
             PipelineKey::new("reference.resolve"),
             "methods/reference/resolve.wgsl",
-            &[layout::storage_read(0), layout::storage_texture(1, wgpu::TextureFormat::Rgba32Float)],
+            &[layout::storage_read(0), layout::storage_read_write(1)],
         );
         (depth, accumulate, resolve)
     }

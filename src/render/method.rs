@@ -27,11 +27,12 @@ pub struct MethodContext<'a> {
     pub derived: &'a mut DerivedResources,
     /// Group 0 of every screen-space pass: frame constants, G-buffer, shadow map.
     pub inputs: &'a FrameInputs,
-    /// Where the method writes its visibility: `rgba32float`, rgb = V per channel.
-    pub visibility: &'a wgpu::TextureView,
-    /// The unshadowed irradiance E0 per channel (`rgba32float`), already computed: a method
-    /// that works out blocked irradiance rather than a fraction divides by it.
-    pub e0: &'a wgpu::TextureView,
+    /// Where the method writes its visibility: `array<vec4<f32>>`, one per pixel row-major,
+    /// rgb = V per channel (`render::targets` says why a buffer).
+    pub visibility: &'a wgpu::Buffer,
+    /// The unshadowed irradiance E0 per channel (laid out as `visibility`), already computed:
+    /// a method that works out blocked irradiance rather than a fraction divides by it.
+    pub e0: &'a wgpu::Buffer,
     pub width: u32,
     pub height: u32,
     pub encoder: &'a mut wgpu::CommandEncoder,

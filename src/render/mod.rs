@@ -18,7 +18,7 @@ use glam::Vec3;
 
 use crate::error::JobResult;
 use crate::gpu::layout;
-use crate::gpu::pool::{DerivedResources, PipelinePool, ReadbackPool, TexturePool};
+use crate::gpu::pool::{BufferPool, DerivedResources, PipelinePool, ReadbackPool, TexturePool};
 use crate::gpu::readback::Readback;
 use crate::gpu::scene::GpuScene;
 use crate::gpu::timing::GpuTimer;
@@ -31,7 +31,7 @@ pub use draw::{vertex_layout, ScenePipeline, DEPTH_BUFFER_FORMAT};
 pub use frame::{Camera, ExtraImages, FrameSpec, LightProjection};
 pub use passes::{screen_compute_entry, screen_compute_pipeline, E0Mode};
 pub use pixel_list::PixelListBuffers;
-use targets::{FrameTargets, FLOAT_TARGET};
+use targets::FrameTargets;
 
 /// The per-frame constants, laid out as `Frame` in `shaders/common/frame.wgsl`.
 #[repr(C)]
@@ -98,6 +98,8 @@ pub struct Renderer {
     gpu: Arc<GpuContext>,
     pub pipelines: PipelinePool,
     pub textures: TexturePool,
+    /// The screen-space images (`targets`), recycled like the textures.
+    pub buffers: BufferPool,
     pub derived: DerivedResources,
     pub readbacks: ReadbackPool,
     timer: GpuTimer,
@@ -134,7 +136,7 @@ impl Renderer {
             e0_output: bgl(
                 "Renderer::e0_output_layout",
                 &[
-                    layout::storage_texture(0, FLOAT_TARGET),
+                    layout::storage_read_write(0),
                     layout::storage_read_write(1),
                     layout::storage_read_write(2),
                     layout::storage_read_write(3),
@@ -143,10 +145,10 @@ impl Renderer {
             composite_io: bgl(
                 "Renderer::composite_io_layout",
                 &[
-                    layout::texture_float(0),
-                    layout::texture_float(1),
-                    layout::storage_texture(2, FLOAT_TARGET),
-                    layout::storage_texture(3, wgpu::TextureFormat::R32Float),
+                    layout::storage_read(0),
+                    layout::storage_read(1),
+                    layout::storage_read_write(2),
+                    layout::storage_read_write(3),
                     layout::storage_read_write(4),
                 ],
             ),
@@ -168,6 +170,7 @@ impl Renderer {
             gpu,
             pipelines: PipelinePool::default(),
             textures: TexturePool::default(),
+            buffers: BufferPool::default(),
             derived: DerivedResources::default(),
             readbacks: ReadbackPool::default(),
             timer,
@@ -198,10 +201,10 @@ impl Renderer {
     ) -> JobResult<FrameOutput> {
         let compiled_before = self.pipelines.stats.created;
         self.timer.begin_frame();
-        let targets = FrameTargets::alloc(&mut self.textures, &self.gpu.device, spec.width, spec.height, spec.shadow_resolution);
+        let targets = FrameTargets::alloc(&mut self.textures, &mut self.buffers, &self.gpu.device, spec.width, spec.height, spec.shadow_resolution);
         let frame = self.render_into(&targets, scene, spec, timings, supervisor);
         // A cancelled frame gives its targets back too: the next job reuses them.
-        targets.release(&mut self.textures);
+        targets.release(&mut self.textures, &mut self.buffers);
         timings.pipelines_compiled += self.pipelines.stats.created - compiled_before;
         frame
     }
@@ -257,8 +260,8 @@ impl Renderer {
                 pipelines: &mut self.pipelines,
                 derived: &mut self.derived,
                 inputs: &inputs,
-                visibility: &targets.visibility.view,
-                e0: &targets.e0.view,
+                visibility: &targets.visibility.buffer,
+                e0: &targets.e0.buffer,
                 width: spec.width,
                 height: spec.height,
                 encoder: &mut enc,
@@ -295,13 +298,13 @@ impl Renderer {
         let pool = &mut self.readbacks;
         let float_color = spec.extra_images.float_color;
         let color_index = if float_color {
-            readback.copy(&gpu, pool, &mut enc, &targets.color.texture)
+            readback.copy_buffer(&gpu, pool, &mut enc, &targets.color.buffer)
         } else {
             readback.copy_buffer(&gpu, pool, &mut enc, srgb8_buffer.as_ref().expect("made when the float colour is not read back"))
         };
-        let visibility_index = spec.extra_images.visibility.then(|| readback.copy(&gpu, pool, &mut enc, &targets.visibility.texture));
-        let e0_index = spec.extra_images.visibility.then(|| readback.copy(&gpu, pool, &mut enc, &targets.e0.texture));
-        let depth_index = spec.extra_images.depth.then(|| readback.copy(&gpu, pool, &mut enc, &targets.depth.texture));
+        let visibility_index = spec.extra_images.visibility.then(|| readback.copy_buffer(&gpu, pool, &mut enc, &targets.visibility.buffer));
+        let e0_index = spec.extra_images.visibility.then(|| readback.copy_buffer(&gpu, pool, &mut enc, &targets.e0.buffer));
+        let depth_index = spec.extra_images.depth.then(|| readback.copy_buffer(&gpu, pool, &mut enc, &targets.depth.buffer));
         gpu.queue.submit([enc.finish()]);
         let mut images = readback.finish(&gpu, pool)?;
         let gpu_times = self.timer.read(&gpu)?;

@@ -147,7 +147,7 @@ impl Renderer {
                 label: Some("E0::outputs"),
                 layout: &io_layout,
                 entries: &layout::entries(&[
-                    wgpu::BindingResource::TextureView(&targets.e0.view),
+                    targets.e0.buffer.as_entire_binding(),
                     records.as_entire_binding(),
                     fallback.list.as_entire_binding(),
                     groups.as_entire_binding(),
@@ -210,15 +210,14 @@ impl Renderer {
                 mapped_at_creation: false,
             })
         });
-        let view = wgpu::BindingResource::TextureView;
         let io = self.gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("Composite::io"),
             layout: &io_layout,
             entries: &layout::entries(&[
-                view(&targets.e0.view),
-                view(&targets.visibility.view),
-                view(&targets.color.view),
-                view(&targets.depth.view),
+                targets.e0.buffer.as_entire_binding(),
+                targets.visibility.buffer.as_entire_binding(),
+                targets.color.buffer.as_entire_binding(),
+                targets.depth.buffer.as_entire_binding(),
                 srgb8.or(unused.as_ref()).expect("one of the two").as_entire_binding(),
             ]),
         });

@@ -1,10 +1,17 @@
-//! The frame's render targets: the shadow map's and the G-buffer's attachments and the
-//! screen-space images (E0, visibility, colour, depth), drawn from the texture pool for one
-//! frame and given back after it, with the formats every pass agrees on.
+//! The frame's render targets: the shadow map's and the G-buffer's attachments, drawn from
+//! the texture pool, and the screen-space images (E0, visibility, colour, depth), storage
+//! buffers drawn from the buffer pool — all for one frame and given back after it, with the
+//! formats and layouts every pass agrees on.
+//!
+//! The screen-space images are buffers, not storage textures, because lavapipe pays several
+//! times a buffer store for a store to an `rgba32float` storage texture (1080p: ~27 ms against
+//! ~10), and every method's last pass, E0 and the composite store one; a buffer also reads
+//! back without row padding. Pixel (x, y) is element `y × width + x` (`pixel_index` in
+//! `shaders/common/frame_inputs.wgsl`).
 
-use crate::gpu::pool::{PooledTexture, TextureKey, TexturePool};
+use crate::gpu::pool::{BufferKey, BufferPool, PooledBuffer, PooledTexture, TextureKey, TexturePool};
 
-/// The frame's render targets, drawn from and returned to the pool.
+/// The frame's render targets, drawn from and returned to the pools.
 pub(super) struct FrameTargets {
     pub shadow_depth_buffer: PooledTexture,
     pub shadow_depth: PooledTexture,
@@ -15,10 +22,14 @@ pub(super) struct FrameTargets {
     pub normal: PooledTexture,
     pub albedo: PooledTexture,
     pub object_id: PooledTexture,
-    pub e0: PooledTexture,
-    pub visibility: PooledTexture,
-    pub color: PooledTexture,
-    pub depth: PooledTexture,
+    /// `array<vec4<f32>>`: rgb = E0 per channel.
+    pub e0: PooledBuffer,
+    /// `array<vec4<f32>>`: rgb = V per channel.
+    pub visibility: PooledBuffer,
+    /// `array<vec4<f32>>`: linear radiance and coverage alpha (EXR and comparisons).
+    pub color: PooledBuffer,
+    /// `array<f32>`: view depth, +∞ for background (EXR).
+    pub depth: PooledBuffer,
 }
 
 pub(super) const SHADOW_DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Float;
@@ -27,14 +38,15 @@ pub(super) const DEPTH_BUFFER_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat:
 pub(super) const POSITION_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
 pub(super) const NORMAL_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
 pub(super) const ALBEDO_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
-pub(super) const FLOAT_TARGET: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
 
 impl FrameTargets {
-    pub fn alloc(pool: &mut TexturePool, device: &wgpu::Device, width: u32, height: u32, shadow: u32) -> Self {
+    pub fn alloc(textures: &mut TexturePool, buffers: &mut BufferPool, device: &wgpu::Device, width: u32, height: u32, shadow: u32) -> Self {
         use wgpu::TextureUsages as U;
         let attachment = U::RENDER_ATTACHMENT | U::TEXTURE_BINDING;
-        let storage = U::STORAGE_BINDING | U::TEXTURE_BINDING | U::COPY_SRC;
-        let mut get = |label, w, h, format, usage| pool.alloc(device, TextureKey { label, width: w, height: h, format, usage });
+        let mut get = |label, w, h, format, usage| textures.alloc(device, TextureKey { label, width: w, height: h, format, usage });
+        let pixels = u64::from(width) * u64::from(height);
+        let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
+        let mut image = |label, bytes_per_pixel: u64| buffers.alloc(device, BufferKey { label, size: pixels * bytes_per_pixel, usage });
         Self {
             shadow_depth_buffer: get("FrameTargets::shadow_depth_buffer", shadow, shadow, DEPTH_BUFFER_FORMAT, U::RENDER_ATTACHMENT),
             shadow_depth: get("FrameTargets::shadow_depth", shadow, shadow, SHADOW_DEPTH_FORMAT, attachment),
@@ -45,14 +57,14 @@ impl FrameTargets {
             normal: get("FrameTargets::normal", width, height, NORMAL_FORMAT, attachment),
             albedo: get("FrameTargets::albedo", width, height, ALBEDO_FORMAT, attachment),
             object_id: get("FrameTargets::object_id", width, height, ID_FORMAT, attachment),
-            e0: get("FrameTargets::e0", width, height, FLOAT_TARGET, storage),
-            visibility: get("FrameTargets::visibility", width, height, FLOAT_TARGET, storage),
-            color: get("FrameTargets::color", width, height, FLOAT_TARGET, storage),
-            depth: get("FrameTargets::depth", width, height, wgpu::TextureFormat::R32Float, storage),
+            e0: image("FrameTargets::e0", 16),
+            visibility: image("FrameTargets::visibility", 16),
+            color: image("FrameTargets::color", 16),
+            depth: image("FrameTargets::depth", 4),
         }
     }
 
-    pub fn release(self, pool: &mut TexturePool) {
+    pub fn release(self, textures: &mut TexturePool, buffers: &mut BufferPool) {
         for t in [
             self.shadow_depth_buffer,
             self.shadow_depth,
@@ -63,12 +75,11 @@ impl FrameTargets {
             self.normal,
             self.albedo,
             self.object_id,
-            self.e0,
-            self.visibility,
-            self.color,
-            self.depth,
         ] {
-            pool.release(t);
+            textures.release(t);
+        }
+        for b in [self.e0, self.visibility, self.color, self.depth] {
+            buffers.release(b);
         }
     }
 }

@@ -58,7 +58,7 @@ struct Counters {
 @group(1) @binding(0) var<uniform> params: BrabecParams;
 @group(1) @binding(1) var<storage, read_write> state: array<PixelState>;
 @group(1) @binding(2) var<storage, read_write> counters: Counters;
-@group(1) @binding(3) var visibility_out: texture_storage_2d<rgba32float, write>;
+@group(1) @binding(3) var<storage, read_write> visibility_out: array<vec4<f32>>;
 // The light's edge table (`light::tables::edge_table`, read through common/edge_table.wgsl).
 @group(1) @binding(4) var<storage, read> edge_table: array<vec4<f32>>;
 // Per block of the light depth map, what a search needs to know to skip it (summary.wgsl).
@@ -379,7 +379,7 @@ fn mark(p: vec2<u32>) {
     let i = state_index(p);
     if state[i].t == UNKNOWN {
         state[i].t = MARKED;
-        to_search.pixels[atomicAdd(&to_search.count, 1u)] = list_index(p);
+        to_search.pixels[atomicAdd(&to_search.count, 1u)] = pixel_index(p);
     }
 }
 

@@ -22,5 +22,5 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     if params.falloff == 1u {
         v = 0.5 - 0.5 * cos(3.14159265 * v);
     }
-    textureStore(visibility_out, pixel, vec4<f32>(colored_visibility(v, t, state[i].normal, state[i].edge), 1.0));
+    visibility_out[pixel_index(pixel)] = vec4<f32>(colored_visibility(v, t, state[i].normal, state[i].edge), 1.0);
 }

@@ -58,7 +58,7 @@ fn mark_boundary(@builtin(global_invocation_id) id: vec3<u32>) {
         }
     }
     if lit < 16u {
-        boundary.pixels[atomicAdd(&boundary.count, 1u)] = list_index(pixel) << 4u | lit;
+        boundary.pixels[atomicAdd(&boundary.count, 1u)] = pixel_index(pixel) << 4u | lit;
     }
 }
 

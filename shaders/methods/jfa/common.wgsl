@@ -32,7 +32,7 @@ struct JfaParams {
 @group(1) @binding(1) var<storage, read> edge_table: array<vec4<f32>>;
 @group(1) @binding(2) var<storage, read> src: array<vec4<f32>>;
 @group(1) @binding(3) var<storage, read_write> dst: array<vec4<f32>>;
-@group(1) @binding(4) var visibility_out: texture_storage_2d<rgba32float, write>;
+@group(1) @binding(4) var<storage, read_write> visibility_out: array<vec4<f32>>;
 @group(1) @binding(5) var<storage, read_write> counters: array<atomic<u32>, 4>;
 // jfa-e: per eye pixel, bit 0 covered, bit 1 in hard shadow — computed once by the boundary
 // pass so that flooding rounds read a flag instead of redoing the shadow test per neighbour.

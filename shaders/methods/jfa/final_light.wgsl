@@ -40,7 +40,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
             v = select(v, vec3<f32>(0.0), hard);
         }
     }
-    textureStore(visibility_out, pixel, vec4<f32>(v, 1.0));
+    visibility_out[pixel_index(pixel)] = vec4<f32>(v, 1.0);
 }
 
 // The listed pixels: the intensity for the occluder their texel holds (inner penumbra where in

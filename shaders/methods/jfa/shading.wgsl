@@ -12,7 +12,7 @@
 @group(1) @binding(11) var<storage, read_write> shaded_groups: array<u32, 3>; // indirect dispatch
 
 fn list_for_shading(pixel: vec2<u32>, hard: bool) {
-    shaded.pixels[atomicAdd(&shaded.count, 1u)] = list_index(pixel) << 1u | u32(hard);
+    shaded.pixels[atomicAdd(&shaded.count, 1u)] = pixel_index(pixel) << 1u | u32(hard);
 }
 
 // The size of `shade_listed`'s dispatch.
@@ -40,5 +40,5 @@ fn store_shaded(pixel: vec2<u32>, hard: bool, intensity: vec4<f32>) {
         v = intensity.rgb;
         atomicAdd(&counters[1], 1u);
     }
-    textureStore(visibility_out, pixel, vec4<f32>(v, 1.0));
+    visibility_out[pixel_index(pixel)] = vec4<f32>(v, 1.0);
 }

@@ -26,7 +26,7 @@ struct FilterParams {
     _pad: vec2<u32>,
 }
 
-@group(1) @binding(0) var visibility_out: texture_storage_2d<rgba32float, write>;
+@group(1) @binding(0) var<storage, read_write> visibility_out: array<vec4<f32>>;
 @group(1) @binding(1) var<uniform> params: FilterParams;
 // chun-oh: the light image integrated over the filter's quadtree (`light_regions` in
 // `src/methods/chun_oh.rs`): 0–15 the 4×4 cells, 16–19 the 2×2, 20 the whole light; rgb the
@@ -175,18 +175,18 @@ fn classify(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     if !covered(pixel) {
-        textureStore(visibility_out, pixel, vec4<f32>(1.0));
+        visibility_out[pixel_index(pixel)] = vec4<f32>(1.0);
         return;
     }
     let p = textureLoad(gbuf_position, pixel, 0).xyz;
     let ls = to_light_space(p);
     // Outside the shadow frustum the filter has nothing to test: lit.
     if !ls.inside {
-        textureStore(visibility_out, pixel, vec4<f32>(unblocked_visibility(), 1.0));
+        visibility_out[pixel_index(pixel)] = vec4<f32>(unblocked_visibility(), 1.0);
         atomicAdd(&counters[0], 1u);
         atomicAdd(&counters[5], 1u);
     } else {
-        listed.pixels[atomicAdd(&listed.count, 1u)] = list_index(pixel);
+        listed.pixels[atomicAdd(&listed.count, 1u)] = pixel_index(pixel);
     }
 }
 
@@ -204,6 +204,6 @@ fn filter_listed(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocat
         let pixel = listed_pixel(listed.pixels[i]);
         let v = filtered_visibility(run_filter(pixel));
         atomicAdd(&counters[5], 1u);
-        textureStore(visibility_out, pixel, vec4<f32>(v, 1.0));
+        visibility_out[pixel_index(pixel)] = vec4<f32>(v, 1.0);
     }
 }

@@ -6,7 +6,7 @@
 #import common/frame_inputs.wgsl
 
 @group(1) @binding(0) var<storage, read> sums: array<vec4<f32>>;
-@group(1) @binding(1) var visibility_out: texture_storage_2d<rgba32float, write>;
+@group(1) @binding(1) var<storage, read_write> visibility_out: array<vec4<f32>>;
 
 @compute @workgroup_size(8, 8)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
@@ -20,5 +20,5 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     let total = unshadowed.r + unshadowed.g + unshadowed.b;
     let gray = select(1.0, (shadowed.r + shadowed.g + shadowed.b) / total, total > 0.0);
     let v = select(vec3<f32>(gray), shadowed / unshadowed, unshadowed > vec3<f32>(0.0));
-    textureStore(visibility_out, pixel, vec4<f32>(clamp(v, vec3<f32>(0.0), vec3<f32>(1.0)), 1.0));
+    visibility_out[pixel_index(pixel)] = vec4<f32>(clamp(v, vec3<f32>(0.0), vec3<f32>(1.0)), 1.0);
 }

@@ -55,13 +55,13 @@ struct WorkItem {
 @group(1) @binding(5) var<storage, read_write> tile_ranges: array<vec2<f32>>;
 // 0 depth reads, 1 LI writes.
 @group(1) @binding(6) var<storage, read_write> counters: array<atomic<u32>, 4>;
-@group(1) @binding(7) var visibility_out: texture_storage_2d<rgba32float, write>;
+@group(1) @binding(7) var<storage, read_write> visibility_out: array<vec4<f32>>;
 // The light's sector table (`light::tables::sector_table`): the emission (w: area) of the
 // sectors from direction 0 to each angle, out to each station.
 @group(1) @binding(9) var<storage, read> sectors: array<vec4<f32>>;
 // The unshadowed irradiance per channel: what a coloured wedge's blocked irradiance is a
 // fraction of.
-@group(1) @binding(10) var e0_in: texture_2d<f32>;
+@group(1) @binding(10) var<storage, read> e0_in: array<vec4<f32>>;
 // Per pixel, two vec4s written by `tiles.wgsl`: the surface point with, in w, the object whose
 // volume and wedges it ignores (NO_OBJECT: none; NOT_COVERED: background), then its normal.
 @group(1) @binding(8) var<storage, read_write> receivers: array<vec4<f32>>;

@@ -380,7 +380,7 @@ fn penumbra_delta(index: u32, at: u32) -> vec3<i32> {
     }
     var e0 = vec3<f32>(1.0);
     if params.channels == 3u {
-        e0 = textureLoad(e0_in, vec2<u32>(at % frame.sizes.x, at / frame.sizes.x), 0).rgb;
+        e0 = e0_in[at].rgb;
     }
     return -vec3<i32>(round(f32(params.full) * wedge_share(w, receiver.xyz, receivers[2u * at + 1u].xyz, e0)));
 }

@@ -17,5 +17,5 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
         let c = min(k, params.channels - 1u); // a uniform light's one value serves all three
         v[k] = clamp(1.0 + f32(atomicLoad(&li[at + c])) / f32(params.full), 0.0, 1.0);
     }
-    textureStore(visibility_out, pixel, vec4<f32>(v, 1.0));
+    visibility_out[pixel_index(pixel)] = vec4<f32>(v, 1.0);
 }
