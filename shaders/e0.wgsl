@@ -2,8 +2,9 @@
 // form over each uniform cell of the light image, times the cell's radiance, summed —
 // evaluated exactly at the corners and the centre of 8×8-pixel blocks and interpolated
 // inside a block wherever the error measured at its centre, and a bound for what the centre
-// cannot see, keep it within E0_TOLERANCE of the exact sum; every other pixel is listed and
-// summed exactly by a compacted pass of its own (contract §1, "E0").
+// cannot see, keep it within E0_TOLERANCE of the exact sum; every other lit pixel is listed
+// and summed exactly by a compacted pass of its own (contract §1, "E0") — one for pixels that
+// see the whole light above their horizon, whose cells need no clipping, one for the rest.
 //
 // What is interpolated: below its horizon-free region, E0 = |n · Φ(x)| per channel, where
 // Φ = Σ radiance × ½ Σ Θᵢ Γᵢ is the light's vector irradiance — a smooth function of the
@@ -17,10 +18,12 @@
 
 @group(1) @binding(0) var<storage, read_write> e0_out: array<vec4<f32>>;
 @group(1) @binding(1) var<storage, read_write> corners: array<Corner>;
-// The pixels the interpolation did not accept, summed exactly by a pass of their own
-// (common/pixel_list.wgsl says why).
-@group(1) @binding(2) var<storage, read_write> fallback: PixelList;
-@group(1) @binding(3) var<storage, read_write> fallback_groups: array<u32, 3>; // indirect dispatch
+// The pixels the interpolation refuses, summed exactly by a pass of their own over each list (common/pixel_list.wgsl says why): those that
+// see the whole light above their horizon, whose cells need no clipping, and the others.
+@group(1) @binding(2) var<storage, read_write> above: PixelList;
+@group(1) @binding(3) var<storage, read_write> above_groups: array<u32, 3>; // indirect dispatch
+@group(1) @binding(4) var<storage, read_write> clipped: PixelList;
+@group(1) @binding(5) var<storage, read_write> clipped_groups: array<u32, 3>;
 
 // Pixels per block side; mirrors `render::passes::E0_BLOCK`.
 const BLOCK: u32 = 8u;
@@ -59,12 +62,24 @@ fn lit_side(x: vec3<f32>) -> bool {
     return dot(x - frame.light_center.xyz, frame.light_n.xyz) > 0.0;
 }
 
-// The exact sum over the cells, clipped to x's hemisphere.
-fn exact_e0(x: vec3<f32>, nx: vec3<f32>) -> vec3<f32> {
+// The exact sum over the cells, each clipped to x's hemisphere.
+fn clipped_e0(x: vec3<f32>, nx: vec3<f32>) -> vec3<f32> {
     var e0 = vec3<f32>(0.0);
     for (var k = 0u; k < frame.sizes.w; k++) {
         let cell = light_cells[k];
         e0 += cell.radiance.rgb * polygon_irradiance(x, nx, cell.corners);
+    }
+    return e0;
+}
+
+// The exact sum where the whole light lies above x's horizon: no cell needs clipping, and
+// |nx · Φ| of each cell (`polygon_vector`, its own four edges) is the value
+// `polygon_irradiance` computes there, in the same order, at about half the cost.
+fn unclipped_e0(x: vec3<f32>, nx: vec3<f32>) -> vec3<f32> {
+    var e0 = vec3<f32>(0.0);
+    for (var k = 0u; k < frame.sizes.w; k++) {
+        let cell = light_cells[k];
+        e0 += cell.radiance.rgb * abs(dot(nx, polygon_vector(x, cell.corners)));
     }
     return e0;
 }
@@ -81,11 +96,19 @@ fn corner_pixel(c: vec2<u32>) -> vec2<u32> {
 fn exact_terms(x: vec3<f32>, nx: vec3<f32>, depth: f32) -> Corner {
     var phi = mat3x3<f32>(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0));
     var e0 = vec3<f32>(0.0);
+    // With the light wholly above the horizon a cell's irradiance is |nx · its Φ| (`unclipped_e0`).
+    let above = light_above(x, nx);
     for (var k = 0u; k < frame.sizes.w; k++) {
         let cell = light_cells[k];
         let phi_cell = polygon_vector(x, cell.corners);
         phi += mat3x3<f32>(phi_cell * cell.radiance.r, phi_cell * cell.radiance.g, phi_cell * cell.radiance.b);
-        e0 += cell.radiance.rgb * polygon_irradiance(x, nx, cell.corners);
+        var irradiance: f32;
+        if above {
+            irradiance = abs(dot(nx, phi_cell));
+        } else {
+            irradiance = polygon_irradiance(x, nx, cell.corners);
+        }
+        e0 += cell.radiance.rgb * irradiance;
     }
     return Corner(vec4<f32>(phi[0], e0.r), vec4<f32>(phi[1], e0.g), vec4<f32>(phi[2], e0.b), vec4<f32>(x, 1.0), vec4<f32>(nx, depth));
 }
@@ -241,16 +264,14 @@ fn interpolated_e0(pixel: vec2<u32>, b: Block, checked: vec2<f32>) -> vec4<f32> 
     return vec4<f32>(e0, select(0.0, 1.0, done && checked.x < UNCHECKED));
 }
 
-// The exact sum at one pixel.
-fn exact_at(pixel: vec2<u32>) -> vec3<f32> {
-    if !covered(pixel) {
-        return vec3<f32>(0.0);
+// Lists a lit pixel for the exact sum: in `above` where the whole light lies above its
+// horizon, else in `clipped`.
+fn list_exact(pixel: vec2<u32>, x: vec3<f32>, nx: vec3<f32>) {
+    if light_above(x, nx) {
+        above.pixels[atomicAdd(&above.count, 1u)] = pixel_index(pixel);
+    } else {
+        clipped.pixels[atomicAdd(&clipped.count, 1u)] = pixel_index(pixel);
     }
-    let x = textureLoad(gbuf_position, pixel, 0).xyz;
-    if !lit_side(x) {
-        return vec3<f32>(0.0);
-    }
-    return exact_e0(x, textureLoad(gbuf_normal, pixel, 0).xyz);
 }
 
 // Pass 2, one invocation per block (a row of blocks per workgroup row): the centre checks
@@ -275,34 +296,56 @@ fn interpolate_blocks(@builtin(global_invocation_id) id: vec3<u32>) {
                 if e0.w > 0.0 {
                     e0_out[pixel_index(pixel)] = vec4<f32>(e0.xyz, 1.0);
                 } else {
-                    fallback.pixels[atomicAdd(&fallback.count, 1u)] = pixel_index(pixel);
+                    list_exact(pixel, textureLoad(gbuf_position, pixel, 0).xyz, textureLoad(gbuf_normal, pixel, 0).xyz);
                 }
             }
         }
     }
 }
 
-// Pass 3: the size of pass 4's dispatch.
-@compute @workgroup_size(1)
-fn fallback_size() {
-    fallback_groups = list_dispatch(atomicLoad(&fallback.count));
+// Every pixel summed exactly, in one pass: lights of a cell or two, where the corners and
+// the check cost more than they save (and listing the lit pixels costs more than the cells'
+// sums: an atomic append per lane), and `E0Mode::Exact`, the yardstick the interpolation is
+// measured against.
+@compute @workgroup_size(8, 8)
+fn exact(@builtin(global_invocation_id) id: vec3<u32>) {
+    let pixel = id.xy;
+    if any(pixel >= frame.sizes.xy) {
+        return;
+    }
+    let x = textureLoad(gbuf_position, pixel, 0).xyz;
+    var e0 = vec3<f32>(0.0);
+    if covered(pixel) && lit_side(x) {
+        e0 = clipped_e0(x, textureLoad(gbuf_normal, pixel, 0).xyz);
+    }
+    e0_out[pixel_index(pixel)] = vec4<f32>(e0, 1.0);
 }
 
-// Pass 4: the listed pixels, summed exactly.
+// The sizes of the two exact passes' dispatches.
+@compute @workgroup_size(1)
+fn exact_sizes() {
+    above_groups = list_dispatch(atomicLoad(&above.count));
+    clipped_groups = list_dispatch(atomicLoad(&clipped.count));
+}
+
+// The pixels of `above`, summed exactly without clipping.
 @compute @workgroup_size(64)
-fn fallback_exact(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) lane: u32) {
+fn exact_above(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) lane: u32) {
     let i = list_position(group, lane);
-    if i < atomicLoad(&fallback.count) {
-        let pixel = listed_pixel(fallback.pixels[i]);
-        e0_out[pixel_index(pixel)] = vec4<f32>(exact_at(pixel), 1.0);
+    if i < atomicLoad(&above.count) {
+        let pixel = listed_pixel(above.pixels[i]);
+        let x = textureLoad(gbuf_position, pixel, 0).xyz;
+        e0_out[pixel_index(pixel)] = vec4<f32>(unclipped_e0(x, textureLoad(gbuf_normal, pixel, 0).xyz), 1.0);
     }
 }
 
-// Every pixel summed exactly: lights of a cell or two (cheaper than the corners and the
-// check), and the yardstick the interpolation is measured against (`E0Mode::Exact`).
-@compute @workgroup_size(8, 8)
-fn exact(@builtin(global_invocation_id) id: vec3<u32>) {
-    if all(id.xy < frame.sizes.xy) {
-        e0_out[pixel_index(id.xy)] = vec4<f32>(exact_at(id.xy), 1.0);
+// The pixels of `clipped`, summed exactly with each cell clipped to the hemisphere.
+@compute @workgroup_size(64)
+fn exact_clipped(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) lane: u32) {
+    let i = list_position(group, lane);
+    if i < atomicLoad(&clipped.count) {
+        let pixel = listed_pixel(clipped.pixels[i]);
+        let x = textureLoad(gbuf_position, pixel, 0).xyz;
+        e0_out[pixel_index(pixel)] = vec4<f32>(clipped_e0(x, textureLoad(gbuf_normal, pixel, 0).xyz), 1.0);
     }
 }

@@ -420,7 +420,8 @@ fn bench_writes_its_phase_table_and_the_e0_check() {
                 assert!((passes(name) - phase(name)).abs() < 1e-6 * phase(name).max(1.0), "{name}: {row:?}");
             }
             let names: Vec<&str> = row.passes.iter().map(|(_, pass, _)| pass.as_str()).collect();
-            let e0_passes: &[&str] = if row.light == "flame" { &["e0_corners", "e0_interpolate", "e0_fallback"] } else { &["e0"] };
+            let e0_passes: &[&str] =
+                if row.light == "flame" { &["e0_corners", "e0_interpolate", "e0_exact_above", "e0_exact_clipped"] } else { &["e0"] };
             assert!(e0_passes.iter().all(|p| names.contains(p)) || !engine.gpu().timestamps_inside_passes, "{names:?}");
         }
     }

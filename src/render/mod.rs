@@ -140,6 +140,8 @@ impl Renderer {
                     layout::storage_read_write(1),
                     layout::storage_read_write(2),
                     layout::storage_read_write(3),
+                    layout::storage_read_write(4),
+                    layout::storage_read_write(5),
                 ],
             ),
             composite_io: bgl(

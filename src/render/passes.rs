@@ -123,8 +123,9 @@ impl Renderer {
     /// E0 (`shaders/e0.wgsl`). Under a light of more than `E0_EXACT_CELLS` cells: the exact
     /// sum at the corners of `E0_BLOCK`-pixel blocks; per block, the interpolation's error at
     /// its centre, and each of its pixels interpolated where the error estimate allows and
-    /// listed otherwise; then the listed pixels summed exactly (an indirect dispatch sized on
-    /// the GPU). Otherwise (or with `E0Mode::Exact`) the exact sum everywhere.
+    /// listed otherwise; then the listed pixels summed exactly, those that see the whole light
+    /// above their horizon without clipping (two indirect dispatches sized on the GPU).
+    /// Otherwise (or with `E0Mode::Exact`) the exact sum everywhere, in one pass.
     pub(super) fn record_e0(&mut self, encoder: &mut wgpu::CommandEncoder, inputs: &FrameInputs, targets: &FrameTargets, spec: &FrameSpec) {
         let io_layout = self.layouts.e0_output.clone();
         let device = &self.gpu.device;
@@ -140,45 +141,50 @@ impl Renderer {
             device.create_buffer(&wgpu::BufferDescriptor { label: Some(label), size, usage: wgpu::BufferUsages::STORAGE | usage, mapped_at_creation: false })
         };
         let records = buffer("E0::corners", u64::from(corners * rows) * E0_CORNER_BYTES, wgpu::BufferUsages::empty());
-        // The pixels the interpolation refuses (at most every pixel).
-        let fallback = PixelListBuffers::new(device, encoder, "E0", pixels);
-        let bind = |groups: &wgpu::Buffer| {
+        // The pixels summed exactly, by whether they see the whole light (at most every pixel).
+        let above = PixelListBuffers::new(device, encoder, "E0::above", pixels);
+        let clipped = PixelListBuffers::new(device, encoder, "E0::clipped", pixels);
+        let bind = |above_groups: &wgpu::Buffer, clipped_groups: &wgpu::Buffer| {
             device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("E0::outputs"),
                 layout: &io_layout,
                 entries: &layout::entries(&[
                     targets.e0.buffer.as_entire_binding(),
                     records.as_entire_binding(),
-                    fallback.list.as_entire_binding(),
-                    groups.as_entire_binding(),
+                    above.list.as_entire_binding(),
+                    above_groups.as_entire_binding(),
+                    clipped.list.as_entire_binding(),
+                    clipped_groups.as_entire_binding(),
                 ]),
             })
         };
-        let io = bind(&fallback.groups);
+        let (io, listed_io) = (bind(&above.groups, &clipped.groups), bind(&above.stand_in, &clipped.stand_in));
         let screen = (spec.width.div_ceil(8), spec.height.div_ceil(8));
         let mut pass = encoder
             .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("e0"), timestamp_writes: self.timer.compute_scope("e0", "e0") });
         pass.set_bind_group(0, &inputs.bind_group, &[]);
         pass.set_bind_group(1, &io, &[]);
-        if interpolate {
-            let steps = [
-                ("e0_corners", "block_corners", (corners.div_ceil(8), rows.div_ceil(8))),
-                // One invocation per block, 64 blocks of a row per workgroup.
-                ("e0_interpolate", "interpolate_blocks", ((corners - 1).div_ceil(64), rows - 1)),
-                ("e0_fallback_size", "fallback_size", (1, 1)),
-            ];
-            for (name, entry_point, (x, y)) in steps {
-                pass.set_pipeline(&entry(name, entry_point));
-                pass.dispatch_workgroups(x, y, 1);
-                self.timer.mark(&mut pass, name);
-            }
-            pass.set_bind_group(1, &bind(&fallback.stand_in), &[]);
-            pass.set_pipeline(&entry("e0_fallback", "fallback_exact"));
-            pass.dispatch_workgroups_indirect(&fallback.groups, 0);
-            self.timer.mark(&mut pass, "e0_fallback");
-        } else {
+        if !interpolate {
             pass.set_pipeline(&entry("e0_exact", "exact"));
             pass.dispatch_workgroups(screen.0, screen.1, 1);
+            return;
+        }
+        let steps = [
+            ("e0_corners", "block_corners", (corners.div_ceil(8), rows.div_ceil(8))),
+            // One invocation per block, 64 blocks of a row per workgroup.
+            ("e0_interpolate", "interpolate_blocks", ((corners - 1).div_ceil(64), rows - 1)),
+            ("e0_exact_sizes", "exact_sizes", (1, 1)),
+        ];
+        for (name, entry_point, (x, y)) in steps {
+            pass.set_pipeline(&entry(name, entry_point));
+            pass.dispatch_workgroups(x, y, 1);
+            self.timer.mark(&mut pass, name);
+        }
+        pass.set_bind_group(1, &listed_io, &[]);
+        for (name, entry_point, list) in [("e0_exact_above", "exact_above", &above), ("e0_exact_clipped", "exact_clipped", &clipped)] {
+            pass.set_pipeline(&entry(name, entry_point));
+            pass.dispatch_workgroups_indirect(&list.groups, 0);
+            self.timer.mark(&mut pass, name);
         }
     }
 
