@@ -237,10 +237,10 @@ fn light_above(x: vec3<f32>, nx: vec3<f32>) -> bool {
 
 // E0 at one pixel interpolated from its block's corners: xyz, and w = 1 where the estimate
 // accepts it (or the pixel receives no light), 0 where it must be summed exactly.
-fn interpolated_e0(pixel: vec2<u32>, b: Block, checked: vec2<f32>) -> vec4<f32> {
-    let x = textureLoad(gbuf_position, pixel, 0).xyz;
-    let nx = textureLoad(gbuf_normal, pixel, 0).xyz;
-    if !covered(pixel) || !lit_side(x) {
+// `normal` is the pixel's G-buffer normal texel (w: coverage).
+fn interpolated_e0(pixel: vec2<u32>, x: vec3<f32>, normal: vec4<f32>, b: Block, checked: vec2<f32>) -> vec4<f32> {
+    let nx = normal.xyz;
+    if normal.w <= 0.5 || !lit_side(x) {
         return vec4<f32>(0.0, 0.0, 0.0, 1.0);
     }
     let s = stencil(pixel, b);
@@ -292,11 +292,14 @@ fn interpolate_blocks(@builtin(global_invocation_id) id: vec3<u32>) {
         for (var x = 0u; x < BLOCK; x++) {
             let pixel = origin + vec2<u32>(x, y);
             if all(pixel < frame.sizes.xy) {
-                let e0 = interpolated_e0(pixel, b, checked);
+                // Loaded once here: lavapipe runs the listing branch's code for every pixel.
+                let x = textureLoad(gbuf_position, pixel, 0).xyz;
+                let normal = textureLoad(gbuf_normal, pixel, 0);
+                let e0 = interpolated_e0(pixel, x, normal, b, checked);
                 if e0.w > 0.0 {
                     e0_out[pixel_index(pixel)] = vec4<f32>(e0.xyz, 1.0);
                 } else {
-                    list_exact(pixel, textureLoad(gbuf_position, pixel, 0).xyz, textureLoad(gbuf_normal, pixel, 0).xyz);
+                    list_exact(pixel, x, normal.xyz);
                 }
             }
         }
