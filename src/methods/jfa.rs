@@ -284,6 +284,8 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
         layout::storage_read_write(9),
         layout::storage_read_write(10),
         layout::storage_read_write(11),
+        layout::storage_read_write(12),
+        layout::storage_read_write(13),
     ];
     let seed = ctx.screen_pipeline(PipelineKey::new(which.seed.0), which.seed.1, &io);
     // jfa-e lists its boundary pixels and seeds them in a compacted pass (boundary.wgsl).
@@ -293,6 +295,10 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
     });
     let listed = crate::render::PixelListBuffers::new(&device, ctx.encoder, "Jfa::boundary", if which.light_space { 0 } else { u64::from(grid.0) * u64::from(grid.1) });
     let round = ctx.screen_pipeline(PipelineKey::new(which.round.0), which.round.1, &io);
+    // Each round runs over the tiles a record may reach, listed just before it (common.wgsl).
+    let tile_passes = [(1, "list_tiles"), (2, "tiles_size"), (3, "tiles_reset")]
+        .map(|(variant, entry)| ctx.screen_entry(PipelineKey { name: which.round.0, variant }, which.round.1, entry, &io));
+    let tile_list = crate::render::PixelListBuffers::new(&device, ctx.encoder, "Jfa::tile_list", u64::from(tile_count));
     let finish = ctx.screen_pipeline(PipelineKey::new(which.finish.0), which.finish.1, &io);
     // The final pass lists the pixels it shades by an occluder and shades them in a compacted
     // pass (final_light.wgsl, final_eye.wgsl).
@@ -300,7 +306,7 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
         .map(|(variant, entry)| ctx.screen_entry(PipelineKey { name: which.finish.0, variant }, which.finish.1, entry, &io));
     let shaded = crate::render::PixelListBuffers::new(&device, ctx.encoder, "Jfa::shaded", u64::from(ctx.width) * u64::from(ctx.height));
     // Ping-pong: `a_to_b` reads a and writes b, `b_to_a` the reverse.
-    let group_with = |src: &wgpu::Buffer, dst: &wgpu::Buffer, listed_groups: &wgpu::Buffer, shaded_groups: &wgpu::Buffer| {
+    let group_with = |src: &wgpu::Buffer, dst: &wgpu::Buffer, listed_groups: &wgpu::Buffer, shaded_groups: &wgpu::Buffer, tile_groups: &wgpu::Buffer| {
         ctx.bind(
             "Jfa::bind_group",
             &seed,
@@ -317,20 +323,29 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
                 listed_groups.as_entire_binding(),
                 shaded.list.as_entire_binding(),
                 shaded_groups.as_entire_binding(),
+                tile_list.list.as_entire_binding(),
+                tile_groups.as_entire_binding(),
             ],
         )
     };
-    let group = |src: &wgpu::Buffer, dst: &wgpu::Buffer| group_with(src, dst, &listed.groups, &shaded.groups);
+    let group = |src: &wgpu::Buffer, dst: &wgpu::Buffer| group_with(src, dst, &listed.groups, &shaded.groups, &tile_list.groups);
     // The boundary seeds write a (as the seed pass does), the indirect grid bound as its stand-in.
-    let seeding = group_with(&b, &a, &listed.stand_in, &shaded.groups);
+    let seeding = group_with(&b, &a, &listed.stand_in, &shaded.groups, &tile_list.groups);
     // The seeds are in a and each round reads the other buffer: the final passes read a after
     // an even number of rounds.
     let result_in_a = steps.len().is_multiple_of(2);
-    let final_shading =
-        if result_in_a { group_with(&a, &b, &listed.groups, &shaded.stand_in) } else { group_with(&b, &a, &listed.groups, &shaded.stand_in) };
+    let final_shading = if result_in_a {
+        group_with(&a, &b, &listed.groups, &shaded.stand_in, &tile_list.groups)
+    } else {
+        group_with(&b, &a, &listed.groups, &shaded.stand_in, &tile_list.groups)
+    };
     let (a_to_b, b_to_a) = (group(&a, &b), group(&b, &a));
-    // Rounds skip the tiles no record can reach and leave their cells as they are, so both
-    // record buffers start empty (all zero) and the tile flags start clear.
+    // The rounds themselves, with the tile list's grid bound as its stand-in.
+    let round_group = |src: &wgpu::Buffer, dst: &wgpu::Buffer| group_with(src, dst, &listed.groups, &shaded.groups, &tile_list.stand_in);
+    let (round_a_to_b, round_b_to_a) = (round_group(&a, &b), round_group(&b, &a));
+    // Rounds run over the tiles a record can reach (listed before each round) and leave the
+    // others' cells as they are, so both record buffers start empty (all zero) and the tile
+    // flags start clear.
     ctx.encoder.clear_buffer(&b, 0, None);
     ctx.encoder.clear_buffer(&tiles, 0, None);
     let groups = (grid.0.div_ceil(TILE), grid.1.div_ceil(TILE));
@@ -357,12 +372,23 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
             pass.dispatch_workgroups_indirect(&listed.groups, 0);
             ctx.timer.mark(&mut pass, "jfa_seed_boundary");
         }
-        pass.set_pipeline(&round);
+        let [list_tiles, tiles_size, tiles_reset] = &tile_passes;
         for k in 0..steps.len() {
             let offset = layout::slot_offset(k + 1);
-            pass.set_bind_group(1, if k.is_multiple_of(2) { &a_to_b } else { &b_to_a }, &[offset]);
-            pass.dispatch_workgroups(groups.0, groups.1, 1);
+            let (listing, flooding) = if k.is_multiple_of(2) { (&a_to_b, &round_a_to_b) } else { (&b_to_a, &round_b_to_a) };
+            pass.set_bind_group(1, listing, &[offset]);
+            pass.set_pipeline(list_tiles);
+            pass.dispatch_workgroups(groups.0.div_ceil(8), groups.1.div_ceil(8), 1);
+            pass.set_pipeline(tiles_size);
+            pass.dispatch_workgroups(1, 1, 1);
+            ctx.timer.mark(&mut pass, "jfa_list_tiles");
+            pass.set_pipeline(&round);
+            pass.set_bind_group(1, flooding, &[offset]);
+            pass.dispatch_workgroups_indirect(&tile_list.groups, 0);
             ctx.timer.mark(&mut pass, "jfa_rounds");
+            pass.set_pipeline(tiles_reset);
+            pass.set_bind_group(1, listing, &[offset]);
+            pass.dispatch_workgroups(1, 1, 1);
         }
         pass.set_pipeline(&finish);
         pass.set_bind_group(1, if result_in_a { &a_to_b } else { &b_to_a }, &[0]);

@@ -4,6 +4,7 @@
 
 #import common/frame_inputs.wgsl
 #import common/shadow.wgsl
+#import common/pixel_list.wgsl
 #import methods/jfa/neighbours.wgsl
 #import common/edge_table.wgsl
 
@@ -81,17 +82,51 @@ fn tile_holds_record(tile: vec2<i32>) -> bool {
     return atomicLoad(&tiles[tile.y * tile_count().x + tile.x]) != 0u;
 }
 
-var<workgroup> in_reach: u32;
+// Listed rounds: before each round `list_tiles` lists the tiles a record may reach in it
+// (`reach_holds_record`), the round runs one workgroup per listed tile (an indirect dispatch
+// sized by `tiles_size`), and `tiles_reset` empties the list for the next round. A tile left
+// out would copy empty records over the empty records both buffers hold; on lavapipe a
+// workgroup that returns at once still pays for most of its code (a CPU rasteriser runs both
+// sides of a branch), so such tiles are not launched at all. Entries are tile indices,
+// row-major over `tile_count()`.
+@group(1) @binding(12) var<storage, read_write> tile_list: PixelList;
+@group(1) @binding(13) var<storage, read_write> tile_groups: array<u32, 3>;
 
-// Whether a record may reach this workgroup's tile in this round (`reach_holds_record`), the
-// same answer for the whole workgroup; counts the tiles flooded. Call it first, in uniform
-// control flow.
-fn tile_in_reach(local: u32, group: vec2<u32>) -> bool {
-    if local == 0u {
-        in_reach = u32(reach_holds_record(vec2<i32>(group), params.step, tile_count()));
-        atomicAdd(&counters[2], in_reach);
+// One invocation per tile: lists it where a record may reach it this round; counts the tiles
+// flooded.
+@compute @workgroup_size(8, 8)
+fn list_tiles(@builtin(global_invocation_id) id: vec3<u32>) {
+    let tile = vec2<i32>(id.xy);
+    if any(tile >= tile_count()) {
+        return;
     }
-    return workgroupUniformLoad(&in_reach) != 0u;
+    if reach_holds_record(tile, params.step, tile_count()) {
+        tile_list.pixels[atomicAdd(&tile_list.count, 1u)] = u32(tile.y * tile_count().x + tile.x);
+        atomicAdd(&counters[2], 1u);
+    }
+}
+
+// The round's grid: one workgroup per listed tile.
+@compute @workgroup_size(1)
+fn tiles_size() {
+    let n = atomicLoad(&tile_list.count);
+    tile_groups = array<u32, 3>(min(n, LIST_MAX_GROUPS), (n + LIST_MAX_GROUPS - 1u) / LIST_MAX_GROUPS, 1u);
+}
+
+@compute @workgroup_size(1)
+fn tiles_reset() {
+    atomicStore(&tile_list.count, 0u);
+}
+
+// The grid cell a lane of a listed round works on, or (−1, −1) past the list's end.
+fn listed_cell(group: vec3<u32>, local: vec3<u32>) -> vec2<i32> {
+    let i = group.y * LIST_MAX_GROUPS + group.x;
+    if i >= atomicLoad(&tile_list.count) {
+        return vec2<i32>(-1);
+    }
+    let t = i32(tile_list.pixels[i]);
+    let across = tile_count().x;
+    return vec2<i32>(t % across, t / across) * TILE + vec2<i32>(local.xy);
 }
 
 fn mark_tile(cell: vec2<i32>) {

@@ -58,15 +58,14 @@ fn midpoint_holds(r: Receiver, k: u32) -> bool {
     return intensity(textureLoad(gbuf_position, mid, 0).xyz, src[at].xyz, (mid_flag & HARD) != 0u).w > 0.0;
 }
 
+// One workgroup per listed tile (`list_tiles` in common.wgsl).
 @compute @workgroup_size(8, 8)
-fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) local: u32, @builtin(workgroup_id) group: vec3<u32>) {
-    if !tile_in_reach(local, group.xy) {
+fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_id) local: vec3<u32>) {
+    let cell = listed_cell(group, local);
+    if cell.x < 0 || any(vec2<u32>(cell) >= frame.sizes.xy) {
         return;
     }
-    let pixel = id.xy;
-    if any(pixel >= frame.sizes.xy) {
-        return;
-    }
+    let pixel = vec2<u32>(cell);
     let index = 2u * (pixel.y * frame.sizes.x + pixel.x);
     var best = src[index];
     var best_origin = src[index + 1u];

@@ -10,17 +10,15 @@
 
 #import methods/jfa/common.wgsl
 
+// One workgroup per listed tile (`list_tiles` in common.wgsl).
 @compute @workgroup_size(8, 8)
-fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) local: u32, @builtin(workgroup_id) group: vec3<u32>) {
-    if !tile_in_reach(local, group.xy) {
-        return;
-    }
+fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_id) local: vec3<u32>) {
+    let p = listed_cell(group, local);
     let res = i32(frame.sizes.z);
-    if any(id.xy >= vec2<u32>(u32(res))) {
+    if p.x < 0 || any(p >= vec2<i32>(res)) {
         return;
     }
-    let p = vec2<i32>(id.xy);
-    let index = id.y * u32(res) + id.x;
+    let index = u32(p.y * res + p.x);
     var best = src[index];
     var best_key = key_of(best);
     let receiver = textureLoad(shadow_position, p, 0);

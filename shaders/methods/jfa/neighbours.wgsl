@@ -22,8 +22,10 @@ fn floor_div(a: i32, b: i32) -> i32 {
 
 // Past the paper: a flood only ever adds or improves records, so a tile whose cells and all
 // their jump neighbours hold none would copy empty records over the empty records both
-// buffers already hold — its workgroup can return at once. Most of a shadow map is far from
-// any silhouette, so this is where a round's cost goes. Whether a record may reach `tile` this
+// buffers already hold — it need not run. Most of a shadow map is far from any silhouette,
+// so this is where a round's cost goes. (The shadow methods list the tiles that must run and
+// launch only those, `list_tiles` in common.wgsl; the Voronoi twin returns early from the
+// others: the same tiles run.) Whether a record may reach `tile` this
 // round: some tile holding a neighbour of its cells (offsets a·step, b·step) — or the tile
 // itself — holds one. The importer defines `tile_holds_record(tile)`: a flag any cell of
 // that tile sets once it holds a record (seed pass or an earlier round).
