@@ -86,7 +86,8 @@ pub struct GpuContext {
     /// Whether passes can be timed with GPU timestamp queries.
     pub timestamps: bool,
     /// Whether timestamps can also be written between a pass's dispatches, so each dispatch
-    /// is timed on its own (`GpuTimer::mark`).
+    /// is timed on its own (`GpuTimer::mark`), and around copies recorded on an encoder
+    /// (`GpuTimer::time_encoder`).
     pub timestamps_inside_passes: bool,
     /// Set by `fail_next_readback` (fault tests).
     fail_next_readback: std::sync::atomic::AtomicBool,
@@ -126,13 +127,14 @@ impl GpuContext {
             .ok_or(GpuError::NoAdapter(choice))?;
         let info = adapter.get_info();
         let timestamps = adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY);
-        let timestamps_inside_passes = timestamps && adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY_INSIDE_PASSES);
+        let inside = wgpu::Features::TIMESTAMP_QUERY_INSIDE_PASSES | wgpu::Features::TIMESTAMP_QUERY_INSIDE_ENCODERS;
+        let timestamps_inside_passes = timestamps && adapter.features().contains(inside);
         let mut required_features = wgpu::Features::empty();
         if timestamps {
             required_features |= wgpu::Features::TIMESTAMP_QUERY;
         }
         if timestamps_inside_passes {
-            required_features |= wgpu::Features::TIMESTAMP_QUERY_INSIDE_PASSES;
+            required_features |= inside;
         }
         // Ask for what the adapter has: large shadow maps and outputs need more than the
         // WebGPU defaults, and penumbra enforces its own (smaller) limits per job.

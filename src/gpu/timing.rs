@@ -1,6 +1,7 @@
 //! GPU timestamps per pass, where the adapter has them (lavapipe does). Each pass asks for a
 //! scope named by its phase and its own label; where timestamps may also be written inside
-//! a pass, `mark` after each dispatch times the dispatches one by one. After the frame the
+//! a pass, `mark` after each dispatch times the dispatches one by one, and `time_encoder`
+//! times copies recorded between passes. After the frame the
 //! timer resolves the queries and reports milliseconds per phase and per pass.
 
 use super::{GpuContext, GpuError};
@@ -105,6 +106,20 @@ impl GpuTimer {
             beginning_of_pass_write_index: Some(i),
             end_of_pass_write_index: Some(i + 1),
         })
+    }
+
+    /// Records `record` (copies) straight on `encoder`, timed as pass `pass` of `phase` where
+    /// timestamps can be written between passes; untimed elsewhere.
+    pub fn time_encoder(&mut self, encoder: &mut wgpu::CommandEncoder, phase: &'static str, pass: &'static str, record: impl FnOnce(&mut wgpu::CommandEncoder)) {
+        let begin = if self.inside_passes { self.open(phase, pass).map(|(_, i)| i) } else { None };
+        match (begin, &self.queries) {
+            (Some(i), Some(queries)) => {
+                encoder.write_timestamp(queries, i);
+                record(encoder);
+                encoder.write_timestamp(queries, i + 1);
+            }
+            _ => record(encoder),
+        }
     }
 
     /// Ends the dispatch `name` inside the compute pass opened last: its time runs from the

@@ -57,7 +57,8 @@ pub(super) struct Uniforms {
     mode: u32,
     threshold: f32,
     light_threshold: f32,
-    _pad: [u32; 2],
+    map_pitch: u32,
+    _pad: u32,
 }
 
 /// `mode` values of `filter.wgsl`.
@@ -98,7 +99,8 @@ impl Uniforms {
             mode: MODE_PCSS,
             threshold: 0.0,
             light_threshold: 0.0,
-            _pad: [0; 2],
+            map_pitch: map_pitch_bytes(ctx.spec.shadow_resolution) / 4,
+            _pad: 0,
         }
     }
 
@@ -109,7 +111,7 @@ impl Uniforms {
 }
 
 /// Records the filter passes of `pcss` or `chun-oh` (`filter.wgsl`) and reads their counters
-/// back: the shadow map copied into a buffer, the per-pixel pass that lists the covered pixels
+/// back: the shadow map copied into a buffer, then the per-pixel pass that lists the covered pixels
 /// inside the shadow frustum, and the search and filter over that list alone.
 /// `light_regions` is the light's quadtree table (`light_regions`), 21 `vec4`s.
 pub(super) fn run(
@@ -129,14 +131,28 @@ pub(super) fn run(
         layout::storage_read_write(6),
     ];
     let mut entry = |variant: u32, entry: &'static str| ctx.screen_entry(PipelineKey { name, variant }, shader, entry, &io);
-    let (build, classify, size, filter) = (entry(0, "copy_map"), entry(1, "classify"), entry(2, "listed_size"), entry(3, "filter_listed"));
+    let (classify, size, filter) = (entry(1, "classify"), entry(2, "listed_size"), entry(3, "filter_listed"));
 
     let device = &ctx.gpu.device;
     let buffer = |label, size: u64, usage: wgpu::BufferUsages| {
         device.create_buffer(&wgpu::BufferDescriptor { label: Some(label), size, usage: wgpu::BufferUsages::STORAGE | usage, mapped_at_creation: false })
     };
     let side = ctx.spec.shadow_resolution;
-    let map_depth = buffer("Filter::map_depth", 4 * u64::from(side).pow(2), wgpu::BufferUsages::empty());
+    // The shadow map's depths in a buffer, by a copy (a memcpy on lavapipe, where a compute
+    // pass reading every texel cost ~25 ms at 2048²).
+    let pitch = map_pitch_bytes(side);
+    let map_depth = buffer("Filter::map_depth", u64::from(pitch) * u64::from(side), wgpu::BufferUsages::COPY_DST);
+    let shadow_depth = ctx.shadow_depth;
+    ctx.timer.time_encoder(ctx.encoder, "method", "filter_copy_map", |encoder| {
+        encoder.copy_texture_to_buffer(
+            shadow_depth.as_image_copy(),
+            wgpu::TexelCopyBufferInfo {
+                buffer: &map_depth,
+                layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(pitch), rows_per_image: None },
+            },
+            shadow_depth.size(),
+        )
+    });
     let pixels = u64::from(ctx.width) * u64::from(ctx.height);
     let listed = PixelListBuffers::new(device, ctx.encoder, "Filter", pixels);
     let uniform_buffer = ctx.uniforms("Filter::uniforms", &uniforms);
@@ -156,18 +172,13 @@ pub(super) fn run(
             ],
         )
     };
-    let (build_group, classify_group, size_group, filter_group) =
-        (bind(&build, &listed.groups), bind(&classify, &listed.groups), bind(&size, &listed.groups), bind(&filter, &listed.stand_in));
+    let (classify_group, size_group, filter_group) = (bind(&classify, &listed.groups), bind(&size, &listed.groups), bind(&filter, &listed.stand_in));
     let (gx, gy) = ctx.dispatch_size();
     {
         let mut pass = ctx
             .encoder
             .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(name), timestamp_writes: ctx.timer.compute_scope("method", name) });
         pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
-        pass.set_pipeline(&build);
-        pass.set_bind_group(1, &build_group, &[]);
-        pass.dispatch_workgroups(side.div_ceil(8), side.div_ceil(8), 1);
-        ctx.timer.mark(&mut pass, "filter_copy_map");
         pass.set_pipeline(&classify);
         pass.set_bind_group(1, &classify_group, &[]);
         pass.dispatch_workgroups(gx, gy, 1);
@@ -314,4 +325,10 @@ mod tests {
         assert!((table[..16].iter().map(|c| c[0]).sum::<f32>() - red_total).abs() < 1e-5, "cells partition the light");
         assert!(table[WHOLE][3] > 0.5 && table[quadrant_index(1, 0)][3] > 0.05, "a colourful light varies");
     }
+}
+
+/// Bytes from one row of the shadow map's copy to the next: a row of f32 depths, padded to
+/// the copy alignment.
+fn map_pitch_bytes(side: u32) -> u32 {
+    (4 * side).div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT
 }

@@ -27,6 +27,9 @@ pub struct MethodContext<'a> {
     pub derived: &'a mut DerivedResources,
     /// Group 0 of every screen-space pass: frame constants, G-buffer, shadow map.
     pub inputs: &'a FrameInputs,
+    /// The shadow map's linear depth (`R32Float`, bound in `inputs` too), for methods that
+    /// copy it into a buffer.
+    pub shadow_depth: &'a wgpu::Texture,
     /// Where the method writes its visibility: `array<vec4<f32>>`, one per pixel row-major,
     /// rgb = V per channel (`render::targets` says why a buffer).
     pub visibility: &'a wgpu::Buffer,

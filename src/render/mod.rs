@@ -262,6 +262,7 @@ impl Renderer {
                 pipelines: &mut self.pipelines,
                 derived: &mut self.derived,
                 inputs: &inputs,
+                shadow_depth: &targets.shadow_depth.texture,
                 visibility: &targets.visibility.buffer,
                 e0: &targets.e0.buffer,
                 width: spec.width,

@@ -49,7 +49,7 @@ impl FrameTargets {
         let mut image = |label, bytes_per_pixel: u64| buffers.alloc(device, BufferKey { label, size: pixels * bytes_per_pixel, usage });
         Self {
             shadow_depth_buffer: get("FrameTargets::shadow_depth_buffer", shadow, shadow, DEPTH_BUFFER_FORMAT, U::RENDER_ATTACHMENT),
-            shadow_depth: get("FrameTargets::shadow_depth", shadow, shadow, SHADOW_DEPTH_FORMAT, attachment),
+            shadow_depth: get("FrameTargets::shadow_depth", shadow, shadow, SHADOW_DEPTH_FORMAT, attachment | U::COPY_SRC),
             shadow_id: get("FrameTargets::shadow_id", shadow, shadow, ID_FORMAT, attachment),
             shadow_position: get("FrameTargets::shadow_position", shadow, shadow, POSITION_FORMAT, attachment),
             depth_buffer: get("FrameTargets::depth_buffer", width, height, DEPTH_BUFFER_FORMAT, U::RENDER_ATTACHMENT),

@@ -3,7 +3,7 @@
 // the blockers' average depth, and a lattice of shadow tests over that filter, counted per
 // cell of its 4×4 quadtree (for chun-oh) with a few popcounts per row. See `src/methods/pcss.rs`.
 //
-// The passes (`src/methods/filter.rs`): the shadow map copied into a buffer; per pixel, the
+// The passes (`src/methods/filter.rs`), after the shadow map is copied into a buffer: per pixel, the
 // uncovered ones and those outside the shadow frustum written at once, the others listed; then
 // the search and the filter over the listed pixels alone (common/pixel_list.wgsl says why). The importing method defines
 // `unblocked_visibility()` and `filtered_visibility(filter)`, which also counts the pixel.
@@ -23,7 +23,8 @@ struct FilterParams {
     mode: u32,              // 0 pcss, 1 chun-oh adaptive, 2 chun-oh fixed
     threshold: f32,         // chun-oh: visibility variance above which a region splits
     light_threshold: f32,   // chun-oh: relative colour variance of the light part that forces a split
-    _pad: vec2<u32>,
+    map_pitch: u32,         // texels from one row of `map_depth` to the next (rows padded to 256 bytes)
+    _pad: u32,
 }
 
 @group(1) @binding(0) var<storage, read_write> visibility_out: array<vec4<f32>>;
@@ -39,7 +40,10 @@ struct FilterParams {
 // The pixels the search cannot be skipped for, and the dispatch over them.
 @group(1) @binding(4) var<storage, read_write> listed: PixelList;
 @group(1) @binding(5) var<storage, read_write> listed_groups: array<u32, 3>;
-// The shadow map's depths, row after row (`copy_map`).
+// The shadow map's depths, row after row, `params.map_pitch` apart: a copy of the shadow
+// map (`filter::run`), which the search and the filter read instead of the texture: on
+// lavapipe a storage-buffer load is a plain gather and a texel fetch is not (format,
+// robustness), and these two loops are nearly all loads.
 @group(1) @binding(6) var<storage, read_write> map_depth: array<f32>;
 
 const MODE_PCSS: u32 = 0u;
@@ -86,7 +90,7 @@ fn tap_depth(uv: vec2<f32>) -> f32 {
         return 1e30;
     }
     let t = vec2<u32>(shadow_texel(uv));
-    return map_depth[t.y * frame.sizes.z + t.x];
+    return map_depth[t.y * params.map_pitch + t.x];
 }
 
 // PCSS steps 1–3 (Fernando 2005; Chun & Oh §3 "filter size computation"): search the cone's
@@ -156,17 +160,7 @@ fn run_filter(pixel: vec2<u32>) -> Filter {
     return f;
 }
 
-// Pass 1: the shadow map's depths copied into a plain buffer, which the search and the
-// filter read instead of the texture: on lavapipe a storage-buffer load is a plain gather and
-// a texel fetch is not (format, robustness), and these two loops are nearly all loads.
-@compute @workgroup_size(8, 8)
-fn copy_map(@builtin(global_invocation_id) id: vec3<u32>) {
-    if all(id.xy < vec2<u32>(frame.sizes.z)) {
-        map_depth[id.y * frame.sizes.z + id.x] = textureLoad(shadow_depth, id.xy, 0).r;
-    }
-}
-
-// Pass 2, every pixel: uncovered pixels and those outside the shadow frustum written, the
+// Pass 1, every pixel: uncovered pixels and those outside the shadow frustum written, the
 // others listed.
 @compute @workgroup_size(8, 8)
 fn classify(@builtin(global_invocation_id) id: vec3<u32>) {
@@ -190,13 +184,13 @@ fn classify(@builtin(global_invocation_id) id: vec3<u32>) {
     }
 }
 
-// Pass 3: the size of pass 4's dispatch.
+// Pass 2: the size of pass 3's dispatch.
 @compute @workgroup_size(1)
 fn listed_size() {
     listed_groups = list_dispatch(atomicLoad(&listed.count));
 }
 
-// Pass 4: the search and the filter, over the listed pixels.
+// Pass 3: the search and the filter, over the listed pixels.
 @compute @workgroup_size(64)
 fn filter_listed(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) lane: u32) {
     let i = list_position(group, lane);
