@@ -317,9 +317,16 @@ struct TileItem {
     valid: bool,
 }
 
-fn tile_item(group: vec3<u32>, local: u32) -> TileItem {
+// The work item of a workgroup: items go in rows of `groups.x` workgroups, as even as the
+// grid allows (`item_grid` in `wedges/mod.rs`), so that few workgroups past the list's end are
+// launched — on lavapipe one that returns at once still pays for most of its code.
+fn item_index(group: vec3<u32>, groups: vec3<u32>) -> u32 {
+    return group.y * groups.x + group.x;
+}
+
+fn tile_item(group: vec3<u32>, groups: vec3<u32>, local: u32) -> TileItem {
     var item: TileItem;
-    let index = group.y * 65535u + group.x;
+    let index = item_index(group, groups);
     item.valid = index < arrayLength(&work);
     if !item.valid {
         return item;

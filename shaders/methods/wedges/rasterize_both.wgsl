@@ -6,8 +6,8 @@
 #import methods/wedges/rasterize.wgsl
 
 @compute @workgroup_size(64)
-fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) local: u32) {
-    let item = tile_item(group, local);
+fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>, @builtin(local_invocation_index) local: u32) {
+    let item = tile_item(group, groups, local);
     if !item.valid {
         return;
     }

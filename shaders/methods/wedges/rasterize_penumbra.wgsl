@@ -9,8 +9,8 @@
 #import common/pixel_list.wgsl
 
 @compute @workgroup_size(64)
-fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) local: u32) {
-    let item = tile_item(group, local);
+fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>, @builtin(local_invocation_index) local: u32) {
+    let item = tile_item(group, groups, local);
     if !item.valid {
         return;
     }
@@ -25,12 +25,12 @@ fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index
 
 // Lists the pixels of each item's tile that lie inside its wedge.
 @compute @workgroup_size(64)
-fn mark_inside(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) local: u32) {
-    let item = tile_item(group, local);
+fn mark_inside(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>, @builtin(local_invocation_index) local: u32) {
+    let item = tile_item(group, groups, local);
     if !item.valid {
         return;
     }
-    let index = group.y * 65535u + group.x;
+    let index = item_index(group, groups);
     let wedge = item.job.primitive - params.polygon_count;
     for (var k = local; k < params.tile * params.tile; k += 64u) {
         let at = tile_pixel(item.origin, k);

@@ -318,12 +318,12 @@ impl ShadowMethod for Wedges {
             pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
             for ((pipeline, items), work) in chunks.iter().zip(&works) {
                 // One workgroup per item, in rows of at most 65 535.
-                let n = items.len() as u32;
+                let (x, y) = item_grid(items.len() as u32);
                 let group = bind(work, &inside.groups);
                 pass.set_bind_group(1, &group, &[]);
                 if std::ptr::eq(*pipeline, &*penumbra_pipeline) {
                     pass.set_pipeline(&mark);
-                    pass.dispatch_workgroups(n.min(65535), n.div_ceil(65535), 1);
+                    pass.dispatch_workgroups(x, y, 1);
                     ctx.timer.mark(&mut pass, "wedges_penumbra_inside");
                     pass.set_pipeline(&size);
                     pass.dispatch_workgroups(1, 1, 1);
@@ -337,7 +337,7 @@ impl ShadowMethod for Wedges {
                     ctx.timer.mark(&mut pass, "wedges_penumbra_reset");
                 } else {
                     pass.set_pipeline(pipeline);
-                    pass.dispatch_workgroups(n.min(65535), n.div_ceil(65535), 1);
+                    pass.dispatch_workgroups(x, y, 1);
                     ctx.timer.mark(&mut pass, if std::ptr::eq(*pipeline, &*umbra_pipeline) { "wedges_umbra" } else { "wedges_both" });
                 }
             }
@@ -364,5 +364,26 @@ impl ShadowMethod for Wedges {
             ("non_manifold_edges".to_owned(), stats.non_manifold_edges as f64),
             ("channels".to_owned(), f64::from(uniforms.channels)),
         ]))
+    }
+}
+
+/// The workgroup grid of one workgroup per item for `n` items: rows of at most 65 535 (a
+/// dimension's guaranteed limit), as even as they can be, so that fewer than one row's count
+/// of workgroups fall past the end (`item_index` in `rasterize.wgsl`).
+fn item_grid(n: u32) -> (u32, u32) {
+    let rows = n.div_ceil(65535).max(1);
+    (n.div_ceil(rows), rows)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::item_grid;
+
+    #[test]
+    fn the_item_grid_covers_every_item_with_less_than_a_row_to_spare() {
+        for n in [0, 1, 64, 65535, 65536, 70000, 131070, 131071, 972487, 4 << 20] {
+            let (x, y) = item_grid(n);
+            assert!(x <= 65535 && x * y >= n && x * y - n < y, "{n}: {x}×{y}");
+        }
     }
 }
