@@ -284,6 +284,12 @@ pub fn light_regions(image: &LightImage) -> [[f32; 4]; 21] {
     table
 }
 
+/// Bytes from one row of the shadow map's copy to the next: a row of f32 depths, padded to
+/// the copy alignment.
+fn map_pitch_bytes(side: u32) -> u32 {
+    (4 * side).div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -325,10 +331,4 @@ mod tests {
         assert!((table[..16].iter().map(|c| c[0]).sum::<f32>() - red_total).abs() < 1e-5, "cells partition the light");
         assert!(table[WHOLE][3] > 0.5 && table[quadrant_index(1, 0)][3] > 0.05, "a colourful light varies");
     }
-}
-
-/// Bytes from one row of the shadow map's copy to the next: a row of f32 depths, padded to
-/// the copy alignment.
-fn map_pitch_bytes(side: u32) -> u32 {
-    (4 * side).div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT
 }
