@@ -79,6 +79,37 @@ impl TextureKey {
     }
 }
 
+/// Idle objects by key, at most `max_per_key` of one key, so memory stays bounded when job
+/// sizes vary: what the target, buffer and readback pools share.
+struct FreeList<K, T> {
+    free: HashMap<K, Vec<T>>,
+    max_per_key: usize,
+}
+
+impl<K: std::hash::Hash + Eq, T> FreeList<K, T> {
+    fn new(max_per_key: usize) -> Self {
+        Self { free: HashMap::new(), max_per_key }
+    }
+
+    /// An idle object of `key`, or a new one from `create`; counted in `stats`.
+    fn take_or(&mut self, key: K, stats: &mut PoolStats, create: impl FnOnce(K) -> T) -> T {
+        if let Some(item) = self.free.get_mut(&key).and_then(Vec::pop) {
+            stats.reused += 1;
+            return item;
+        }
+        stats.created += 1;
+        create(key)
+    }
+
+    /// Keeps `item` for a later `take_or`, unless enough of its key are idle already.
+    fn give(&mut self, key: K, item: T) {
+        let list = self.free.entry(key).or_default();
+        if list.len() < self.max_per_key {
+            list.push(item);
+        }
+    }
+}
+
 /// A texture from the pool with its default view.
 pub struct PooledTexture {
     pub key: TextureKey,
@@ -87,51 +118,43 @@ pub struct PooledTexture {
 }
 
 /// Free render targets by key. Jobs `alloc` what they need and `release` it when done; at
-/// most `max_free_per_key` idle targets of one key are kept, so memory stays bounded when
-/// job sizes vary.
+/// most two idle targets of one key are kept.
 pub struct TexturePool {
-    free: HashMap<TextureKey, Vec<PooledTexture>>,
-    max_free_per_key: usize,
+    free: FreeList<TextureKey, PooledTexture>,
     pub stats: PoolStats,
 }
 
 impl Default for TexturePool {
     fn default() -> Self {
-        Self { free: HashMap::new(), max_free_per_key: 2, stats: PoolStats::default() }
+        Self { free: FreeList::new(2), stats: PoolStats::default() }
     }
 }
 
 impl TexturePool {
     pub fn alloc(&mut self, device: &wgpu::Device, key: TextureKey) -> PooledTexture {
-        if let Some(texture) = self.free.get_mut(&key).and_then(Vec::pop) {
-            self.stats.reused += 1;
-            return texture;
-        }
-        self.stats.created += 1;
-        let texture = device.create_texture(&wgpu::TextureDescriptor {
-            label: Some(key.label),
-            size: wgpu::Extent3d { width: key.width, height: key.height, depth_or_array_layers: 1 },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format: key.format,
-            usage: key.usage,
-            view_formats: &[],
-        });
-        let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
-        PooledTexture { key, texture, view }
+        self.free.take_or(key, &mut self.stats, |key| {
+            let texture = device.create_texture(&wgpu::TextureDescriptor {
+                label: Some(key.label),
+                size: wgpu::Extent3d { width: key.width, height: key.height, depth_or_array_layers: 1 },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format: key.format,
+                usage: key.usage,
+                view_formats: &[],
+            });
+            let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
+            PooledTexture { key, texture, view }
+        })
     }
 
     pub fn release(&mut self, texture: PooledTexture) {
-        let list = self.free.entry(texture.key).or_default();
-        if list.len() < self.max_free_per_key {
-            list.push(texture);
-        }
+        self.free.give(texture.key, texture);
     }
 
     /// Bytes held by idle targets.
     pub fn idle_bytes(&self) -> u64 {
-        self.free.iter().map(|(k, v)| k.bytes() * v.len() as u64).sum()
+        self.free.free.iter().map(|(k, v)| k.bytes() * v.len() as u64).sum()
     }
 }
 
@@ -149,74 +172,59 @@ pub struct PooledBuffer {
     pub buffer: wgpu::Buffer,
 }
 
-/// Free per-frame storage buffers (the screen-space images) by key, kept like render targets:
-/// at most `max_free_per_key` idle ones of a key.
+/// Free per-frame storage buffers (the screen-space images) by key, kept like render targets.
 pub struct BufferPool {
-    free: HashMap<BufferKey, Vec<PooledBuffer>>,
-    max_free_per_key: usize,
+    free: FreeList<BufferKey, PooledBuffer>,
     pub stats: PoolStats,
 }
 
 impl Default for BufferPool {
     fn default() -> Self {
-        Self { free: HashMap::new(), max_free_per_key: 2, stats: PoolStats::default() }
+        Self { free: FreeList::new(2), stats: PoolStats::default() }
     }
 }
 
 impl BufferPool {
     pub fn alloc(&mut self, device: &wgpu::Device, key: BufferKey) -> PooledBuffer {
-        if let Some(buffer) = self.free.get_mut(&key).and_then(Vec::pop) {
-            self.stats.reused += 1;
-            return buffer;
-        }
-        self.stats.created += 1;
-        let buffer = device.create_buffer(&wgpu::BufferDescriptor { label: Some(key.label), size: key.size, usage: key.usage, mapped_at_creation: false });
-        PooledBuffer { key, buffer }
+        self.free.take_or(key, &mut self.stats, |key| {
+            let buffer = device.create_buffer(&wgpu::BufferDescriptor { label: Some(key.label), size: key.size, usage: key.usage, mapped_at_creation: false });
+            PooledBuffer { key, buffer }
+        })
     }
 
     pub fn release(&mut self, buffer: PooledBuffer) {
-        let list = self.free.entry(buffer.key).or_default();
-        if list.len() < self.max_free_per_key {
-            list.push(buffer);
-        }
+        self.free.give(buffer.key, buffer);
     }
 }
 
 /// Free readback (MAP_READ) buffers by size: the readbacks of a steady stream of same-sized
-/// jobs reuse them instead of allocating. At most `max_free_per_size` idle ones per size.
+/// jobs reuse them instead of allocating. At most four idle ones per size.
 pub struct ReadbackPool {
-    free: HashMap<u64, Vec<wgpu::Buffer>>,
-    max_free_per_size: usize,
+    free: FreeList<u64, wgpu::Buffer>,
     pub stats: PoolStats,
 }
 
 impl Default for ReadbackPool {
     fn default() -> Self {
-        Self { free: HashMap::new(), max_free_per_size: 4, stats: PoolStats::default() }
+        Self { free: FreeList::new(4), stats: PoolStats::default() }
     }
 }
 
 impl ReadbackPool {
     pub fn alloc(&mut self, device: &wgpu::Device, size: u64) -> wgpu::Buffer {
-        if let Some(buffer) = self.free.get_mut(&size).and_then(Vec::pop) {
-            self.stats.reused += 1;
-            return buffer;
-        }
-        self.stats.created += 1;
-        device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("Readback::buffer"),
-            size,
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
+        self.free.take_or(size, &mut self.stats, |size| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("Readback::buffer"),
+                size,
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            })
         })
     }
 
     /// Takes back an unmapped buffer.
     pub fn release(&mut self, buffer: wgpu::Buffer) {
-        let list = self.free.entry(buffer.size()).or_default();
-        if list.len() < self.max_free_per_size {
-            list.push(buffer);
-        }
+        self.free.give(buffer.size(), buffer);
     }
 }
 
