@@ -1,8 +1,8 @@
 //! GPU timestamps per pass, where the adapter has them (lavapipe does). Each pass asks for a
 //! scope named by its phase and its own label; where timestamps may also be written inside
 //! a pass, `mark` after each dispatch times the dispatches one by one, and `time_encoder`
-//! times copies recorded between passes. After the frame the
-//! timer resolves the queries and reports milliseconds per phase and per pass.
+//! times copies recorded between passes. After the frame the timer resolves the queries and
+//! reports milliseconds per phase and per pass.
 
 use super::{GpuContext, GpuError};
 
