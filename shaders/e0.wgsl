@@ -18,8 +18,9 @@
 
 @group(1) @binding(0) var<storage, read_write> e0_out: array<vec4<f32>>;
 @group(1) @binding(1) var<storage, read_write> corners: array<Corner>;
-// The pixels the interpolation refuses, summed exactly by a pass of their own over each list (common/pixel_list.wgsl says why): those that
-// see the whole light above their horizon, whose cells need no clipping, and the others.
+// The pixels the interpolation refuses, summed exactly by a pass of their own over each list
+// (common/pixel_list.wgsl says why): those that see the whole light above their horizon,
+// whose cells need no clipping, and the others.
 @group(1) @binding(2) var<storage, read_write> above: PixelList;
 @group(1) @binding(3) var<storage, read_write> above_groups: array<u32, 3>; // indirect dispatch
 @group(1) @binding(4) var<storage, read_write> clipped: PixelList;
@@ -293,13 +294,13 @@ fn interpolate_blocks(@builtin(global_invocation_id) id: vec3<u32>) {
             let pixel = origin + vec2<u32>(x, y);
             if all(pixel < frame.sizes.xy) {
                 // Loaded once here: lavapipe runs the listing branch's code for every pixel.
-                let x = textureLoad(gbuf_position, pixel, 0).xyz;
+                let position = textureLoad(gbuf_position, pixel, 0).xyz;
                 let normal = textureLoad(gbuf_normal, pixel, 0);
-                let e0 = interpolated_e0(pixel, x, normal, b, checked);
+                let e0 = interpolated_e0(pixel, position, normal, b, checked);
                 if e0.w > 0.0 {
                     e0_out[pixel_index(pixel)] = vec4<f32>(e0.xyz, 1.0);
                 } else {
-                    list_exact(pixel, x, normal.xyz);
+                    list_exact(pixel, position, normal.xyz);
                 }
             }
         }
@@ -331,14 +332,25 @@ fn exact_sizes() {
     clipped_groups = list_dispatch(atomicLoad(&clipped.count));
 }
 
+// A listed pixel's surface: its element of the screen-space images, position and normal.
+struct Surface {
+    at: u32,
+    x: vec3<f32>,
+    nx: vec3<f32>,
+}
+
+fn listed_surface(entry: u32) -> Surface {
+    let pixel = listed_pixel(entry);
+    return Surface(entry, textureLoad(gbuf_position, pixel, 0).xyz, textureLoad(gbuf_normal, pixel, 0).xyz);
+}
+
 // The pixels of `above`, summed exactly without clipping.
 @compute @workgroup_size(64)
 fn exact_above(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) lane: u32) {
     let i = list_position(group, lane);
     if i < atomicLoad(&above.count) {
-        let pixel = listed_pixel(above.pixels[i]);
-        let x = textureLoad(gbuf_position, pixel, 0).xyz;
-        e0_out[pixel_index(pixel)] = vec4<f32>(unclipped_e0(x, textureLoad(gbuf_normal, pixel, 0).xyz), 1.0);
+        let s = listed_surface(above.pixels[i]);
+        e0_out[s.at] = vec4<f32>(unclipped_e0(s.x, s.nx), 1.0);
     }
 }
 
@@ -347,8 +359,7 @@ fn exact_above(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocatio
 fn exact_clipped(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) lane: u32) {
     let i = list_position(group, lane);
     if i < atomicLoad(&clipped.count) {
-        let pixel = listed_pixel(clipped.pixels[i]);
-        let x = textureLoad(gbuf_position, pixel, 0).xyz;
-        e0_out[pixel_index(pixel)] = vec4<f32>(clipped_e0(x, textureLoad(gbuf_normal, pixel, 0).xyz), 1.0);
+        let s = listed_surface(clipped.pixels[i]);
+        e0_out[s.at] = vec4<f32>(clipped_e0(s.x, s.nx), 1.0);
     }
 }
