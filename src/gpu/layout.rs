@@ -82,15 +82,6 @@ pub fn sampler(binding: u32) -> Entry {
     }
 }
 
-pub fn storage_texture(binding: u32, format: wgpu::TextureFormat) -> Entry {
-    Entry {
-        binding,
-        visibility: ShaderStages::COMPUTE.union(ShaderStages::FRAGMENT),
-        ty: BindingType::StorageTexture { access: wgpu::StorageTextureAccess::WriteOnly, format, view_dimension: TextureViewDimension::D2 },
-        count: None,
-    }
-}
-
 /// Bind group entries from resources in binding order 0, 1, 2, …
 pub fn entries<'a>(resources: &[wgpu::BindingResource<'a>]) -> Vec<wgpu::BindGroupEntry<'a>> {
     resources
