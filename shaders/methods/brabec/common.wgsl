@@ -188,7 +188,10 @@ fn jitter(t: vec2<i32>) -> vec2<f32> {
 // Rings of growing Chebyshev radius are visited and the search stops once no closer texel
 // can follow, so its cost grows with the distance found, not with r_max. Under a coloured
 // light it also returns the occluder edge's line across the light (`edge_line`).
-fn search(pixel: vec2<u32>) -> Found {
+// `jittered` is a constant of the entry point (`search.wgsl`): lavapipe runs a branch's code
+// even where no lane takes it, so the hash of the optional jitter, in the innermost loop, is
+// compiled out when the job asks for none (it cost a third of the search).
+fn search(pixel: vec2<u32>, jittered: bool) -> Found {
     var out = Found(1.0, vec2<f32>(0.0), 0.0);
     if !covered(pixel) {
         return out;
@@ -203,11 +206,13 @@ fn search(pixel: vec2<u32>) -> Found {
     atomicAdd(&counters.radius_sum_16, u32(r_max * 16.0));
     let res = i32(frame.sizes.z);
     let base = vec2<i32>(floor(w.texel));
-    var best = r_max;
+    // The nearest hit's squared distance: one square root per ring, not per texel.
+    var best2 = r_max * r_max;
     var best_depth = 0.0;
     var best_texel = vec2<i32>(0);
     var found = false;
     let rings = i32(ceil(r_max)) + 1;
+    let limit = w.depth - w.bias;
     let lo = max(base - rings, vec2<i32>(0));
     let hi = min(base + rings, vec2<i32>(res - 1));
     if any(lo > hi) || !may_hit(w, receiver, lo, hi) {
@@ -216,7 +221,7 @@ fn search(pixel: vec2<u32>) -> Found {
     }
     for (var k = 0; k <= rings; k++) {
         // Texel centres on ring k lie at least k − 0.5 texels from P'.
-        if f32(k) - 0.5 > best {
+        if f32(k) - 0.5 > sqrt(best2) {
             break;
         }
         for (var dy = -k; dy <= k; dy++) {
@@ -230,19 +235,18 @@ fn search(pixel: vec2<u32>) -> Found {
                 if all(t >= vec2<i32>(0)) && all(t < vec2<i32>(res)) {
                     let texel = map_texels[t.y * res + t.x];
                     let d = bitcast<f32>(texel.x);
-                    let id = texel.y;
-                    var hit: bool;
-                    let same_object = id == receiver || params.use_ids == 0u;
-                    let other_object = id != receiver || params.use_ids == 0u;
-                    if w.hard {
-                        hit = d >= w.depth - w.bias && same_object;
-                    } else {
-                        hit = d < w.depth - w.bias && other_object;
-                    }
+                    // Outer pixels hit texels nearer the light of other objects, inner ones
+                    // texels as far of their own object.
+                    let hit = (d < limit) != w.hard && ((texel.y == receiver) == w.hard || params.use_ids == 0u);
                     if hit {
-                        let dist = length(vec2<f32>(t) + 0.5 + jitter(t) - w.texel);
-                        if dist < best {
-                            best = dist;
+                        var to = vec2<f32>(t) + 0.5;
+                        if jittered {
+                            to += jitter(t);
+                        }
+                        let offset = to - w.texel;
+                        let dist2 = dot(offset, offset);
+                        if dist2 < best2 {
+                            best2 = dist2;
                             best_depth = d;
                             best_texel = t;
                             found = true;
@@ -273,6 +277,7 @@ fn search(pixel: vec2<u32>) -> Found {
     } else {
         dz = best_depth - w.depth; // the paper's pseudo-code, §3.3
     }
+    let best = sqrt(best2);
     let f = clamp(best / max(hit_radius(w.depth, max(dz, 0.0)), 1e-6), 0.0, 1.0);
     // The paper's §3.3 pseudo-code returns 1 − 0.5·f outside and 0.5·f inside, which would
     // make the hard edge brightest; the text (§3.2: f rises from 0 at the blocker to 1) fixes
@@ -364,8 +369,8 @@ fn pixel_key(pixel: vec2<u32>) -> u32 {
 }
 
 // Searches pixel `p` and keeps what it found.
-fn search_into(p: vec2<u32>) {
-    let found = search(p);
+fn search_into(p: vec2<u32>, jittered: bool) {
+    let found = search(p, jittered);
     let i = state_index(p);
     state[i].t = found.t;
     state[i].normal = found.normal;

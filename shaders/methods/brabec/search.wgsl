@@ -8,10 +8,20 @@ fn listed_size() {
     search_groups = list_dispatch(atomicLoad(&to_search.count));
 }
 
+// The search without jitter (`jitter_texels` 0, the default) and with it: two entry points,
+// so the constant compiles the jitter out of the first (see `search`).
 @compute @workgroup_size(64)
 fn search_listed(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) lane: u32) {
     let i = list_position(group, lane);
     if i < atomicLoad(&to_search.count) {
-        search_into(listed_pixel(to_search.pixels[i]));
+        search_into(listed_pixel(to_search.pixels[i]), false);
+    }
+}
+
+@compute @workgroup_size(64)
+fn search_listed_jittered(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) lane: u32) {
+    let i = list_position(group, lane);
+    if i < atomicLoad(&to_search.count) {
+        search_into(listed_pixel(to_search.pixels[i]), true);
     }
 }
