@@ -78,8 +78,8 @@ fn cone_half_extent(d: f32, z: f32) -> vec2<f32> {
 // t = (0.5 − uv)·2·tan_half (uv grows along −r and −u), and meets the plane at depth
 // dot(p − c, N) / dot(w, N). dot(w, N) is linear in t and |w|² = 1 + |t|² (the light frame is
 // orthonormal), so the pixel's part is done once here, a row's part once per row (`TapRow`),
-// and a tap costs a few multiply-adds and one division: on lavapipe, which hoists nothing out
-// of a loop, that halved the cost of the search and the filter (see the README).
+// and a tap costs a few multiply-adds and one division. On lavapipe, where the invariant parts
+// had stayed inside the loops, that halved the cost of the search and the filter (README).
 struct ReceiverPlane {
     facing_n: f32, // dot(n, N), dot(r, N), dot(u, N)
     facing_r: f32,
