@@ -33,8 +33,13 @@ fn depth_bias(p: vec3<f32>, n: vec3<f32>, depth: f32, constant_texels: f32, slop
 }
 
 fn shadow_texel(uv: vec2<f32>) -> vec2<i32> {
+    return vec2<i32>(shadow_texel_axis(uv.x), shadow_texel_axis(uv.y));
+}
+
+// One coordinate of `shadow_texel`, for loops that walk the map's rows and columns apart.
+fn shadow_texel_axis(x: f32) -> i32 {
     let res = i32(frame.sizes.z);
-    return clamp(vec2<i32>(floor(uv * f32(res))), vec2<i32>(0), vec2<i32>(res - 1));
+    return clamp(i32(floor(x * f32(res))), 0, res - 1);
 }
 
 // The direction, in light coordinates, in which the silhouette next to occluder point o

@@ -197,11 +197,9 @@ impl ShadowMethod for Brabec {
         let mark_rows = ctx.screen_entry(PipelineKey::new("brabec.rows.mark"), "methods/brabec/rows.wgsl", "mark_searches", &io);
         let list_size = ctx.screen_entry(PipelineKey::new("brabec.search.size"), "methods/brabec/search.wgsl", "listed_size", &io);
         // The jitter's hash is compiled out of the search unless asked for (`search.wgsl`).
-        let search = if uniforms.jitter > 0.0 {
-            ctx.screen_entry(PipelineKey::new("brabec.search.jittered"), "methods/brabec/search.wgsl", "search_listed_jittered", &io)
-        } else {
-            ctx.screen_entry(PipelineKey::new("brabec.search"), "methods/brabec/search.wgsl", "search_listed", &io)
-        };
+        let (search_key, search_entry) =
+            if uniforms.jitter > 0.0 { ("brabec.search.jittered", "search_listed_jittered") } else { ("brabec.search", "search_listed") };
+        let search = ctx.screen_entry(PipelineKey::new(search_key), "methods/brabec/search.wgsl", search_entry, &io);
         let columns = ctx.screen_pipeline(PipelineKey::new("brabec.columns"), "methods/brabec/columns.wgsl", &io);
         let rows = ctx.screen_pipeline(PipelineKey::new("brabec.rows"), "methods/brabec/rows.wgsl", &io);
         let finish = ctx.screen_pipeline(PipelineKey::new("brabec.finish"), "methods/brabec/finish.wgsl", &io);

@@ -12,16 +12,16 @@ fn listed_size() {
 // so the constant compiles the jitter out of the first (see `search`).
 @compute @workgroup_size(64)
 fn search_listed(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) lane: u32) {
-    let i = list_position(group, lane);
-    if i < atomicLoad(&to_search.count) {
-        search_into(listed_pixel(to_search.pixels[i]), false);
-    }
+    search_list_position(list_position(group, lane), false);
 }
 
 @compute @workgroup_size(64)
 fn search_listed_jittered(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) lane: u32) {
-    let i = list_position(group, lane);
+    search_list_position(list_position(group, lane), true);
+}
+
+fn search_list_position(i: u32, jittered: bool) {
     if i < atomicLoad(&to_search.count) {
-        search_into(listed_pixel(to_search.pixels[i]), true);
+        search_into(listed_pixel(to_search.pixels[i]), jittered);
     }
 }

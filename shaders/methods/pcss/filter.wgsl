@@ -120,12 +120,21 @@ fn receiver_plane(p: vec3<f32>, normal: vec3<f32>, d: f32, bias: f32) -> Receive
     );
 }
 
+// One map coordinate of a tap (u or v): its texel, whether it lies on the map, and the ray's
+// tangent along it.
+struct MapAxis {
+    texel: u32,
+    inside: bool,
+    tangent: f32,
+}
+
+fn map_axis(x: f32) -> MapAxis {
+    return MapAxis(u32(shadow_texel_axis(x)), x >= 0.0 && x < 1.0, (0.5 - x) * 2.0 * frame.light_proj.x);
+}
+
 fn tap_row(plane: ReceiverPlane, grid: Lattice, j: u32) -> TapRow {
-    let v = grid.first.y + f32(j) * grid.step.y;
-    let t = (0.5 - v) * 2.0 * frame.light_proj.x;
-    let res = i32(frame.sizes.z);
-    let row = u32(clamp(i32(floor(v * f32(res))), 0, res - 1));
-    return TapRow(row * params.map_pitch, v >= 0.0 && v < 1.0, plane.facing_n + t * plane.facing_u, 1.0 + t * t);
+    let v = map_axis(grid.first.y + f32(j) * grid.step.y);
+    return TapRow(v.texel * params.map_pitch, v.inside, plane.facing_n + v.tangent * plane.facing_u, 1.0 + v.tangent * v.tangent);
 }
 
 // Tap i of a row: whether its texel is nearer the light than the receiver's plane there (less
@@ -137,11 +146,9 @@ struct Tap {
 }
 
 fn tap(plane: ReceiverPlane, grid: Lattice, row: TapRow, i: u32) -> Tap {
-    let u = grid.first.x + f32(i) * grid.step.x;
-    let t = (0.5 - u) * 2.0 * frame.light_proj.x;
-    let res = i32(frame.sizes.z);
-    let column = u32(clamp(i32(floor(u * f32(res))), 0, res - 1));
-    let depth = select(1e30, map_depth[row.first + column], row.inside && u >= 0.0 && u < 1.0);
+    let u = map_axis(grid.first.x + f32(i) * grid.step.x);
+    let t = u.tangent;
+    let depth = select(1e30, map_depth[row.first + u.texel], row.inside && u.inside);
     let facing = row.facing + t * plane.facing_r;
     let z = plane.offset / facing;
     // Grazing planes (|dot(w, N)| ≤ 0.05·|w|) give wild depths; the pixel's own depth is the
