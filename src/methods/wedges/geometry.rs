@@ -16,9 +16,6 @@ pub(super) struct Volume {
     pub object: Vec<u32>,
     /// Cap polygons among `polygons` (z-fail only).
     pub caps: usize,
-    /// Per wedge, its tangent planes (world space, inside ≥ 0; none when the edge's line
-    /// crosses the light).
-    pub wedge_planes: Vec<Vec<Vec4>>,
     pub wedges: Vec<WedgeGpu>,
 }
 
@@ -54,10 +51,9 @@ impl Volume {
                 }
             }
         }
-        let wedge_planes: Vec<Vec<Vec4>> = silhouette.iter().map(|e| tangent_planes(e, light)).collect();
         let wedges: Vec<WedgeGpu> = silhouette
             .iter()
-            .zip(&wedge_planes)
+            .map(|e| (e, tangent_planes(e, light)))
             .map(|(e, planes)| WedgeGpu {
                 a: e.a.extend(e.multiplicity as f32).to_array(),
                 b: e.b.extend(e.object as f32).to_array(),
@@ -65,7 +61,7 @@ impl Volume {
             })
             .collect();
 
-        Self { polygons, multiplicity, object, caps, wedge_planes, wedges }
+        Self { polygons, multiplicity, object, caps, wedges }
     }
 
     /// The volume polygons as the shaders read them (`VolumePolygon` in `common.wgsl`).
@@ -110,20 +106,8 @@ pub(super) fn eye_in_shadow(mesh: &EdgeMesh, c: Vec3, eye: Vec3) -> bool {
     })
 }
 
-/// Points whose convex hull holds the edge's wedge out to `reach`: the edge's ends and their
-/// shadows from the light's four corners.
-pub(super) fn wedge_hull(e: &SilhouetteEdge, light: &AreaLight, reach: f32) -> Vec<Vec3> {
-    let mut hull = vec![e.a, e.b];
-    for corner in light_corners(light) {
-        for p in [e.a, e.b] {
-            let d = p - corner;
-            hull.push(p + d * ((reach + (p - light.center).length()) / d.length().max(1e-6)));
-        }
-    }
-    hull
-}
-
-fn light_corners(light: &AreaLight) -> [Vec3; 4] {
+/// The light rectangle's corners.
+pub(super) fn light_corners(light: &AreaLight) -> [Vec3; 4] {
     let (hw, hh) = (0.5 * light.size_m.x, 0.5 * light.size_m.y);
     [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)].map(|(s, t)| light.center + light.r * (s * hw) + light.u * (t * hh))
 }

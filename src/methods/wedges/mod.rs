@@ -289,7 +289,7 @@ impl ShadowMethod for Wedges {
         let culling_start = std::time::Instant::now();
         let grid = TileGrid::new(grid_size, tile, (spec.width, spec.height), &depth_ranges, camera, &view_proj);
 
-        let work = cull(&volume, &silhouette, light, reach, &grid, &view_proj, culling, zfail);
+        let work = cull(&volume, &silhouette, light, reach, &grid, &view_proj, camera.eye, culling, zfail);
         let single = params.get(&PASSES) == "single";
         let passes = work.passes(single, [&*umbra_pipeline, &*penumbra_pipeline, &*both_pipeline]);
         let kept: usize = passes.iter().map(|(_, items)| items.len()).sum::<usize>();
