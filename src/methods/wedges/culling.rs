@@ -80,8 +80,7 @@ pub(super) fn cull(
     zfail: bool,
 ) -> Work {
     let to_ndc = view_proj.inverse().transpose();
-    let umbra: Vec<Footprint> =
-        volume.polygons.iter().map(|p| footprint(view_proj, p, crossing_region(p, eye, zfail), grid)).collect();
+    let umbra: Vec<Footprint> = volume.polygons.iter().map(|p| footprint(view_proj, p, crossing_region(p, eye, zfail), grid)).collect();
     let wedges: Vec<Footprint> = silhouette
         .iter()
         .map(|e| match wedge_region(e, light, reach) {
