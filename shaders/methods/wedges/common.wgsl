@@ -53,7 +53,7 @@ struct WorkItem {
 @group(1) @binding(3) var<storage, read> work: array<WorkItem>;
 @group(1) @binding(4) var<storage, read_write> li: array<atomic<i32>>; // `channels` per pixel
 @group(1) @binding(5) var<storage, read_write> tile_ranges: array<vec2<f32>>;
-// 0 depth reads, 1 LI writes.
+// 0 depth reads, 1 LI writes, 2 (wedge, pixel) pairs inside their wedge (three-pass only).
 @group(1) @binding(6) var<storage, read_write> counters: array<atomic<u32>, 4>;
 @group(1) @binding(7) var<storage, read_write> visibility_out: array<vec4<f32>>;
 // The light's sector table (`light::tables::sector_table`): the emission (w: area) of the

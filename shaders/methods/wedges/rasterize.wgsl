@@ -281,12 +281,9 @@ fn colored_share(poly: ptr<function, array<vec2<f32>, 8>>, count: u32, a2: vec2<
     }
     let mean_radiance = emitted / area; // the image's emission per m² of light
     if below_horizon {
-        var region = 0.0;
-        for (var k = 0u; k < count; k++) {
-            region += 0.5 * cross2((*poly)[k], (*poly)[(k + 1u) % count]);
-        }
+        // `part` is the region's area here (`wedge_share`).
         let whole = sector(TAU, 1.0).rgb;
-        return abs(region) * mean_radiance / max(whole, vec3<f32>(1e-30));
+        return part * mean_radiance / max(whole, vec3<f32>(1e-30));
     }
     let blocked = part * frame.light_center.w * mean_radiance;
     return select(vec3<f32>(0.0), blocked / e0, e0 > vec3<f32>(0.0));

@@ -40,10 +40,12 @@ fn mark_inside(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups)
     }
 }
 
-// The size of `shade_listed`'s dispatch.
+// The size of `shade_listed`'s dispatch; counts the pairs it shades.
 @compute @workgroup_size(1)
 fn inside_size() {
-    inside_groups = list_dispatch(atomicLoad(&inside.count));
+    let count = atomicLoad(&inside.count);
+    inside_groups = list_dispatch(count);
+    atomicAdd(&counters[2], count);
 }
 
 // The listed pairs: each one's share of the light.

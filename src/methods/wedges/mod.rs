@@ -360,6 +360,7 @@ impl ShadowMethod for Wedges {
             ("work_items".to_owned(), kept as f64),
             ("depth_reads".to_owned(), f64::from(counts[0])),
             ("li_writes".to_owned(), f64::from(counts[1])),
+            ("wedge_pixels_inside".to_owned(), f64::from(counts[2])),
             ("boundary_edges".to_owned(), stats.boundary_edges as f64),
             ("non_manifold_edges".to_owned(), stats.non_manifold_edges as f64),
             ("channels".to_owned(), f64::from(uniforms.channels)),
