@@ -47,7 +47,6 @@ pub const SOURCES: &[(&str, &str)] = &[
     ("methods/wedges/rasterize_penumbra.wgsl", include_str!("../../shaders/methods/wedges/rasterize_penumbra.wgsl")),
     ("methods/wedges/rasterize_both.wgsl", include_str!("../../shaders/methods/wedges/rasterize_both.wgsl")),
     ("methods/wedges/resolve.wgsl", include_str!("../../shaders/methods/wedges/resolve.wgsl")),
-    ("methods/reference/sample.wgsl", include_str!("../../shaders/methods/reference/sample.wgsl")),
     ("methods/reference/sample_depth.wgsl", include_str!("../../shaders/methods/reference/sample_depth.wgsl")),
     ("methods/reference/accumulate.wgsl", include_str!("../../shaders/methods/reference/accumulate.wgsl")),
     ("methods/reference/resolve.wgsl", include_str!("../../shaders/methods/reference/resolve.wgsl")),

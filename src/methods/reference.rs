@@ -17,7 +17,7 @@
 //! and resolution both growing the estimate converges to the true visibility (the analytic
 //! test in `tests/render.rs` shows the error shrinking).
 
-use glam::Vec3;
+use glam::{Mat4, Vec3};
 
 use bytemuck::Zeroable as _;
 
@@ -41,24 +41,30 @@ const SEED: Param<u32> = Param::integer("seed", 1, 0, 4_294_967_295, "seed of th
 
 const PARAMS: &[ParamSpec] = &[SAMPLES.spec, RESOLUTION.spec, BIAS_TEXELS.spec, SLOPE_BIAS_TEXELS.spec, SEED.spec];
 
-/// The unit of a sample's distance map (its depth 1.0), metres: twice the distance to the
-/// frustum's farthest corner, so every point the map can hold is nearer and a receiver just
-/// past the far plane still tests as lit against an empty texel.
-fn distance_unit(projection: &LightProjection) -> f32 {
-    2.0 * projection.far * (1.0 + 2.0 * projection.tan_half * projection.tan_half).sqrt()
+/// The projection a sample's depth map is drawn with: the frustum `fit` gives that sample,
+/// reversed-Z with the far plane at infinity, so the stored depth is `near / view depth`
+/// (`sample_depth.wgsl`) and float depth keeps the same relative precision at every distance.
+fn reversed_projection(projection: &LightProjection) -> Mat4 {
+    Mat4::perspective_infinite_reverse_rh(2.0 * projection.tan_half.atan(), 1.0, projection.near)
+}
+
+/// The rotation into every sample's view coordinates: each frustum looks along the light
+/// normal with the image's up, from its own sample point.
+fn sample_rotation(light: &AreaLight) -> Mat4 {
+    Mat4::look_to_rh(Vec3::ZERO, light.n, light.u)
 }
 
 /// Samples recorded per submission; progress is reported between submissions.
 const BATCH: u64 = 16;
 
-/// Memory the distance maps of one accumulate batch may take: 8 maps at the default 1024²,
-/// one at 4096².
-const BATCH_MAP_BYTES: u64 = 64 << 20;
+/// Memory the depth maps of one accumulate batch may take: 16 maps at the default 1024², 8 at
+/// 2048², two at 4096².
+const BATCH_MAP_BYTES: u64 = 128 << 20;
 
-/// The most samples one accumulate pass reads; mirrors `BATCH` in `accumulate.wgsl`.
-const BATCH_SAMPLES: usize = 8;
+/// The most samples one accumulate pass reads; mirrors `MAX_SAMPLES` in `accumulate.wgsl`.
+const BATCH_SAMPLES: usize = 16;
 
-/// Distance maps drawn before one accumulate pass reads them all: more per pass reads the
+/// Depth maps drawn before one accumulate pass reads them all: more per pass reads the
 /// G-buffer and updates the sums less often, fewer keeps the maps' memory bounded.
 fn batch_layers(resolution: u32) -> u32 {
     let map_bytes = u64::from(resolution) * u64::from(resolution) * 4;
@@ -69,20 +75,21 @@ fn batch_layers(resolution: u32) -> u32 {
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 struct BatchUniforms {
-    count: u32,
+    rotation: [[f32; 4]; 3],
     row_texels: u32,
-    pad: [u32; 2],
-    samples: [SampleUniforms; BATCH_SAMPLES],
+    resolution: u32,
+    bias_texels: f32,
+    slope_bias_texels: f32,
+    samples: [BatchSample; BATCH_SAMPLES],
 }
 
-/// One light sample, laid out as `LightSample` in `shaders/methods/reference/sample.wgsl`.
+/// One light sample as the accumulate pass reads it (`BatchSample` in `accumulate.wgsl`).
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
-struct SampleUniforms {
-    view_proj: [[f32; 4]; 4],
-    position: [f32; 4],
+struct BatchSample {
+    origin: [f32; 4],
     radiance: [f32; 4],
-    params: [f32; 4],
+    lens: [f32; 4],
 }
 
 /// A point on the light and its weight: `L(y)` times the area of its stratum.
@@ -153,37 +160,43 @@ impl ShadowMethod for Reference {
         let resolution = params.get(&RESOLUTION);
         let (samples, strata) = light_samples(&spec.light, &spec.light_image, params.get(&SAMPLES), u64::from(params.get(&SEED)));
         let corners = ctx.scene.shadow_fit_points(&spec.light);
-        let slots: Vec<SampleUniforms> = samples
+        let rotation = sample_rotation(&spec.light);
+        // Per sample: its map's projection (the depth pass) and what the accumulate pass needs.
+        let (view_projs, slots): (Vec<[[f32; 4]; 4]>, Vec<BatchSample>) = samples
             .iter()
             .map(|sample| {
-                let at_sample = AreaLight { center: sample.position, ..spec.light };
-                let projection = LightProjection::fit(&at_sample, &corners);
-                SampleUniforms {
-                    view_proj: projection.view_proj.to_cols_array_2d(),
-                    position: sample.position.extend(distance_unit(&projection)).to_array(),
+                let projection = LightProjection::fit(&AreaLight { center: sample.position, ..spec.light }, &corners);
+                let proj = reversed_projection(&projection);
+                let view = rotation * Mat4::from_translation(-sample.position);
+                let slot = BatchSample {
+                    origin: rotation.transform_point3(sample.position).extend(projection.near).to_array(),
                     radiance: sample.weight.extend(0.0).to_array(),
-                    params: [projection.tan_half, resolution as f32, params.get(&BIAS_TEXELS), params.get(&SLOPE_BIAS_TEXELS)],
-                }
+                    lens: [proj.y_axis.y, 2.0 * projection.tan_half / resolution as f32, 0.0, 0.0],
+                };
+                ((proj * view).to_cols_array_2d(), slot)
             })
-            .collect();
-        let uniform_buffer = layout::uniform_slots(&device, "Reference::samples", &slots);
+            .unzip();
+        let uniform_buffer = layout::uniform_slots(&device, "Reference::samples", &view_projs);
         // Each sample's map is copied into its layer of a plain buffer, in rows padded for the
         // copy, which the accumulate pass reads: a storage-buffer load on lavapipe is a plain
         // gather, a texel fetch adds format and robustness handling.
         let row_bytes = (4 * resolution).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
         let layer_bytes = u64::from(row_bytes) * u64::from(resolution);
         let layers = batch_layers(resolution).min(slots.len().max(1) as u32);
-        let batches: Vec<BatchUniforms> = slots
+        let batches: Vec<(u32, BatchUniforms)> = slots
             .chunks(layers as usize)
             .map(|chunk| {
                 let mut batch = BatchUniforms::zeroed();
-                batch.count = chunk.len() as u32;
+                batch.rotation = [0, 1, 2].map(|i| rotation.row(i).to_array());
                 batch.row_texels = row_bytes / 4;
+                batch.resolution = resolution;
+                batch.bias_texels = params.get(&BIAS_TEXELS);
+                batch.slope_bias_texels = params.get(&SLOPE_BIAS_TEXELS);
                 batch.samples[..chunk.len()].copy_from_slice(chunk);
-                batch
+                (chunk.len() as u32, batch)
             })
             .collect();
-        let batch_buffer = layout::uniform_slots(&device, "Reference::batches", &batches);
+        let batch_buffer = layout::uniform_slots(&device, "Reference::batches", &batches.iter().map(|(_, b)| *b).collect::<Vec<_>>());
         let pixels = u64::from(ctx.width) * u64::from(ctx.height);
         let sums = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("Reference::sums"),
@@ -203,29 +216,20 @@ impl ShadowMethod for Reference {
                 view_formats: &[],
             })
         };
-        // The distance map is the depth buffer itself (`sample_depth.wgsl`).
-        let distance = target("Reference::distance", DEPTH_BUFFER_FORMAT, wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC);
-        let distance_view = distance.create_view(&Default::default());
-        let distances = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("Reference::distances"),
+        // The depth map is the depth buffer itself (`sample_depth.wgsl`).
+        let depth = target("Reference::depth", DEPTH_BUFFER_FORMAT, wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC);
+        let depth_view = depth.create_view(&Default::default());
+        let depths = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("Reference::depths"),
             size: layer_bytes * u64::from(layers),
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let (depth_pipeline, accumulate_pipeline, resolve_pipeline) = self.pipelines(ctx);
+        let (depth_pipeline, resolve_pipeline) = self.pipelines(ctx);
         let depth_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("Reference::sample"),
             layout: &depth_pipeline.get_bind_group_layout(0),
-            entries: &layout::entries(&[layout::slot_binding::<SampleUniforms>(&uniform_buffer)]),
-        });
-        let accumulate_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("Reference::accumulate"),
-            layout: &accumulate_pipeline.get_bind_group_layout(1),
-            entries: &layout::entries(&[
-                layout::slot_binding::<BatchUniforms>(&batch_buffer),
-                distances.as_entire_binding(),
-                sums.as_entire_binding(),
-            ]),
+            entries: &layout::entries(&[layout::slot_binding::<[[f32; 4]; 4]>(&uniform_buffer)]),
         });
         let resolve_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("Reference::resolve"),
@@ -237,15 +241,15 @@ impl ShadowMethod for Reference {
         let (gx, gy) = ctx.dispatch_size();
         let total = samples.len() as u64;
         let mut before = 0;
-        for (b, batch) in batches.iter().enumerate() {
-            for layer in 0..batch.count {
+        for (b, &(count, _)) in batches.iter().enumerate() {
+            for layer in 0..count {
                 let k = before as usize + layer as usize;
                 let mut pass = ctx.encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
                     label: Some("Reference::sample_depth"),
                     color_attachments: &[],
                     depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                        view: &distance_view,
-                        depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(1.0), store: wgpu::StoreOp::Store }),
+                        view: &depth_view,
+                        depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(0.0), store: wgpu::StoreOp::Store }),
                         stencil_ops: None,
                     }),
                     timestamp_writes: None,
@@ -259,9 +263,9 @@ impl ShadowMethod for Reference {
                 pass.draw_indexed(0..ctx.scene.index_count, 0, 0..1);
                 drop(pass);
                 ctx.encoder.copy_texture_to_buffer(
-                    wgpu::TexelCopyTextureInfo { aspect: wgpu::TextureAspect::DepthOnly, ..distance.as_image_copy() },
+                    wgpu::TexelCopyTextureInfo { aspect: wgpu::TextureAspect::DepthOnly, ..depth.as_image_copy() },
                     wgpu::TexelCopyBufferInfo {
-                        buffer: &distances,
+                        buffer: &depths,
                         layout: wgpu::TexelCopyBufferLayout {
                             offset: u64::from(layer) * layer_bytes,
                             bytes_per_row: Some(row_bytes),
@@ -272,15 +276,28 @@ impl ShadowMethod for Reference {
                 );
             }
             {
+                // One pipeline per batch size (`SAMPLES` in accumulate.wgsl): all but the last
+                // batch are full.
+                let pipeline = ctx.screen_specialized(
+                    PipelineKey { name: "reference.accumulate", variant: count },
+                    ("methods/reference/accumulate.wgsl", "main"),
+                    &[layout::uniform_dynamic(0), layout::storage_read(1), layout::storage_read_write(2)],
+                    &[("SAMPLES", f64::from(count))],
+                );
+                let group = ctx.bind(
+                    "Reference::accumulate",
+                    &pipeline,
+                    &[layout::slot_binding::<BatchUniforms>(&batch_buffer), depths.as_entire_binding(), sums.as_entire_binding()],
+                );
                 let mut pass = ctx
                     .encoder
                     .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("Reference::accumulate"), timestamp_writes: None });
-                pass.set_pipeline(&accumulate_pipeline);
+                pass.set_pipeline(&pipeline);
                 pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
-                pass.set_bind_group(1, &accumulate_group, &[layout::slot_offset_of::<BatchUniforms>(b)]);
+                pass.set_bind_group(1, &group, &[layout::slot_offset_of::<BatchUniforms>(b)]);
                 pass.dispatch_workgroups(gx, gy, 1);
             }
-            let done = before + u64::from(batch.count);
+            let done = before + u64::from(count);
             let flush = done / BATCH > before / BATCH || done == total;
             before = done;
             if flush {
@@ -310,36 +327,29 @@ impl ShadowMethod for Reference {
 }
 
 impl Reference {
-    fn pipelines(
-        &self,
-        ctx: &mut MethodContext<'_>,
-    ) -> (std::sync::Arc<wgpu::RenderPipeline>, std::sync::Arc<wgpu::ComputePipeline>, std::sync::Arc<wgpu::ComputePipeline>) {
+    fn pipelines(&self, ctx: &mut MethodContext<'_>) -> (std::sync::Arc<wgpu::RenderPipeline>, std::sync::Arc<wgpu::ComputePipeline>) {
         let device = &ctx.gpu.device;
-        let bgl = |label, entries: &[wgpu::BindGroupLayoutEntry]| {
-            device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(label), entries })
-        };
         let depth = ctx.pipelines.render(PipelineKey::new("reference.sample_depth"), || {
-            let sample_layout = bgl("Reference::sample_layout", &[layout::uniform_dynamic(0)]);
+            let sample_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some("Reference::sample_layout"),
+                entries: &[layout::uniform_dynamic(0)],
+            });
             let pipeline = ScenePipeline {
-                fragment: "fs_main",
                 label: "Reference::sample_depth",
                 shader: "methods/reference/sample_depth.wgsl",
+                fragment: None,
                 bind_group_layouts: &[&sample_layout],
                 targets: &[],
+                depth_compare: wgpu::CompareFunction::Greater,
             };
             pipeline.build(device)
         });
-        let accumulate = ctx.screen_pipeline(
-            PipelineKey::new("reference.accumulate"),
-            "methods/reference/accumulate.wgsl",
-            &[layout::uniform_dynamic(0), layout::storage_read(1), layout::storage_read_write(2)],
-        );
         let resolve = ctx.screen_pipeline(
             PipelineKey::new("reference.resolve"),
             "methods/reference/resolve.wgsl",
             &[layout::storage_read(0), layout::storage_read_write(1)],
         );
-        (depth, accumulate, resolve)
+        (depth, resolve)
     }
 }
 

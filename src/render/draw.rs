@@ -10,14 +10,19 @@ use crate::scene::Vertex;
 pub const DEPTH_BUFFER_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 
 /// A pipeline that draws the scene: `shader`'s `vs_main` and its `fragment` entry, these bind groups,
-/// these colour targets, and the depth test of `depth_state`.
+/// these colour targets, and a depth test that writes depth.
 pub struct ScenePipeline<'a> {
     pub label: &'static str,
     pub shader: &'static str,
-    /// The fragment entry point (`fs_main` unless a shader has several).
-    pub fragment: &'static str,
+    /// The fragment entry point (`fs_main` unless a shader has several), or None for a pass
+    /// that writes depth alone: no fragment shader runs, only the rasteriser's own depth test
+    /// and write — on lavapipe the cheapest pass there is.
+    pub fragment: Option<&'static str>,
     pub bind_group_layouts: &'a [&'a wgpu::BindGroupLayout],
     pub targets: &'a [wgpu::TextureFormat],
+    /// `Less` for depth cleared to 1 (`depth_attachment`); `Greater` for a reversed-Z
+    /// projection, cleared to 0.
+    pub depth_compare: wgpu::CompareFunction,
 }
 
 impl ScenePipeline<'_> {
@@ -40,11 +45,17 @@ impl ScenePipeline<'_> {
                 buffers: &[Some(vertex_layout())],
             },
             primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },
-            depth_stencil: Some(depth_state()),
+            depth_stencil: Some(wgpu::DepthStencilState {
+                format: DEPTH_BUFFER_FORMAT,
+                depth_write_enabled: Some(true),
+                depth_compare: Some(self.depth_compare),
+                stencil: Default::default(),
+                bias: Default::default(),
+            }),
             multisample: Default::default(),
-            fragment: Some(wgpu::FragmentState {
+            fragment: self.fragment.map(|entry| wgpu::FragmentState {
                 module: &module,
-                entry_point: Some(self.fragment),
+                entry_point: Some(entry),
                 compilation_options: Default::default(),
                 targets: &targets,
             }),
@@ -62,16 +73,6 @@ pub fn vertex_layout() -> wgpu::VertexBufferLayout<'static> {
         array_stride: std::mem::size_of::<Vertex>() as u64,
         step_mode: wgpu::VertexStepMode::Vertex,
         attributes: &ATTRIBUTES,
-    }
-}
-
-fn depth_state() -> wgpu::DepthStencilState {
-    wgpu::DepthStencilState {
-        format: DEPTH_BUFFER_FORMAT,
-        depth_write_enabled: Some(true),
-        depth_compare: Some(wgpu::CompareFunction::Less),
-        stencil: Default::default(),
-        bias: Default::default(),
     }
 }
 

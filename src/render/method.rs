@@ -80,11 +80,23 @@ impl MethodContext<'_> {
         entry: &'static str,
         io: &[wgpu::BindGroupLayoutEntry],
     ) -> Arc<wgpu::ComputePipeline> {
+        self.screen_specialized(key, (shader, entry), io, &[])
+    }
+
+    /// `screen_entry` with values for the shader's pipeline-overridable constants; `key`'s
+    /// variant must tell the values apart.
+    pub fn screen_specialized(
+        &mut self,
+        key: PipelineKey,
+        (shader, entry): (&'static str, &'static str),
+        io: &[wgpu::BindGroupLayoutEntry],
+        constants: &[(&str, f64)],
+    ) -> Arc<wgpu::ComputePipeline> {
         let device = &self.gpu.device;
         let inputs_layout = &self.inputs.layout;
         self.pipelines.compute(key, || {
             let io_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(key.name), entries: io });
-            crate::render::screen_compute_entry(device, inputs_layout, key.name, shader, entry, &io_layout)
+            crate::render::screen_compute_specialized(device, inputs_layout, key.name, (shader, entry), &io_layout, constants)
         })
     }
 

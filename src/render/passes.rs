@@ -57,7 +57,14 @@ impl Renderer {
             } else {
                 ("fs_depth", &[SHADOW_DEPTH_FORMAT])
             };
-            let pipeline = ScenePipeline { label: "ShadowMap::pipeline", shader: "shadow_map.wgsl", fragment, bind_group_layouts: &[draw_layout], targets };
+            let pipeline = ScenePipeline {
+                label: "ShadowMap::pipeline",
+                shader: "shadow_map.wgsl",
+                fragment: Some(fragment),
+                bind_group_layouts: &[draw_layout],
+                targets,
+                depth_compare: wgpu::CompareFunction::Less,
+            };
             pipeline.build(device)
         });
         let bind_group = self.draw_bind_group(scene);
@@ -85,11 +92,12 @@ impl Renderer {
         let (draw_layout, material_layout) = (&self.layouts.draw, &self.layouts.material);
         let pipeline = self.pipelines.render(PipelineKey::new("gbuffer"), || {
             let pipeline = ScenePipeline {
-                fragment: "fs_main",
                 label: "GBuffer::pipeline",
                 shader: "gbuffer.wgsl",
+                fragment: Some("fs_main"),
                 bind_group_layouts: &[draw_layout, material_layout],
                 targets: &[POSITION_FORMAT, NORMAL_FORMAT, ALBEDO_FORMAT, ID_FORMAT],
+                depth_compare: wgpu::CompareFunction::Less,
             };
             pipeline.build(device)
         });
@@ -269,6 +277,18 @@ pub fn screen_compute_entry(
     entry: &str,
     io_layout: &wgpu::BindGroupLayout,
 ) -> wgpu::ComputePipeline {
+    screen_compute_specialized(device, inputs_layout, label, (shader, entry), io_layout, &[])
+}
+
+/// `screen_compute_entry` with values for the shader's pipeline-overridable constants.
+pub fn screen_compute_specialized(
+    device: &wgpu::Device,
+    inputs_layout: &wgpu::BindGroupLayout,
+    label: &'static str,
+    (shader, entry): (&str, &str),
+    io_layout: &wgpu::BindGroupLayout,
+    constants: &[(&str, f64)],
+) -> wgpu::ComputePipeline {
     let module = shaders::module(device, shader);
     let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
         label: Some(label),
@@ -280,7 +300,7 @@ pub fn screen_compute_entry(
         layout: Some(&layout),
         module: &module,
         entry_point: Some(entry),
-        compilation_options: Default::default(),
+        compilation_options: wgpu::PipelineCompilationOptions { constants, ..Default::default() },
         cache: None,
     })
 }

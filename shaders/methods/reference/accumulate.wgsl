@@ -1,28 +1,43 @@
 // Method `reference`, per batch of light samples: adds the batch's contributions to the two
 // sums of the ratio estimator, per pixel: Σ L·G·V (shadowed) and Σ L·G (unshadowed), with
-// G = cosθx·cosθy/|x−y|² and V from each sample's distance map (contract §1).
+// G = cosθx·cosθy/|x−y|² and V from each sample's depth map (contract §1).
 //
-// Why batches, and why the samples are spelled out one by one: on lavapipe a per-pixel pass
-// per sample paid for the G-buffer reads and the sums' update every sample, and a sample's
-// uniforms indexed by a loop counter were loaded lane by lane (a gather per field). A batch
-// reads and updates each pixel once, and constant indices make every sample's fields plain
-// scalar loads.
+// Why it is written this way (each measured on lavapipe at 1080p): a pass per sample paid for
+// the G-buffer reads and the sums' update every sample, so a batch reads and updates each
+// pixel once; a branch no lane takes still runs its code, so the number of samples is a
+// pipeline constant (`SAMPLES`) and the unused slots compile away instead of being skipped by
+// a test; a sample's uniforms indexed by a loop counter were loaded lane by lane, so the
+// samples are spelled out one by one (constant indices: scalar loads). Every sample's frustum
+// looks along the light normal with the image's up, so they share one rotation: the pixel is
+// rotated into it once per batch and each sample costs a subtraction, not a matrix.
 
 #import common/frame_inputs.wgsl
-#import methods/reference/sample.wgsl
 
-// Samples per batch; mirrors `methods::reference::BATCH_SAMPLES`.
-const BATCH: u32 = 8u;
+// The most samples a batch holds; mirrors `methods::reference::BATCH_SAMPLES`.
+const MAX_SAMPLES: u32 = 16u;
+// The samples in this pipeline's batches: one pipeline per batch size.
+override SAMPLES: u32 = MAX_SAMPLES;
+
+struct BatchSample {
+    origin: vec4<f32>,   // xyz: the sample point y in view coordinates (rotation · y); w: its map's near plane, metres
+    radiance: vec4<f32>, // rgb: L(y) × stratum area, the sample's weight in the estimator
+    lens: vec4<f32>,     // x: 1 / tan of its frustum's half angle; y: a texel's width per metre of depth (2·tan / resolution)
+}
 
 struct Batch {
-    count: u32,      // samples in the batch (1..=BATCH); sample k has layer k of `distances`
-    row_texels: u32, // texels per row of a layer (rows padded for the copy)
-    samples: array<LightSample, BATCH>,
+    // Rows of the rotation into view coordinates (x right, y up, z away from the light normal).
+    rotation: array<vec4<f32>, 3>,
+    row_texels: u32,         // texels per row of a map (rows padded for the copy)
+    resolution: u32,         // texels per side of a map
+    bias_texels: f32,        // constant bias of the visibility test, texels
+    slope_bias_texels: f32,  // slope-scaled bias, texels × tanθ at the receiver
+    samples: array<BatchSample, MAX_SAMPLES>, // sample k has layer k of `depths`
 }
 
 @group(1) @binding(0) var<uniform> batch: Batch;
-// The batch's distance maps, one after the other, each `resolution` rows of `row_texels`.
-@group(1) @binding(1) var<storage, read> distances: array<f32>;
+// The batch's depth maps, one after the other, each `resolution` rows of `row_texels`:
+// near / (view depth of the nearest surface), 0 where the map holds nothing.
+@group(1) @binding(1) var<storage, read> depths: array<f32>;
 @group(1) @binding(2) var<storage, read_write> sums: array<vec4<f32>>; // 2 per pixel
 
 struct Sums {
@@ -30,34 +45,30 @@ struct Sums {
     unshadowed: vec3<f32>,
 }
 
-// Sample `layer`'s L·G·V and L·G at x (normal n).
-fn add_sample(sums: ptr<function, Sums>, x: vec3<f32>, n: vec3<f32>, layer: u32, light_sample: LightSample) {
-    let to_light = light_sample.position.xyz - x;
-    let dist = length(to_light);
-    let w = to_light / dist;
-    let cos_x = dot(n, w);
-    let cos_y = -dot(frame.light_n.xyz, w);
-    if cos_x <= 0.0 || cos_y <= 0.0 {
-        return;
-    }
-    let contribution = light_sample.radiance.rgb * (cos_x * cos_y / (dist * dist));
-    var visible = 1.0;
-    let clip = light_sample.view_proj * vec4<f32>(x, 1.0);
-    let ndc = clip.xy / clip.w;
+// Sample `layer`'s L·G·V and L·G at x (normal n), both in view coordinates.
+fn add_sample(sums: ptr<function, Sums>, x: vec3<f32>, n: vec3<f32>, layer: u32, s: BatchSample) {
+    let v = x - s.origin.xyz; // from the sample to x
+    let depth = -v.z;         // along the light normal
+    let dist2 = dot(v, v);
+    let inv_dist = inverseSqrt(dist2);
+    let cos_x = -dot(n, v) * inv_dist;
+    let cos_y = depth * inv_dist;
+    let contribution = select(vec3<f32>(0.0), s.radiance.rgb * (cos_x * cos_y / dist2), cos_x > 0.0 && cos_y > 0.0);
+    let ndc = v.xy * (s.lens.x / depth);
     let uv = vec2<f32>(ndc.x * 0.5 + 0.5, 0.5 - ndc.y * 0.5);
-    // Outside the sample's frustum (beyond its widest angle) nothing is recorded: lit.
-    if clip.w > 0.0 && all(uv >= vec2<f32>(0.0)) && all(uv < vec2<f32>(1.0)) {
-        let res = light_sample.params.y;
-        let texel = min(vec2<u32>(uv * res), vec2<u32>(u32(res) - 1u));
-        let nearest = distances[(layer * u32(res) + texel.y) * batch.row_texels + texel.x] * light_sample.position.w;
-        // Bias in texels of this sample's map at the receiver, constant plus slope-scaled:
-        // it shrinks with resolution, so the estimate converges to true visibility.
-        let texel_m = 2.0 * dist * cos_y * light_sample.params.x / res;
-        let tan_x = min(sqrt(max(1.0 - cos_x * cos_x, 0.0)) / max(cos_x, 0.05), 10.0);
-        let bias = texel_m * (light_sample.params.z + light_sample.params.w * tan_x);
-        visible = select(0.0, 1.0, dist - bias <= nearest);
-    }
-    (*sums).shadowed += contribution * visible;
+    let res = f32(batch.resolution);
+    let texel = min(vec2<u32>(clamp(uv, vec2<f32>(0.0), vec2<f32>(1.0)) * res), vec2<u32>(batch.resolution - 1u));
+    let stored = depths[(layer * batch.resolution + texel.y) * batch.row_texels + texel.x];
+    // Bias in texels of this sample's map at the receiver, constant plus slope-scaled: it
+    // shrinks with resolution, so the estimate converges to true visibility.
+    let tan_x = min(sqrt(max(1.0 - cos_x * cos_x, 0.0)) / max(cos_x, 0.05), 10.0);
+    let bias = depth * s.lens.y * (batch.bias_texels + batch.slope_bias_texels * tan_x);
+    // Lit when the receiver, brought `bias` metres nearer along its ray, is no deeper than
+    // the nearest surface: depth·(1 − bias/|v|) ≤ near/stored, multiplied out so that an
+    // empty texel (0) is lit without a division. Outside the frustum nothing is recorded: lit.
+    let inside = depth > 0.0 && all(uv >= vec2<f32>(0.0)) && all(uv < vec2<f32>(1.0));
+    let visible = !inside || depth * (1.0 - bias * inv_dist) * stored <= s.origin.w;
+    (*sums).shadowed += select(vec3<f32>(0.0), contribution, visible);
     (*sums).unshadowed += contribution;
 }
 
@@ -67,17 +78,28 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     if !covered(pixel) {
         return;
     }
-    let x = textureLoad(gbuf_position, pixel, 0).xyz;
-    let n = textureLoad(gbuf_normal, pixel, 0).xyz;
+    let world = textureLoad(gbuf_position, pixel, 0).xyz;
+    let normal = textureLoad(gbuf_normal, pixel, 0).xyz;
+    let r = batch.rotation;
+    let x = vec3<f32>(dot(r[0].xyz, world), dot(r[1].xyz, world), dot(r[2].xyz, world));
+    let n = vec3<f32>(dot(r[0].xyz, normal), dot(r[1].xyz, normal), dot(r[2].xyz, normal));
     var s = Sums(vec3<f32>(0.0), vec3<f32>(0.0));
     add_sample(&s, x, n, 0u, batch.samples[0]);
-    if batch.count > 1u { add_sample(&s, x, n, 1u, batch.samples[1]); }
-    if batch.count > 2u { add_sample(&s, x, n, 2u, batch.samples[2]); }
-    if batch.count > 3u { add_sample(&s, x, n, 3u, batch.samples[3]); }
-    if batch.count > 4u { add_sample(&s, x, n, 4u, batch.samples[4]); }
-    if batch.count > 5u { add_sample(&s, x, n, 5u, batch.samples[5]); }
-    if batch.count > 6u { add_sample(&s, x, n, 6u, batch.samples[6]); }
-    if batch.count > 7u { add_sample(&s, x, n, 7u, batch.samples[7]); }
+    if SAMPLES > 1u { add_sample(&s, x, n, 1u, batch.samples[1]); }
+    if SAMPLES > 2u { add_sample(&s, x, n, 2u, batch.samples[2]); }
+    if SAMPLES > 3u { add_sample(&s, x, n, 3u, batch.samples[3]); }
+    if SAMPLES > 4u { add_sample(&s, x, n, 4u, batch.samples[4]); }
+    if SAMPLES > 5u { add_sample(&s, x, n, 5u, batch.samples[5]); }
+    if SAMPLES > 6u { add_sample(&s, x, n, 6u, batch.samples[6]); }
+    if SAMPLES > 7u { add_sample(&s, x, n, 7u, batch.samples[7]); }
+    if SAMPLES > 8u { add_sample(&s, x, n, 8u, batch.samples[8]); }
+    if SAMPLES > 9u { add_sample(&s, x, n, 9u, batch.samples[9]); }
+    if SAMPLES > 10u { add_sample(&s, x, n, 10u, batch.samples[10]); }
+    if SAMPLES > 11u { add_sample(&s, x, n, 11u, batch.samples[11]); }
+    if SAMPLES > 12u { add_sample(&s, x, n, 12u, batch.samples[12]); }
+    if SAMPLES > 13u { add_sample(&s, x, n, 13u, batch.samples[13]); }
+    if SAMPLES > 14u { add_sample(&s, x, n, 14u, batch.samples[14]); }
+    if SAMPLES > 15u { add_sample(&s, x, n, 15u, batch.samples[15]); }
     let index = 2u * (pixel.y * frame.sizes.x + pixel.x);
     sums[index] += vec4<f32>(s.shadowed, 0.0);
     sums[index + 1u] += vec4<f32>(s.unshadowed, 0.0);

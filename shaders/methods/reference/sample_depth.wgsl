@@ -1,27 +1,14 @@
-// Method `reference`, per light sample: the distance from the sample point to the nearest
-// surface in every direction of its frustum (a shadow map from that point), as depth. Distances are
-// computed per fragment from the interpolated world position: radial distance is not affine,
-// so interpolating it per vertex would be wrong.
+// Method `reference`, per light sample: a depth map of the scene from the sample point (a
+// shadow map from that point) — the rasteriser's own depth, with no fragment shader: a
+// reversed-Z perspective with the far plane at infinity stores near / (view depth), as exact
+// relative to the depth near the sample as far from it (float depth). A fragment shader
+// writing a radial distance per fragment (frag_depth) turned lavapipe's early depth test off.
 
-#import methods/reference/sample.wgsl
-
-@group(0) @binding(0) var<uniform> light_sample: LightSample;
-
-struct VsOut {
-    @builtin(position) clip: vec4<f32>,
-    @location(0) world: vec3<f32>,
-}
+// The sample's projection (`methods::reference::reversed_view_proj`); one slot per sample,
+// bound with a dynamic offset.
+@group(0) @binding(0) var<uniform> view_proj: mat4x4<f32>;
 
 @vertex
-fn vs_main(@location(0) position: vec3<f32>) -> VsOut {
-    return VsOut(light_sample.view_proj * vec4<f32>(position, 1.0), position);
-}
-
-// The distance goes to the depth buffer itself, in units of `position.w` (every point of the
-// frustum is nearer): the depth test keeps the nearest along each texel's ray, and the map
-// needs no colour target — on lavapipe a second full-size attachment, cleared and written per
-// sample, cost more than the triangles.
-@fragment
-fn fs_main(in: VsOut) -> @builtin(frag_depth) f32 {
-    return length(in.world - light_sample.position.xyz) / light_sample.position.w;
+fn vs_main(@location(0) position: vec3<f32>) -> @builtin(position) vec4<f32> {
+    return view_proj * vec4<f32>(position, 1.0);
 }
