@@ -27,17 +27,18 @@ struct BatchSample {
 struct Batch {
     // Rows of the rotation into view coordinates (x right, y up, z away from the light normal).
     rotation: array<vec4<f32>, 3>,
-    row_texels: u32,         // texels per row of a map (rows padded for the copy)
     resolution: u32,         // texels per side of a map
     bias_texels: f32,        // constant bias of the visibility test, texels
     slope_bias_texels: f32,  // slope-scaled bias, texels × tanθ at the receiver
+    pad: u32,
     samples: array<BatchSample, MAX_SAMPLES>, // sample k has layer k of `depths`
 }
 
 @group(1) @binding(0) var<uniform> batch: Batch;
-// The batch's depth maps, one after the other, each `resolution` rows of `row_texels`:
-// near / (view depth of the nearest surface), 0 where the map holds nothing.
-@group(1) @binding(1) var<storage, read> depths: array<f32>;
+// The batch's depth maps, a layer each: near / (view depth of the nearest surface), 0 where
+// the map holds nothing. Read where they were drawn: a texel fetch costs more than a buffer
+// load on lavapipe, but less than copying every map into a buffer.
+@group(1) @binding(1) var depths: texture_depth_2d_array;
 @group(1) @binding(2) var<storage, read_write> sums: array<vec4<f32>>; // 2 per pixel
 
 struct Sums {
@@ -45,31 +46,29 @@ struct Sums {
     unshadowed: vec3<f32>,
 }
 
-// Sample `layer`'s L·G·V and L·G at x (normal n), both in view coordinates.
-fn add_sample(sums: ptr<function, Sums>, x: vec3<f32>, n: vec3<f32>, layer: u32, s: BatchSample) {
+// Sample `layer`'s L·G·V and L·G at x (normal n), both in view coordinates; `bias` is the
+// pixel's bias of the visibility test in texels.
+fn add_sample(sums: ptr<function, Sums>, x: vec3<f32>, n: vec3<f32>, bias: f32, layer: u32, s: BatchSample) {
     let v = x - s.origin.xyz; // from the sample to x
     let depth = -v.z;         // along the light normal
-    let dist2 = dot(v, v);
-    let inv_dist = inverseSqrt(dist2);
+    let inv_dist = inverseSqrt(dot(v, v));
     let cos_x = -dot(n, v) * inv_dist;
     let cos_y = depth * inv_dist;
-    let contribution = select(vec3<f32>(0.0), s.radiance.rgb * (cos_x * cos_y / dist2), cos_x > 0.0 && cos_y > 0.0);
+    let g = select(0.0, cos_x * cos_y * inv_dist * inv_dist, cos_x > 0.0 && cos_y > 0.0);
     let ndc = v.xy * (s.lens.x / depth);
     let uv = vec2<f32>(ndc.x * 0.5 + 0.5, 0.5 - ndc.y * 0.5);
-    let res = f32(batch.resolution);
-    let texel = min(vec2<u32>(clamp(uv, vec2<f32>(0.0), vec2<f32>(1.0)) * res), vec2<u32>(batch.resolution - 1u));
-    let stored = depths[(layer * batch.resolution + texel.y) * batch.row_texels + texel.x];
-    // Bias in texels of this sample's map at the receiver, constant plus slope-scaled: it
-    // shrinks with resolution, so the estimate converges to true visibility.
-    let tan_x = min(sqrt(max(1.0 - cos_x * cos_x, 0.0)) / max(cos_x, 0.05), 10.0);
-    let bias = depth * s.lens.y * (batch.bias_texels + batch.slope_bias_texels * tan_x);
-    // Lit when the receiver, brought `bias` metres nearer along its ray, is no deeper than
-    // the nearest surface: depth·(1 − bias/|v|) ≤ near/stored, multiplied out so that an
-    // empty texel (0) is lit without a division. Outside the frustum nothing is recorded: lit.
+    let texel = min(vec2<u32>(clamp(uv, vec2<f32>(0.0), vec2<f32>(1.0)) * f32(batch.resolution)), vec2<u32>(batch.resolution - 1u));
+    let stored = textureLoad(depths, texel, layer, 0);
+    // The bias in metres at the receiver (texels of this map there × `bias`) shrinks with the
+    // resolution, so the estimate converges to true visibility. Lit when the receiver, brought
+    // that much nearer along its ray, is no deeper than the nearest surface:
+    // depth·(1 − bias_m/|v|) ≤ near/stored, multiplied out so that an empty texel (0) is lit
+    // without a division. Outside the frustum nothing is recorded: lit.
+    let bias_m = depth * s.lens.y * bias;
     let inside = depth > 0.0 && all(uv >= vec2<f32>(0.0)) && all(uv < vec2<f32>(1.0));
-    let visible = !inside || depth * (1.0 - bias * inv_dist) * stored <= s.origin.w;
-    (*sums).shadowed += select(vec3<f32>(0.0), contribution, visible);
-    (*sums).unshadowed += contribution;
+    let visible = !inside || depth * (1.0 - bias_m * inv_dist) * stored <= s.origin.w;
+    (*sums).shadowed += s.radiance.rgb * select(0.0, g, visible);
+    (*sums).unshadowed += s.radiance.rgb * g;
 }
 
 @compute @workgroup_size(8, 8)
@@ -83,23 +82,29 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     let r = batch.rotation;
     let x = vec3<f32>(dot(r[0].xyz, world), dot(r[1].xyz, world), dot(r[2].xyz, world));
     let n = vec3<f32>(dot(r[0].xyz, normal), dot(r[1].xyz, normal), dot(r[2].xyz, normal));
+    // The bias of the visibility test in texels, constant plus slope-scaled by tanθ between
+    // the normal and the direction to the light's centre (the same for every sample: it
+    // takes a square root and a division out of each).
+    let cos_c = clamp(dot(normal, normalize(frame.light_center.xyz - world)), 0.0, 1.0);
+    let tan_c = min(sqrt(1.0 - cos_c * cos_c) / max(cos_c, 0.05), 10.0);
+    let bias = batch.bias_texels + batch.slope_bias_texels * tan_c;
     var s = Sums(vec3<f32>(0.0), vec3<f32>(0.0));
-    add_sample(&s, x, n, 0u, batch.samples[0]);
-    if SAMPLES > 1u { add_sample(&s, x, n, 1u, batch.samples[1]); }
-    if SAMPLES > 2u { add_sample(&s, x, n, 2u, batch.samples[2]); }
-    if SAMPLES > 3u { add_sample(&s, x, n, 3u, batch.samples[3]); }
-    if SAMPLES > 4u { add_sample(&s, x, n, 4u, batch.samples[4]); }
-    if SAMPLES > 5u { add_sample(&s, x, n, 5u, batch.samples[5]); }
-    if SAMPLES > 6u { add_sample(&s, x, n, 6u, batch.samples[6]); }
-    if SAMPLES > 7u { add_sample(&s, x, n, 7u, batch.samples[7]); }
-    if SAMPLES > 8u { add_sample(&s, x, n, 8u, batch.samples[8]); }
-    if SAMPLES > 9u { add_sample(&s, x, n, 9u, batch.samples[9]); }
-    if SAMPLES > 10u { add_sample(&s, x, n, 10u, batch.samples[10]); }
-    if SAMPLES > 11u { add_sample(&s, x, n, 11u, batch.samples[11]); }
-    if SAMPLES > 12u { add_sample(&s, x, n, 12u, batch.samples[12]); }
-    if SAMPLES > 13u { add_sample(&s, x, n, 13u, batch.samples[13]); }
-    if SAMPLES > 14u { add_sample(&s, x, n, 14u, batch.samples[14]); }
-    if SAMPLES > 15u { add_sample(&s, x, n, 15u, batch.samples[15]); }
+    add_sample(&s, x, n, bias, 0u, batch.samples[0]);
+    if SAMPLES > 1u { add_sample(&s, x, n, bias, 1u, batch.samples[1]); }
+    if SAMPLES > 2u { add_sample(&s, x, n, bias, 2u, batch.samples[2]); }
+    if SAMPLES > 3u { add_sample(&s, x, n, bias, 3u, batch.samples[3]); }
+    if SAMPLES > 4u { add_sample(&s, x, n, bias, 4u, batch.samples[4]); }
+    if SAMPLES > 5u { add_sample(&s, x, n, bias, 5u, batch.samples[5]); }
+    if SAMPLES > 6u { add_sample(&s, x, n, bias, 6u, batch.samples[6]); }
+    if SAMPLES > 7u { add_sample(&s, x, n, bias, 7u, batch.samples[7]); }
+    if SAMPLES > 8u { add_sample(&s, x, n, bias, 8u, batch.samples[8]); }
+    if SAMPLES > 9u { add_sample(&s, x, n, bias, 9u, batch.samples[9]); }
+    if SAMPLES > 10u { add_sample(&s, x, n, bias, 10u, batch.samples[10]); }
+    if SAMPLES > 11u { add_sample(&s, x, n, bias, 11u, batch.samples[11]); }
+    if SAMPLES > 12u { add_sample(&s, x, n, bias, 12u, batch.samples[12]); }
+    if SAMPLES > 13u { add_sample(&s, x, n, bias, 13u, batch.samples[13]); }
+    if SAMPLES > 14u { add_sample(&s, x, n, bias, 14u, batch.samples[14]); }
+    if SAMPLES > 15u { add_sample(&s, x, n, bias, 15u, batch.samples[15]); }
     let index = 2u * (pixel.y * frame.sizes.x + pixel.x);
     sums[index] += vec4<f32>(s.shadowed, 0.0);
     sums[index + 1u] += vec4<f32>(s.unshadowed, 0.0);
