@@ -98,24 +98,26 @@ fn may_hit(w: Warped, receiver: u32, lo: vec2<i32>, hi: vec2<i32>) -> bool {
     let blocks = summary_blocks();
     let b0 = lo / SUMMARY_BLOCK;
     let b1 = hi / SUMMARY_BLOCK;
-    let limit = w.depth - w.bias;
     for (var by = b0.y; by <= b1.y; by++) {
         for (var bx = b0.x; bx <= b1.x; bx++) {
-            let s = summary[by * blocks + bx];
-            var possible: bool;
-            if w.hard {
-                let same_object = s.object == receiver || s.object == MIXED || params.use_ids == 0u;
-                possible = s.far >= limit && same_object;
-            } else {
-                let other_object = s.object != receiver || params.use_ids == 0u;
-                possible = s.near < limit && other_object;
-            }
-            if possible {
+            if block_may_hit(w, receiver, summary[by * blocks + bx]) {
                 return true;
             }
         }
     }
     return false;
+}
+
+// Whether a block with summary `s` can hold a hit of the search from w (`is_hit` applied to
+// the block's bounds).
+fn block_may_hit(w: Warped, receiver: u32, s: BlockSummary) -> bool {
+    let limit = w.depth - w.bias;
+    if w.hard {
+        let same_object = s.object == receiver || s.object == MIXED || params.use_ids == 0u;
+        return s.far >= limit && same_object;
+    }
+    let other_object = s.object != receiver || params.use_ids == 0u;
+    return s.near < limit && other_object;
 }
 
 const UNKNOWN: f32 = -1.0;
@@ -182,12 +184,133 @@ fn jitter(t: vec2<i32>) -> vec2<f32> {
     return (vec2<f32>(f32(h & 0xffffu), f32(h >> 16u)) / 65536.0 - 0.5) * params.jitter;
 }
 
+// The nearest hit of a search: its squared distance from P' (texels), depth and texel.
+struct Nearest {
+    dist2: f32,
+    depth: f32,
+    texel: vec2<i32>,
+    found: bool,
+}
+
+// Whether texel `t` (depth bits and id `texel`) is a hit for the search from w: outer pixels
+// hit texels nearer the light of other objects, inner ones texels as far of their own object.
+fn is_hit(w: Warped, receiver: u32, texel: vec2<u32>) -> bool {
+    return (bitcast<f32>(texel.x) < w.depth - w.bias) != w.hard && ((texel.y == receiver) == w.hard || params.use_ids == 0u);
+}
+
+// The paper's search order: rings of growing Chebyshev radius k around P''s texel `base`,
+// stopping once no closer texel can follow (texel centres on ring k lie at least k − 0.5
+// texels from P'), so its cost grows with the distance found, not with r_max. The first of
+// equally near hits in the order (ring, row, column) is kept. Used with the §4.3 jitter, which
+// moves each hit by up to half a texel: the rings' stopping rule then decides the result.
+fn nearest_in_rings(w: Warped, receiver: u32, base: vec2<i32>, rings: i32, r_max: f32) -> Nearest {
+    let res = i32(frame.sizes.z);
+    var near = Nearest(r_max * r_max, 0.0, vec2<i32>(0), false);
+    for (var k = 0; k <= rings; k++) {
+        // One square root per ring, not per texel.
+        if f32(k) - 0.5 > sqrt(near.dist2) {
+            break;
+        }
+        for (var dy = -k; dy <= k; dy++) {
+            let edge_row = dy == -k || dy == k;
+            var dx = -k;
+            loop {
+                if dx > k {
+                    break;
+                }
+                let t = base + vec2<i32>(dx, dy);
+                if all(t >= vec2<i32>(0)) && all(t < vec2<i32>(res)) {
+                    let texel = map_texels[t.y * res + t.x];
+                    if is_hit(w, receiver, texel) {
+                        let offset = vec2<f32>(t) + 0.5 + jitter(t) - w.texel;
+                        let dist2 = dot(offset, offset);
+                        if dist2 < near.dist2 {
+                            near = Nearest(dist2, bitcast<f32>(texel.x), t, true);
+                        }
+                    }
+                }
+                // Inner rows of the ring: only its two end texels.
+                if edge_row || dx == k {
+                    dx += 1;
+                } else {
+                    dx = k;
+                }
+            }
+        }
+    }
+    return near;
+}
+
+// The same nearest hit as `nearest_in_rings` without jitter (where the rings stop only once
+// no later texel can be nearer, so theirs is the nearest hit of the whole square [lo, hi]
+// within r_max, the first in ring order among equals), found block by block: the summary
+// blocks around P' in rings, a block scanned only when its summary allows a hit and its
+// nearest texel centre is no farther than the best so far, and ties broken by the texel's
+// place in the rings' order. Past the paper, with bit-identical results: in the outer
+// penumbra the texels between P' and the occluder, which the rings visit one by one, lie in
+// blocks the summary rules out.
+fn nearest_in_blocks(w: Warped, receiver: u32, base: vec2<i32>, lo: vec2<i32>, hi: vec2<i32>, r_max: f32) -> Nearest {
+    let res = i32(frame.sizes.z);
+    let blocks = summary_blocks();
+    var near = Nearest(r_max * r_max, 0.0, vec2<i32>(0), false);
+    var near_order = 0x7fffffff;
+    // P''s own block (floor division: base may lie left of or above the map) and the blocks
+    // the square spans.
+    let home = vec2<i32>(floor(vec2<f32>(base) / f32(SUMMARY_BLOCK)));
+    let b_lo = lo / SUMMARY_BLOCK;
+    let b_hi = hi / SUMMARY_BLOCK;
+    let rings = max(max(home.x - b_lo.x, b_hi.x - home.x), max(home.y - b_lo.y, b_hi.y - home.y));
+    for (var kb = 0; kb <= rings; kb++) {
+        // Blocks of ring kb lie outside the (kb − 1) rings around P''s own block: their texel
+        // centres are at least 8(kb − 1) + 0.5 texels from P'.
+        let bound = f32(SUMMARY_BLOCK * (kb - 1)) + 0.5;
+        if kb > 0 && bound * bound > near.dist2 {
+            break;
+        }
+        for (var by = max(home.y - kb, b_lo.y); by <= min(home.y + kb, b_hi.y); by++) {
+            let edge_row = abs(by - home.y) == kb;
+            var bx = max(home.x - kb, b_lo.x);
+            loop {
+                if bx > min(home.x + kb, b_hi.x) {
+                    break;
+                }
+                let block_lo = max(vec2<i32>(bx, by) * SUMMARY_BLOCK, lo);
+                let block_hi = min(vec2<i32>(bx, by) * SUMMARY_BLOCK + SUMMARY_BLOCK - 1, hi);
+                let closest = clamp(w.texel, vec2<f32>(block_lo) + 0.5, vec2<f32>(block_hi) + 0.5) - w.texel;
+                if dot(closest, closest) <= near.dist2 && block_may_hit(w, receiver, summary[by * blocks + bx]) {
+                    for (var ty = block_lo.y; ty <= block_hi.y; ty++) {
+                        for (var tx = block_lo.x; tx <= block_hi.x; tx++) {
+                            let t = vec2<i32>(tx, ty);
+                            let texel = map_texels[ty * res + tx];
+                            let offset = vec2<f32>(t) + 0.5 - w.texel;
+                            let dist2 = dot(offset, offset);
+                            let d = t - base;
+                            let k = max(abs(d.x), abs(d.y));
+                            let order = (k << 20u) | ((d.y + 512) << 10u) | (d.x + 512);
+                            if is_hit(w, receiver, texel) && (dist2 < near.dist2 || (dist2 == near.dist2 && order < near_order)) {
+                                near = Nearest(dist2, bitcast<f32>(texel.x), t, true);
+                                near_order = order;
+                            }
+                        }
+                    }
+                }
+                // Inner rows of the ring: only its two end blocks.
+                if edge_row || bx >= home.x + kb {
+                    bx += 1;
+                } else {
+                    bx = home.x + kb;
+                }
+            }
+        }
+    }
+    return near;
+}
+
 // The §3.3 search for one camera pixel; returns the penumbra coordinate t.
 // Outer (lit) pixels look for the nearest texel closer to the light than P that belongs to
-// another object; inner (hard-shadowed) pixels for the nearest lit texel of their own object.
-// Rings of growing Chebyshev radius are visited and the search stops once no closer texel
-// can follow, so its cost grows with the distance found, not with r_max. Under a coloured
-// light it also returns the occluder edge's line across the light (`edge_line`).
+// another object; inner (hard-shadowed) pixels for the nearest lit texel of their own object
+// (`nearest_in_rings`, `nearest_in_blocks`). Under a coloured light it also returns the
+// occluder edge's line across the light (`edge_line`).
 // `jittered` is a constant of the entry point (`search.wgsl`): lavapipe runs a branch's code
 // even where no lane takes it, so the hash of the optional jitter, in the innermost loop, is
 // compiled out when the job asks for none (it cost a third of the search).
@@ -206,62 +329,23 @@ fn search(pixel: vec2<u32>, jittered: bool) -> Found {
     atomicAdd(&counters.radius_sum_16, u32(r_max * 16.0));
     let res = i32(frame.sizes.z);
     let base = vec2<i32>(floor(w.texel));
-    // The nearest hit's squared distance: one square root per ring, not per texel.
-    var best2 = r_max * r_max;
-    var best_depth = 0.0;
-    var best_texel = vec2<i32>(0);
-    var found = false;
     let rings = i32(ceil(r_max)) + 1;
-    let limit = w.depth - w.bias;
     let lo = max(base - rings, vec2<i32>(0));
     let hi = min(base + rings, vec2<i32>(res - 1));
     if any(lo > hi) || !may_hit(w, receiver, lo, hi) {
         out.t = select(1.0, 0.0, w.hard);
         return out;
     }
-    for (var k = 0; k <= rings; k++) {
-        // Texel centres on ring k lie at least k − 0.5 texels from P'.
-        if f32(k) - 0.5 > sqrt(best2) {
-            break;
-        }
-        for (var dy = -k; dy <= k; dy++) {
-            let edge_row = dy == -k || dy == k;
-            var dx = -k;
-            loop {
-                if dx > k {
-                    break;
-                }
-                let t = base + vec2<i32>(dx, dy);
-                if all(t >= vec2<i32>(0)) && all(t < vec2<i32>(res)) {
-                    let texel = map_texels[t.y * res + t.x];
-                    let d = bitcast<f32>(texel.x);
-                    // Outer pixels hit texels nearer the light of other objects, inner ones
-                    // texels as far of their own object.
-                    let hit = (d < limit) != w.hard && ((texel.y == receiver) == w.hard || params.use_ids == 0u);
-                    if hit {
-                        var to = vec2<f32>(t) + 0.5;
-                        if jittered {
-                            to += jitter(t);
-                        }
-                        let offset = to - w.texel;
-                        let dist2 = dot(offset, offset);
-                        if dist2 < best2 {
-                            best2 = dist2;
-                            best_depth = d;
-                            best_texel = t;
-                            found = true;
-                        }
-                    }
-                }
-                // Inner rows of the ring: only its two end texels.
-                if edge_row || dx == k {
-                    dx += 1;
-                } else {
-                    dx = k;
-                }
-            }
-        }
+    var near: Nearest;
+    if jittered {
+        near = nearest_in_rings(w, receiver, base, rings, r_max);
+    } else {
+        near = nearest_in_blocks(w, receiver, base, lo, hi, r_max);
     }
+    let best2 = near.dist2;
+    let best_depth = near.depth;
+    let best_texel = near.texel;
+    let found = near.found;
     if !found {
         out.t = select(1.0, 0.0, w.hard);
         return out;
