@@ -24,21 +24,38 @@ fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_id) l
     let receiver = textureLoad(shadow_position, p, 0);
     let receiver_depth = textureLoad(shadow_depth, p, 0).r;
     if receiver.w > 0.0 {
+        // The distinct occluders the neighbours offer besides the one held, in neighbour
+        // order, gathered first and then weighed: neighbours mostly hand on the same
+        // occluder, and on a CPU rasteriser a key computed for one lane is paid by all 8, so
+        // weighing inside the neighbour loop paid for up to 8 keys per texel where one or two
+        // are new. A repeated occluder has the key of its first offer, which a strict `<`
+        // keeps, so the result is the same.
+        var offers: array<vec3<f32>, 8>;
+        var count = 0u;
         for (var k = 0u; k < 9u; k++) {
             let n = jump_neighbour(p, k, params.step, vec2<i32>(res));
             if n.x < 0 {
                 continue;
             }
             let candidate = src[u32(n.y * res + n.x)];
-            // Jump flooding hands one occluder to many neighbours; the one held already has
-            // its key for this receiver, so it is not evaluated again.
             if is_empty(candidate) || all(candidate.xyz == best.xyz) {
                 continue;
             }
-            let i = intensity(receiver.xyz, candidate.xyz, false);
+            var seen = false;
+            for (var j = 0u; j < count; j++) {
+                seen = seen || all(offers[j] == candidate.xyz);
+            }
+            if !seen {
+                offers[count] = candidate.xyz;
+                count++;
+            }
+        }
+        for (var j = 0u; j < count; j++) {
+            let candidate = offers[j];
+            let i = intensity(receiver.xyz, candidate, false);
             var key = luminance(i.rgb);
             if i.w == 0.0 {
-                let occluder = to_light_space(candidate.xyz);
+                let occluder = to_light_space(candidate);
                 if params.inner == 0u || receiver_depth > occluder.depth * (1.0 + params.silhouette_relative) {
                     continue;
                 }
@@ -46,7 +63,7 @@ fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_id) l
                 key = SEED_KEY + d / (d + 1.0);
             }
             if key < best_key {
-                best = packed(candidate.xyz, key);
+                best = packed(candidate, key);
                 best_key = key;
             }
         }
