@@ -1075,6 +1075,38 @@ fn wedges_with_the_eye_inside_a_shadow_volume_use_z_fail_and_see_what_just_outsi
 }
 
 #[test]
+fn pooled_scratch_buffers_leave_nothing_for_the_next_job() {
+    // Methods take their large buffers (records, receivers, sums, depth maps) from the
+    // renderer's pools, holding whatever the last job left: each must clear or overwrite what
+    // it reads. A job rendered before and after another (another scene and light in the same
+    // buffers) must come out the same, and the second time allocate nothing.
+    let engine = penumbra::engine::Engine::new(common::engine().gpu(), Limits::default(), penumbra::engine::PathPolicy::Deny);
+    let frame = |scene: &str, light: &str, method: &serde_json::Value| {
+        let spec = json!({
+            "scene": {"builtin": scene}, "light": {"image": {"builtin": light}}, "method": method,
+            "shadow_map": {"resolution": 512}, "output": {"width": 128, "height": 96, "format": "exr"}
+        });
+        engine.render_frame(&job(spec), &()).unwrap().0
+    };
+    for method in [
+        json!({"name": "jfa-l"}),
+        json!({"name": "jfa-e"}),
+        json!({"name": "brabec"}),
+        json!({"name": "wedges"}),
+        json!({"name": "pcss"}),
+        json!({"name": "chun-oh"}),
+        json!({"name": "reference", "samples": 8}),
+    ] {
+        let first = frame("crowd", "stripes", &method);
+        frame("columns", "white", &method);
+        let created = engine.stats().targets_created;
+        let again = frame("crowd", "stripes", &method);
+        assert_eq!(first.visibility, again.visibility, "{method}: the same job, after another, renders the same");
+        assert_eq!(engine.stats().targets_created, created, "{method}: the second time its buffers come from the pool");
+    }
+}
+
+#[test]
 fn a_steady_stream_of_jobs_allocates_nothing_new() {
     // Its own engine, so that no other test's jobs move its counters.
     let engine = penumbra::engine::Engine::new(common::engine().gpu(), Limits::default(), penumbra::engine::PathPolicy::Deny);

@@ -68,6 +68,8 @@ pub struct TextureKey {
     pub label: &'static str,
     pub width: u32,
     pub height: u32,
+    /// Array layers (1: a plain 2D texture).
+    pub layers: u32,
     pub format: wgpu::TextureFormat,
     pub usage: wgpu::TextureUsages,
 }
@@ -75,7 +77,7 @@ pub struct TextureKey {
 impl TextureKey {
     pub fn bytes(&self) -> u64 {
         let block = self.format.block_copy_size(Some(wgpu::TextureAspect::All)).unwrap_or(4);
-        u64::from(self.width) * u64::from(self.height) * u64::from(block)
+        u64::from(self.width) * u64::from(self.height) * u64::from(self.layers) * u64::from(block)
     }
 }
 
@@ -135,7 +137,7 @@ impl TexturePool {
         self.free.take_or(key, &mut self.stats, |key| {
             let texture = device.create_texture(&wgpu::TextureDescriptor {
                 label: Some(key.label),
-                size: wgpu::Extent3d { width: key.width, height: key.height, depth_or_array_layers: 1 },
+                size: wgpu::Extent3d { width: key.width, height: key.height, depth_or_array_layers: key.layers },
                 mip_level_count: 1,
                 sample_count: 1,
                 dimension: wgpu::TextureDimension::D2,

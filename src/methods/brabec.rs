@@ -159,12 +159,8 @@ impl ShadowMethod for Brabec {
         let device = ctx.gpu.device.clone();
         let uniform_buffer = ctx.uniforms("Brabec::uniforms", &uniforms);
         let pixels = u64::from(ctx.width) * u64::from(ctx.height);
-        let state = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("Brabec::state"),
-            size: pixels * 24,
-            usage: wgpu::BufferUsages::STORAGE,
-            mapped_at_creation: false,
-        });
+        // From the pool: `classify` writes every pixel's state, `summary` every block and texel.
+        let state = ctx.scratch_buffer("Brabec::state", pixels * 24, wgpu::BufferUsages::STORAGE);
         let counters = ctx.counters("Brabec::counters", 5);
         let io = [
             layout::uniform(0),
@@ -178,18 +174,8 @@ impl ShadowMethod for Brabec {
             layout::storage_read_write(8),
         ];
         let summary_side = spec.shadow_resolution.div_ceil(SUMMARY_BLOCK);
-        let summary = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("Brabec::summary"),
-            size: u64::from(summary_side).pow(2) * 16,
-            usage: wgpu::BufferUsages::STORAGE,
-            mapped_at_creation: false,
-        });
-        let map_texels = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("Brabec::map_texels"),
-            size: u64::from(spec.shadow_resolution).pow(2) * 8,
-            usage: wgpu::BufferUsages::STORAGE,
-            mapped_at_creation: false,
-        });
+        let summary = ctx.scratch_buffer("Brabec::summary", u64::from(summary_side).pow(2) * 16, wgpu::BufferUsages::STORAGE);
+        let map_texels = ctx.scratch_buffer("Brabec::map_texels", u64::from(spec.shadow_resolution).pow(2) * 8, wgpu::BufferUsages::STORAGE);
         let summarize = ctx.screen_pipeline(PipelineKey::new("brabec.summary"), "methods/brabec/summary.wgsl", &io);
         let classify = ctx.screen_pipeline(PipelineKey::new("brabec.classify"), "methods/brabec/classify.wgsl", &io);
         let lattice = ctx.screen_pipeline(PipelineKey::new("brabec.lattice"), "methods/brabec/lattice.wgsl", &io);

@@ -134,14 +134,12 @@ pub(super) fn run(
     let (classify, size, filter) = (entry(1, "classify"), entry(2, "listed_size"), entry(3, "filter_listed"));
 
     let device = &ctx.gpu.device;
-    let buffer = |label, size: u64, usage: wgpu::BufferUsages| {
-        device.create_buffer(&wgpu::BufferDescriptor { label: Some(label), size, usage: wgpu::BufferUsages::STORAGE | usage, mapped_at_creation: false })
-    };
     let side = ctx.spec.shadow_resolution;
     // The shadow map's depths in a buffer, by a copy (a memcpy on lavapipe, where a compute
     // pass reading every texel cost ~25 ms at 2048²).
     let pitch = map_pitch_bytes(side);
-    let map_depth = buffer("Filter::map_depth", u64::from(pitch) * u64::from(side), wgpu::BufferUsages::COPY_DST);
+    // From the pool: the copy writes all of it.
+    let map_depth = ctx.scratch_buffer("Filter::map_depth", u64::from(pitch) * u64::from(side), wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST);
     let shadow_depth = ctx.shadow_depth;
     ctx.timer.time_encoder(ctx.encoder, "method", "filter_copy_map", |encoder| {
         encoder.copy_texture_to_buffer(

@@ -247,29 +247,16 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
     // The coloured look-up depends only on the light image and the light's shape; building it
     // integrates ~6·10⁴ samples per direction on the CPU, so it is kept for later jobs.
     let lut = ctx.light_table("edge_table", edge_table);
-    let records = |label| {
-        device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some(label),
-            size: u64::from(grid.0) * u64::from(grid.1) * which.record_bytes,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        })
-    };
-    let (a, b) = (records("Jfa::records_a"), records("Jfa::records_b"));
-    let flags = device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("Jfa::flags"),
-        // Only jfa-e keeps per-pixel flags.
-        size: if which.light_space { 4 } else { u64::from(grid.0) * u64::from(grid.1) * 4 },
-        usage: wgpu::BufferUsages::STORAGE,
-        mapped_at_creation: false,
-    });
+    // From the pool: the seed pass writes every record of a and (jfa-e) every flag, b and the
+    // tile flags are cleared below.
+    let cells = u64::from(grid.0) * u64::from(grid.1);
+    let storage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
+    let a = ctx.scratch_buffer("Jfa::records_a", cells * which.record_bytes, storage);
+    let b = ctx.scratch_buffer("Jfa::records_b", cells * which.record_bytes, storage);
+    // Only jfa-e keeps per-pixel flags.
+    let flags = ctx.scratch_buffer("Jfa::flags", if which.light_space { 4 } else { cells * 4 }, storage);
     let tile_count = grid.0.div_ceil(TILE) * grid.1.div_ceil(TILE);
-    let tiles = device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("Jfa::tiles"),
-        size: u64::from(tile_count) * 4,
-        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    });
+    let tiles = ctx.scratch_buffer("Jfa::tiles", u64::from(tile_count) * 4, storage);
     let counters = ctx.counters("Jfa::counters", 4);
     let io = [
         layout::uniform_dynamic(0),

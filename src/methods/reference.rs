@@ -27,7 +27,7 @@ use bytemuck::Zeroable as _;
 use super::{Cap, Counters, MethodContext, Param, ParamSpec, Params, ShadowMethod};
 use crate::error::JobResult;
 use crate::gpu::layout;
-use crate::gpu::pool::PipelineKey;
+use crate::gpu::pool::{PipelineKey, TextureKey};
 use crate::light::{AreaLight, LightImage};
 use crate::render::LightProjection;
 use crate::render::{ScenePipeline, DEPTH_BUFFER_FORMAT};
@@ -195,22 +195,16 @@ impl ShadowMethod for Reference {
             .collect();
         let batch_buffer = layout::uniform_slots(&device, "Reference::batches", &batches.iter().map(|(_, b)| *b).collect::<Vec<_>>());
         let pixels = u64::from(ctx.width) * u64::from(ctx.height);
-        let sums = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("Reference::sums"),
-            size: pixels * 32,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
+        // From the pool: the sums are cleared below, and every map's layer before it is drawn.
+        let sums = ctx.scratch_buffer("Reference::sums", pixels * 32, wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST);
         // The depth maps are the depth buffers themselves (`sample_depth.wgsl`), one layer each.
-        let depth = device.create_texture(&wgpu::TextureDescriptor {
-            label: Some("Reference::depths"),
-            size: wgpu::Extent3d { width: resolution, height: resolution, depth_or_array_layers: layers },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
+        let depth = ctx.scratch_texture(TextureKey {
+            label: "Reference::depths",
+            width: resolution,
+            height: resolution,
+            layers,
             format: DEPTH_BUFFER_FORMAT,
             usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
-            view_formats: &[],
         });
         let layer_views: Vec<wgpu::TextureView> = (0..layers)
             .map(|layer| {

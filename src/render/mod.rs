@@ -24,7 +24,7 @@ use crate::gpu::scene::GpuScene;
 use crate::gpu::timing::GpuTimer;
 use crate::gpu::GpuContext;
 use crate::light::{LightCell, E0_GRID};
-use crate::render::method::{Counters, MethodContext};
+use crate::render::method::{Counters, MethodContext, Scratch};
 use crate::supervise::{cancelled_error, Supervisor};
 use crate::timing::Timings;
 pub use draw::{vertex_layout, ScenePipeline, DEPTH_BUFFER_FORMAT};
@@ -256,11 +256,14 @@ impl Renderer {
 
         // The method's visibility.
         let mut enc = encoder();
-        let counters = {
+        let (counters, scratch) = {
             let mut ctx = MethodContext {
                 gpu: &gpu,
                 pipelines: &mut self.pipelines,
                 derived: &mut self.derived,
+                buffers: &mut self.buffers,
+                textures: &mut self.textures,
+                scratch: Scratch::default(),
                 inputs: &inputs,
                 shadow_depth: &targets.shadow_depth.texture,
                 visibility: &targets.visibility.buffer,
@@ -274,9 +277,13 @@ impl Renderer {
                 projection: &projection,
                 supervisor,
             };
-            spec.method.record(&mut ctx, &spec.params)?
+            let counters = spec.method.record(&mut ctx, &spec.params);
+            (counters, std::mem::take(&mut ctx.scratch))
         };
+        let counters = counters?;
         submit(enc)?;
+        // The method's scratch buffers are free once its passes have run.
+        scratch.release(&mut self.buffers, &mut self.textures);
         let start = timings.phase("method", start);
         // A long method stops recording its batches once cancelled; what it left is discarded.
         go_on()?;

@@ -207,19 +207,12 @@ impl ShadowMethod for Wedges {
         let polygon_buffer = storage("Wedges::polygons", bytemuck::cast_slice(&volume.polygons_gpu()));
         let wedge_buffer = storage("Wedges::wedges", bytemuck::cast_slice(wedges));
         let ranges = storage("Wedges::tile_ranges", &vec![0u8; tile_count * 8]);
-        let li = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("Wedges::li"),
-            size: u64::from(spec.width) * u64::from(spec.height) * 4 * u64::from(uniforms.channels),
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
+        // From the pool: the LI buffer is cleared before the rasteriser runs, and the tiles pass
+        // writes every pixel's receiver record.
+        let pixels = u64::from(spec.width) * u64::from(spec.height);
+        let li = ctx.scratch_buffer("Wedges::li", pixels * 4 * u64::from(uniforms.channels), wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST);
         let counters = storage("Wedges::counters", &[0u8; 16]);
-        let receivers = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("Wedges::receivers"),
-            size: u64::from(spec.width) * u64::from(spec.height) * 32,
-            usage: wgpu::BufferUsages::STORAGE,
-            mapped_at_creation: false,
-        });
+        let receivers = ctx.scratch_buffer("Wedges::receivers", pixels * 32, wgpu::BufferUsages::STORAGE);
         let io = [
             layout::uniform(0),
             layout::storage_read(1),
