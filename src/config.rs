@@ -132,6 +132,11 @@ pub struct ServeConfig {
     #[arg(long, env = "PENUMBRA_CACHE_BYTES", default_value_t = crate::engine::DEFAULT_CACHE_BYTES)]
     pub cache_bytes: u64,
 
+    /// Bytes of idle GPU memory the renderer keeps for later frames, in each of its pools
+    /// (render targets, methods' scratch buffers, readback buffers); the longest idle go first.
+    #[arg(long, env = "PENUMBRA_POOL_BYTES", default_value_t = crate::gpu::pool::DEFAULT_POOL_BYTES)]
+    pub pool_bytes: u64,
+
     /// Render jobs admitted at once, waiting or running; one more answers 429 with Retry-After.
     #[arg(long, env = "PENUMBRA_QUEUE", default_value_t = 64, value_parser = clap::value_parser!(u32).range(1..))]
     pub queue: u32,

@@ -85,6 +85,8 @@ pub struct Engine {
     /// One frame at a time on the device.
     state: Mutex<RenderState>,
     references: Mutex<Lru<String, Arc<FrameOutput>>>,
+    /// The renderer's pool budget (`with_pool_budget`), kept for a renderer made anew.
+    pool_bytes: std::sync::atomic::AtomicU64,
 }
 
 impl Engine {
@@ -109,12 +111,21 @@ impl Engine {
             references: Mutex::new(Lru::new(REFERENCE_CACHE_ENTRIES)),
             uploads: Mutex::new(UploadStore::new(DEFAULT_CACHE_BYTES)),
             last_stats: Mutex::new(EngineStats::default()),
+            pool_bytes: std::sync::atomic::AtomicU64::new(crate::gpu::pool::DEFAULT_POOL_BYTES),
         }
     }
 
     /// Sets the upload cache's byte budget (scenes count their CPU and GPU copies).
     pub fn with_cache_budget(self, bytes: u64) -> Self {
         Self { uploads: Mutex::new(UploadStore::new(bytes)), ..self }
+    }
+
+    /// Sets how many bytes of idle GPU targets and scratch buffers the renderer keeps for
+    /// later frames (`Renderer::set_pool_budget`), now and after a device is replaced.
+    pub fn with_pool_budget(self, bytes: u64) -> Self {
+        self.pool_bytes.store(bytes, std::sync::atomic::Ordering::Relaxed);
+        self.state.lock().unwrap_or_else(|poisoned| poisoned.into_inner()).renderer.set_pool_budget(bytes);
+        self
     }
 
     /// The device in use now (another engine may share it: tests, several configurations).

@@ -3,7 +3,7 @@
 //! reuse; its counters show in the timing breakdown and, later, in `/metrics`.
 
 use std::any::Any;
-use std::collections::HashMap;
+use std::collections::{HashMap, VecDeque};
 use std::sync::Arc;
 
 /// Identifies a pipeline: the pass or method that owns it and a variant of it.
@@ -81,21 +81,31 @@ impl TextureKey {
     }
 }
 
-/// Idle objects by key, at most `max_per_key` of one key, so memory stays bounded when job
-/// sizes vary: what the target, buffer and readback pools share.
+/// Idle objects by key, at most `max_per_key` of one key and `budget` bytes in all (the
+/// objects given back longest ago go first), so memory stays bounded when job sizes vary:
+/// what the target, buffer and readback pools share.
 struct FreeList<K, T> {
     free: HashMap<K, Vec<T>>,
     max_per_key: usize,
+    /// One entry per idle object, the longest idle first: its key and bytes.
+    order: VecDeque<(K, u64)>,
+    bytes: u64,
+    budget: u64,
 }
 
-impl<K: std::hash::Hash + Eq, T> FreeList<K, T> {
+impl<K: std::hash::Hash + Eq + Clone, T> FreeList<K, T> {
     fn new(max_per_key: usize) -> Self {
-        Self { free: HashMap::new(), max_per_key }
+        Self { free: HashMap::new(), max_per_key, order: VecDeque::new(), bytes: 0, budget: DEFAULT_POOL_BYTES }
     }
 
     /// An idle object of `key`, or a new one from `create`; counted in `stats`.
     fn take_or(&mut self, key: K, stats: &mut PoolStats, create: impl FnOnce(K) -> T) -> T {
         if let Some(item) = self.free.get_mut(&key).and_then(Vec::pop) {
+            // Objects of one key are alike: forget the most recently idle entry of the key.
+            if let Some(at) = self.order.iter().rposition(|(k, _)| *k == key) {
+                let (_, bytes) = self.order.remove(at).unwrap_or((key, 0));
+                self.bytes -= bytes;
+            }
             stats.reused += 1;
             return item;
         }
@@ -103,14 +113,43 @@ impl<K: std::hash::Hash + Eq, T> FreeList<K, T> {
         create(key)
     }
 
-    /// Keeps `item` for a later `take_or`, unless enough of its key are idle already.
-    fn give(&mut self, key: K, item: T) {
-        let list = self.free.entry(key).or_default();
-        if list.len() < self.max_per_key {
-            list.push(item);
+    /// Keeps `item` (`bytes` of memory) for a later `take_or`, unless enough of its key are
+    /// idle already; then drops the longest idle objects while the pool holds more than its
+    /// budget.
+    fn give(&mut self, key: K, item: T, bytes: u64) {
+        let list = self.free.entry(key.clone()).or_default();
+        if list.len() >= self.max_per_key {
+            return;
+        }
+        list.push(item);
+        self.order.push_back((key, bytes));
+        self.bytes += bytes;
+        self.trim();
+    }
+
+    fn trim(&mut self) {
+        while self.bytes > self.budget {
+            let Some((key, bytes)) = self.order.pop_front() else { break };
+            if let Some(list) = self.free.get_mut(&key) {
+                if !list.is_empty() {
+                    list.remove(0);
+                }
+                if list.is_empty() {
+                    self.free.remove(&key);
+                }
+            }
+            self.bytes -= bytes;
         }
     }
+
+    fn set_budget(&mut self, bytes: u64) {
+        self.budget = bytes;
+        self.trim();
+    }
 }
+
+/// Bytes of idle objects each of the texture, buffer and readback pools keeps by default.
+pub const DEFAULT_POOL_BYTES: u64 = 1 << 30;
 
 /// A texture from the pool with its default view.
 pub struct PooledTexture {
@@ -151,12 +190,18 @@ impl TexturePool {
     }
 
     pub fn release(&mut self, texture: PooledTexture) {
-        self.free.give(texture.key, texture);
+        let (key, bytes) = (texture.key, texture.key.bytes());
+        self.free.give(key, texture, bytes);
     }
 
     /// Bytes held by idle targets.
     pub fn idle_bytes(&self) -> u64 {
-        self.free.free.iter().map(|(k, v)| k.bytes() * v.len() as u64).sum()
+        self.free.bytes
+    }
+
+    /// At most `bytes` of idle targets are kept.
+    pub fn set_budget(&mut self, bytes: u64) {
+        self.free.set_budget(bytes);
     }
 }
 
@@ -195,7 +240,18 @@ impl BufferPool {
     }
 
     pub fn release(&mut self, buffer: PooledBuffer) {
-        self.free.give(buffer.key, buffer);
+        let key = buffer.key;
+        self.free.give(key, buffer, key.size);
+    }
+
+    /// Bytes held by idle buffers.
+    pub fn idle_bytes(&self) -> u64 {
+        self.free.bytes
+    }
+
+    /// At most `bytes` of idle buffers are kept.
+    pub fn set_budget(&mut self, bytes: u64) {
+        self.free.set_budget(bytes);
     }
 }
 
@@ -226,7 +282,13 @@ impl ReadbackPool {
 
     /// Takes back an unmapped buffer.
     pub fn release(&mut self, buffer: wgpu::Buffer) {
-        self.free.give(buffer.size(), buffer);
+        let size = buffer.size();
+        self.free.give(size, buffer, size);
+    }
+
+    /// At most `bytes` of idle readback buffers are kept.
+    pub fn set_budget(&mut self, bytes: u64) {
+        self.free.set_budget(bytes);
     }
 }
 
@@ -288,6 +350,25 @@ impl DerivedResources {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn free_lists_keep_at_most_their_budget_dropping_the_longest_idle_first() {
+        let mut list: FreeList<u32, &str> = FreeList::new(2);
+        list.set_budget(100);
+        let mut stats = PoolStats::default();
+        list.give(1, "a", 40);
+        list.give(2, "b", 40);
+        list.give(1, "c", 40); // 120 > 100: "a", idle longest, goes
+        assert_eq!(list.bytes, 80);
+        assert_eq!(list.take_or(1, &mut stats, |_| "new"), "c");
+        assert_eq!(list.take_or(1, &mut stats, |_| "new"), "new");
+        assert_eq!(list.bytes, 40);
+        list.give(3, "d", 70); // 110: "b" goes
+        assert_eq!((list.bytes, list.take_or(2, &mut stats, |_| "new")), (70, "new"));
+        list.give(4, "e", 500); // over the budget alone: kept by no one
+        assert_eq!(list.bytes, 0);
+        assert_eq!(stats, PoolStats { created: 2, reused: 1 });
+    }
 
     #[test]
     fn derived_resources_are_reused_and_evicted_least_recently_used_first() {

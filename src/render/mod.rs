@@ -187,6 +187,14 @@ impl Renderer {
         &self.gpu
     }
 
+    /// Keeps at most `bytes` of idle targets, of idle buffers and of idle readback buffers
+    /// (each) for later frames; the longest idle go first.
+    pub fn set_pool_budget(&mut self, bytes: u64) {
+        self.textures.set_budget(bytes);
+        self.buffers.set_budget(bytes);
+        self.readbacks.set_budget(bytes);
+    }
+
     /// The layout scenes need for their material bind groups.
     pub fn material_layout(&self) -> &wgpu::BindGroupLayout {
         &self.layouts.material
