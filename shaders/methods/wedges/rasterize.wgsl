@@ -15,6 +15,12 @@
 
 #import methods/wedges/common.wgsl
 
+// `CHANNELS` and `COLOR_ANGLES` as pipeline constants (`methods::wedges` makes a
+// pipeline per value): on lavapipe a branch no lane takes still runs its code, so a uniform
+// light's passes hold no colour code at all, and the colour loop runs a fixed count.
+override CHANNELS: u32 = 1u;
+override COLOR_ANGLES: u32 = 8u;
+
 fn cross2(a: vec2<f32>, b: vec2<f32>) -> f32 {
     return a.x * b.y - a.y * b.x;
 }
@@ -205,7 +211,7 @@ fn wedge_share(w: Wedge, p: vec3<f32>, normal: vec3<f32>, e0: vec3<f32>) -> vec3
         whole = light_polygon_irradiance(&rect, 4u, p, normal);
     }
     let weight = sign(side) * w.a.w;
-    if params.channels == 1u {
+    if CHANNELS == 1u {
         return vec3<f32>(weight * part / max(whole, 1e-30));
     }
     return weight * colored_share(&poly, count, a2, d, p, normal, part, below_horizon, e0);
@@ -243,14 +249,14 @@ fn colored_share(poly: ptr<function, array<vec2<f32>, 8>>, count: u32, a2: vec2<
     }
     // The first direction within the table's first turn; the span then stays in its two.
     let start = fract((atan2(g.y, g.x) + lo) / TAU) * TAU;
-    let width = (hi - lo) / f32(params.color_angles);
+    let width = (hi - lo) / f32(COLOR_ANGLES);
     let line_normal = vec2<f32>(-d.y, d.x);
     let line_offset = dot(line_normal, a2);
     let n_light = frame.light_n.xyz;
     var emitted = vec3<f32>(0.0);
     var area = 0.0;
     var outer_before = sector(start, 1.0);
-    for (var j = 0u; j < params.color_angles; j++) {
+    for (var j = 0u; j < COLOR_ANGLES; j++) {
         let phi_a = start + width * f32(j);
         let phi_b = phi_a + width;
         let mid = phi_a + 0.5 * width;
@@ -351,8 +357,8 @@ fn tile_pixel(origin: vec2<u32>, k: u32) -> i32 {
 
 fn add_light(at: u32, delta: vec3<i32>) {
     if any(delta != vec3<i32>(0)) {
-        for (var k = 0u; k < params.channels; k++) {
-            atomicAdd(&li[at * params.channels + k], delta[k]);
+        for (var k = 0u; k < CHANNELS; k++) {
+            atomicAdd(&li[at * CHANNELS + k], delta[k]);
         }
         atomicAdd(&counters[1], 1u);
     }
@@ -383,7 +389,7 @@ fn penumbra_delta(index: u32, at: u32) -> vec3<i32> {
         return vec3<i32>(0);
     }
     var e0 = vec3<f32>(1.0);
-    if params.channels == 3u {
+    if CHANNELS == 3u {
         e0 = e0_in[at].rgb;
     }
     return -vec3<i32>(round(f32(params.full) * wedge_share(w, receiver.xyz, receivers[2u * at + 1u].xyz, e0)));

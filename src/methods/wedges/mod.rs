@@ -229,15 +229,25 @@ impl ShadowMethod for Wedges {
             layout::storage_read_write(12),
         ];
         let tiles_pipeline = ctx.screen_pipeline(PipelineKey::new("wedges.tiles"), "methods/wedges/tiles.wgsl", &io);
-        let umbra_pipeline = ctx.screen_pipeline(PipelineKey::new("wedges.umbra"), "methods/wedges/rasterize_umbra.wgsl", &io);
-        let penumbra_pipeline = ctx.screen_pipeline(PipelineKey::new("wedges.penumbra"), "methods/wedges/rasterize_penumbra.wgsl", &io);
-        let both_pipeline = ctx.screen_pipeline(PipelineKey::new("wedges.both"), "methods/wedges/rasterize_both.wgsl", &io);
         let resolve = ctx.screen_pipeline(PipelineKey::new("wedges.resolve"), "methods/wedges/resolve.wgsl", &io);
-        let mut entry = |name: &'static str, entry: &'static str| {
-            ctx.screen_entry(PipelineKey::new(name), "methods/wedges/rasterize_penumbra.wgsl", entry, &io)
+        // The rasteriser's pipelines are specialised by the LI buffer's channels and the colour
+        // steps (pipeline constants in rasterize.wgsl): a uniform light's passes hold no colour
+        // code, and the colour loop has a fixed count.
+        let constants = [("CHANNELS", f64::from(uniforms.channels)), ("COLOR_ANGLES", f64::from(uniforms.color_angles))];
+        let variant = uniforms.channels << 16 | uniforms.color_angles;
+        let mut raster = |name: &'static str, shader: &'static str, entry: &'static str| {
+            ctx.screen_specialized(PipelineKey { name, variant }, (shader, entry), &io, &constants)
         };
-        let (mark, size, shade, reset) =
-            (entry("wedges.inside", "mark_inside"), entry("wedges.inside_size", "inside_size"), entry("wedges.shade", "shade_listed"), entry("wedges.inside_reset", "inside_reset"));
+        let umbra_pipeline = raster("wedges.umbra", "methods/wedges/rasterize_umbra.wgsl", "main");
+        let penumbra_pipeline = raster("wedges.penumbra", "methods/wedges/rasterize_penumbra.wgsl", "main");
+        let both_pipeline = raster("wedges.both", "methods/wedges/rasterize_both.wgsl", "main");
+        let penumbra = "methods/wedges/rasterize_penumbra.wgsl";
+        let (mark, size, shade, reset) = (
+            raster("wedges.inside", penumbra, "mark_inside"),
+            raster("wedges.inside_size", penumbra, "inside_size"),
+            raster("wedges.shade", penumbra, "shade_listed"),
+            raster("wedges.inside_reset", penumbra, "inside_reset"),
+        );
         let sectors = if colored { ctx.light_table("wedges.sectors", sector_table) } else { std::sync::Arc::new(storage("Wedges::no_sectors", &[])) };
         let tile_pixels = u64::from(tile) * u64::from(tile);
         // The penumbra pass lists the pixels inside each wedge, a chunk of items at a time.
