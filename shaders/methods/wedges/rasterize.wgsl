@@ -383,14 +383,18 @@ fn inside_wedge(index: u32, at: u32) -> bool {
 
 // The penumbra term at receiver `at` for wedge `index`.
 fn penumbra_delta(index: u32, at: u32) -> vec3<i32> {
-    let receiver = receivers[2u * at];
-    let w = wedges[index];
     if !inside_wedge(index, at) {
         return vec3<i32>(0);
     }
+    return penumbra_delta_inside(index, at);
+}
+
+// `penumbra_delta` for a receiver known to lie inside the wedge (listed by `mark_inside`).
+fn penumbra_delta_inside(index: u32, at: u32) -> vec3<i32> {
     var e0 = vec3<f32>(1.0);
     if CHANNELS == 3u {
         e0 = e0_in[at].rgb;
     }
-    return -vec3<i32>(round(f32(params.full) * wedge_share(w, receiver.xyz, receivers[2u * at + 1u].xyz, e0)));
+    let share = wedge_share(wedges[index], receivers[2u * at].xyz, receivers[2u * at + 1u].xyz, e0);
+    return -vec3<i32>(round(f32(params.full) * share));
 }

@@ -58,7 +58,7 @@ fn shade_listed(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocati
         let tiles = tile_grid();
         let origin = vec2<u32>(job.tile % tiles.x, job.tile / tiles.x) * params.tile;
         let at = u32(tile_pixel(origin, pair.y));
-        add_light(at, penumbra_delta(job.primitive - params.polygon_count, at));
+        add_light(at, penumbra_delta_inside(job.primitive - params.polygon_count, at));
     }
 }
 
