@@ -99,7 +99,7 @@ impl Uniforms {
             mode: MODE_PCSS,
             threshold: 0.0,
             light_threshold: 0.0,
-            map_pitch: map_pitch_bytes(ctx.spec.shadow_resolution) / 4,
+            map_pitch: 0, // set by `run`, from the copy it makes
             _pad: 0,
         }
     }
@@ -133,24 +133,9 @@ pub(super) fn run(
     let mut entry = |variant: u32, entry: &'static str| ctx.screen_entry(PipelineKey { name, variant }, shader, entry, &io);
     let (classify, size, filter) = (entry(1, "classify"), entry(2, "listed_size"), entry(3, "filter_listed"));
 
+    let (map_depth, map_pitch) = ctx.shadow_depth_copy("Filter::map_depth", "filter_copy_map");
+    let uniforms = Uniforms { map_pitch, ..uniforms };
     let device = &ctx.gpu.device;
-    let side = ctx.spec.shadow_resolution;
-    // The shadow map's depths in a buffer, by a copy (a memcpy on lavapipe, where a compute
-    // pass reading every texel cost ~25 ms at 2048²).
-    let pitch = map_pitch_bytes(side);
-    // From the pool: the copy writes all of it.
-    let map_depth = ctx.scratch_buffer("Filter::map_depth", u64::from(pitch) * u64::from(side), wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST);
-    let shadow_depth = ctx.shadow_depth;
-    ctx.timer.time_encoder(ctx.encoder, "method", "filter_copy_map", |encoder| {
-        encoder.copy_texture_to_buffer(
-            shadow_depth.as_image_copy(),
-            wgpu::TexelCopyBufferInfo {
-                buffer: &map_depth,
-                layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(pitch), rows_per_image: None },
-            },
-            shadow_depth.size(),
-        )
-    });
     let pixels = u64::from(ctx.width) * u64::from(ctx.height);
     let listed = PixelListBuffers::new(device, ctx.encoder, "Filter", pixels);
     let uniform_buffer = ctx.uniforms("Filter::uniforms", &uniforms);
@@ -280,12 +265,6 @@ pub fn light_regions(image: &LightImage) -> [[f32; 4]; 21] {
     }
     table[WHOLE] = region(&(0..16).collect::<Vec<_>>());
     table
-}
-
-/// Bytes from one row of the shadow map's copy to the next: a row of f32 depths, padded to
-/// the copy alignment.
-fn map_pitch_bytes(side: u32) -> u32 {
-    (4 * side).div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT
 }
 
 #[cfg(test)]

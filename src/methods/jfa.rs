@@ -117,7 +117,8 @@ struct Uniforms {
     light_space: u32,
     edge_model: u32,
     inner: u32,
-    _pad: [u32; 2],
+    map_pitch: u32,
+    _pad: u32,
 }
 
 /// The flood's workgroups are `TILE`² cells (`TILE` in `neighbours.wgsl`).
@@ -230,7 +231,8 @@ fn common_uniforms(params: &Params) -> Uniforms {
         light_space: 0,
         edge_model: u32::from(params.get(&EDGE_MODEL) == "silhouette"),
         inner: 0,
-        _pad: [0; 2],
+        map_pitch: 0,
+        _pad: 0,
     }
 }
 
@@ -240,7 +242,9 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
     let device = ctx.gpu.device.clone();
     let grid = if which.light_space { (ctx.spec.shadow_resolution, ctx.spec.shadow_resolution) } else { (ctx.width, ctx.height) };
     let steps = steps(params.get(&ROUNDS), params.get(&FLOODING) == "standard");
-    let base = Uniforms { light_space: u32::from(which.light_space), ..base };
+    // The shadow map's depths, which the seeds, the rounds and the hard-shadow test read.
+    let (map_depth, map_pitch) = ctx.shadow_depth_copy("Jfa::map_depth", "jfa_copy_map");
+    let base = Uniforms { light_space: u32::from(which.light_space), map_pitch, ..base };
     // Slot 0: seed and final pass; slots 1…: one per round.
     let slots: Vec<Uniforms> = std::iter::once(0).chain(steps.iter().copied()).map(|step| Uniforms { step, ..base }).collect();
     let uniforms = layout::uniform_slots(&device, "Jfa::uniforms", &slots);
@@ -273,6 +277,7 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
         layout::storage_read_write(11),
         layout::storage_read_write(12),
         layout::storage_read_write(13),
+        layout::storage_read(14),
     ];
     let seed = ctx.screen_pipeline(PipelineKey::new(which.seed.0), which.seed.1, &io);
     // jfa-e lists its boundary pixels and seeds them in a compacted pass (boundary.wgsl).
@@ -312,6 +317,7 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
                 shaded_groups.as_entire_binding(),
                 tile_list.list.as_entire_binding(),
                 tile_groups.as_entire_binding(),
+                map_depth.as_entire_binding(),
             ],
         )
     };

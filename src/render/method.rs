@@ -145,6 +145,30 @@ impl MethodContext<'_> {
         texture
     }
 
+    /// The shadow map's depths copied into a pooled storage buffer, row after row, and the
+    /// texels from one row to the next (rows padded to the copy alignment); the copy is timed
+    /// as pass `pass` of the method. On lavapipe a storage-buffer load is a plain gather where
+    /// a texel fetch is not, and the copy is a memcpy (a compute pass reading every texel cost
+    /// ~25 ms at 2048²).
+    pub fn shadow_depth_copy(&mut self, label: &'static str, pass: &'static str) -> (wgpu::Buffer, u32) {
+        let texture = self.shadow_depth;
+        let side = texture.width();
+        let pitch = (4 * side).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
+        // The copy writes all of it.
+        let buffer = self.scratch_buffer(label, u64::from(pitch) * u64::from(side), wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST);
+        self.timer.time_encoder(self.encoder, "method", pass, |encoder| {
+            encoder.copy_texture_to_buffer(
+                texture.as_image_copy(),
+                wgpu::TexelCopyBufferInfo {
+                    buffer: &buffer,
+                    layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(pitch), rows_per_image: None },
+                },
+                texture.size(),
+            )
+        });
+        (buffer, pitch / 4)
+    }
+
     /// A uniform buffer holding `value` (laid out as its WGSL struct).
     pub fn uniforms<T: bytemuck::Pod>(&self, label: &'static str, value: &T) -> wgpu::Buffer {
         use wgpu::util::DeviceExt as _;

@@ -19,6 +19,7 @@ struct JfaParams {
     light_space: u32,         // 1 for jfa-l (the grid is the shadow map), 0 for jfa-e (the screen)
     edge_model: u32,          // 1: the visible part is bounded by the silhouette's own direction at the occluder; 0: the paper's line orthogonal to c→q
     inner: u32,               // jfa-l: 1 floods silhouettes into the occluders' footprints for the inner penumbra (past the paper)
+    map_pitch: u32,           // texels from one row of `map_depth` to the next
 }
 
 // What flooding carries (§4.1, §5.1), packed small because every round moves the whole grid
@@ -91,6 +92,15 @@ fn tile_holds_record(tile: vec2<i32>) -> bool {
 // row-major over `tile_count()`.
 @group(1) @binding(12) var<storage, read_write> tile_list: PixelList;
 @group(1) @binding(13) var<storage, read_write> tile_groups: array<u32, 3>;
+// The shadow map's depths, row after row, `params.map_pitch` apart (`MethodContext::
+// shadow_depth_copy`): read here rather than from the texture, where on lavapipe a texel fetch
+// costs several buffer loads (the seed pass reads nine per texel of the map).
+@group(1) @binding(14) var<storage, read> map_depth: array<f32>;
+
+// The shadow map's depth at texel t (inside the map).
+fn map_depth_at(t: vec2<i32>) -> f32 {
+    return map_depth[u32(t.y) * params.map_pitch + u32(t.x)];
+}
 
 // One invocation per tile: lists it where a record may reach it this round; counts the tiles
 // flooded.
@@ -141,7 +151,7 @@ fn hard_shadowed(pixel: vec2<u32>) -> bool {
     if !ls.inside {
         return false;
     }
-    let blocker = textureLoad(shadow_depth, shadow_texel(ls.uv), 0).r;
+    let blocker = map_depth_at(shadow_texel(ls.uv));
     return ls.depth - depth_bias(p, n, ls.depth, params.bias_texels, params.slope_bias_texels) > blocker;
 }
 

@@ -22,7 +22,7 @@ fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_id) l
     var best = src[index];
     var best_key = key_of(best);
     let receiver = textureLoad(shadow_position, p, 0);
-    let receiver_depth = textureLoad(shadow_depth, p, 0).r;
+    let receiver_depth = map_depth_at(p);
     if receiver.w > 0.0 {
         // The distinct occluders the neighbours offer besides the one held, in neighbour
         // order, gathered first and then weighed: neighbours mostly hand on the same

@@ -14,13 +14,13 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     var record = vec4<f32>(0.0);
     let here = textureLoad(shadow_position, p, 0);
     if here.w > 0.0 {
-        let depth = textureLoad(shadow_depth, p, 0).r;
+        let depth = map_depth_at(p);
         var silhouette = false;
         for (var b = -1; b <= 1; b++) {
             for (var a = -1; a <= 1; a++) {
                 let n = p + vec2<i32>(a, b);
                 if all(n >= vec2<i32>(0)) && all(n < vec2<i32>(i32(res))) {
-                    silhouette = silhouette || textureLoad(shadow_depth, n, 0).r > depth * (1.0 + params.silhouette_relative);
+                    silhouette = silhouette || map_depth_at(n) > depth * (1.0 + params.silhouette_relative);
                 }
             }
         }
