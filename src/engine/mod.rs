@@ -86,7 +86,7 @@ pub struct Engine {
     state: Mutex<RenderState>,
     references: Mutex<Lru<String, Arc<FrameOutput>>>,
     /// The renderer's pool budget (`with_pool_budget`), kept for a renderer made anew.
-    pool_bytes: std::sync::atomic::AtomicU64,
+    pool_bytes: u64,
 }
 
 impl Engine {
@@ -111,7 +111,7 @@ impl Engine {
             references: Mutex::new(Lru::new(REFERENCE_CACHE_ENTRIES)),
             uploads: Mutex::new(UploadStore::new(DEFAULT_CACHE_BYTES)),
             last_stats: Mutex::new(EngineStats::default()),
-            pool_bytes: std::sync::atomic::AtomicU64::new(crate::gpu::pool::DEFAULT_POOL_BYTES),
+            pool_bytes: crate::gpu::pool::DEFAULT_POOL_BYTES,
         }
     }
 
@@ -123,9 +123,8 @@ impl Engine {
     /// Sets how many bytes of idle GPU targets and scratch buffers the renderer keeps for
     /// later frames (`Renderer::set_pool_budget`), now and after a device is replaced.
     pub fn with_pool_budget(self, bytes: u64) -> Self {
-        self.pool_bytes.store(bytes, std::sync::atomic::Ordering::Relaxed);
         self.state.lock().unwrap_or_else(|poisoned| poisoned.into_inner()).renderer.set_pool_budget(bytes);
-        self
+        Self { pool_bytes: bytes, ..self }
     }
 
     /// The device in use now (another engine may share it: tests, several configurations).

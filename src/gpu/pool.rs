@@ -102,8 +102,7 @@ impl<K: std::hash::Hash + Eq + Clone, T> FreeList<K, T> {
     fn take_or(&mut self, key: K, stats: &mut PoolStats, create: impl FnOnce(K) -> T) -> T {
         if let Some(item) = self.free.get_mut(&key).and_then(Vec::pop) {
             // Objects of one key are alike: forget the most recently idle entry of the key.
-            if let Some(at) = self.order.iter().rposition(|(k, _)| *k == key) {
-                let (_, bytes) = self.order.remove(at).unwrap_or((key, 0));
+            if let Some((_, bytes)) = self.order.iter().rposition(|(k, _)| *k == key).and_then(|at| self.order.remove(at)) {
                 self.bytes -= bytes;
             }
             stats.reused += 1;

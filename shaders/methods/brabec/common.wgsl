@@ -269,7 +269,9 @@ fn nearest_in_blocks(w: Warped, receiver: u32, base: vec2<i32>, lo: vec2<i32>, h
         }
         for (var by = max(home.y - kb, b_lo.y); by <= min(home.y + kb, b_hi.y); by++) {
             let edge_row = abs(by - home.y) == kb;
-            var bx = max(home.x - kb, b_lo.x);
+            // An inner row starts at the ring's own left block, which may lie left of the
+            // square (then skipped): clamping it would visit an inner ring's block again.
+            var bx = select(home.x - kb, max(home.x - kb, b_lo.x), edge_row);
             loop {
                 if bx > min(home.x + kb, b_hi.x) {
                     break;
@@ -277,7 +279,7 @@ fn nearest_in_blocks(w: Warped, receiver: u32, base: vec2<i32>, lo: vec2<i32>, h
                 let block_lo = max(vec2<i32>(bx, by) * SUMMARY_BLOCK, lo);
                 let block_hi = min(vec2<i32>(bx, by) * SUMMARY_BLOCK + SUMMARY_BLOCK - 1, hi);
                 let closest = clamp(w.texel, vec2<f32>(block_lo) + 0.5, vec2<f32>(block_hi) + 0.5) - w.texel;
-                if dot(closest, closest) <= near.dist2 && block_may_hit(w, receiver, summary[by * blocks + bx]) {
+                if bx >= b_lo.x && dot(closest, closest) <= near.dist2 && block_may_hit(w, receiver, summary[by * blocks + bx]) {
                     for (var ty = block_lo.y; ty <= block_hi.y; ty++) {
                         for (var tx = block_lo.x; tx <= block_hi.x; tx++) {
                             let t = vec2<i32>(tx, ty);

@@ -4,8 +4,8 @@
 // relative to the depth near the sample as far from it (float depth). A fragment shader
 // writing a radial distance per fragment (frag_depth) turned lavapipe's early depth test off.
 
-// The sample's projection (`methods::reference::reversed_view_proj`); one slot per sample,
-// bound with a dynamic offset.
+// The sample's projection (`reversed_projection` × its view, in `methods::reference`); one
+// slot per sample, bound with a dynamic offset.
 @group(0) @binding(0) var<uniform> view_proj: mat4x4<f32>;
 
 @vertex
