@@ -7,7 +7,7 @@
 //!   each channel's emission on the centre's side. `jfa-l`, `jfa-e` and `brabec` read it
 //!   (`shaders/common/edge_table.wgsl`).
 //! - `sector_table`: the emission of the sectors around the light centre, from direction 0
-//!   to each angle and out to each fraction of the way to the rectangle's edge — exact along
+//!   to each angle, beyond each fraction of the way to the rectangle's edge — exact along
 //!   each ray for the piecewise-constant image. `wedges` integrates each channel over the
 //!   region a wedge cuts off with it (`shaders/methods/wedges/rasterize.wgsl`).
 
@@ -104,16 +104,17 @@ pub const SECTOR_ANGLES: u32 = 1024;
 pub const SECTOR_STATIONS: u32 = 64;
 
 /// The sector table, `2·SECTOR_ANGLES + 1` rows of `SECTOR_STATIONS` entries: entry (i, j) is
-/// the emission of the part of the light around its centre between the directions 0 and
-/// φᵢ = 2π·i/SECTOR_ANGLES (light-local, x along r, y along u, counter-clockwise) and out to
+/// the emission of the part of the light between the directions 0 and φᵢ = 2π·i/SECTOR_ANGLES
+/// from its centre (light-local, x along r, y along u, counter-clockwise) and beyond
 /// sⱼ = j/(SECTOR_STATIONS − 1) of the distance ρ(φ) to the rectangle's edge:
-/// ∫₀^φᵢ ∫₀^{sⱼ·ρ(φ)} emission(ρ, φ) ρ dρ dφ in rgb, and in w the same area without the image
-/// (emission 1 everywhere). A region bounded by two rays from the centre and by a curve
-/// ρ = s(φ)·ρ(φ) then has the emission C(φ₁, s) − C(φ₀, s) where s is constant, and a curve
-/// that varies is followed in short steps: an image's colour boundaries (whatever their
-/// direction) are integrated exactly, what is approximated is only how s varies within a
-/// step. Along each ray the integral is exact (the ray is cut where it crosses texel
-/// boundaries); over angle each row adds the ray at its step's middle angle.
+/// ∫₀^φᵢ ∫_{sⱼ·ρ(φ)}^{ρ(φ)} emission(ρ, φ) ρ dρ dφ in rgb, and in w the same area without the
+/// image (emission 1 everywhere). A region bounded by two rays from the centre, by the
+/// rectangle's edge and by a curve ρ = s(φ)·ρ(φ) then has the emission B(φ₁, s) − B(φ₀, s)
+/// where s is constant — two look-ups, the shape of a wedge's region (station 0 holds whole
+/// sectors) — and a curve that varies is followed in short steps: an image's colour
+/// boundaries (whatever their direction) are integrated exactly, what is approximated is only
+/// how s varies within a step. Along each ray the integral is exact (the ray is cut where it
+/// crosses texel boundaries); over angle each row adds the ray at its step's middle angle.
 pub fn sector_table(light: &AreaLight, image: &LightImage) -> Vec<[f32; 4]> {
     let half = light.size_m * 0.5;
     let (width, height) = (image.width, image.height);
@@ -143,6 +144,7 @@ pub fn sector_table(light: &AreaLight, image: &LightImage) -> Vec<[f32; 4]> {
         let station = |j: usize| reach * j as f32 / (stations - 1) as f32;
         cuts.extend((0..stations).map(station));
         cuts.sort_by(f32::total_cmp);
+        // Running integrals from the centre; each station's is taken from the ray's total below.
         let mut sum = glam::Vec3::ZERO;
         let mut last = 0.0f32;
         let mut next = 0;
@@ -168,15 +170,17 @@ pub fn sector_table(light: &AreaLight, image: &LightImage) -> Vec<[f32; 4]> {
             next += 1;
         }
     }
-    // Cumulative over angle, for two turns.
+    // Beyond each station (the ray's total less what lies within), cumulative over angle, for
+    // two turns; in f64 until stored, so the differences lose nothing to rounding.
     let rows = 2 * SECTOR_ANGLES as usize + 1;
     let mut table = vec![[0.0f32; 4]; rows * stations];
     let mut running = vec![[0.0f64; 4]; stations];
     for i in 1..rows {
         let ray = &rays[((i - 1) % SECTOR_ANGLES as usize) * stations..][..stations];
+        let total = ray[stations - 1];
         for j in 0..stations {
             for k in 0..4 {
-                running[j][k] += f64::from(ray[j][k]) * step;
+                running[j][k] += (f64::from(total[k]) - f64::from(ray[j][k])) * step;
                 table[i * stations + j][k] = running[j][k] as f32;
             }
         }
@@ -218,14 +222,16 @@ mod tests {
         for name in ["white", "stripes", "flame", "quadrants"] {
             let image = LightImage::builtin(name, &Default::default(), "f").unwrap();
             let table = sector_table(&light, &image);
-            let turn = sector(&table, SECTOR_ANGLES, last);
+            let turn = sector(&table, SECTOR_ANGLES, 0);
             let total = image.mean_emission() * light.area_m2();
             for k in 0..3 {
                 assert!((turn[k] - total[k]).abs() <= 0.002 * total.max_element(), "{name} channel {k}: {} vs {}", turn[k], total[k]);
             }
             assert!((turn[3] - light.area_m2()).abs() < 0.002 * light.area_m2(), "{name}: area {}", turn[3]);
             // The second turn repeats the first.
-            let twice = sector(&table, 2 * SECTOR_ANGLES, last);
+            let twice = sector(&table, 2 * SECTOR_ANGLES, 0);
+            // Nothing lies beyond the edge.
+            assert!(sector(&table, SECTOR_ANGLES, last).iter().all(|&v| v.abs() < 1e-6), "{name}");
             assert!((twice[0] - 2.0 * turn[0]).abs() < 1e-3 * turn[0].max(1e-3));
         }
         // `quadrants`: the first quarter turn (x > 0, y > 0: right of the centre, towards the
@@ -233,14 +239,14 @@ mod tests {
         let image = LightImage::builtin("quadrants", &Default::default(), "f").unwrap();
         let table = sector_table(&light, &image);
         let quarter = light.area_m2() / 4.0;
-        let first = sector(&table, SECTOR_ANGLES / 4, last);
+        let first = sector(&table, SECTOR_ANGLES / 4, 0);
         assert!(first[0] < 1e-6 && (first[1] - quarter).abs() < 1e-3 && first[2] < 1e-6, "{first:?}");
-        let second = sector(&table, SECTOR_ANGLES / 2, last);
+        let second = sector(&table, SECTOR_ANGLES / 2, 0);
         assert!((second[0] - first[0] - quarter).abs() < 1e-3 && (second[1] - first[1]).abs() < 1e-6, "{second:?}");
-        // Halfway out, a quarter of the area: (1/2)² of the quarter.
-        let inner = sector(&table, SECTOR_ANGLES / 4, last / 2);
+        // Beyond halfway out, three quarters of the area: 1 − (1/2)² of the quarter.
+        let outer = sector(&table, SECTOR_ANGLES / 4, last / 2);
         let s = (last / 2) as f32 / last as f32;
-        assert!((inner[3] - s * s * quarter).abs() < 1e-3, "{inner:?}");
+        assert!((outer[3] - (1.0 - s * s) * quarter).abs() < 1e-3, "{outer:?}");
     }
 
     #[test]

@@ -57,7 +57,7 @@ struct WorkItem {
 @group(1) @binding(6) var<storage, read_write> counters: array<atomic<u32>, 4>;
 @group(1) @binding(7) var<storage, read_write> visibility_out: array<vec4<f32>>;
 // The light's sector table (`light::tables::sector_table`): the emission (w: area) of the
-// sectors from direction 0 to each angle, out to each station.
+// sectors from direction 0 to each angle, beyond each station.
 @group(1) @binding(9) var<storage, read> sectors: array<vec4<f32>>;
 // The unshadowed irradiance per channel: what a coloured wedge's blocked irradiance is a
 // fraction of.

@@ -225,7 +225,8 @@ fn wedge_share(w: Wedge, p: vec3<f32>, normal: vec3<f32>, e0: vec3<f32>) -> vec3
 // line and the rectangle, so it is the sector between its extreme directions minus what lies
 // on c's side of the line. Its angular span is cut into `color_angles` steps; in each, the
 // line's distance is held at its value in the middle of the step and the sector table gives
-// the emission and the area between it and the rectangle's edge — the image's colour
+// the emission and the area between it and the rectangle's edge (two look-ups: the table
+// holds what lies beyond each distance) — the image's colour
 // boundaries, whatever their direction, are integrated exactly, only the line's drift within
 // a step is approximated — and the kernel at the step's middle weighs them. The mean comes
 // from these pieces, so their error only bends the hue: a uniform light gets back exactly
@@ -255,7 +256,6 @@ fn colored_share(poly: ptr<function, array<vec2<f32>, 8>>, count: u32, a2: vec2<
     let n_light = frame.light_n.xyz;
     var emitted = vec3<f32>(0.0);
     var area = 0.0;
-    var outer_before = sector(start, 1.0);
     for (var j = 0u; j < COLOR_ANGLES; j++) {
         let phi_a = start + width * f32(j);
         let phi_b = phi_a + width;
@@ -270,9 +270,7 @@ fn colored_share(poly: ptr<function, array<vec2<f32>, 8>>, count: u32, a2: vec2<
             enter = clamp(line_offset / along, 0.0, reach);
         }
         let s = enter / reach;
-        let outer_after = sector(phi_b, 1.0);
-        let piece = (outer_after - outer_before) - (sector(phi_b, s) - sector(phi_a, s));
-        outer_before = outer_after;
+        let piece = sector(phi_b, s) - sector(phi_a, s);
         var kernel = 1.0;
         if !below_horizon {
             let to_light = light_point(e * 0.5 * (enter + reach)) - p;
@@ -288,7 +286,7 @@ fn colored_share(poly: ptr<function, array<vec2<f32>, 8>>, count: u32, a2: vec2<
     let mean_radiance = emitted / area; // the image's emission per m² of light
     if below_horizon {
         // `part` is the region's area here (`wedge_share`).
-        let whole = sector(TAU, 1.0).rgb;
+        let whole = sector(TAU, 0.0).rgb;
         return part * mean_radiance / max(whole, vec3<f32>(1e-30));
     }
     let blocked = part * frame.light_center.w * mean_radiance;
@@ -298,7 +296,7 @@ fn colored_share(poly: ptr<function, array<vec2<f32>, 8>>, count: u32, a2: vec2<
 const TAU: f32 = 6.28318531;
 
 // The sector table (`light::tables::sector_table`) at angle `phi` ∈ [0, 4π) and radial
-// fraction `s`, linear between its rows and stations: rgb the emission, w the area.
+// fraction `s`, linear between its rows and stations: rgb the emission beyond s, w the area.
 fn sector(phi: f32, s: f32) -> vec4<f32> {
     let rows = 2u * params.sector_angles;
     let y = clamp(phi / TAU * f32(params.sector_angles), 0.0, f32(rows));
