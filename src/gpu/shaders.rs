@@ -91,9 +91,17 @@ fn append(name: &str, out: &mut String, seen: &mut HashSet<String>) {
     }
 }
 
-/// Compiles a composed shader into a module on `device`.
+/// Compiles a composed shader into a module on `device`, with wgpu's run-time checks except
+/// its loop bounding: naga gives every loop a 64-bit counter that ends it after 2⁶⁴ turns (for
+/// untrusted shaders, whose endless loops a driver could miscompile), and on lavapipe a loop
+/// pays for it each turn — 4 % of `wedges`' colour pass. These shaders are the crate's own,
+/// none taken from a request, and every loop in them has a bound it reaches (a count, a list's
+/// length or a search radius). Bounds checks and the guards of integer division stay.
 pub fn module(device: &wgpu::Device, name: &str) -> wgpu::ShaderModule {
-    device.create_shader_module(wgpu::ShaderModuleDescriptor { label: Some(name), source: wgpu::ShaderSource::Wgsl(compose(name).into()) })
+    let descriptor = wgpu::ShaderModuleDescriptor { label: Some(name), source: wgpu::ShaderSource::Wgsl(compose(name).into()) };
+    let checks = wgpu::ShaderRuntimeChecks { force_loop_bounding: false, ..wgpu::ShaderRuntimeChecks::checked() };
+    // SAFETY: every loop in `SOURCES` terminates (above); all other checks are kept.
+    unsafe { device.create_shader_module_trusted(descriptor, checks) }
 }
 
 #[cfg(test)]

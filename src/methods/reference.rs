@@ -62,7 +62,7 @@ const BATCH: u64 = 16;
 
 /// Memory the depth maps of one accumulate batch may take: 16 maps at the default 1024², 8 at
 /// 2048², two at 4096².
-const BATCH_MAP_BYTES: u64 = 128 << 20;
+const BATCH_MAP_BYTES: u64 = 256 << 20;
 
 /// The most samples one accumulate pass reads; mirrors `MAX_SAMPLES` in `accumulate.wgsl`.
 const BATCH_SAMPLES: usize = 16;
@@ -174,7 +174,7 @@ impl ShadowMethod for Reference {
                 let slot = BatchSample {
                     origin: rotation.transform_point3(sample.position).extend(projection.near).to_array(),
                     radiance: sample.weight.extend(0.0).to_array(),
-                    lens: [proj.y_axis.y, 2.0 * projection.tan_half / resolution as f32, 0.0, 0.0],
+                    lens: [proj.y_axis.y, 2.0 * projection.tan_half / resolution as f32, proj.y_axis.y * resolution as f32 * 0.5, 0.0],
                 };
                 ((proj * view).to_cols_array_2d(), slot)
             })
@@ -195,8 +195,15 @@ impl ShadowMethod for Reference {
             .collect();
         let batch_buffer = layout::uniform_slots(&device, "Reference::batches", &batches.iter().map(|(_, b)| *b).collect::<Vec<_>>());
         let pixels = u64::from(ctx.width) * u64::from(ctx.height);
-        // From the pool: the sums are cleared below, and every map's layer before it is drawn.
-        let sums = ctx.scratch_buffer("Reference::sums", pixels * 32, wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST);
+        // One channel where every weight is gray (its three sums would be equal), else three.
+        let channels: u32 = if samples.iter().all(|s| s.weight.x == s.weight.y && s.weight.x == s.weight.z) { 1 } else { 3 };
+        // From the pool: the first batch writes every covered pixel's sums (with no samples,
+        // they are cleared below), and every map's layer is cleared before it is drawn.
+        let sums = ctx.scratch_buffer(
+            "Reference::sums",
+            pixels * 8 * u64::from(channels),
+            wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+        );
         // The depth maps are the depth buffers themselves (`sample_depth.wgsl`), one layer each.
         let depth = ctx.scratch_texture(TextureKey {
             label: "Reference::depths",
@@ -217,7 +224,7 @@ impl ShadowMethod for Reference {
             })
             .collect();
         let depths_view = depth.create_view(&wgpu::TextureViewDescriptor { dimension: Some(wgpu::TextureViewDimension::D2Array), ..Default::default() });
-        let (depth_pipeline, resolve_pipeline) = self.pipelines(ctx);
+        let (depth_pipeline, resolve_pipeline) = self.pipelines(ctx, channels);
         let depth_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("Reference::sample"),
             layout: &depth_pipeline.get_bind_group_layout(0),
@@ -229,7 +236,9 @@ impl ShadowMethod for Reference {
             entries: &layout::entries(&[sums.as_entire_binding(), ctx.visibility.as_entire_binding()]),
         });
 
-        ctx.encoder.clear_buffer(&sums, 0, None);
+        if samples.is_empty() {
+            ctx.encoder.clear_buffer(&sums, 0, None);
+        }
         let (gx, gy) = ctx.dispatch_size();
         let total = samples.len() as u64;
         let mut before = 0;
@@ -256,10 +265,11 @@ impl ShadowMethod for Reference {
                 drop(pass);
             }
             {
-                // One pipeline per batch size (`SAMPLES` in accumulate.wgsl): all but the last
-                // batch are full.
+                // One pipeline per batch size (`SAMPLES` in accumulate.wgsl: all but the last
+                // batch are full), channels of the sums, and whether it is the first.
+                let first = b == 0;
                 let pipeline = ctx.screen_specialized(
-                    PipelineKey { name: "reference.accumulate", variant: count },
+                    PipelineKey { name: "reference.accumulate", variant: count | channels << 8 | u32::from(first) << 16 },
                     ("methods/reference/accumulate.wgsl", "main"),
                     &[
                         layout::uniform_dynamic(0),
@@ -275,7 +285,7 @@ impl ShadowMethod for Reference {
                         },
                         layout::storage_read_write(2),
                     ],
-                    &[("SAMPLES", f64::from(count))],
+                    &[("SAMPLES", f64::from(count)), ("CHANNELS", f64::from(channels)), ("FIRST", f64::from(u8::from(first)))],
                 );
                 let group = ctx.bind(
                     "Reference::accumulate",
@@ -320,7 +330,7 @@ impl ShadowMethod for Reference {
 }
 
 impl Reference {
-    fn pipelines(&self, ctx: &mut MethodContext<'_>) -> (std::sync::Arc<wgpu::RenderPipeline>, std::sync::Arc<wgpu::ComputePipeline>) {
+    fn pipelines(&self, ctx: &mut MethodContext<'_>, channels: u32) -> (std::sync::Arc<wgpu::RenderPipeline>, std::sync::Arc<wgpu::ComputePipeline>) {
         let device = &ctx.gpu.device;
         let depth = ctx.pipelines.render(PipelineKey::new("reference.sample_depth"), || {
             let sample_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -337,10 +347,11 @@ impl Reference {
             };
             pipeline.build(device)
         });
-        let resolve = ctx.screen_pipeline(
-            PipelineKey::new("reference.resolve"),
-            "methods/reference/resolve.wgsl",
+        let resolve = ctx.screen_specialized(
+            PipelineKey { name: "reference.resolve", variant: channels },
+            ("methods/reference/resolve.wgsl", "main"),
             &[layout::storage_read(0), layout::storage_read_write(1)],
+            &[("CHANNELS", f64::from(channels))],
         );
         (depth, resolve)
     }

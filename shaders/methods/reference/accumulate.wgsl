@@ -17,11 +17,17 @@
 const MAX_SAMPLES: u32 = 16u;
 // The samples in this pipeline's batches: one pipeline per batch size.
 override SAMPLES: u32 = MAX_SAMPLES;
+// Channels of the sums: 1 where every sample's weight is gray (a uniform or shaped white
+// light: its channels' sums would be equal), else 3. Fewer bytes per pixel to read and write
+// each batch, and a third of the additions.
+override CHANNELS: u32 = 3u;
+// The first batch writes the sums instead of adding to them (nothing to clear or read).
+override FIRST: bool = false;
 
 struct BatchSample {
     origin: vec4<f32>,   // xyz: the sample point y in view coordinates (rotation · y); w: its map's near plane, metres
     radiance: vec4<f32>, // rgb: L(y) × stratum area, the sample's weight in the estimator
-    lens: vec4<f32>,     // x: 1 / tan of its frustum's half angle; y: a texel's width per metre of depth (2·tan / resolution)
+    lens: vec4<f32>,     // x: 1 / tan of its frustum's half angle; y: a texel's width per metre of depth (2·tan / resolution); z: x · resolution / 2, texels per unit of tan
 }
 
 struct Batch {
@@ -39,7 +45,8 @@ struct Batch {
 // the map holds nothing. Read where they were drawn: a texel fetch costs more than a buffer
 // load on lavapipe, but less than copying every map into a buffer.
 @group(1) @binding(1) var depths: texture_depth_2d_array;
-@group(1) @binding(2) var<storage, read_write> sums: array<vec4<f32>>; // 2 per pixel
+// Per covered pixel, 2·CHANNELS floats: Σ L·G·V, then Σ L·G (`resolve.wgsl` reads them).
+@group(1) @binding(2) var<storage, read_write> sums: array<f32>;
 
 struct Sums {
     shadowed: vec3<f32>,
@@ -52,23 +59,31 @@ fn add_sample(sums: ptr<function, Sums>, x: vec3<f32>, n: vec3<f32>, bias: f32, 
     let v = x - s.origin.xyz; // from the sample to x
     let depth = -v.z;         // along the light normal
     let inv_dist = inverseSqrt(dot(v, v));
-    let cos_x = -dot(n, v) * inv_dist;
-    let cos_y = depth * inv_dist;
-    let g = select(0.0, cos_x * cos_y * inv_dist * inv_dist, cos_x > 0.0 && cos_y > 0.0);
-    let ndc = v.xy * (s.lens.x / depth);
-    let uv = vec2<f32>(ndc.x * 0.5 + 0.5, 0.5 - ndc.y * 0.5);
-    let texel = min(vec2<u32>(clamp(uv, vec2<f32>(0.0), vec2<f32>(1.0)) * f32(batch.resolution)), vec2<u32>(batch.resolution - 1u));
+    let inv_dist2 = inv_dist * inv_dist;
+    // G = cosθx·cosθy/|v|² with cosθx = −n·v/|v|, cosθy = depth/|v|; 0 behind either surface.
+    let g = max(-dot(n, v), 0.0) * max(depth, 0.0) * inv_dist2 * inv_dist2;
+    // The map's texel coordinates (x right, y down from its top-left corner).
+    let half = 0.5 * f32(batch.resolution);
+    let f = v.xy * (s.lens.z / depth);
+    let t = vec2<f32>(half + f.x, half - f.y);
+    let texel = vec2<u32>(clamp(t, vec2<f32>(0.0), vec2<f32>(f32(batch.resolution) - 1.0)));
     let stored = textureLoad(depths, texel, layer, 0);
     // The bias in metres at the receiver (texels of this map there × `bias`) shrinks with the
     // resolution, so the estimate converges to true visibility. Lit when the receiver, brought
     // that much nearer along its ray, is no deeper than the nearest surface:
     // depth·(1 − bias_m/|v|) ≤ near/stored, multiplied out so that an empty texel (0) is lit
-    // without a division. Outside the frustum nothing is recorded: lit.
+    // without a division. Outside the frustum nothing is recorded: lit. (Behind the sample,
+    // G is 0 whatever the test says.)
     let bias_m = depth * s.lens.y * bias;
-    let inside = depth > 0.0 && all(uv >= vec2<f32>(0.0)) && all(uv < vec2<f32>(1.0));
+    let inside = all(t >= vec2<f32>(0.0)) && all(t < vec2<f32>(2.0 * half));
     let visible = !inside || depth * (1.0 - bias_m * inv_dist) * stored <= s.origin.w;
-    (*sums).shadowed += s.radiance.rgb * select(0.0, g, visible);
-    (*sums).unshadowed += s.radiance.rgb * g;
+    if CHANNELS == 1u {
+        (*sums).shadowed.x += s.radiance.r * select(0.0, g, visible);
+        (*sums).unshadowed.x += s.radiance.r * g;
+    } else {
+        (*sums).shadowed += s.radiance.rgb * select(0.0, g, visible);
+        (*sums).unshadowed += s.radiance.rgb * g;
+    }
 }
 
 @compute @workgroup_size(8, 8)
@@ -105,7 +120,15 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     if SAMPLES > 13u { add_sample(&s, x, n, bias, 13u, batch.samples[13]); }
     if SAMPLES > 14u { add_sample(&s, x, n, bias, 14u, batch.samples[14]); }
     if SAMPLES > 15u { add_sample(&s, x, n, bias, 15u, batch.samples[15]); }
-    let index = 2u * (pixel.y * frame.sizes.x + pixel.x);
-    sums[index] += vec4<f32>(s.shadowed, 0.0);
-    sums[index + 1u] += vec4<f32>(s.unshadowed, 0.0);
+    let base = 2u * CHANNELS * (pixel.y * frame.sizes.x + pixel.x);
+    for (var c = 0u; c < CHANNELS; c++) {
+        var shadowed = s.shadowed[c];
+        var unshadowed = s.unshadowed[c];
+        if !FIRST {
+            shadowed += sums[base + c];
+            unshadowed += sums[base + CHANNELS + c];
+        }
+        sums[base + c] = shadowed;
+        sums[base + CHANNELS + c] = unshadowed;
+    }
 }
