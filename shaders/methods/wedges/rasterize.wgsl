@@ -134,16 +134,20 @@ fn light_point(x: vec2<f32>) -> vec3<f32> {
     return frame.light_center.xyz + x.x * frame.light_r.xyz + x.y * frame.light_u.xyz;
 }
 
-// The penumbra wedge's contribution at p (§3's light intensity, computed exactly for a
-// rectangle): project the silhouette edge from p onto the light plane (c' at the origin); a
-// light point x is hidden by one more layer than c' for each projected edge that the segment
-// c'x crosses inwards, so the light beyond this edge inside its angular sector from c' —
-// clipped to the rectangle — is this edge's share, added where c' is outside the projected
-// occluder (outer penumbra) and removed where it is inside (inner). Returns that share as a
-// signed fraction of the irradiance the whole light gives p, times the multiplicity; 0
-// outside the wedge. Per channel (`colored_share`) for a coloured light, where `e0` is p's
-// unshadowed irradiance.
-fn wedge_share(w: Wedge, p: vec3<f32>, normal: vec3<f32>, e0: vec3<f32>) -> vec3<f32> {
+// The silhouette edge projected from p onto the light plane (light coordinates, c' at the
+// origin), and `side` > 0 where c' lies on the left of a' → b'. `crosses` is false where the
+// edge's share at p is certainly empty: no part of it lies between the light and p, the
+// projected edge misses the rectangle's bounding box, or it passes through c' (an empty
+// sector).
+struct ProjectedEdge {
+    a2: vec2<f32>,
+    b2: vec2<f32>,
+    side: f32,
+    crosses: bool,
+}
+
+fn projected_edge(w: Wedge, p: vec3<f32>) -> ProjectedEdge {
+    var edge: ProjectedEdge;
     let c = frame.light_center.xyz;
     let n = frame.light_n.xyz;
     let half = 0.5 * vec2<f32>(frame.light_n.w, frame.light_u.w);
@@ -155,7 +159,7 @@ fn wedge_share(w: Wedge, p: vec3<f32>, normal: vec3<f32>, e0: vec3<f32>) -> vec3
     // Only the part of the edge between the light and p can hide the light from p.
     let limit = hp * (1.0 - 1e-4);
     if (ha >= limit && hb >= limit) || min(ha, hb) <= 0.0 {
-        return vec3<f32>(0.0);
+        return edge;
     }
     if ha >= limit {
         a = a + (b - a) * ((ha - limit) / (ha - hb));
@@ -167,18 +171,41 @@ fn wedge_share(w: Wedge, p: vec3<f32>, normal: vec3<f32>, e0: vec3<f32>) -> vec3
     }
     let qa = p + (a - p) * (hp / (hp - ha));
     let qb = p + (b - p) * (hp / (hp - hb));
-    let a2 = vec2<f32>(dot(qa - c, frame.light_r.xyz), dot(qa - c, frame.light_u.xyz));
-    let b2 = vec2<f32>(dot(qb - c, frame.light_r.xyz), dot(qb - c, frame.light_u.xyz));
+    edge.a2 = vec2<f32>(dot(qa - c, frame.light_r.xyz), dot(qa - c, frame.light_u.xyz));
+    edge.b2 = vec2<f32>(dot(qb - c, frame.light_r.xyz), dot(qb - c, frame.light_u.xyz));
+    let a2 = edge.a2;
+    let b2 = edge.b2;
     // The share is empty unless the projected edge meets the rectangle (which is convex and
     // holds c'); a bounding-box test rejects most misses.
     if max(a2.x, b2.x) < -half.x || min(a2.x, b2.x) > half.x || max(a2.y, b2.y) < -half.y || min(a2.y, b2.y) > half.y {
-        return vec3<f32>(0.0);
+        return edge;
     }
     let d = b2 - a2;
-    let side = cross2(d, -a2); // > 0: c' on the left of a' → b'
-    if abs(side) <= 1e-9 * (dot(d, d) + dot(a2, a2)) {
-        return vec3<f32>(0.0); // the edge passes through c': its sector is empty
+    edge.side = cross2(d, -a2);
+    // The edge passes through c': its sector is empty.
+    edge.crosses = abs(edge.side) > 1e-9 * (dot(d, d) + dot(a2, a2));
+    return edge;
+}
+
+// The penumbra wedge's contribution at p (§3's light intensity, computed exactly for a
+// rectangle): project the silhouette edge from p onto the light plane (c' at the origin); a
+// light point x is hidden by one more layer than c' for each projected edge that the segment
+// c'x crosses inwards, so the light beyond this edge inside its angular sector from c' —
+// clipped to the rectangle — is this edge's share, added where c' is outside the projected
+// occluder (outer penumbra) and removed where it is inside (inner). Returns that share as a
+// signed fraction of the irradiance the whole light gives p, times the multiplicity; 0
+// outside the wedge. Per channel (`colored_share`) for a coloured light, where `e0` is p's
+// unshadowed irradiance.
+fn wedge_share(w: Wedge, p: vec3<f32>, normal: vec3<f32>, e0: vec3<f32>) -> vec3<f32> {
+    let edge = projected_edge(w, p);
+    if !edge.crosses {
+        return vec3<f32>(0.0);
     }
+    let half = 0.5 * vec2<f32>(frame.light_n.w, frame.light_u.w);
+    let a2 = edge.a2;
+    let b2 = edge.b2;
+    let d = b2 - a2;
+    let side = edge.side;
     var poly = array<vec2<f32>, 8>(-half, vec2<f32>(half.x, -half.y), half, vec2<f32>(-half.x, half.y), vec2<f32>(0.0), vec2<f32>(0.0), vec2<f32>(0.0), vec2<f32>(0.0));
     var count = 4u;
     // Beyond the edge's line, on the side away from c'.

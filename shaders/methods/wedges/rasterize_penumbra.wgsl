@@ -23,7 +23,10 @@ fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) groups
     }
 }
 
-// Lists the pixels of each item's tile that lie inside its wedge.
+// Lists the pixels of each item's tile that lie inside its wedge and whose projected edge
+// crosses the light (`projected_edge`): a quarter of the pixels inside a wedge are not, and
+// in the shading pass they would idle beside lanes that integrate (lavapipe runs a SIMD
+// group's code for all of its lanes).
 @compute @workgroup_size(64)
 fn mark_inside(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>, @builtin(local_invocation_index) local: u32) {
     let item = tile_item(group, groups, local);
@@ -34,7 +37,7 @@ fn mark_inside(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups)
     let wedge = item.job.primitive - params.polygon_count;
     for (var k = local; k < params.tile * params.tile; k += 64u) {
         let at = tile_pixel(item.origin, k);
-        if at >= 0 && inside_wedge(wedge, u32(at)) {
+        if at >= 0 && inside_wedge(wedge, u32(at)) && projected_edge(wedges[wedge], receivers[2u * u32(at)].xyz).crosses {
             inside.pairs[atomicAdd(&inside.count, 1u)] = vec2<u32>(index, k);
         }
     }
