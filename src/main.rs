@@ -122,7 +122,11 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 Some(dir) => PathPolicy::Under(dir.clone()),
                 None => PathPolicy::Deny,
             };
-            let engine = Arc::new(Engine::new(gpu, config.render.limits.limits(), paths).with_cache_budget(config.cache_bytes).with_pool_budget(config.pool_bytes));
+            let engine = Arc::new(
+                Engine::new(gpu, config.render.limits.limits(), paths)
+                    .with_cache_budget(config.cache_bytes)
+                    .with_pool_budget(config.pool_bytes),
+            );
             let runtime = tokio::runtime::Runtime::new()?;
             runtime.block_on(penumbra::server::serve(config, engine))
         }

@@ -127,7 +127,14 @@ fn metrics(test: &Planar, reference: &Planar, mask: &[bool]) -> Metrics {
     );
     let flip = masked_mean(flip_map.to_vec().into_iter().map(f64::from), mask);
     let mae_rgb = absolute.map(|a| a / count as f64);
-    Metrics { rmse, mae: absolute.iter().sum::<f64>() / samples, mae_rgb, psnr_db: if rmse > 0.0 { -20.0 * rmse.log10() } else { f64::INFINITY }, ssim, flip }
+    Metrics {
+        rmse,
+        mae: absolute.iter().sum::<f64>() / samples,
+        mae_rgb,
+        psnr_db: if rmse > 0.0 { -20.0 * rmse.log10() } else { f64::INFINITY },
+        ssim,
+        flip,
+    }
 }
 
 fn masked_mean(values: impl Iterator<Item = f64>, mask: &[bool]) -> f64 {
@@ -159,7 +166,17 @@ mod tests {
                 visibility.push([v; 3]);
             }
         }
-        FrameOutput { width, height, color, srgb8: None, visibility: Some(visibility), depth: None, e0: None, counters: Default::default(), warnings: Vec::new() }
+        FrameOutput {
+            width,
+            height,
+            color,
+            srgb8: None,
+            visibility: Some(visibility),
+            depth: None,
+            e0: None,
+            counters: Default::default(),
+            warnings: Vec::new(),
+        }
     }
 
     /// A soft edge: lit on the left, umbra on the right, a penumbra from 0.75 to 0.25 between

@@ -1517,7 +1517,8 @@ async fn the_assimp_gltf2_corpus_renders_with_shadows_or_is_refused_by_name() {
         .output()
         .expect("node runs");
     assert!(validated.status.success(), "{}", String::from_utf8_lossy(&validated.stderr));
-    let verdicts: Vec<Value> = validated.stdout.split(|&b| b == b'\n').filter(|l| !l.is_empty()).map(|l| serde_json::from_slice(l).unwrap()).collect();
+    let verdicts: Vec<Value> =
+        validated.stdout.split(|&b| b == b'\n').filter(|l| !l.is_empty()).map(|l| serde_json::from_slice(l).unwrap()).collect();
     assert_eq!(verdicts.len(), files.len());
 
     let (_daemon, base) = serve(&["--scene-dir", corpus.to_str().unwrap()], &[]).await;
@@ -1533,15 +1534,17 @@ async fn the_assimp_gltf2_corpus_renders_with_shadows_or_is_refused_by_name() {
         let valid = verdict["errors"] == 0;
         let job = json!({"scene": {"path": relative, "floor": true}, "method": {"name": "pcss"},
                          "output": {"width": width, "height": height, "format": "exr"}});
-        let response =
-            client.post(format!("{base}/v1/render")).header("accept", "application/json").json(&job).send().await.unwrap();
+        let response = client.post(format!("{base}/v1/render")).header("accept", "application/json").json(&job).send().await.unwrap();
         let status = response.status();
         let answer: Value = response.json().await.unwrap();
         if !status.is_success() {
             assert!(status.is_client_error(), "{relative}: {status} {answer}");
             let message = answer["error"]["message"].as_str().unwrap();
             assert_eq!(answer["error"]["field"], "scene", "{relative}: {answer}");
-            assert!(!valid || !required.is_empty() || triangles == 0, "{relative}: the validator passes it, it has {triangles} triangles, yet {answer}");
+            assert!(
+                !valid || !required.is_empty() || triangles == 0,
+                "{relative}: the validator passes it, it has {triangles} triangles, yet {answer}"
+            );
             for extension in &required {
                 assert!(message.contains(extension), "{relative}: the refusal does not name {extension}: {message}");
             }
@@ -1565,7 +1568,11 @@ async fn the_assimp_gltf2_corpus_renders_with_shadows_or_is_refused_by_name() {
             } else {
                 assert!(drawn > triangles, "{relative}: {drawn} triangles drawn, {triangles} in its meshes");
             }
-            assert_eq!(answer["timings"]["scene_textures"].as_u64().unwrap() > 0, verdict["textures"].as_bool().unwrap(), "{relative}: textures");
+            assert_eq!(
+                answer["timings"]["scene_textures"].as_u64().unwrap() > 0,
+                verdict["textures"].as_bool().unwrap(),
+                "{relative}: textures"
+            );
         }
         let image = client.get(format!("{base}{}", answer["image"].as_str().unwrap())).send().await.unwrap().bytes().await.unwrap();
         let (_, _, channels) = common::decode_exr(&image);
@@ -1584,7 +1591,8 @@ async fn the_assimp_gltf2_corpus_renders_with_shadows_or_is_refused_by_name() {
 
         if valid {
             // The same scene through the client, packed into one GLB and uploaded.
-            let job = json!({"scene": {"path": file, "floor": true}, "method": {"name": "pcss"}, "output": {"width": width, "height": height}});
+            let job =
+                json!({"scene": {"path": file, "floor": true}, "method": {"name": "pcss"}, "output": {"width": width, "height": height}});
             let job_file = work.path().join("job.json");
             std::fs::write(&job_file, job.to_string()).unwrap();
             let out = work.path().join("submitted.exr");
@@ -1701,8 +1709,7 @@ async fn relative_uris_are_read_inside_the_scene_directory_only() {
     // Packed into one GLB it uploads, and the receipt says what penumbra will ignore.
     let mut document: Value = serde_json::from_slice(&with_uri("mesh%20data.bin")).unwrap();
     document["extensionsUsed"] = json!(["KHR_texture_transform"]);
-    let packed =
-        penumbra::scene::gltf::pack(&serde_json::to_vec(&document).unwrap(), &model, &Limits::default(), "scene").unwrap();
+    let packed = penumbra::scene::gltf::pack(&serde_json::to_vec(&document).unwrap(), &model, &Limits::default(), "scene").unwrap();
     let response = client.post(format!("{base}/v1/scenes")).body(packed).send().await.unwrap();
     assert_eq!(response.status(), StatusCode::CREATED);
     let receipt: Value = response.json().await.unwrap();

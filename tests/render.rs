@@ -938,10 +938,12 @@ fn fringe_pixels(reference: &[[f32; 3]], halves: Halves) -> [(&'static str, Vec<
     let clearly_coloured = |i: &usize| (reference[*i][0] - reference[*i][2]).abs() > 0.2;
     let side = |range: std::ops::Range<usize>| -> Vec<usize> {
         (0..128)
-            .flat_map(|across| range.clone().map(move |k| match halves {
-                Halves::LeftRight => across * 128 + k,
-                Halves::TopBottom => k * 128 + across,
-            }))
+            .flat_map(|across| {
+                range.clone().map(move |k| match halves {
+                    Halves::LeftRight => across * 128 + k,
+                    Halves::TopBottom => k * 128 + across,
+                })
+            })
             .filter(clearly_coloured)
             .collect()
     };
@@ -974,14 +976,24 @@ fn every_soft_method_colours_each_side_of_an_edge_with_the_hidden_half_missing()
                 // orientation); and it colours most of it (where it does not, its penumbra
                 // ends elsewhere than the reference's — a matter of its gray level).
                 let coloured: Vec<usize> = pixels.iter().copied().filter(|&i| (v[i][0] - v[i][2]).abs() > 0.02).collect();
-                let agree = coloured.iter().filter(|&&i| (v[i][0] - v[i][2]).signum() == (reference[i][0] - reference[i][2]).signum()).count();
+                let agree =
+                    coloured.iter().filter(|&&i| (v[i][0] - v[i][2]).signum() == (reference[i][0] - reference[i][2]).signum()).count();
                 eprintln!(
                     "{method}, {halves:?}: {side} side, {} of {} fringe pixels coloured, {agree} of them with the reference's hue",
                     coloured.len(),
                     pixels.len()
                 );
-                assert!(coloured.len() as f32 >= 0.8 * pixels.len() as f32, "{method}, {halves:?}, {side}: {} of {} coloured", coloured.len(), pixels.len());
-                assert!(agree as f32 >= 0.97 * coloured.len() as f32, "{method}, {halves:?}, {side} side: {agree} of {} agree", coloured.len());
+                assert!(
+                    coloured.len() as f32 >= 0.8 * pixels.len() as f32,
+                    "{method}, {halves:?}, {side}: {} of {} coloured",
+                    coloured.len(),
+                    pixels.len()
+                );
+                assert!(
+                    agree as f32 >= 0.97 * coloured.len() as f32,
+                    "{method}, {halves:?}, {side} side: {agree} of {} agree",
+                    coloured.len()
+                );
             }
             let error = fringe_error(&v, &reference, &all);
             eprintln!("{method}, {halves:?}: mean |V − Vref| over the fringes {error:.3} (pcss, gray: {gray:.3})");

@@ -117,7 +117,11 @@ pub struct BenchReport {
 pub fn run(engine: &Engine, options: &BenchOptions) -> anyhow::Result<BenchReport> {
     let (width, height) = parse_size(&options.size)?;
     let mut methods: Vec<(String, MethodSpec)> = if options.methods.is_empty() {
-        REGISTRY.iter().filter(|m| m.name() != "reference").map(|m| (m.name().to_owned(), MethodSpec { name: m.name().into(), params: Map::new() })).collect()
+        REGISTRY
+            .iter()
+            .filter(|m| m.name() != "reference")
+            .map(|m| (m.name().to_owned(), MethodSpec { name: m.name().into(), params: Map::new() }))
+            .collect()
     } else {
         options.methods.iter().map(|text| Ok((text.clone(), parse_method(text)?))).collect::<anyhow::Result<_>>()?
     };
@@ -141,7 +145,10 @@ pub fn run(engine: &Engine, options: &BenchOptions) -> anyhow::Result<BenchRepor
             let (light_name, light_params) = parse_named(light)?;
             let base = Job {
                 scene: parse_scene(scene)?.into(),
-                light: crate::job::LightSpec { image: Some(AssetRef::Builtin { name: light_name, params: light_params }), ..Default::default() },
+                light: crate::job::LightSpec {
+                    image: Some(AssetRef::Builtin { name: light_name, params: light_params }),
+                    ..Default::default()
+                },
                 shadow_map: crate::job::ShadowMapSpec { resolution: options.shadow_map },
                 output: crate::job::OutputSpec { width, height, format: OutputFormat::Png, exposure: 0.0 },
                 ..Job::embedded_default()
@@ -157,7 +164,12 @@ pub fn run(engine: &Engine, options: &BenchOptions) -> anyhow::Result<BenchRepor
             progress.inc(1);
 
             progress.set_message(format!("{case}: E0, exact and interpolated"));
-            e0.push(e0_accuracy(engine, scene, light, &exr(&Job { method: MethodSpec { name: "hard".into(), params: Map::new() }, ..base.clone() }))?);
+            e0.push(e0_accuracy(
+                engine,
+                scene,
+                light,
+                &exr(&Job { method: MethodSpec { name: "hard".into(), params: Map::new() }, ..base.clone() }),
+            )?);
             progress.inc(2);
 
             // Errors, from one EXR frame each (not timed).
@@ -173,7 +185,9 @@ pub fn run(engine: &Engine, options: &BenchOptions) -> anyhow::Result<BenchRepor
             for repetition in 0..options.repeat {
                 for ((label, method), runs) in methods.iter().zip(&mut runs) {
                     progress.set_message(format!("{case}: {label} ({}/{})", repetition + 1, options.repeat));
-                    let rendered = engine.render(&Job { method: method.clone(), ..base.clone() }, &()).map_err(|e| anyhow::anyhow!("{case}: {label}: {e}"))?;
+                    let rendered = engine
+                        .render(&Job { method: method.clone(), ..base.clone() }, &())
+                        .map_err(|e| anyhow::anyhow!("{case}: {label}: {e}"))?;
                     runs.push(rendered.timings);
                     progress.inc(1);
                 }
@@ -272,7 +286,8 @@ fn e0_accuracy(engine: &Engine, scene: &str, light: &str, job: &Job) -> anyhow::
     }
     let (name, params) = parse_named(light)?;
     let image = crate::light::LightImage::builtin(&name, &params, "light").map_err(|e| anyhow::anyhow!("{light}: {}", e.message))?;
-    let unit = crate::light::AreaLight::new(glam::Vec3::ZERO, -glam::Vec3::Y, -glam::Vec3::Z, glam::Vec2::ONE, 1.0).map_err(|e| anyhow::anyhow!(e.message))?;
+    let unit = crate::light::AreaLight::new(glam::Vec3::ZERO, -glam::Vec3::Y, -glam::Vec3::Z, glam::Vec2::ONE, 1.0)
+        .map_err(|e| anyhow::anyhow!(e.message))?;
     Ok(E0Accuracy {
         scene: scene.into(),
         light: light.into(),
@@ -328,7 +343,10 @@ fn markdown(report: &BenchReport) -> Result<String, std::fmt::Error> {
     }
     writeln!(md, "## E0: interpolated against the exact sum\n")?;
     writeln!(md, "Relative error over pixels and channels with E0 > 1e-3 × the frame's largest (contract §1: at most 1e-3).\n")?;
-    writeln!(md, "| scene | light | cells | interpolated pixels | worst relative error | mean relative error | E0 exact ms | E0 interpolated ms |")?;
+    writeln!(
+        md,
+        "| scene | light | cells | interpolated pixels | worst relative error | mean relative error | E0 exact ms | E0 interpolated ms |"
+    )?;
     writeln!(md, "|---|---|---:|---:|---:|---:|---:|---:|")?;
     for e in &report.e0 {
         writeln!(

@@ -186,8 +186,10 @@ fn with_white_twins(labels: &[String], colored: bool) -> anyhow::Result<Vec<Suit
         let (name, params) = parse_named(label)?;
         crate::light::LightImage::builtin(&name, &params, "light").map_err(|e| anyhow::anyhow!("light `{label}`: {}", e.message))
     };
-    let mut lights: Vec<SuiteLight> =
-        labels.iter().map(|label| Ok(SuiteLight { label: label.clone(), identity: LightIdentity::of(&image(label)?), twin: String::new() })).collect::<anyhow::Result<_>>()?;
+    let mut lights: Vec<SuiteLight> = labels
+        .iter()
+        .map(|label| Ok(SuiteLight { label: label.clone(), identity: LightIdentity::of(&image(label)?), twin: String::new() }))
+        .collect::<anyhow::Result<_>>()?;
     for k in 0..lights.len() {
         let twin = LightIdentity::of(&image(&lights[k].label)?.white_twin());
         let label = match lights.iter().find(|l| l.identity == twin) {
@@ -224,7 +226,10 @@ fn colored_ratios(rows: &[Row], lights: &[SuiteLight]) -> Vec<ColoredRatio> {
     for row in rows.iter().filter(|r| r.method != "reference") {
         let Some(light) = lights.iter().find(|l| l.label == row.light && l.twin != l.label && !l.twin.is_empty()) else { continue };
         let twin = rows.iter().find(|t| {
-            t.scene == row.scene && t.light == light.twin && t.method == row.method && (t.width, t.height, t.shadow_map) == (row.width, row.height, row.shadow_map)
+            t.scene == row.scene
+                && t.light == light.twin
+                && t.method == row.method
+                && (t.width, t.height, t.shadow_map) == (row.width, row.height, row.shadow_map)
         });
         if let Some(twin) = twin {
             let (mae, twin_mae) = (row.quality.visibility.penumbra.mae, twin.quality.visibility.penumbra.mae);

@@ -160,7 +160,8 @@ fn write_colored(md: &mut String, report: &EvalReport) -> std::fmt::Result {
     writeln!(md, "| method | {} | all |", lights.join(" | "))?;
     writeln!(md, "|---|{}---:|", "---:|".repeat(lights.len()))?;
     for method in &methods {
-        let cells: Vec<String> = lights.iter().map(|light| mean(&|c: &&super::ColoredRatio| c.method == *method && c.light == *light)).collect();
+        let cells: Vec<String> =
+            lights.iter().map(|light| mean(&|c: &&super::ColoredRatio| c.method == *method && c.light == *light)).collect();
         writeln!(md, "| {method} | {} | {} |", cells.join(" | "), mean(&|c: &&super::ColoredRatio| c.method == *method))?;
     }
     Ok(())

@@ -166,7 +166,17 @@ impl GpuContext {
             driver_info: info.driver_info,
             timestamps,
         };
-        Ok(Self { choice, lost, device, queue, adapter, limits, timestamps, timestamps_inside_passes, fail_next_readback: Default::default() })
+        Ok(Self {
+            choice,
+            lost,
+            device,
+            queue,
+            adapter,
+            limits,
+            timestamps,
+            timestamps_inside_passes,
+            fail_next_readback: Default::default(),
+        })
     }
 
     /// Whether the device is gone: every later submission would fail or read back nothing.

@@ -233,7 +233,12 @@ impl Default for BufferPool {
 impl BufferPool {
     pub fn alloc(&mut self, device: &wgpu::Device, key: BufferKey) -> PooledBuffer {
         self.free.take_or(key, &mut self.stats, |key| {
-            let buffer = device.create_buffer(&wgpu::BufferDescriptor { label: Some(key.label), size: key.size, usage: key.usage, mapped_at_creation: false });
+            let buffer = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(key.label),
+                size: key.size,
+                usage: key.usage,
+                mapped_at_creation: false,
+            });
             PooledBuffer { key, buffer }
         })
     }

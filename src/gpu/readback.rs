@@ -15,7 +15,13 @@ impl Readback {
 
     /// Records a copy of a whole storage buffer (`COPY_SRC`) and returns its index in
     /// `finish`'s result.
-    pub fn copy_buffer(&mut self, gpu: &GpuContext, pool: &mut ReadbackPool, encoder: &mut wgpu::CommandEncoder, source: &wgpu::Buffer) -> usize {
+    pub fn copy_buffer(
+        &mut self,
+        gpu: &GpuContext,
+        pool: &mut ReadbackPool,
+        encoder: &mut wgpu::CommandEncoder,
+        source: &wgpu::Buffer,
+    ) -> usize {
         let size = source.size();
         let buffer = pool.alloc(&gpu.device, size);
         encoder.copy_buffer_to_buffer(source, 0, &buffer, 0, size);

@@ -6,8 +6,8 @@ use glam::Vec3;
 use wgpu::util::DeviceExt;
 
 use super::GpuContext;
-use crate::scene::adjacency::EdgeMesh;
 use crate::light::AreaLight;
+use crate::scene::adjacency::EdgeMesh;
 use crate::scene::{DrawRange, OnFloor, Scene, SceneDefaults};
 
 /// A material's constant part as the G-buffer shader reads it.
@@ -190,5 +190,6 @@ impl GpuScene {
 
 /// The eight corners of the box [a, b].
 fn box_corners(a: Vec3, b: Vec3) -> [Vec3; 8] {
-    [0, 1, 2, 3, 4, 5, 6, 7].map(|k| Vec3::new(if k & 1 == 0 { a.x } else { b.x }, if k & 2 == 0 { a.y } else { b.y }, if k & 4 == 0 { a.z } else { b.z }))
+    [0, 1, 2, 3, 4, 5, 6, 7]
+        .map(|k| Vec3::new(if k & 1 == 0 { a.x } else { b.x }, if k & 2 == 0 { a.y } else { b.y }, if k & 4 == 0 { a.z } else { b.z }))
 }

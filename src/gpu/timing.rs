@@ -110,7 +110,13 @@ impl GpuTimer {
 
     /// Records `record` (copies) straight on `encoder`, timed as pass `pass` of `phase` where
     /// timestamps can be written between passes; untimed elsewhere.
-    pub fn time_encoder(&mut self, encoder: &mut wgpu::CommandEncoder, phase: &'static str, pass: &'static str, record: impl FnOnce(&mut wgpu::CommandEncoder)) {
+    pub fn time_encoder(
+        &mut self,
+        encoder: &mut wgpu::CommandEncoder,
+        phase: &'static str,
+        pass: &'static str,
+        record: impl FnOnce(&mut wgpu::CommandEncoder),
+    ) {
         let begin = if self.inside_passes { self.open(phase, pass).map(|(_, i)| i) } else { None };
         match (begin, &self.queries) {
             (Some(i), Some(queries)) => {

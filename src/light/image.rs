@@ -94,11 +94,8 @@ impl LightImage {
     /// every emitting texel white. What a method's error under a coloured light is compared
     /// with to measure what the colours cost it (`penumbra eval --colored`).
     pub fn white_twin(&self) -> Self {
-        let texels = self
-            .texels
-            .iter()
-            .map(|&[r, g, b, a]| if r.max(g).max(b) > 0.0 { [1.0, 1.0, 1.0, a] } else { [0.0, 0.0, 0.0, a] })
-            .collect();
+        let texels =
+            self.texels.iter().map(|&[r, g, b, a]| if r.max(g).max(b) > 0.0 { [1.0, 1.0, 1.0, a] } else { [0.0, 0.0, 0.0, a] }).collect();
         Self::new(self.width, self.height, texels)
     }
 
@@ -294,7 +291,9 @@ mod tests {
 
     #[test]
     fn built_in_parameters_are_checked_by_name_and_type() {
-        let bad = |key: &str, value: Value| LightImage::builtin("stripes", &Map::from_iter([(key.to_owned(), value)]), "light.image").unwrap_err();
+        let bad = |key: &str, value: Value| {
+            LightImage::builtin("stripes", &Map::from_iter([(key.to_owned(), value)]), "light.image").unwrap_err()
+        };
         let unknown = bad("hue", Value::Bool(true));
         assert_eq!((unknown.code, unknown.field.as_deref()), (ErrorCode::UnknownField, Some("light.image.hue")));
         let wrong = bad("white", Value::from(1));

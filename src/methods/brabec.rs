@@ -175,7 +175,8 @@ impl ShadowMethod for Brabec {
         ];
         let summary_side = spec.shadow_resolution.div_ceil(SUMMARY_BLOCK);
         let summary = ctx.scratch_buffer("Brabec::summary", u64::from(summary_side).pow(2) * 16, wgpu::BufferUsages::STORAGE);
-        let map_texels = ctx.scratch_buffer("Brabec::map_texels", u64::from(spec.shadow_resolution).pow(2) * 8, wgpu::BufferUsages::STORAGE);
+        let map_texels =
+            ctx.scratch_buffer("Brabec::map_texels", u64::from(spec.shadow_resolution).pow(2) * 8, wgpu::BufferUsages::STORAGE);
         let summarize = ctx.screen_pipeline(PipelineKey::new("brabec.summary"), "methods/brabec/summary.wgsl", &io);
         let classify = ctx.screen_pipeline(PipelineKey::new("brabec.classify"), "methods/brabec/classify.wgsl", &io);
         let lattice = ctx.screen_pipeline(PipelineKey::new("brabec.lattice"), "methods/brabec/lattice.wgsl", &io);
@@ -190,7 +191,11 @@ impl ShadowMethod for Brabec {
         let rows = ctx.screen_pipeline(PipelineKey::new("brabec.rows"), "methods/brabec/rows.wgsl", &io);
         let finish = ctx.screen_pipeline(PipelineKey::new("brabec.finish"), "methods/brabec/finish.wgsl", &io);
         // A uniform light needs no table: its colours are its gray level.
-        let edges = if uniforms.colored == 1 { ctx.light_table("edge_table", edge_table) } else { std::sync::Arc::new(ctx.counters("Brabec::no_table", 4)) };
+        let edges = if uniforms.colored == 1 {
+            ctx.light_table("edge_table", edge_table)
+        } else {
+            std::sync::Arc::new(ctx.counters("Brabec::no_table", 4))
+        };
         let to_search = PixelListBuffers::new(&device, ctx.encoder, "Brabec", pixels);
         let bind = |groups: &wgpu::Buffer| {
             ctx.bind(

@@ -155,12 +155,14 @@ pub(super) fn run(
             ],
         )
     };
-    let (classify_group, size_group, filter_group) = (bind(&classify, &listed.groups), bind(&size, &listed.groups), bind(&filter, &listed.stand_in));
+    let (classify_group, size_group, filter_group) =
+        (bind(&classify, &listed.groups), bind(&size, &listed.groups), bind(&filter, &listed.stand_in));
     let (gx, gy) = ctx.dispatch_size();
     {
-        let mut pass = ctx
-            .encoder
-            .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(name), timestamp_writes: ctx.timer.compute_scope("method", name) });
+        let mut pass = ctx.encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some(name),
+            timestamp_writes: ctx.timer.compute_scope("method", name),
+        });
         pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
         pass.set_pipeline(&classify);
         pass.set_bind_group(1, &classify_group, &[]);

@@ -37,17 +37,13 @@ impl ShadowMethod for Hard {
     }
 
     fn record(&self, ctx: &mut MethodContext<'_>, params: &Params) -> JobResult<Counters> {
-        let pipeline = ctx.screen_pipeline(
-            PipelineKey::new("hard"),
-            "methods/hard.wgsl",
-            &[layout::storage_read_write(0), layout::uniform(1)],
-        );
+        let pipeline =
+            ctx.screen_pipeline(PipelineKey::new("hard"), "methods/hard.wgsl", &[layout::storage_read_write(0), layout::uniform(1)]);
         let uniforms = ctx.uniforms(
             "Hard::uniforms",
             &HardUniforms { bias_texels: params.get(&BIAS_TEXELS), slope_bias_texels: params.get(&SLOPE_BIAS_TEXELS), _pad: [0.0; 2] },
         );
-        let outputs =
-            ctx.bind("Hard::outputs", &pipeline, &[ctx.visibility.as_entire_binding(), uniforms.as_entire_binding()]);
+        let outputs = ctx.bind("Hard::outputs", &pipeline, &[ctx.visibility.as_entire_binding(), uniforms.as_entire_binding()]);
         ctx.dispatch_screen("Hard::pass", &pipeline, &outputs);
         Ok(Counters::new())
     }

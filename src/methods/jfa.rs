@@ -34,11 +34,11 @@
 
 use wgpu::util::DeviceExt;
 
-use crate::light::tables::edge_table;
 use super::{Cap, Counters, MethodContext, Param, ParamSpec, Params, ShadowMethod, BIAS_TEXELS, SLOPE_BIAS_TEXELS};
 use crate::error::JobResult;
 use crate::gpu::layout;
 use crate::gpu::pool::PipelineKey;
+use crate::light::tables::edge_table;
 
 pub struct JfaL;
 pub struct JfaE;
@@ -283,9 +283,18 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
     // jfa-e lists its boundary pixels and seeds them in a compacted pass (boundary.wgsl).
     let boundary = (!which.light_space).then(|| {
         let mut entry = |name, entry| ctx.screen_entry(PipelineKey::new(name), which.seed.1, entry, &io);
-        [entry("jfa-e.boundary.mark", "mark_boundary"), entry("jfa-e.boundary.size", "boundary_size"), entry("jfa-e.boundary.seed", "seed_listed")]
+        [
+            entry("jfa-e.boundary.mark", "mark_boundary"),
+            entry("jfa-e.boundary.size", "boundary_size"),
+            entry("jfa-e.boundary.seed", "seed_listed"),
+        ]
     });
-    let listed = crate::render::PixelListBuffers::new(&device, ctx.encoder, "Jfa::boundary", if which.light_space { 0 } else { u64::from(grid.0) * u64::from(grid.1) });
+    let listed = crate::render::PixelListBuffers::new(
+        &device,
+        ctx.encoder,
+        "Jfa::boundary",
+        if which.light_space { 0 } else { u64::from(grid.0) * u64::from(grid.1) },
+    );
     let round = ctx.screen_pipeline(PipelineKey::new(which.round.0), which.round.1, &io);
     // Each round runs over the tiles a record may reach, listed just before it (common.wgsl).
     let tile_passes = [(1, "list_tiles"), (2, "tiles_size"), (3, "tiles_reset")]
@@ -298,29 +307,30 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
         .map(|(variant, entry)| ctx.screen_entry(PipelineKey { name: which.finish.0, variant }, which.finish.1, entry, &io));
     let shaded = crate::render::PixelListBuffers::new(&device, ctx.encoder, "Jfa::shaded", u64::from(ctx.width) * u64::from(ctx.height));
     // Ping-pong: `a_to_b` reads a and writes b, `b_to_a` the reverse.
-    let group_with = |src: &wgpu::Buffer, dst: &wgpu::Buffer, listed_groups: &wgpu::Buffer, shaded_groups: &wgpu::Buffer, tile_groups: &wgpu::Buffer| {
-        ctx.bind(
-            "Jfa::bind_group",
-            &seed,
-            &[
-                layout::slot_binding::<Uniforms>(&uniforms),
-                lut.as_entire_binding(),
-                src.as_entire_binding(),
-                dst.as_entire_binding(),
-                ctx.visibility.as_entire_binding(),
-                counters.as_entire_binding(),
-                flags.as_entire_binding(),
-                tiles.as_entire_binding(),
-                listed.list.as_entire_binding(),
-                listed_groups.as_entire_binding(),
-                shaded.list.as_entire_binding(),
-                shaded_groups.as_entire_binding(),
-                tile_list.list.as_entire_binding(),
-                tile_groups.as_entire_binding(),
-                map_depth.as_entire_binding(),
-            ],
-        )
-    };
+    let group_with =
+        |src: &wgpu::Buffer, dst: &wgpu::Buffer, listed_groups: &wgpu::Buffer, shaded_groups: &wgpu::Buffer, tile_groups: &wgpu::Buffer| {
+            ctx.bind(
+                "Jfa::bind_group",
+                &seed,
+                &[
+                    layout::slot_binding::<Uniforms>(&uniforms),
+                    lut.as_entire_binding(),
+                    src.as_entire_binding(),
+                    dst.as_entire_binding(),
+                    ctx.visibility.as_entire_binding(),
+                    counters.as_entire_binding(),
+                    flags.as_entire_binding(),
+                    tiles.as_entire_binding(),
+                    listed.list.as_entire_binding(),
+                    listed_groups.as_entire_binding(),
+                    shaded.list.as_entire_binding(),
+                    shaded_groups.as_entire_binding(),
+                    tile_list.list.as_entire_binding(),
+                    tile_groups.as_entire_binding(),
+                    map_depth.as_entire_binding(),
+                ],
+            )
+        };
     let group = |src: &wgpu::Buffer, dst: &wgpu::Buffer| group_with(src, dst, &listed.groups, &shaded.groups, &tile_list.groups);
     // The boundary seeds write a (as the seed pass does), the indirect grid bound as its stand-in.
     let seeding = group_with(&b, &a, &listed.stand_in, &shaded.groups, &tile_list.groups);

@@ -41,7 +41,8 @@ const SAMPLES: Param<u32> =
 const RESOLUTION: Param<u32> = Param::integer("resolution", 1024, 64, 4096, "side of each sample's depth map, texels");
 const BIAS_TEXELS: Param<f32> =
     Param::float("bias_texels", 1.0, 0.0, 64.0, "constant bias of the visibility test, in texels of the sample's map");
-const SLOPE_BIAS_TEXELS: Param<f32> = Param::float("slope_bias_texels", 1.0, 0.0, 64.0, "slope-scaled bias, texels × tanθ at the receiver (θ to the light's centre)");
+const SLOPE_BIAS_TEXELS: Param<f32> =
+    Param::float("slope_bias_texels", 1.0, 0.0, 64.0, "slope-scaled bias, texels × tanθ at the receiver (θ to the light's centre)");
 const SEED: Param<u32> = Param::integer("seed", 1, 0, 4_294_967_295, "seed of the jitter within strata");
 
 const PARAMS: &[ParamSpec] = &[SAMPLES.spec, RESOLUTION.spec, BIAS_TEXELS.spec, SLOPE_BIAS_TEXELS.spec, SEED.spec];
@@ -227,7 +228,8 @@ impl ShadowMethod for Reference {
                 })
             })
             .collect();
-        let depths_view = depth.create_view(&wgpu::TextureViewDescriptor { dimension: Some(wgpu::TextureViewDimension::D2Array), ..Default::default() });
+        let depths_view =
+            depth.create_view(&wgpu::TextureViewDescriptor { dimension: Some(wgpu::TextureViewDimension::D2Array), ..Default::default() });
         let (depth_pipeline, resolve_pipeline) = self.pipelines(ctx, channels);
         let depth_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("Reference::sample"),
@@ -294,7 +296,11 @@ impl ShadowMethod for Reference {
                 let group = ctx.bind(
                     "Reference::accumulate",
                     &pipeline,
-                    &[layout::slot_binding::<BatchUniforms>(&batch_buffer), wgpu::BindingResource::TextureView(&depths_view), sums.as_entire_binding()],
+                    &[
+                        layout::slot_binding::<BatchUniforms>(&batch_buffer),
+                        wgpu::BindingResource::TextureView(&depths_view),
+                        sums.as_entire_binding(),
+                    ],
                 );
                 let mut pass = ctx
                     .encoder
@@ -334,7 +340,11 @@ impl ShadowMethod for Reference {
 }
 
 impl Reference {
-    fn pipelines(&self, ctx: &mut MethodContext<'_>, channels: u32) -> (std::sync::Arc<wgpu::RenderPipeline>, std::sync::Arc<wgpu::ComputePipeline>) {
+    fn pipelines(
+        &self,
+        ctx: &mut MethodContext<'_>,
+        channels: u32,
+    ) -> (std::sync::Arc<wgpu::RenderPipeline>, std::sync::Arc<wgpu::ComputePipeline>) {
         let device = &ctx.gpu.device;
         let depth = ctx.pipelines.render(PipelineKey::new("reference.sample_depth"), || {
             let sample_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {

@@ -8,7 +8,9 @@ use std::collections::BTreeMap;
 use std::sync::Arc;
 
 use crate::error::JobResult;
-use crate::gpu::pool::{BufferKey, BufferPool, DerivedResources, PipelineKey, PipelinePool, PooledBuffer, PooledTexture, TextureKey, TexturePool};
+use crate::gpu::pool::{
+    BufferKey, BufferPool, DerivedResources, PipelineKey, PipelinePool, PooledBuffer, PooledTexture, TextureKey, TexturePool,
+};
 use crate::gpu::scene::GpuScene;
 use crate::gpu::timing::GpuTimer;
 use crate::gpu::GpuContext;
@@ -155,7 +157,8 @@ impl MethodContext<'_> {
         let side = texture.width();
         let pitch = (4 * side).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
         // The copy writes all of it.
-        let buffer = self.scratch_buffer(label, u64::from(pitch) * u64::from(side), wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST);
+        let buffer =
+            self.scratch_buffer(label, u64::from(pitch) * u64::from(side), wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST);
         self.timer.time_encoder(self.encoder, "method", pass, |encoder| {
             encoder.copy_texture_to_buffer(
                 texture.as_image_copy(),
@@ -209,9 +212,10 @@ impl MethodContext<'_> {
     /// frame inputs in group 0, `group` in group 1.
     pub fn dispatch_screen(&mut self, label: &'static str, pipeline: &wgpu::ComputePipeline, group: &wgpu::BindGroup) {
         let (gx, gy) = self.dispatch_size();
-        let mut pass = self
-            .encoder
-            .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(label), timestamp_writes: self.timer.compute_scope("method", label) });
+        let mut pass = self.encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some(label),
+            timestamp_writes: self.timer.compute_scope("method", label),
+        });
         pass.set_pipeline(pipeline);
         pass.set_bind_group(0, &self.inputs.bind_group, &[]);
         pass.set_bind_group(1, group, &[]);

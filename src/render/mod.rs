@@ -211,7 +211,8 @@ impl Renderer {
     ) -> JobResult<FrameOutput> {
         let compiled_before = self.pipelines.stats.created;
         self.timer.begin_frame();
-        let targets = FrameTargets::alloc(&mut self.textures, &mut self.buffers, &self.gpu.device, spec.width, spec.height, spec.shadow_resolution);
+        let targets =
+            FrameTargets::alloc(&mut self.textures, &mut self.buffers, &self.gpu.device, spec.width, spec.height, spec.shadow_resolution);
         let frame = self.render_into(&targets, scene, spec, timings, supervisor);
         // A cancelled frame gives its targets back too: the next job reuses them.
         targets.release(&mut self.textures, &mut self.buffers);

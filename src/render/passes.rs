@@ -139,14 +139,20 @@ impl Renderer {
         let device = &self.gpu.device;
         let inputs_layout = &self.layouts.inputs;
         let mut entry = |name: &'static str, entry: &'static str| {
-            self.pipelines.compute(PipelineKey::new(name), || screen_compute_entry(device, inputs_layout, name, "e0.wgsl", entry, &io_layout))
+            self.pipelines
+                .compute(PipelineKey::new(name), || screen_compute_entry(device, inputs_layout, name, "e0.wgsl", entry, &io_layout))
         };
         let interpolate = self.e0_mode == E0Mode::Interpolated && spec.cells.len() > E0_EXACT_CELLS;
         let corners = if interpolate { (spec.width - 1) / E0_BLOCK + 2 } else { 1 };
         let rows = if interpolate { (spec.height - 1) / E0_BLOCK + 2 } else { 1 };
         let pixels = if interpolate { u64::from(spec.width) * u64::from(spec.height) } else { 0 };
         let buffer = |label, size: u64, usage: wgpu::BufferUsages| {
-            device.create_buffer(&wgpu::BufferDescriptor { label: Some(label), size, usage: wgpu::BufferUsages::STORAGE | usage, mapped_at_creation: false })
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size,
+                usage: wgpu::BufferUsages::STORAGE | usage,
+                mapped_at_creation: false,
+            })
         };
         let records = buffer("E0::corners", u64::from(corners * rows) * E0_CORNER_BYTES, wgpu::BufferUsages::empty());
         // The pixels summed exactly, by whether they see the whole light (at most every pixel).
@@ -247,8 +253,10 @@ impl Renderer {
         io: &wgpu::BindGroup,
         spec: &FrameSpec,
     ) {
-        let mut pass = encoder
-            .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(label), timestamp_writes: self.timer.compute_scope(label, label) });
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some(label),
+            timestamp_writes: self.timer.compute_scope(label, label),
+        });
         pass.set_pipeline(pipeline);
         pass.set_bind_group(0, &inputs.bind_group, &[]);
         pass.set_bind_group(1, io, &[]);

@@ -40,10 +40,18 @@ pub(super) const NORMAL_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba1
 pub(super) const ALBEDO_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
 
 impl FrameTargets {
-    pub fn alloc(textures: &mut TexturePool, buffers: &mut BufferPool, device: &wgpu::Device, width: u32, height: u32, shadow: u32) -> Self {
+    pub fn alloc(
+        textures: &mut TexturePool,
+        buffers: &mut BufferPool,
+        device: &wgpu::Device,
+        width: u32,
+        height: u32,
+        shadow: u32,
+    ) -> Self {
         use wgpu::TextureUsages as U;
         let attachment = U::RENDER_ATTACHMENT | U::TEXTURE_BINDING;
-        let mut get = |label, w, h, format, usage| textures.alloc(device, TextureKey { label, width: w, height: h, layers: 1, format, usage });
+        let mut get =
+            |label, w, h, format, usage| textures.alloc(device, TextureKey { label, width: w, height: h, layers: 1, format, usage });
         let pixels = u64::from(width) * u64::from(height);
         let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
         let mut image = |label, bytes_per_pixel: u64| buffers.alloc(device, BufferKey { label, size: pixels * bytes_per_pixel, usage });

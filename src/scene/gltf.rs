@@ -266,7 +266,9 @@ fn load_unchecked(bytes: &[u8], limits: &Limits, field: &str, uris: &UriReader<'
     if !untextured.is_empty() {
         untextured.dedup();
         let list = untextured.join(", ");
-        builder.warn(format!("base-colour textures without the texture coordinates they name are drawn in their first texel's colour: {list}"));
+        builder.warn(format!(
+            "base-colour textures without the texture coordinates they name are drawn in their first texel's colour: {list}"
+        ));
     }
     Ok(builder.finish(fitted_defaults))
 }
@@ -508,10 +510,13 @@ pub fn pack(bytes: &[u8], folder: &Path, limits: &Limits, field: &str) -> JobRes
     let mut bin = Vec::new();
     let mut starts = Vec::new();
     for (index, buffer) in items(&document, "buffers").iter().enumerate() {
-        let length = buffer.get("byteLength").and_then(Value::as_u64).ok_or_else(|| invalid(field, format!("buffer {index} has no byteLength")))?;
-        let uri = buffer.get("uri").and_then(Value::as_str).ok_or_else(|| invalid(field, format!("buffer {index} of a .gltf has no uri")))?;
+        let length =
+            buffer.get("byteLength").and_then(Value::as_u64).ok_or_else(|| invalid(field, format!("buffer {index} has no byteLength")))?;
+        let uri =
+            buffer.get("uri").and_then(Value::as_str).ok_or_else(|| invalid(field, format!("buffer {index} of a .gltf has no uri")))?;
         let data = uris.read(uri)?;
-        let data = data.get(..length as usize).ok_or_else(|| invalid(field, format!("buffer {index} is shorter than its declared length")))?;
+        let data =
+            data.get(..length as usize).ok_or_else(|| invalid(field, format!("buffer {index} is shorter than its declared length")))?;
         starts.push(bin.len() as u64);
         bin.extend_from_slice(data);
         // Views keep their alignment (at most 4 bytes per component) if every buffer starts on 4.

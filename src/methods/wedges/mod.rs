@@ -210,7 +210,11 @@ impl ShadowMethod for Wedges {
         // From the pool: the LI buffer is cleared before the rasteriser runs, and the tiles pass
         // writes every pixel's receiver record.
         let pixels = u64::from(spec.width) * u64::from(spec.height);
-        let li = ctx.scratch_buffer("Wedges::li", pixels * 4 * u64::from(uniforms.channels), wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST);
+        let li = ctx.scratch_buffer(
+            "Wedges::li",
+            pixels * 4 * u64::from(uniforms.channels),
+            wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+        );
         let counters = storage("Wedges::counters", &[0u8; 16]);
         let receivers = ctx.scratch_buffer("Wedges::receivers", pixels * 32, wgpu::BufferUsages::STORAGE);
         let io = [
@@ -248,7 +252,8 @@ impl ShadowMethod for Wedges {
             raster("wedges.shade", penumbra, "shade_listed"),
             raster("wedges.inside_reset", penumbra, "inside_reset"),
         );
-        let sectors = if colored { ctx.light_table("wedges.sectors", sector_table) } else { std::sync::Arc::new(storage("Wedges::no_sectors", &[])) };
+        let sectors =
+            if colored { ctx.light_table("wedges.sectors", sector_table) } else { std::sync::Arc::new(storage("Wedges::no_sectors", &[])) };
         let tile_pixels = u64::from(tile) * u64::from(tile);
         // The penumbra pass lists the pixels inside each wedge, a chunk of items at a time.
         let inside_items = (INSIDE_PAIRS / tile_pixels).max(1) as usize;
