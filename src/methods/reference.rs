@@ -179,7 +179,7 @@ impl ShadowMethod for Reference {
                 let slot = BatchSample {
                     origin: rotation.transform_point3(sample.position).extend(projection.near).to_array(),
                     radiance: sample.weight.extend(0.0).to_array(),
-                    lens: [proj.y_axis.y, 2.0 * projection.tan_half / resolution as f32, proj.y_axis.y * resolution as f32 * 0.5, 0.0],
+                    lens: [proj.y_axis.y * resolution as f32 * 0.5, 2.0 * projection.tan_half / resolution as f32, 0.0, 0.0],
                 };
                 ((proj * view).to_cols_array_2d(), slot)
             })

@@ -27,7 +27,7 @@ override FIRST: bool = false;
 struct BatchSample {
     origin: vec4<f32>,   // xyz: the sample point y in view coordinates (rotation · y); w: its map's near plane, metres
     radiance: vec4<f32>, // rgb: L(y) × stratum area, the sample's weight in the estimator
-    lens: vec4<f32>,     // x: 1 / tan of its frustum's half angle; y: a texel's width per metre of depth (2·tan / resolution); z: x · resolution / 2, texels per unit of tan
+    lens: vec4<f32>,     // x: texels per unit of tan from the map's centre (resolution / (2·tan of its half angle)); y: a texel's width per metre of depth (2·tan / resolution)
 }
 
 struct Batch {
@@ -64,7 +64,7 @@ fn add_sample(sums: ptr<function, Sums>, x: vec3<f32>, n: vec3<f32>, bias: f32, 
     let g = max(-dot(n, v), 0.0) * max(depth, 0.0) * inv_dist2 * inv_dist2;
     // The map's texel coordinates (x right, y down from its top-left corner).
     let half = 0.5 * f32(batch.resolution);
-    let f = v.xy * (s.lens.z / depth);
+    let f = v.xy * (s.lens.x / depth);
     let t = vec2<f32>(half + f.x, half - f.y);
     let texel = vec2<u32>(clamp(t, vec2<f32>(0.0), vec2<f32>(f32(batch.resolution) - 1.0)));
     let stored = textureLoad(depths, texel, layer, 0);

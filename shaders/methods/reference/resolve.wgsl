@@ -22,9 +22,12 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     var v = vec3<f32>(1.0);
     if covered(pixel) {
         let base = 2u * CHANNELS * (pixel.y * frame.sizes.x + pixel.x);
-        var shadowed = vec3<f32>(sums[base]);
-        var unshadowed = vec3<f32>(sums[base + CHANNELS]);
-        if CHANNELS == 3u {
+        var shadowed: vec3<f32>;
+        var unshadowed: vec3<f32>;
+        if CHANNELS == 1u {
+            shadowed = vec3<f32>(sums[base]);
+            unshadowed = vec3<f32>(sums[base + 1u]);
+        } else {
             shadowed = vec3<f32>(sums[base], sums[base + 1u], sums[base + 2u]);
             unshadowed = vec3<f32>(sums[base + 3u], sums[base + 4u], sums[base + 5u]);
         }
