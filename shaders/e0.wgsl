@@ -1,7 +1,7 @@
 // The unshadowed irradiance E0 (contract §1), identical for every method: Lambert's closed
 // form over each uniform cell of the light image, times the cell's radiance, summed —
 // evaluated exactly at the corners and the centre of 8×8-pixel blocks and interpolated
-// inside a block wherever the error measured at its centre, and a bound for what the centre
+// inside a block wherever the error measured at its centre, and bounds for what the centre
 // cannot see, keep it within E0_TOLERANCE of the exact sum; every other lit pixel is listed
 // and summed exactly by a compacted pass of its own (contract §1, "E0") — one for pixels that
 // see the whole light above their horizon, whose cells need no clipping, one for the rest.
@@ -9,9 +9,10 @@
 // What is interpolated: below its horizon-free region, E0 = |n · Φ(x)| per channel, where
 // Φ = Σ radiance × ½ Σ Θᵢ Γᵢ is the light's vector irradiance — a smooth function of the
 // position alone, so it interpolates across the normal's discontinuities (box edges, facets).
-// Where the light straddles the receiver's horizon E0 depends on the normal through the
-// clipping; on a flat face (the four corners' normal equal to the pixel's) E0 itself is a
-// smooth function of position and is interpolated instead.
+// The blend is corrected along the pixel's view ray (`ray_offset`), where a bumpy surface
+// leaves the corners' blend. Where the light straddles the receiver's horizon E0 depends on
+// the normal through the clipping; on a flat face (the four corners' normal equal to the
+// pixel's) E0 itself is a smooth function of position and is interpolated instead.
 
 #import common/frame_inputs.wgsl
 #import common/pixel_list.wgsl
@@ -36,8 +37,22 @@ const E0_TOLERANCE: f32 = 6e-4;
 // largest at the centre; the margin covers higher orders.
 const ERROR_MARGIN: f32 = 1.25;
 // |∇Φ| ≤ GRADIENT·|Φ|/dist, dist the distance to the light (a point light's Φ ∝ 1/r² has
-// |∇Φ| = 2|Φ|/r; the margin covers the area light's edges).
+// |∇Φ| = 2|Φ|/r; the margin covers the area light's edges): the error per unit of
+// |t − t_centre|/dist in a block whose centre found it flat, which corrects nothing.
 const GRADIENT: f32 = 4.0;
+// A block is flat where its centre lies within FLAT × the distance to the light of the
+// corners' blend (f32 rounding leaves ~1e-7 on a plane).
+const FLAT: f32 = 1e-5;
+// The view-ray derivative's forward difference: its step over the distance to the light.
+const RAY_STEP: f32 = 1e-2;
+// The derivative's relative error — the difference's truncation, ~1.5 RAY_STEP, and its
+// change across the block, up to ~5 % on a curved receiver (the torus at 960×540) — times
+// |∂Φ/∂t| ≤ 2|Φ|/dist (a point light's Φ ∝ 1/r²), with a margin of 2: the error per unit of
+// |t − t_centre|/dist the centre's check does not see.
+const RAY_FIRST: f32 = 0.2;
+// Φ's second derivative along a ray, ≤ 6|Φ|/dist² for a point light, halved (Taylor) and
+// doubled (margin): the error per unit of (t/dist)².
+const RAY_SECOND: f32 = 6.0;
 // A block whose centre could not be checked.
 const UNCHECKED: f32 = 1e30;
 
@@ -209,24 +224,79 @@ fn max3(v: vec3<f32>) -> f32 {
     return max(v.x, max(v.y, v.z));
 }
 
-// The interpolation's actual error at a block's centre pixel, relative to |Φ| (x), and the
-// centre's distance from the corners' blended position (y); x is UNCHECKED where the centre
-// or a corner holds no lit surface.
-fn block_error(block: vec2<u32>, b: Block) -> vec2<f32> {
+// What a block's centre pixel says about its interpolation: the derivatives of Φ and of the
+// E0 blend along the view ray (see `correction`), and the error left at the centre once they
+// are applied, relative to |Φ|.
+struct Check {
+    error: f32,           // UNCHECKED where the centre or a corner holds no lit surface
+    ray: f32,             // the centre's offset along its view ray from the corners' blend, m
+    first: f32,           // the error per unit of |t − ray|/dist the centre does not see
+    d_phi: mat3x3<f32>,   // ∂Φ/∂t per channel (columns)
+    d_e0: vec3<f32>,      // ∂E0/∂t with the centre's normal
+}
+
+fn unchecked() -> Check {
+    return Check(UNCHECKED, 0.0, 0.0, mat3x3<f32>(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0)), vec3<f32>(0.0));
+}
+
+fn phi_of(c: Corner) -> mat3x3<f32> {
+    return mat3x3<f32>(c.phi_r.xyz, c.phi_g.xyz, c.phi_b.xyz);
+}
+
+// Unit direction from the eye through x.
+fn view_ray(x: vec3<f32>) -> vec3<f32> {
+    return normalize(x - frame.eye.xyz);
+}
+
+// The pixel's signed distance along its view ray from the corners' blended position.
+// Perspective-correct weights put the blend on the pixel's own view ray (the weights are the
+// screen-space bilinear ones over depth, so the blend projects to the pixel), so on a surface
+// that bends or bumps inside the block the blend misses x only along that ray: by t, and Φ
+// there is the blend's plus t ∂Φ/∂t to first order — the correction that lets a bumpy
+// surface (a landscape) be interpolated at all, where the plain blend is off by |∇Φ| t.
+fn ray_offset(x: vec3<f32>, mixed: Corner) -> f32 {
+    return dot(x - mixed.position.xyz, view_ray(x));
+}
+
+// Measures the block at its centre pixel: the error of the corrected interpolation there
+// and, where the centre leaves the corners' blend along its ray at all (the block is not
+// flat), Φ's and the E0 blend's derivatives along the view ray, by a forward difference of
+// RAY_STEP × the distance to the light (truncation ~1.5 RAY_STEP of the derivative; Φ's
+// rounding, atan2-based, stays far below it). A flat block skips the difference (one exact
+// sum fewer: on lavapipe the SIMD groups of a flat floor or box face take no lane through
+// it) and bounds what its pixels' offsets add by Φ's gradient instead.
+fn block_check(block: vec2<u32>, b: Block) -> Check {
     let centre = min(block * BLOCK + BLOCK / 2u, frame.sizes.xy - 1u);
     let s = stencil(centre, b);
     let exact = pixel_terms(centre);
-    if all_valid(s) && exact.position.w > 0.0 {
-        let mixed = blend(s);
-        let size = max(phi_size(exact), vec3<f32>(1e-30));
-        let phi_error = vec3<f32>(
-            distance(mixed.phi_r.xyz, exact.phi_r.xyz),
-            distance(mixed.phi_g.xyz, exact.phi_g.xyz),
-            distance(mixed.phi_b.xyz, exact.phi_b.xyz),
-        );
-        return vec2<f32>(max3(phi_error / size), distance(mixed.position.xyz, exact.position.xyz));
+    if !all_valid(s) || exact.position.w <= 0.0 {
+        return unchecked();
     }
-    return vec2<f32>(UNCHECKED, 0.0);
+    let x = exact.position.xyz;
+    let mixed = blend(s);
+    let t = ray_offset(x, mixed);
+    var check = Check(0.0, t, GRADIENT, mat3x3<f32>(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0)), vec3<f32>(0.0));
+    let distance_to_light = light_distance(x);
+    if abs(t) > FLAT * distance_to_light {
+        let step = RAY_STEP * distance_to_light;
+        let beyond = x + step * view_ray(x);
+        if !lit_side(beyond) {
+            return unchecked();
+        }
+        let ahead = exact_terms(beyond, exact.normal.xyz, exact.normal.w);
+        check.first = RAY_FIRST;
+        check.d_phi = (phi_of(ahead) - phi_of(exact)) * (1.0 / step);
+        check.d_e0 = (e0_of(ahead) - e0_of(exact)) / step;
+    }
+    let phi = phi_of(mixed) + check.d_phi * t;
+    let size = max(phi_size(exact), vec3<f32>(1e-30));
+    let phi_error = vec3<f32>(
+        distance(phi[0], exact.phi_r.xyz),
+        distance(phi[1], exact.phi_g.xyz),
+        distance(phi[2], exact.phi_b.xyz),
+    );
+    check.error = max3(phi_error / size);
+    return check;
 }
 
 // Whether the whole light rectangle lies above the plane through x with normal nx.
@@ -236,33 +306,37 @@ fn light_above(x: vec3<f32>, nx: vec3<f32>) -> bool {
     return c - reach > HORIZON_EPS;
 }
 
-// E0 at one pixel interpolated from its block's corners: xyz, and w = 1 where the estimate
-// accepts it (or the pixel receives no light), 0 where it must be summed exactly.
-// `normal` is the pixel's G-buffer normal texel (w: coverage).
-fn interpolated_e0(pixel: vec2<u32>, x: vec3<f32>, normal: vec4<f32>, b: Block, checked: vec2<f32>) -> vec4<f32> {
+// E0 at one pixel interpolated from its block's corners, corrected along the view ray
+// (`ray_offset`): xyz, and w = 1 where the estimate accepts it (or the pixel receives no
+// light), 0 where it must be summed exactly. `normal` is the pixel's G-buffer normal texel
+// (w: coverage).
+fn interpolated_e0(pixel: vec2<u32>, x: vec3<f32>, normal: vec4<f32>, b: Block, check: Check) -> vec4<f32> {
     let nx = normal.xyz;
     if normal.w <= 0.5 || !lit_side(x) {
         return vec4<f32>(0.0, 0.0, 0.0, 1.0);
     }
     let s = stencil(pixel, b);
     let mixed = blend(s);
-    // The centre's error with a margin, plus what a position off the corners' surface
-    // (farther from it than the centre was) adds through Φ's gradient.
-    let off = max(distance(x, mixed.position.xyz) - checked.y, 0.0);
-    let relative = ERROR_MARGIN * checked.x + GRADIENT * off / light_distance(x);
-    let size = phi_size(mixed);
+    let t = ray_offset(x, mixed);
+    // The centre's error with a margin; what the derivative's error adds where the pixel lies
+    // farther along its ray than the centre did; and the second order in t.
+    let reach = t / light_distance(x);
+    let beyond = abs(t - check.ray) / light_distance(x);
+    let relative = ERROR_MARGIN * check.error + check.first * beyond + RAY_SECOND * reach * reach;
+    let phi = phi_of(mixed) + check.d_phi * t;
+    let size = vec3<f32>(length(phi[0]), length(phi[1]), length(phi[2]));
     var e0: vec3<f32>;
     var done: bool;
     if light_above(x, nx) {
-        e0 = abs(nx * mat3x3<f32>(mixed.phi_r.xyz, mixed.phi_g.xyz, mixed.phi_b.xyz));
+        e0 = abs(nx * phi);
         done = all(relative * size <= E0_TOLERANCE * e0);
     } else {
         // The light straddles the horizon: on a flat face (the corners' normal the pixel's) E0
         // is still smooth in the position and is blended itself.
-        e0 = e0_of(mixed);
+        e0 = e0_of(mixed) + check.d_e0 * t;
         done = all((relative + bend(s, nx)) * size <= E0_TOLERANCE * e0);
     }
-    return vec4<f32>(e0, select(0.0, 1.0, done && checked.x < UNCHECKED));
+    return vec4<f32>(e0, select(0.0, 1.0, done && check.error < UNCHECKED));
 }
 
 // Lists a lit pixel for the exact sum: in `above` where the whole light lies above its
@@ -287,7 +361,7 @@ fn interpolate_blocks(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let b = load_block(block);
-    let checked = block_error(block, b);
+    let check = block_check(block, b);
     let origin = block * BLOCK;
     for (var y = 0u; y < BLOCK; y++) {
         for (var x = 0u; x < BLOCK; x++) {
@@ -296,7 +370,7 @@ fn interpolate_blocks(@builtin(global_invocation_id) id: vec3<u32>) {
                 // Loaded once here: lavapipe runs the listing branch's code for every pixel.
                 let position = textureLoad(gbuf_position, pixel, 0).xyz;
                 let normal = textureLoad(gbuf_normal, pixel, 0);
-                let e0 = interpolated_e0(pixel, position, normal, b, checked);
+                let e0 = interpolated_e0(pixel, position, normal, b, check);
                 if e0.w > 0.0 {
                     e0_out[pixel_index(pixel)] = vec4<f32>(e0.xyz, 1.0);
                 } else {

@@ -93,8 +93,16 @@ fn light_image_lands_the_documented_way_round() {
 fn e0_interpolation_stays_within_a_thousandth_of_the_exact_sum() {
     let gpu = penumbra::gpu::GpuContext::new(penumbra::gpu::AdapterChoice::Auto).unwrap();
     let engine = penumbra::engine::Engine::new(std::sync::Arc::new(gpu), Limits::default(), penumbra::engine::PathPolicy::Any);
-    for (scene, light) in [("crowd", "flame"), ("columns", "stripes"), ("torus", "quadrants")] {
-        let job = job(json!({"scene": {"builtin": scene}, "light": {"image": {"builtin": light}}, "method": {"name": "hard"},
+    // `terrain`: a bumpy receiver, whose pixels leave their block corners' blend along the
+    // view ray (the derivative's correction, `shaders/e0.wgsl`).
+    let terrain = json!({"builtin": "terrain", "triangles": 100000});
+    for (scene, light) in [
+        (json!({"builtin": "crowd"}), "flame"),
+        (json!({"builtin": "columns"}), "stripes"),
+        (json!({"builtin": "torus"}), "quadrants"),
+        (terrain, "stripes"),
+    ] {
+        let job = job(json!({"scene": scene, "light": {"image": {"builtin": light}}, "method": {"name": "hard"},
                              "output": {"width": 960, "height": 540, "format": "exr"}}));
         let mut frames = Vec::new();
         for mode in [penumbra::render::E0Mode::Exact, penumbra::render::E0Mode::Interpolated] {
