@@ -49,7 +49,6 @@ pub const SOURCES: &[(&str, &str)] = &[
     ("methods/wedges/resolve.wgsl", include_str!("../../shaders/methods/wedges/resolve.wgsl")),
     ("methods/reference/sample_depth.wgsl", include_str!("../../shaders/methods/reference/sample_depth.wgsl")),
     ("methods/reference/accumulate.wgsl", include_str!("../../shaders/methods/reference/accumulate.wgsl")),
-    ("methods/reference/resolve.wgsl", include_str!("../../shaders/methods/reference/resolve.wgsl")),
 ];
 
 /// Shaders that are pipelines' entry files: those that declare an entry point and that no

@@ -6,9 +6,9 @@
 //! within each stratum; a sample that lands on a black or transparent texel has no weight and
 //! costs nothing. For each sample the scene is drawn into a depth map from the sample point
 //! (`sample_depth.wgsl`: the rasteriser's reversed-Z depth alone, no fragment shader), a layer
-//! of an array; once per batch of up to sixteen samples every pixel adds the batch's `L·G·V`
-//! and `L·G` to two sums (`accumulate.wgsl`: the first batch writes them), and `resolve.wgsl`
-//! divides them. The sums have one channel where every sample's weight is gray (a white or
+//! of an array; once per batch of up to 32 samples every pixel adds the batch's `L·G·V`
+//! and `L·G` to two sums (`accumulate.wgsl`: the first batch writes them, the last writes
+//! their ratio instead). The sums have one channel where every sample's weight is gray (a white or
 //! shaped white light, whose three channels' sums would be equal) and three otherwise.
 //! Batching changes only the order of the additions (the same samples, maps and tests).
 //! Numerator and denominator share the same samples, so lit and umbra pixels are exact and the
@@ -63,14 +63,15 @@ fn sample_rotation(light: &AreaLight) -> Mat4 {
 /// Samples recorded per submission; progress is reported between submissions.
 const BATCH: u64 = 16;
 
-/// Memory the depth maps of one accumulate batch may take: 16 maps at the default 1024² and at
-/// 2048², four at 4096². Each batch reads and writes every pixel's sums once: 16 maps of 2048²
-/// per batch rather than 8 took 64 samples at 1080p from 0.86 to 0.85 s of method phase under
-/// a coloured light (the sums' bytes per batch are the same; fewer batches move fewer).
-const BATCH_MAP_BYTES: u64 = 256 << 20;
+/// Memory the depth maps of one accumulate batch may take: 32 maps at the default 1024² and at
+/// 2048², eight at 4096². Each batch but the last stores every pixel's sums and each but the
+/// first reads them, and on lavapipe a pixel's stores cost about as much as a sample's test:
+/// 64 samples of 2048² at 1080p in two batches of 32 rather than four of 16 took the whole
+/// request from 0.97 to 0.92 s under a coloured light (0.85 to 0.80 s under white).
+const BATCH_MAP_BYTES: u64 = 512 << 20;
 
 /// The most samples one accumulate pass reads; mirrors `MAX_SAMPLES` in `accumulate.wgsl`.
-const BATCH_SAMPLES: usize = 16;
+const BATCH_SAMPLES: usize = 32;
 
 /// Depth maps drawn before one accumulate pass reads them all: more per pass reads the
 /// G-buffer and updates the sums less often, fewer keeps the maps' memory bounded.
@@ -186,8 +187,10 @@ impl ShadowMethod for Reference {
             .unzip();
         let uniform_buffer = layout::uniform_slots(&device, "Reference::samples", &view_projs);
         let layers = batch_layers(resolution).min(slots.len().max(1) as u32);
-        let batches: Vec<(u32, BatchUniforms)> = slots
-            .chunks(layers as usize)
+        // No samples (a black light): one empty batch, whose ratio is 1 everywhere.
+        let chunks: Vec<&[BatchSample]> = if slots.is_empty() { vec![&[]] } else { slots.chunks(layers as usize).collect() };
+        let batches: Vec<(u32, BatchUniforms)> = chunks
+            .into_iter()
             .map(|chunk| {
                 let mut batch = BatchUniforms::zeroed();
                 batch.rotation = [0, 1, 2].map(|i| rotation.row(i).to_array());
@@ -202,13 +205,10 @@ impl ShadowMethod for Reference {
         let pixels = u64::from(ctx.width) * u64::from(ctx.height);
         // One channel where every weight is gray (its three sums would be equal), else three.
         let channels: u32 = if samples.iter().all(|s| s.weight.x == s.weight.y && s.weight.x == s.weight.z) { 1 } else { 3 };
-        // From the pool: the first batch writes every covered pixel's sums (with no samples,
-        // they are cleared below), and every map's layer is cleared before it is drawn.
-        let sums = ctx.scratch_buffer(
-            "Reference::sums",
-            pixels * 8 * u64::from(channels),
-            wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-        );
+        // From the pool: the first batch writes every covered pixel's sums and the last reads
+        // them (a single batch needs none), and every map's layer is cleared before it is drawn.
+        let sums_bytes = if batches.len() > 1 { pixels * 8 * u64::from(channels) } else { 16 };
+        let sums = ctx.scratch_buffer("Reference::sums", sums_bytes, wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST);
         // The depth maps are the depth buffers themselves (`sample_depth.wgsl`), one layer each.
         let depth = ctx.scratch_texture(TextureKey {
             label: "Reference::depths",
@@ -230,21 +230,12 @@ impl ShadowMethod for Reference {
             .collect();
         let depths_view =
             depth.create_view(&wgpu::TextureViewDescriptor { dimension: Some(wgpu::TextureViewDimension::D2Array), ..Default::default() });
-        let (depth_pipeline, resolve_pipeline) = self.pipelines(ctx, channels);
+        let depth_pipeline = self.depth_pipeline(ctx);
         let depth_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("Reference::sample"),
             layout: &depth_pipeline.get_bind_group_layout(0),
             entries: &layout::entries(&[layout::slot_binding::<[[f32; 4]; 4]>(&uniform_buffer)]),
         });
-        let resolve_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("Reference::resolve"),
-            layout: &resolve_pipeline.get_bind_group_layout(1),
-            entries: &layout::entries(&[sums.as_entire_binding(), ctx.visibility.as_entire_binding()]),
-        });
-
-        if samples.is_empty() {
-            ctx.encoder.clear_buffer(&sums, 0, None);
-        }
         let (gx, gy) = ctx.dispatch_size();
         let total = samples.len() as u64;
         let mut before = 0;
@@ -272,10 +263,13 @@ impl ShadowMethod for Reference {
             }
             {
                 // One pipeline per batch size (`SAMPLES` in accumulate.wgsl: all but the last
-                // batch are full), channels of the sums, and whether it is the first.
-                let first = b == 0;
+                // batch are full), channels of the sums, and whether it is the first or last.
+                let (first, last) = (b == 0, b + 1 == batches.len());
                 let pipeline = ctx.screen_specialized(
-                    PipelineKey { name: "reference.accumulate", variant: count | channels << 8 | u32::from(first) << 16 },
+                    PipelineKey {
+                        name: "reference.accumulate",
+                        variant: count | channels << 8 | u32::from(first) << 16 | u32::from(last) << 17,
+                    },
                     ("methods/reference/accumulate.wgsl", "main"),
                     &[
                         layout::uniform_dynamic(0),
@@ -290,8 +284,14 @@ impl ShadowMethod for Reference {
                             count: None,
                         },
                         layout::storage_read_write(2),
+                        layout::storage_read_write(3),
                     ],
-                    &[("SAMPLES", f64::from(count)), ("CHANNELS", f64::from(channels)), ("FIRST", f64::from(u8::from(first)))],
+                    &[
+                        ("SAMPLES", f64::from(count)),
+                        ("CHANNELS", f64::from(channels)),
+                        ("FIRST", f64::from(u8::from(first))),
+                        ("LAST", f64::from(u8::from(last))),
+                    ],
                 );
                 let group = ctx.bind(
                     "Reference::accumulate",
@@ -300,6 +300,7 @@ impl ShadowMethod for Reference {
                         layout::slot_binding::<BatchUniforms>(&batch_buffer),
                         wgpu::BindingResource::TextureView(&depths_view),
                         sums.as_entire_binding(),
+                        ctx.visibility.as_entire_binding(),
                     ],
                 );
                 let mut pass = ctx
@@ -323,14 +324,6 @@ impl ShadowMethod for Reference {
                 }
             }
         }
-        {
-            let mut pass =
-                ctx.encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("Reference::resolve"), timestamp_writes: None });
-            pass.set_pipeline(&resolve_pipeline);
-            pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
-            pass.set_bind_group(1, &resolve_group, &[]);
-            pass.dispatch_workgroups(gx, gy, 1);
-        }
         Ok(Counters::from([
             ("samples".to_owned(), total as f64),
             ("samples_skipped_black".to_owned(), f64::from(strata) - total as f64),
@@ -340,13 +333,10 @@ impl ShadowMethod for Reference {
 }
 
 impl Reference {
-    fn pipelines(
-        &self,
-        ctx: &mut MethodContext<'_>,
-        channels: u32,
-    ) -> (std::sync::Arc<wgpu::RenderPipeline>, std::sync::Arc<wgpu::ComputePipeline>) {
+    /// The depth-only pipeline that draws a sample's map.
+    fn depth_pipeline(&self, ctx: &mut MethodContext<'_>) -> std::sync::Arc<wgpu::RenderPipeline> {
         let device = &ctx.gpu.device;
-        let depth = ctx.pipelines.render(PipelineKey::new("reference.sample_depth"), || {
+        ctx.pipelines.render(PipelineKey::new("reference.sample_depth"), || {
             let sample_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                 label: Some("Reference::sample_layout"),
                 entries: &[layout::uniform_dynamic(0)],
@@ -360,14 +350,7 @@ impl Reference {
                 depth_compare: wgpu::CompareFunction::Greater,
             };
             pipeline.build(device)
-        });
-        let resolve = ctx.screen_specialized(
-            PipelineKey { name: "reference.resolve", variant: channels },
-            ("methods/reference/resolve.wgsl", "main"),
-            &[layout::storage_read(0), layout::storage_read_write(1)],
-            &[("CHANNELS", f64::from(channels))],
-        );
-        (depth, resolve)
+        })
     }
 }
 

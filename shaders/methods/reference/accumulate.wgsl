@@ -1,6 +1,7 @@
 // Method `reference`, per batch of light samples: adds the batch's contributions to the two
 // sums of the ratio estimator, per pixel: Σ L·G·V (shadowed) and Σ L·G (unshadowed), with
-// G = cosθx·cosθy/|x−y|² and V from each sample's depth map (contract §1).
+// G = cosθx·cosθy/|x−y|² and V from each sample's depth map (contract §1); the last batch
+// writes their ratio, the visibility, instead (`LAST`).
 //
 // Why it is written this way (each measured on lavapipe at 1080p): a pass per sample paid for
 // the G-buffer reads and the sums' update every sample, so a batch reads and updates each
@@ -14,7 +15,7 @@
 #import common/frame_inputs.wgsl
 
 // The most samples a batch holds; mirrors `methods::reference::BATCH_SAMPLES`.
-const MAX_SAMPLES: u32 = 16u;
+const MAX_SAMPLES: u32 = 32u;
 // The samples in this pipeline's batches: one pipeline per batch size.
 override SAMPLES: u32 = MAX_SAMPLES;
 // Channels of the sums: 1 where every sample's weight is gray (a uniform or shaped white
@@ -23,6 +24,10 @@ override SAMPLES: u32 = MAX_SAMPLES;
 override CHANNELS: u32 = 3u;
 // The first batch writes the sums instead of adding to them (nothing to clear or read).
 override FIRST: bool = false;
+// The last batch writes the visibility instead of the sums: on lavapipe each float a pixel
+// stores costs about as much as a sample's test, so the sums are stored once fewer and
+// never read back by a pass of their own.
+override LAST: bool = false;
 
 struct BatchSample {
     origin: vec4<f32>,   // xyz: the sample point y in view coordinates (rotation · y); w: its map's near plane, metres
@@ -45,8 +50,10 @@ struct Batch {
 // the map holds nothing. Read where they were drawn: a texel fetch costs more than a buffer
 // load on lavapipe, but less than copying every map into a buffer.
 @group(1) @binding(1) var depths: texture_depth_2d_array;
-// Per covered pixel, 2·CHANNELS floats: Σ L·G·V, then Σ L·G (`resolve.wgsl` reads them).
+// Per covered pixel, 2·CHANNELS floats: Σ L·G·V, then Σ L·G (what the batches so far added).
 @group(1) @binding(2) var<storage, read_write> sums: array<f32>;
+// The method's output, written by the last batch.
+@group(1) @binding(3) var<storage, read_write> visibility_out: array<vec4<f32>>;
 
 struct Sums {
     shadowed: vec3<f32>,
@@ -90,6 +97,9 @@ fn add_sample(sums: ptr<function, Sums>, x: vec3<f32>, n: vec3<f32>, bias: f32, 
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     let pixel = id.xy;
     if !covered(pixel) {
+        if LAST && all(pixel < frame.sizes.xy) {
+            visibility_out[pixel_index(pixel)] = vec4<f32>(1.0);
+        }
         return;
     }
     let world = textureLoad(gbuf_position, pixel, 0).xyz;
@@ -104,7 +114,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     let tan_c = min(sqrt(1.0 - cos_c * cos_c) / max(cos_c, 0.05), 10.0);
     let bias = batch.bias_texels + batch.slope_bias_texels * tan_c;
     var s = Sums(vec3<f32>(0.0), vec3<f32>(0.0));
-    add_sample(&s, x, n, bias, 0u, batch.samples[0]);
+    if SAMPLES > 0u { add_sample(&s, x, n, bias, 0u, batch.samples[0]); }
     if SAMPLES > 1u { add_sample(&s, x, n, bias, 1u, batch.samples[1]); }
     if SAMPLES > 2u { add_sample(&s, x, n, bias, 2u, batch.samples[2]); }
     if SAMPLES > 3u { add_sample(&s, x, n, bias, 3u, batch.samples[3]); }
@@ -120,15 +130,52 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     if SAMPLES > 13u { add_sample(&s, x, n, bias, 13u, batch.samples[13]); }
     if SAMPLES > 14u { add_sample(&s, x, n, bias, 14u, batch.samples[14]); }
     if SAMPLES > 15u { add_sample(&s, x, n, bias, 15u, batch.samples[15]); }
+    if SAMPLES > 16u { add_sample(&s, x, n, bias, 16u, batch.samples[16]); }
+    if SAMPLES > 17u { add_sample(&s, x, n, bias, 17u, batch.samples[17]); }
+    if SAMPLES > 18u { add_sample(&s, x, n, bias, 18u, batch.samples[18]); }
+    if SAMPLES > 19u { add_sample(&s, x, n, bias, 19u, batch.samples[19]); }
+    if SAMPLES > 20u { add_sample(&s, x, n, bias, 20u, batch.samples[20]); }
+    if SAMPLES > 21u { add_sample(&s, x, n, bias, 21u, batch.samples[21]); }
+    if SAMPLES > 22u { add_sample(&s, x, n, bias, 22u, batch.samples[22]); }
+    if SAMPLES > 23u { add_sample(&s, x, n, bias, 23u, batch.samples[23]); }
+    if SAMPLES > 24u { add_sample(&s, x, n, bias, 24u, batch.samples[24]); }
+    if SAMPLES > 25u { add_sample(&s, x, n, bias, 25u, batch.samples[25]); }
+    if SAMPLES > 26u { add_sample(&s, x, n, bias, 26u, batch.samples[26]); }
+    if SAMPLES > 27u { add_sample(&s, x, n, bias, 27u, batch.samples[27]); }
+    if SAMPLES > 28u { add_sample(&s, x, n, bias, 28u, batch.samples[28]); }
+    if SAMPLES > 29u { add_sample(&s, x, n, bias, 29u, batch.samples[29]); }
+    if SAMPLES > 30u { add_sample(&s, x, n, bias, 30u, batch.samples[30]); }
+    if SAMPLES > 31u { add_sample(&s, x, n, bias, 31u, batch.samples[31]); }
     let base = 2u * CHANNELS * (pixel.y * frame.sizes.x + pixel.x);
-    for (var c = 0u; c < CHANNELS; c++) {
-        var shadowed = s.shadowed[c];
-        var unshadowed = s.unshadowed[c];
-        if !FIRST {
-            shadowed += sums[base + c];
-            unshadowed += sums[base + CHANNELS + c];
+    if !FIRST {
+        for (var c = 0u; c < CHANNELS; c++) {
+            s.shadowed[c] += sums[base + c];
+            s.unshadowed[c] += sums[base + CHANNELS + c];
         }
-        sums[base + c] = shadowed;
-        sums[base + CHANNELS + c] = unshadowed;
     }
+    if LAST {
+        visibility_out[pixel_index(pixel)] = vec4<f32>(ratio(s), 1.0);
+    } else {
+        for (var c = 0u; c < CHANNELS; c++) {
+            sums[base + c] = s.shadowed[c];
+            sums[base + CHANNELS + c] = s.unshadowed[c];
+        }
+    }
+}
+
+// Visibility per channel as the ratio of the two sums, V = Σ L·G·V / Σ L·G. Using the same
+// samples in numerator and denominator makes fully lit points exactly 1 and umbrae exactly 0
+// (a ratio estimator). A channel the light does not emit at all takes the ratio of the
+// channel sums; a point no sample reaches is lit (1).
+fn ratio(s: Sums) -> vec3<f32> {
+    var shadowed = s.shadowed;
+    var unshadowed = s.unshadowed;
+    if CHANNELS == 1u {
+        shadowed = vec3<f32>(shadowed.x);
+        unshadowed = vec3<f32>(unshadowed.x);
+    }
+    let total = unshadowed.r + unshadowed.g + unshadowed.b;
+    let gray = select(1.0, (shadowed.r + shadowed.g + shadowed.b) / total, total > 0.0);
+    let v = select(vec3<f32>(gray), shadowed / unshadowed, unshadowed > vec3<f32>(0.0));
+    return clamp(v, vec3<f32>(0.0), vec3<f32>(1.0));
 }
