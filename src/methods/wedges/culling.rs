@@ -107,11 +107,16 @@ pub(super) fn cull(
         let row = (blocks_x.1 - blocks_x.0) as usize;
         let mut kept = Vec::new();
         for ty in y.0..y.1 {
-            for tx in x.0..x.1 {
-                let block = (ty / BLOCK - y.0 / BLOCK) as usize * row + (tx / BLOCK - blocks_x.0) as usize;
-                let t = ty * grid.across + tx;
-                if open[block] && test(grid.boxes[t as usize]) {
-                    kept.push(t);
+            let blocks = &open[(ty / BLOCK - y.0 / BLOCK) as usize * row..][..row];
+            // A closed block is passed over as a whole: nearly every block of a large wedge's
+            // bounding box is closed (terrain: 99.8 % of its tiles culled), and visiting its
+            // tiles one by one only to skip them was most of the culling's time.
+            for (bx, _) in (blocks_x.0..).zip(blocks).filter(|(_, &open)| open) {
+                for tx in (bx * BLOCK).max(x.0)..((bx + 1) * BLOCK).min(x.1) {
+                    let t = ty * grid.across + tx;
+                    if test(grid.boxes[t as usize]) {
+                        kept.push(t);
+                    }
                 }
             }
         }
