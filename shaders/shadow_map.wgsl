@@ -1,7 +1,8 @@
 // Light-space shadow map, rendered from the centre of the area light: linear depth along the
-// light normal, the object id of the nearest surface (used by methods that need ids,
-// Brabec–Seidel §3.2 and Rong–Tan §5.2) and its world position (the "light space coordinate"
-// Rong–Tan §4.1 floods). No culling: back faces cast shadows too (contract §1).
+// light normal and the object id of the nearest surface (used by methods that need ids,
+// Brabec–Seidel §3.2 and Rong–Tan §5.2). Its world position (the "light space coordinate"
+// Rong–Tan §4.1 floods) is the texel's ray at that depth (`shadow_point`, common/shadow.wgsl).
+// No culling: back faces cast shadows too (contract §1).
 
 #import common/frame.wgsl
 
@@ -11,7 +12,6 @@ struct VsOut {
     @builtin(position) clip: vec4<f32>,
     @location(0) depth: f32,
     @location(1) @interpolate(flat) object_id: u32,
-    @location(2) world: vec3<f32>,
 }
 
 @vertex
@@ -21,19 +21,17 @@ fn vs_main(@location(0) position: vec3<f32>, @location(3) object_id: u32) -> VsO
     // Affine in world space, so perspective-correct interpolation makes it exact per pixel.
     out.depth = dot(position - frame.light_center.xyz, frame.light_n.xyz);
     out.object_id = object_id;
-    out.world = position;
     return out;
 }
 
 struct FsOut {
     @location(0) depth: f32,
     @location(1) object_id: u32,
-    @location(2) world: vec4<f32>,
 }
 
 @fragment
 fn fs_main(in: VsOut) -> FsOut {
-    return FsOut(in.depth, in.object_id, vec4<f32>(in.world, 1.0));
+    return FsOut(in.depth, in.object_id);
 }
 
 // Depth alone, for methods that read nothing else of the shadow map.

@@ -13,7 +13,6 @@
 @group(0) @binding(5) var shadow_depth: texture_2d<f32>;  // linear depth along the light normal
 @group(0) @binding(6) var shadow_id: texture_2d<u32>;     // object id seen from the light centre
 @group(0) @binding(7) var<uniform> light_cells: array<LightCell, 64>; // frame.sizes.w of them (light::E0_GRID²)
-@group(0) @binding(8) var shadow_position: texture_2d<f32>; // world position seen from the light centre, w 1 where covered
 
 // Distance from the light's centre to its rectangle's edge along unit direction `e` (light
 // coordinates: x along r, y along u).

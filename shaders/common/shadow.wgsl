@@ -32,6 +32,25 @@ fn depth_bias(p: vec3<f32>, n: vec3<f32>, depth: f32, constant_texels: f32, slop
     return texel_size_m(depth) * (constant_texels + slope_texels * tan_theta);
 }
 
+// The surface point the shadow map holds at texel t (xyz, world), w 1 where it holds one. The
+// map stores the linear depth along the light normal, and the rasteriser sampled it at the
+// texel's centre, on that texel's ray from the light centre (the inverse of `to_light_space`:
+// the frustum looks along n with up u, so its right is −r), so the point is the ray at that
+// depth: what the shadow pass used to write in a texture of its own, to rounding, for a
+// quarter of the pass's bytes (on lavapipe 40 → 21 ms at 2048² on `terrain`).
+fn shadow_point(t: vec2<i32>) -> vec4<f32> {
+    let depth = textureLoad(shadow_depth, t, 0).r;
+    let uv = (vec2<f32>(t) + 0.5) / f32(frame.sizes.z);
+    let ndc = vec2<f32>(2.0 * uv.x - 1.0, 1.0 - 2.0 * uv.y) * frame.light_proj.x;
+    let ray = frame.light_n.xyz - ndc.x * frame.light_r.xyz + ndc.y * frame.light_u.xyz;
+    // The map is cleared to f32::MAX where nothing was drawn.
+    let covered = depth < EMPTY_DEPTH;
+    return vec4<f32>(frame.light_center.xyz + ray * select(0.0, depth, covered), select(0.0, 1.0, covered));
+}
+
+// Depths at or beyond this are texels the shadow pass drew nothing into (cleared to f32::MAX).
+const EMPTY_DEPTH: f32 = 1e38;
+
 fn shadow_texel(uv: vec2<f32>) -> vec2<i32> {
     return vec2<i32>(shadow_texel_axis(uv.x), shadow_texel_axis(uv.y));
 }
@@ -58,7 +77,7 @@ fn silhouette_normal(o: vec3<f32>, radius: i32, relative: f32) -> vec2<f32> {
             if (a == 0 && b == 0) || any(t < vec2<i32>(0)) || any(t >= vec2<i32>(res)) {
                 continue;
             }
-            let deeper = textureLoad(shadow_position, t, 0).w == 0.0 || textureLoad(shadow_depth, t, 0).r > limit;
+            let deeper = shadow_point(t).w == 0.0 || textureLoad(shadow_depth, t, 0).r > limit;
             let offset = normalize(vec2<f32>(f32(a), f32(b)));
             beyond += select(-offset, offset, deeper);
         }

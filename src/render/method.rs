@@ -264,9 +264,9 @@ pub trait ShadowMethod: Send + Sync {
     /// Records the passes that fill `ctx.visibility`.
     /// Fails the job on a GPU error (a failed map or poll), never panics.
     fn record(&self, ctx: &mut MethodContext<'_>, params: &Params) -> JobResult<Counters>;
-    /// Whether the method reads what the shadow map sees besides its depth — object ids and
-    /// world positions (`shadow_id`, `shadow_position`). A method that does not says so, and
-    /// the shadow-map pass writes depth alone: at 2048² the two extra targets are 80 MB of
+    /// Whether the method reads what the shadow map sees besides its depth — object ids
+    /// (`shadow_id`; world positions come from the depth, `shadow_point`). A method that does
+    /// not says so, and the shadow-map pass writes depth alone: at 2048² the ids are 16 MB of
     /// clears and writes a frame, half the pass on lavapipe.
     fn reads_light_surfaces(&self) -> bool {
         true

@@ -39,8 +39,9 @@ impl Renderer {
         })
     }
 
-    /// The shadow map from the light's centre: depth, and with `surfaces` the object ids and
-    /// world positions too (`ShadowMethod::reads_light_surfaces`).
+    /// The shadow map from the light's centre: depth, and with `surfaces` the object ids too
+    /// (`ShadowMethod::reads_light_surfaces`; the world positions are the depth's texel rays,
+    /// `shadow_point` in common/shadow.wgsl).
     pub(super) fn record_shadow_map(
         &mut self,
         encoder: &mut wgpu::CommandEncoder,
@@ -52,11 +53,8 @@ impl Renderer {
         let draw_layout = &self.layouts.draw;
         let key = PipelineKey { name: "shadow_map", variant: u32::from(surfaces) };
         let pipeline = self.pipelines.render(key, || {
-            let (fragment, targets): (_, &[wgpu::TextureFormat]) = if surfaces {
-                ("fs_main", &[SHADOW_DEPTH_FORMAT, ID_FORMAT, POSITION_FORMAT])
-            } else {
-                ("fs_depth", &[SHADOW_DEPTH_FORMAT])
-            };
+            let (fragment, targets): (_, &[wgpu::TextureFormat]) =
+                if surfaces { ("fs_main", &[SHADOW_DEPTH_FORMAT, ID_FORMAT]) } else { ("fs_depth", &[SHADOW_DEPTH_FORMAT]) };
             let pipeline = ScenePipeline {
                 label: "ShadowMap::pipeline",
                 shader: "shadow_map.wgsl",
@@ -71,7 +69,6 @@ impl Renderer {
         let all = [
             Some(clear_attachment(&targets.shadow_depth.view, f64::from(f32::MAX))),
             Some(clear_attachment(&targets.shadow_id.view, f64::from(u32::MAX))),
-            Some(clear_attachment(&targets.shadow_position.view, 0.0)),
         ];
         let colors = if surfaces { &all[..] } else { &all[..1] };
         let timestamps = self.timer.render_scope("shadow_map", "ShadowMap::pass");

@@ -401,7 +401,7 @@ fn edge_line(p: vec3<f32>, w: Warped, found: vec2<i32>, f: f32) -> vec3<f32> {
         let step = select(vec2<i32>(sign(back)), vec2<i32>(0), abs(back) < vec2<f32>(0.5 * max(abs(back.x), abs(back.y))));
         texel = clamp(found + step, vec2<i32>(0), vec2<i32>(i32(frame.sizes.z) - 1));
     }
-    let occluder = textureLoad(shadow_position, texel, 0).xyz;
+    let occluder = shadow_point(texel).xyz;
     // The blocker lies towards e (outer), the lit surface towards e (inner): the occluder
     // faces away along −e, respectively +e.
     var normal = select(-e, e, w.hard);
@@ -422,7 +422,7 @@ fn edge_line(p: vec3<f32>, w: Warped, found: vec2<i32>, f: f32) -> vec3<f32> {
 // of the light the blocker hides (outer penumbra) or the lit surface sees (inner).
 fn light_direction(p: vec3<f32>, depth: f32, texel: vec2<i32>) -> vec2<f32> {
     let c = frame.light_center.xyz;
-    let point = textureLoad(shadow_position, texel, 0).xyz;
+    let point = shadow_point(texel).xyz;
     let on_ray = c + (p - c) * (dot(point - c, frame.light_n.xyz) / max(depth, 1e-6));
     let offset = point - on_ray;
     return vec2<f32>(dot(offset, frame.light_r.xyz), dot(offset, frame.light_u.xyz));

@@ -81,7 +81,7 @@ fn seed_listed(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocatio
     let here = textureLoad(gbuf_position, pixel, 0);
     let lit = textureLoad(gbuf_position, vec2<u32>(vec2<i32>(pixel) + neighbour), 0).xyz;
     let texel = shadow_texel(to_light_space(here.xyz).uv);
-    let occluder = textureLoad(shadow_position, texel, 0).xyz;
+    let occluder = shadow_point(texel).xyz;
     let intensity_here = intensity(here.xyz, occluder, true);
     // A seed whose own ray misses the light still passes its occluder on.
     let key = select(SEED_KEY, 1.0 - luminance(intensity_here.rgb), intensity_here.w > 0.0);

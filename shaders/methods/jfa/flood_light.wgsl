@@ -21,7 +21,7 @@ fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_id) l
     let index = u32(p.y * res + p.x);
     var best = src[index];
     var best_key = key_of(best);
-    let receiver = textureLoad(shadow_position, p, 0);
+    let receiver = shadow_point(p);
     let receiver_depth = map_depth_at(p);
     if receiver.w > 0.0 {
         // The distinct occluders the neighbours offer besides the one held, in neighbour

@@ -12,7 +12,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     let p = vec2<i32>(id.xy);
     var record = vec4<f32>(0.0);
-    let here = textureLoad(shadow_position, p, 0);
+    let here = shadow_point(p);
     if here.w > 0.0 {
         let depth = map_depth_at(p);
         var silhouette = false;
