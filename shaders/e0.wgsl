@@ -225,7 +225,7 @@ fn max3(v: vec3<f32>) -> f32 {
 }
 
 // What a block's centre pixel says about its interpolation: the derivatives of Φ and of the
-// E0 blend along the view ray (see `correction`), and the error left at the centre once they
+// E0 blend along the view ray (`ray_offset`), and the error left at the centre once they
 // are applied, relative to |Φ|.
 struct Check {
     error: f32,           // UNCHECKED where the centre or a corner holds no lit surface

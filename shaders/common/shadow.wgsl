@@ -77,7 +77,8 @@ fn silhouette_normal(o: vec3<f32>, radius: i32, relative: f32) -> vec2<f32> {
             if (a == 0 && b == 0) || any(t < vec2<i32>(0)) || any(t >= vec2<i32>(res)) {
                 continue;
             }
-            let deeper = shadow_point(t).w == 0.0 || textureLoad(shadow_depth, t, 0).r > limit;
+            // An empty texel holds f32::MAX: deeper than any limit.
+            let deeper = textureLoad(shadow_depth, t, 0).r > limit;
             let offset = normalize(vec2<f32>(f32(a), f32(b)));
             beyond += select(-offset, offset, deeper);
         }
