@@ -3,8 +3,8 @@
 //! (`light::tables`). Shaders: `shaders/methods/jfa/`. Both share one pass driver (`flood`): seed,
 //! `rounds` rounds of flooding between two record buffers, final pass.
 //!
-//! `jfa-l`: the shadow map (from the light centre) also stores each texel's world
-//! position (§4.1 "light space coordinates"). `silhouette.wgsl` marks texels with a deeper
+//! `jfa-l`: each shadow-map texel's world position (§4.1 "light space coordinates") is its
+//! ray from the light centre at the stored depth (`shadow_point`). `silhouette.wgsl` marks texels with a deeper
 //! neighbour as silhouette pixels, seeded with their own position. `flood_light.wgsl` runs
 //! `rounds` rounds with steps 2^(rounds−1) … 1 (§3), each texel keeping, among the occluders
 //! its 8 neighbours at ±step carry, the one that gives its own surface point the least light;
