@@ -39,7 +39,11 @@ fn depth_bias(p: vec3<f32>, n: vec3<f32>, depth: f32, constant_texels: f32, slop
 // depth: what the shadow pass used to write in a texture of its own, to rounding, for a
 // quarter of the pass's bytes (on lavapipe 40 → 21 ms at 2048² on `terrain`).
 fn shadow_point(t: vec2<i32>) -> vec4<f32> {
-    let depth = textureLoad(shadow_depth, t, 0).r;
+    return shadow_point_at(t, textureLoad(shadow_depth, t, 0).r);
+}
+
+// `shadow_point` where texel t's depth is at hand (`jfa-*` read their copy of the map).
+fn shadow_point_at(t: vec2<i32>, depth: f32) -> vec4<f32> {
     let uv = (vec2<f32>(t) + 0.5) / f32(frame.sizes.z);
     let ndc = vec2<f32>(2.0 * uv.x - 1.0, 1.0 - 2.0 * uv.y) * frame.light_proj.x;
     let ray = frame.light_n.xyz - ndc.x * frame.light_r.xyz + ndc.y * frame.light_u.xyz;

@@ -21,8 +21,8 @@ fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_id) l
     let index = u32(p.y * res + p.x);
     var best = src[index];
     var best_key = key_of(best);
-    let receiver = shadow_point(p);
     let receiver_depth = map_depth_at(p);
+    let receiver = shadow_point_at(p, receiver_depth);
     if receiver.w > 0.0 {
         // The distinct occluders the neighbours offer besides the one held, in neighbour
         // order, gathered first and then weighed: neighbours mostly hand on the same

@@ -12,9 +12,9 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     let p = vec2<i32>(id.xy);
     var record = vec4<f32>(0.0);
-    let here = shadow_point(p);
+    let depth = map_depth_at(p);
+    let here = shadow_point_at(p, depth);
     if here.w > 0.0 {
-        let depth = map_depth_at(p);
         var silhouette = false;
         for (var b = -1; b <= 1; b++) {
             for (var a = -1; a <= 1; a++) {
