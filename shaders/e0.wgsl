@@ -320,8 +320,9 @@ fn interpolated_e0(pixel: vec2<u32>, x: vec3<f32>, normal: vec4<f32>, b: Block, 
     let t = ray_offset(x, mixed);
     // The centre's error with a margin; what the derivative's error adds where the pixel lies
     // farther along its ray than the centre did; and the second order in t.
-    let reach = t / light_distance(x);
-    let beyond = abs(t - check.ray) / light_distance(x);
+    let dist = light_distance(x);
+    let reach = t / dist;
+    let beyond = abs(t - check.ray) / dist;
     let relative = ERROR_MARGIN * check.error + check.first * beyond + RAY_SECOND * reach * reach;
     let phi = phi_of(mixed) + check.d_phi * t;
     let size = vec3<f32>(length(phi[0]), length(phi[1]), length(phi[2]));

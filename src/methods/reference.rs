@@ -60,7 +60,9 @@ fn sample_rotation(light: &AreaLight) -> Mat4 {
     Mat4::look_to_rh(Vec3::ZERO, light.n, light.u)
 }
 
-/// Samples recorded per submission; progress is reported between submissions.
+/// Samples recorded between submissions at least: the frame is submitted, progress reported
+/// and cancellation checked after each batch that completes another 16 (every batch where
+/// a batch holds 16 or more maps, every other one of 8 at 4096²).
 const BATCH: u64 = 16;
 
 /// Memory the depth maps of one accumulate batch may take: 32 maps at the default 1024² and at
