@@ -24,6 +24,9 @@ pub struct GpuScene {
     pub materials: wgpu::Buffer,
     /// Group 1 of the G-buffer pass, one per material: base-colour texture and sampler.
     pub material_bind_groups: Vec<wgpu::BindGroup>,
+    /// Per material, whether it samples a texture of its own (else the 1×1 white one is bound
+    /// and the G-buffer pass draws it without sampling).
+    pub textured: Vec<bool>,
     pub draws: Vec<DrawRange>,
     pub triangles: u64,
     pub textures: u64,
@@ -112,6 +115,7 @@ impl GpuScene {
         };
         let white = upload_texture(1, 1, &[255; 4]);
         let views: Vec<wgpu::TextureView> = scene.textures.iter().map(|t| upload_texture(t.width, t.height, &t.rgba8)).collect();
+        let textured: Vec<bool> = scene.materials.iter().map(|m| m.texture.is_some_and(|t| t < views.len())).collect();
         let material_bind_groups = scene
             .materials
             .iter()
@@ -130,6 +134,7 @@ impl GpuScene {
             index_count: scene.indices.len() as u32,
             materials,
             material_bind_groups,
+            textured,
             draws: scene.draws.clone(),
             triangles: scene.triangle_count(),
             textures: scene.textures.len() as u64,

@@ -87,17 +87,22 @@ impl Renderer {
     pub(super) fn record_gbuffer(&mut self, encoder: &mut wgpu::CommandEncoder, scene: &GpuScene, targets: &FrameTargets) {
         let device = &self.gpu.device;
         let (draw_layout, material_layout) = (&self.layouts.draw, &self.layouts.material);
-        let pipeline = self.pipelines.render(PipelineKey::new("gbuffer"), || {
-            let pipeline = ScenePipeline {
-                label: "GBuffer::pipeline",
-                shader: "gbuffer.wgsl",
-                fragment: Some("fs_main"),
-                bind_group_layouts: &[draw_layout, material_layout],
-                targets: &[POSITION_FORMAT, NORMAL_FORMAT, ALBEDO_FORMAT, ID_FORMAT],
-                depth_compare: wgpu::CompareFunction::Less,
-            };
-            pipeline.build(device)
-        });
+        // Two fragment entry points: materials with a texture, and those without (no sample).
+        let mut pipeline = |name: &'static str, fragment: &'static str| {
+            self.pipelines.render(PipelineKey::new(name), || {
+                let pipeline = ScenePipeline {
+                    label: "GBuffer::pipeline",
+                    shader: "gbuffer.wgsl",
+                    fragment: Some(fragment),
+                    bind_group_layouts: &[draw_layout, material_layout],
+                    targets: &[POSITION_FORMAT, NORMAL_FORMAT, ALBEDO_FORMAT, ID_FORMAT],
+                    depth_compare: wgpu::CompareFunction::Less,
+                };
+                pipeline.build(device)
+            })
+        };
+        let textured = pipeline("gbuffer", "fs_main");
+        let untextured = pipeline("gbuffer.untextured", "fs_untextured");
         let bind_group = self.draw_bind_group(scene);
         let colors = [
             Some(clear_attachment(&targets.position.view, 0.0)),
@@ -107,9 +112,11 @@ impl Renderer {
         ];
         let timestamps = self.timer.render_scope("gbuffer", "GBuffer::pass");
         let mut pass =
-            begin_scene_pass(encoder, "GBuffer::pass", &colors, &targets.depth_buffer.view, timestamps, (&pipeline, &bind_group), scene);
+            begin_scene_pass(encoder, "GBuffer::pass", &colors, &targets.depth_buffer.view, timestamps, (&textured, &bind_group), scene);
         for draw in &scene.draws {
-            pass.set_bind_group(1, &scene.material_bind_groups[draw.material as usize], &[]);
+            let material = draw.material as usize;
+            pass.set_pipeline(if scene.textured.get(material).copied().unwrap_or(false) { &textured } else { &untextured });
+            pass.set_bind_group(1, &scene.material_bind_groups[material], &[]);
             pass.draw_indexed(draw.first_index..draw.first_index + draw.index_count, 0, 0..1);
         }
     }

@@ -121,11 +121,7 @@ fn light_polygon_irradiance(poly: ptr<function, array<vec2<f32>, 8>>, count: u32
     for (var k = 0u; k < count; k++) {
         let a = normalize(light_point((*poly)[k]) - p);
         let b = normalize(light_point((*poly)[(k + 1u) % count]) - p);
-        let c = cross(a, b);
-        let len = length(c);
-        if len > 1e-12 {
-            sum += atan2(len, dot(a, b)) * dot(normal, c / len);
-        }
+        sum += dot(normal, edge_vector(a, b));
     }
     return 0.5 * abs(sum);
 }
