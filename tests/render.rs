@@ -5,7 +5,7 @@ mod common;
 
 use glam::{Vec2, Vec3};
 use penumbra::job::{AssetRef, Job, Limits, OutputFormat};
-use penumbra::light::{light_cells, unshadowed_irradiance, AreaLight, LightImage};
+use penumbra::light::{edges_acute_from, light_cells, unshadowed_irradiance, AreaLight, LightImage};
 use penumbra::methods::chun_oh::quadtree_probe;
 use penumbra::methods::filter::light_regions;
 use serde_json::json;
@@ -150,26 +150,44 @@ fn png_pixels_made_on_the_gpu_match_the_cpu_transfer_function() {
 #[test]
 fn e0_on_the_gpu_matches_its_cpu_twin() {
     // Pixel (16, 16) of a 33×33 view looking straight down at (3, 0, 3) sees exactly that
-    // point of the floor (albedo 0.7), lit by a tilted coloured light and unshadowed.
-    let light_json = json!({"center": [2, 1.5, 2.5], "direction": [0.3, -1, 0.2], "up": [1, 0, 0],
-                            "size": [1.5, 0.7], "intensity": 10, "image": {"builtin": "stripes"}});
-    let job = job(json!({
-        "scene": {"builtin": "torus"},
-        "camera": {"eye": [3, 6, 3], "target": [3, 0, 3], "up": [0, 0, -1], "fov_y_deg": 20},
-        "light": light_json,
-        "output": {"width": 33, "height": 33, "format": "exr"}
-    }));
-    let (frame, _) = common::engine().render_frame(&job, &()).unwrap();
-    let light = AreaLight::new(Vec3::new(2.0, 1.5, 2.5), Vec3::new(0.3, -1.0, 0.2), Vec3::X, Vec2::new(1.5, 0.7), 10.0).unwrap();
-    let cells = light_cells(&light, &LightImage::builtin("stripes", &Default::default(), "light.image").unwrap());
-    let expected = unshadowed_irradiance(&light, &cells, Vec3::new(3.0, 0.0, 3.0), Vec3::Y) * 0.7 / std::f32::consts::PI;
-    let got = frame.color[16 * 33 + 16];
-    for k in 0..3 {
-        let rel = (got[k] - expected[k]).abs() / expected[k].max(1e-6);
-        assert!(rel < 2e-3, "channel {k}: GPU {} vs CPU {}", got[k], expected[k]);
+    // point of the floor (albedo 0.7), lit by a tilted coloured light and unshadowed — under
+    // each of three lights, for both forms of Lambert's edge term (`edge_vector` in
+    // shaders/common/light.wgsl): the first two lie within the scene's reach, so its frames
+    // take the general form, and the second hangs 0.15 m above the point, where the light's
+    // long edges subtend obtuse angles; the third is far above the scene (`ACUTE_EDGES`).
+    let lights = [
+        (Vec3::new(2.0, 1.5, 2.5), Vec3::new(0.3, -1.0, 0.2), false),
+        (Vec3::new(3.0, 0.15, 3.0), Vec3::new(0.0, -1.0, 0.1), false),
+        (Vec3::new(3.0, 6.0, 3.0), Vec3::new(0.1, -1.0, 0.0), true),
+    ];
+    let size = Vec2::new(1.5, 0.7);
+    // The torus scene: its 12 m floor, and a box holding the torus above it too.
+    let (floor_min, floor_max, scene_max) = (Vec3::new(-6.0, 0.0, -6.0), Vec3::new(6.0, 0.0, 6.0), Vec3::new(6.0, 2.0, 6.0));
+    for (center, direction, acute) in lights {
+        let light = AreaLight::new(center, direction, Vec3::X, size, 10.0).unwrap();
+        // What the frame takes: acute within a box holding the scene, or general within one
+        // the scene holds.
+        let (min, max) = if acute { (floor_min, scene_max) } else { (floor_min, floor_max) };
+        assert_eq!(edges_acute_from(&light, min, max), acute, "light at {center}");
+        let light_json = json!({"center": center.to_array(), "direction": direction.to_array(), "up": [1, 0, 0],
+                                "size": size.to_array(), "intensity": 10, "image": {"builtin": "stripes"}});
+        let job = job(json!({
+            "scene": {"builtin": "torus"},
+            "camera": {"eye": [3, 6, 3], "target": [3, 0, 3], "up": [0, 0, -1], "fov_y_deg": 20},
+            "light": light_json,
+            "output": {"width": 33, "height": 33, "format": "exr"}
+        }));
+        let (frame, _) = common::engine().render_frame(&job, &()).unwrap();
+        let cells = light_cells(&light, &LightImage::builtin("stripes", &Default::default(), "light.image").unwrap());
+        let expected = unshadowed_irradiance(&light, &cells, Vec3::new(3.0, 0.0, 3.0), Vec3::Y) * 0.7 / std::f32::consts::PI;
+        let got = frame.color[16 * 33 + 16];
+        for k in 0..3 {
+            let rel = (got[k] - expected[k]).abs() / expected[k].max(1e-6);
+            assert!(rel < 2e-3, "light at {center}, channel {k}: GPU {} vs CPU {}", got[k], expected[k]);
+        }
+        let visibility = frame.visibility.as_ref().unwrap()[16 * 33 + 16];
+        assert_eq!(visibility, [1.0, 1.0, 1.0]);
     }
-    let visibility = frame.visibility.as_ref().unwrap()[16 * 33 + 16];
-    assert_eq!(visibility, [1.0, 1.0, 1.0]);
 }
 
 #[test]

@@ -76,6 +76,18 @@ pub fn light_cells(light: &AreaLight, image: &LightImage) -> Vec<LightCell> {
         .collect()
 }
 
+/// Whether every segment within the light's rectangle subtends at most a right angle from
+/// every point of the box `[min, max]` (`ACUTE_EDGES` in `shaders/common/light.wgsl`). A
+/// segment subtends more only from inside the sphere on it as diameter (Thales), which lies
+/// within half its length — at most half the light's diagonal — of the rectangle; the box's
+/// distance to the rectangle is at least its distance to the centre less half the diagonal.
+pub fn edges_acute_from(light: &AreaLight, min: Vec3, max: Vec3) -> bool {
+    let half_diagonal = 0.5 * light.size_m.length();
+    let nearest = light.center.clamp(min, max);
+    // The margin keeps f32 rounding on the acute side of the bound.
+    nearest.distance(light.center) > 2.0 * half_diagonal * (1.0 + 1e-3)
+}
+
 /// `∫ cosθx dω` over a polygon seen from `x` with normal `nx`, after clipping the polygon
 /// to the hemisphere above x (Lambert's closed form for the vector irradiance: ½ Σ Θᵢ n·Γᵢ).
 /// The CPU twin of `polygon_irradiance` in `shaders/common/light.wgsl`.
@@ -159,6 +171,36 @@ mod tests {
         let cells = light_cells(&light, &LightImage::builtin("white", &Map::new(), "f").unwrap());
         let e = unshadowed_irradiance(&light, &cells, Vec3::ZERO, Vec3::Y);
         assert!((e.x - std::f32::consts::PI).abs() < 1e-2, "{e}");
+    }
+
+    #[test]
+    fn edges_are_acute_from_a_box_farther_than_the_lights_diagonal() {
+        let light = AreaLight::new(Vec3::new(0.0, 2.0, 0.0), -Vec3::Y, -Vec3::Z, Vec2::new(2.0, 1.0), 1.0).unwrap();
+        // Every segment between points of the rectangle, seen from every corner of the box and
+        // from its point nearest the light: at most a right angle where the test says so.
+        let widest = |min: Vec3, max: Vec3| {
+            let mut points: Vec<Vec3> = (0..8).map(|k| Vec3::select(glam::BVec3::new(k & 1 != 0, k & 2 != 0, k & 4 != 0), max, min)).collect();
+            points.push(light.center.clamp(min, max));
+            let on_light: Vec<Vec3> = (0..=8).flat_map(|i| (0..=8).map(move |j| (i as f32 / 8.0, j as f32 / 8.0))).map(|(s, t)| light.image_point(s, t)).collect();
+            let mut cos_min = 1.0f32;
+            for x in &points {
+                for a in &on_light {
+                    for b in &on_light {
+                        if a != b {
+                            cos_min = cos_min.min((*a - *x).normalize().dot((*b - *x).normalize()));
+                        }
+                    }
+                }
+            }
+            cos_min
+        };
+        let far = (Vec3::new(-5.0, -3.0, -5.0), Vec3::new(5.0, -0.3, 5.0));
+        assert!(edges_acute_from(&light, far.0, far.1));
+        assert!(widest(far.0, far.1) >= 0.0);
+        // Just under the light: its long edges subtend obtuse angles, and the test says so.
+        let near = (Vec3::new(-5.0, -3.0, -5.0), Vec3::new(5.0, 1.8, 5.0));
+        assert!(!edges_acute_from(&light, near.0, near.1));
+        assert!(widest(near.0, near.1) < 0.0);
     }
 
     #[test]

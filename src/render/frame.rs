@@ -9,7 +9,7 @@ use glam::{Mat4, Vec2, Vec3};
 use crate::error::{JobError, JobResult};
 use crate::gpu::scene::GpuScene;
 use crate::job::{Job, OutputFormat};
-use crate::light::{light_cells, AreaLight, LightCell, LightImage};
+use crate::light::{edges_acute_from, light_cells, AreaLight, LightCell, LightImage};
 use crate::params::Params;
 use crate::render::method::ShadowMethod;
 
@@ -112,6 +112,9 @@ pub struct FrameSpec {
     pub camera: Camera,
     pub light: AreaLight,
     pub cells: Vec<LightCell>,
+    /// No receiver sees an edge of the light under more than a right angle
+    /// (`light::edges_acute_from`): Lambert's sums are specialised (`ACUTE_EDGES`).
+    pub acute_edges: bool,
     pub light_image: Arc<LightImage>,
     pub method: &'static dyn ShadowMethod,
     pub params: Params,
@@ -155,6 +158,7 @@ impl FrameSpec {
         Ok(Self {
             camera,
             cells: light_cells(&light, &light_image),
+            acute_edges: edges_acute_from(&light, scene.bounds_min, scene.bounds_max),
             light_image,
             light,
             method,

@@ -142,9 +142,12 @@ impl Renderer {
         let io_layout = self.layouts.e0_output.clone();
         let device = &self.gpu.device;
         let inputs_layout = &self.layouts.inputs;
+        // Specialised by `ACUTE_EDGES` (shaders/common/light.wgsl).
+        let constants = [("ACUTE_EDGES", f64::from(u8::from(spec.acute_edges)))];
         let mut entry = |name: &'static str, entry: &'static str| {
-            self.pipelines
-                .compute(PipelineKey::new(name), || screen_compute_entry(device, inputs_layout, name, "e0.wgsl", entry, &io_layout))
+            self.pipelines.compute(PipelineKey { name, variant: u32::from(spec.acute_edges) }, || {
+                screen_compute_specialized(device, inputs_layout, name, ("e0.wgsl", entry), &io_layout, &constants)
+            })
         };
         let interpolate = self.e0_mode == E0Mode::Interpolated && spec.cells.len() > E0_EXACT_CELLS;
         let corners = if interpolate { (spec.width - 1) / E0_BLOCK + 2 } else { 1 };

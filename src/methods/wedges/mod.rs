@@ -236,9 +236,13 @@ impl ShadowMethod for Wedges {
         let resolve = ctx.screen_pipeline(PipelineKey::new("wedges.resolve"), "methods/wedges/resolve.wgsl", &io);
         // The rasteriser's pipelines are specialised by the LI buffer's channels and the colour
         // steps (pipeline constants in rasterize.wgsl): a uniform light's passes hold no colour
-        // code, and the colour loop has a fixed count.
-        let constants = [("CHANNELS", f64::from(uniforms.channels)), ("COLOR_ANGLES", f64::from(uniforms.color_angles))];
-        let variant = uniforms.channels << 16 | uniforms.color_angles;
+        // code, and the colour loop has a fixed count; and by `ACUTE_EDGES` (common/light.wgsl).
+        let constants = [
+            ("CHANNELS", f64::from(uniforms.channels)),
+            ("COLOR_ANGLES", f64::from(uniforms.color_angles)),
+            ("ACUTE_EDGES", f64::from(u8::from(spec.acute_edges))),
+        ];
+        let variant = u32::from(spec.acute_edges) << 24 | uniforms.channels << 16 | uniforms.color_angles;
         let mut raster = |name: &'static str, shader: &'static str, entry: &'static str| {
             ctx.screen_specialized(PipelineKey { name, variant }, (shader, entry), &io, &constants)
         };
