@@ -179,9 +179,13 @@ mod tests {
         // Every segment between points of the rectangle, seen from every corner of the box and
         // from its point nearest the light: at most a right angle where the test says so.
         let widest = |min: Vec3, max: Vec3| {
-            let mut points: Vec<Vec3> = (0..8).map(|k| Vec3::select(glam::BVec3::new(k & 1 != 0, k & 2 != 0, k & 4 != 0), max, min)).collect();
+            let mut points: Vec<Vec3> =
+                (0..8).map(|k| Vec3::select(glam::BVec3::new(k & 1 != 0, k & 2 != 0, k & 4 != 0), max, min)).collect();
             points.push(light.center.clamp(min, max));
-            let on_light: Vec<Vec3> = (0..=8).flat_map(|i| (0..=8).map(move |j| (i as f32 / 8.0, j as f32 / 8.0))).map(|(s, t)| light.image_point(s, t)).collect();
+            let on_light: Vec<Vec3> = (0..=8)
+                .flat_map(|i| (0..=8).map(move |j| (i as f32 / 8.0, j as f32 / 8.0)))
+                .map(|(s, t)| light.image_point(s, t))
+                .collect();
             let mut cos_min = 1.0f32;
             for x in &points {
                 for a in &on_light {
