@@ -52,7 +52,14 @@ struct WorkItem {
 @group(1) @binding(2) var<storage, read> wedges: array<Wedge>;
 @group(1) @binding(3) var<storage, read> work: array<WorkItem>;
 @group(1) @binding(4) var<storage, read_write> li: array<atomic<i32>>; // `channels` per pixel
-@group(1) @binding(5) var<storage, read_write> tile_ranges: array<vec2<f32>>;
+// Per tile (`tiles.wgsl`): the world-space box of its receivers, and in w their view depth
+// range (lo.w zmin, hi.w zmax); lo > hi for a tile of background only.
+@group(1) @binding(5) var<storage, read_write> tile_ranges: array<TileRange>;
+
+struct TileRange {
+    lo: vec4<f32>,
+    hi: vec4<f32>,
+}
 // 0 depth reads, 1 LI writes, 2 (wedge, pixel) pairs inside their wedge (three-pass only).
 @group(1) @binding(6) var<storage, read_write> counters: array<atomic<u32>, 4>;
 @group(1) @binding(7) var<storage, read_write> visibility_out: array<vec4<f32>>;

@@ -1,6 +1,7 @@
 // Method `wedges` (Assarsson & Akenine-Möller 2003 §4): the per-tile depth range occlusion
 // culling tests wedges against — zmin and zmax of the view depth of the tile's covered pixels
-// (+∞ / −∞ for a tile of background only) — and, while reading every pixel, the receiver
+// (+∞ / −∞ for a tile of background only), and past the paper the world-space box of their
+// points (`culling.rs` says why) — and, while reading every pixel, the receiver
 // record the rasteriser reads instead of the G-buffer (one storage read, not four texture
 // loads, per pixel and primitive).
 
@@ -13,8 +14,8 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let origin = vec2<u32>(id.x % tiles.x, id.x / tiles.x) * params.tile;
-    var zmin = 1e30;
-    var zmax = -1e30;
+    var lo = vec4<f32>(1e30);
+    var hi = vec4<f32>(-1e30);
     for (var y = origin.y; y < min(origin.y + params.tile, frame.sizes.y); y++) {
         for (var x = origin.x; x < min(origin.x + params.tile, frame.sizes.x); x++) {
             let pixel = vec2<u32>(x, y);
@@ -25,8 +26,8 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
             }
             let position = textureLoad(gbuf_position, pixel, 0);
             let normal = textureLoad(gbuf_normal, pixel, 0).xyz;
-            zmin = min(zmin, position.w);
-            zmax = max(zmax, position.w);
+            lo = min(lo, position);
+            hi = max(hi, position);
             // A point facing away from the light centre lies in its own object's volume — the
             // segment to the centre runs through the object — yet the part of the light above
             // its horizon may well reach it, and E0 already leaves out the part below. So its
@@ -40,5 +41,5 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
             receivers[at + 1u] = vec4<f32>(normal, 0.0);
         }
     }
-    tile_ranges[id.x] = vec2<f32>(zmin, zmax);
+    tile_ranges[id.x] = TileRange(lo, hi);
 }

@@ -11,6 +11,12 @@
 //!   test): the receivers whose eye ray crosses it where the count looks — the polygon's cone
 //!   from the eye, beyond its plane for z-pass, before it for z-fail (`crossing_region`).
 //!
+//! Past the paper, each tile is also tested by the world-space box of its receivers' points:
+//! a tile's NDC box is its pixels' frustum slice between zmin and zmax, as deep as the range
+//! and as wide as the slice there, where the points of a surface patch seen at a grazing angle
+//! (a landscape) fill a thin box — on `terrain`, most tiles a wedge's region slices through
+//! between zmin and zmax hold no point inside it.
+//!
 //! Each region holds every receiver the primitive changes, so culling changes no pixel (a test
 //! renders with and without it). The boxes are widened by half a pixel and a thousandth of
 //! their depth, so a receiver that the G-buffer places a rounding away from its pixel centre,
@@ -43,16 +49,34 @@ pub(super) struct Footprint {
 /// An NDC box: (x0, x1, y0, y1, z0, z1).
 type NdcBox = [f32; 6];
 
-/// The tile grid with each tile's NDC box (x, y from its pixels, z from its depth range), and
-/// the boxes of blocks of `BLOCK`² tiles.
+/// What a tile (or a block of tiles) is tested by: its NDC box and the world-space box of its
+/// receivers' points (min, max).
+#[derive(Clone, Copy)]
+struct TileBox {
+    ndc: NdcBox,
+    world: [Vec3; 2],
+}
+
+impl TileBox {
+    fn union(self, other: Self) -> Self {
+        let (u, b) = (self.ndc, other.ndc);
+        Self {
+            ndc: [u[0].min(b[0]), u[1].max(b[1]), u[2].min(b[2]), u[3].max(b[3]), u[4].min(b[4]), u[5].max(b[5])],
+            world: [self.world[0].min(other.world[0]), self.world[1].max(other.world[1])],
+        }
+    }
+}
+
+/// The tile grid with each tile's boxes (NDC: x, y from its pixels, z from its depth range;
+/// world: its receivers'), and the boxes of blocks of `BLOCK`² tiles.
 pub(super) struct TileGrid {
     across: u32,
     down: u32,
     /// Per tile, or None for background only.
-    boxes: Vec<Option<NdcBox>>,
+    boxes: Vec<Option<TileBox>>,
     blocks_across: u32,
-    /// Per block: the box holding every covered tile's box, or None for background only.
-    blocks: Vec<Option<NdcBox>>,
+    /// Per block: the boxes holding every covered tile's, or None for background only.
+    blocks: Vec<Option<TileBox>>,
 }
 
 /// What survived culling: per volume polygon and per wedge, the tiles it must be rasterised
@@ -96,7 +120,7 @@ pub(super) fn cull(
             return (y.0..y.1).flat_map(|ty| (x.0..x.1).map(move |tx| ty * grid.across + tx)).collect();
         }
         let planes: Vec<Vec4> = footprint.planes.iter().map(|plane| to_ndc * *plane).collect();
-        let test = |b: Option<NdcBox>| survives(footprint, &planes, b, umbra, zfail);
+        let test = |b: Option<TileBox>| survives(footprint, &planes, b, umbra, zfail);
         // Blocks first; the tiles of surviving blocks in row-major order (the single pass
         // looks tiles up by binary search).
         let blocks_x = (x.0 / BLOCK, x.1.div_ceil(BLOCK));
@@ -165,11 +189,13 @@ impl Work {
 }
 
 impl TileGrid {
+    /// `ranges`: per tile, as `tiles.wgsl` writes them, the world-space box of its receivers
+    /// with their view depth range in w (lo, hi).
     pub fn new(
         size: (u32, u32),
         tile: u32,
         pixels: (u32, u32),
-        depth: &[[f32; 2]],
+        ranges: &[[[f32; 4]; 2]],
         camera: &crate::render::Camera,
         view_proj: &Mat4,
     ) -> Self {
@@ -182,33 +208,36 @@ impl TileGrid {
         let (half_x, half_y) = (1.0 / pixels.0 as f32, 1.0 / pixels.1 as f32);
         let px = |x: u32| 2.0 * (x.min(pixels.0)) as f32 / pixels.0 as f32 - 1.0;
         let py = |y: u32| 1.0 - 2.0 * (y.min(pixels.1)) as f32 / pixels.1 as f32;
-        let boxes: Vec<Option<NdcBox>> = (0..size.0 * size.1)
+        let boxes: Vec<Option<TileBox>> = (0..size.0 * size.1)
             .map(|t| {
-                let [zmin, zmax] = depth[t as usize];
+                let [lo, hi] = ranges[t as usize];
+                let (zmin, zmax) = (lo[3], hi[3]);
                 if zmin > zmax {
                     return None;
                 }
                 let (tx, ty) = (t % size.0, t / size.0);
-                Some([
-                    px(tx * tile) - half_x,
-                    px((tx + 1) * tile) + half_x,
-                    py((ty + 1) * tile) - half_y,
-                    py(ty * tile) + half_y,
-                    ndc_z(zmin * (1.0 - DEPTH_MARGIN)),
-                    ndc_z(zmax * (1.0 + DEPTH_MARGIN)),
-                ])
+                // The same margin as the depth range's, a thousandth of the view depth.
+                let margin = Vec3::splat(DEPTH_MARGIN * zmax.abs());
+                Some(TileBox {
+                    ndc: [
+                        px(tx * tile) - half_x,
+                        px((tx + 1) * tile) + half_x,
+                        py((ty + 1) * tile) - half_y,
+                        py(ty * tile) + half_y,
+                        ndc_z(zmin * (1.0 - DEPTH_MARGIN)),
+                        ndc_z(zmax * (1.0 + DEPTH_MARGIN)),
+                    ],
+                    world: [Vec3::from_slice(&lo[..3]) - margin, Vec3::from_slice(&hi[..3]) + margin],
+                })
             })
             .collect();
         let blocks_across = size.0.div_ceil(BLOCK);
-        let mut blocks: Vec<Option<NdcBox>> = vec![None; (blocks_across * size.1.div_ceil(BLOCK)) as usize];
+        let mut blocks: Vec<Option<TileBox>> = vec![None; (blocks_across * size.1.div_ceil(BLOCK)) as usize];
         for (t, tile_box) in boxes.iter().enumerate() {
             let Some(b) = tile_box else { continue };
             let (tx, ty) = (t as u32 % size.0, t as u32 / size.0);
             let block = &mut blocks[((ty / BLOCK) * blocks_across + tx / BLOCK) as usize];
-            *block = Some(match *block {
-                None => *b,
-                Some(u) => [u[0].min(b[0]), u[1].max(b[1]), u[2].min(b[2]), u[3].max(b[3]), u[4].min(b[4]), u[5].max(b[5])],
-            });
+            *block = Some(block.map_or(*b, |u| u.union(*b)));
         }
         Self { across: size.0, down: size.1, boxes, blocks_across, blocks }
     }
@@ -235,12 +264,13 @@ fn footprint(view_proj: &Mat4, points: &[Vec3], planes: Vec<Vec4>, grid: &TileGr
     }
 }
 
-/// Occlusion culling of one primitive over one box (§4): background holds nothing; the quick
-/// rejection compares depth ranges — a volume polygon only with zmax (z-pass: it must lie in
-/// front of something) or zmin (z-fail: behind something), a wedge with both — and then the
-/// region's planes, in NDC (`planes`), are tested with the box's p-vertex (Fig. 7).
-fn survives(footprint: &Footprint, planes: &[Vec4], ndc_box: Option<NdcBox>, umbra: bool, zfail: bool) -> bool {
-    let Some([x0, x1, y0, y1, z0, z1]) = ndc_box else {
+/// Occlusion culling of one primitive over one tile or block (§4): background holds nothing;
+/// the quick rejection compares depth ranges — a volume polygon only with zmax (z-pass: it
+/// must lie in front of something) or zmin (z-fail: behind something), a wedge with both — and
+/// then the region's planes, in NDC (`planes`), are tested with the NDC box's p-vertex
+/// (Fig. 7), and in world space (`footprint.planes`) with the world box's.
+fn survives(footprint: &Footprint, planes: &[Vec4], tile_box: Option<TileBox>, umbra: bool, zfail: bool) -> bool {
+    let Some(TileBox { ndc: [x0, x1, y0, y1, z0, z1], world: [lo, hi] }) = tile_box else {
         return false;
     };
     let (zmin, zmax) = footprint.z;
@@ -251,11 +281,10 @@ fn survives(footprint: &Footprint, planes: &[Vec4], ndc_box: Option<NdcBox>, umb
     } else {
         zmin <= z1
     };
-    quick
-        && planes.iter().all(|p| {
-            let vertex = Vec3::new(if p.x > 0.0 { x1 } else { x0 }, if p.y > 0.0 { y1 } else { y0 }, if p.z > 0.0 { z1 } else { z0 });
-            p.truncate().dot(vertex) + p.w >= 0.0
-        })
+    let p_vertex_inside =
+        |p: &Vec4, lo: Vec3, hi: Vec3| p.truncate().dot(Vec3::select(p.truncate().cmpgt(Vec3::ZERO), hi, lo)) + p.w >= 0.0;
+    let ndc = (Vec3::new(x0, y0, z0), Vec3::new(x1, y1, z1));
+    quick && planes.iter().all(|p| p_vertex_inside(p, ndc.0, ndc.1)) && footprint.planes.iter().all(|p| p_vertex_inside(p, lo, hi))
 }
 
 /// The planes (world space, inside ≥ 0) of the receivers whose eye ray crosses the volume
