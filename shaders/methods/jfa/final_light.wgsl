@@ -15,6 +15,11 @@ fn texel_record(p: vec3<f32>) -> vec4<f32> {
     if !ls.inside {
         return vec4<f32>(0.0);
     }
+    return record_at(ls);
+}
+
+// The record at the texel of a point inside the map, already in light space.
+fn record_at(ls: LightSpace) -> vec4<f32> {
     let texel = shadow_texel(ls.uv);
     return src[u32(texel.y) * frame.sizes.z + u32(texel.x)];
 }
@@ -29,9 +34,10 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     var v = vec3<f32>(1.0);
     if covered(pixel) {
         let p = textureLoad(gbuf_position, pixel, 0).xyz;
-        if to_light_space(p).inside {
-            let record = texel_record(p);
-            let hard = hard_shadowed(pixel);
+        let ls = to_light_space(p);
+        if ls.inside {
+            let record = record_at(ls);
+            let hard = hard_shadowed_in_map(pixel, p, ls);
             let needed = select(in_penumbra(record), params.inner == 1u && !is_empty(record), hard);
             if needed {
                 list_for_shading(pixel, hard);

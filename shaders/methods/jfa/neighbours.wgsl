@@ -30,6 +30,18 @@ fn floor_div(a: i32, b: i32) -> i32 {
 // itself — holds one. The importer defines `tile_holds_record(tile)`: a flag any cell of
 // that tile sets once it holds a record (seed pass or an earlier round).
 fn reach_holds_record(tile: vec2<i32>, step: i32, tiles: vec2<i32>) -> bool {
+    if step < TILE {
+        // The offsets' tiles are the 3×3 tiles around this one: each once, not once per
+        // offset that reaches it (36 looks, most of them repeats, below).
+        for (var ty = max(tile.y - 1, 0); ty <= min(tile.y + 1, tiles.y - 1); ty++) {
+            for (var tx = max(tile.x - 1, 0); tx <= min(tile.x + 1, tiles.x - 1); tx++) {
+                if tile_holds_record(vec2<i32>(tx, ty)) {
+                    return true;
+                }
+            }
+        }
+        return false;
+    }
     for (var b = -1; b <= 1; b++) {
         // The cells tile.y·TILE + b·step … + TILE − 1 span one tile, or two when step is not
         // a multiple of TILE.
