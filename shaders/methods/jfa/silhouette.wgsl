@@ -15,16 +15,15 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     let depth = map_depth_at(p);
     let here = shadow_point_at(p, depth);
     if here.w > 0.0 {
-        var silhouette = false;
+        // A neighbour past the map's edge is clamped onto it: onto p itself (never deeper) or
+        // another of p's neighbours, so the answer is the same without a branch per load.
+        var deepest = depth;
         for (var b = -1; b <= 1; b++) {
             for (var a = -1; a <= 1; a++) {
-                let n = p + vec2<i32>(a, b);
-                if all(n >= vec2<i32>(0)) && all(n < vec2<i32>(i32(res))) {
-                    silhouette = silhouette || map_depth_at(n) > depth * (1.0 + params.silhouette_relative);
-                }
+                deepest = max(deepest, map_depth_at(clamp(p + vec2<i32>(a, b), vec2<i32>(0), vec2<i32>(i32(res) - 1))));
             }
         }
-        if silhouette {
+        if deepest > depth * (1.0 + params.silhouette_relative) {
             record = packed(here.xyz, SEED_KEY);
             mark_tile(p);
             atomicAdd(&counters[0], 1u);
