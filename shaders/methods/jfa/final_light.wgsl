@@ -32,12 +32,14 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     var v = vec3<f32>(1.0);
-    if covered(pixel) {
+    // The normal texel once: its w is the coverage (`covered`), its xyz the bias's normal.
+    let normal = textureLoad(gbuf_normal, pixel, 0);
+    if normal.w > 0.5 {
         let p = textureLoad(gbuf_position, pixel, 0).xyz;
         let ls = to_light_space(p);
         if ls.inside {
             let record = record_at(ls);
-            let hard = hard_shadowed_in_map(pixel, p, ls);
+            let hard = hard_shadowed_in_map(p, normal.xyz, ls);
             let needed = select(in_penumbra(record), params.inner == 1u && !is_empty(record), hard);
             if needed {
                 list_for_shading(pixel, hard);
