@@ -66,7 +66,7 @@ const TILE: Param<u32> =
 const CULLING: Param<bool> = Param::boolean(
     "culling",
     true,
-    "occlusion culling with the tiles' zmin and zmax (§4); false rasterises every tile a primitive's bounding box covers",
+    "occlusion culling with the tiles' zmin and zmax (§4) and their receivers' world-space boxes; false rasterises every tile a primitive's bounding box covers",
 );
 const VOLUME: Param<&str> = Param::choice(
     "volume",
