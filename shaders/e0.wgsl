@@ -207,9 +207,16 @@ fn blend(s: Stencil) -> Corner {
     );
 }
 
-// Largest distance of the corners' normals from nx: 0 on a flat face.
+// Largest distance of the corners' normals from nx: 0 on a flat face. One square root of the
+// largest square (the same value: the root is monotonic and correctly rounded).
 fn bend(s: Stencil, nx: vec3<f32>) -> f32 {
-    return max(max(distance(s.c00.normal.xyz, nx), distance(s.c10.normal.xyz, nx)), max(distance(s.c01.normal.xyz, nx), distance(s.c11.normal.xyz, nx)));
+    let squares = vec4<f32>(
+        dot(s.c00.normal.xyz - nx, s.c00.normal.xyz - nx),
+        dot(s.c10.normal.xyz - nx, s.c10.normal.xyz - nx),
+        dot(s.c01.normal.xyz - nx, s.c01.normal.xyz - nx),
+        dot(s.c11.normal.xyz - nx, s.c11.normal.xyz - nx),
+    );
+    return sqrt(max(max(squares.x, squares.y), max(squares.z, squares.w)));
 }
 
 fn phi_size(c: Corner) -> vec3<f32> {

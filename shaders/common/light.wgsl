@@ -13,9 +13,9 @@ struct LightCell {
 // function of u = 1 − cos Θ (singular only at Θ = π, u = 2), held by `theta_over_sin`; an
 // obtuse one is π − the acute Θ' with the same sine, so Θ / sin Θ = π / sin Θ − Θ' / sin Θ.
 // No atan2 and no acos: as accurate as atan2 at every angle (1e-7 relative where f32 allows;
-// acos loses the tiny angles of distant cells), and on lavapipe E0's exact sums take a
-// sixth less time (a 26-cell light over a 100k-triangle landscape: 190 → 162 ms), a
-// quarter less where no edge can be obtuse (`ACUTE_EDGES`: 147 ms).
+// acos loses the tiny angles of distant cells), and on lavapipe E0 under a 26-cell light
+// over a 100k-triangle landscape took 162 ms instead of 190, 148 ms where no edge can be
+// obtuse (`ACUTE_EDGES`).
 fn edge_vector(a: vec3<f32>, b: vec3<f32>) -> vec3<f32> {
     let c = cross(a, b);
     let cos_theta = dot(a, b);
@@ -32,9 +32,9 @@ fn edge_vector(a: vec3<f32>, b: vec3<f32>) -> vec3<f32> {
 const PI: f32 = 3.14159265;
 
 // Set (a pipeline constant) where no receiver of the frame can see an edge of the light under
-// more than a right angle (`light::edges_acute_from`: the scene lies farther from the light
-// than half its diagonal): `edge_vector` then needs no obtuse branch. On lavapipe a branch no
-// lane takes still costs its code, so the constant removes it instead.
+// more than a right angle (`light::edges_acute_from`: the scene's box lies farther from the
+// light's centre than its diagonal): `edge_vector` then needs no obtuse branch, which a
+// select would compute for every edge and a branch measured no cheaper on lavapipe.
 override ACUTE_EDGES: bool = false;
 
 // Θ / sin Θ for Θ ∈ [0, π/2] from u = 1 − cos Θ ∈ [0, 1]: a degree-9 polynomial fitted to

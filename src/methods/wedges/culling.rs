@@ -396,6 +396,26 @@ mod tests {
     }
 
     #[test]
+    fn a_tile_is_culled_by_its_receivers_world_box_where_its_ndc_box_passes() {
+        let light = AreaLight::new(Vec3::Y * 3.0, -Vec3::Y, -Vec3::Z, Vec2::new(2.0, 1.0), 1.0).unwrap();
+        let edge = SilhouetteEdge { a: Vec3::new(0.5, 1.0, -0.7), b: Vec3::new(0.2, 1.3, 0.6), multiplicity: 1, object: 0 };
+        let (_, planes) = wedge_region(&edge, &light, 20.0).unwrap();
+        let footprint = Footprint { tiles_x: (0, 1), tiles_y: (0, 1), z: (f32::NEG_INFINITY, f32::INFINITY), planes };
+        // An NDC box that passes every NDC test (no NDC planes), and world boxes: a small one
+        // around a point the edge hides light from, and one as small far to the side.
+        let tile = |centre: Vec3| {
+            Some(TileBox { ndc: [-1.0, 1.0, -1.0, 1.0, 0.0, 1.0], world: [centre - Vec3::splat(0.05), centre + Vec3::splat(0.05)] })
+        };
+        let e = edge.a.lerp(edge.b, 0.5);
+        let hidden = e + (e - light.center) * 0.8;
+        assert!(survives(&footprint, &[], tile(hidden), false, false));
+        assert!(!survives(&footprint, &[], tile(Vec3::new(8.0, 0.0, 0.0)), false, false));
+        // A box straddling the region's boundary survives: it may hold a receiver inside.
+        let straddling = Some(TileBox { ndc: [-1.0, 1.0, -1.0, 1.0, 0.0, 1.0], world: [hidden, Vec3::new(8.0, 0.0, 0.0).max(hidden)] });
+        assert!(survives(&footprint, &[], straddling, false, false));
+    }
+
+    #[test]
     fn the_crossing_region_is_behind_the_polygon_for_z_pass_and_before_it_for_z_fail() {
         let quad = [Vec3::new(-1.0, 0.0, -1.0), Vec3::new(1.0, 0.0, -1.0), Vec3::new(1.0, 0.0, 1.0), Vec3::new(-1.0, 0.0, 1.0)];
         let eye = Vec3::new(0.0, 5.0, 0.0);
