@@ -1,7 +1,8 @@
 // Light-space shadow map, rendered from the centre of the area light: linear depth along the
-// light normal and the object id of the nearest surface (used by methods that need ids,
-// Brabec–Seidel §3.2 and Rong–Tan §5.2). Its world position (the "light space coordinate"
-// Rong–Tan §4.1 floods) is the texel's ray at that depth (`shadow_point`, common/shadow.wgsl).
+// light normal and the object id of the nearest surface (for `brabec`, the one method that
+// reads the ids: `ShadowMethod::reads_light_surfaces`). Its world position (the "light space
+// coordinate" Rong–Tan §4.1 floods) is the texel's ray at that depth (`shadow_point`,
+// common/shadow.wgsl).
 // No culling: back faces cast shadows too (contract §1).
 
 #import common/frame.wgsl

@@ -152,7 +152,7 @@ fn e0_on_the_gpu_matches_its_cpu_twin() {
     // Pixel (16, 16) of a 33×33 view looking straight down at (3, 0, 3) sees exactly that
     // point of the floor (albedo 0.7), lit by a tilted coloured light and unshadowed — under
     // each of three lights, for both forms of Lambert's edge term (`edge_vector` in
-    // shaders/common/light.wgsl): the first two lie within the scene's reach, so its frames
+    // shaders/common/light.wgsl): the first two lie within the scene's reach, so their frames
     // take the general form, and the second hangs 0.15 m above the point, where the light's
     // long edges subtend obtuse angles; the third is far above the scene (`ACUTE_EDGES`).
     let lights = [

@@ -115,19 +115,22 @@ impl GpuScene {
         };
         let white = upload_texture(1, 1, &[255; 4]);
         let views: Vec<wgpu::TextureView> = scene.textures.iter().map(|t| upload_texture(t.width, t.height, &t.rgba8)).collect();
-        let textured: Vec<bool> = scene.materials.iter().map(|m| m.texture.is_some_and(|t| t < views.len())).collect();
-        let material_bind_groups = scene
+        let (material_bind_groups, textured) = scene
             .materials
             .iter()
             .map(|m| {
-                let view = m.texture.and_then(|t| views.get(t)).unwrap_or(&white);
-                device.create_bind_group(&wgpu::BindGroupDescriptor {
+                let texture = m.texture.and_then(|t| views.get(t));
+                let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
                     label: Some("GpuScene::material_bind_group"),
                     layout: material_layout,
-                    entries: &super::layout::entries(&[wgpu::BindingResource::TextureView(view), wgpu::BindingResource::Sampler(&sampler)]),
-                })
+                    entries: &super::layout::entries(&[
+                        wgpu::BindingResource::TextureView(texture.unwrap_or(&white)),
+                        wgpu::BindingResource::Sampler(&sampler),
+                    ]),
+                });
+                (group, texture.is_some())
             })
-            .collect();
+            .unzip();
         Self {
             vertex_buffer,
             index_buffer,

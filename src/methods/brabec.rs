@@ -111,6 +111,12 @@ const BLOCK: u32 = 4;
 const SUMMARY_BLOCK: u32 = 8;
 
 impl ShadowMethod for Brabec {
+    /// The ids seen from the light: the search summaries (`summary.wgsl`) and §4.3's
+    /// interpolation key (`pixel_key`).
+    fn reads_light_surfaces(&self) -> bool {
+        true
+    }
+
     fn name(&self) -> &'static str {
         "brabec"
     }

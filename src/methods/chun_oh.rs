@@ -60,10 +60,6 @@ const PARAMS: &[ParamSpec] = &[
 ];
 
 impl ShadowMethod for ChunOh {
-    fn reads_light_surfaces(&self) -> bool {
-        false
-    }
-
     fn name(&self) -> &'static str {
         "chun-oh"
     }

@@ -20,10 +20,6 @@ struct HardUniforms {
 }
 
 impl ShadowMethod for Hard {
-    fn reads_light_surfaces(&self) -> bool {
-        false
-    }
-
     fn name(&self) -> &'static str {
         "hard"
     }

@@ -163,11 +163,6 @@ const EYE_SPACE: Flood = Flood {
 };
 
 impl ShadowMethod for JfaL {
-    /// Positions come from the depth (`shadow_point`); neither flood reads the ids.
-    fn reads_light_surfaces(&self) -> bool {
-        false
-    }
-
     fn name(&self) -> &'static str {
         LIGHT_SPACE.name
     }
@@ -194,11 +189,6 @@ impl ShadowMethod for JfaL {
 }
 
 impl ShadowMethod for JfaE {
-    /// Positions come from the depth (`shadow_point`); neither flood reads the ids.
-    fn reads_light_surfaces(&self) -> bool {
-        false
-    }
-
     fn name(&self) -> &'static str {
         EYE_SPACE.name
     }

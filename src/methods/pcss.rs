@@ -9,10 +9,6 @@ use crate::error::JobResult;
 pub struct Pcss;
 
 impl ShadowMethod for Pcss {
-    fn reads_light_surfaces(&self) -> bool {
-        false
-    }
-
     fn name(&self) -> &'static str {
         "pcss"
     }

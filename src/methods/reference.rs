@@ -149,10 +149,6 @@ impl SplitMix64 {
 }
 
 impl ShadowMethod for Reference {
-    fn reads_light_surfaces(&self) -> bool {
-        false
-    }
-
     fn name(&self) -> &'static str {
         "reference"
     }

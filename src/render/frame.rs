@@ -128,6 +128,12 @@ pub struct FrameSpec {
 }
 
 impl FrameSpec {
+    /// `acute_edges` as the pipeline constant of `shaders/common/light.wgsl`, for every pipeline
+    /// whose shaders sum Lambert's edge terms (E0, `wedges`).
+    pub fn acute_edges_constant(&self) -> (&'static str, f64) {
+        ("ACUTE_EDGES", f64::from(u8::from(self.acute_edges)))
+    }
+
     /// Merges the job over the scene's defaults and checks what the merge produced; `method`
     /// is the job's method with its checked parameters (`engine::check_job`).
     pub fn resolve(

@@ -266,9 +266,9 @@ pub trait ShadowMethod: Send + Sync {
     fn record(&self, ctx: &mut MethodContext<'_>, params: &Params) -> JobResult<Counters>;
     /// Whether the method reads what the shadow map sees besides its depth — object ids
     /// (`shadow_id`; world positions come from the depth, `shadow_point`). A method that does
-    /// not says so, and the shadow-map pass writes depth alone: at 2048² the ids are 16 MB of
-    /// clears and writes a frame, half the pass on lavapipe.
+    /// says so; for the others the shadow-map pass writes depth alone: at 2048² the ids are
+    /// 16 MB of clears and writes a frame, half the pass on lavapipe.
     fn reads_light_surfaces(&self) -> bool {
-        true
+        false
     }
 }

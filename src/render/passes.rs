@@ -115,7 +115,7 @@ impl Renderer {
             begin_scene_pass(encoder, "GBuffer::pass", &colors, &targets.depth_buffer.view, timestamps, (&textured, &bind_group), scene);
         for draw in &scene.draws {
             let material = draw.material as usize;
-            pass.set_pipeline(if scene.textured.get(material).copied().unwrap_or(false) { &textured } else { &untextured });
+            pass.set_pipeline(if scene.textured[material] { &textured } else { &untextured });
             pass.set_bind_group(1, &scene.material_bind_groups[material], &[]);
             pass.draw_indexed(draw.first_index..draw.first_index + draw.index_count, 0, 0..1);
         }
@@ -142,8 +142,7 @@ impl Renderer {
         let io_layout = self.layouts.e0_output.clone();
         let device = &self.gpu.device;
         let inputs_layout = &self.layouts.inputs;
-        // Specialised by `ACUTE_EDGES` (shaders/common/light.wgsl).
-        let constants = [("ACUTE_EDGES", f64::from(u8::from(spec.acute_edges)))];
+        let constants = [spec.acute_edges_constant()];
         let mut entry = |name: &'static str, entry: &'static str| {
             self.pipelines.compute(PipelineKey { name, variant: u32::from(spec.acute_edges) }, || {
                 screen_compute_specialized(device, inputs_layout, name, ("e0.wgsl", entry), &io_layout, &constants)

@@ -139,10 +139,6 @@ struct Uniforms {
 }
 
 impl ShadowMethod for Wedges {
-    fn reads_light_surfaces(&self) -> bool {
-        false
-    }
-
     fn name(&self) -> &'static str {
         "wedges"
     }
@@ -237,11 +233,8 @@ impl ShadowMethod for Wedges {
         // The rasteriser's pipelines are specialised by the LI buffer's channels and the colour
         // steps (pipeline constants in rasterize.wgsl): a uniform light's passes hold no colour
         // code, and the colour loop has a fixed count; and by `ACUTE_EDGES` (common/light.wgsl).
-        let constants = [
-            ("CHANNELS", f64::from(uniforms.channels)),
-            ("COLOR_ANGLES", f64::from(uniforms.color_angles)),
-            ("ACUTE_EDGES", f64::from(u8::from(spec.acute_edges))),
-        ];
+        let constants =
+            [("CHANNELS", f64::from(uniforms.channels)), ("COLOR_ANGLES", f64::from(uniforms.color_angles)), spec.acute_edges_constant()];
         let variant = u32::from(spec.acute_edges) << 24 | uniforms.channels << 16 | uniforms.color_angles;
         let mut raster = |name: &'static str, shader: &'static str, entry: &'static str| {
             ctx.screen_specialized(PipelineKey { name, variant }, (shader, entry), &io, &constants)
