@@ -88,18 +88,6 @@ fn clipped_e0(x: vec3<f32>, nx: vec3<f32>) -> vec3<f32> {
     return e0;
 }
 
-// The exact sum where the whole light lies above x's horizon: no cell needs clipping, and
-// |nx · Φ| of each cell (`polygon_vector`, its own four edges) is the value
-// `polygon_irradiance` computes there, in the same order, at about half the cost.
-fn unclipped_e0(x: vec3<f32>, nx: vec3<f32>) -> vec3<f32> {
-    var e0 = vec3<f32>(0.0);
-    for (var k = 0u; k < frame.sizes.w; k++) {
-        let cell = light_cells[k];
-        e0 += cell.radiance.rgb * abs(dot(nx, polygon_vector(x, cell.corners)));
-    }
-    return e0;
-}
-
 fn corner_count() -> vec2<u32> {
     return (frame.sizes.xy - 1u) / BLOCK + 2u;
 }
@@ -112,7 +100,7 @@ fn corner_pixel(c: vec2<u32>) -> vec2<u32> {
 fn exact_terms(x: vec3<f32>, nx: vec3<f32>, depth: f32) -> Corner {
     var phi = mat3x3<f32>(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0));
     var e0 = vec3<f32>(0.0);
-    // With the light wholly above the horizon a cell's irradiance is |nx · its Φ| (`unclipped_e0`).
+    // With the light wholly above the horizon a cell's irradiance is |nx · its Φ| (`exact_above`).
     let above = light_above(x, nx);
     for (var k = 0u; k < frame.sizes.w; k++) {
         let cell = light_cells[k];
@@ -395,23 +383,37 @@ fn interpolate_blocks(@builtin(global_invocation_id) id: vec3<u32>) {
 // measured against.
 @compute @workgroup_size(8, 8)
 fn exact(@builtin(global_invocation_id) id: vec3<u32>) {
-    let pixel = id.xy;
-    if any(pixel >= frame.sizes.xy) {
+    let origin = 2u * id.xy;
+    if any(origin >= frame.sizes.xy) {
         return;
     }
-    let x = textureLoad(gbuf_position, pixel, 0).xyz;
-    var e0 = vec3<f32>(0.0);
-    if covered(pixel) && lit_side(x) {
-        e0 = clipped_e0(x, textureLoad(gbuf_normal, pixel, 0).xyz);
+    let last = frame.sizes.xy - 1u;
+    let p = array<vec2<u32>, 4>(origin, min(origin + vec2<u32>(1u, 0u), last), min(origin + vec2<u32>(0u, 1u), last), min(origin + 1u, last));
+    let q = Quad(screen_surface(p[0]), screen_surface(p[1]), screen_surface(p[2]), screen_surface(p[3]));
+    var e0 = mat4x3<f32>(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0));
+    for (var k = 0u; k < frame.sizes.w; k++) {
+        let cell = light_cells[k];
+        e0[0] += cell.radiance.rgb * polygon_irradiance(q.a.x, q.a.nx, cell.corners);
+        e0[1] += cell.radiance.rgb * polygon_irradiance(q.b.x, q.b.nx, cell.corners);
+        e0[2] += cell.radiance.rgb * polygon_irradiance(q.c.x, q.c.nx, cell.corners);
+        e0[3] += cell.radiance.rgb * polygon_irradiance(q.d.x, q.d.nx, cell.corners);
     }
-    e0_out[pixel_index(pixel)] = vec4<f32>(e0, 1.0);
+    store_quad(q, e0);
+}
+
+// A pixel's surface, its normal zero where it receives no light (E0 = 0 then).
+fn screen_surface(pixel: vec2<u32>) -> Surface {
+    let x = textureLoad(gbuf_position, pixel, 0).xyz;
+    let normal = textureLoad(gbuf_normal, pixel, 0);
+    let lit = normal.w > 0.5 && lit_side(x);
+    return Surface(pixel_index(pixel), x, select(vec3<f32>(0.0), normal.xyz, lit));
 }
 
 // The sizes of the two exact passes' dispatches.
 @compute @workgroup_size(1)
 fn exact_sizes() {
-    above_groups = list_dispatch(atomicLoad(&above.count));
-    clipped_groups = list_dispatch(atomicLoad(&clipped.count));
+    above_groups = list_dispatch((atomicLoad(&above.count) + QUAD - 1u) / QUAD);
+    clipped_groups = list_dispatch((atomicLoad(&clipped.count) + QUAD - 1u) / QUAD);
 }
 
 // A listed pixel's surface: its element of the screen-space images, position and normal.
@@ -426,22 +428,76 @@ fn listed_surface(entry: u32) -> Surface {
     return Surface(entry, textureLoad(gbuf_position, pixel, 0).xyz, textureLoad(gbuf_normal, pixel, 0).xyz);
 }
 
-// The pixels of `above`, summed exactly without clipping.
+// Listed pixels per invocation of the exact passes. On lavapipe a uniform-buffer load indexed
+// by the loop over cells is a gather, lane by lane, and loading a cell cost more than summing
+// it for one pixel: four pixels per invocation load each cell once for all four (E0 under a
+// 26-cell light over `terrain`: the unclipped sums 36 → 22 ms, the clipped 54 → 40 ms).
+const QUAD: u32 = 4u;
+
+// The four listed pixels of one invocation.
+struct Quad {
+    a: Surface,
+    b: Surface,
+    c: Surface,
+    d: Surface,
+}
+
+fn listed_quad(pixels: vec4<u32>) -> Quad {
+    return Quad(listed_surface(pixels.x), listed_surface(pixels.y), listed_surface(pixels.z), listed_surface(pixels.w));
+}
+
+fn store_quad(q: Quad, e0: mat4x3<f32>) {
+    e0_out[q.a.at] = vec4<f32>(e0[0], 1.0);
+    e0_out[q.b.at] = vec4<f32>(e0[1], 1.0);
+    e0_out[q.c.at] = vec4<f32>(e0[2], 1.0);
+    e0_out[q.d.at] = vec4<f32>(e0[3], 1.0);
+}
+
+// The list positions of an invocation's quad, clamped to the list: where it ends, the last
+// pixel is summed again and written twice with the same value.
+fn quad_positions(group: vec3<u32>, lane: u32, count: u32) -> vec4<u32> {
+    let first = QUAD * list_position(group, lane);
+    return min(vec4<u32>(first) + vec4<u32>(0u, 1u, 2u, 3u), vec4<u32>(count - 1u));
+}
+
+// The pixels of `above`, summed exactly without clipping: where the whole light lies above
+// x's horizon, |nx · Φ| of each cell (`polygon_vector`, its own four edges) is the value
+// `polygon_irradiance` computes there, in the same order, at about half the cost.
 @compute @workgroup_size(64)
 fn exact_above(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) lane: u32) {
-    let i = list_position(group, lane);
-    if i < atomicLoad(&above.count) {
-        let s = listed_surface(above.pixels[i]);
-        e0_out[s.at] = vec4<f32>(unclipped_e0(s.x, s.nx), 1.0);
+    let count = atomicLoad(&above.count);
+    if QUAD * list_position(group, lane) >= count {
+        return;
     }
+    let at = quad_positions(group, lane, count);
+    let q = listed_quad(vec4<u32>(above.pixels[at.x], above.pixels[at.y], above.pixels[at.z], above.pixels[at.w]));
+    var e0 = mat4x3<f32>(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0));
+    for (var k = 0u; k < frame.sizes.w; k++) {
+        let cell = light_cells[k];
+        e0[0] += cell.radiance.rgb * abs(dot(q.a.nx, polygon_vector(q.a.x, cell.corners)));
+        e0[1] += cell.radiance.rgb * abs(dot(q.b.nx, polygon_vector(q.b.x, cell.corners)));
+        e0[2] += cell.radiance.rgb * abs(dot(q.c.nx, polygon_vector(q.c.x, cell.corners)));
+        e0[3] += cell.radiance.rgb * abs(dot(q.d.nx, polygon_vector(q.d.x, cell.corners)));
+    }
+    store_quad(q, e0);
 }
 
 // The pixels of `clipped`, summed exactly with each cell clipped to the hemisphere.
 @compute @workgroup_size(64)
 fn exact_clipped(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) lane: u32) {
-    let i = list_position(group, lane);
-    if i < atomicLoad(&clipped.count) {
-        let s = listed_surface(clipped.pixels[i]);
-        e0_out[s.at] = vec4<f32>(clipped_e0(s.x, s.nx), 1.0);
+    let count = atomicLoad(&clipped.count);
+    if QUAD * list_position(group, lane) >= count {
+        return;
     }
+    let at = quad_positions(group, lane, count);
+    let q = listed_quad(vec4<u32>(clipped.pixels[at.x], clipped.pixels[at.y], clipped.pixels[at.z], clipped.pixels[at.w]));
+    var e0 = mat4x3<f32>(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0));
+    for (var k = 0u; k < frame.sizes.w; k++) {
+        let cell = light_cells[k];
+        e0[0] += cell.radiance.rgb * polygon_irradiance(q.a.x, q.a.nx, cell.corners);
+        e0[1] += cell.radiance.rgb * polygon_irradiance(q.b.x, q.b.nx, cell.corners);
+        e0[2] += cell.radiance.rgb * polygon_irradiance(q.c.x, q.c.nx, cell.corners);
+        e0[3] += cell.radiance.rgb * polygon_irradiance(q.d.x, q.d.nx, cell.corners);
+    }
+    store_quad(q, e0);
 }

@@ -179,14 +179,14 @@ impl Renderer {
             })
         };
         let (io, listed_io) = (bind(&above.groups, &clipped.groups), bind(&above.stand_in, &clipped.stand_in));
-        let screen = (spec.width.div_ceil(8), spec.height.div_ceil(8));
         let mut pass = encoder
             .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("e0"), timestamp_writes: self.timer.compute_scope("e0", "e0") });
         pass.set_bind_group(0, &inputs.bind_group, &[]);
         pass.set_bind_group(1, &io, &[]);
         if !interpolate {
             pass.set_pipeline(&entry("e0_exact", "exact"));
-            pass.dispatch_workgroups(screen.0, screen.1, 1);
+            // 8×8 invocations of 2×2 pixels each.
+            pass.dispatch_workgroups(spec.width.div_ceil(16), spec.height.div_ceil(16), 1);
             return;
         }
         let steps = [
