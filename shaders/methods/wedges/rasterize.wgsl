@@ -365,15 +365,25 @@ fn tile_item(group: vec3<u32>, groups: vec3<u32>, local: u32) -> TileItem {
     return item;
 }
 
-// The k-th pixel of the tile at `origin` as an index into per-pixel buffers, or −1 when it is
-// off screen or background.
-fn tile_pixel(origin: vec2<u32>, k: u32) -> i32 {
+// The k-th pixel of a tile: its index into per-pixel buffers and its receiver record (the
+// surface point; w, the object it ignores), loaded once for every test of the pixel. Not
+// valid off screen or on the background.
+struct TilePixel {
+    at: u32,
+    receiver: vec4<f32>,
+    valid: bool,
+}
+
+fn tile_pixel(origin: vec2<u32>, k: u32) -> TilePixel {
     let pixel = origin + vec2<u32>(k % params.tile, k / params.tile);
+    var px: TilePixel;
     if any(pixel >= frame.sizes.xy) {
-        return -1;
+        return px;
     }
-    let at = pixel.y * frame.sizes.x + pixel.x;
-    return select(i32(at), -1, receivers[2u * at].w == NOT_COVERED);
+    px.at = pixel.y * frame.sizes.x + pixel.x;
+    px.receiver = receivers[2u * px.at];
+    px.valid = px.receiver.w != NOT_COVERED;
+    return px;
 }
 
 fn add_light(at: u32, delta: vec3<i32>) {
@@ -385,37 +395,38 @@ fn add_light(at: u32, delta: vec3<i32>) {
     }
 }
 
-// The umbra term at receiver `at` for volume polygon `index`.
-fn umbra_delta(index: u32, at: u32) -> i32 {
-    let receiver = receivers[2u * at];
-    if polygons[index].v1.w == receiver.w {
+// The primitives are loaded once per work item, before the loop over its tile's pixels, and
+// passed by value: on lavapipe a storage load inside the loop is a gather, lane by lane, on
+// every pass through it, though every lane reads the same primitive.
+
+// The umbra term at a receiver for a volume polygon.
+fn umbra_delta(poly: VolumePolygon, receiver: vec4<f32>) -> i32 {
+    if poly.v1.w == receiver.w {
         return 0; // its own object, facing away from the light centre
     }
-    return -params.full * volume_crossing(polygons[index], frame.eye.xyz, receiver.xyz);
+    return -params.full * volume_crossing(poly, frame.eye.xyz, receiver.xyz);
 }
 
 // §3: "if p is inside the wedge" — its plane equations, and not the wedge's own object.
-fn inside_wedge(index: u32, at: u32) -> bool {
-    let receiver = receivers[2u * at];
-    let w = wedges[index];
+fn inside_wedge(w: Wedge, receiver: vec4<f32>) -> bool {
     let p = vec4<f32>(receiver.xyz, 1.0);
     return w.b.w != receiver.w && dot(w.front, p) >= 0.0 && dot(w.back, p) >= 0.0;
 }
 
-// The penumbra term at receiver `at` for wedge `index`.
-fn penumbra_delta(index: u32, at: u32) -> vec3<i32> {
-    if !inside_wedge(index, at) {
+// The penumbra term at a receiver (pixel `at`) for a wedge.
+fn penumbra_delta(w: Wedge, px: TilePixel) -> vec3<i32> {
+    if !inside_wedge(w, px.receiver) {
         return vec3<i32>(0);
     }
-    return penumbra_delta_inside(index, at);
+    return penumbra_delta_inside(w, px.at);
 }
 
 // `penumbra_delta` for a receiver known to lie inside the wedge (listed by `mark_inside`).
-fn penumbra_delta_inside(index: u32, at: u32) -> vec3<i32> {
+fn penumbra_delta_inside(w: Wedge, at: u32) -> vec3<i32> {
     var e0 = vec3<f32>(1.0);
     if CHANNELS == 3u {
         e0 = e0_in[at].rgb;
     }
-    let share = wedge_share(wedges[index], receivers[2u * at].xyz, receivers[2u * at + 1u].xyz, e0);
+    let share = wedge_share(w, receivers[2u * at].xyz, receivers[2u * at + 1u].xyz, e0);
     return -vec3<i32>(round(f32(params.full) * share));
 }

@@ -14,18 +14,21 @@ fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) groups
     let job = item.job;
     let polygon = job.primitive < params.polygon_count;
     let wedge = select(job.both, job.primitive - params.polygon_count + 1u, !polygon);
+    // Loaded once (rasterize.wgsl says why); the half an item lacks is never read.
+    let poly = polygons[select(0u, job.primitive, polygon)];
+    let w = wedges[select(0u, wedge - 1u, wedge > 0u)];
     for (var k = local; k < params.tile * params.tile; k += 64u) {
-        let at = tile_pixel(item.origin, k);
-        if at < 0 {
+        let px = tile_pixel(item.origin, k);
+        if !px.valid {
             continue;
         }
         var delta = vec3<i32>(0);
         if polygon {
-            delta += vec3<i32>(umbra_delta(job.primitive, u32(at)));
+            delta += vec3<i32>(umbra_delta(poly, px.receiver));
         }
         if wedge > 0u {
-            delta += penumbra_delta(wedge - 1u, u32(at));
+            delta += penumbra_delta(w, px);
         }
-        add_light(u32(at), delta);
+        add_light(px.at, delta);
     }
 }

@@ -14,11 +14,11 @@ fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) groups
     if !item.valid {
         return;
     }
-    let wedge = item.job.primitive - params.polygon_count;
+    let w = wedges[item.job.primitive - params.polygon_count];
     for (var k = local; k < params.tile * params.tile; k += 64u) {
-        let at = tile_pixel(item.origin, k);
-        if at >= 0 {
-            add_light(u32(at), penumbra_delta(wedge, u32(at)));
+        let px = tile_pixel(item.origin, k);
+        if px.valid {
+            add_light(px.at, penumbra_delta(w, px));
         }
     }
 }
@@ -34,10 +34,10 @@ fn mark_inside(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups)
         return;
     }
     let index = item_index(group, groups);
-    let wedge = item.job.primitive - params.polygon_count;
+    let w = wedges[item.job.primitive - params.polygon_count];
     for (var k = local; k < params.tile * params.tile; k += 64u) {
-        let at = tile_pixel(item.origin, k);
-        if at >= 0 && inside_wedge(wedge, u32(at)) && projected_edge(wedges[wedge], receivers[2u * u32(at)].xyz).crosses {
+        let px = tile_pixel(item.origin, k);
+        if px.valid && inside_wedge(w, px.receiver) && projected_edge(w, px.receiver.xyz).crosses {
             inside.pairs[atomicAdd(&inside.count, 1u)] = vec2<u32>(index, k);
         }
     }
@@ -60,8 +60,8 @@ fn shade_listed(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocati
         let job = work[pair.x];
         let tiles = tile_grid();
         let origin = vec2<u32>(job.tile % tiles.x, job.tile / tiles.x) * params.tile;
-        let at = u32(tile_pixel(origin, pair.y));
-        add_light(at, penumbra_delta_inside(job.primitive - params.polygon_count, at));
+        let at = tile_pixel(origin, pair.y).at;
+        add_light(at, penumbra_delta_inside(wedges[job.primitive - params.polygon_count], at));
     }
 }
 

@@ -9,10 +9,11 @@ fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) groups
     if !item.valid {
         return;
     }
+    let poly = polygons[item.job.primitive];
     for (var k = local; k < params.tile * params.tile; k += 64u) {
-        let at = tile_pixel(item.origin, k);
-        if at >= 0 {
-            add_light(u32(at), vec3<i32>(umbra_delta(item.job.primitive, u32(at))));
+        let px = tile_pixel(item.origin, k);
+        if px.valid {
+            add_light(px.at, vec3<i32>(umbra_delta(poly, px.receiver)));
         }
     }
 }
