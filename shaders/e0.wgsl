@@ -96,67 +96,25 @@ fn corner_pixel(c: vec2<u32>) -> vec2<u32> {
     return min(c * BLOCK, frame.sizes.xy - 1u);
 }
 
-// One cell's Φ at x (xyz) and its exact irradiance with normal nx (w); with the light wholly
-// above x's horizon (`above`) a cell's irradiance is |nx · its Φ| (`exact_above`).
-fn cell_terms(x: vec3<f32>, nx: vec3<f32>, above: bool, corners: array<vec4<f32>, 4>) -> vec4<f32> {
-    let phi = polygon_vector(x, corners);
-    var irradiance: f32;
-    if above {
-        irradiance = abs(dot(nx, phi));
-    } else {
-        irradiance = polygon_irradiance(x, nx, corners);
-    }
-    return vec4<f32>(phi, irradiance);
-}
-
-// A cell's Φ weighted by its radiance, per channel (columns).
-fn weighted(phi: vec3<f32>, radiance: vec3<f32>) -> mat3x3<f32> {
-    return mat3x3<f32>(phi * radiance.r, phi * radiance.g, phi * radiance.b);
-}
-
-fn corner_record(phi: mat3x3<f32>, e0: vec3<f32>, x: vec3<f32>, nx: vec3<f32>, depth: f32) -> Corner {
-    return Corner(vec4<f32>(phi[0], e0.r), vec4<f32>(phi[1], e0.g), vec4<f32>(phi[2], e0.b), vec4<f32>(x, 1.0), vec4<f32>(nx, depth));
-}
-
 // Φ per channel (columns) and the exact E0 with x's own normal (w of each column's vec4).
 fn exact_terms(x: vec3<f32>, nx: vec3<f32>, depth: f32) -> Corner {
     var phi = mat3x3<f32>(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0));
     var e0 = vec3<f32>(0.0);
+    // With the light wholly above the horizon a cell's irradiance is |nx · its Φ| (`exact_above`).
     let above = light_above(x, nx);
     for (var k = 0u; k < frame.sizes.w; k++) {
         let cell = light_cells[k];
-        let terms = cell_terms(x, nx, above, cell.corners);
-        phi += weighted(terms.xyz, cell.radiance.rgb);
-        e0 += cell.radiance.rgb * terms.w;
+        let phi_cell = polygon_vector(x, cell.corners);
+        phi += mat3x3<f32>(phi_cell * cell.radiance.r, phi_cell * cell.radiance.g, phi_cell * cell.radiance.b);
+        var irradiance: f32;
+        if above {
+            irradiance = abs(dot(nx, phi_cell));
+        } else {
+            irradiance = polygon_irradiance(x, nx, cell.corners);
+        }
+        e0 += cell.radiance.rgb * irradiance;
     }
-    return corner_record(phi, e0, x, nx, depth);
-}
-
-// `exact_terms` at two points in one loop over the cells, which loads each cell once for both
-// (on lavapipe a load indexed by the loop is a gather, lane by lane, that costs more than a
-// cell's sums: the exact passes say what that saves).
-struct TermsPair {
-    a: Corner,
-    b: Corner,
-}
-
-fn exact_pair(xa: vec3<f32>, na: vec3<f32>, depth_a: f32, xb: vec3<f32>, nb: vec3<f32>, depth_b: f32) -> TermsPair {
-    var phi_a = mat3x3<f32>(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0));
-    var phi_b = phi_a;
-    var e0_a = vec3<f32>(0.0);
-    var e0_b = vec3<f32>(0.0);
-    let above_a = light_above(xa, na);
-    let above_b = light_above(xb, nb);
-    for (var k = 0u; k < frame.sizes.w; k++) {
-        let cell = light_cells[k];
-        let ta = cell_terms(xa, na, above_a, cell.corners);
-        let tb = cell_terms(xb, nb, above_b, cell.corners);
-        phi_a += weighted(ta.xyz, cell.radiance.rgb);
-        phi_b += weighted(tb.xyz, cell.radiance.rgb);
-        e0_a += cell.radiance.rgb * ta.w;
-        e0_b += cell.radiance.rgb * tb.w;
-    }
-    return TermsPair(corner_record(phi_a, e0_a, xa, na, depth_a), corner_record(phi_b, e0_b, xb, nb, depth_b));
+    return Corner(vec4<f32>(phi[0], e0.r), vec4<f32>(phi[1], e0.g), vec4<f32>(phi[2], e0.b), vec4<f32>(x, 1.0), vec4<f32>(nx, depth));
 }
 
 fn no_corner() -> Corner {
@@ -305,33 +263,25 @@ fn ray_offset(x: vec3<f32>, mixed: Corner) -> f32 {
 fn block_check(block: vec2<u32>, b: Block) -> Check {
     let centre = min(block * BLOCK + BLOCK / 2u, frame.sizes.xy - 1u);
     let s = stencil(centre, b);
-    if !all_valid(s) || !covered(centre) {
+    let exact = pixel_terms(centre);
+    if !all_valid(s) || exact.position.w <= 0.0 {
         return unchecked();
     }
-    let position = textureLoad(gbuf_position, centre, 0);
-    let x = position.xyz;
-    if !lit_side(x) {
-        return unchecked();
-    }
-    let nx = textureLoad(gbuf_normal, centre, 0).xyz;
+    let x = exact.position.xyz;
     let mixed = blend(s);
     let t = ray_offset(x, mixed);
     var check = Check(0.0, t, GRADIENT, mat3x3<f32>(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0)), vec3<f32>(0.0));
     let distance_to_light = light_distance(x);
-    var exact: Corner;
     if abs(t) > FLAT * distance_to_light {
         let step = RAY_STEP * distance_to_light;
         let beyond = x + step * view_ray(x);
         if !lit_side(beyond) {
             return unchecked();
         }
-        let pair = exact_pair(x, nx, position.w, beyond, nx, position.w);
-        exact = pair.a;
+        let ahead = exact_terms(beyond, exact.normal.xyz, exact.normal.w);
         check.first = RAY_FIRST;
-        check.d_phi = (phi_of(pair.b) - phi_of(exact)) * (1.0 / step);
-        check.d_e0 = (e0_of(pair.b) - e0_of(exact)) / step;
-    } else {
-        exact = exact_terms(x, nx, position.w);
+        check.d_phi = (phi_of(ahead) - phi_of(exact)) * (1.0 / step);
+        check.d_e0 = (e0_of(ahead) - e0_of(exact)) / step;
     }
     let phi = phi_of(mixed) + check.d_phi * t;
     let size = max(phi_size(exact), vec3<f32>(1e-30));
