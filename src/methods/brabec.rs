@@ -117,6 +117,11 @@ impl ShadowMethod for Brabec {
         true
     }
 
+    /// The receiver's own id against the ids seen from the light (§3.2's object-id test).
+    fn reads_object_ids(&self) -> bool {
+        true
+    }
+
     fn name(&self) -> &'static str {
         "brabec"
     }

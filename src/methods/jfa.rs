@@ -193,6 +193,11 @@ impl ShadowMethod for JfaE {
         EYE_SPACE.name
     }
 
+    /// The boundary and the flood compare object ids (§5's check against jumping too far).
+    fn reads_object_ids(&self) -> bool {
+        true
+    }
+
     fn summary(&self) -> &'static str {
         "Rong & Tan 2006 §5: hard shadows with 3D positions, boundary pixels, eye-space jump flooding for inner and outer penumbrae, object-id and midpoint checks against jumping too far"
     }

@@ -271,4 +271,10 @@ pub trait ShadowMethod: Send + Sync {
     fn reads_light_surfaces(&self) -> bool {
         false
     }
+    /// Whether the method reads the G-buffer's object ids (`gbuf_id`). A method that does says
+    /// so; for the others the G-buffer pass draws without that target: at 1080p it was a tenth
+    /// of the pass on lavapipe (6 of 57 ms over a 100k-triangle landscape).
+    fn reads_object_ids(&self) -> bool {
+        false
+    }
 }

@@ -248,7 +248,7 @@ impl Renderer {
 
         // Eye-space G-buffer.
         let mut enc = encoder();
-        self.record_gbuffer(&mut enc, scene, targets);
+        self.record_gbuffer(&mut enc, scene, targets, spec.method.reads_object_ids());
         submit(enc)?;
         let start = timings.phase("gbuffer", start);
         go_on()?;

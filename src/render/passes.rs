@@ -84,18 +84,25 @@ impl Renderer {
         pass.draw_indexed(0..scene.index_count, 0, 0..1);
     }
 
-    pub(super) fn record_gbuffer(&mut self, encoder: &mut wgpu::CommandEncoder, scene: &GpuScene, targets: &FrameTargets) {
+    pub(super) fn record_gbuffer(&mut self, encoder: &mut wgpu::CommandEncoder, scene: &GpuScene, targets: &FrameTargets, ids: bool) {
         let device = &self.gpu.device;
         let (draw_layout, material_layout) = (&self.layouts.draw, &self.layouts.material);
         // Two fragment entry points: materials with a texture, and those without (no sample).
+        // With `ids` (`ShadowMethod::reads_object_ids`) the object-id target too; without, the
+        // fragment's id output has no attachment and is dropped.
+        let formats: &[wgpu::TextureFormat] = if ids {
+            &[POSITION_FORMAT, NORMAL_FORMAT, ALBEDO_FORMAT, ID_FORMAT]
+        } else {
+            &[POSITION_FORMAT, NORMAL_FORMAT, ALBEDO_FORMAT]
+        };
         let mut pipeline = |name: &'static str, fragment: &'static str| {
-            self.pipelines.render(PipelineKey::new(name), || {
+            self.pipelines.render(PipelineKey { name, variant: u32::from(ids) }, || {
                 let pipeline = ScenePipeline {
                     label: "GBuffer::pipeline",
                     shader: "gbuffer.wgsl",
                     fragment: Some(fragment),
                     bind_group_layouts: &[draw_layout, material_layout],
-                    targets: &[POSITION_FORMAT, NORMAL_FORMAT, ALBEDO_FORMAT, ID_FORMAT],
+                    targets: formats,
                     depth_compare: wgpu::CompareFunction::Less,
                 };
                 pipeline.build(device)
@@ -110,9 +117,10 @@ impl Renderer {
             Some(clear_attachment(&targets.albedo.view, 0.0)),
             Some(clear_attachment(&targets.object_id.view, f64::from(u32::MAX))),
         ];
+        let colors = &colors[..formats.len()];
         let timestamps = self.timer.render_scope("gbuffer", "GBuffer::pass");
         let mut pass =
-            begin_scene_pass(encoder, "GBuffer::pass", &colors, &targets.depth_buffer.view, timestamps, (&textured, &bind_group), scene);
+            begin_scene_pass(encoder, "GBuffer::pass", colors, &targets.depth_buffer.view, timestamps, (&textured, &bind_group), scene);
         for draw in &scene.draws {
             let material = draw.material as usize;
             pass.set_pipeline(if scene.textured[material] { &textured } else { &untextured });

@@ -143,6 +143,11 @@ impl ShadowMethod for Wedges {
         "wedges"
     }
 
+    /// A receiver facing away from the light centre ignores its own object (`tiles.wgsl`).
+    fn reads_object_ids(&self) -> bool {
+        true
+    }
+
     fn summary(&self) -> &'static str {
         "Assarsson & Akenine-Möller 2003: soft shadow volumes — silhouette edges from the light centre, penumbra wedges, LI buffer, umbra by z-pass or z-fail, zmin/zmax tile occlusion culling, three-pass or single-pass"
     }
