@@ -12,27 +12,46 @@ fn edge_entry(row: u32, x: f32) -> vec4<f32> {
     return mix(edge_table[at], edge_table[at + 1u], clamp(x - f32(i), 0.0, 1.0));
 }
 
-// The line orthogonal to unit direction `e` (light coordinates: x along r, y along u) at
-// fraction `s` ∈ [0, 1] of the way from the centre to the rectangle's edge: rgb the fraction of
-// each channel's emission on the centre's side, w the same fraction of the light's white twin
-// (its shape alone). Linear between neighbouring directions and distances.
-fn edge_fraction(e: vec2<f32>, s: f32) -> vec4<f32> {
+// Where the line orthogonal to unit direction `e` (light coordinates: x along r, y along u)
+// at fraction `s` ∈ [0, 1] of the way from the centre to the rectangle's edge falls in the
+// table: the row below its direction, the fraction of the way to the next row, and its
+// station coordinate. Look-ups are linear between neighbouring directions and distances.
+struct EdgeSpot {
+    row: u32,
+    toward_next: f32,
+    x: f32,
+}
+
+fn edge_spot(e: vec2<f32>, s: f32) -> EdgeSpot {
     let turns = fract(atan2(e.y, e.x) / 6.28318531 + 1.0);
     let y = turns * f32(EDGE_ANGLES);
     let row = u32(y);
-    let x = clamp(s, 0.0, 1.0) * f32(EDGE_STATIONS - 1u);
-    return mix(edge_entry(row, x), edge_entry(row + 1u, x), y - f32(row));
+    return EdgeSpot(row, y - f32(row), clamp(s, 0.0, 1.0) * f32(EDGE_STATIONS - 1u));
 }
 
 // The same for the line through light point `q` (light coordinates) orthogonal to c→q: the
 // intensity look-up of Rong & Tan 2006 §3.
-fn edge_fraction_at(q: vec2<f32>) -> vec4<f32> {
+fn edge_spot_at(q: vec2<f32>) -> EdgeSpot {
     let length_q = length(q);
     if length_q <= 0.0 {
-        return edge_fraction(vec2<f32>(1.0, 0.0), 0.0);
+        return edge_spot(vec2<f32>(1.0, 0.0), 0.0);
     }
     let e = q / length_q;
-    return edge_fraction(e, length_q / light_reach(e));
+    return edge_spot(e, length_q / light_reach(e));
+}
+
+// rgb: the fraction of each channel's emission on the centre's side of the line at `spot`;
+// w: the same fraction of the light's white twin (its shape alone).
+fn edge_fraction_of(spot: EdgeSpot) -> vec4<f32> {
+    return mix(edge_entry(spot.row, spot.x), edge_entry(spot.row + 1u, spot.x), spot.toward_next);
+}
+
+fn edge_fraction(e: vec2<f32>, s: f32) -> vec4<f32> {
+    return edge_fraction_of(edge_spot(e, s));
+}
+
+fn edge_fraction_at(q: vec2<f32>) -> vec4<f32> {
+    return edge_fraction_of(edge_spot_at(q));
 }
 
 // The fraction of each channel's emission (w: of the white twin's) on the side {y : y·n < λ}

@@ -27,6 +27,16 @@ const EDGE_SAMPLES: u32 = 256;
 /// Bins of each direction's histogram of the samples' distances along it.
 const EDGE_BINS: usize = 2048;
 
+/// Rec. 709's luminance weights, which jump flooding's keys use (`shaders/methods/jfa/common.wgsl`).
+pub const LUMINANCE: glam::Vec3 = glam::Vec3::new(0.2126, 0.7152, 0.0722);
+
+/// The luminance of every `edge_table` entry, in the same order, four to an element (the
+/// GPU reads a flat array of floats): the keys jump flooding minimises.
+pub fn edge_luminance_table(light: &AreaLight, image: &LightImage) -> Vec<[f32; 4]> {
+    let luminance = |e: &[f32; 4]| glam::Vec3::new(e[0], e[1], e[2]).dot(LUMINANCE);
+    edge_table(light, image).chunks_exact(4).map(|c| [luminance(&c[0]), luminance(&c[1]), luminance(&c[2]), luminance(&c[3])]).collect()
+}
+
 /// The edge table: the intensity look-up of Rong & Tan 2006 (§3, §4.1), coloured and indexed
 /// by the line rather than by a point of the light. Row i is the direction
 /// eᵢ = (cos φᵢ, sin φᵢ), φᵢ = 2π·i/EDGE_ANGLES, in light-local coordinates (x along r, y along

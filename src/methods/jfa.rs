@@ -38,7 +38,7 @@ use super::{Cap, Counters, MethodContext, Param, ParamSpec, Params, ShadowMethod
 use crate::error::JobResult;
 use crate::gpu::layout;
 use crate::gpu::pool::PipelineKey;
-use crate::light::tables::edge_table;
+use crate::light::tables::{edge_luminance_table, edge_table};
 
 pub struct JfaL;
 pub struct JfaE;
@@ -256,6 +256,7 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
     // The coloured look-up depends only on the light image and the light's shape; building it
     // integrates ~6·10⁴ samples per direction on the CPU, so it is kept for later jobs.
     let lut = ctx.light_table("edge_table", edge_table);
+    let luminance = ctx.light_table("edge_luminance", edge_luminance_table);
     // From the pool: the seed pass writes every record of a and (jfa-e) every flag, b and the
     // tile flags are cleared below.
     let cells = u64::from(grid.0) * u64::from(grid.1);
@@ -283,6 +284,7 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
         layout::storage_read_write(12),
         layout::storage_read_write(13),
         layout::storage_read(14),
+        layout::storage_read(15),
     ];
     let seed = ctx.screen_pipeline(PipelineKey::new(which.seed.0), which.seed.1, &io);
     // jfa-e lists its boundary pixels and seeds them in a compacted pass (boundary.wgsl).
@@ -333,6 +335,7 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
                     tile_list.list.as_entire_binding(),
                     tile_groups.as_entire_binding(),
                     map_depth.as_entire_binding(),
+                    luminance.as_entire_binding(),
                 ],
             )
         };

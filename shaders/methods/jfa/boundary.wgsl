@@ -82,9 +82,9 @@ fn seed_listed(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocatio
     let lit = textureLoad(gbuf_position, vec2<u32>(vec2<i32>(pixel) + neighbour), 0).xyz;
     let texel = shadow_texel(to_light_space(here.xyz).uv);
     let occluder = shadow_point(texel).xyz;
-    let intensity_here = intensity(here.xyz, occluder, true);
+    let intensity_here = intensity_key(here.xyz, occluder);
     // A seed whose own ray misses the light still passes its occluder on.
-    let key = select(SEED_KEY, 1.0 - luminance(intensity_here.rgb), intensity_here.w > 0.0);
+    let key = select(SEED_KEY, intensity_here.x, intensity_here.y > 0.0);
     let id_bits = f32(textureLoad(gbuf_id, pixel, 0).r);
     // The silhouette's direction at the occluder point, once per seed: the lit neighbour's
     // texel lies beyond the silhouette, so a window reaching it finds it.

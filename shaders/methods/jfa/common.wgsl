@@ -32,6 +32,8 @@ struct JfaParams {
 @group(1) @binding(0) var<uniform> params: JfaParams;
 // The light's edge table (`light::tables::edge_table`, read through common/edge_table.wgsl).
 @group(1) @binding(1) var<storage, read> edge_table: array<vec4<f32>>;
+// Its entries' luminance (`light::tables::edge_luminance_table`), for the rounds' keys.
+@group(1) @binding(15) var<storage, read> edge_luminance: array<f32>;
 @group(1) @binding(2) var<storage, read> src: array<vec4<f32>>;
 @group(1) @binding(3) var<storage, read_write> dst: array<vec4<f32>>;
 @group(1) @binding(4) var<storage, read_write> visibility_out: array<vec4<f32>>;
@@ -156,10 +158,6 @@ fn hard_shadowed_in_map(p: vec3<f32>, n: vec3<f32>, ls: LightSpace) -> bool {
     return ls.depth - depth_bias(p, n, ls.depth, params.bias_texels, params.slope_bias_texels) > blocker;
 }
 
-fn luminance(c: vec3<f32>) -> f32 {
-    return dot(c, vec3<f32>(0.2126, 0.7152, 0.0722));
-}
-
 // Where the ray from receiver p through occluder point o meets the light plane, in light
 // coordinates (x along r, y along u, c at the origin); w = 1 when it meets the light
 // rectangle, else 0 (§3: then p is not in o's penumbra).
@@ -171,16 +169,28 @@ fn light_hit(p: vec3<f32>, o: vec3<f32>) -> vec4<f32> {
 
 // §3: shoot a ray from receiver p through occluder point o to the light plane. If it meets
 // the light at q, the visible part is the light on the centre's side of the line through q
-// orthogonal to c→q (for a receiver outside hard shadow), or the other side (inside). Returns
-// rgb intensity and w = 1 when the ray meets the light (p is in a penumbra), else w = 0. This
-// is what flooding minimises (or maximises) to choose an occluder.
-fn intensity(p: vec3<f32>, o: vec3<f32>, inside: bool) -> vec4<f32> {
+// orthogonal to c→q (for a receiver outside hard shadow), or the other side (inside); flooding
+// keeps the occluder that leaves an outside receiver the least light and an inside one the
+// most. Returns the key it minimises, with y = 1 where the ray meets the light (p is in a
+// penumbra), else y = 0: the luminance of the centre's side, for both (inside, the visible
+// side's luminance is 1 minus it: Rec. 709's weights sum to 1, and the key is 1 minus that).
+// Read from the luminance table (`edge_luminance`): luminance is linear, so the table's
+// interpolated luminance is the interpolated colour's, and a look-up gathers one float where
+// the colour table's gathers four — the look-ups are most of a round's loads.
+fn intensity_key(p: vec3<f32>, o: vec3<f32>) -> vec2<f32> {
     let hit = light_hit(p, o);
     if hit.w == 0.0 {
-        return vec4<f32>(0.0);
+        return vec2<f32>(0.0);
     }
-    let f = edge_fraction_at(hit.xy).rgb;
-    return vec4<f32>(select(f, 1.0 - f, inside), 1.0);
+    let spot = edge_spot_at(hit.xy);
+    let near = mix(luminance_entry(spot.row, spot.x), luminance_entry(spot.row + 1u, spot.x), spot.toward_next);
+    return vec2<f32>(near, 1.0);
+}
+
+fn luminance_entry(row: u32, x: f32) -> f32 {
+    let i = min(u32(x), EDGE_STATIONS - 2u);
+    let at = (row % EDGE_ANGLES) * EDGE_STATIONS + i;
+    return mix(edge_luminance[at], edge_luminance[at + 1u], clamp(x - f32(i), 0.0, 1.0));
 }
 
 // The visibility the final passes give receiver p for occluder point o (p in o's penumbra,

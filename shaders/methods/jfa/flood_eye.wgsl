@@ -40,8 +40,8 @@ fn candidate_key(r: Receiver, k: u32) -> f32 {
     if params.same_object == 1u && src[at + 1].z != r.object {
         return NO_KEY;
     }
-    let i = intensity(r.here, candidate.xyz, r.inside);
-    return select(select(luminance(i.rgb), 1.0 - luminance(i.rgb), r.inside), NO_KEY, i.w == 0.0);
+    let key = intensity_key(r.here, candidate.xyz);
+    return select(key.x, NO_KEY, key.y == 0.0);
 }
 
 // §5.2's continuity check, read as: the midpoint between the boundary pixel and this one must
@@ -55,7 +55,7 @@ fn midpoint_holds(r: Receiver, k: u32) -> bool {
     if (mid_flag & COVERED) == 0u {
         return false;
     }
-    return intensity(textureLoad(gbuf_position, mid, 0).xyz, src[at].xyz, (mid_flag & HARD) != 0u).w > 0.0;
+    return light_hit(textureLoad(gbuf_position, mid, 0).xyz, src[at].xyz).w > 0.0;
 }
 
 // One workgroup per listed tile (`list_tiles` in common.wgsl).

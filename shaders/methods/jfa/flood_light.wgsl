@@ -52,9 +52,9 @@ fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_id) l
         }
         for (var j = 0u; j < count; j++) {
             let candidate = offers[j];
-            let i = intensity(receiver.xyz, candidate, false);
-            var key = luminance(i.rgb);
-            if i.w == 0.0 {
+            let i = intensity_key(receiver.xyz, candidate);
+            var key = i.x;
+            if i.y == 0.0 {
                 let occluder = to_light_space(candidate);
                 if params.inner == 0u || receiver_depth > occluder.depth * (1.0 + params.silhouette_relative) {
                     continue;
