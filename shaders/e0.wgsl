@@ -156,6 +156,52 @@ fn load_block(block: vec2<u32>) -> Block {
     return Block(corners[row], corners[row + 1u], corners[below], corners[below + 1u]);
 }
 
+// One row of a block, ready for its pixels' blends: the perspective-correct blend of the
+// corners (`stencil`) is Σ bᵢ cᵢ/dᵢ over Σ bᵢ/dᵢ, bᵢ the bilinear weights and dᵢ the corners'
+// view depths, and both sums are linear along a row. So each row holds them at its two ends,
+// and a pixel takes a linear step and one division instead of four weights and four divisions
+// (the same values up to rounding).
+struct RowBlend {
+    left_r: vec4<f32>,
+    left_g: vec4<f32>,
+    left_b: vec4<f32>,
+    left_position: vec4<f32>,
+    right_r: vec4<f32>,
+    right_g: vec4<f32>,
+    right_b: vec4<f32>,
+    right_position: vec4<f32>,
+    weight: vec2<f32>, // Σ bᵢ/dᵢ at the left and right ends
+}
+
+// Row `fy` (0 at the block's top corners, 1 at its bottom ones).
+fn row_blend(b: Block, fy: f32) -> RowBlend {
+    let inv = 1.0 / max(vec4<f32>(b.c00.normal.w, b.c10.normal.w, b.c01.normal.w, b.c11.normal.w), vec4<f32>(1e-20));
+    let w = vec4<f32>(inv.x * (1.0 - fy), inv.y * (1.0 - fy), inv.z * fy, inv.w * fy);
+    return RowBlend(
+        w.x * b.c00.phi_r + w.z * b.c01.phi_r,
+        w.x * b.c00.phi_g + w.z * b.c01.phi_g,
+        w.x * b.c00.phi_b + w.z * b.c01.phi_b,
+        w.x * b.c00.position + w.z * b.c01.position,
+        w.y * b.c10.phi_r + w.w * b.c11.phi_r,
+        w.y * b.c10.phi_g + w.w * b.c11.phi_g,
+        w.y * b.c10.phi_b + w.w * b.c11.phi_b,
+        w.y * b.c10.position + w.w * b.c11.position,
+        vec2<f32>(w.x + w.z, w.y + w.w),
+    );
+}
+
+// The blend of the corners' records at fraction `fx` along the row (`blend` for that pixel).
+fn blend_in_row(row: RowBlend, fx: f32) -> Corner {
+    let scale = 1.0 / mix(row.weight.x, row.weight.y, fx);
+    return Corner(
+        mix(row.left_r, row.right_r, fx) * scale,
+        mix(row.left_g, row.right_g, fx) * scale,
+        mix(row.left_b, row.right_b, fx) * scale,
+        mix(row.left_position, row.right_position, fx) * scale,
+        vec4<f32>(0.0),
+    );
+}
+
 // A block's corners and a pixel's bilinear weights among them.
 struct Stencil {
     c00: Corner,
@@ -197,12 +243,12 @@ fn blend(s: Stencil) -> Corner {
 
 // Largest distance of the corners' normals from nx: 0 on a flat face. One square root of the
 // largest square (the same value: the root is monotonic and correctly rounded).
-fn bend(s: Stencil, nx: vec3<f32>) -> f32 {
+fn bend(b: Block, nx: vec3<f32>) -> f32 {
     let squares = vec4<f32>(
-        dot(s.c00.normal.xyz - nx, s.c00.normal.xyz - nx),
-        dot(s.c10.normal.xyz - nx, s.c10.normal.xyz - nx),
-        dot(s.c01.normal.xyz - nx, s.c01.normal.xyz - nx),
-        dot(s.c11.normal.xyz - nx, s.c11.normal.xyz - nx),
+        dot(b.c00.normal.xyz - nx, b.c00.normal.xyz - nx),
+        dot(b.c10.normal.xyz - nx, b.c10.normal.xyz - nx),
+        dot(b.c01.normal.xyz - nx, b.c01.normal.xyz - nx),
+        dot(b.c11.normal.xyz - nx, b.c11.normal.xyz - nx),
     );
     return sqrt(max(max(squares.x, squares.y), max(squares.z, squares.w)));
 }
@@ -304,14 +350,12 @@ fn light_above(x: vec3<f32>, nx: vec3<f32>) -> bool {
 // E0 at one pixel interpolated from its block's corners, corrected along the view ray
 // (`ray_offset`): xyz, and w = 1 where the estimate accepts it (or the pixel receives no
 // light), 0 where it must be summed exactly. `normal` is the pixel's G-buffer normal texel
-// (w: coverage).
-fn interpolated_e0(pixel: vec2<u32>, x: vec3<f32>, normal: vec4<f32>, b: Block, check: Check) -> vec4<f32> {
+// (w: coverage); `mixed`, the blend of the block's corners at the pixel (`blend_in_row`).
+fn interpolated_e0(x: vec3<f32>, normal: vec4<f32>, b: Block, mixed: Corner, check: Check) -> vec4<f32> {
     let nx = normal.xyz;
     if normal.w <= 0.5 || !lit_side(x) {
         return vec4<f32>(0.0, 0.0, 0.0, 1.0);
     }
-    let s = stencil(pixel, b);
-    let mixed = blend(s);
     let t = ray_offset(x, mixed);
     // The centre's error with a margin; what the derivative's error adds where the pixel lies
     // farther along its ray than the centre did; and the second order in t.
@@ -330,7 +374,7 @@ fn interpolated_e0(pixel: vec2<u32>, x: vec3<f32>, normal: vec4<f32>, b: Block, 
         // The light straddles the horizon: on a flat face (the corners' normal the pixel's) E0
         // is still smooth in the position and is blended itself.
         e0 = e0_of(mixed) + check.d_e0 * t;
-        done = all((relative + bend(s, nx)) * size <= E0_TOLERANCE * e0);
+        done = all((relative + bend(b, nx)) * size <= E0_TOLERANCE * e0);
     }
     return vec4<f32>(e0, select(0.0, 1.0, done && check.error < UNCHECKED));
 }
@@ -378,10 +422,13 @@ fn interpolate_blocks(@builtin(global_invocation_id) id: vec3<u32>) {
     let b = load_block(block);
     let check = block_check(block, b);
     let origin = block * BLOCK;
+    // The pixels' fractions of the way between the corners (`stencil`).
+    let step = 1.0 / vec2<f32>(max(corner_pixel(block + 1u) - corner_pixel(block), vec2<u32>(1u)));
     // The pixels to list, four rows at a time: 4 × BLOCK (8) bits.
     var to_above = 0u;
     var to_clip = 0u;
     for (var y = 0u; y < BLOCK; y++) {
+        let row = row_blend(b, f32(y) * step.y);
         for (var x = 0u; x < BLOCK; x++) {
             let bit = 1u << ((y % 4u) * BLOCK + x);
             let pixel = origin + vec2<u32>(x, y);
@@ -389,7 +436,7 @@ fn interpolate_blocks(@builtin(global_invocation_id) id: vec3<u32>) {
                 // Loaded once here: lavapipe runs the listing branch's code for every pixel.
                 let position = textureLoad(gbuf_position, pixel, 0).xyz;
                 let normal = textureLoad(gbuf_normal, pixel, 0);
-                let e0 = interpolated_e0(pixel, position, normal, b, check);
+                let e0 = interpolated_e0(position, normal, b, blend_in_row(row, f32(x) * step.x), check);
                 if e0.w > 0.0 {
                     e0_out[pixel_index(pixel)] = vec4<f32>(e0.xyz, 1.0);
                 } else if light_above(position, normal.xyz) {
