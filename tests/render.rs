@@ -1116,7 +1116,7 @@ fn wedges_with_the_eye_inside_a_shadow_volume_use_z_fail_and_see_what_just_outsi
 fn pooled_scratch_buffers_leave_nothing_for_the_next_job() {
     // Methods take their large buffers (records, receivers, sums, depth maps) from the
     // renderer's pools, holding whatever the last job left: each must clear or overwrite what
-    // it reads. A job rendered before and after another (another scene and light in the same
+    // it reads. A job rendered before and after others (another scene and light in the same
     // buffers) must come out the same, and the second time allocate nothing.
     let engine = penumbra::engine::Engine::new(common::engine().gpu(), Limits::default(), penumbra::engine::PathPolicy::Deny);
     let frame = |scene: &str, light: &str, method: &serde_json::Value| {
@@ -1135,8 +1135,14 @@ fn pooled_scratch_buffers_leave_nothing_for_the_next_job() {
         json!({"name": "chun-oh"}),
         json!({"name": "reference", "samples": 8}),
     ] {
+        // Before each of the two frames compared, a frame whose G-buffer draws another scene's
+        // object ids (a different one each time): a method that reads them without saying so
+        // (`ShadowMethod::reads_object_ids`) would read those.
+        let ids_of = |scene| frame(scene, "white", &json!({"name": "wedges"}));
+        ids_of("torus");
         let first = frame("crowd", "stripes", &method);
         frame("columns", "white", &method);
+        ids_of("columns");
         let created = engine.stats().targets_created;
         let again = frame("crowd", "stripes", &method);
         assert_eq!(first.visibility, again.visibility, "{method}: the same job, after another, renders the same");

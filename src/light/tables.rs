@@ -5,7 +5,8 @@
 //! - `edge_table`, the intensity look-up of Rong & Tan 2006 (§3, §4.1), coloured: for a line
 //!   across the light, given by its direction from the centre and its distance, the part of
 //!   each channel's emission on the centre's side. `jfa-l`, `jfa-e` and `brabec` read it
-//!   (`shaders/common/edge_table.wgsl`).
+//!   (`shaders/common/edge_table.wgsl`); `edge_luminance_table` holds each entry's
+//!   luminance, the keys JFA's rounds compare (`shaders/methods/jfa/common.wgsl`).
 //! - `sector_table`: the emission of the sectors around the light centre, from direction 0
 //!   to each angle, beyond each fraction of the way to the rectangle's edge — exact along
 //!   each ray for the piecewise-constant image. `wedges` integrates each channel over the
@@ -299,6 +300,26 @@ mod tests {
         let red_total = 3.0 / 6.0;
         let red_visible = (2.0 / 6.0 - s_line) + 1.0 / 6.0;
         assert!((left[0] - red_visible / red_total).abs() < 0.01, "{} vs {}", left[0], red_visible / red_total);
+    }
+
+    #[test]
+    fn the_luminance_table_is_the_edge_tables_luminance_entry_for_entry() {
+        let wide = light(Vec2::new(3.0, 1.0));
+        let image = LightImage::builtin("flame", &Default::default(), "f").unwrap();
+        let (table, luminance) = (edge_table(&wide, &image), edge_luminance_table(&wide, &image));
+        let flat: Vec<f32> = luminance.iter().flatten().copied().collect();
+        assert_eq!(flat.len(), table.len());
+        for (e, l) in table.iter().zip(&flat) {
+            assert_eq!(*l, glam::Vec3::new(e[0], e[1], e[2]).dot(LUMINANCE));
+        }
+        // Rec. 709's weights sum to 1: under a white light the luminance is the fraction itself,
+        // and the far side's luminance is 1 minus the near side's (what the keys rely on).
+        assert!((LUMINANCE.element_sum() - 1.0).abs() < 1e-6);
+        let white = LightImage::builtin("white", &Default::default(), "f").unwrap();
+        let (table, luminance) = (edge_table(&wide, &white), edge_luminance_table(&wide, &white));
+        for (e, l) in table.iter().zip(luminance.iter().flatten()) {
+            assert!((e[0] - l).abs() < 1e-6);
+        }
     }
 
     #[test]
