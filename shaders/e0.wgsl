@@ -78,16 +78,6 @@ fn lit_side(x: vec3<f32>) -> bool {
     return dot(x - frame.light_center.xyz, frame.light_n.xyz) > 0.0;
 }
 
-// The exact sum over the cells, each clipped to x's hemisphere.
-fn clipped_e0(x: vec3<f32>, nx: vec3<f32>) -> vec3<f32> {
-    var e0 = vec3<f32>(0.0);
-    for (var k = 0u; k < frame.sizes.w; k++) {
-        let cell = light_cells[k];
-        e0 += cell.radiance.rgb * polygon_irradiance(x, nx, cell.corners);
-    }
-    return e0;
-}
-
 fn corner_count() -> vec2<u32> {
     return (frame.sizes.xy - 1u) / BLOCK + 2u;
 }
@@ -468,15 +458,7 @@ fn exact(@builtin(global_invocation_id) id: vec3<u32>) {
     let last = frame.sizes.xy - 1u;
     let p = array<vec2<u32>, 4>(origin, min(origin + vec2<u32>(1u, 0u), last), min(origin + vec2<u32>(0u, 1u), last), min(origin + 1u, last));
     let q = Quad(screen_surface(p[0]), screen_surface(p[1]), screen_surface(p[2]), screen_surface(p[3]));
-    var e0 = mat4x3<f32>(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0));
-    for (var k = 0u; k < frame.sizes.w; k++) {
-        let cell = light_cells[k];
-        e0[0] += cell.radiance.rgb * polygon_irradiance(q.a.x, q.a.nx, cell.corners);
-        e0[1] += cell.radiance.rgb * polygon_irradiance(q.b.x, q.b.nx, cell.corners);
-        e0[2] += cell.radiance.rgb * polygon_irradiance(q.c.x, q.c.nx, cell.corners);
-        e0[3] += cell.radiance.rgb * polygon_irradiance(q.d.x, q.d.nx, cell.corners);
-    }
-    store_quad(q, e0);
+    store_quad(q, clipped_quad(q));
 }
 
 // A pixel's surface, its normal zero where it receives no light (E0 = 0 then).
@@ -560,6 +542,19 @@ fn exact_above(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocatio
     store_quad(q, e0);
 }
 
+// The exact sum at each of a quad's pixels (columns), every cell clipped to its hemisphere.
+fn clipped_quad(q: Quad) -> mat4x3<f32> {
+    var e0 = mat4x3<f32>(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0));
+    for (var k = 0u; k < frame.sizes.w; k++) {
+        let cell = light_cells[k];
+        e0[0] += cell.radiance.rgb * polygon_irradiance(q.a.x, q.a.nx, cell.corners);
+        e0[1] += cell.radiance.rgb * polygon_irradiance(q.b.x, q.b.nx, cell.corners);
+        e0[2] += cell.radiance.rgb * polygon_irradiance(q.c.x, q.c.nx, cell.corners);
+        e0[3] += cell.radiance.rgb * polygon_irradiance(q.d.x, q.d.nx, cell.corners);
+    }
+    return e0;
+}
+
 // The pixels of `clipped`, summed exactly with each cell clipped to the hemisphere.
 @compute @workgroup_size(64)
 fn exact_clipped(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) lane: u32) {
@@ -569,13 +564,5 @@ fn exact_clipped(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocat
     }
     let at = quad_positions(group, lane, count);
     let q = listed_quad(vec4<u32>(clipped.pixels[at.x], clipped.pixels[at.y], clipped.pixels[at.z], clipped.pixels[at.w]));
-    var e0 = mat4x3<f32>(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0));
-    for (var k = 0u; k < frame.sizes.w; k++) {
-        let cell = light_cells[k];
-        e0[0] += cell.radiance.rgb * polygon_irradiance(q.a.x, q.a.nx, cell.corners);
-        e0[1] += cell.radiance.rgb * polygon_irradiance(q.b.x, q.b.nx, cell.corners);
-        e0[2] += cell.radiance.rgb * polygon_irradiance(q.c.x, q.c.nx, cell.corners);
-        e0[3] += cell.radiance.rgb * polygon_irradiance(q.d.x, q.d.nx, cell.corners);
-    }
-    store_quad(q, e0);
+    store_quad(q, clipped_quad(q));
 }
