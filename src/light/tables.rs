@@ -31,11 +31,20 @@ const EDGE_BINS: usize = 2048;
 /// Rec. 709's luminance weights, which jump flooding's keys use (`shaders/methods/jfa/common.wgsl`).
 pub const LUMINANCE: glam::Vec3 = glam::Vec3::new(0.2126, 0.7152, 0.0722);
 
-/// The luminance of every `edge_table` entry, in the same order, four to an element (the
-/// GPU reads a flat array of floats): the keys jump flooding minimises.
+/// The luminance of the `edge_table`, the keys jump flooding minimises, laid out for a
+/// bilinear look-up in one load: element (row i, station j), in the edge table's order, holds
+/// the luminance of entries (i, j), (i, j + 1), (i + 1, j) and (i + 1, j + 1) — the next row
+/// wrapping around the turn, the next station clamped to the last.
 pub fn edge_luminance_table(light: &AreaLight, image: &LightImage) -> Vec<[f32; 4]> {
-    let luminance = |e: &[f32; 4]| glam::Vec3::new(e[0], e[1], e[2]).dot(LUMINANCE);
-    edge_table(light, image).chunks_exact(4).map(|c| [luminance(&c[0]), luminance(&c[1]), luminance(&c[2]), luminance(&c[3])]).collect()
+    let table = edge_table(light, image);
+    let luminance = |i: u32, j: u32| {
+        let e = table[((i % EDGE_ANGLES) * EDGE_STATIONS + j.min(EDGE_STATIONS - 1)) as usize];
+        glam::Vec3::new(e[0], e[1], e[2]).dot(LUMINANCE)
+    };
+    (0..EDGE_ANGLES)
+        .flat_map(|i| (0..EDGE_STATIONS).map(move |j| (i, j)))
+        .map(|(i, j)| [luminance(i, j), luminance(i, j + 1), luminance(i + 1, j), luminance(i + 1, j + 1)])
+        .collect()
 }
 
 /// The edge table: the intensity look-up of Rong & Tan 2006 (§3, §4.1), coloured and indexed
@@ -307,18 +316,22 @@ mod tests {
         let wide = light(Vec2::new(3.0, 1.0));
         let image = LightImage::builtin("flame", &Default::default(), "f").unwrap();
         let (table, luminance) = (edge_table(&wide, &image), edge_luminance_table(&wide, &image));
-        let flat: Vec<f32> = luminance.iter().flatten().copied().collect();
-        assert_eq!(flat.len(), table.len());
-        for (e, l) in table.iter().zip(&flat) {
-            assert_eq!(*l, glam::Vec3::new(e[0], e[1], e[2]).dot(LUMINANCE));
+        assert_eq!(luminance.len(), table.len());
+        let of = |i: u32, j: u32| {
+            let e = edge(&table, i % EDGE_ANGLES, j.min(EDGE_STATIONS - 1));
+            glam::Vec3::new(e[0], e[1], e[2]).dot(LUMINANCE)
+        };
+        for (i, j) in [(0, 0), (7, 30), (EDGE_ANGLES - 1, 12), (100, EDGE_STATIONS - 1)] {
+            let got = luminance[(i * EDGE_STATIONS + j) as usize];
+            assert_eq!(got, [of(i, j), of(i, j + 1), of(i + 1, j), of(i + 1, j + 1)], "row {i} station {j}");
         }
         // Rec. 709's weights sum to 1: under a white light the luminance is the fraction itself,
         // and the far side's luminance is 1 minus the near side's (what the keys rely on).
         assert!((LUMINANCE.element_sum() - 1.0).abs() < 1e-6);
         let white = LightImage::builtin("white", &Default::default(), "f").unwrap();
         let (table, luminance) = (edge_table(&wide, &white), edge_luminance_table(&wide, &white));
-        for (e, l) in table.iter().zip(luminance.iter().flatten()) {
-            assert!((e[0] - l).abs() < 1e-6);
+        for (e, l) in table.iter().zip(&luminance) {
+            assert!((e[0] - l[0]).abs() < 1e-6);
         }
     }
 

@@ -32,8 +32,9 @@ struct JfaParams {
 @group(1) @binding(0) var<uniform> params: JfaParams;
 // The light's edge table (`light::tables::edge_table`, read through common/edge_table.wgsl).
 @group(1) @binding(1) var<storage, read> edge_table: array<vec4<f32>>;
-// Its entries' luminance (`light::tables::edge_luminance_table`), for the rounds' keys.
-@group(1) @binding(15) var<storage, read> edge_luminance: array<f32>;
+// Its entries' luminance (`light::tables::edge_luminance_table`), for the rounds' keys: per
+// entry, its own and its neighbours' in the next station, the next row and both.
+@group(1) @binding(15) var<storage, read> edge_luminance: array<vec4<f32>>;
 @group(1) @binding(2) var<storage, read> src: array<vec4<f32>>;
 @group(1) @binding(3) var<storage, read_write> dst: array<vec4<f32>>;
 @group(1) @binding(4) var<storage, read_write> visibility_out: array<vec4<f32>>;
@@ -175,22 +176,20 @@ fn light_hit(p: vec3<f32>, o: vec3<f32>) -> vec4<f32> {
 // penumbra), else y = 0: the luminance of the centre's side, for both (inside, the visible
 // side's luminance is 1 minus it: Rec. 709's weights sum to 1, and the key is 1 minus that).
 // Read from the luminance table (`edge_luminance`): luminance is linear, so the table's
-// interpolated luminance is the interpolated colour's, and a look-up gathers one float where
-// the colour table's gathers four — the look-ups are most of a round's loads.
+// interpolated luminance is the interpolated colour's, and a look-up loads one vec4 where the
+// colour table's loads four — the look-ups are most of a round's loads.
 fn intensity_key(p: vec3<f32>, o: vec3<f32>) -> vec2<f32> {
     let hit = light_hit(p, o);
     if hit.w == 0.0 {
         return vec2<f32>(0.0);
     }
     let spot = edge_spot_at(hit.xy);
-    let near = mix(luminance_entry(spot.row, spot.x), luminance_entry(spot.row + 1u, spot.x), spot.toward_next);
+    // The four entries around the spot in one load (a vec4 gathers for less than four floats).
+    let i = min(u32(spot.x), EDGE_STATIONS - 2u);
+    let around = edge_luminance[(spot.row % EDGE_ANGLES) * EDGE_STATIONS + i];
+    let along = clamp(spot.x - f32(i), 0.0, 1.0);
+    let near = mix(mix(around.x, around.y, along), mix(around.z, around.w, along), spot.toward_next);
     return vec2<f32>(near, 1.0);
-}
-
-fn luminance_entry(row: u32, x: f32) -> f32 {
-    let i = min(u32(x), EDGE_STATIONS - 2u);
-    let at = (row % EDGE_ANGLES) * EDGE_STATIONS + i;
-    return mix(edge_luminance[at], edge_luminance[at + 1u], clamp(x - f32(i), 0.0, 1.0));
 }
 
 // The visibility the final passes give receiver p for occluder point o (p in o's penumbra,
