@@ -146,11 +146,13 @@ fn load_block(block: vec2<u32>) -> Block {
     return Block(corners[row], corners[row + 1u], corners[below], corners[below + 1u]);
 }
 
-// One row of a block, ready for its pixels' blends: the perspective-correct blend of the
-// corners (`stencil`) is Σ bᵢ cᵢ/dᵢ over Σ bᵢ/dᵢ, bᵢ the bilinear weights and dᵢ the corners'
-// view depths, and both sums are linear along a row. So each row holds them at its two ends,
-// and a pixel takes a linear step and one division instead of four weights and four divisions
-// (the same values up to rounding).
+// The blend of a block's corners at a pixel is perspective-correct (bilinear over view
+// depth): on a plane it puts the blend of the corners' positions on the pixel's own position
+// up to second order, where plain screen-space weights would be off by the projection's
+// curvature. It is Σ bᵢ cᵢ/dᵢ over Σ bᵢ/dᵢ, bᵢ the bilinear weights and dᵢ the corners' view
+// depths, and both sums are linear along a row of the block: so a row holds them at its two
+// ends (`RowBlend`), and a pixel takes a linear step and one division instead of four
+// weights and four divisions.
 struct RowBlend {
     left_r: vec4<f32>,
     left_g: vec4<f32>,
@@ -180,7 +182,7 @@ fn row_blend(b: Block, fy: f32) -> RowBlend {
     );
 }
 
-// The blend of the corners' records at fraction `fx` along the row (`blend` for that pixel).
+// The blend of the corners' records at fraction `fx` along the row.
 fn blend_in_row(row: RowBlend, fx: f32) -> Corner {
     let scale = 1.0 / mix(row.weight.x, row.weight.y, fx);
     return Corner(
@@ -192,43 +194,19 @@ fn blend_in_row(row: RowBlend, fx: f32) -> Corner {
     );
 }
 
-// A block's corners and a pixel's bilinear weights among them.
-struct Stencil {
-    c00: Corner,
-    c10: Corner,
-    c01: Corner,
-    c11: Corner,
-    w: vec4<f32>,
+// The fraction of the way between a block's corners that one pixel is, across and down
+// (a block at the frame's edge spans fewer pixels).
+fn pixel_step(block: vec2<u32>) -> vec2<f32> {
+    return 1.0 / vec2<f32>(max(corner_pixel(block + 1u) - corner_pixel(block), vec2<u32>(1u)));
 }
 
-fn stencil(pixel: vec2<u32>, b: Block) -> Stencil {
-    let block = pixel / BLOCK;
-    let p0 = corner_pixel(block);
-    let p1 = corner_pixel(block + 1u);
-    let f = vec2<f32>(pixel - p0) / vec2<f32>(max(p1 - p0, vec2<u32>(1u)));
-    // Perspective-correct weights (bilinear over view depth): on a plane they put the blend
-    // of the corners' positions on the pixel's own position up to second order, where plain
-    // screen-space weights would be off by the projection's curvature.
-    let bilinear = vec4<f32>((1.0 - f.x) * (1.0 - f.y), f.x * (1.0 - f.y), (1.0 - f.x) * f.y, f.x * f.y);
-    let depth = max(vec4<f32>(b.c00.normal.w, b.c10.normal.w, b.c01.normal.w, b.c11.normal.w), vec4<f32>(1e-20));
-    let w = bilinear / depth;
-    return Stencil(b.c00, b.c10, b.c01, b.c11, w / (w.x + w.y + w.z + w.w));
+// The blend at the pixel `offset` from the block's first (`step`: `pixel_step`).
+fn blend_at(b: Block, offset: vec2<u32>, step: vec2<f32>) -> Corner {
+    return blend_in_row(row_blend(b, f32(offset.y) * step.y), f32(offset.x) * step.x);
 }
 
-fn all_valid(s: Stencil) -> bool {
-    return s.c00.position.w * s.c10.position.w * s.c01.position.w * s.c11.position.w > 0.0;
-}
-
-// The bilinear blend of the corners' records.
-fn blend(s: Stencil) -> Corner {
-    let w = s.w;
-    return Corner(
-        w.x * s.c00.phi_r + w.y * s.c10.phi_r + w.z * s.c01.phi_r + w.w * s.c11.phi_r,
-        w.x * s.c00.phi_g + w.y * s.c10.phi_g + w.z * s.c01.phi_g + w.w * s.c11.phi_g,
-        w.x * s.c00.phi_b + w.y * s.c10.phi_b + w.z * s.c01.phi_b + w.w * s.c11.phi_b,
-        w.x * s.c00.position + w.y * s.c10.position + w.z * s.c01.position + w.w * s.c11.position,
-        vec4<f32>(0.0),
-    );
+fn all_valid(b: Block) -> bool {
+    return b.c00.position.w * b.c10.position.w * b.c01.position.w * b.c11.position.w > 0.0;
 }
 
 // Largest distance of the corners' normals from nx: 0 on a flat face. One square root of the
@@ -298,13 +276,13 @@ fn ray_offset(x: vec3<f32>, mixed: Corner) -> f32 {
 // it) and bounds what its pixels' offsets add by Φ's gradient instead.
 fn block_check(block: vec2<u32>, b: Block) -> Check {
     let centre = min(block * BLOCK + BLOCK / 2u, frame.sizes.xy - 1u);
-    let s = stencil(centre, b);
     let exact = pixel_terms(centre);
-    if !all_valid(s) || exact.position.w <= 0.0 {
+    if !all_valid(b) || exact.position.w <= 0.0 {
         return unchecked();
     }
     let x = exact.position.xyz;
-    let mixed = blend(s);
+    // The same blend as the block's pixels take (`interpolate_blocks`).
+    let mixed = blend_at(b, centre - block * BLOCK, pixel_step(block));
     let t = ray_offset(x, mixed);
     var check = Check(0.0, t, GRADIENT, mat3x3<f32>(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0)), vec3<f32>(0.0));
     let distance_to_light = light_distance(x);
@@ -412,8 +390,7 @@ fn interpolate_blocks(@builtin(global_invocation_id) id: vec3<u32>) {
     let b = load_block(block);
     let check = block_check(block, b);
     let origin = block * BLOCK;
-    // The pixels' fractions of the way between the corners (`stencil`).
-    let step = 1.0 / vec2<f32>(max(corner_pixel(block + 1u) - corner_pixel(block), vec2<u32>(1u)));
+    let step = pixel_step(block);
     // The pixels to list, four rows at a time: 4 × BLOCK (8) bits.
     var to_above = 0u;
     var to_clip = 0u;

@@ -6,10 +6,22 @@
 const EDGE_ANGLES: u32 = 256u;
 const EDGE_STATIONS: u32 = 64u;
 
-fn edge_entry(row: u32, x: f32) -> vec4<f32> {
+// Where station coordinate `x` of row `row` falls among the table's entries: the entry at or
+// below it (the next one lies at `at` + 1) and the fraction of the way to the next. Shared by
+// every table laid out like this one (JFA's luminance table too).
+struct EdgeCell {
+    at: u32,
+    along: f32,
+}
+
+fn edge_cell(row: u32, x: f32) -> EdgeCell {
     let i = min(u32(x), EDGE_STATIONS - 2u);
-    let at = (row % EDGE_ANGLES) * EDGE_STATIONS + i;
-    return mix(edge_table[at], edge_table[at + 1u], clamp(x - f32(i), 0.0, 1.0));
+    return EdgeCell((row % EDGE_ANGLES) * EDGE_STATIONS + i, clamp(x - f32(i), 0.0, 1.0));
+}
+
+fn edge_entry(row: u32, x: f32) -> vec4<f32> {
+    let cell = edge_cell(row, x);
+    return mix(edge_table[cell.at], edge_table[cell.at + 1u], cell.along);
 }
 
 // Where the line orthogonal to unit direction `e` (light coordinates: x along r, y along u)

@@ -185,10 +185,9 @@ fn intensity_key(p: vec3<f32>, o: vec3<f32>) -> vec2<f32> {
     }
     let spot = edge_spot_at(hit.xy);
     // The four entries around the spot in one load (a vec4 gathers for less than four floats).
-    let i = min(u32(spot.x), EDGE_STATIONS - 2u);
-    let around = edge_luminance[(spot.row % EDGE_ANGLES) * EDGE_STATIONS + i];
-    let along = clamp(spot.x - f32(i), 0.0, 1.0);
-    let near = mix(mix(around.x, around.y, along), mix(around.z, around.w, along), spot.toward_next);
+    let cell = edge_cell(spot.row, spot.x);
+    let around = edge_luminance[cell.at];
+    let near = mix(mix(around.x, around.y, cell.along), mix(around.z, around.w, cell.along), spot.toward_next);
     return vec2<f32>(near, 1.0);
 }
 
