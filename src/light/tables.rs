@@ -31,12 +31,12 @@ const EDGE_BINS: usize = 2048;
 /// Rec. 709's luminance weights, which jump flooding's keys use (`shaders/methods/jfa/common.wgsl`).
 pub const LUMINANCE: glam::Vec3 = glam::Vec3::new(0.2126, 0.7152, 0.0722);
 
-/// The luminance of the `edge_table`, the keys jump flooding minimises, laid out for a
+/// The luminance of an `edge_table`, the keys jump flooding minimises, laid out for a
 /// bilinear look-up in one load: element (row i, station j), in the edge table's order, holds
 /// the luminance of entries (i, j), (i, j + 1), (i + 1, j) and (i + 1, j + 1) — the next row
-/// wrapping around the turn, the next station clamped to the last.
-pub fn edge_luminance_table(light: &AreaLight, image: &LightImage) -> Vec<[f32; 4]> {
-    let table = edge_table(light, image);
+/// wrapping around the turn, the next station clamped to the last. Made from the edge table
+/// rather than from the light, which the edge table took ~10 ms to integrate.
+pub fn edge_luminance_table(table: &[[f32; 4]]) -> Vec<[f32; 4]> {
     let luminance = |i: u32, j: u32| {
         let e = table[((i % EDGE_ANGLES) * EDGE_STATIONS + j.min(EDGE_STATIONS - 1)) as usize];
         glam::Vec3::new(e[0], e[1], e[2]).dot(LUMINANCE)
@@ -315,7 +315,8 @@ mod tests {
     fn the_luminance_table_is_the_edge_tables_luminance_entry_for_entry() {
         let wide = light(Vec2::new(3.0, 1.0));
         let image = LightImage::builtin("flame", &Default::default(), "f").unwrap();
-        let (table, luminance) = (edge_table(&wide, &image), edge_luminance_table(&wide, &image));
+        let table = edge_table(&wide, &image);
+        let luminance = edge_luminance_table(&table);
         assert_eq!(luminance.len(), table.len());
         let of = |i: u32, j: u32| {
             let e = edge(&table, i % EDGE_ANGLES, j.min(EDGE_STATIONS - 1));
@@ -329,7 +330,8 @@ mod tests {
         // and the far side's luminance is 1 minus the near side's (what the keys rely on).
         assert!((LUMINANCE.element_sum() - 1.0).abs() < 1e-6);
         let white = LightImage::builtin("white", &Default::default(), "f").unwrap();
-        let (table, luminance) = (edge_table(&wide, &white), edge_luminance_table(&wide, &white));
+        let table = edge_table(&wide, &white);
+        let luminance = edge_luminance_table(&table);
         for (e, l) in table.iter().zip(&luminance) {
             assert!((e[0] - l[0]).abs() < 1e-6);
         }

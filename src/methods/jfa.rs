@@ -254,9 +254,12 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
     let slots: Vec<Uniforms> = std::iter::once(0).chain(steps.iter().copied()).map(|step| Uniforms { step, ..base }).collect();
     let uniforms = layout::uniform_slots(&device, "Jfa::uniforms", &slots);
     // The coloured look-up depends only on the light image and the light's shape; building it
-    // integrates ~6·10⁴ samples per direction on the CPU, so it is kept for later jobs.
-    let lut = ctx.light_table("edge_table", edge_table);
-    let luminance = ctx.light_table("edge_luminance", edge_luminance_table);
+    // integrates ~6·10⁴ samples per direction on the CPU, so it is kept for later jobs, and
+    // the rounds' luminance table is made from it (built once here when neither is kept).
+    let mut colours = None;
+    let lut = ctx.light_table("edge_table", |light, image| colours.get_or_insert_with(|| edge_table(light, image)).clone());
+    let luminance =
+        ctx.light_table("edge_luminance", |light, image| edge_luminance_table(colours.get_or_insert_with(|| edge_table(light, image))));
     // From the pool: the seed pass writes every record of a and (jfa-e) every flag, b and the
     // tile flags are cleared below.
     let cells = u64::from(grid.0) * u64::from(grid.1);

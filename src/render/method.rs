@@ -229,7 +229,7 @@ impl MethodContext<'_> {
     pub fn light_table(
         &mut self,
         name: &'static str,
-        build: fn(&crate::light::AreaLight, &crate::light::LightImage) -> Vec<[f32; 4]>,
+        build: impl FnOnce(&crate::light::AreaLight, &crate::light::LightImage) -> Vec<[f32; 4]>,
     ) -> Arc<wgpu::Buffer> {
         use std::hash::{Hash, Hasher};
         use wgpu::util::DeviceExt as _;
