@@ -44,7 +44,7 @@ struct WorkItem {
     primitive: u32,
     tile: u32,
     both: u32,
-    _pad: u32,
+    origin: u32, // the tile's first pixel: x in the low 16 bits, y in the high
 }
 
 @group(1) @binding(0) var<uniform> params: WedgeParams;

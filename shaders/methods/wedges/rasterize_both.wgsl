@@ -17,7 +17,7 @@ fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) groups
     // Loaded once (rasterize.wgsl says why); the half an item lacks is never read.
     let poly = polygons[select(0u, job.primitive, polygon)];
     let w = wedges[select(0u, wedge - 1u, wedge > 0u)];
-    for (var k = local; k < params.tile * params.tile; k += 64u) {
+    for (var k = local; k < TILE * TILE; k += 64u) {
         let px = tile_pixel(item.origin, k);
         if !px.valid {
             continue;

@@ -15,7 +15,7 @@ fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) groups
         return;
     }
     let w = wedges[item.job.primitive - params.polygon_count];
-    for (var k = local; k < params.tile * params.tile; k += 64u) {
+    for (var k = local; k < TILE * TILE; k += 64u) {
         let px = tile_pixel(item.origin, k);
         if px.valid {
             add_light(px.at, penumbra_delta(w, px));
@@ -35,7 +35,7 @@ fn mark_inside(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups)
     }
     let index = item_index(group, groups);
     let w = wedges[item.job.primitive - params.polygon_count];
-    for (var k = local; k < params.tile * params.tile; k += 64u) {
+    for (var k = local; k < TILE * TILE; k += 64u) {
         let px = tile_pixel(item.origin, k);
         if px.valid && inside_wedge(w, px.receiver) && projected_edge(w, px.receiver.xyz).crosses {
             inside.pairs[atomicAdd(&inside.count, 1u)] = vec2<u32>(index, k);
@@ -58,9 +58,7 @@ fn shade_listed(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocati
     if i < atomicLoad(&inside.count) {
         let pair = inside.pairs[i];
         let job = work[pair.x];
-        let tiles = tile_grid();
-        let origin = vec2<u32>(job.tile % tiles.x, job.tile / tiles.x) * params.tile;
-        let at = tile_pixel(origin, pair.y).at;
+        let at = tile_pixel(tile_origin(job), pair.y).at;
         add_light(at, penumbra_delta_inside(wedges[job.primitive - params.polygon_count], at));
     }
 }

@@ -10,7 +10,7 @@ fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) groups
         return;
     }
     let poly = polygons[item.job.primitive];
-    for (var k = local; k < params.tile * params.tile; k += 64u) {
+    for (var k = local; k < TILE * TILE; k += 64u) {
         let px = tile_pixel(item.origin, k);
         if px.valid {
             add_light(px.at, vec3<i32>(umbra_delta(poly, px.receiver)));

@@ -71,6 +71,8 @@ impl TileBox {
 /// world: its receivers'), and the boxes of blocks of `BLOCK`² tiles.
 pub(super) struct TileGrid {
     across: u32,
+    /// Pixels per tile side.
+    tile: u32,
     down: u32,
     /// Per tile, or None for background only.
     boxes: Vec<Option<TileBox>>,
@@ -87,6 +89,9 @@ pub(super) struct Work {
     pub tested: u64,
     /// Index of the first wedge among the rasteriser's primitives (after the polygons).
     wedge_base: u32,
+    /// Tiles per row, and pixels per tile side.
+    across: u32,
+    tile: u32,
 }
 
 /// Culls every (primitive, tile) pair in each primitive's bounding box; without `culling`,
@@ -148,7 +153,7 @@ pub(super) fn cull(
     };
     let umbra_tiles: Vec<Vec<u32>> = umbra.iter().map(|f| survivors(f, true)).collect();
     let wedge_tiles: Vec<Vec<u32>> = wedges.iter().map(|f| survivors(f, false)).collect();
-    Work { umbra_tiles, wedge_tiles, tested, wedge_base: volume.polygons.len() as u32 }
+    Work { umbra_tiles, wedge_tiles, tested, wedge_base: volume.polygons.len() as u32, across: grid.across, tile: grid.tile }
 }
 
 impl Work {
@@ -166,7 +171,12 @@ impl Work {
         [umbra, penumbra, both]: [&'p wgpu::ComputePipeline; 3],
     ) -> Vec<(&'p wgpu::ComputePipeline, Vec<WorkItem>)> {
         let wedge_base = self.wedge_base;
-        let item = |primitive, tile, both| WorkItem { primitive, tile, both, _pad: 0 };
+        let (across, side) = (self.across, self.tile);
+        // The tile's first pixel, packed, so that the rasteriser divides by nothing.
+        let item = |primitive, tile: u32, both| {
+            let origin = (tile % across) * side | (tile / across) * side << 16;
+            WorkItem { primitive, tile, both, origin }
+        };
         if single {
             let mut items = Vec::new();
             for (i, quad_tiles) in self.umbra_tiles.iter().enumerate() {
@@ -239,7 +249,7 @@ impl TileGrid {
             let block = &mut blocks[((ty / BLOCK) * blocks_across + tx / BLOCK) as usize];
             *block = Some(block.map_or(*b, |u| u.union(*b)));
         }
-        Self { across: size.0, down: size.1, boxes, blocks_across, blocks }
+        Self { across: size.0, tile, down: size.1, boxes, blocks_across, blocks }
     }
 }
 

@@ -119,7 +119,8 @@ struct WorkItem {
     primitive: u32,
     tile: u32,
     both: u32,
-    _pad: u32,
+    /// The tile's first pixel: x in the low 16 bits, y in the high.
+    origin: u32,
 }
 
 /// `WedgeParams` in `common.wgsl`.
@@ -237,10 +238,15 @@ impl ShadowMethod for Wedges {
         let resolve = ctx.screen_pipeline(PipelineKey::new("wedges.resolve"), "methods/wedges/resolve.wgsl", &io);
         // The rasteriser's pipelines are specialised by the LI buffer's channels and the colour
         // steps (pipeline constants in rasterize.wgsl): a uniform light's passes hold no colour
-        // code, and the colour loop has a fixed count; and by `ACUTE_EDGES` (common/light.wgsl).
-        let constants =
-            [("CHANNELS", f64::from(uniforms.channels)), ("COLOR_ANGLES", f64::from(uniforms.color_angles)), spec.acute_edges_constant()];
-        let variant = u32::from(spec.acute_edges) << 24 | uniforms.channels << 16 | uniforms.color_angles;
+        // code, and the colour loop has a fixed count; by the tile's side (a pixel's place in
+        // its tile is a shift, not a division); and by `ACUTE_EDGES` (common/light.wgsl).
+        let constants = [
+            ("CHANNELS", f64::from(uniforms.channels)),
+            ("COLOR_ANGLES", f64::from(uniforms.color_angles)),
+            ("TILE", f64::from(tile)),
+            spec.acute_edges_constant(),
+        ];
+        let variant = u32::from(spec.acute_edges) << 24 | uniforms.channels << 16 | tile << 6 | uniforms.color_angles;
         let mut raster = |name: &'static str, shader: &'static str, entry: &'static str| {
             ctx.screen_specialized(PipelineKey { name, variant }, (shader, entry), &io, &constants)
         };
