@@ -83,6 +83,10 @@ pub struct GpuContext {
     pub queue: wgpu::Queue,
     pub adapter: AdapterSummary,
     pub limits: wgpu::Limits,
+    /// A software rasteriser (lavapipe): a workgroup runs as a loop over SIMD groups of 8
+    /// lanes on a CPU core, so passes that do little per invocation size their workgroups
+    /// for it (see the wedges rasteriser).
+    pub software: bool,
     /// Whether passes can be timed with GPU timestamp queries.
     pub timestamps: bool,
     /// Whether timestamps can also be written between a pass's dispatches, so each dispatch
@@ -158,6 +162,7 @@ impl GpuContext {
             tracing::error!(?reason, %message, "GPU device lost");
             flag.store(true, std::sync::atomic::Ordering::SeqCst);
         });
+        let software = info.device_type == wgpu::DeviceType::Cpu;
         let adapter = AdapterSummary {
             name: info.name,
             backend: format!("{:?}", info.backend).to_lowercase(),
@@ -173,6 +178,7 @@ impl GpuContext {
             queue,
             adapter,
             limits,
+            software,
             timestamps,
             timestamps_inside_passes,
             fail_next_readback: Default::default(),

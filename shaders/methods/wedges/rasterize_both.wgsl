@@ -5,7 +5,7 @@
 
 #import methods/wedges/rasterize.wgsl
 
-@compute @workgroup_size(64)
+@compute @workgroup_size(LANES)
 fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>, @builtin(local_invocation_index) local: u32) {
     let item = tile_item(group, groups, local);
     if !item.valid {
@@ -17,7 +17,7 @@ fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) groups
     // Loaded once (rasterize.wgsl says why); the half an item lacks is never read.
     let poly = polygons[select(0u, job.primitive, polygon)];
     let w = wedges[select(0u, wedge - 1u, wedge > 0u)];
-    for (var k = local; k < TILE * TILE; k += 64u) {
+    for (var k = local; k < TILE * TILE; k += LANES) {
         let px = tile_pixel(item.origin, k);
         if !px.valid {
             continue;

@@ -8,14 +8,14 @@
 #import methods/wedges/rasterize.wgsl
 #import common/pixel_list.wgsl
 
-@compute @workgroup_size(64)
+@compute @workgroup_size(LANES)
 fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>, @builtin(local_invocation_index) local: u32) {
     let item = tile_item(group, groups, local);
     if !item.valid {
         return;
     }
     let w = wedges[item.job.primitive - params.polygon_count];
-    for (var k = local; k < TILE * TILE; k += 64u) {
+    for (var k = local; k < TILE * TILE; k += LANES) {
         let px = tile_pixel(item.origin, k);
         if px.valid {
             add_light(px.at, penumbra_delta(w, px));
@@ -27,7 +27,7 @@ fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) groups
 // crosses the light (`projected_edge`): a quarter of the pixels inside a wedge are not, and
 // in the shading pass they would idle beside lanes that integrate (lavapipe runs a SIMD
 // group's code for all of its lanes).
-@compute @workgroup_size(64)
+@compute @workgroup_size(LANES)
 fn mark_inside(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>, @builtin(local_invocation_index) local: u32) {
     let item = tile_item(group, groups, local);
     if !item.valid {
@@ -35,7 +35,7 @@ fn mark_inside(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups)
     }
     let index = item_index(group, groups);
     let w = wedges[item.job.primitive - params.polygon_count];
-    for (var k = local; k < TILE * TILE; k += 64u) {
+    for (var k = local; k < TILE * TILE; k += LANES) {
         let px = tile_pixel(item.origin, k);
         if px.valid && inside_wedge(w, px.receiver) && projected_edge(w, px.receiver.xyz).crosses {
             inside.pairs[atomicAdd(&inside.count, 1u)] = vec2<u32>(index, k);

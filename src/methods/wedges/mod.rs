@@ -240,10 +240,13 @@ impl ShadowMethod for Wedges {
         // steps (pipeline constants in rasterize.wgsl): a uniform light's passes hold no colour
         // code, and the colour loop has a fixed count; by the tile's side (a pixel's place in
         // its tile is a shift, not a division); and by `ACUTE_EDGES` (common/light.wgsl).
+        // `LANES` in rasterize.wgsl, by the kind of device (fixed per pipeline cache).
+        let lanes: u32 = if ctx.gpu.software { 8 } else { 64 };
         let constants = [
             ("CHANNELS", f64::from(uniforms.channels)),
             ("COLOR_ANGLES", f64::from(uniforms.color_angles)),
             ("TILE", f64::from(tile)),
+            ("LANES", f64::from(lanes)),
             spec.acute_edges_constant(),
         ];
         let variant = u32::from(spec.acute_edges) << 24 | uniforms.channels << 16 | tile << 6 | uniforms.color_angles;
