@@ -91,8 +91,9 @@ fn tile_holds_record(tile: vec2<i32>) -> bool {
 // sized by `tiles_size`), and `tiles_reset` empties the list for the next round. A tile left
 // out would copy empty records over the empty records both buffers hold; on lavapipe a
 // workgroup that returns at once still pays for most of its code (a CPU rasteriser runs both
-// sides of a branch), so such tiles are not launched at all. Entries are tile indices,
-// row-major over `tile_count()`.
+// sides of a branch), so such tiles are not launched at all. Entries are tile coordinates,
+// x in the low 16 bits and y in the high: a row-major index would cost every SIMD group of
+// a round two divisions by the grid's width, lane by lane on lavapipe.
 @group(1) @binding(12) var<storage, read_write> tile_list: PixelList;
 @group(1) @binding(13) var<storage, read_write> tile_groups: array<u32, 3>;
 // The shadow map's depths, row after row, `params.map_pitch` apart (`MethodContext::
@@ -114,7 +115,7 @@ fn list_tiles(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     if reach_holds_record(tile, params.step, tile_count()) {
-        tile_list.pixels[atomicAdd(&tile_list.count, 1u)] = u32(tile.y * tile_count().x + tile.x);
+        tile_list.pixels[atomicAdd(&tile_list.count, 1u)] = u32(tile.x) | u32(tile.y) << 16u;
         atomicAdd(&counters[2], 1u);
     }
 }
@@ -137,9 +138,8 @@ fn listed_cell(group: vec3<u32>, local: vec3<u32>) -> vec2<i32> {
     if i >= atomicLoad(&tile_list.count) {
         return vec2<i32>(-1);
     }
-    let t = i32(tile_list.pixels[i]);
-    let across = tile_count().x;
-    return vec2<i32>(t % across, t / across) * TILE + vec2<i32>(local.xy);
+    let t = tile_list.pixels[i];
+    return vec2<i32>(vec2<u32>(t & 0xffffu, t >> 16u)) * TILE + vec2<i32>(local.xy);
 }
 
 fn mark_tile(cell: vec2<i32>) {
