@@ -11,6 +11,8 @@
 //!   to each angle, beyond each fraction of the way to the rectangle's edge — exact along
 //!   each ray for the piecewise-constant image. `wedges` integrates each channel over the
 //!   region a wedge cuts off with it (`shaders/methods/wedges/rasterize.wgsl`).
+//! - `emitting_octagon`: a convex octagon around the light's emitting texels, by which
+//!   `wedges` recognises the wedges that can hide nothing that emits.
 
 use glam::Vec2;
 
@@ -206,6 +208,40 @@ pub fn sector_table(light: &AreaLight, image: &LightImage) -> Vec<[f32; 4]> {
         }
     }
     table
+}
+
+/// An octagon holding every texel of the light that emits, as its extent along x, y, x + y
+/// and x − y (light-local metres: x along r, y along u), lows then highs — the bounding box
+/// with its corners cut. `wedges` skips a wedge whose silhouette edge, projected onto the
+/// light, misses it: the light a wedge hides lies beyond the edge, on segments from the
+/// centre that cross it, so with the centre inside a convex region that holds every emitting
+/// texel such a wedge hides no emission. Where the centre lies outside the texels' octagon
+/// (or nothing emits), the rectangle's own octagon, which holds the centre.
+pub fn emitting_octagon(light: &AreaLight, image: &LightImage) -> ([f32; 4], [f32; 4]) {
+    let axes = |p: Vec2| [p.x, p.y, p.x + p.y, p.x - p.y];
+    let half = light.size_m * 0.5;
+    let rectangle = ([-half.x, -half.y, -half.x - half.y, -half.x - half.y], [half.x, half.y, half.x + half.y, half.x + half.y]);
+    let (mut lo, mut hi) = ([f32::INFINITY; 4], [f32::NEG_INFINITY; 4]);
+    for j in 0..image.height {
+        for i in 0..image.width {
+            if image.emission(i, j).max_element() <= 0.0 {
+                continue;
+            }
+            let (s0, s1) = (i as f32 / image.width as f32, (i + 1) as f32 / image.width as f32);
+            let (t0, t1) = (j as f32 / image.height as f32, (j + 1) as f32 / image.height as f32);
+            for corner in [local(light, s0, t0), local(light, s1, t0), local(light, s0, t1), local(light, s1, t1)] {
+                for (k, v) in axes(corner).into_iter().enumerate() {
+                    lo[k] = lo[k].min(v);
+                    hi[k] = hi[k].max(v);
+                }
+            }
+        }
+    }
+    if (0..4).all(|k| lo[k] <= 0.0 && hi[k] >= 0.0) {
+        (lo, hi)
+    } else {
+        rectangle
+    }
 }
 
 /// Distance from the centre of a rectangle of half-sides `half` to its edge along unit `e`.

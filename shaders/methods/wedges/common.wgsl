@@ -15,6 +15,10 @@ struct WedgeParams {
     color_angles: u32,  // directions per wedge over which a coloured light's emission is integrated
     sector_angles: u32, // angular steps per turn of the sector table (which holds two turns)
     sector_stations: u32, // entries per row
+    // The octagon holding the light's emitting texels (`light::tables::emitting_octagon`):
+    // its extents along x, y, x + y and x − y in light coordinates, lows and highs.
+    emitting_lo: vec4<f32>,
+    emitting_hi: vec4<f32>,
 }
 
 // A planar convex polygon of the shadow volume from the light centre (a side quad or, for

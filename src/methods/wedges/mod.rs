@@ -52,7 +52,7 @@ use crate::error::JobResult;
 use crate::gpu::layout;
 use crate::gpu::pool::PipelineKey;
 use crate::gpu::readback::read_buffer;
-use crate::light::tables::{sector_table, SECTOR_ANGLES, SECTOR_STATIONS};
+use crate::light::tables::{emitting_octagon, sector_table, SECTOR_ANGLES, SECTOR_STATIONS};
 use culling::{cull, TileGrid};
 use geometry::{eye_in_shadow, Volume};
 
@@ -137,6 +137,8 @@ struct Uniforms {
     sector_angles: u32,
     sector_stations: u32,
     _pad: [u32; 3],
+    emitting_lo: [f32; 4],
+    emitting_hi: [f32; 4],
 }
 
 impl ShadowMethod for Wedges {
@@ -185,6 +187,7 @@ impl ShadowMethod for Wedges {
         let grid_size = (spec.width.div_ceil(tile), spec.height.div_ceil(tile));
         let tile_count = (grid_size.0 * grid_size.1) as usize;
         let colored = !spec.light_image.is_uniform();
+        let (emitting_lo, emitting_hi) = emitting_octagon(light, &spec.light_image);
         let uniforms = Uniforms {
             tile,
             zfail: u32::from(zfail),
@@ -196,6 +199,8 @@ impl ShadowMethod for Wedges {
             sector_angles: SECTOR_ANGLES,
             sector_stations: SECTOR_STATIONS,
             _pad: [0; 3],
+            emitting_lo,
+            emitting_hi,
         };
         let storage = |label, contents: &[u8]| {
             device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
