@@ -100,13 +100,19 @@ fn volume_crossing(poly: VolumePolygon, eye: vec3<f32>, p: vec3<f32>) -> i32 {
     return select(m, -m, entering == (params.zfail == 1u));
 }
 
+// The vertex after k of a polygon of `count`: a comparison, where `(k + 1) % count` was a
+// division lane by lane on lavapipe, in every turn of the polygon loops.
+fn next(k: u32, count: u32) -> u32 {
+    return select(k + 1u, 0u, k + 1u == count);
+}
+
 // Clips the convex polygon `poly` (count vertices) to the half-plane dot(normal, x) + offset ≥ 0.
 fn clip(poly: ptr<function, array<vec2<f32>, 8>>, count: u32, normal: vec2<f32>, offset: f32) -> u32 {
     var out: array<vec2<f32>, 8>;
     var n = 0u;
     for (var k = 0u; k < count; k++) {
         let a = (*poly)[k];
-        let b = (*poly)[(k + 1u) % count];
+        let b = (*poly)[next(k, count)];
         let da = dot(normal, a) + offset;
         let db = dot(normal, b) + offset;
         if da >= 0.0 {
@@ -130,7 +136,7 @@ fn light_polygon_irradiance(poly: ptr<function, array<vec2<f32>, 8>>, count: u32
     var sum = 0.0;
     for (var k = 0u; k < count; k++) {
         let a = normalize(light_point((*poly)[k]) - p);
-        let b = normalize(light_point((*poly)[(k + 1u) % count]) - p);
+        let b = normalize(light_point((*poly)[next(k, count)]) - p);
         sum += dot(normal, edge_vector(a, b));
     }
     return 0.5 * abs(sum);
@@ -238,7 +244,7 @@ fn wedge_share(w: Wedge, p: vec3<f32>, normal: vec3<f32>, e0: vec3<f32>) -> vec3
         // Part of the light lies below p's horizon, where Lambert's formula would need
         // clipping: weigh by area instead (E0 carries the exact horizon).
         for (var k = 0u; k < count; k++) {
-            part += 0.5 * cross2(poly[k], poly[(k + 1u) % count]);
+            part += 0.5 * cross2(poly[k], poly[next(k, count)]);
         }
         part = abs(part);
         whole = 4.0 * half.x * half.y;
