@@ -106,25 +106,29 @@ fn next(k: u32, count: u32) -> u32 {
     return select(k + 1u, 0u, k + 1u == count);
 }
 
-// Clips the convex polygon `poly` (count vertices) to the half-plane dot(normal, x) + offset ≥ 0.
-fn clip(poly: ptr<function, array<vec2<f32>, 8>>, count: u32, normal: vec2<f32>, offset: f32) -> u32 {
-    var out: array<vec2<f32>, 8>;
+// Clips the convex polygon `src` (count vertices) to the half-plane dot(normal, x) + offset ≥ 0,
+// into `dst`; returns its vertex count. Polygons live in function memory (their vertices are
+// indexed by lane-varying counts), where on lavapipe each access is a gather or a scatter
+// lane by lane: so each vertex is read once (the edge's end is the next edge's start) and the
+// clips alternate between two arrays instead of copying the result back.
+fn clip(src: ptr<function, array<vec2<f32>, 8>>, dst: ptr<function, array<vec2<f32>, 8>>, count: u32, normal: vec2<f32>, offset: f32) -> u32 {
     var n = 0u;
+    var a = (*src)[0];
+    var da = dot(normal, a) + offset;
     for (var k = 0u; k < count; k++) {
-        let a = (*poly)[k];
-        let b = (*poly)[next(k, count)];
-        let da = dot(normal, a) + offset;
+        let b = (*src)[next(k, count)];
         let db = dot(normal, b) + offset;
         if da >= 0.0 {
-            out[n] = a;
+            (*dst)[n] = a;
             n++;
         }
         if (da >= 0.0) != (db >= 0.0) && n < 8u {
-            out[n] = a + (b - a) * (da / (da - db));
+            (*dst)[n] = a + (b - a) * (da / (da - db));
             n++;
         }
+        a = b;
+        da = db;
     }
-    *poly = out;
     return n;
 }
 
@@ -132,13 +136,33 @@ fn clip(poly: ptr<function, array<vec2<f32>, 8>>, count: u32, normal: vec2<f32>,
 // points `poly` (light coordinates), by Lambert's formula ½ Σ Θₖ (n · Γₖ) — the weight the
 // reference and E0 give each part of the light (cosines and distance), so shares of it are
 // fractions of what p receives, not of the light's area.
+// Each vertex's direction is normalised once: an edge's end is the next edge's start.
 fn light_polygon_irradiance(poly: ptr<function, array<vec2<f32>, 8>>, count: u32, p: vec3<f32>, normal: vec3<f32>) -> f32 {
+    let first = normalize(light_point((*poly)[0]) - p);
+    var a = first;
     var sum = 0.0;
     for (var k = 0u; k < count; k++) {
-        let a = normalize(light_point((*poly)[k]) - p);
-        let b = normalize(light_point((*poly)[next(k, count)]) - p);
+        var b = first;
+        if k + 1u < count {
+            b = normalize(light_point((*poly)[k + 1u]) - p);
+        }
         sum += dot(normal, edge_vector(a, b));
+        a = b;
     }
+    return 0.5 * abs(sum);
+}
+
+// The same for the whole light rectangle, its corners held in registers.
+fn light_rectangle_irradiance(half: vec2<f32>, p: vec3<f32>, normal: vec3<f32>) -> f32 {
+    let c0 = normalize(light_point(-half) - p);
+    let c1 = normalize(light_point(vec2<f32>(half.x, -half.y)) - p);
+    let c2 = normalize(light_point(half) - p);
+    let c3 = normalize(light_point(vec2<f32>(-half.x, half.y)) - p);
+    var sum = 0.0;
+    sum += dot(normal, edge_vector(c0, c1));
+    sum += dot(normal, edge_vector(c1, c2));
+    sum += dot(normal, edge_vector(c2, c3));
+    sum += dot(normal, edge_vector(c3, c0));
     return 0.5 * abs(sum);
 }
 
@@ -221,24 +245,24 @@ fn wedge_share(w: Wedge, p: vec3<f32>, normal: vec3<f32>, e0: vec3<f32>) -> vec3
     let b2 = edge.b2;
     let d = b2 - a2;
     let side = edge.side;
-    var poly = array<vec2<f32>, 8>(-half, vec2<f32>(half.x, -half.y), half, vec2<f32>(-half.x, half.y), vec2<f32>(0.0), vec2<f32>(0.0), vec2<f32>(0.0), vec2<f32>(0.0));
-    var count = 4u;
+    var rect = array<vec2<f32>, 8>(-half, vec2<f32>(half.x, -half.y), half, vec2<f32>(-half.x, half.y), vec2<f32>(0.0), vec2<f32>(0.0), vec2<f32>(0.0), vec2<f32>(0.0));
+    var poly: array<vec2<f32>, 8>;
     // Beyond the edge's line, on the side away from c'.
     let beyond = -sign(side) * vec2<f32>(-d.y, d.x);
-    count = clip(&poly, count, beyond, -dot(beyond, a2));
+    var count = clip(&rect, &poly, 4u, beyond, -dot(beyond, a2));
     // Inside the angular sector from c': on b's side of the line c'a', on a's side of c'b'.
     let s = sign(cross2(a2, b2));
-    count = clip(&poly, count, s * vec2<f32>(-a2.y, a2.x), 0.0);
-    count = clip(&poly, count, -s * vec2<f32>(-b2.y, b2.x), 0.0);
+    count = clip(&poly, &rect, count, s * vec2<f32>(-a2.y, a2.x), 0.0);
+    count = clip(&rect, &poly, count, -s * vec2<f32>(-b2.y, b2.x), 0.0);
     if count < 3u {
         return vec3<f32>(0.0);
     }
-    var rect = array<vec2<f32>, 8>(-half, vec2<f32>(half.x, -half.y), half, vec2<f32>(-half.x, half.y), vec2<f32>(0.0), vec2<f32>(0.0), vec2<f32>(0.0), vec2<f32>(0.0));
     var whole = 0.0;
     var below_horizon = false;
-    for (var k = 0u; k < 4u; k++) {
-        below_horizon = below_horizon || dot(light_point(rect[k]) - p, normal) <= 0.0;
-    }
+    below_horizon = below_horizon || dot(light_point(-half) - p, normal) <= 0.0;
+    below_horizon = below_horizon || dot(light_point(vec2<f32>(half.x, -half.y)) - p, normal) <= 0.0;
+    below_horizon = below_horizon || dot(light_point(half) - p, normal) <= 0.0;
+    below_horizon = below_horizon || dot(light_point(vec2<f32>(-half.x, half.y)) - p, normal) <= 0.0;
     var part = 0.0;
     if below_horizon {
         // Part of the light lies below p's horizon, where Lambert's formula would need
@@ -250,7 +274,9 @@ fn wedge_share(w: Wedge, p: vec3<f32>, normal: vec3<f32>, e0: vec3<f32>) -> vec3
         whole = 4.0 * half.x * half.y;
     } else {
         part = light_polygon_irradiance(&poly, count, p, normal);
-        whole = light_polygon_irradiance(&rect, 4u, p, normal);
+        if CHANNELS == 1u {
+            whole = light_rectangle_irradiance(half, p, normal);
+        }
     }
     let weight = sign(side) * w.a.w;
     if CHANNELS == 1u {
