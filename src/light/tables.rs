@@ -306,6 +306,39 @@ mod tests {
     }
 
     #[test]
+    fn the_emitting_octagon_holds_every_emitting_texel_and_the_centre() {
+        let light = light(Vec2::new(1.6, 0.9));
+        let half = light.size_m * 0.5;
+        let rectangle = ([-half.x, -half.y, -half.x - half.y, -half.x - half.y], [half.x, half.y, half.x + half.y, half.x + half.y]);
+        let builtin = |name| LightImage::builtin(name, &Default::default(), "f").unwrap();
+        // Lights that emit everywhere: the rectangle's own octagon.
+        for name in ["white", "stripes", "quadrants"] {
+            let (lo, hi) = emitting_octagon(&light, &builtin(name));
+            for k in 0..4 {
+                assert!((lo[k] - rectangle.0[k]).abs() < 1e-6 && (hi[k] - rectangle.1[k]).abs() < 1e-6, "{name} axis {k}: {lo:?} {hi:?}");
+            }
+        }
+        // The flame's black corners are cut off, and every texel that emits stays inside.
+        let flame = builtin("flame");
+        let (lo, hi) = emitting_octagon(&light, &flame);
+        assert!((0..4).all(|k| lo[k] < 0.0 && hi[k] > 0.0), "the centre: {lo:?} {hi:?}");
+        assert!(hi[2] < 0.9 * rectangle.1[2] && lo[3] > 0.9 * rectangle.0[3], "corners kept: {lo:?} {hi:?}");
+        for j in 0..flame.height {
+            for i in 0..flame.width {
+                if flame.emission(i, j).max_element() > 0.0 {
+                    let c = local(&light, (i as f32 + 0.5) / flame.width as f32, (j as f32 + 0.5) / flame.height as f32);
+                    let v = [c.x, c.y, c.x + c.y, c.x - c.y];
+                    assert!((0..4).all(|k| lo[k] <= v[k] && v[k] <= hi[k]), "texel ({i}, {j}) outside");
+                }
+            }
+        }
+        // Only a corner emits: the centre lies outside its octagon, so the rectangle's is kept
+        // (a wedge's region is a sector from the centre: the test needs the centre inside).
+        let corner = LightImage::from_fn(4, 4, |s, t| if s < 0.25 && t < 0.25 { [1.0; 4] } else { [0.0; 4] });
+        assert_eq!(emitting_octagon(&light, &corner), rectangle);
+    }
+
+    #[test]
     fn uniform_images_are_recognised() {
         let builtin = |name| LightImage::builtin(name, &Default::default(), "f").unwrap();
         assert!(builtin("white").is_uniform());
