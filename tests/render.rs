@@ -1073,7 +1073,10 @@ fn wedges_variants_agree_culling_changes_only_the_work() {
     let unculled = wedges_frame(json!({"name": "wedges", "culling": false}), None);
     let single = wedges_frame(json!({"name": "wedges", "passes": "single"}), None);
     let zfail = wedges_frame(json!({"name": "wedges", "volume": "zfail"}), None);
+    // Tiles of 10 pixels do not divide the 128 × 96 frame: the last row and column are cut.
+    let uneven = wedges_frame(json!({"name": "wedges", "tile": 10}), None);
     assert_eq!(culled.visibility, unculled.visibility, "culled and unculled render the same image");
+    assert_eq!(culled.visibility, uneven.visibility, "tiles that do not divide the frame cull no receiver a primitive changes");
     assert_eq!(culled.visibility, single.visibility, "three-pass and single-pass render the same image");
     let differ = culled
         .visibility

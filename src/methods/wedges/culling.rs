@@ -72,8 +72,9 @@ impl TileBox {
 /// world: its receivers'), and the boxes of blocks of `BLOCK`² tiles.
 pub(super) struct TileGrid {
     across: u32,
-    /// Pixels per tile side.
+    /// Pixels per tile side, and the frame's pixels across and down.
     tile: u32,
+    pixels: (u32, u32),
     down: u32,
     /// Per tile, or None for background only.
     boxes: Vec<Option<TileBox>>,
@@ -252,7 +253,7 @@ impl TileGrid {
             let block = &mut blocks[((ty / BLOCK) * blocks_across + tx / BLOCK) as usize];
             *block = Some(block.map_or(*b, |u| u.union(*b)));
         }
-        Self { across: size.0, tile, down: size.1, boxes, blocks_across, blocks }
+        Self { across: size.0, tile, pixels, down: size.1, boxes, blocks_across, blocks }
     }
 }
 
@@ -266,9 +267,12 @@ fn footprint(view_proj: &Mat4, points: &[Vec3], planes: Vec<Vec4>, grid: &TileGr
     let ndc: Vec<Vec3> = clips.iter().map(|c| c.truncate() / c.w).collect();
     let min = ndc.iter().fold(Vec3::splat(f32::INFINITY), |m, p| m.min(*p));
     let max = ndc.iter().fold(Vec3::splat(f32::NEG_INFINITY), |m, p| m.max(*p));
-    // NDC x → tile column, NDC y (up) → tile row (down).
-    let column = |x: f32| (((x * 0.5 + 0.5) * grid.across as f32).floor().max(0.0) as u32).min(grid.across);
-    let row = |y: f32| (((0.5 - y * 0.5) * grid.down as f32).floor().max(0.0) as u32).min(grid.down);
+    // NDC x → pixel column → tile column, NDC y (up) → pixel row → tile row (down): through
+    // pixels, since where the tile does not divide the frame the last tile is cut short and
+    // the grid spans more than the screen.
+    let (width, height, tile) = (grid.pixels.0 as f32, grid.pixels.1 as f32, grid.tile as f32);
+    let column = |x: f32| (((x * 0.5 + 0.5) * width / tile).floor().max(0.0) as u32).min(grid.across);
+    let row = |y: f32| (((0.5 - y * 0.5) * height / tile).floor().max(0.0) as u32).min(grid.down);
     Footprint {
         tiles_x: (column(min.x), (column(max.x) + 1).min(grid.across)),
         tiles_y: (row(max.y), (row(min.y) + 1).min(grid.down)),
