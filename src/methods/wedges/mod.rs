@@ -41,6 +41,10 @@
 //!   there for z-fail; rays are intersected with the polygons analytically, so no far plane
 //!   clips them (the role of the paper's infinite far plane).
 //! - Surfaces on their own volume's cap (every lit caster) count as outside it.
+//! - Past the paper, a pixel inside a wedge is skipped where the wedge's silhouette edge,
+//!   projected from it onto the light, misses the octagon around the light's emitting texels
+//!   (`light::tables::emitting_octagon`): the light it hides lies beyond that edge, so it
+//!   hides only black. Under a flame-shaped light that was two in three wedge pixels.
 
 use wgpu::util::DeviceExt;
 
