@@ -113,8 +113,7 @@ pub(super) fn cull(
     let to_ndc = view_proj.inverse().transpose();
     // Primitives are culled independently: on all cores (a frame's culling waits on the CPU
     // while the device idles; on `terrain` it was 64 ms on one core).
-    let umbra: Vec<Footprint> =
-        volume.polygons.par_iter().map(|p| footprint(view_proj, p, crossing_region(p, eye, zfail), grid)).collect();
+    let umbra: Vec<Footprint> = volume.polygons.par_iter().map(|p| footprint(view_proj, p, crossing_region(p, eye, zfail), grid)).collect();
     let wedges: Vec<Footprint> = silhouette
         .par_iter()
         .map(|e| match wedge_region(e, light, reach) {
@@ -154,7 +153,11 @@ pub(super) fn cull(
         }
         kept
     };
-    let tested = umbra.iter().chain(&wedges).map(|f| u64::from(f.tiles_x.1.saturating_sub(f.tiles_x.0)) * u64::from(f.tiles_y.1.saturating_sub(f.tiles_y.0))).sum();
+    let tested = umbra
+        .iter()
+        .chain(&wedges)
+        .map(|f| u64::from(f.tiles_x.1.saturating_sub(f.tiles_x.0)) * u64::from(f.tiles_y.1.saturating_sub(f.tiles_y.0)))
+        .sum();
     let umbra_tiles: Vec<Vec<u32>> = umbra.par_iter().map(|f| survivors(f, true)).collect();
     let wedge_tiles: Vec<Vec<u32>> = wedges.par_iter().map(|f| survivors(f, false)).collect();
     Work { umbra_tiles, wedge_tiles, tested, wedge_base: volume.polygons.len() as u32, across: grid.across, tile: grid.tile }
@@ -178,7 +181,7 @@ impl Work {
         let (across, side) = (self.across, self.tile);
         // The tile's first pixel, packed, so that the rasteriser divides by nothing.
         let item = |primitive, tile: u32, both| {
-            let origin = (tile % across) * side | (tile / across) * side << 16;
+            let origin = ((tile % across) * side) | (((tile / across) * side) << 16);
             WorkItem { primitive, tile, both, origin }
         };
         if single {
