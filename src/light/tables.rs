@@ -222,18 +222,19 @@ pub fn emitting_octagon(light: &AreaLight, image: &LightImage) -> ([f32; 4], [f3
     let half = light.size_m * 0.5;
     let rectangle = ([-half.x, -half.y, -half.x - half.y, -half.x - half.y], [half.x, half.y, half.x + half.y, half.x + half.y]);
     let (mut lo, mut hi) = ([f32::INFINITY; 4], [f32::NEG_INFINITY; 4]);
+    let emits = |i: u32, j: u32| image.emission(i, j).max_element() > 0.0;
     for j in 0..image.height {
-        for i in 0..image.width {
-            if image.emission(i, j).max_element() <= 0.0 {
-                continue;
-            }
-            let (s0, s1) = (i as f32 / image.width as f32, (i + 1) as f32 / image.width as f32);
-            let (t0, t1) = (j as f32 / image.height as f32, (j + 1) as f32 / image.height as f32);
-            for corner in [local(light, s0, t0), local(light, s1, t0), local(light, s0, t1), local(light, s1, t1)] {
-                for (k, v) in axes(corner).into_iter().enumerate() {
-                    lo[k] = lo[k].min(v);
-                    hi[k] = hi[k].max(v);
-                }
+        // Along a row every extent is reached at its first or its last emitting texel, so
+        // each row is searched from both ends (a light that emits everywhere costs two texels
+        // a row).
+        let Some(first) = (0..image.width).find(|&i| emits(i, j)) else { continue };
+        let last = (first..image.width).rev().find(|&i| emits(i, j)).unwrap_or(first);
+        let (s0, s1) = (first as f32 / image.width as f32, (last + 1) as f32 / image.width as f32);
+        let (t0, t1) = (j as f32 / image.height as f32, (j + 1) as f32 / image.height as f32);
+        for corner in [local(light, s0, t0), local(light, s1, t0), local(light, s0, t1), local(light, s1, t1)] {
+            for (k, v) in axes(corner).into_iter().enumerate() {
+                lo[k] = lo[k].min(v);
+                hi[k] = hi[k].max(v);
             }
         }
     }
