@@ -20,9 +20,9 @@
 //! Each region holds every receiver the primitive changes, so culling changes no pixel (a test
 //! renders with and without it). The boxes are widened by half a pixel and a thousandth of
 //! their depth, so a receiver that the G-buffer places a rounding away from its pixel centre,
-//! or on the polygon itself, is never culled. Tiles are tested in blocks first: a block whose
-//! box fails a plane culls all its tiles at once (a tile's box lies inside its block's), which
-//! gives the same survivors for a fraction of the tests.
+//! or on the polygon itself, is never culled. Tiles are tested in blocks first, and blocks in
+//! blocks of blocks: a block whose box fails a plane culls all its tiles at once (a tile's box
+//! lies inside its block's), which gives the same survivors for a fraction of the tests.
 
 use glam::{Mat4, Vec3, Vec4};
 use rayon::prelude::*;
@@ -81,6 +81,9 @@ pub(super) struct TileGrid {
     blocks_across: u32,
     /// Per block: the boxes holding every covered tile's, or None for background only.
     blocks: Vec<Option<TileBox>>,
+    supers_across: u32,
+    /// Per block of `BLOCK`² blocks: the boxes holding every covered block's.
+    supers: Vec<Option<TileBox>>,
 }
 
 /// What survived culling: per volume polygon and per wedge, the tiles it must be rasterised
@@ -128,12 +131,21 @@ pub(super) fn cull(
         }
         let planes: Vec<Vec4> = footprint.planes.iter().map(|plane| to_ndc * *plane).collect();
         let test = |b: Option<TileBox>| survives(footprint, &planes, b, umbra, zfail);
-        // Blocks first; the tiles of surviving blocks in row-major order (the single pass
-        // looks tiles up by binary search).
+        // Blocks of blocks first, then blocks, then the tiles of surviving blocks in
+        // row-major order (the single pass looks tiles up by binary search).
         let blocks_x = (x.0 / BLOCK, x.1.div_ceil(BLOCK));
-        let open: Vec<bool> = (y.0 / BLOCK..y.1.div_ceil(BLOCK))
+        let blocks_y = (y.0 / BLOCK, y.1.div_ceil(BLOCK));
+        let supers_x = (blocks_x.0 / BLOCK, blocks_x.1.div_ceil(BLOCK));
+        let supers_open: Vec<bool> = (blocks_y.0 / BLOCK..blocks_y.1.div_ceil(BLOCK))
+            .flat_map(|sy| (supers_x.0..supers_x.1).map(move |sx| (sx, sy)))
+            .map(|(sx, sy)| test(grid.supers[(sy * grid.supers_across + sx) as usize]))
+            .collect();
+        let super_row = (supers_x.1 - supers_x.0) as usize;
+        let super_open =
+            |bx: u32, by: u32| supers_open[(by / BLOCK - blocks_y.0 / BLOCK) as usize * super_row + (bx / BLOCK - supers_x.0) as usize];
+        let open: Vec<bool> = (blocks_y.0..blocks_y.1)
             .flat_map(|by| (blocks_x.0..blocks_x.1).map(move |bx| (bx, by)))
-            .map(|(bx, by)| test(grid.blocks[(by * grid.blocks_across + bx) as usize]))
+            .map(|(bx, by)| super_open(bx, by) && test(grid.blocks[(by * grid.blocks_across + bx) as usize]))
             .collect();
         let row = (blocks_x.1 - blocks_x.0) as usize;
         let mut kept = Vec::new();
@@ -256,7 +268,15 @@ impl TileGrid {
             let block = &mut blocks[((ty / BLOCK) * blocks_across + tx / BLOCK) as usize];
             *block = Some(block.map_or(*b, |u| u.union(*b)));
         }
-        Self { across: size.0, tile, pixels, down: size.1, boxes, blocks_across, blocks }
+        let supers_across = blocks_across.div_ceil(BLOCK);
+        let mut supers: Vec<Option<TileBox>> = vec![None; (supers_across * size.1.div_ceil(BLOCK).div_ceil(BLOCK)) as usize];
+        for (b, block_box) in blocks.iter().enumerate() {
+            let Some(u) = block_box else { continue };
+            let (bx, by) = (b as u32 % blocks_across, b as u32 / blocks_across);
+            let group = &mut supers[((by / BLOCK) * supers_across + bx / BLOCK) as usize];
+            *group = Some(group.map_or(*u, |v| v.union(*u)));
+        }
+        Self { across: size.0, tile, pixels, down: size.1, boxes, blocks_across, blocks, supers_across, supers }
     }
 }
 
