@@ -258,11 +258,8 @@ fn wedge_share(w: Wedge, p: vec3<f32>, normal: vec3<f32>, e0: vec3<f32>) -> vec3
         return vec3<f32>(0.0);
     }
     var whole = 0.0;
-    var below_horizon = false;
-    below_horizon = below_horizon || dot(light_point(-half) - p, normal) <= 0.0;
-    below_horizon = below_horizon || dot(light_point(vec2<f32>(half.x, -half.y)) - p, normal) <= 0.0;
-    below_horizon = below_horizon || dot(light_point(half) - p, normal) <= 0.0;
-    below_horizon = below_horizon || dot(light_point(vec2<f32>(-half.x, half.y)) - p, normal) <= 0.0;
+    let below_horizon = dot(light_point(-half) - p, normal) <= 0.0 || dot(light_point(vec2<f32>(half.x, -half.y)) - p, normal) <= 0.0
+        || dot(light_point(half) - p, normal) <= 0.0 || dot(light_point(vec2<f32>(-half.x, half.y)) - p, normal) <= 0.0;
     var part = 0.0;
     if below_horizon {
         // Part of the light lies below p's horizon, where Lambert's formula would need

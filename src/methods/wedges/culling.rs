@@ -260,24 +260,25 @@ impl TileGrid {
                 })
             })
             .collect();
-        let blocks_across = size.0.div_ceil(BLOCK);
-        let mut blocks: Vec<Option<TileBox>> = vec![None; (blocks_across * size.1.div_ceil(BLOCK)) as usize];
-        for (t, tile_box) in boxes.iter().enumerate() {
-            let Some(b) = tile_box else { continue };
-            let (tx, ty) = (t as u32 % size.0, t as u32 / size.0);
-            let block = &mut blocks[((ty / BLOCK) * blocks_across + tx / BLOCK) as usize];
-            *block = Some(block.map_or(*b, |u| u.union(*b)));
-        }
-        let supers_across = blocks_across.div_ceil(BLOCK);
-        let mut supers: Vec<Option<TileBox>> = vec![None; (supers_across * size.1.div_ceil(BLOCK).div_ceil(BLOCK)) as usize];
-        for (b, block_box) in blocks.iter().enumerate() {
-            let Some(u) = block_box else { continue };
-            let (bx, by) = (b as u32 % blocks_across, b as u32 / blocks_across);
-            let group = &mut supers[((by / BLOCK) * supers_across + bx / BLOCK) as usize];
-            *group = Some(group.map_or(*u, |v| v.union(*u)));
-        }
+        let (blocks_across, blocks) = in_blocks(&boxes, size.0, size.1);
+        let (supers_across, supers) = in_blocks(&blocks, blocks_across, size.1.div_ceil(BLOCK));
         Self { across: size.0, tile, pixels, down: size.1, boxes, blocks_across, blocks, supers_across, supers }
     }
+}
+
+/// A grid of boxes (`across` × `down`, row-major) gathered into blocks of `BLOCK`²: each
+/// block's boxes hold every covered member's, or None where none is covered. Returns the
+/// blocks per row and the blocks.
+fn in_blocks(boxes: &[Option<TileBox>], across: u32, down: u32) -> (u32, Vec<Option<TileBox>>) {
+    let blocks_across = across.div_ceil(BLOCK);
+    let mut blocks: Vec<Option<TileBox>> = vec![None; (blocks_across * down.div_ceil(BLOCK)) as usize];
+    for (i, member) in boxes.iter().enumerate() {
+        let Some(b) = member else { continue };
+        let (x, y) = (i as u32 % across, i as u32 / across);
+        let block = &mut blocks[((y / BLOCK) * blocks_across + x / BLOCK) as usize];
+        *block = Some(block.map_or(*b, |u| u.union(*b)));
+    }
+    (blocks_across, blocks)
 }
 
 /// A primitive's bounding box in tiles and NDC depth range; points behind the eye make it
