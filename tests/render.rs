@@ -1078,6 +1078,16 @@ fn wedges_variants_agree_culling_changes_only_the_work() {
     assert_eq!(culled.visibility, unculled.visibility, "culled and unculled render the same image");
     assert_eq!(culled.visibility, uneven.visibility, "tiles that do not divide the frame cull no receiver a primitive changes");
     assert_eq!(culled.visibility, single.visibility, "three-pass and single-pass render the same image");
+    // A landscape is one object whose slopes facing away from the light ignore its own
+    // primitives: tiles of only such pixels are culled for them, and slopes seen at a grazing
+    // angle by their slabs.
+    let landscape = |culling: bool| {
+        let spec = json!({"scene": {"builtin": "terrain"}, "method": {"name": "wedges", "culling": culling}, "output": {"width": 128, "height": 96, "format": "exr"}});
+        common::engine().render_frame(&job(spec), &()).unwrap().0
+    };
+    let (landscape_culled, landscape_unculled) = (landscape(true), landscape(false));
+    assert_eq!(landscape_culled.visibility, landscape_unculled.visibility, "culling changes no pixel of a landscape");
+    assert!(landscape_culled.counters["work_items"] < 0.5 * landscape_unculled.counters["work_items"], "{:?}", landscape_culled.counters);
     let differ = culled
         .visibility
         .as_ref()

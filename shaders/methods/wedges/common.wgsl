@@ -57,12 +57,15 @@ struct WorkItem {
 @group(1) @binding(3) var<storage, read> work: array<WorkItem>;
 @group(1) @binding(4) var<storage, read_write> li: array<atomic<i32>>; // `channels` per pixel
 // Per tile (`tiles.wgsl`): the world-space box of its receivers, and in w their view depth
-// range (lo.w zmin, hi.w zmax); lo > hi for a tile of background only.
+// range (lo.w zmin, hi.w zmax), lo > hi for a tile of background only; and the slab they
+// span along the normal at the tile's centre.
 @group(1) @binding(5) var<storage, read_write> tile_ranges: array<TileRange>;
 
 struct TileRange {
     lo: vec4<f32>,
     hi: vec4<f32>,
+    axis: vec4<f32>, // xyz: the normal at the tile's centre pixel (0 where it is not covered); w: the least of axis · point
+    most: vec4<f32>, // x: the greatest of axis · point; y: the object every covered pixel ignores, or NO_OBJECT
 }
 // 0 depth reads, 1 LI writes, 2 (wedge, pixel) pairs inside their wedge (three-pass only).
 @group(1) @binding(6) var<storage, read_write> counters: array<atomic<u32>, 4>;

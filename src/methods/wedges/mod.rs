@@ -217,7 +217,7 @@ impl ShadowMethod for Wedges {
         let uniform_buffer = ctx.uniforms("Wedges::uniforms", &uniforms);
         let polygon_buffer = storage("Wedges::polygons", bytemuck::cast_slice(&volume.polygons_gpu()));
         let wedge_buffer = storage("Wedges::wedges", bytemuck::cast_slice(wedges));
-        let ranges = storage("Wedges::tile_ranges", &vec![0u8; tile_count * 32]);
+        let ranges = storage("Wedges::tile_ranges", &vec![0u8; tile_count * 64]);
         // From the pool: the LI buffer is cleared before the rasteriser runs, and the tiles pass
         // writes every pixel's receiver record.
         let pixels = u64::from(spec.width) * u64::from(spec.height);
@@ -313,7 +313,7 @@ impl ShadowMethod for Wedges {
             pass.dispatch_workgroups((tile_count as u32).div_ceil(64), 1, 1);
         }
         ctx.flush()?;
-        let tile_ranges: Vec<[[f32; 4]; 2]> = bytemuck::cast_slice(&read_buffer(ctx.gpu, &ranges)?).to_vec();
+        let tile_ranges: Vec<[[f32; 4]; 4]> = bytemuck::cast_slice(&read_buffer(ctx.gpu, &ranges)?).to_vec();
         let culling_start = std::time::Instant::now();
         let grid = TileGrid::new(grid_size, tile, (spec.width, spec.height), &tile_ranges, camera, &view_proj);
 
