@@ -32,7 +32,8 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
 }
 
 // Step 2, every pixel: lists those in hard shadow with a lit, covered neighbour close in 3D
-// (the last such neighbour in scan order is the one remembered).
+// (the last such neighbour in scan order is the one remembered: the bits are visited in
+// that order).
 @compute @workgroup_size(8, 8)
 fn mark_boundary(@builtin(global_invocation_id) id: vec3<u32>) {
     let pixel = id.xy;
@@ -40,9 +41,10 @@ fn mark_boundary(@builtin(global_invocation_id) id: vec3<u32>) {
     if any(pixel >= size) || (flags[pixel.y * size.x + pixel.x] & HARD) == 0u {
         return;
     }
-    let here = textureLoad(gbuf_position, pixel, 0);
-    let reach = here.w * params.boundary_relative;
-    var lit = 16u;
+    // The neighbours that are lit and covered, as bits 3·(b + 1) + a + 1, from their flags
+    // alone: inside a shadow there are none, and the positions need not be read (on lavapipe
+    // a SIMD group of 8 such pixels skips the second loop).
+    var candidates = 0u;
     for (var b = -1; b <= 1; b++) {
         for (var a = -1; a <= 1; a++) {
             let n = vec2<i32>(pixel) + vec2<i32>(a, b);
@@ -50,11 +52,24 @@ fn mark_boundary(@builtin(global_invocation_id) id: vec3<u32>) {
                 continue;
             }
             let m = vec2<u32>(n);
-            let flag = flags[m.y * size.x + m.x];
-            let there = textureLoad(gbuf_position, m, 0).xyz;
-            if (flag & (COVERED | HARD)) == COVERED && distance(there, here.xyz) < reach {
-                lit = u32(3 * (b + 1) + a + 1);
+            if (flags[m.y * size.x + m.x] & (COVERED | HARD)) == COVERED {
+                candidates |= 1u << u32(3 * (b + 1) + a + 1);
             }
+        }
+    }
+    if candidates == 0u {
+        return;
+    }
+    let here = textureLoad(gbuf_position, pixel, 0);
+    let reach = here.w * params.boundary_relative;
+    var lit = 16u;
+    var rest = candidates;
+    while rest != 0u {
+        let k = firstTrailingBit(rest);
+        rest &= rest - 1u;
+        let m = vec2<u32>(vec2<i32>(pixel) + vec2<i32>(i32(k % 3u) - 1, i32(k / 3u) - 1));
+        if distance(textureLoad(gbuf_position, m, 0).xyz, here.xyz) < reach {
+            lit = k;
         }
     }
     if lit < 16u {
