@@ -288,7 +288,7 @@ fn wedge_share(w: Wedge, p: vec3<f32>, normal: vec3<f32>, e0: vec3<f32>) -> vec3
 // (`part`); what the image adds is the region's mean radiance, weighed as p weighs it
 // (cosines over squared distance). The region is bounded by rays from the centre, the edge's
 // line and the rectangle, so it is the sector between its extreme directions minus what lies
-// on c's side of the line. Its angular span is cut into `color_angles` steps; in each, the
+// on c's side of the line. Its angular span is cut into steps (`color_angles` at most); in each, the
 // line's distance is held at its value in the middle of the step and the sector table gives
 // the emission and the area between it and the rectangle's edge (two look-ups: the table
 // holds what lies beyond each distance) — the image's colour
@@ -315,13 +315,19 @@ fn colored_share(poly: ptr<function, array<vec2<f32>, 8>>, count: u32, a2: vec2<
     }
     // The first direction within the table's first turn; the span then stays in its two.
     let start = fract((atan2(g.y, g.x) + lo) / TAU) * TAU;
-    let width = (hi - lo) / f32(COLOR_ANGLES);
+    // `color_angles` steps across a region an eighth of a turn wide or wider; a narrower one
+    // takes steps as wide as such a region's, but at least two. A short silhouette edge (a
+    // landscape's) cuts a narrow region, where the line hardly drifts within a step: on
+    // `terrain` under `stripes` this took the shading from ~260 to ~220 ms, every penumbra
+    // error within 2e-6 of the fixed count's and the `occluder` closed form's unchanged.
+    let steps = clamp(u32(ceil(4.0 * f32(COLOR_ANGLES) * (hi - lo) / PI)), min(2u, COLOR_ANGLES), COLOR_ANGLES);
+    let width = (hi - lo) / f32(steps);
     let line_normal = vec2<f32>(-d.y, d.x);
     let line_offset = dot(line_normal, a2);
     let n_light = frame.light_n.xyz;
     var emitted = vec3<f32>(0.0);
     var area = 0.0;
-    for (var j = 0u; j < COLOR_ANGLES; j++) {
+    for (var j = 0u; j < steps; j++) {
         let phi_a = start + width * f32(j);
         let phi_b = phi_a + width;
         let mid = phi_a + 0.5 * width;

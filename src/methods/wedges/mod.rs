@@ -30,7 +30,7 @@
 //!   visibility per channel): the LI buffer holds three values per pixel, and a wedge takes
 //!   away from each channel the irradiance its region blocks — Lambert's exact share of the
 //!   region times the region's mean radiance, integrated from the light's sector table
-//!   (`light::tables`) in `color_angles` angular steps — over that channel's E0. The cost does
+//!   (`light::tables`) in up to `color_angles` angular steps — over that channel's E0. The cost does
 //!   not grow with the image's texels; a uniform image keeps the one gray value and the exact
 //!   share.
 //! - Wedge culling uses the wedge's two tangent planes (through the edge, touching the light
@@ -91,7 +91,7 @@ const COLOR_ANGLES: Param<u32> = Param::integer(
     8,
     1,
     32,
-    "angular steps across a wedge's region in which a coloured light's emission is integrated (the image exactly, the edge's line held at each step's middle); a uniform light needs none",
+    "angular steps across a wedge's region (an eighth of a turn or wider; a narrower one takes proportionally fewer, at least two) in which a coloured light's emission is integrated (the image exactly, the edge's line held at each step's middle); a uniform light needs none",
 );
 
 const PARAMS: &[ParamSpec] = &[TILE.spec, CULLING.spec, VOLUME.spec, OBJECT_IDS.spec, PASSES.spec, COLOR_ANGLES.spec];
