@@ -107,8 +107,8 @@ fn seed_listed(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocatio
     let normal = silhouette_normal(occluder, clamp(i32(ceil(reach_texels)) + 1, 2, 8), params.silhouette_relative);
     let angle = select(atan2(normal.y, normal.x), NO_NORMAL, dot(normal, normal) == 0.0);
     let index = 2u * (pixel.y * frame.sizes.x + pixel.x);
-    dst[index] = packed(occluder, key);
-    dst[index + 1u] = vec4<f32>(vec2<f32>(pixel), id_bits, angle);
+    dst[index] = eye_packed(occluder, id_bits);
+    dst[index + 1u] = vec4<f32>(vec2<f32>(pixel), key, angle);
     mark_tile(vec2<i32>(pixel));
     atomicAdd(&counters[0], 1u);
 }

@@ -23,10 +23,12 @@ struct JfaParams {
 }
 
 // What flooding carries (§4.1, §5.1), packed small because every round moves the whole grid
-// of them: one vec4 per cell for jfa-l, two for jfa-e. The first holds an occluder point
-// (xyz) and, in w, the key flooding minimises plus 1, so that an all-zero record — a cleared
-// buffer — is empty. jfa-e's second holds where the record came from: xy the boundary pixel,
-// z its object id, w the angle of the silhouette's normal at the occluder point in light
+// of them: one vec4 per cell for jfa-l, two for jfa-e. jfa-l's holds an occluder point (xyz)
+// and, in w, the key flooding minimises plus 1, so that an all-zero record — a cleared
+// buffer — is empty. jfa-e's first holds the occluder point and, in w, the object id of the
+// boundary pixel it came from plus 1 (0: empty), so that weighing a neighbour's record reads
+// one vec4 — on lavapipe each is a gather, lane by lane; its second holds xy the boundary
+// pixel, z the key, w the angle of the silhouette's normal at the occluder point in light
 // coordinates (`NO_NORMAL` where there is none). The rgb intensity is not stored: the final pass recomputes it from the
 // occluder (§4.1 "Generating Final Image" does so for jfa-l; jfa-e gets the same value).
 @group(1) @binding(0) var<uniform> params: JfaParams;
@@ -71,6 +73,24 @@ fn key_of(record: vec4<f32>) -> f32 {
 // A record holding a penumbra occluder, not just a seed.
 fn in_penumbra(record: vec4<f32>) -> bool {
     return !is_empty(record) && key_of(record) <= 1.0;
+}
+
+// jfa-e's record (two vec4s, above): the first from an occluder point and the boundary
+// pixel's object id; whether it is empty; its key; whether it holds a penumbra occluder.
+fn eye_packed(occluder: vec3<f32>, object: f32) -> vec4<f32> {
+    return vec4<f32>(occluder, object + 1.0);
+}
+
+fn eye_object(record: vec4<f32>) -> f32 {
+    return record.w - 1.0;
+}
+
+fn eye_key(record: vec4<f32>, origin: vec4<f32>) -> f32 {
+    return select(origin.z, EMPTY_KEY, is_empty(record));
+}
+
+fn eye_in_penumbra(record: vec4<f32>, origin: vec4<f32>) -> bool {
+    return !is_empty(record) && origin.z <= 1.0;
 }
 
 // The flooded grid: the shadow map (jfa-l) or the screen (jfa-e).

@@ -18,7 +18,8 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     let flag = flags[pixel.y * frame.sizes.x + pixel.x];
     if (flag & COVERED) != 0u {
         let inside = (flag & HARD) != 0u;
-        if in_penumbra(src[2u * (pixel.y * frame.sizes.x + pixel.x)]) {
+        let index = 2u * (pixel.y * frame.sizes.x + pixel.x);
+        if eye_in_penumbra(src[index], src[index + 1u]) {
             list_for_shading(pixel, inside);
             return;
         }

@@ -37,7 +37,7 @@ fn candidate_key(r: Receiver, k: u32) -> f32 {
     if is_empty(candidate) || all(candidate.xyz == r.own.xyz) {
         return NO_KEY;
     }
-    if params.same_object == 1u && src[at + 1].z != r.object {
+    if params.same_object == 1u && eye_object(candidate) != r.object {
         return NO_KEY;
     }
     let key = intensity_key(r.here, candidate.xyz);
@@ -81,7 +81,7 @@ fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_id) l
         var after_k = -1;
         loop {
             var chosen = -1;
-            var chosen_key = key_of(best);
+            var chosen_key = eye_key(best, best_origin);
             for (var k = 0u; k < 9u; k++) {
                 let key = candidate_key(r, k);
                 let after = key > after_key || (key == after_key && i32(k) > after_k);
@@ -95,8 +95,8 @@ fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_id) l
             }
             if params.midpoint == 0u || midpoint_holds(r, u32(chosen)) {
                 let at = neighbour_record(r, u32(chosen));
-                best = packed(src[at].xyz, chosen_key);
-                best_origin = src[at + 1];
+                best = src[at];
+                best_origin = vec4<f32>(src[at + 1].xy, chosen_key, src[at + 1].w);
                 break;
             }
             after_key = chosen_key;
