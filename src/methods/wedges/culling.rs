@@ -497,12 +497,18 @@ mod tests {
         assert!(wedge_region(&above, &light, 20.0).is_none());
     }
 
+    /// An edge of `object` under a 2 × 1 m light, and its wedge's footprint over one tile with
+    /// no NDC test (every depth).
+    fn edge_under_light(object: u32) -> (AreaLight, SilhouetteEdge, Footprint) {
+        let light = AreaLight::new(Vec3::Y * 3.0, -Vec3::Y, -Vec3::Z, Vec2::new(2.0, 1.0), 1.0).unwrap();
+        let edge = SilhouetteEdge { a: Vec3::new(0.5, 1.0, -0.7), b: Vec3::new(0.2, 1.3, 0.6), multiplicity: 1, object };
+        let (_, planes) = wedge_region(&edge, &light, 20.0).unwrap();
+        (light, edge, Footprint { tiles_x: (0, 1), tiles_y: (0, 1), z: (f32::NEG_INFINITY, f32::INFINITY), planes, object })
+    }
+
     #[test]
     fn a_tile_is_culled_by_its_receivers_world_box_where_its_ndc_box_passes() {
-        let light = AreaLight::new(Vec3::Y * 3.0, -Vec3::Y, -Vec3::Z, Vec2::new(2.0, 1.0), 1.0).unwrap();
-        let edge = SilhouetteEdge { a: Vec3::new(0.5, 1.0, -0.7), b: Vec3::new(0.2, 1.3, 0.6), multiplicity: 1, object: 0 };
-        let (_, planes) = wedge_region(&edge, &light, 20.0).unwrap();
-        let footprint = Footprint { tiles_x: (0, 1), tiles_y: (0, 1), z: (f32::NEG_INFINITY, f32::INFINITY), planes, object: 0 };
+        let (light, edge, footprint) = edge_under_light(0);
         // An NDC box that passes every NDC test (no NDC planes), and world boxes: a small one
         // around a point the edge hides light from, and one as small far to the side.
         let tile = |centre: Vec3| {
@@ -561,10 +567,7 @@ mod tests {
 
     #[test]
     fn a_tile_whose_pixels_all_ignore_an_object_is_culled_for_that_objects_primitives() {
-        let light = AreaLight::new(Vec3::Y * 3.0, -Vec3::Y, -Vec3::Z, Vec2::new(2.0, 1.0), 1.0).unwrap();
-        let edge = SilhouetteEdge { a: Vec3::new(0.5, 1.0, -0.7), b: Vec3::new(0.2, 1.3, 0.6), multiplicity: 1, object: 3 };
-        let (_, planes) = wedge_region(&edge, &light, 20.0).unwrap();
-        let footprint = Footprint { tiles_x: (0, 1), tiles_y: (0, 1), z: (f32::NEG_INFINITY, f32::INFINITY), planes, object: 3 };
+        let (light, edge, footprint) = edge_under_light(3);
         let e = edge.a.lerp(edge.b, 0.5);
         let hidden = e + (e - light.center) * 0.8;
         let tile = |ignores| {
