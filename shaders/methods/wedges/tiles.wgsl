@@ -1,7 +1,8 @@
 // Method `wedges` (Assarsson & Akenine-Möller 2003 §4): the per-tile depth range occlusion
 // culling tests wedges against — zmin and zmax of the view depth of the tile's covered pixels
 // (+∞ / −∞ for a tile of background only), and past the paper the world-space box of their
-// points (`culling.rs` says why) — and, while reading every pixel, the receiver
+// points, the slab they span along the centre pixel's normal and the object they all ignore
+// (`culling.rs` says why) — and, while reading every pixel, the receiver
 // record the rasteriser reads instead of the G-buffer (one storage read, not four texture
 // loads, per pixel and primitive).
 
