@@ -359,11 +359,13 @@ fn footprint(view_proj: &Mat4, points: &[Vec3], planes: Vec<Vec4>, object: u32, 
     }
 }
 
-/// Occlusion culling of one primitive over one tile or block (§4): background holds nothing;
-/// the quick rejection compares depth ranges — a volume polygon only with zmax (z-pass: it
-/// must lie in front of something) or zmin (z-fail: behind something), a wedge with both — and
-/// then the region's planes, in NDC (`planes`), are tested with the NDC box's p-vertex
-/// (Fig. 7), and in world space (`footprint.planes`) with the world box's.
+/// Occlusion culling of one primitive over one tile or block (§4): background holds nothing,
+/// nor does a tile whose pixels all ignore the primitive's object; the quick rejection
+/// compares depth ranges — a volume polygon only with zmax (z-pass: it must lie in front of
+/// something) or zmin (z-fail: behind something), a wedge with both — and then the region's
+/// planes, in NDC (`planes`), are tested with the NDC box's p-vertex (Fig. 7), and in world
+/// space (`footprint.planes`) with the world box's and with the corners of the tile's slab
+/// hull where it has one.
 fn survives(footprint: &Footprint, planes: &[Vec4], tile_box: Option<TileBox>, umbra: bool, zfail: bool) -> bool {
     let Some(TileBox { ndc: [x0, x1, y0, y1, z0, z1], world: [lo, hi], hull, ignores }) = tile_box else {
         return false;
