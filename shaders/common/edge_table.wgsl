@@ -7,8 +7,7 @@ const EDGE_ANGLES: u32 = 256u;
 const EDGE_STATIONS: u32 = 64u;
 
 // Where station coordinate `x` of row `row` falls among the table's entries: the entry at or
-// below it (the next one lies at `at` + 1) and the fraction of the way to the next. Shared by
-// every table laid out like this one (JFA's luminance table too).
+// below it (the next one lies at `at` + 1) and the fraction of the way to the next.
 struct EdgeCell {
     at: u32,
     along: f32,

@@ -5,8 +5,8 @@
 //! - `edge_table`, the intensity look-up of Rong & Tan 2006 (§3, §4.1), coloured: for a line
 //!   across the light, given by its direction from the centre and its distance, the part of
 //!   each channel's emission on the centre's side. `jfa-l`, `jfa-e` and `brabec` read it
-//!   (`shaders/common/edge_table.wgsl`); `edge_luminance_table` holds each entry's
-//!   luminance, the keys JFA's rounds compare (`shaders/methods/jfa/common.wgsl`).
+//!   (`shaders/common/edge_table.wgsl`); `key_table` holds its luminance on a grid over the
+//!   light, the keys JFA's rounds compare (`shaders/methods/jfa/common.wgsl`).
 //! - `sector_table`: the emission of the sectors around the light centre, from direction 0
 //!   to each angle, beyond each fraction of the way to the rectangle's edge — exact along
 //!   each ray for the piecewise-constant image. `wedges` integrates each channel over the
@@ -33,20 +33,50 @@ const EDGE_BINS: usize = 2048;
 /// Rec. 709's luminance weights, which jump flooding's keys use (`shaders/methods/jfa/common.wgsl`).
 pub const LUMINANCE: glam::Vec3 = glam::Vec3::new(0.2126, 0.7152, 0.0722);
 
-/// The luminance of an `edge_table`, the keys jump flooding minimises, laid out for a
-/// bilinear look-up in one load: element (row i, station j), in the edge table's order, holds
-/// the luminance of entries (i, j), (i, j + 1), (i + 1, j) and (i + 1, j + 1) — the next row
-/// wrapping around the turn, the next station clamped to the last. Made from the edge table
-/// rather than from the light, which the edge table took ~10 ms to integrate.
-pub fn edge_luminance_table(table: &[[f32; 4]]) -> Vec<[f32; 4]> {
-    let luminance = |i: u32, j: u32| {
-        let e = table[((i % EDGE_ANGLES) * EDGE_STATIONS + j.min(EDGE_STATIONS - 1)) as usize];
-        glam::Vec3::new(e[0], e[1], e[2]).dot(LUMINANCE)
+/// Cells per side of `key_table`'s grid over the light.
+pub const KEY_CELLS: u32 = 128;
+
+/// The keys jump flooding minimises (`shaders/methods/jfa/common.wgsl`) at every point q of
+/// the light: the luminance of the edge table's entry for the line through q orthogonal to
+/// c→q (Rong & Tan 2006 §3), as `edge_lookup` interpolates it. Sampled at the corners of a
+/// grid of KEY_CELLS × KEY_CELLS cells over the rectangle (x along r, y along u, from the
+/// (−r, −u) corner) and laid out for a bilinear look-up in one load: element (row j, column i)
+/// holds the keys at cell (i, j)'s corners (i, j), (i + 1, j), (i, j + 1) and (i + 1, j + 1).
+///
+/// A grid over the light rather than the edge table's (direction, distance): a round looks a
+/// key up for each of a pixel's nine neighbours, and finding a point's direction (an atan2)
+/// and distance (a square root, three divisions) cost lavapipe 50 of `jfa-e`'s 310 ms of
+/// rounds on `terrain` under `flame`; a grid cell is two multiplications away. The key only
+/// ranks occluders (the final pass recomputes the colour from the edge table itself), and the
+/// grid departs from the polar look-up only within a cell of the centre, where the direction
+/// of the line turns fastest.
+pub fn key_table(light: &AreaLight, table: &[[f32; 4]]) -> Vec<[f32; 4]> {
+    let n = KEY_CELLS;
+    let key = |i: u32, j: u32| {
+        let q = (Vec2::new(i as f32, j as f32) / n as f32 - Vec2::splat(0.5)) * light.size_m;
+        edge_lookup(table, light.size_m * 0.5, q).truncate().dot(LUMINANCE)
     };
-    (0..EDGE_ANGLES)
-        .flat_map(|i| (0..EDGE_STATIONS).map(move |j| (i, j)))
-        .map(|(i, j)| [luminance(i, j), luminance(i, j + 1), luminance(i + 1, j), luminance(i + 1, j + 1)])
-        .collect()
+    let corners: Vec<f32> = (0..=n).flat_map(|j| (0..=n).map(move |i| (i, j))).map(|(i, j)| key(i, j)).collect();
+    let at = |i: u32, j: u32| corners[(j * (n + 1) + i) as usize];
+    (0..n).flat_map(|j| (0..n).map(move |i| (i, j))).map(|(i, j)| [at(i, j), at(i + 1, j), at(i, j + 1), at(i + 1, j + 1)]).collect()
+}
+
+/// The edge table's look-up for the line through light point `q` (light-local metres, the
+/// centre at the origin) orthogonal to c→q, interpolated between neighbouring directions and
+/// distances: `edge_fraction_at` in `shaders/common/edge_table.wgsl`, step for step.
+pub fn edge_lookup(table: &[[f32; 4]], half: Vec2, q: Vec2) -> glam::Vec4 {
+    let length = q.length();
+    let (e, s) = if length > 0.0 { (q / length, length / edge_distance(half, q / length)) } else { (Vec2::X, 0.0) };
+    let turns = (e.y.atan2(e.x) / std::f32::consts::TAU + 1.0).fract();
+    let y = turns * EDGE_ANGLES as f32;
+    let row = y as u32;
+    let x = s.clamp(0.0, 1.0) * (EDGE_STATIONS - 1) as f32;
+    let entry = |row: u32| {
+        let i = (x as u32).min(EDGE_STATIONS - 2);
+        let at = ((row % EDGE_ANGLES) * EDGE_STATIONS + i) as usize;
+        glam::Vec4::from(table[at]).lerp(glam::Vec4::from(table[at + 1]), (x - i as f32).clamp(0.0, 1.0))
+    };
+    entry(row).lerp(entry(row + 1), y - row as f32)
 }
 
 /// The edge table: the intensity look-up of Rong & Tan 2006 (§3, §4.1), coloured and indexed
@@ -382,29 +412,57 @@ mod tests {
     }
 
     #[test]
-    fn the_luminance_table_is_the_edge_tables_luminance_entry_for_entry() {
+    fn the_key_table_samples_the_edge_tables_luminance_on_a_grid() {
         let wide = light(Vec2::new(3.0, 1.0));
+        let half = wide.size_m * 0.5;
         let image = LightImage::builtin("flame", &Default::default(), "f").unwrap();
         let table = edge_table(&wide, &image);
-        let luminance = edge_luminance_table(&table);
-        assert_eq!(luminance.len(), table.len());
-        let of = |i: u32, j: u32| {
-            let e = edge(&table, i % EDGE_ANGLES, j.min(EDGE_STATIONS - 1));
-            glam::Vec3::new(e[0], e[1], e[2]).dot(LUMINANCE)
-        };
-        for (i, j) in [(0, 0), (7, 30), (EDGE_ANGLES - 1, 12), (100, EDGE_STATIONS - 1)] {
-            let got = luminance[(i * EDGE_STATIONS + j) as usize];
-            assert_eq!(got, [of(i, j), of(i, j + 1), of(i + 1, j), of(i + 1, j + 1)], "row {i} station {j}");
+        let keys = key_table(&wide, &table);
+        assert_eq!(keys.len() as u32, KEY_CELLS * KEY_CELLS);
+        let polar = |q: Vec2| edge_lookup(&table, half, q).truncate().dot(LUMINANCE);
+        // A grid point's key is the polar look-up there; the four corners of a cell are its
+        // neighbours' shared corners.
+        let point = |i: u32, j: u32| (Vec2::new(i as f32, j as f32) / KEY_CELLS as f32 - Vec2::splat(0.5)) * wide.size_m;
+        for (i, j) in [(0, 0), (7, 30), (KEY_CELLS - 1, 12), (100, KEY_CELLS - 1), (64, 64)] {
+            let cell = keys[(j * KEY_CELLS + i) as usize];
+            assert_eq!(cell[0], polar(point(i, j)), "cell ({i}, {j})");
+            assert_eq!(cell[3], polar(point(i + 1, j + 1)), "cell ({i}, {j})");
+            if i + 1 < KEY_CELLS {
+                assert_eq!(cell[1], keys[(j * KEY_CELLS + i + 1) as usize][0]);
+            }
         }
-        // Rec. 709's weights sum to 1: under a white light the luminance is the fraction itself,
-        // and the far side's luminance is 1 minus the near side's (what the keys rely on).
+        // Between grid points the bilinear blend stays close to the polar look-up (measured:
+        // 1e-4 on average), except within a few cells of the centre, where the line's
+        // direction turns with the point's.
+        let blend = |q: Vec2| {
+            let g = ((q / wide.size_m + Vec2::splat(0.5)) * KEY_CELLS as f32).clamp(Vec2::ZERO, Vec2::splat(KEY_CELLS as f32));
+            let (i, j) = ((g.x as u32).min(KEY_CELLS - 1), (g.y as u32).min(KEY_CELLS - 1));
+            let f = g - Vec2::new(i as f32, j as f32);
+            let c = keys[(j * KEY_CELLS + i) as usize];
+            let lerp = |a: f32, b: f32, t: f32| a + (b - a) * t;
+            lerp(lerp(c[0], c[1], f.x), lerp(c[2], c[3], f.x), f.y)
+        };
+        let (mut worst, mut total, mut count) = (0.0f32, 0.0, 0);
+        for j in 0..97 {
+            for i in 0..97 {
+                let q = (Vec2::new(i as f32 + 0.31, j as f32 + 0.77) / 97.0 - Vec2::splat(0.5)) * wide.size_m;
+                let departure = (blend(q) - polar(q)).abs();
+                total += departure;
+                count += 1;
+                if (q / wide.size_m * KEY_CELLS as f32).length() > 8.0 {
+                    worst = worst.max(departure);
+                }
+            }
+        }
+        assert!(total / (count as f32) < 5e-4, "mean departure {}", total / count as f32);
+        assert!(worst < 0.01, "worst departure beyond 8 cells of the centre {worst}");
+        // Rec. 709's weights sum to 1: under a white light the key is the fraction itself, and
+        // the far side's luminance is 1 minus the near side's (what the keys rely on).
         assert!((LUMINANCE.element_sum() - 1.0).abs() < 1e-6);
         let white = LightImage::builtin("white", &Default::default(), "f").unwrap();
         let table = edge_table(&wide, &white);
-        let luminance = edge_luminance_table(&table);
-        for (e, l) in table.iter().zip(&luminance) {
-            assert!((e[0] - l[0]).abs() < 1e-6);
-        }
+        let q = Vec2::new(0.9, -0.2);
+        assert!((edge_lookup(&table, half, q).truncate().dot(LUMINANCE) - edge_lookup(&table, half, q).x).abs() < 1e-6);
     }
 
     #[test]

@@ -38,7 +38,7 @@ use super::{Cap, Counters, MethodContext, Param, ParamSpec, Params, ShadowMethod
 use crate::error::JobResult;
 use crate::gpu::layout;
 use crate::gpu::pool::PipelineKey;
-use crate::light::tables::{edge_luminance_table, edge_table};
+use crate::light::tables::{edge_table, key_table};
 
 pub struct JfaL;
 pub struct JfaE;
@@ -255,11 +255,10 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
     let uniforms = layout::uniform_slots(&device, "Jfa::uniforms", &slots);
     // The coloured look-up depends only on the light image and the light's shape; building it
     // integrates ~6·10⁴ samples per direction on the CPU, so it is kept for later jobs, and
-    // the rounds' luminance table is made from it (built once here when neither is kept).
+    // the rounds' table of keys is made from it (built once here when neither is kept).
     let mut colours = None;
     let lut = ctx.light_table("edge_table", |light, image| colours.get_or_insert_with(|| edge_table(light, image)).clone());
-    let luminance =
-        ctx.light_table("edge_luminance", |light, image| edge_luminance_table(colours.get_or_insert_with(|| edge_table(light, image))));
+    let keys = ctx.light_table("jfa_keys", |light, image| key_table(light, colours.get_or_insert_with(|| edge_table(light, image))));
     // From the pool: the seed pass writes every record of a and (jfa-e) every flag, b and the
     // tile flags are cleared below.
     let cells = u64::from(grid.0) * u64::from(grid.1);
@@ -338,7 +337,7 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
                     tile_list.list.as_entire_binding(),
                     tile_groups.as_entire_binding(),
                     map_depth.as_entire_binding(),
-                    luminance.as_entire_binding(),
+                    keys.as_entire_binding(),
                 ],
             )
         };

@@ -34,9 +34,11 @@ struct JfaParams {
 @group(1) @binding(0) var<uniform> params: JfaParams;
 // The light's edge table (`light::tables::edge_table`, read through common/edge_table.wgsl).
 @group(1) @binding(1) var<storage, read> edge_table: array<vec4<f32>>;
-// Its entries' luminance (`light::tables::edge_luminance_table`), for the rounds' keys: per
-// entry, its own and its neighbours' in the next station, the next row and both.
-@group(1) @binding(15) var<storage, read> edge_luminance: array<vec4<f32>>;
+// The rounds' keys over the light (`light::tables::key_table`): per cell of a KEY_CELLS²
+// grid over the rectangle, row by row from the (−r, −u) corner, the keys at its four corners.
+@group(1) @binding(15) var<storage, read> key_table: array<vec4<f32>>;
+// Mirrors `light::tables::KEY_CELLS`.
+const KEY_CELLS: u32 = 128u;
 @group(1) @binding(2) var<storage, read> src: array<vec4<f32>>;
 @group(1) @binding(3) var<storage, read_write> dst: array<vec4<f32>>;
 @group(1) @binding(4) var<storage, read_write> visibility_out: array<vec4<f32>>;
@@ -195,20 +197,20 @@ fn light_hit(p: vec3<f32>, o: vec3<f32>) -> vec4<f32> {
 // most. Returns the key it minimises, with y = 1 where the ray meets the light (p is in a
 // penumbra), else y = 0: the luminance of the centre's side, for both (inside, the visible
 // side's luminance is 1 minus it: Rec. 709's weights sum to 1, and the key is 1 minus that).
-// Read from the luminance table (`edge_luminance`): luminance is linear, so the table's
-// interpolated luminance is the interpolated colour's, and a look-up loads one vec4 where the
-// colour table's loads four — the look-ups are most of a round's loads.
+// Read from the grid of keys over the light (`key_table`, which says why a grid): luminance
+// is linear, so the table's luminance is the edge table's colour's, and one load holds the
+// four corners of q's cell — the look-ups are most of a round's loads.
 fn intensity_key(p: vec3<f32>, o: vec3<f32>) -> vec2<f32> {
     let hit = light_hit(p, o);
     if hit.w == 0.0 {
         return vec2<f32>(0.0);
     }
-    let spot = edge_spot_at(hit.xy);
-    // The four entries around the spot in one load (a vec4 gathers for less than four floats).
-    let cell = edge_cell(spot.row, spot.x);
-    let around = edge_luminance[cell.at];
-    let near = mix(mix(around.x, around.y, cell.along), mix(around.z, around.w, cell.along), spot.toward_next);
-    return vec2<f32>(near, 1.0);
+    let size = vec2<f32>(frame.light_n.w, frame.light_u.w);
+    let g = clamp((hit.xy / size + 0.5) * f32(KEY_CELLS), vec2<f32>(0.0), vec2<f32>(f32(KEY_CELLS)));
+    let cell = min(vec2<u32>(g), vec2<u32>(KEY_CELLS - 1u));
+    let f = g - vec2<f32>(cell);
+    let corners = key_table[cell.y * KEY_CELLS + cell.x];
+    return vec2<f32>(mix(mix(corners.x, corners.y, f.x), mix(corners.z, corners.w, f.x), f.y), 1.0);
 }
 
 // The visibility the final passes give receiver p for occluder point o (p in o's penumbra,
