@@ -449,6 +449,12 @@ fn bench_writes_its_phase_table_and_the_e0_check() {
             let e0_passes: &[&str] =
                 if row.light == "flame" { &["e0_corners", "e0_interpolate", "e0_exact_above", "e0_exact_clipped"] } else { &["e0"] };
             assert!(e0_passes.iter().all(|p| names.contains(p)) || !engine.gpu().timestamps_inside_passes, "{names:?}");
+            // The reference says what its samples cost: the maps' raster and the tests.
+            if row.method.starts_with("reference") {
+                assert!(names.contains(&"reference_accumulate"), "{names:?}");
+                assert!(names.contains(&"reference_maps") || !engine.gpu().timestamps_inside_passes, "{names:?}");
+                assert!((passes("method") - phase("method")).abs() < 1e-6 * phase("method").max(1.0), "{row:?}");
+            }
         }
     }
     let hard = report.rows.iter().find(|r| r.method == "hard" && r.light == "flame").unwrap();

@@ -238,27 +238,31 @@ impl ShadowMethod for Reference {
         let total = samples.len() as u64;
         let mut before = 0;
         for (b, &(count, _)) in batches.iter().enumerate() {
-            for layer in 0..count {
-                let k = before as usize + layer as usize;
-                let mut pass = ctx.encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                    label: Some("Reference::sample_depth"),
-                    color_attachments: &[],
-                    depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                        view: &layer_views[layer as usize],
-                        depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(0.0), store: wgpu::StoreOp::Store }),
-                        stencil_ops: None,
-                    }),
-                    timestamp_writes: None,
-                    occlusion_query_set: None,
-                    multiview_mask: None,
-                });
-                pass.set_pipeline(&depth_pipeline);
-                pass.set_bind_group(0, &depth_group, &[layout::slot_offset(k)]);
-                pass.set_vertex_buffer(0, ctx.scene.vertex_buffer.slice(..));
-                pass.set_index_buffer(ctx.scene.index_buffer.slice(..), wgpu::IndexFormat::Uint32);
-                pass.draw_indexed(0..ctx.scene.index_count, 0, 0..1);
-                drop(pass);
-            }
+            // The batch's maps, timed together where timestamps can be written between passes
+            // (a scope per map would take the timer's queries at 256 samples).
+            let scene = ctx.scene;
+            ctx.timer.time_encoder(ctx.encoder, "method", "reference_maps", |encoder| {
+                for layer in 0..count {
+                    let k = before as usize + layer as usize;
+                    let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                        label: Some("Reference::sample_depth"),
+                        color_attachments: &[],
+                        depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                            view: &layer_views[layer as usize],
+                            depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(0.0), store: wgpu::StoreOp::Store }),
+                            stencil_ops: None,
+                        }),
+                        timestamp_writes: None,
+                        occlusion_query_set: None,
+                        multiview_mask: None,
+                    });
+                    pass.set_pipeline(&depth_pipeline);
+                    pass.set_bind_group(0, &depth_group, &[layout::slot_offset(k)]);
+                    pass.set_vertex_buffer(0, scene.vertex_buffer.slice(..));
+                    pass.set_index_buffer(scene.index_buffer.slice(..), wgpu::IndexFormat::Uint32);
+                    pass.draw_indexed(0..scene.index_count, 0, 0..1);
+                }
+            });
             {
                 // One pipeline per batch size (`SAMPLES` in accumulate.wgsl: all but the last
                 // batch are full), channels of the sums, and whether it is the first or last.
@@ -301,9 +305,10 @@ impl ShadowMethod for Reference {
                         ctx.visibility.as_entire_binding(),
                     ],
                 );
-                let mut pass = ctx
-                    .encoder
-                    .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("Reference::accumulate"), timestamp_writes: None });
+                let mut pass = ctx.encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some("Reference::accumulate"),
+                    timestamp_writes: ctx.timer.compute_scope("method", "reference_accumulate"),
+                });
                 pass.set_pipeline(&pipeline);
                 pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
                 pass.set_bind_group(1, &group, &[layout::slot_offset_of::<BatchUniforms>(b)]);
