@@ -125,5 +125,9 @@ mod tests {
         let wgsl = source("common/edge_table.wgsl").unwrap();
         assert!(wgsl.contains(&format!("const EDGE_ANGLES: u32 = {EDGE_ANGLES}u;")), "EDGE_ANGLES");
         assert!(wgsl.contains(&format!("const EDGE_STATIONS: u32 = {EDGE_STATIONS}u;")), "EDGE_STATIONS");
+        // So does JFA's grid of keys over the light.
+        use crate::light::tables::KEY_CELLS;
+        let jfa = source("methods/jfa/common.wgsl").unwrap();
+        assert!(jfa.contains(&format!("const KEY_CELLS: u32 = {KEY_CELLS}u;")), "KEY_CELLS");
     }
 }

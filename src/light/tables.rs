@@ -64,7 +64,7 @@ pub fn key_table(light: &AreaLight, table: &[[f32; 4]]) -> Vec<[f32; 4]> {
 /// The edge table's look-up for the line through light point `q` (light-local metres, the
 /// centre at the origin) orthogonal to c→q, interpolated between neighbouring directions and
 /// distances: `edge_fraction_at` in `shaders/common/edge_table.wgsl`, step for step.
-pub fn edge_lookup(table: &[[f32; 4]], half: Vec2, q: Vec2) -> glam::Vec4 {
+fn edge_lookup(table: &[[f32; 4]], half: Vec2, q: Vec2) -> glam::Vec4 {
     let length = q.length();
     let (e, s) = if length > 0.0 { (q / length, length / edge_distance(half, q / length)) } else { (Vec2::X, 0.0) };
     let turns = (e.y.atan2(e.x) / std::f32::consts::TAU + 1.0).fract();
