@@ -264,7 +264,8 @@ fn view_ray(x: vec3<f32>) -> vec3<f32> {
 // there is the blend's plus t ∂Φ/∂t to first order — the correction that lets a bumpy
 // surface (a landscape) be interpolated at all, where the plain blend is off by |∇Φ| t.
 fn ray_offset(x: vec3<f32>, mixed: Corner) -> f32 {
-    return dot(x - mixed.position.xyz, view_ray(x));
+    let view = x - frame.eye.xyz;
+    return dot(x - mixed.position.xyz, view) * inverseSqrt(dot(view, view));
 }
 
 // Measures the block at its centre pixel: the error of the corrected interpolation there
@@ -317,7 +318,8 @@ fn light_above(x: vec3<f32>, nx: vec3<f32>) -> bool {
 
 // E0 at one pixel interpolated from its block's corners, corrected along the view ray
 // (`ray_offset`): xyz, and w = 1 where the estimate accepts it (or the pixel receives no
-// light), 0 where it must be summed exactly. `normal` is the pixel's G-buffer normal texel
+// light), 0 where it must be summed exactly and the whole light lies above its horizon
+// (`exact_above`), −1 where it must be summed exactly with clipping (`exact_clipped`). `normal` is the pixel's G-buffer normal texel
 // (w: coverage); `mixed`, the blend of the block's corners at the pixel (`blend_in_row`).
 fn interpolated_e0(x: vec3<f32>, normal: vec4<f32>, b: Block, mixed: Corner, check: Check) -> vec4<f32> {
     let nx = normal.xyz;
@@ -332,19 +334,19 @@ fn interpolated_e0(x: vec3<f32>, normal: vec4<f32>, b: Block, mixed: Corner, che
     let beyond = abs(t - check.ray) / dist;
     let relative = ERROR_MARGIN * check.error + check.first * beyond + RAY_SECOND * reach * reach;
     let phi = phi_of(mixed) + check.d_phi * t;
-    let size = vec3<f32>(length(phi[0]), length(phi[1]), length(phi[2]));
-    var e0: vec3<f32>;
-    var done: bool;
-    if light_above(x, nx) {
-        e0 = abs(nx * phi);
-        done = all(relative * size <= E0_TOLERANCE * e0);
-    } else {
-        // The light straddles the horizon: on a flat face (the corners' normal the pixel's) E0
-        // is still smooth in the position and is blended itself.
-        e0 = e0_of(mixed) + check.d_e0 * t;
-        done = all((relative + bend(b, nx)) * size <= E0_TOLERANCE * e0);
-    }
-    return vec4<f32>(e0, select(0.0, 1.0, done && check.error < UNCHECKED));
+    // Both cases in straight-line code (lavapipe runs both sides of a branch its SIMD group
+    // splits on, and a landscape splits most groups): with the whole light above the horizon
+    // E0 is |nx · Φ|; where the light straddles it, on a flat face (the corners' normal the
+    // pixel's) E0 is still smooth in the position and is blended itself.
+    let above = light_above(x, nx);
+    let e0 = select(e0_of(mixed) + check.d_e0 * t, abs(nx * phi), above);
+    let error = relative + select(bend(b, nx), 0.0, above);
+    // error × |Φ| ≤ E0_TOLERANCE × E0, compared squared (no square root per channel); both
+    // sides' signs kept (error ≥ 0, E0 may not be).
+    let size2 = vec3<f32>(dot(phi[0], phi[0]), dot(phi[1], phi[1]), dot(phi[2], phi[2]));
+    let bound = E0_TOLERANCE * e0;
+    let done = all(error * error * size2 <= bound * abs(bound)) && check.error < UNCHECKED;
+    return vec4<f32>(e0, select(select(-1.0, 0.0, above), 1.0, done));
 }
 
 // Appends the pixels of a block whose bits are set in `mask` — bit 8r + x: column x of row
@@ -406,7 +408,8 @@ fn interpolate_blocks(@builtin(global_invocation_id) id: vec3<u32>) {
                 let e0 = interpolated_e0(position, normal, b, blend_in_row(row, f32(x) * step.x), check);
                 if e0.w > 0.0 {
                     e0_out[pixel_index(pixel)] = vec4<f32>(e0.xyz, 1.0);
-                } else if light_above(position, normal.xyz) {
+                } else if e0.w == 0.0 {
+                    // The whole light above the horizon: summed without clipping.
                     to_above |= bit;
                 } else {
                     to_clip |= bit;

@@ -63,8 +63,9 @@ const HORIZON_EPS: f32 = 1e-6;
 fn clip_edge(e: ptr<function, ClippedEdges>, a: vec3<f32>, b: vec3<f32>, ua: vec3<f32>, ub: vec3<f32>, da: f32, db: f32) {
     let above_a = da > HORIZON_EPS;
     let above_b = db > HORIZON_EPS;
-    let rise = select(db - da, 1.0, db == da); // only used where the edge crosses, i.e. da ≠ db
-    let q = normalize(a + (b - a) * ((HORIZON_EPS - da) / rise));
+    // The crossing a + (b − a)(ε − da)/(db − da), scaled by db − da (no division): its
+    // direction is all `edge_vector` needs, so the scale only has to keep its sign.
+    let q = normalize((a * (db - HORIZON_EPS) + b * (HORIZON_EPS - da)) * sign(db - da));
     let term = edge_vector(select(q, ua, above_a), select(q, ub, above_b));
     (*e).sum += select(vec3<f32>(0.0), term, above_a || above_b);
     (*e).exit = select((*e).exit, q, above_a && !above_b);
