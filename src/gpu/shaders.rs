@@ -118,16 +118,25 @@ mod tests {
         }
     }
 
+    /// Asserts that `file` declares `declaration` verbatim: a constant the WGSL hard-codes
+    /// (its passes bind no uniform for it) as Rust defines it.
+    fn declares(file: &str, declaration: String) {
+        let wgsl = source(file).unwrap();
+        assert!(wgsl.contains(&declaration), "{file} does not declare `{declaration}`");
+    }
+
     #[test]
-    fn the_edge_table_look_up_reads_the_table_as_it_is_built() {
-        // The WGSL hard-codes the table's shape (its callers bind it without uniforms).
-        use crate::light::tables::{EDGE_ANGLES, EDGE_STATIONS};
-        let wgsl = source("common/edge_table.wgsl").unwrap();
-        assert!(wgsl.contains(&format!("const EDGE_ANGLES: u32 = {EDGE_ANGLES}u;")), "EDGE_ANGLES");
-        assert!(wgsl.contains(&format!("const EDGE_STATIONS: u32 = {EDGE_STATIONS}u;")), "EDGE_STATIONS");
-        // So does JFA's grid of keys over the light.
-        use crate::light::tables::KEY_CELLS;
-        let jfa = source("methods/jfa/common.wgsl").unwrap();
-        assert!(jfa.contains(&format!("const KEY_CELLS: u32 = {KEY_CELLS}u;")), "KEY_CELLS");
+    fn constants_mirrored_in_wgsl_match_their_rust_definitions() {
+        use crate::light::tables::{EDGE_ANGLES, EDGE_STATIONS, KEY_CELLS};
+        use crate::light::E0_GRID;
+        // The edge table's shape and JFA's grid of keys over the light.
+        declares("common/edge_table.wgsl", format!("const EDGE_ANGLES: u32 = {EDGE_ANGLES}u;"));
+        declares("common/edge_table.wgsl", format!("const EDGE_STATIONS: u32 = {EDGE_STATIONS}u;"));
+        declares("methods/jfa/common.wgsl", format!("const KEY_CELLS: u32 = {KEY_CELLS}u;"));
+        // E0's blocks, and the light cells every screen-space pass may read.
+        declares("e0.wgsl", format!("const BLOCK: u32 = {}u;", crate::render::E0_BLOCK));
+        declares("common/frame_inputs.wgsl", format!("array<LightCell, {}>", E0_GRID * E0_GRID));
+        // The reference's samples per batch: its uniform block's array.
+        declares("methods/reference/accumulate.wgsl", format!("const MAX_SAMPLES: u32 = {}u;", crate::methods::reference::BATCH_SAMPLES));
     }
 }

@@ -72,8 +72,9 @@ const BATCH: u64 = 16;
 /// request from 0.97 to 0.92 s under a coloured light (0.85 to 0.80 s under white).
 const BATCH_MAP_BYTES: u64 = 512 << 20;
 
-/// The most samples one accumulate pass reads; mirrors `MAX_SAMPLES` in `accumulate.wgsl`.
-const BATCH_SAMPLES: usize = 32;
+/// The most samples one accumulate pass reads; mirrors `MAX_SAMPLES` in `accumulate.wgsl`
+/// (checked by `gpu::shaders`' tests).
+pub(crate) const BATCH_SAMPLES: usize = 32;
 
 /// Depth maps drawn before one accumulate pass reads them all: more per pass reads the
 /// G-buffer and updates the sums less often, fewer keeps the maps' memory bounded.
