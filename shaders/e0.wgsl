@@ -318,8 +318,8 @@ fn light_above(x: vec3<f32>, nx: vec3<f32>) -> bool {
 
 // E0 at one pixel interpolated from its block's corners, corrected along the view ray
 // (`ray_offset`): xyz, and w = 1 where the estimate accepts it (or the pixel receives no
-// light), 0 where it must be summed exactly and the whole light lies above its horizon
-// (`exact_above`), −1 where it must be summed exactly with clipping (`exact_clipped`). `normal` is the pixel's G-buffer normal texel
+// light); where it must be summed exactly, w = 0 if the whole light lies above its horizon
+// (`exact_above`), else −1 (`exact_clipped`). `normal` is the pixel's G-buffer normal texel
 // (w: coverage); `mixed`, the blend of the block's corners at the pixel (`blend_in_row`).
 fn interpolated_e0(x: vec3<f32>, normal: vec4<f32>, b: Block, mixed: Corner, check: Check) -> vec4<f32> {
     let nx = normal.xyz;

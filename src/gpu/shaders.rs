@@ -103,6 +103,14 @@ pub fn module(device: &wgpu::Device, name: &str) -> wgpu::ShaderModule {
     unsafe { device.create_shader_module_trusted(descriptor, checks) }
 }
 
+/// Asserts that the WGSL file `name` declares `declaration` verbatim: a constant a shader
+/// hard-codes (its passes bind no uniform for it) as Rust defines it. For tests.
+#[cfg(test)]
+pub(crate) fn assert_declares(name: &str, declaration: &str) {
+    let wgsl = source(name).unwrap_or_else(|| panic!("{name} is not listed in SOURCES"));
+    assert!(wgsl.contains(declaration), "{name} does not declare `{declaration}`");
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -118,25 +126,16 @@ mod tests {
         }
     }
 
-    /// Asserts that `file` declares `declaration` verbatim: a constant the WGSL hard-codes
-    /// (its passes bind no uniform for it) as Rust defines it.
-    fn declares(file: &str, declaration: String) {
-        let wgsl = source(file).unwrap();
-        assert!(wgsl.contains(&declaration), "{file} does not declare `{declaration}`");
-    }
-
     #[test]
     fn constants_mirrored_in_wgsl_match_their_rust_definitions() {
         use crate::light::tables::{EDGE_ANGLES, EDGE_STATIONS, KEY_CELLS};
         use crate::light::E0_GRID;
         // The edge table's shape and JFA's grid of keys over the light.
-        declares("common/edge_table.wgsl", format!("const EDGE_ANGLES: u32 = {EDGE_ANGLES}u;"));
-        declares("common/edge_table.wgsl", format!("const EDGE_STATIONS: u32 = {EDGE_STATIONS}u;"));
-        declares("methods/jfa/common.wgsl", format!("const KEY_CELLS: u32 = {KEY_CELLS}u;"));
-        // E0's blocks, and the light cells every screen-space pass may read.
-        declares("e0.wgsl", format!("const BLOCK: u32 = {}u;", crate::render::E0_BLOCK));
-        declares("common/frame_inputs.wgsl", format!("array<LightCell, {}>", E0_GRID * E0_GRID));
-        // The reference's samples per batch: its uniform block's array.
-        declares("methods/reference/accumulate.wgsl", format!("const MAX_SAMPLES: u32 = {}u;", crate::methods::reference::BATCH_SAMPLES));
+        assert_declares("common/edge_table.wgsl", &format!("const EDGE_ANGLES: u32 = {EDGE_ANGLES}u;"));
+        assert_declares("common/edge_table.wgsl", &format!("const EDGE_STATIONS: u32 = {EDGE_STATIONS}u;"));
+        assert_declares("methods/jfa/common.wgsl", &format!("const KEY_CELLS: u32 = {KEY_CELLS}u;"));
+        // The light cells every screen-space pass may read. (Constants of higher layers are
+        // checked beside their definitions: `render::passes`, `methods::reference`.)
+        assert_declares("common/frame_inputs.wgsl", &format!("array<LightCell, {}>", E0_GRID * E0_GRID));
     }
 }

@@ -73,8 +73,8 @@ const BATCH: u64 = 16;
 const BATCH_MAP_BYTES: u64 = 512 << 20;
 
 /// The most samples one accumulate pass reads; mirrors `MAX_SAMPLES` in `accumulate.wgsl`
-/// (checked by `gpu::shaders`' tests).
-pub(crate) const BATCH_SAMPLES: usize = 32;
+/// (checked by a test below).
+const BATCH_SAMPLES: usize = 32;
 
 /// Depth maps drawn before one accumulate pass reads them all: more per pass reads the
 /// G-buffer and updates the sums less often, fewer keeps the maps' memory bounded.
@@ -362,6 +362,12 @@ impl Reference {
 mod tests {
     use super::*;
     use glam::Vec2;
+
+    #[test]
+    fn the_batch_matches_its_wgsl_mirror() {
+        let declaration = format!("const MAX_SAMPLES: u32 = {BATCH_SAMPLES}u;");
+        crate::gpu::shaders::assert_declares("methods/reference/accumulate.wgsl", &declaration);
+    }
 
     #[test]
     fn samples_are_stratified_and_skip_black() {

@@ -29,8 +29,6 @@ use crate::supervise::{cancelled_error, Supervisor};
 use crate::timing::Timings;
 pub use draw::{vertex_layout, ScenePipeline, DEPTH_BUFFER_FORMAT};
 pub use frame::{Camera, ExtraImages, FrameSpec, LightProjection};
-#[cfg(test)]
-pub(crate) use passes::E0_BLOCK; // for `gpu::shaders`' check of the WGSL mirror
 pub use passes::{screen_compute_entry, screen_compute_pipeline, screen_compute_specialized, E0Mode};
 pub use pixel_list::PixelListBuffers;
 use targets::FrameTargets;

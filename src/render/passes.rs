@@ -326,3 +326,11 @@ pub fn screen_compute_specialized(
         cache: None,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn the_e0_block_matches_its_wgsl_mirror() {
+        crate::gpu::shaders::assert_declares("e0.wgsl", &format!("const BLOCK: u32 = {}u;", super::E0_BLOCK));
+    }
+}
