@@ -406,12 +406,14 @@ fn interpolate_blocks(@builtin(global_invocation_id) id: vec3<u32>) {
                 let position = textureLoad(gbuf_position, pixel, 0).xyz;
                 let normal = textureLoad(gbuf_normal, pixel, 0);
                 let e0 = interpolated_e0(position, normal, b, blend_in_row(row, f32(x) * step.x), check);
-                if e0.w > 0.0 {
-                    e0_out[pixel_index(pixel)] = vec4<f32>(e0.xyz, 1.0);
-                } else if e0.w == 0.0 {
+                // Stored whether or not the estimate holds: a refused pixel's value is
+                // overwritten by its exact pass, and lavapipe stores a whole SIMD group for
+                // less than it stores a masked part of one (the pass −7 % on `terrain`).
+                e0_out[pixel_index(pixel)] = vec4<f32>(e0.xyz, 1.0);
+                if e0.w == 0.0 {
                     // The whole light above the horizon: summed without clipping.
                     to_above |= bit;
-                } else {
+                } else if e0.w < 0.0 {
                     to_clip |= bit;
                 }
             }
