@@ -135,7 +135,8 @@ mod tests {
         assert_declares("common/edge_table.wgsl", &format!("const EDGE_STATIONS: u32 = {EDGE_STATIONS}u;"));
         assert_declares("methods/jfa/common.wgsl", &format!("const KEY_CELLS: u32 = {KEY_CELLS}u;"));
         // The light cells every screen-space pass may read. (Constants of higher layers are
-        // checked beside their definitions: `render::passes`, `methods::reference`.)
+        // checked beside their definitions: `render::passes`, `methods::brabec`,
+        // `methods::reference`.)
         assert_declares("common/frame_inputs.wgsl", &format!("array<LightCell, {}>", E0_GRID * E0_GRID));
     }
 }

@@ -107,7 +107,7 @@ struct Uniforms {
 const BLOCK: u32 = 4;
 
 /// Texels per side of the depth map's summary blocks, which prove searches empty; mirrors
-/// `SUMMARY_BLOCK` in `shaders/methods/brabec/common.wgsl`.
+/// `SUMMARY_BLOCK` in `shaders/methods/brabec/common.wgsl` (checked by a test below).
 const SUMMARY_BLOCK: u32 = 8;
 
 impl ShadowMethod for Brabec {
@@ -289,5 +289,14 @@ impl ShadowMethod for Brabec {
             counters.insert("pixels_unresolved".to_owned(), f64::from(unresolved));
         }
         Ok(counters)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn the_summary_block_matches_its_wgsl_mirror() {
+        let declaration = format!("const SUMMARY_BLOCK: i32 = {};", super::SUMMARY_BLOCK);
+        crate::gpu::shaders::assert_declares("methods/brabec/common.wgsl", &declaration);
     }
 }
