@@ -309,11 +309,23 @@ fn block_check(block: vec2<u32>, b: Block) -> Check {
     return check;
 }
 
-// Whether the whole light rectangle lies above the plane through x with normal nx.
+// The height of the light's cells above the plane through x with normal nx: the least and
+// the greatest over the rectangle that bounds them (`frame.cells_bounds`), not over the whole
+// light — a shaped light's black texels are no part of its sum, and under a low light a
+// landscape's slopes see all of a flame's cells above their horizon, or none, where the
+// rectangle straddles it.
+fn cells_height(x: vec3<f32>, nx: vec3<f32>) -> vec2<f32> {
+    let bounds = frame.cells_bounds;
+    let centre = frame.light_center.xyz + bounds.x * frame.light_r.xyz + bounds.y * frame.light_u.xyz;
+    let c = dot(centre - x, nx);
+    let reach = bounds.z * abs(dot(frame.light_r.xyz, nx)) + bounds.w * abs(dot(frame.light_u.xyz, nx));
+    return vec2<f32>(c - reach, c + reach);
+}
+
+// Whether every cell of the light lies above the plane through x with normal nx: each cell's
+// clipped irradiance is then its unclipped |nx · Φ| (the same edge terms, the same order).
 fn light_above(x: vec3<f32>, nx: vec3<f32>) -> bool {
-    let c = dot(frame.light_center.xyz - x, nx);
-    let reach = 0.5 * (frame.light_n.w * abs(dot(frame.light_r.xyz, nx)) + frame.light_u.w * abs(dot(frame.light_u.xyz, nx)));
-    return c - reach > HORIZON_EPS;
+    return cells_height(x, nx).x > HORIZON_EPS;
 }
 
 // E0 at one pixel interpolated from its block's corners, corrected along the view ray
@@ -338,14 +350,18 @@ fn interpolated_e0(x: vec3<f32>, normal: vec4<f32>, b: Block, mixed: Corner, che
     // splits on, and a landscape splits most groups): with the whole light above the horizon
     // E0 is |nx · Φ|; where the light straddles it, on a flat face (the corners' normal the
     // pixel's) E0 is still smooth in the position and is blended itself.
-    let above = light_above(x, nx);
-    let e0 = select(e0_of(mixed) + check.d_e0 * t, abs(nx * phi), above);
+    // With every cell on or below the horizon (by HORIZON_EPS, for rounding) no clipped edge
+    // survives and E0 is exactly 0, what the exact sum adds up to there.
+    let height = cells_height(x, nx);
+    let above = height.x > HORIZON_EPS;
+    let below = height.y <= 0.0;
+    let e0 = select(select(e0_of(mixed) + check.d_e0 * t, abs(nx * phi), above), vec3<f32>(0.0), below);
     let error = relative + select(bend(b, nx), 0.0, above);
     // error × |Φ| ≤ E0_TOLERANCE × E0, compared squared (no square root per channel); both
     // sides' signs kept (error ≥ 0, E0 may not be).
     let size2 = vec3<f32>(dot(phi[0], phi[0]), dot(phi[1], phi[1]), dot(phi[2], phi[2]));
     let bound = E0_TOLERANCE * e0;
-    let done = all(error * error * size2 <= bound * abs(bound)) && check.error < UNCHECKED;
+    let done = (all(error * error * size2 <= bound * abs(bound)) && check.error < UNCHECKED) || below;
     return vec4<f32>(e0, select(select(-1.0, 0.0, above), 1.0, done));
 }
 

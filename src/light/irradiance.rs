@@ -76,6 +76,22 @@ pub fn light_cells(light: &AreaLight, image: &LightImage) -> Vec<LightCell> {
         .collect()
 }
 
+/// The rectangle that bounds the light's cells, in the light's frame: its centre along `r`
+/// and `u` from the light's centre and its half width and height, metres. A shaped light
+/// (`flame`, `disk`) drops its black texels from the cells, so its cells can all lie on one
+/// side of a receiver's horizon where the whole rectangle does not (`light_above` in
+/// `shaders/e0.wgsl`). The whole rectangle where there are no cells.
+pub fn cells_bounds(light: &AreaLight, cells: &[LightCell]) -> [f32; 4] {
+    let along = |p: Vec3| glam::Vec2::new((p - light.center).dot(light.r), (p - light.center).dot(light.u));
+    let mut corners = cells.iter().flat_map(|c| c.corners).map(along);
+    let Some(first) = corners.next() else {
+        return [0.0, 0.0, 0.5 * light.size_m.x, 0.5 * light.size_m.y];
+    };
+    let (min, max) = corners.fold((first, first), |(lo, hi), p| (lo.min(p), hi.max(p)));
+    let (centre, half) = (0.5 * (min + max), 0.5 * (max - min));
+    [centre.x, centre.y, half.x, half.y]
+}
+
 /// Whether every segment within the light's rectangle subtends at most a right angle from
 /// every point of the box `[min, max]` (`ACUTE_EDGES` in `shaders/common/light.wgsl`). A
 /// segment subtends more only from inside the sphere on it as diameter (Thales), which lies
@@ -245,6 +261,31 @@ mod tests {
         let flux: Vec3 =
             cells.iter().map(|c| c.radiance * (c.corners[1] - c.corners[0]).length() * (c.corners[3] - c.corners[0]).length()).sum();
         assert!((flux - image.mean_emission()).length() < 1e-4, "{flux} vs {}", image.mean_emission());
+    }
+
+    #[test]
+    fn the_cells_bounds_hold_every_cell_and_no_more() {
+        let light = AreaLight::new(Vec3::new(1.0, 3.0, -2.0), -Vec3::Y, -Vec3::Z, Vec2::new(2.0, 1.0), 1.0).unwrap();
+        let none = Map::new();
+        let bounds = |name: &str| cells_bounds(&light, &light_cells(&light, &LightImage::builtin(name, &none, "f").unwrap()));
+        // A light with no black texels: its whole rectangle.
+        for name in ["white", "stripes"] {
+            let [cx, cy, hx, hy] = bounds(name);
+            assert!(cx.abs() < 1e-5 && cy.abs() < 1e-5 && (hx - 1.0).abs() < 1e-5 && (hy - 0.5).abs() < 1e-5, "{name}");
+        }
+        // The flame: black at both sides of its 8 × 8 cell grid (`E0_GRID`), its tip and its
+        // base in the middle columns: a quarter narrower than the light, as tall, centred.
+        let image = LightImage::builtin("flame", &none, "f").unwrap();
+        let [cx, cy, hx, hy] = cells_bounds(&light, &light_cells(&light, &image));
+        assert!(cx.abs() < 1e-5 && cy.abs() < 1e-5 && (hx - 0.75).abs() < 1e-5 && (hy - 0.5).abs() < 1e-5, "{cx} {cy} {hx} {hy}");
+        for cell in light_cells(&light, &image) {
+            for p in cell.corners {
+                let q = p - light.center;
+                assert!((q.dot(light.r) - cx).abs() <= hx + 1e-5 && (q.dot(light.u) - cy).abs() <= hy + 1e-5);
+            }
+        }
+        // No cells (a black light): the whole rectangle.
+        assert_eq!(cells_bounds(&light, &[]), [0.0, 0.0, 1.0, 0.5]);
     }
 
     #[test]

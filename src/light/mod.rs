@@ -15,7 +15,7 @@ use glam::{Vec2, Vec3};
 
 use crate::error::{JobError, JobResult};
 pub use image::{LightImage, BUILTIN_LIGHT_IMAGES};
-pub use irradiance::{edges_acute_from, light_cells, polygon_irradiance, unshadowed_irradiance, LightCell, E0_GRID};
+pub use irradiance::{cells_bounds, edges_acute_from, light_cells, polygon_irradiance, unshadowed_irradiance, LightCell, E0_GRID};
 
 /// The light's rectangle and frame in world space.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -23,7 +23,7 @@ use crate::gpu::readback::Readback;
 use crate::gpu::scene::GpuScene;
 use crate::gpu::timing::GpuTimer;
 use crate::gpu::GpuContext;
-use crate::light::{LightCell, E0_GRID};
+use crate::light::{cells_bounds, LightCell, E0_GRID};
 use crate::render::method::{Counters, MethodContext, Scratch};
 use crate::supervise::{cancelled_error, Supervisor};
 use crate::timing::Timings;
@@ -48,6 +48,7 @@ pub struct FrameUniforms {
     light_proj: [f32; 4],
     ambient: [f32; 4],
     sizes: [u32; 4],
+    cells_bounds: [f32; 4],
 }
 
 /// A light cell as `LightCell` in `shaders/common/light.wgsl`.
@@ -365,6 +366,7 @@ impl Renderer {
             light_proj: [projection.tan_half, 0.0, projection.near, projection.far],
             ambient: v4(spec.ambient, spec.exposure.exp2()),
             sizes: [spec.width, spec.height, spec.shadow_resolution, spec.cells.len() as u32],
+            cells_bounds: cells_bounds(light, &spec.cells),
         };
         self.gpu.queue.write_buffer(&self.uniforms, 0, bytemuck::bytes_of(&uniforms));
         let cells: Vec<LightCellGpu> = spec.cells.iter().map(cell_to_gpu).collect();
