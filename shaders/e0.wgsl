@@ -4,7 +4,8 @@
 // inside a block wherever the error measured at its centre, and bounds for what the centre
 // cannot see, keep it within E0_TOLERANCE of the exact sum; every other lit pixel is listed
 // and summed exactly by a compacted pass of its own (contract §1, "E0") — one for pixels that
-// see the whole light above their horizon, whose cells need no clipping, one for the rest.
+// see every cell of the light above their horizon, whose cells need no clipping, one for the
+// rest; a pixel that sees every cell below its horizon takes 0, the exact sum, and no pass.
 //
 // What is interpolated: below its horizon-free region, E0 = |n · Φ(x)| per channel, where
 // Φ = Σ radiance × ½ Σ Θᵢ Γᵢ is the light's vector irradiance — a smooth function of the
@@ -20,7 +21,7 @@
 @group(1) @binding(0) var<storage, read_write> e0_out: array<vec4<f32>>;
 @group(1) @binding(1) var<storage, read_write> corners: array<Corner>;
 // The pixels the interpolation refuses, summed exactly by a pass of their own over each list
-// (common/pixel_list.wgsl says why): those that see the whole light above their horizon,
+// (common/pixel_list.wgsl says why): those that see every cell above their horizon,
 // whose cells need no clipping, and the others.
 @group(1) @binding(2) var<storage, read_write> above: PixelList;
 @group(1) @binding(3) var<storage, read_write> above_groups: array<u32, 3>; // indirect dispatch
@@ -89,22 +90,32 @@ fn corner_pixel(c: vec2<u32>) -> vec2<u32> {
 // Φ per channel (columns) and the exact E0 with x's own normal (w of each column's vec4).
 fn exact_terms(x: vec3<f32>, nx: vec3<f32>, depth: f32) -> Corner {
     var phi = mat3x3<f32>(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0));
-    var e0 = vec3<f32>(0.0);
-    // With the light wholly above the horizon a cell's irradiance is |nx · its Φ| (`exact_above`).
-    let above = light_above(x, nx);
+    // With every cell above the horizon a cell's irradiance is |nx · its Φ| (`exact_above`).
+    var e0_above = vec3<f32>(0.0);
     for (var k = 0u; k < frame.sizes.w; k++) {
         let cell = light_cells[k];
         let phi_cell = polygon_vector(x, cell.corners);
         phi += mat3x3<f32>(phi_cell * cell.radiance.r, phi_cell * cell.radiance.g, phi_cell * cell.radiance.b);
-        var irradiance: f32;
-        if above {
-            irradiance = abs(dot(nx, phi_cell));
-        } else {
-            irradiance = polygon_irradiance(x, nx, cell.corners);
-        }
-        e0 += cell.radiance.rgb * irradiance;
+        e0_above += cell.radiance.rgb * abs(dot(nx, phi_cell));
     }
+    let height = cells_height(x, nx);
+    let above = height.x > HORIZON_EPS;
+    let e0 = select(clipped_sum(x, nx, !above && height.y > 0.0), e0_above, above);
     return Corner(vec4<f32>(phi[0], e0.r), vec4<f32>(phi[1], e0.g), vec4<f32>(phi[2], e0.b), vec4<f32>(x, 1.0), vec4<f32>(nx, depth));
+}
+
+// The clipped sum where `straddles`, else 0 (every cell below the horizon, or a value the
+// caller does not take) by a loop of no iterations: lavapipe runs an `if`'s body for every
+// lane of its SIMD group, taken or not, but a loop's body only until no lane goes on — once,
+// masked, where none straddles, instead of once per cell (`e0_corners` −30 % on `crowd`
+// under `flame`, whose corners mostly see the whole light).
+fn clipped_sum(x: vec3<f32>, nx: vec3<f32>, straddles: bool) -> vec3<f32> {
+    var e0 = vec3<f32>(0.0);
+    for (var k = 0u; k < select(0u, frame.sizes.w, straddles); k++) {
+        let cell = light_cells[k];
+        e0 += cell.radiance.rgb * polygon_irradiance(x, nx, cell.corners);
+    }
+    return e0;
 }
 
 fn no_corner() -> Corner {
@@ -313,7 +324,10 @@ fn block_check(block: vec2<u32>, b: Block) -> Check {
 // the greatest over the rectangle that bounds them (`frame.cells_bounds`), not over the whole
 // light — a shaped light's black texels are no part of its sum, and under a low light a
 // landscape's slopes see all of a flame's cells above their horizon, or none, where the
-// rectangle straddles it.
+// rectangle straddles it. The least above HORIZON_EPS: every cell lies above, and its clipped
+// irradiance is its unclipped |nx · Φ| (the same edge terms in the same order). The greatest
+// at most 0 (HORIZON_EPS below the clip's threshold, for rounding): every cell lies below, no
+// clipped edge survives and E0 is exactly 0.
 fn cells_height(x: vec3<f32>, nx: vec3<f32>) -> vec2<f32> {
     let bounds = frame.cells_bounds;
     let centre = frame.light_center.xyz + bounds.x * frame.light_r.xyz + bounds.y * frame.light_u.xyz;
@@ -322,15 +336,9 @@ fn cells_height(x: vec3<f32>, nx: vec3<f32>) -> vec2<f32> {
     return vec2<f32>(c - reach, c + reach);
 }
 
-// Whether every cell of the light lies above the plane through x with normal nx: each cell's
-// clipped irradiance is then its unclipped |nx · Φ| (the same edge terms, the same order).
-fn light_above(x: vec3<f32>, nx: vec3<f32>) -> bool {
-    return cells_height(x, nx).x > HORIZON_EPS;
-}
-
 // E0 at one pixel interpolated from its block's corners, corrected along the view ray
 // (`ray_offset`): xyz, and w = 1 where the estimate accepts it (or the pixel receives no
-// light); where it must be summed exactly, w = 0 if the whole light lies above its horizon
+// light); where it must be summed exactly, w = 0 if every cell lies above its horizon
 // (`exact_above`), else −1 (`exact_clipped`). `normal` is the pixel's G-buffer normal texel
 // (w: coverage); `mixed`, the blend of the block's corners at the pixel (`blend_in_row`).
 fn interpolated_e0(x: vec3<f32>, normal: vec4<f32>, b: Block, mixed: Corner, check: Check) -> vec4<f32> {
@@ -347,11 +355,10 @@ fn interpolated_e0(x: vec3<f32>, normal: vec4<f32>, b: Block, mixed: Corner, che
     let relative = ERROR_MARGIN * check.error + check.first * beyond + RAY_SECOND * reach * reach;
     let phi = phi_of(mixed) + check.d_phi * t;
     // Both cases in straight-line code (lavapipe runs both sides of a branch its SIMD group
-    // splits on, and a landscape splits most groups): with the whole light above the horizon
+    // splits on, and a landscape splits most groups): with every cell above the horizon
     // E0 is |nx · Φ|; where the light straddles it, on a flat face (the corners' normal the
-    // pixel's) E0 is still smooth in the position and is blended itself.
-    // With every cell on or below the horizon (by HORIZON_EPS, for rounding) no clipped edge
-    // survives and E0 is exactly 0, what the exact sum adds up to there.
+    // pixel's) E0 is still smooth in the position and is blended itself; with every cell
+    // below it E0 is 0, exactly the sum (`cells_height`).
     let height = cells_height(x, nx);
     let above = height.x > HORIZON_EPS;
     let below = height.y <= 0.0;
@@ -394,7 +401,7 @@ fn append_rows(to_above: bool, origin: vec2<u32>, first_row: u32, mask: u32) {
 
 // Pass 2, one invocation per block (a row of blocks per workgroup row): the centre checks
 // the interpolation, then each of the block's pixels is interpolated where the estimate
-// allows and listed otherwise for the exact sum — in `above` where the whole light lies above
+// allows and listed otherwise for the exact sum — in `above` where every cell lies above
 // its horizon, else in `clipped` — four rows at a time (an atomic append per pixel cost lavapipe
 // 9 of this pass's 50 ms on `terrain` under `flame`). One invocation loads the block's 20
 // corner vectors for its 64 pixels: on lavapipe a storage load is a gather lane by lane
@@ -427,7 +434,7 @@ fn interpolate_blocks(@builtin(global_invocation_id) id: vec3<u32>) {
                 // less than it stores a masked part of one (the pass −7 % on `terrain`).
                 e0_out[pixel_index(pixel)] = vec4<f32>(e0.xyz, 1.0);
                 if e0.w == 0.0 {
-                    // The whole light above the horizon: summed without clipping.
+                    // Every cell above the horizon: summed without clipping.
                     to_above |= bit;
                 } else if e0.w < 0.0 {
                     to_clip |= bit;
