@@ -143,8 +143,10 @@ impl Renderer {
     /// E0 (`shaders/e0.wgsl`). Under a light of more than `E0_EXACT_CELLS` cells: the exact
     /// sum at the corners of `E0_BLOCK`-pixel blocks; per block, the interpolation's error at
     /// its centre, and each of its pixels interpolated where the error estimate allows and
-    /// listed otherwise; then the listed pixels summed exactly, those that see the whole light
-    /// above their horizon without clipping (two indirect dispatches sized on the GPU).
+    /// listed otherwise (a pixel that sees every cell of the light below its horizon takes 0,
+    /// its exact sum, and is not listed); then the listed pixels summed exactly, those that
+    /// see every cell above their horizon without clipping (two indirect dispatches sized on
+    /// the GPU).
     /// Otherwise (or with `E0Mode::Exact`) the exact sum everywhere, in one pass.
     pub(super) fn record_e0(&mut self, encoder: &mut wgpu::CommandEncoder, inputs: &FrameInputs, targets: &FrameTargets, spec: &FrameSpec) {
         let io_layout = self.layouts.e0_output.clone();
@@ -169,7 +171,8 @@ impl Renderer {
             })
         };
         let records = buffer("E0::corners", u64::from(corners * rows) * E0_CORNER_BYTES, wgpu::BufferUsages::empty());
-        // The pixels summed exactly, by whether they see the whole light (at most every pixel).
+        // The pixels summed exactly, by whether they see every cell above their horizon (at
+        // most every pixel).
         let above = PixelListBuffers::new(device, encoder, "E0::above", pixels);
         let clipped = PixelListBuffers::new(device, encoder, "E0::clipped", pixels);
         let bind = |above_groups: &wgpu::Buffer, clipped_groups: &wgpu::Buffer| {
