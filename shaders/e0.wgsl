@@ -108,7 +108,7 @@ fn exact_terms(x: vec3<f32>, nx: vec3<f32>, depth: f32) -> Corner {
 // caller does not take) by a loop of no iterations: lavapipe runs an `if`'s body for every
 // lane of its SIMD group, taken or not, but a loop's body only until no lane goes on — once,
 // masked, where none straddles, instead of once per cell (`e0_corners` −30 % on `crowd`
-// under `flame`, whose corners mostly see the whole light).
+// under `flame`, whose corners mostly see every cell above their horizon).
 fn clipped_sum(x: vec3<f32>, nx: vec3<f32>, straddles: bool) -> vec3<f32> {
     var e0 = vec3<f32>(0.0);
     for (var k = 0u; k < select(0u, frame.sizes.w, straddles); k++) {

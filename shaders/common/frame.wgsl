@@ -14,5 +14,5 @@ struct Frame {
     light_proj: vec4<f32>,   // x: tan of the shadow frustum's half angle, y: unused, z: near, w: far
     ambient: vec4<f32>,      // rgb: ambient irradiance asked for by the job; w: 2^exposure (PNG)
     sizes: vec4<u32>,        // x, y: output size; z: shadow-map resolution; w: light cell count
-    cells_bounds: vec4<f32>, // the rectangle bounding the light's cells: xy its centre along r and u from the light's centre, zw its half width and height, m
+    cells_bounds: vec4<f32>, // rectangle bounding the light's cells: xy centre (along r, u from the light's), zw half sizes, m
 }

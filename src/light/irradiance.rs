@@ -79,7 +79,7 @@ pub fn light_cells(light: &AreaLight, image: &LightImage) -> Vec<LightCell> {
 /// The rectangle that bounds the light's cells, in the light's frame: its centre along `r`
 /// and `u` from the light's centre and its half width and height, metres. A shaped light
 /// (`flame`, `disk`) drops its black texels from the cells, so its cells can all lie on one
-/// side of a receiver's horizon where the whole rectangle does not (`light_above` in
+/// side of a receiver's horizon where the whole rectangle does not (`cells_height` in
 /// `shaders/e0.wgsl`). The whole rectangle where there are no cells.
 pub fn cells_bounds(light: &AreaLight, cells: &[LightCell]) -> [f32; 4] {
     let along = |p: Vec3| glam::Vec2::new((p - light.center).dot(light.r), (p - light.center).dot(light.u));
@@ -273,8 +273,8 @@ mod tests {
             let [cx, cy, hx, hy] = bounds(name);
             assert!(cx.abs() < 1e-5 && cy.abs() < 1e-5 && (hx - 1.0).abs() < 1e-5 && (hy - 0.5).abs() < 1e-5, "{name}");
         }
-        // The flame: black at both sides of its 8 × 8 cell grid (`E0_GRID`), its tip and its
-        // base in the middle columns: a quarter narrower than the light, as tall, centred.
+        // The flame: the outer columns of its cell grid (`E0_GRID`) are black, its tip and its
+        // base are not: a quarter narrower than the light, as tall, centred.
         let image = LightImage::builtin("flame", &none, "f").unwrap();
         let [cx, cy, hx, hy] = cells_bounds(&light, &light_cells(&light, &image));
         assert!(cx.abs() < 1e-5 && cy.abs() < 1e-5 && (hx - 0.75).abs() < 1e-5 && (hy - 0.5).abs() < 1e-5, "{cx} {cy} {hx} {hy}");
