@@ -275,10 +275,10 @@ mod tests {
         }
         // The flame: the outer columns of its cell grid (`E0_GRID`) are black, its tip and its
         // base are not: a quarter narrower than the light, as tall, centred.
-        let image = LightImage::builtin("flame", &none, "f").unwrap();
-        let [cx, cy, hx, hy] = cells_bounds(&light, &light_cells(&light, &image));
+        let cells = light_cells(&light, &LightImage::builtin("flame", &none, "f").unwrap());
+        let [cx, cy, hx, hy] = cells_bounds(&light, &cells);
         assert!(cx.abs() < 1e-5 && cy.abs() < 1e-5 && (hx - 0.75).abs() < 1e-5 && (hy - 0.5).abs() < 1e-5, "{cx} {cy} {hx} {hy}");
-        for cell in light_cells(&light, &image) {
+        for cell in cells {
             for p in cell.corners {
                 let q = p - light.center;
                 assert!((q.dot(light.r) - cx).abs() <= hx + 1e-5 && (q.dot(light.u) - cy).abs() <= hy + 1e-5);
