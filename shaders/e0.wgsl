@@ -124,10 +124,13 @@ fn no_corner() -> Corner {
 
 // The exact terms at a pixel, or an invalid record where it holds no lit surface.
 fn pixel_terms(pixel: vec2<u32>) -> Corner {
-    if covered(pixel) {
+    // The normal texel once: its w is the coverage (`covered`; corners and centres lie on
+    // the screen).
+    let normal = textureLoad(gbuf_normal, pixel, 0);
+    if normal.w > 0.5 {
         let x = textureLoad(gbuf_position, pixel, 0);
         if lit_side(x.xyz) {
-            return exact_terms(x.xyz, textureLoad(gbuf_normal, pixel, 0).xyz, x.w);
+            return exact_terms(x.xyz, normal.xyz, x.w);
         }
     }
     return no_corner();

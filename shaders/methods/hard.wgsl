@@ -19,9 +19,11 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     var v = 1.0;
-    if covered(pixel) {
+    // The normal texel once: its w is the coverage (`covered`), its xyz the bias's normal.
+    let normal = textureLoad(gbuf_normal, pixel, 0);
+    if normal.w > 0.5 {
         let p = textureLoad(gbuf_position, pixel, 0).xyz;
-        let n = textureLoad(gbuf_normal, pixel, 0).xyz;
+        let n = normal.xyz;
         let ls = to_light_space(p);
         if ls.inside {
             let blocker = textureLoad(shadow_depth, shadow_texel(ls.uv), 0).r;

@@ -15,7 +15,9 @@
 @group(1) @binding(8) var<storage, read_write> boundary: PixelList;
 @group(1) @binding(9) var<storage, read_write> boundary_groups: array<u32, 3>; // indirect dispatch
 
-// Step 1, every pixel: its flags, and an empty record.
+// Step 1, every pixel: its flags. (The records start empty: `flood` clears the buffer, where
+// lavapipe stores a zero record lane by lane, a third of this pass.) The normal texel is read
+// once, for the coverage and the bias both.
 @compute @workgroup_size(8, 8)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     let pixel = id.xy;
@@ -23,12 +25,15 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     if any(pixel >= size) {
         return;
     }
-    let is_covered = covered(pixel);
-    let hard = is_covered && hard_shadowed(pixel);
+    let normal = textureLoad(gbuf_normal, pixel, 0);
+    let is_covered = normal.w > 0.5;
+    var hard = false;
+    if is_covered {
+        let p = textureLoad(gbuf_position, pixel, 0).xyz;
+        let ls = to_light_space(p);
+        hard = ls.inside && hard_shadowed_in_map(p, normal.xyz, ls);
+    }
     flags[pixel.y * size.x + pixel.x] = select(0u, COVERED, is_covered) | select(0u, HARD, hard);
-    let index = 2u * (pixel.y * size.x + pixel.x);
-    dst[index] = vec4<f32>(0.0);
-    dst[index + 1u] = vec4<f32>(0.0);
 }
 
 // Step 2, every pixel: lists those in hard shadow with a lit, covered neighbour close in 3D

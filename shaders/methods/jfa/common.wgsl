@@ -168,14 +168,8 @@ fn mark_tile(cell: vec2<i32>) {
     atomicStore(&tiles[cell.y / TILE * tile_count().x + cell.x / TILE], 1u);
 }
 
-// The hard-shadow test of an eye pixel (the same test as method `hard`).
-fn hard_shadowed(pixel: vec2<u32>) -> bool {
-    let p = textureLoad(gbuf_position, pixel, 0).xyz;
-    let ls = to_light_space(p);
-    return ls.inside && hard_shadowed_in_map(p, textureLoad(gbuf_normal, pixel, 0).xyz, ls);
-}
-
-// The same for a point p (normal n) the caller has in light space already, inside the map.
+// The hard-shadow test of an eye point p (normal n; the same test as method `hard`), in light
+// space already, inside the map.
 fn hard_shadowed_in_map(p: vec3<f32>, n: vec3<f32>, ls: LightSpace) -> bool {
     let blocker = map_depth_at(shadow_texel(ls.uv));
     return ls.depth - depth_bias(p, n, ls.depth, params.bias_texels, params.slope_bias_texels) > blocker;

@@ -96,14 +96,19 @@ fn add_sample(sums: ptr<function, Sums>, x: vec3<f32>, n: vec3<f32>, bias: f32, 
 @compute @workgroup_size(8, 8)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     let pixel = id.xy;
-    if !covered(pixel) {
-        if LAST && all(pixel < frame.sizes.xy) {
+    if any(pixel >= frame.sizes.xy) {
+        return;
+    }
+    // The normal texel once: its w is the coverage (`covered`).
+    let normal_texel = textureLoad(gbuf_normal, pixel, 0);
+    if normal_texel.w <= 0.5 {
+        if LAST {
             visibility_out[pixel_index(pixel)] = vec4<f32>(1.0);
         }
         return;
     }
     let world = textureLoad(gbuf_position, pixel, 0).xyz;
-    let normal = textureLoad(gbuf_normal, pixel, 0).xyz;
+    let normal = normal_texel.xyz;
     let r = batch.rotation;
     let x = vec3<f32>(dot(r[0].xyz, world), dot(r[1].xyz, world), dot(r[2].xyz, world));
     let n = vec3<f32>(dot(r[0].xyz, normal), dot(r[1].xyz, normal), dot(r[2].xyz, normal));
