@@ -123,6 +123,8 @@ struct Uniforms {
 
 /// The flood's workgroups are `TILE`² cells (`TILE` in `neighbours.wgsl`).
 const TILE: u32 = 8;
+/// Texels per invocation of jfa-l's silhouette pass (`ROW_TEXELS` in silhouette.wgsl).
+const SILHOUETTE_ROW: u32 = 4;
 
 /// The step lengths of the flood: 2^(rounds−1) … 1, or 1 repeated for standard flooding.
 pub fn steps(rounds: u32, standard: bool) -> Vec<i32> {
@@ -373,10 +375,11 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
             timestamp_writes: ctx.timer.compute_scope("method", "Jfa::passes"),
         });
         pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
-        // Seeds go to a.
+        // Seeds go to a. jfa-l's silhouette pass takes `SILHOUETTE_ROW` texels per invocation.
         pass.set_pipeline(&seed);
         pass.set_bind_group(1, &b_to_a, &[0]);
-        pass.dispatch_workgroups(groups.0, groups.1, 1);
+        let across = if which.light_space { groups.0.div_ceil(SILHOUETTE_ROW) } else { groups.0 };
+        pass.dispatch_workgroups(across, groups.1, 1);
         ctx.timer.mark(&mut pass, "jfa_seed");
         if let Some([mark, size, seed_listed]) = &boundary {
             for (name, pipeline, (x, y)) in [("jfa_boundary", mark, groups), ("jfa_boundary_size", size, (1, 1))] {
