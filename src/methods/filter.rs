@@ -27,6 +27,9 @@ use crate::gpu::pool::{DerivedKey, PipelineKey};
 use crate::light::LightImage;
 use crate::render::PixelListBuffers;
 
+/// Pixels of a row per invocation of the classification (`ROW_PIXELS` in filter.wgsl).
+const CLASSIFY_ROW: u32 = 8;
+
 /// Parameters both filter methods take, with the same meaning.
 const SEARCH_TAPS: Param<u32> = Param::integer("search_taps", 8, 1, 16, "blocker-search taps per side of the search region");
 const TAPS_PER_CELL: Param<u32> = Param::integer(
@@ -157,16 +160,17 @@ pub(super) fn run(
     };
     let (classify_group, size_group, filter_group) =
         (bind(&classify, &listed.groups), bind(&size, &listed.groups), bind(&filter, &listed.stand_in));
-    let (gx, gy) = ctx.dispatch_size();
+    let (_, gy) = ctx.dispatch_size();
     {
         let mut pass = ctx.encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some(name),
             timestamp_writes: ctx.timer.compute_scope("method", name),
         });
         pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
+        // The classification takes `CLASSIFY_ROW` pixels of a row per invocation.
         pass.set_pipeline(&classify);
         pass.set_bind_group(1, &classify_group, &[]);
-        pass.dispatch_workgroups(gx, gy, 1);
+        pass.dispatch_workgroups(ctx.width.div_ceil(8 * CLASSIFY_ROW), gy, 1);
         ctx.timer.mark(&mut pass, "filter_classify");
         pass.set_pipeline(&size);
         pass.set_bind_group(1, &size_group, &[]);

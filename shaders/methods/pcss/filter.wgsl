@@ -223,27 +223,50 @@ fn run_filter(pixel: vec2<u32>) -> Filter {
     return f;
 }
 
+// Pixels per invocation of pass 1: a run of a row, listed with one atomic append for the run
+// (on lavapipe an append per pixel is an atomic per lane, and nearly every covered pixel is
+// listed here).
+const ROW_PIXELS: u32 = 8u;
+
 // Pass 1, every pixel: uncovered pixels and those outside the shadow frustum written, the
 // others listed.
 @compute @workgroup_size(8, 8)
 fn classify(@builtin(global_invocation_id) id: vec3<u32>) {
-    let pixel = id.xy;
-    if any(pixel >= frame.sizes.xy) {
+    let first = vec2<u32>(id.x * ROW_PIXELS, id.y);
+    if any(first >= frame.sizes.xy) {
         return;
     }
-    if !covered(pixel) {
-        visibility_out[pixel_index(pixel)] = vec4<f32>(1.0);
+    // Bit k: pixel first + (k, 0) is listed.
+    var listing = 0u;
+    for (var k = 0u; k < ROW_PIXELS; k++) {
+        let pixel = first + vec2<u32>(k, 0u);
+        if pixel.x >= frame.sizes.x {
+            break;
+        }
+        if !covered(pixel) {
+            visibility_out[pixel_index(pixel)] = vec4<f32>(1.0);
+            continue;
+        }
+        let p = textureLoad(gbuf_position, pixel, 0).xyz;
+        let ls = to_light_space(p);
+        // Outside the shadow frustum the filter has nothing to test: lit.
+        if !ls.inside {
+            visibility_out[pixel_index(pixel)] = vec4<f32>(unblocked_visibility(), 1.0);
+            atomicAdd(&counters[0], 1u);
+            atomicAdd(&counters[5], 1u);
+        } else {
+            listing |= 1u << k;
+        }
+    }
+    if listing == 0u {
         return;
     }
-    let p = textureLoad(gbuf_position, pixel, 0).xyz;
-    let ls = to_light_space(p);
-    // Outside the shadow frustum the filter has nothing to test: lit.
-    if !ls.inside {
-        visibility_out[pixel_index(pixel)] = vec4<f32>(unblocked_visibility(), 1.0);
-        atomicAdd(&counters[0], 1u);
-        atomicAdd(&counters[5], 1u);
-    } else {
-        listed.pixels[atomicAdd(&listed.count, 1u)] = pixel_index(pixel);
+    var at = atomicAdd(&listed.count, countOneBits(listing));
+    var rest = listing;
+    while rest != 0u {
+        listed.pixels[at] = pixel_index(first + vec2<u32>(firstTrailingBit(rest), 0u));
+        at++;
+        rest &= rest - 1u;
     }
 }
 
