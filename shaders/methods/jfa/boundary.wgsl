@@ -15,9 +15,9 @@
 @group(1) @binding(8) var<storage, read_write> boundary: PixelList;
 @group(1) @binding(9) var<storage, read_write> boundary_groups: array<u32, 3>; // indirect dispatch
 
-// Step 1, every pixel: its flags. (The records start empty: `flood` clears the buffer, where
-// lavapipe stores a zero record lane by lane, a third of this pass.) The normal texel is read
-// once, for the coverage and the bias both.
+// Step 1, every pixel: its flags. The records start empty by a buffer fill in `flood`, not by
+// this pass storing an empty record per pixel (lavapipe stores them lane by lane: about a
+// quarter of the pass). The normal texel is read once, for the coverage and the bias both.
 @compute @workgroup_size(8, 8)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     let pixel = id.xy;
