@@ -124,10 +124,10 @@ fn no_corner() -> Corner {
 
 // The exact terms at a pixel, or an invalid record where it holds no lit surface.
 fn pixel_terms(pixel: vec2<u32>) -> Corner {
-    // The normal texel once: its w is the coverage (`covered`; corners and centres lie on
-    // the screen).
+    // The normal texel once, for the coverage and the normal (`covers`; corners and centres
+    // lie on the screen).
     let normal = textureLoad(gbuf_normal, pixel, 0);
-    if normal.w > 0.5 {
+    if covers(normal) {
         let x = textureLoad(gbuf_position, pixel, 0);
         if lit_side(x.xyz) {
             return exact_terms(x.xyz, normal.xyz, x.w);
@@ -346,7 +346,7 @@ fn cells_height(x: vec3<f32>, nx: vec3<f32>) -> vec2<f32> {
 // (w: coverage); `mixed`, the blend of the block's corners at the pixel (`blend_in_row`).
 fn interpolated_e0(x: vec3<f32>, normal: vec4<f32>, b: Block, mixed: Corner, check: Check) -> vec4<f32> {
     let nx = normal.xyz;
-    if normal.w <= 0.5 || !lit_side(x) {
+    if !covers(normal) || !lit_side(x) {
         return vec4<f32>(0.0, 0.0, 0.0, 1.0);
     }
     let t = ray_offset(x, mixed);
@@ -473,7 +473,7 @@ fn exact(@builtin(global_invocation_id) id: vec3<u32>) {
 fn screen_surface(pixel: vec2<u32>) -> Surface {
     let x = textureLoad(gbuf_position, pixel, 0).xyz;
     let normal = textureLoad(gbuf_normal, pixel, 0);
-    let lit = normal.w > 0.5 && lit_side(x);
+    let lit = covers(normal) && lit_side(x);
     return Surface(pixel_index(pixel), x, select(vec3<f32>(0.0), normal.xyz, lit));
 }
 

@@ -38,7 +38,13 @@ fn light_plane_hit(p: vec3<f32>, o: vec3<f32>) -> vec3<f32> {
 
 // True where the G-buffer holds a surface (not background) and the pixel is on screen.
 fn covered(pixel: vec2<u32>) -> bool {
-    return all(pixel < frame.sizes.xy) && textureLoad(gbuf_normal, pixel, 0).w > 0.5;
+    return all(pixel < frame.sizes.xy) && covers(textureLoad(gbuf_normal, pixel, 0));
+}
+
+// `covered` for a pixel on screen whose normal texel the caller has read already (w: the
+// G-buffer's coverage), so that a pass needing the normal too reads the texel once.
+fn covers(normal: vec4<f32>) -> bool {
+    return normal.w > 0.5;
 }
 
 // The element of a screen-space image (E0, visibility, colour: `render::targets`, storage

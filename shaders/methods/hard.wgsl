@@ -19,9 +19,9 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     var v = 1.0;
-    // The normal texel once: its w is the coverage (`covered`), its xyz the bias's normal.
+    // The normal texel once, for the coverage and the bias's normal (`covers`).
     let normal = textureLoad(gbuf_normal, pixel, 0);
-    if normal.w > 0.5 {
+    if covers(normal) {
         let p = textureLoad(gbuf_position, pixel, 0).xyz;
         let n = normal.xyz;
         let ls = to_light_space(p);

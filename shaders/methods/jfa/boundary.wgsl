@@ -17,7 +17,8 @@
 
 // Step 1, every pixel: its flags. The records start empty by a buffer fill in `flood`, not by
 // this pass storing an empty record per pixel (lavapipe stores them lane by lane: about a
-// quarter of the pass). The normal texel is read once, for the coverage and the bias both.
+// quarter of the pass). The normal texel is read once, for the coverage and the bias both
+// (`covers`).
 @compute @workgroup_size(8, 8)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     let pixel = id.xy;
@@ -26,7 +27,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let normal = textureLoad(gbuf_normal, pixel, 0);
-    let is_covered = normal.w > 0.5;
+    let is_covered = covers(normal);
     var hard = false;
     if is_covered {
         let p = textureLoad(gbuf_position, pixel, 0).xyz;

@@ -20,7 +20,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     // map's edge is clamped onto it: onto the texel itself (never deeper) or another of its
     // neighbours, so the answer is the same without a branch per load. Column j of the window
     // is texel first.x − 1 + j; texel k sees columns k … k + 2.
-    var deepest = vec4<f32>(0.0);
+    var deepest = vec4<f32>(-3.4e38);
     var depth = vec4<f32>(0.0);
     for (var b = -1; b <= 1; b++) {
         let y = clamp(first.y + b, 0, res - 1);
@@ -29,7 +29,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
             c[j] = map_depth_at(vec2<i32>(clamp(first.x - 1 + j, 0, res - 1), y));
         }
         let row = max(max(vec4<f32>(c[0], c[1], c[2], c[3]), vec4<f32>(c[1], c[2], c[3], c[4])), vec4<f32>(c[2], c[3], c[4], c[5]));
-        deepest = select(max(deepest, row), row, b == -1);
+        deepest = max(deepest, row);
         if b == 0 {
             depth = vec4<f32>(c[1], c[2], c[3], c[4]);
         }

@@ -99,9 +99,9 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     if any(pixel >= frame.sizes.xy) {
         return;
     }
-    // The normal texel once: its w is the coverage (`covered`).
+    // The normal texel once, for the coverage and the normal (`covers`).
     let normal_texel = textureLoad(gbuf_normal, pixel, 0);
-    if normal_texel.w <= 0.5 {
+    if !covers(normal_texel) {
         if LAST {
             visibility_out[pixel_index(pixel)] = vec4<f32>(1.0);
         }
