@@ -174,6 +174,7 @@ mod tests {
             visibility: Some(visibility),
             depth: None,
             e0: None,
+            e0_summed_exactly: None,
             counters: Default::default(),
             warnings: Vec::new(),
         }

@@ -80,6 +80,9 @@ pub struct FrameOutput {
     pub depth: Option<Vec<f32>>,
     /// The unshadowed irradiance E0, whenever the visibility is read back.
     pub e0: Option<Vec<[f32; 3]>>,
+    /// The pixels E0 summed exactly because its interpolation refused them, where it ran and
+    /// E0 is read back.
+    pub e0_summed_exactly: Option<u32>,
     pub counters: Counters,
     /// The scene's warnings (`Scene::warnings`), for the job's answer.
     pub warnings: Vec<String>,
@@ -258,7 +261,7 @@ impl Renderer {
 
         // Unshadowed irradiance E0.
         let mut enc = encoder();
-        self.record_e0(&mut enc, &inputs, targets, spec);
+        let e0_listed = self.record_e0(&mut enc, &inputs, targets, spec);
         submit(enc)?;
         let start = timings.phase("e0", start);
         go_on()?;
@@ -324,6 +327,7 @@ impl Renderer {
         let visibility_index = spec.extra_images.visibility.then(|| readback.copy_buffer(&gpu, pool, &mut enc, &targets.visibility.buffer));
         let e0_index = spec.extra_images.visibility.then(|| readback.copy_buffer(&gpu, pool, &mut enc, &targets.e0.buffer));
         let depth_index = spec.extra_images.depth.then(|| readback.copy_buffer(&gpu, pool, &mut enc, &targets.depth.buffer));
+        let listed_index = e0_listed.map(|listed| readback.copy_buffer(&gpu, pool, &mut enc, &listed));
         gpu.queue.submit([enc.finish()]);
         let mut images = readback.finish(&gpu, pool)?;
         let gpu_times = self.timer.read(&gpu)?;
@@ -342,12 +346,24 @@ impl Renderer {
             v.iter().zip(e).map(|(v, e)| if *e == [0.0; 3] { [1.0; 3] } else { [v[0], v[1], v[2]] }).collect()
         });
         let depth = depth_index.map(|i| bytemuck::cast_slice::<u8, f32>(&images[i]).to_vec());
+        let e0_summed_exactly = listed_index.map(|i| bytemuck::cast_slice::<u8, u32>(&images[i][..8]).iter().sum());
         timings.phase("readback", start);
         for time in gpu_times {
             timings.add_gpu(time.phase, time.pass, time.ms);
         }
         let warnings = scene.warnings.clone();
-        Ok(FrameOutput { width: spec.width, height: spec.height, color, srgb8, visibility, depth, e0, counters, warnings })
+        Ok(FrameOutput {
+            width: spec.width,
+            height: spec.height,
+            color,
+            srgb8,
+            visibility,
+            depth,
+            e0,
+            e0_summed_exactly,
+            counters,
+            warnings,
+        })
     }
 
     fn write_constants(&self, spec: &FrameSpec, projection: &LightProjection) {

@@ -148,7 +148,17 @@ impl Renderer {
     /// see every cell above their horizon without clipping (two indirect dispatches sized on
     /// the GPU).
     /// Otherwise (or with `E0Mode::Exact`) the exact sum everywhere, in one pass.
-    pub(super) fn record_e0(&mut self, encoder: &mut wgpu::CommandEncoder, inputs: &FrameInputs, targets: &FrameTargets, spec: &FrameSpec) {
+    ///
+    /// Returns, where the interpolation ran and the frame reads E0 back, a buffer that will
+    /// hold the two lists' counts: the pixels the interpolation refused (`penumbra bench`
+    /// reports the share it kept).
+    pub(super) fn record_e0(
+        &mut self,
+        encoder: &mut wgpu::CommandEncoder,
+        inputs: &FrameInputs,
+        targets: &FrameTargets,
+        spec: &FrameSpec,
+    ) -> Option<wgpu::Buffer> {
         let io_layout = self.layouts.e0_output.clone();
         let device = &self.gpu.device;
         let inputs_layout = &self.layouts.inputs;
@@ -198,7 +208,7 @@ impl Renderer {
             pass.set_pipeline(&entry("e0_exact", "exact"));
             // 8×8 invocations of 2×2 pixels each.
             pass.dispatch_workgroups(spec.width.div_ceil(16), spec.height.div_ceil(16), 1);
-            return;
+            return None;
         }
         let steps = [
             ("e0_corners", "block_corners", (corners.div_ceil(8), rows.div_ceil(8))),
@@ -217,6 +227,14 @@ impl Renderer {
             pass.dispatch_workgroups_indirect(&list.groups, 0);
             self.timer.mark(&mut pass, name);
         }
+        drop(pass);
+        spec.extra_images.visibility.then(|| {
+            // Each list's count is its first word.
+            let counts = buffer("E0::listed", 8, wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC);
+            encoder.copy_buffer_to_buffer(&above.list, 0, &counts, 0, 4);
+            encoder.copy_buffer_to_buffer(&clipped.list, 0, &counts, 4, 4);
+            counts
+        })
     }
 
     /// The composite: linear colour and depth (`main`), or the PNG's 8-bit sRGB pixels into

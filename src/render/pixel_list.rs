@@ -29,8 +29,9 @@ impl PixelListBuffers {
                 mapped_at_creation: false,
             })
         };
-        // The count, padded to the entries' alignment, then the entries.
-        let list = buffer("list", entry_bytes.max(4) * (1 + capacity.max(1)), wgpu::BufferUsages::COPY_DST);
+        // The count, padded to the entries' alignment, then the entries; the count may be
+        // copied out (E0's, which `penumbra bench` reports).
+        let list = buffer("list", entry_bytes.max(4) * (1 + capacity.max(1)), wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC);
         encoder.clear_buffer(&list, 0, Some(4));
         let groups = buffer("list_groups", 12, wgpu::BufferUsages::INDIRECT);
         let stand_in = buffer("list_groups_stand_in", 12, wgpu::BufferUsages::empty());
