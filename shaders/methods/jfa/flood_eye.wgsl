@@ -25,42 +25,37 @@ fn neighbour_record(r: Receiver, k: u32) -> i32 {
     return select(i32(2u * (u32(n.y) * frame.sizes.x + u32(n.x))), -1, n.x < 0);
 }
 
-// A neighbour's record and the key its occluder gives this pixel.
-struct Candidate {
-    key: f32,
-    record: vec4<f32>,
-}
-
-// Neighbour k's candidate, its key NO_KEY where it cannot be taken: no record, the occluder
-// the pixel holds already (whose key it has), another object's (with `same_object`), or one
-// whose ray misses the light.
-fn candidate(r: Receiver, k: u32) -> Candidate {
+// The key neighbour k's occluder gives this pixel, or NO_KEY where it cannot be taken: no
+// record, the occluder the pixel holds already (whose key it has), another object's (with
+// `same_object`), or one whose ray misses the light.
+fn candidate_key(r: Receiver, k: u32) -> f32 {
     let at = neighbour_record(r, k);
     if at < 0 {
-        return Candidate(NO_KEY, vec4<f32>(0.0));
+        return NO_KEY;
     }
-    let record = src[at];
-    if is_empty(record) || all(record.xyz == r.own.xyz) {
-        return Candidate(NO_KEY, record);
+    let candidate = src[at];
+    if is_empty(candidate) || all(candidate.xyz == r.own.xyz) {
+        return NO_KEY;
     }
-    if params.same_object == 1u && eye_object(record) != r.object {
-        return Candidate(NO_KEY, record);
+    if params.same_object == 1u && eye_object(candidate) != r.object {
+        return NO_KEY;
     }
-    let key = intensity_key(r.here, record.xyz);
-    return Candidate(select(key.x, NO_KEY, key.y == 0.0), record);
+    let key = intensity_key(r.here, candidate.xyz);
+    return select(key.x, NO_KEY, key.y == 0.0);
 }
 
 // §5.2's continuity check, read as: the midpoint between the boundary pixel and this one must
 // itself be in a penumbra of the same occluder. Asking instead whether the midpoint already
 // holds a record would depend on the order jump flooding reaches pixels (far ones first) and
-// cut real penumbrae. `origin`: the candidate's second vec4 (xy its boundary pixel).
-fn midpoint_holds(r: Receiver, origin: vec4<f32>, occluder: vec3<f32>) -> bool {
-    let mid = vec2<u32>((vec2<i32>(origin.xy) + r.p) / 2);
+// cut real penumbrae.
+fn midpoint_holds(r: Receiver, k: u32) -> bool {
+    let at = neighbour_record(r, k);
+    let mid = vec2<u32>((vec2<i32>(src[at + 1].xy) + r.p) / 2);
     let mid_flag = flags[mid.y * frame.sizes.x + mid.x];
     if (mid_flag & COVERED) == 0u {
         return false;
     }
-    return light_hit(textureLoad(gbuf_position, mid, 0).xyz, occluder).w > 0.0;
+    return light_hit(textureLoad(gbuf_position, mid, 0).xyz, src[at].xyz).w > 0.0;
 }
 
 // One workgroup per listed tile (`list_tiles` in common.wgsl).
@@ -87,25 +82,21 @@ fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_id) l
         loop {
             var chosen = -1;
             var chosen_key = eye_key(best, best_origin);
-            // The chosen neighbour's record, kept from the search: loading it again for the
-            // midpoint and for the copy cost a gather lane by lane each.
-            var chosen_record = best;
             for (var k = 0u; k < 9u; k++) {
-                let c = candidate(r, k);
-                let after = c.key > after_key || (c.key == after_key && i32(k) > after_k);
-                if after && c.key < chosen_key {
+                let key = candidate_key(r, k);
+                let after = key > after_key || (key == after_key && i32(k) > after_k);
+                if after && key < chosen_key {
                     chosen = i32(k);
-                    chosen_key = c.key;
-                    chosen_record = c.record;
+                    chosen_key = key;
                 }
             }
             if chosen < 0 {
                 break;
             }
-            let origin = src[neighbour_record(r, u32(chosen)) + 1];
-            if params.midpoint == 0u || midpoint_holds(r, origin, chosen_record.xyz) {
-                best = chosen_record;
-                best_origin = vec4<f32>(origin.xy, chosen_key, origin.w);
+            if params.midpoint == 0u || midpoint_holds(r, u32(chosen)) {
+                let at = neighbour_record(r, u32(chosen));
+                best = src[at];
+                best_origin = vec4<f32>(src[at + 1].xy, chosen_key, src[at + 1].w);
                 break;
             }
             after_key = chosen_key;
