@@ -105,9 +105,12 @@ fn e0_interpolation_stays_within_a_thousandth_of_the_exact_sum() {
         let job = job(json!({"scene": scene, "light": {"image": {"builtin": light}}, "method": {"name": "hard"},
                              "output": {"width": 960, "height": 540, "format": "exr"}}));
         let mut frames = Vec::new();
+        let mut listed = None;
         for mode in [penumbra::render::E0Mode::Exact, penumbra::render::E0Mode::Interpolated] {
             engine.set_e0_mode(mode);
-            frames.push(engine.render_frame(&job, &()).unwrap().0.e0.unwrap());
+            let frame = engine.render_frame(&job, &()).unwrap().0;
+            listed = frame.e0_summed_exactly;
+            frames.push(frame.e0.unwrap());
         }
         let (exact, interpolated) = (&frames[0], &frames[1]);
         let largest = exact.iter().flatten().fold(0.0f32, |m, &e| m.max(e));
@@ -132,6 +135,15 @@ fn e0_interpolation_stays_within_a_thousandth_of_the_exact_sum() {
         assert_eq!(lit_wrongly, 0, "{scene}/{light}: pixels the exact sum leaves unlit, lit by the interpolation");
         // The interpolation ran (the exact sum would agree bit for bit everywhere).
         assert!(differ * 4 > lit, "{scene}/{light}: {differ} of {lit} lit pixels interpolated");
+        // The pixels E0 says it listed for the exact sums are the lit ones whose bits the
+        // interpolation left as the exact sum's (give or take the few it blended to the same
+        // bits): what `penumbra bench` reports the interpolated share from.
+        let listed = listed.expect("the interpolation ran and E0 was read back") as usize;
+        assert!(
+            (lit - differ).abs_diff(listed) <= lit / 100,
+            "{scene}/{light}: {listed} listed, {} lit and not interpolated",
+            lit - differ
+        );
     }
 }
 
@@ -471,6 +483,11 @@ fn bench_writes_its_phase_table_and_the_e0_check() {
     for e in &report.e0 {
         assert!(e.worst_relative < 1e-3, "{e:?}");
     }
+    // The share the interpolation kept: none under a one-cell light, summed exactly everywhere
+    // (`e0_interpolation_stays_within_a_thousandth_of_the_exact_sum` checks the count).
+    let share = |light: &str| report.e0.iter().find(|e| e.light == light).unwrap().interpolated_fraction;
+    assert_eq!(share("white"), 0.0);
+    assert!((0.0..=1.0).contains(&share("flame")), "{:?}", report.e0);
     let md = std::fs::read_to_string(out.join("bench.md")).unwrap();
     assert!(md.contains("## crowd, flame (") && md.contains("| reference (8 samples) |") && md.contains("## E0: interpolated"), "{md}");
     assert!(!engine.gpu().timestamps || md.contains("GPU ms per pass"), "{md}");
