@@ -160,7 +160,7 @@ pub(super) fn run(
     };
     let (classify_group, size_group, filter_group) =
         (bind(&classify, &listed.groups), bind(&size, &listed.groups), bind(&filter, &listed.stand_in));
-    let (_, gy) = ctx.dispatch_size();
+    let (gx, gy) = ctx.dispatch_size();
     {
         let mut pass = ctx.encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some(name),
@@ -170,7 +170,7 @@ pub(super) fn run(
         // The classification takes `CLASSIFY_ROW` pixels of a row per invocation.
         pass.set_pipeline(&classify);
         pass.set_bind_group(1, &classify_group, &[]);
-        pass.dispatch_workgroups(ctx.width.div_ceil(8 * CLASSIFY_ROW), gy, 1);
+        pass.dispatch_workgroups(gx.div_ceil(CLASSIFY_ROW), gy, 1);
         ctx.timer.mark(&mut pass, "filter_classify");
         pass.set_pipeline(&size);
         pass.set_bind_group(1, &size_group, &[]);
