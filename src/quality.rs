@@ -174,7 +174,6 @@ mod tests {
             visibility: Some(visibility),
             depth: None,
             e0: None,
-            e0_summed_exactly: None,
             counters: Default::default(),
             warnings: Vec::new(),
         }

@@ -109,9 +109,15 @@ fn e0_interpolation_stays_within_a_thousandth_of_the_exact_sum() {
         for mode in [penumbra::render::E0Mode::Exact, penumbra::render::E0Mode::Interpolated] {
             engine.set_e0_mode(mode);
             let frame = engine.render_frame(&job, &()).unwrap().0;
-            listed = frame.e0_summed_exactly;
+            listed = frame.counters.get(penumbra::render::E0_SUMMED_EXACTLY).copied();
+            // Counted only where the interpolation ran.
+            assert_eq!(listed.is_some(), mode == penumbra::render::E0Mode::Interpolated, "{scene}/{light}: {mode:?}");
             frames.push(frame.e0.unwrap());
         }
+        // Every frame reports it, a PNG's too (the counter of a user's job): the same count.
+        let png = Job { output: penumbra::job::OutputSpec { format: OutputFormat::Png, ..job.output.clone() }, ..job.clone() };
+        let png_listed = engine.render_frame(&png, &()).unwrap().0.counters.get(penumbra::render::E0_SUMMED_EXACTLY).copied();
+        assert_eq!(png_listed, listed, "{scene}/{light}: the PNG's count");
         let (exact, interpolated) = (&frames[0], &frames[1]);
         let largest = exact.iter().flatten().fold(0.0f32, |m, &e| m.max(e));
         let (mut worst, mut lit, mut differ, mut unlit, mut lit_wrongly) = (0.0f32, 0usize, 0usize, 0usize, 0usize);
@@ -138,7 +144,7 @@ fn e0_interpolation_stays_within_a_thousandth_of_the_exact_sum() {
         // The pixels E0 says it listed for the exact sums are the lit ones whose bits the
         // interpolation left as the exact sum's (give or take the few it blended to the same
         // bits): what `penumbra bench` reports the interpolated share from.
-        let listed = listed.expect("the interpolation ran and E0 was read back") as usize;
+        let listed = listed.expect("the interpolation ran: E0 counts what it summed exactly") as usize;
         assert!(
             (lit - differ).abs_diff(listed) <= lit / 100,
             "{scene}/{light}: {listed} listed, {} lit and not interpolated",

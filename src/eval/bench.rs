@@ -265,7 +265,8 @@ fn e0_accuracy(engine: &Engine, scene: &str, light: &str, job: &Job) -> anyhow::
         let rendered = engine.render_frame(job, &());
         engine.set_e0_mode(E0Mode::default());
         let (frame, timings) = rendered.map_err(|e| anyhow::anyhow!("{scene}, {light}: E0: {e}"))?;
-        frames.push((frame.e0.context("EXR frames carry E0")?, frame.e0_summed_exactly, phase_ms(&timings, "e0")));
+        let summed_exactly = frame.counters.get(crate::render::E0_SUMMED_EXACTLY).copied();
+        frames.push((frame.e0.context("EXR frames carry E0")?, summed_exactly, phase_ms(&timings, "e0")));
     }
     let ((exact, _, exact_ms), (interpolated, summed_exactly, interpolated_ms)) = (&frames[0], &frames[1]);
     let largest = exact.iter().flatten().fold(0.0f32, |m, &e| m.max(e));

@@ -33,6 +33,10 @@ pub use passes::{screen_compute_entry, screen_compute_pipeline, screen_compute_s
 pub use pixel_list::PixelListBuffers;
 use targets::FrameTargets;
 
+/// The frame's counter of the pixels E0 summed exactly because its interpolation refused
+/// them (present where the interpolation ran: lights of more than `E0_EXACT_CELLS` cells).
+pub const E0_SUMMED_EXACTLY: &str = "e0_pixels_summed_exactly";
+
 /// The per-frame constants, laid out as `Frame` in `shaders/common/frame.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
@@ -80,9 +84,7 @@ pub struct FrameOutput {
     pub depth: Option<Vec<f32>>,
     /// The unshadowed irradiance E0, whenever the visibility is read back.
     pub e0: Option<Vec<[f32; 3]>>,
-    /// The pixels E0 summed exactly because its interpolation refused them, where it ran and
-    /// E0 is read back.
-    pub e0_summed_exactly: Option<u32>,
+    /// The method's counters, and `E0_SUMMED_EXACTLY` where E0 was interpolated.
     pub counters: Counters,
     /// The scene's warnings (`Scene::warnings`), for the job's answer.
     pub warnings: Vec<String>,
@@ -346,24 +348,17 @@ impl Renderer {
             v.iter().zip(e).map(|(v, e)| if *e == [0.0; 3] { [1.0; 3] } else { [v[0], v[1], v[2]] }).collect()
         });
         let depth = depth_index.map(|i| bytemuck::cast_slice::<u8, f32>(&images[i]).to_vec());
-        let e0_summed_exactly = listed_index.map(|i| bytemuck::cast_slice::<u8, u32>(&images[i][..8]).iter().sum());
+        let mut counters = counters;
+        if let Some(i) = listed_index {
+            let listed: u32 = bytemuck::cast_slice::<u8, u32>(&images[i][..8]).iter().sum();
+            counters.insert(E0_SUMMED_EXACTLY.to_owned(), f64::from(listed));
+        }
         timings.phase("readback", start);
         for time in gpu_times {
             timings.add_gpu(time.phase, time.pass, time.ms);
         }
         let warnings = scene.warnings.clone();
-        Ok(FrameOutput {
-            width: spec.width,
-            height: spec.height,
-            color,
-            srgb8,
-            visibility,
-            depth,
-            e0,
-            e0_summed_exactly,
-            counters,
-            warnings,
-        })
+        Ok(FrameOutput { width: spec.width, height: spec.height, color, srgb8, visibility, depth, e0, counters, warnings })
     }
 
     fn write_constants(&self, spec: &FrameSpec, projection: &LightProjection) {

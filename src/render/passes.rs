@@ -149,9 +149,9 @@ impl Renderer {
     /// the GPU).
     /// Otherwise (or with `E0Mode::Exact`) the exact sum everywhere, in one pass.
     ///
-    /// Returns, where the interpolation ran and the frame reads E0 back, a buffer that will
-    /// hold the two lists' counts: the pixels the interpolation refused (`penumbra bench`
-    /// reports the share it kept).
+    /// Returns, where the interpolation ran, a buffer that will hold the two lists' counts:
+    /// the pixels the interpolation refused, which the frame reports as the counter
+    /// `e0_pixels_summed_exactly` (what E0 cost; `penumbra bench` reports the share it kept).
     pub(super) fn record_e0(
         &mut self,
         encoder: &mut wgpu::CommandEncoder,
@@ -228,13 +228,11 @@ impl Renderer {
             self.timer.mark(&mut pass, name);
         }
         drop(pass);
-        spec.extra_images.visibility.then(|| {
-            // Each list's count is its first word.
-            let counts = buffer("E0::listed", 8, wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC);
-            encoder.copy_buffer_to_buffer(&above.list, 0, &counts, 0, 4);
-            encoder.copy_buffer_to_buffer(&clipped.list, 0, &counts, 4, 4);
-            counts
-        })
+        // Each list's count is its first word.
+        let counts = buffer("E0::listed", 8, wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC);
+        encoder.copy_buffer_to_buffer(&above.list, 0, &counts, 0, 4);
+        encoder.copy_buffer_to_buffer(&clipped.list, 0, &counts, 4, 4);
+        Some(counts)
     }
 
     /// The composite: linear colour and depth (`main`), or the PNG's 8-bit sRGB pixels into
