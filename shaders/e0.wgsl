@@ -98,9 +98,8 @@ fn exact_terms(x: vec3<f32>, nx: vec3<f32>, depth: f32) -> Corner {
         phi += mat3x3<f32>(phi_cell * cell.radiance.r, phi_cell * cell.radiance.g, phi_cell * cell.radiance.b);
         e0_above += cell.radiance.rgb * abs(dot(nx, phi_cell));
     }
-    let height = cells_height(x, nx);
-    let above = height.x > HORIZON_EPS;
-    let e0 = select(clipped_sum(x, nx, !above && height.y > 0.0), e0_above, above);
+    let horizon = cells_horizon(x, nx);
+    let e0 = select(clipped_sum(x, nx, !horizon.above && !horizon.below), e0_above, horizon.above);
     return Corner(vec4<f32>(phi[0], e0.r), vec4<f32>(phi[1], e0.g), vec4<f32>(phi[2], e0.b), vec4<f32>(x, 1.0), vec4<f32>(nx, depth));
 }
 
@@ -323,20 +322,27 @@ fn block_check(block: vec2<u32>, b: Block) -> Check {
     return check;
 }
 
-// The height of the light's cells above the plane through x with normal nx: the least and
-// the greatest over the rectangle that bounds them (`frame.cells_bounds`), not over the whole
+// Where the light's cells lie against the horizon of x (the plane through it with normal
+// nx), judged over the rectangle that bounds them (`frame.cells_bounds`), not over the whole
 // light — a shaped light's black texels are no part of its sum, and under a low light a
 // landscape's slopes see all of a flame's cells above their horizon, or none, where the
-// rectangle straddles it. The least above HORIZON_EPS: every cell lies above, and its clipped
-// irradiance is its unclipped |nx · Φ| (the same edge terms in the same order). The greatest
-// at most 0 (HORIZON_EPS below the clip's threshold, for rounding): every cell lies below, no
-// clipped edge survives and E0 is exactly 0.
-fn cells_height(x: vec3<f32>, nx: vec3<f32>) -> vec2<f32> {
+// rectangle straddles it. Neither above nor below: the light straddles the horizon and its
+// cells are clipped.
+struct Horizon {
+    // The least height above HORIZON_EPS: every cell lies above, and its clipped irradiance
+    // is its unclipped |nx · Φ| (the same edge terms in the same order).
+    above: bool,
+    // The greatest at most 0 (HORIZON_EPS below the clip's threshold, for rounding): every
+    // cell lies below, no clipped edge survives and E0 is exactly 0.
+    below: bool,
+}
+
+fn cells_horizon(x: vec3<f32>, nx: vec3<f32>) -> Horizon {
     let bounds = frame.cells_bounds;
     let centre = frame.light_center.xyz + bounds.x * frame.light_r.xyz + bounds.y * frame.light_u.xyz;
     let c = dot(centre - x, nx);
     let reach = bounds.z * abs(dot(frame.light_r.xyz, nx)) + bounds.w * abs(dot(frame.light_u.xyz, nx));
-    return vec2<f32>(c - reach, c + reach);
+    return Horizon(c - reach > HORIZON_EPS, c + reach <= 0.0);
 }
 
 // E0 at one pixel interpolated from its block's corners, corrected along the view ray
@@ -361,10 +367,10 @@ fn interpolated_e0(x: vec3<f32>, normal: vec4<f32>, b: Block, mixed: Corner, che
     // splits on, and a landscape splits most groups): with every cell above the horizon
     // E0 is |nx · Φ|; where the light straddles it, on a flat face (the corners' normal the
     // pixel's) E0 is still smooth in the position and is blended itself; with every cell
-    // below it E0 is 0, exactly the sum (`cells_height`).
-    let height = cells_height(x, nx);
-    let above = height.x > HORIZON_EPS;
-    let below = height.y <= 0.0;
+    // below it E0 is 0, exactly the sum (`cells_horizon`).
+    let horizon = cells_horizon(x, nx);
+    let above = horizon.above;
+    let below = horizon.below;
     let e0 = select(select(e0_of(mixed) + check.d_e0 * t, abs(nx * phi), above), vec3<f32>(0.0), below);
     let error = relative + select(bend(b, nx), 0.0, above);
     // error × |Φ| ≤ E0_TOLERANCE × E0, compared squared (no square root per channel); both

@@ -130,7 +130,7 @@ fn e0_interpolation_stays_within_a_thousandth_of_the_exact_sum() {
             lit += usize::from(e[0] + e[1] + e[2] > 0.0);
             differ += usize::from(e != i);
             // Where every cell lies below a pixel's horizon the interpolation writes 0 without
-            // summing (`cells_height` in shaders/e0.wgsl): what the exact sum adds up to.
+            // summing (`cells_horizon` in shaders/e0.wgsl): what the exact sum adds up to.
             if *e == [0.0; 3] {
                 unlit += 1;
                 lit_wrongly += usize::from(*i != [0.0; 3]);

@@ -79,7 +79,7 @@ pub fn light_cells(light: &AreaLight, image: &LightImage) -> Vec<LightCell> {
 /// The rectangle that bounds the light's cells, in the light's frame: its centre along `r`
 /// and `u` from the light's centre and its half width and height, metres. A shaped light
 /// (`flame`, `disk`) drops its black texels from the cells, so its cells can all lie on one
-/// side of a receiver's horizon where the whole rectangle does not (`cells_height` in
+/// side of a receiver's horizon where the whole rectangle does not (`cells_horizon` in
 /// `shaders/e0.wgsl`). The whole rectangle where there are no cells.
 pub fn cells_bounds(light: &AreaLight, cells: &[LightCell]) -> [f32; 4] {
     let along = |p: Vec3| glam::Vec2::new((p - light.center).dot(light.r), (p - light.center).dot(light.u));
