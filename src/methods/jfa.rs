@@ -261,8 +261,8 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
     let mut colours = None;
     let lut = ctx.light_table("edge_table", |light, image| colours.get_or_insert_with(|| edge_table(light, image)).clone());
     let keys = ctx.light_table("jfa_keys", |light, image| key_table(light, colours.get_or_insert_with(|| edge_table(light, image))));
-    // From the pool: jfa-l's seed pass writes every record of a, jfa-e's every flag; the
-    // other records and the tile flags are cleared below.
+    // From the pool: jfa-e's flags pass writes every flag; the records and the tile flags are
+    // cleared below.
     let cells = u64::from(grid.0) * u64::from(grid.1);
     let storage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
     let a = ctx.scratch_buffer("Jfa::records_a", cells * which.record_bytes, storage);
@@ -360,12 +360,10 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
     let (round_a_to_b, round_b_to_a) = (round_group(&a, &b), round_group(&b, &a));
     // Rounds run over the tiles a record can reach (listed before each round) and leave the
     // others' cells as they are, so both record buffers start empty (all zero) and the tile
-    // flags start clear.
+    // flags start clear; the seeds are stored in a over its empty records (silhouette.wgsl,
+    // boundary.wgsl).
+    ctx.encoder.clear_buffer(&a, 0, None);
     ctx.encoder.clear_buffer(&b, 0, None);
-    if !which.light_space {
-        // jfa-e's seeds go to a over empty records (boundary.wgsl).
-        ctx.encoder.clear_buffer(&a, 0, None);
-    }
     ctx.encoder.clear_buffer(&tiles, 0, None);
     let groups = (grid.0.div_ceil(TILE), grid.1.div_ceil(TILE));
     let screen = ctx.dispatch_size();

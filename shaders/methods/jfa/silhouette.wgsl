@@ -1,6 +1,10 @@
 // Method `jfa-l`, §4.1 "Locating Occluders": a shadow-map texel is a silhouette pixel when one
 // of its 8 neighbours is deeper by more than a threshold (or empty); silhouette pixels seed
-// the flood with their own light-space (world) position.
+// the flood with their own light-space (world) position. Only the seeds are stored, over
+// records a buffer fill has emptied (`methods::jfa`): on lavapipe a store runs lane by lane,
+// and storing an empty record for every other texel of the map cost more than the fill (the
+// pass on `terrain` 76 → 57 ms, on `crowd` 54 → 47 ms under `flame`, the method's whole
+// request 2–9 % faster with the fill).
 
 #import methods/jfa/common.wgsl
 
@@ -39,13 +43,11 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
         if p.x >= res {
             break;
         }
-        var record = vec4<f32>(0.0);
         let here = shadow_point_at(p, depth[k]);
         if here.w > 0.0 && deepest[k] > depth[k] * (1.0 + params.silhouette_relative) {
-            record = packed(here.xyz, SEED_KEY);
+            dst[u32(p.y * res + p.x)] = packed(here.xyz, SEED_KEY);
             mark_tile(p);
             atomicAdd(&counters[0], 1u);
         }
-        dst[u32(p.y * res + p.x)] = record;
     }
 }
