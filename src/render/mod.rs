@@ -294,7 +294,7 @@ impl Renderer {
             let counters = spec.method.record(&mut ctx, &spec.params);
             (counters, std::mem::take(&mut ctx.scratch))
         };
-        let counters = counters?;
+        let mut counters = counters?;
         submit(enc)?;
         // The method's scratch buffers are free once its passes have run.
         scratch.release(&mut self.buffers, &mut self.textures);
@@ -348,7 +348,6 @@ impl Renderer {
             v.iter().zip(e).map(|(v, e)| if *e == [0.0; 3] { [1.0; 3] } else { [v[0], v[1], v[2]] }).collect()
         });
         let depth = depth_index.map(|i| bytemuck::cast_slice::<u8, f32>(&images[i]).to_vec());
-        let mut counters = counters;
         if let Some(i) = listed_index {
             let listed: u32 = bytemuck::cast_slice::<u8, u32>(&images[i][..8]).iter().sum();
             counters.insert(E0_SUMMED_EXACTLY.to_owned(), f64::from(listed));

@@ -30,7 +30,7 @@ impl PixelListBuffers {
             })
         };
         // The count, padded to the entries' alignment, then the entries; the count may be
-        // copied out (E0's, which `penumbra bench` reports).
+        // copied out (E0's, the frame's counter `e0_pixels_summed_exactly`).
         let list = buffer("list", entry_bytes.max(4) * (1 + capacity.max(1)), wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC);
         encoder.clear_buffer(&list, 0, Some(4));
         let groups = buffer("list_groups", 12, wgpu::BufferUsages::INDIRECT);
