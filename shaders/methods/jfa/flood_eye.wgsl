@@ -82,7 +82,7 @@ fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_id) l
         loop {
             var chosen = -1;
             var chosen_key = eye_key(best, best_origin);
-            for (var k = 0u; k < 9u; k++) {
+            for (var k = 0u; k < JUMP_NEIGHBOURS; k++) {
                 let key = candidate_key(r, k);
                 let after = key > after_key || (key == after_key && i32(k) > after_k);
                 if after && key < chosen_key {

@@ -32,7 +32,7 @@ fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_id) l
         // the nine cases of `penumbra bench` the rounds took 7 % less without it (−15 % on
         // `terrain` under `flame`, +14 % on `crowd` under `flame`), output identical.
         let held = best.xyz;
-        for (var k = 0u; k < 9u; k++) {
+        for (var k = 0u; k < JUMP_NEIGHBOURS; k++) {
             let n = jump_neighbour(p, k, params.step, vec2<i32>(res));
             if n.x < 0 {
                 continue;

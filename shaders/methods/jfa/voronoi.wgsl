@@ -46,7 +46,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_
     }
     let p = vec2<i32>(id.xy);
     var best = src[id.y * params.size + id.x];
-    for (var i = 0u; i < 9u; i++) {
+    for (var i = 0u; i < JUMP_NEIGHBOURS; i++) {
         let n = jump_neighbour(p, i, params.step, vec2<i32>(size));
         if n.x < 0 {
             continue;
