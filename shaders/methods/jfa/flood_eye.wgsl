@@ -25,19 +25,30 @@ fn neighbour_record(r: Receiver, k: u32) -> i32 {
     return select(i32(2u * (u32(n.y) * frame.sizes.x + u32(n.x))), -1, n.x < 0);
 }
 
-// The key neighbour k's occluder gives this pixel, or NO_KEY where it cannot be taken: no
-// record, the occluder the pixel holds already (whose key it has), another object's (with
-// `same_object`), or one whose ray misses the light.
+// The jump neighbours whose records this pixel may take, as bits k: a record is there and,
+// with `same_object`, it came from a boundary pixel of this pixel's object. Read from each
+// record's w alone: a round weighs only these (below), and finding them costs a load each
+// where weighing a record costs its whole vec4 and a key from the table.
+fn offered(r: Receiver) -> u32 {
+    var bits = 0u;
+    for (var k = 0u; k < JUMP_NEIGHBOURS; k++) {
+        let at = neighbour_record(r, k);
+        if at >= 0 {
+            let w = src[at].w;
+            if w != 0.0 && (params.same_object == 0u || w - 1.0 == r.object) {
+                bits |= 1u << k;
+            }
+        }
+    }
+    return bits;
+}
+
+// The key offered neighbour k's occluder gives this pixel, or NO_KEY where it cannot be
+// taken: the occluder the pixel holds already (whose key it has), or one whose ray misses
+// the light.
 fn candidate_key(r: Receiver, k: u32) -> f32 {
-    let at = neighbour_record(r, k);
-    if at < 0 {
-        return NO_KEY;
-    }
-    let candidate = src[at];
-    if is_empty(candidate) || all(candidate.xyz == r.own.xyz) {
-        return NO_KEY;
-    }
-    if params.same_object == 1u && eye_object(candidate) != r.object {
+    let candidate = src[neighbour_record(r, k)];
+    if all(candidate.xyz == r.own.xyz) {
         return NO_KEY;
     }
     let key = intensity_key(r.here, candidate.xyz);
@@ -77,12 +88,21 @@ fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_id) l
         // but with the midpoint checked for that neighbour alone — and, should it fail, for
         // the next in (key, neighbour) order — instead of for every better candidate met on
         // the way (on a CPU rasteriser every lane pays for every check any lane makes).
+        // Only the offered neighbours are weighed, in neighbour order: lanes run in lockstep
+        // and a loop runs as many times as its busiest lane needs, so a SIMD group of pixels
+        // offered few records — most of the early rounds' tiles, far from a boundary — weighs
+        // few, where a loop over all eight weighed eight (the rounds took 18–28 % less,
+        // output identical).
+        let offers = offered(r);
         var after_key = -NO_KEY; // the (key, neighbour) order's lower bound, exclusive
         var after_k = -1;
         loop {
             var chosen = -1;
             var chosen_key = eye_key(best, best_origin);
-            for (var k = 0u; k < JUMP_NEIGHBOURS; k++) {
+            var rest = offers;
+            while rest != 0u {
+                let k = firstTrailingBit(rest);
+                rest &= rest - 1u;
                 let key = candidate_key(r, k);
                 let after = key > after_key || (key == after_key && i32(k) > after_k);
                 if after && key < chosen_key {
