@@ -125,6 +125,8 @@ struct Uniforms {
 const TILE: u32 = 8;
 /// Texels per invocation of jfa-l's silhouette pass (`ROW_TEXELS` in silhouette.wgsl).
 const SILHOUETTE_ROW: u32 = 4;
+/// Pixels per invocation of both final passes' `main` (`ROW_PIXELS` in shading.wgsl).
+const FINAL_ROW: u32 = 8;
 
 /// The step lengths of the flood: 2^(rounds−1) … 1, or 1 repeated for standard flooding.
 pub fn steps(rounds: u32, standard: bool) -> Vec<i32> {
@@ -410,7 +412,8 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
         }
         pass.set_pipeline(&finish);
         pass.set_bind_group(1, if result_in_a { &a_to_b } else { &b_to_a }, &[0]);
-        pass.dispatch_workgroups(screen.0, screen.1, 1);
+        // 8 × 8 invocations a workgroup, each a run of `FINAL_ROW` pixels.
+        pass.dispatch_workgroups(ctx.width.div_ceil(8 * FINAL_ROW), screen.1, 1);
         ctx.timer.mark(&mut pass, "jfa_final");
         let [size, shade] = &shading;
         pass.set_pipeline(size);
@@ -526,6 +529,12 @@ pub fn voronoi(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn run_lengths_match_the_shaders() {
+        crate::gpu::shaders::assert_declares("methods/jfa/silhouette.wgsl", &format!("const ROW_TEXELS: i32 = {SILHOUETTE_ROW};"));
+        crate::gpu::shaders::assert_declares("methods/jfa/shading.wgsl", &format!("const ROW_PIXELS: u32 = {FINAL_ROW}u;"));
+    }
 
     #[test]
     fn step_lengths_follow_the_paper() {
