@@ -7,37 +7,17 @@
 
 #import methods/jfa/shading.wgsl
 
-// Every pixel, a run of `ROW_PIXELS` of a row per invocation: 1, 0 in hard shadow, or listed
-// when it holds a penumbra record.
-@compute @workgroup_size(8, 8)
-fn main(@builtin(global_invocation_id) id: vec3<u32>) {
-    let first = vec2<u32>(id.x * ROW_PIXELS, id.y);
-    if any(first >= frame.sizes.xy) {
-        return;
+// A pixel (`main` in shading.wgsl): listed when it holds a penumbra record, else 0 in hard
+// shadow and 1 outside.
+fn final_class(pixel: vec2<u32>) -> FinalClass {
+    let flag = flags[pixel.y * frame.sizes.x + pixel.x];
+    if (flag & COVERED) == 0u {
+        return FinalClass(false, false, vec3<f32>(1.0));
     }
-    // Bit k: pixel first + (k, 0) is listed (in `listing`), in hard shadow (in `hard_bits`).
-    var listing = 0u;
-    var hard_bits = 0u;
-    for (var k = 0u; k < ROW_PIXELS; k++) {
-        let pixel = first + vec2<u32>(k, 0u);
-        if pixel.x >= frame.sizes.x {
-            break;
-        }
-        var v = vec3<f32>(1.0);
-        let flag = flags[pixel.y * frame.sizes.x + pixel.x];
-        if (flag & COVERED) != 0u {
-            let inside = (flag & HARD) != 0u;
-            let index = 2u * (pixel.y * frame.sizes.x + pixel.x);
-            if eye_in_penumbra(src[index], src[index + 1u]) {
-                listing |= 1u << k;
-                hard_bits |= u32(inside) << k;
-                continue;
-            }
-            v = select(v, vec3<f32>(0.0), inside);
-        }
-        visibility_out[pixel_index(pixel)] = vec4<f32>(v, 1.0);
-    }
-    list_run_for_shading(first, listing, hard_bits);
+    let inside = (flag & HARD) != 0u;
+    let index = 2u * (pixel.y * frame.sizes.x + pixel.x);
+    let listed = eye_in_penumbra(src[index], src[index + 1u]);
+    return FinalClass(listed, inside, select(vec3<f32>(1.0), vec3<f32>(0.0), inside));
 }
 
 // The listed pixels: the intensity of their occluder.

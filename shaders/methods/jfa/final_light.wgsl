@@ -24,43 +24,23 @@ fn record_at(ls: LightSpace) -> vec4<f32> {
     return src[u32(texel.y) * frame.sizes.z + u32(texel.x)];
 }
 
-// Every pixel, a run of `ROW_PIXELS` of a row per invocation: 1, 0 in hard shadow, or listed
-// when the flood left it an occluder to shade by.
-@compute @workgroup_size(8, 8)
-fn main(@builtin(global_invocation_id) id: vec3<u32>) {
-    let first = vec2<u32>(id.x * ROW_PIXELS, id.y);
-    if any(first >= frame.sizes.xy) {
-        return;
+// A pixel (`main` in shading.wgsl): listed when the flood left it an occluder to shade by,
+// else 0 in hard shadow and 1 outside. The normal texel is read once, for the coverage and
+// the bias's normal (`covers`).
+fn final_class(pixel: vec2<u32>) -> FinalClass {
+    let normal = textureLoad(gbuf_normal, pixel, 0);
+    if !covers(normal) {
+        return FinalClass(false, false, vec3<f32>(1.0));
     }
-    // Bit k: pixel first + (k, 0) is listed (in `listing`), in hard shadow (in `hard_bits`).
-    var listing = 0u;
-    var hard_bits = 0u;
-    for (var k = 0u; k < ROW_PIXELS; k++) {
-        let pixel = first + vec2<u32>(k, 0u);
-        if pixel.x >= frame.sizes.x {
-            break;
-        }
-        var v = vec3<f32>(1.0);
-        // The normal texel once, for the coverage and the bias's normal (`covers`).
-        let normal = textureLoad(gbuf_normal, pixel, 0);
-        if covers(normal) {
-            let p = textureLoad(gbuf_position, pixel, 0).xyz;
-            let ls = to_light_space(p);
-            if ls.inside {
-                let record = record_at(ls);
-                let hard = hard_shadowed_in_map(p, normal.xyz, ls);
-                let needed = select(in_penumbra(record), params.inner == 1u && !is_empty(record), hard);
-                if needed {
-                    listing |= 1u << k;
-                    hard_bits |= u32(hard) << k;
-                    continue;
-                }
-                v = select(v, vec3<f32>(0.0), hard);
-            }
-        }
-        visibility_out[pixel_index(pixel)] = vec4<f32>(v, 1.0);
+    let p = textureLoad(gbuf_position, pixel, 0).xyz;
+    let ls = to_light_space(p);
+    if !ls.inside {
+        return FinalClass(false, false, vec3<f32>(1.0));
     }
-    list_run_for_shading(first, listing, hard_bits);
+    let record = record_at(ls);
+    let hard = hard_shadowed_in_map(p, normal.xyz, ls);
+    let listed = select(in_penumbra(record), params.inner == 1u && !is_empty(record), hard);
+    return FinalClass(listed, hard, select(vec3<f32>(1.0), vec3<f32>(0.0), hard));
 }
 
 // The listed pixels: the intensity for the occluder their texel holds (inner penumbra where in

@@ -1,5 +1,6 @@
 // Methods `jfa-l`, `jfa-e`, final passes: the pixels shaded by the occluder the flood left
-// them, listed by each final pass's `main` and shaded by its `shade_listed`, an indirect
+// them, listed by `main` below (each final pass classifies a pixel: its `final_class`) and
+// shaded by the final pass's `shade_listed`, an indirect
 // dispatch of their own: lavapipe runs a branch's code — the intensity, and for `jfa-l` a 5×5
 // silhouette window — for all 8 lanes of a SIMD group if one lane takes it, and these pixels
 // are a few percent of a frame.
@@ -37,6 +38,41 @@ fn list_run_for_shading(first: vec2<u32>, listing: u32, hard: u32) {
 @compute @workgroup_size(1)
 fn shaded_size() {
     shaded_groups = list_dispatch(atomicLoad(&shaded.count));
+}
+
+// What a final pass decides for one pixel (its `final_class`, which the importer defines):
+// listed to be shaded by its occluder (in hard shadow or not), or its visibility at once.
+struct FinalClass {
+    listed: bool,
+    hard: bool,
+    visibility: vec3<f32>,
+}
+
+// Every pixel, a run of `ROW_PIXELS` of a row per invocation: its visibility stored, or the
+// pixel listed for `shade_listed`.
+@compute @workgroup_size(8, 8)
+fn main(@builtin(global_invocation_id) id: vec3<u32>) {
+    let first = vec2<u32>(id.x * ROW_PIXELS, id.y);
+    if any(first >= frame.sizes.xy) {
+        return;
+    }
+    // Bit k: pixel first + (k, 0) is listed (in `listing`), in hard shadow (in `hard`).
+    var listing = 0u;
+    var hard = 0u;
+    for (var k = 0u; k < ROW_PIXELS; k++) {
+        let pixel = first + vec2<u32>(k, 0u);
+        if pixel.x >= frame.sizes.x {
+            break;
+        }
+        let decided = final_class(pixel);
+        if decided.listed {
+            listing |= 1u << k;
+            hard |= u32(decided.hard) << k;
+        } else {
+            visibility_out[pixel_index(pixel)] = vec4<f32>(decided.visibility, 1.0);
+        }
+    }
+    list_run_for_shading(first, listing, hard);
 }
 
 // A listed pixel (xy) and whether it is in hard shadow (z), for lane `lane` of workgroup
