@@ -282,6 +282,11 @@ mod tests {
     }
 
     #[test]
+    fn the_classification_run_matches_the_shader() {
+        crate::gpu::shaders::assert_declares("methods/pcss/filter.wgsl", &format!("const ROW_PIXELS: u32 = {CLASSIFY_ROW}u;"));
+    }
+
+    #[test]
     fn a_uniform_light_has_no_colour_variance_and_equal_parts() {
         let table = light_regions(&builtin("white"));
         for region in &table {
