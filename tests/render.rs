@@ -1163,10 +1163,11 @@ fn wedges_with_the_eye_inside_a_shadow_volume_use_z_fail_and_see_what_just_outsi
 
 #[test]
 fn pooled_scratch_buffers_leave_nothing_for_the_next_job() {
-    // Methods take their large buffers (records, receivers, sums, depth maps) from the
-    // renderer's pools, holding whatever the last job left: each must clear or overwrite what
-    // it reads. A job rendered before and after others (another scene and light in the same
-    // buffers) must come out the same, and the second time allocate nothing.
+    // Methods take their large buffers (records, receivers, sums, depth maps, pixel lists)
+    // from the renderer's pools, as E0 (its corners and lists) and the composite do, holding
+    // whatever the last job left: each must clear or overwrite what it reads. A job rendered
+    // before and after others (another scene and light in the same buffers) must come out the
+    // same — its visibility, E0 and colour — and the second time allocate nothing.
     let engine = penumbra::engine::Engine::new(common::engine().gpu(), Limits::default(), penumbra::engine::PathPolicy::Deny);
     let frame = |scene: &str, light: &str, method: &serde_json::Value| {
         let spec = json!({
@@ -1195,8 +1196,21 @@ fn pooled_scratch_buffers_leave_nothing_for_the_next_job() {
         let created = engine.stats().targets_created;
         let again = frame("crowd", "stripes", &method);
         assert_eq!(first.visibility, again.visibility, "{method}: the same job, after another, renders the same");
+        assert_eq!(first.e0, again.e0, "{method}: E0 the same after another job");
+        assert_eq!(first.color, again.color, "{method}: the colour the same after another job");
         assert_eq!(engine.stats().targets_created, created, "{method}: the second time its buffers come from the pool");
     }
+    // A PNG's 8-bit pixels come from a pooled buffer the composite writes in full.
+    let png = |scene: &str, light: &str| {
+        let spec = json!({
+            "scene": {"builtin": scene}, "light": {"image": {"builtin": light}}, "method": {"name": "hard"},
+            "output": {"width": 128, "height": 96, "format": "png"}
+        });
+        engine.render(&job(spec), &()).unwrap().bytes
+    };
+    let first = png("crowd", "flame");
+    png("torus", "white");
+    assert_eq!(first, png("crowd", "flame"), "a PNG after another job is the same");
 }
 
 #[test]
