@@ -368,7 +368,6 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
     ctx.encoder.clear_buffer(&b, 0, None);
     ctx.encoder.clear_buffer(&tiles, 0, None);
     let groups = (grid.0.div_ceil(TILE), grid.1.div_ceil(TILE));
-    let screen = ctx.dispatch_size();
     {
         let mut pass = ctx.encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("Jfa::passes"),
@@ -413,7 +412,7 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
         pass.set_pipeline(&finish);
         pass.set_bind_group(1, if result_in_a { &a_to_b } else { &b_to_a }, &[0]);
         // 8 × 8 invocations a workgroup, each a run of `FINAL_ROW` pixels.
-        pass.dispatch_workgroups(ctx.width.div_ceil(8 * FINAL_ROW), screen.1, 1);
+        pass.dispatch_workgroups(ctx.width.div_ceil(8 * FINAL_ROW), ctx.height.div_ceil(8), 1);
         ctx.timer.mark(&mut pass, "jfa_final");
         let [size, shade] = &shading;
         pass.set_pipeline(size);
