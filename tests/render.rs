@@ -1163,11 +1163,12 @@ fn wedges_with_the_eye_inside_a_shadow_volume_use_z_fail_and_see_what_just_outsi
 
 #[test]
 fn pooled_scratch_buffers_leave_nothing_for_the_next_job() {
-    // Methods take their large buffers (records, receivers, sums, depth maps, pixel lists)
-    // from the renderer's pools, as E0 (its corners and lists) and the composite do, holding
-    // whatever the last job left: each must clear or overwrite what it reads. A job rendered
-    // before and after others (another scene and light in the same buffers) must come out the
-    // same — its visibility, E0 and colour — and the second time allocate nothing.
+    // Methods take their large buffers (records, receivers, sums, depth maps) from the
+    // renderer's pools, as the frame takes its targets and its E0, visibility and colour
+    // images, holding whatever the last job left: each must clear or overwrite what it reads.
+    // A job rendered before and after others (another scene and light in the same buffers)
+    // must come out the same — its visibility, E0 and colour — and the second time allocate
+    // nothing.
     let engine = penumbra::engine::Engine::new(common::engine().gpu(), Limits::default(), penumbra::engine::PathPolicy::Deny);
     let frame = |scene: &str, light: &str, method: &serde_json::Value| {
         let spec = json!({
@@ -1200,7 +1201,7 @@ fn pooled_scratch_buffers_leave_nothing_for_the_next_job() {
         assert_eq!(first.color, again.color, "{method}: the colour the same after another job");
         assert_eq!(engine.stats().targets_created, created, "{method}: the second time its buffers come from the pool");
     }
-    // A PNG's 8-bit pixels come from a pooled buffer the composite writes in full.
+    // The same for a PNG, whose 8-bit pixels the composite makes from those pooled images.
     let png = |scene: &str, light: &str| {
         let spec = json!({
             "scene": {"builtin": scene}, "light": {"image": {"builtin": light}}, "method": {"name": "hard"},
