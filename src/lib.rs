@@ -13,6 +13,7 @@ pub mod engine;
 pub mod error;
 pub mod eval;
 pub mod gpu;
+pub mod image_input;
 pub mod job;
 pub mod jobs;
 pub mod light;

@@ -1,8 +1,6 @@
 //! Light images (contract §1): decoded PNG (sRGB) or EXR (linear) files and the built-in
 //! images, as linear RGBA, piecewise constant — one uniform sub-rectangle per texel.
 
-use std::io::Cursor;
-
 use glam::{Vec2, Vec3};
 use serde_json::{Map, Value};
 
@@ -184,34 +182,15 @@ impl LightImage {
     /// Decodes a PNG (sRGB, decoded to linear) or an EXR (linear) light image, refusing
     /// images larger than `max_dim` from the header, before decoding the pixels.
     pub fn decode(bytes: &[u8], max_dim: u32, field: &str) -> JobResult<Self> {
-        // Decoders are untrusted-input parsers too: `cargo fuzz` found a tiled EXR on which the
-        // `exr` crate overflows (a panic with overflow checks on). A panic is this job's
-        // `invalid_asset`, never a lost worker thread.
-        std::panic::catch_unwind(|| Self::decode_unchecked(bytes, max_dim, field))
-            .unwrap_or_else(|_| Err(JobError::field(ErrorCode::InvalidAsset, field, "the light image could not be decoded")))
-    }
-
-    fn decode_unchecked(bytes: &[u8], max_dim: u32, field: &str) -> JobResult<Self> {
-        let invalid = |message: String| JobError::field(ErrorCode::InvalidAsset, field, message);
-        let mut reader = image::ImageReader::new(Cursor::new(bytes))
-            .with_guessed_format()
-            .map_err(|e| invalid(format!("cannot read the light image: {e}")))?;
-        let format = reader.format();
-        if !matches!(format, Some(image::ImageFormat::Png | image::ImageFormat::OpenExr)) {
-            return Err(invalid("a light image must be a PNG or an OpenEXR file".into()));
-        }
-        let mut limits = image::Limits::default();
-        limits.max_image_width = Some(max_dim);
-        limits.max_image_height = Some(max_dim);
-        limits.max_alloc = Some(u64::from(max_dim) * u64::from(max_dim) * 16 * 2);
-        reader.limits(limits);
-        let decoded = reader.decode().map_err(|e| match e {
-            image::ImageError::Limits(_) => {
-                JobError::field(ErrorCode::LimitExceeded, field, format!("the light image exceeds {max_dim}×{max_dim} texels"))
-            }
-            other => invalid(format!("cannot decode the light image: {other}")),
+        use crate::image_input::{self, Refusal};
+        let limits = image_input::Limits { max_dim, max_alloc: u64::from(max_dim) * u64::from(max_dim) * 16 * 2 };
+        let formats = [image::ImageFormat::Png, image::ImageFormat::OpenExr];
+        let (decoded, format) = image_input::decode(bytes, &formats, limits).map_err(|refusal| match refusal {
+            Refusal::Format(_) => JobError::field(ErrorCode::InvalidAsset, field, "a light image must be a PNG or an OpenEXR file"),
+            Refusal::TooLarge(what) => JobError::field(ErrorCode::LimitExceeded, field, format!("the light image is too large: {what}")),
+            Refusal::Invalid(why) => JobError::field(ErrorCode::InvalidAsset, field, format!("cannot decode the light image: {why}")),
         })?;
-        let linear_input = format == Some(image::ImageFormat::OpenExr);
+        let linear_input = format == image::ImageFormat::OpenExr;
         let rgba = decoded.into_rgba32f();
         let (width, height) = rgba.dimensions();
         let texels = rgba
@@ -254,20 +233,6 @@ fn inside_star(p: Vec2) -> bool {
 }
 
 #[cfg(test)]
-mod fuzz_regressions {
-    use super::*;
-
-    /// `cargo fuzz run light_image` found this: a tiled EXR on which the `exr` crate panics
-    /// when built with overflow checks (as fuzz builds are); either way it is `invalid_asset`.
-    #[test]
-    fn a_malformed_tiled_exr_is_an_invalid_asset() {
-        let bytes = include_bytes!("../../fuzz/regressions/light_image-exr-tiles.exr");
-        let error = LightImage::decode(bytes, 64, "light.image").unwrap_err();
-        assert_eq!(error.code, ErrorCode::InvalidAsset, "{}", error.message);
-    }
-}
-
-#[cfg(test)]
 mod tests {
     use super::*;
 
@@ -287,6 +252,19 @@ mod tests {
         // `white: false` is the image itself.
         let plain = LightImage::builtin("flame", &Map::from_iter([("white".to_owned(), Value::Bool(false))]), "light.image").unwrap();
         assert_eq!(plain, flame);
+    }
+
+    /// The decoder's refusals name the job's field: too large (here an EXR whose data window
+    /// exceeds the limit behind a small display window, which `cargo fuzz` found) is
+    /// `limit_exceeded`, anything else not a light image `invalid_asset`.
+    #[test]
+    fn undecodable_light_images_are_refused_naming_the_field() {
+        let huge = include_bytes!("../../fuzz/regressions/light_image-exr-data-window.exr");
+        let error = LightImage::decode(huge, 64, "light.image").unwrap_err();
+        assert_eq!((error.code, error.field.as_deref()), (ErrorCode::LimitExceeded, Some("light.image")), "{}", error.message);
+        assert!(error.message.contains("data window"), "{}", error.message);
+        let error = LightImage::decode(b"GIF89a", 64, "light.image").unwrap_err();
+        assert_eq!((error.code, error.field.as_deref()), (ErrorCode::InvalidAsset, Some("light.image")), "{}", error.message);
     }
 
     #[test]

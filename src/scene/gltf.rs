@@ -9,7 +9,6 @@
 //! a `file:` URI or a network address.
 
 use std::collections::{BTreeMap, HashMap};
-use std::io::Cursor;
 use std::path::{Component, Path, PathBuf};
 
 use base64::Engine as _;
@@ -477,14 +476,16 @@ fn decode_texture(image: &gltf::Image, buffers: &[Vec<u8>], uris: &UriReader<'_>
         }
         gltf::image::Source::Uri { uri, .. } => uris.read(uri)?,
     };
-    let mut reader = image::ImageReader::new(Cursor::new(bytes))
-        .with_guessed_format()
-        .map_err(|e| invalid(field, format!("cannot read texture: {e}")))?;
-    let mut image_limits = image::Limits::default();
-    image_limits.max_image_width = Some(limits.max_texture_dim);
-    image_limits.max_image_height = Some(limits.max_texture_dim);
-    reader.limits(image_limits);
-    let decoded = reader.decode().map_err(|e| invalid(field, format!("cannot decode texture: {e}")))?;
+    use crate::image_input::{self, Refusal};
+    // glTF 2.0 images are PNG or JPEG; an EXR is taken as well, as it always was.
+    let formats = [image::ImageFormat::Png, image::ImageFormat::Jpeg, image::ImageFormat::OpenExr];
+    // The `image` crate's default allocation budget (512 MiB), now also held over an EXR's parts.
+    let image_limits = image_input::Limits { max_dim: limits.max_texture_dim, max_alloc: 512 * 1024 * 1024 };
+    let (decoded, _) = image_input::decode(&bytes, &formats, image_limits).map_err(|refusal| match refusal {
+        Refusal::Format(_) => invalid(field, "a texture must be a PNG, a JPEG or an OpenEXR file"),
+        Refusal::TooLarge(what) => invalid(field, format!("cannot decode texture: too large: {what}")),
+        Refusal::Invalid(why) => invalid(field, format!("cannot decode texture: {why}")),
+    })?;
     let rgba = decoded.into_rgba8();
     Ok(TextureData { width: rgba.width(), height: rgba.height(), rgba8: rgba.into_raw() })
 }
@@ -631,6 +632,8 @@ fn height_field(n: u32, seed: u32) -> (serde_json::Value, Vec<u8>) {
 
 #[cfg(test)]
 mod tests {
+    use std::io::Cursor;
+
     use super::*;
 
     /// `cargo fuzz run scene` found this: a GLB header declaring a length of 0.
@@ -686,6 +689,26 @@ mod tests {
         let scene = load(&bytes, &Limits::default(), "scene").expect("a valid GLB");
         assert_eq!(scene.indices.len(), 3 * 2 * 8 * 8);
         assert_ne!(bytes, height_field_glb(9, 4));
+    }
+
+    /// A texture is decoded under the same guard as a light image: an EXR whose data window
+    /// is far larger than its display window (found by `cargo fuzz run light_image`; its 30 GB
+    /// allocation inside the `exr` crate aborted the process) is this scene's `invalid_asset`.
+    #[test]
+    fn a_texture_whose_exr_parts_exceed_the_limits_is_refused() {
+        let exr = include_bytes!("../../fuzz/regressions/light_image-exr-data-window.exr");
+        let (mut document, mut bin) = height_field(3, 1);
+        let view = serde_json::json!({"buffer": 0, "byteOffset": bin.len(), "byteLength": exr.len()});
+        bin.extend_from_slice(exr);
+        document["buffers"][0]["byteLength"] = bin.len().into();
+        document["bufferViews"].as_array_mut().unwrap().push(view);
+        document["images"] = serde_json::json!([{"bufferView": 2, "mimeType": "image/png"}]);
+        document["textures"] = serde_json::json!([{"source": 0}]);
+        document["materials"] = serde_json::json!([{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}]);
+        document["meshes"][0]["primitives"][0]["material"] = 0.into();
+        let error = load(&glb(&document, &bin), &Limits::default(), "scene").unwrap_err();
+        assert_eq!((error.code, error.field.as_deref()), (ErrorCode::InvalidAsset, Some("scene")), "{}", error.message);
+        assert!(error.message.contains("data window"), "{}", error.message);
     }
 
     /// A folder `root` holding a height field as `box.gltf` beside `mesh data.bin`, a
