@@ -41,6 +41,9 @@ pub struct LimitArgs {
     /// Largest scene texture, texels per side.
     #[arg(long, env = "PENUMBRA_MAX_TEXTURE_DIM", default_value_t = Limits::default().max_texture_dim)]
     pub max_texture_dim: u32,
+    /// Most bytes a scene's textures may take decoded, together (4 a texel).
+    #[arg(long, env = "PENUMBRA_MAX_TEXTURE_BYTES", default_value_t = Limits::default().max_texture_bytes)]
+    pub max_texture_bytes: u64,
     /// Largest request body (and scene or image file), bytes.
     #[arg(long, env = "PENUMBRA_MAX_BODY_BYTES", default_value_t = Limits::default().max_body_bytes)]
     pub max_body_bytes: usize,
@@ -67,6 +70,7 @@ impl LimitArgs {
             max_triangles: self.max_triangles,
             max_light_image_dim: self.max_light_image_dim,
             max_texture_dim: self.max_texture_dim,
+            max_texture_bytes: self.max_texture_bytes,
             max_body_bytes: self.max_body_bytes,
             max_json_depth: self.max_json_depth,
             max_vertices: self.max_vertices,

@@ -44,9 +44,10 @@ fn decode_unchecked(bytes: &[u8], formats: &[ImageFormat], limits: Limits) -> Re
     image_limits.max_alloc = Some(limits.max_alloc);
     reader.limits(image_limits);
     let decoded = reader.decode().map_err(|e| match e {
-        image::ImageError::Limits(_) => {
-            Refusal::TooLarge(format!("more than {0}×{0} texels, or {1} bytes", limits.max_dim, limits.max_alloc))
-        }
+        image::ImageError::Limits(limit) => Refusal::TooLarge(match limit.kind() {
+            image::error::LimitErrorKind::DimensionError => format!("more than {0}×{0} texels", limits.max_dim),
+            _ => format!("more than {} bytes to decode", limits.max_alloc),
+        }),
         other => Refusal::Invalid(other.to_string()),
     })?;
     Ok((decoded, format))

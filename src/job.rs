@@ -63,6 +63,10 @@ pub struct Limits {
     pub max_light_image_dim: u32,
     /// Largest side of a texture inside a glTF scene.
     pub max_texture_dim: u32,
+    /// Most bytes a scene's textures may take decoded, all together (8-bit RGBA: 4 bytes a
+    /// texel), each image's decoding buffers included: a small file can hold a large image,
+    /// and a body of many such images would otherwise decode to many times the machine's memory.
+    pub max_texture_bytes: u64,
     /// Largest request body in bytes (and scene or image file, and buffer a glTF declares).
     pub max_body_bytes: usize,
     /// Deepest nesting of arrays and objects in a job's JSON, refused before parsing.
@@ -95,6 +99,7 @@ impl Default for Limits {
             max_triangles: 4_000_000,
             max_light_image_dim: 4096,
             max_texture_dim: 8192,
+            max_texture_bytes: 1 << 30,
             max_body_bytes: 64 * 1024 * 1024,
             max_json_depth: MAX_JSON_DEPTH,
             max_vertices: 8_000_000,

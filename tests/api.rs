@@ -1292,11 +1292,20 @@ fn tokens_never_reach_the_logs() {
 /// an async job that could only fail later is refused before its 202.
 #[tokio::test(flavor = "multi_thread")]
 async fn limits_are_flags_listed_and_enforced_with_the_field_named() {
-    let flags = ["--max-samples", "64", "--max-rounds", "4", "--max-json-depth", "6", "--max-vertices", "100", "--max-output-dim", "512"];
+    let flags = [
+        ["--max-samples", "64"],
+        ["--max-rounds", "4"],
+        ["--max-json-depth", "6"],
+        ["--max-vertices", "100"],
+        ["--max-output-dim", "512"],
+        ["--max-texture-bytes", "40000"],
+    ]
+    .concat();
     let (_daemon, base) = serve(&[&["--job-store", "memory"], &flags[..]].concat(), &[("PENUMBRA_MAX_TRIANGLES", "5000")]).await;
     let client = reqwest::Client::new();
     let limits: Value = client.get(format!("{base}/v1/limits")).send().await.unwrap().json().await.unwrap();
-    for (name, value) in [("max_samples", 64), ("max_rounds", 4), ("max_json_depth", 6), ("max_vertices", 100), ("max_triangles", 5000)] {
+    let listed = [("max_samples", 64), ("max_rounds", 4), ("max_json_depth", 6), ("max_vertices", 100), ("max_triangles", 5000)];
+    for (name, value) in listed.into_iter().chain([("max_texture_bytes", 40000)]) {
         assert_eq!(limits[name], value, "{name} in {limits}");
     }
     let max_of = |method: &str, param: &str| {
@@ -1346,6 +1355,19 @@ async fn limits_are_flags_listed_and_enforced_with_the_field_named() {
     let error = upload.json::<Value>().await.unwrap()["error"].clone();
     assert_eq!((status, error["code"].as_str()), (StatusCode::UNPROCESSABLE_ENTITY, Some("limit_exceeded")), "{error}");
     assert!(error["message"].as_str().unwrap().contains("max_vertices"), "{error}");
+    // Three 64×64 textures decode to 49,152 bytes, past the scene's texture budget (the
+    // upload's body is the scene).
+    let rgba = image::ColorType::Rgba8;
+    let glb = penumbra::scene::gltf::textured_height_field_glb(&[rgba, rgba, rgba], 64);
+    let upload = client.post(format!("{base}/v1/scenes")).header("content-type", "model/gltf-binary").body(glb).send().await.unwrap();
+    let status = upload.status();
+    let error = upload.json::<Value>().await.unwrap()["error"].clone();
+    assert_eq!(
+        (status, error["code"].as_str(), error["field"].as_str()),
+        (StatusCode::UNPROCESSABLE_ENTITY, Some("limit_exceeded"), Some("body")),
+        "{error}"
+    );
+    assert!(error["message"].as_str().unwrap().contains("max_texture_bytes"), "{error}");
     // Within every limit, the same server renders.
     let ok = client.post(format!("{base}/v1/render")).json(&with_method(json!({"name": "reference", "samples": 16}))).send().await.unwrap();
     assert_eq!(ok.status(), StatusCode::OK);

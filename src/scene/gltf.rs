@@ -154,6 +154,8 @@ fn load_unchecked(bytes: &[u8], limits: &Limits, field: &str, uris: &UriReader<'
     }
     let mut materials: BTreeMap<Option<usize>, u32> = BTreeMap::new();
     let mut textures: HashMap<usize, usize> = HashMap::new();
+    // What the textures decoded so far take (`max_texture_bytes`).
+    let mut texture_bytes = 0u64;
     let mut skipped_primitives = 0usize;
     let mut untextured: Vec<String> = Vec::new();
     let (mut vertices, mut declared_triangles) = (0u64, 0u64);
@@ -227,7 +229,8 @@ fn load_unchecked(bytes: &[u8], limits: &Limits, field: &str, uris: &UriReader<'
                             let slot = match textures.get(&image.index()) {
                                 Some(&slot) => slot,
                                 None => {
-                                    let data = decode_texture(&image, &buffers, uris)?;
+                                    let data = decode_texture(&image, &buffers, uris, texture_bytes)?;
+                                    texture_bytes += data.rgba8.len() as u64;
                                     let slot = builder.add_texture(data);
                                     textures.insert(image.index(), slot);
                                     slot
@@ -464,8 +467,21 @@ fn decode_data_uri(rest: &str, field: &str) -> JobResult<Vec<u8>> {
     base64::engine::general_purpose::STANDARD.decode(payload.trim()).map_err(|e| invalid(field, format!("bad base64 in data: URI: {e}")))
 }
 
-fn decode_texture(image: &gltf::Image, buffers: &[Vec<u8>], uris: &UriReader<'_>) -> JobResult<TextureData> {
+/// Decodes image `image` into 8-bit RGBA, `taken` bytes of `max_texture_bytes` having gone to
+/// the scene's textures before it: its decoder may allocate what is left and no more, and its
+/// texels must fit there.
+fn decode_texture(image: &gltf::Image, buffers: &[Vec<u8>], uris: &UriReader<'_>, taken: u64) -> JobResult<TextureData> {
     let (limits, field) = (uris.limits, uris.field);
+    let left = limits.max_texture_bytes.saturating_sub(taken);
+    let too_large = |what: String| {
+        let message = format!(
+            "image {}: too large: {what} (max_texture_dim {}; max_texture_bytes {} for the scene's decoded textures, {left} of them left)",
+            image.index(),
+            limits.max_texture_dim,
+            limits.max_texture_bytes
+        );
+        JobError::field(ErrorCode::LimitExceeded, field, message)
+    };
     let bytes: Vec<u8> = match image.source() {
         gltf::image::Source::View { view, .. } => {
             let buffer = &buffers[view.buffer().index()];
@@ -479,13 +495,18 @@ fn decode_texture(image: &gltf::Image, buffers: &[Vec<u8>], uris: &UriReader<'_>
     use crate::image_input::{self, Refusal};
     // glTF 2.0 images are PNG or JPEG; an EXR is taken as well, as it always was.
     let formats = [image::ImageFormat::Png, image::ImageFormat::Jpeg, image::ImageFormat::OpenExr];
-    // The `image` crate's default allocation budget (512 MiB), now also held over an EXR's parts.
-    let image_limits = image_input::Limits { max_dim: limits.max_texture_dim, max_alloc: 512 * 1024 * 1024 };
+    // The decoder's buffers (for an EXR, every part's, from its header) within what is left.
+    let image_limits = image_input::Limits { max_dim: limits.max_texture_dim, max_alloc: left };
     let (decoded, _) = image_input::decode(&bytes, &formats, image_limits).map_err(|refusal| match refusal {
         Refusal::Format(_) => invalid(field, "a texture must be a PNG, a JPEG or an OpenEXR file"),
-        Refusal::TooLarge(what) => invalid(field, format!("cannot decode texture: too large: {what}")),
+        Refusal::TooLarge(what) => too_large(what),
         Refusal::Invalid(why) => invalid(field, format!("cannot decode texture: {why}")),
     })?;
+    // A decoder's buffer of fewer bytes a texel (8-bit RGB, gray) fits where its RGBA would not.
+    let rgba_bytes = 4 * u64::from(decoded.width()) * u64::from(decoded.height());
+    if rgba_bytes > left {
+        return Err(too_large(format!("{}×{} texels, {rgba_bytes} bytes as RGBA", decoded.width(), decoded.height())));
+    }
     let rgba = decoded.into_rgba8();
     Ok(TextureData { width: rgba.width(), height: rgba.height(), rgba8: rgba.into_raw() })
 }
@@ -583,6 +604,38 @@ pub fn glb(document: &serde_json::Value, bin: &[u8]) -> Vec<u8> {
 /// different scenes of a chosen size.
 pub fn height_field_glb(n: u32, seed: u32) -> Vec<u8> {
     let (document, bin) = height_field(n, seed);
+    glb(&document, &bin)
+}
+
+/// `height_field_glb(3, 1)` drawn in one part per entry of `colors`, each with a material of
+/// its own whose base colour is a `side × side` PNG of that colour type (3 bytes a texel
+/// decoded for RGB, 4 as a texture): for tests of what textures may take.
+pub fn textured_height_field_glb(colors: &[image::ColorType], side: u32) -> Vec<u8> {
+    let (mut document, mut bin) = height_field(3, 1);
+    let mut views = Vec::new();
+    for (k, &color) in colors.iter().enumerate() {
+        let texels = vec![(40 * k) as u8; (side * side) as usize * usize::from(color.bytes_per_pixel())];
+        let mut png = Vec::new();
+        image::ImageEncoder::write_image(image::codecs::png::PngEncoder::new(&mut png), &texels, side, side, color.into())
+            .expect("a PNG of whole texels encodes");
+        views.push(serde_json::json!({"buffer": 0, "byteOffset": bin.len(), "byteLength": png.len()}));
+        bin.extend_from_slice(&png);
+        bin.resize(bin.len().next_multiple_of(4), 0);
+    }
+    let parts = colors.len();
+    document["buffers"][0]["byteLength"] = bin.len().into();
+    document["bufferViews"].as_array_mut().expect("the height field's views").extend(views);
+    document["images"] = (0..parts).map(|k| serde_json::json!({"bufferView": 2 + k, "mimeType": "image/png"})).collect();
+    document["textures"] = (0..parts).map(|k| serde_json::json!({"source": k})).collect();
+    document["materials"] = (0..parts).map(|k| serde_json::json!({"pbrMetallicRoughness": {"baseColorTexture": {"index": k}}})).collect();
+    let primitive = document["meshes"][0]["primitives"][0].clone();
+    document["meshes"][0]["primitives"] = (0..parts)
+        .map(|k| {
+            let mut primitive = primitive.clone();
+            primitive["material"] = k.into();
+            primitive
+        })
+        .collect();
     glb(&document, &bin)
 }
 
@@ -693,7 +746,7 @@ mod tests {
 
     /// A texture is decoded under the same guard as a light image: an EXR whose data window
     /// is far larger than its display window (found by `cargo fuzz run light_image`; its 30 GB
-    /// allocation inside the `exr` crate aborted the process) is this scene's `invalid_asset`.
+    /// allocation inside the `exr` crate aborted the process) is refused, `limit_exceeded`.
     #[test]
     fn a_texture_whose_exr_parts_exceed_the_limits_is_refused() {
         let exr = include_bytes!("../../fuzz/regressions/light_image-exr-data-window.exr");
@@ -707,8 +760,29 @@ mod tests {
         document["materials"] = serde_json::json!([{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}]);
         document["meshes"][0]["primitives"][0]["material"] = 0.into();
         let error = load(&glb(&document, &bin), &Limits::default(), "scene").unwrap_err();
-        assert_eq!((error.code, error.field.as_deref()), (ErrorCode::InvalidAsset, Some("scene")), "{}", error.message);
+        assert_eq!((error.code, error.field.as_deref()), (ErrorCode::LimitExceeded, Some("scene")), "{}", error.message);
         assert!(error.message.contains("data window"), "{}", error.message);
+    }
+
+    /// `max_texture_bytes` bounds what a scene's textures take decoded, together: a body of many
+    /// small files of large images cannot decode to more. Refused from the decoder's own
+    /// budget (an RGBA image that does not fit what is left) or from the RGBA texels of one
+    /// whose decoder took less (RGB).
+    #[test]
+    fn textures_are_decoded_within_the_scenes_texture_budget() {
+        let rgba = image::ColorType::Rgba8;
+        let bytes = textured_height_field_glb(&[rgba, rgba, image::ColorType::Rgb8], 64);
+        let texture = 64 * 64 * 4;
+        let fits = |max_texture_bytes: u64| load(&bytes, &Limits { max_texture_bytes, ..Limits::default() }, "scene");
+        let scene = fits(3 * texture).expect("three textures within the budget");
+        assert_eq!(scene.textures.len(), 3);
+        for (max, refused_image) in
+            [(texture + texture / 2, "image 1"), (2 * texture + 3 * 64 * 64, "image 2"), (3 * texture - 1, "image 2")]
+        {
+            let error = fits(max).unwrap_err();
+            assert_eq!((error.code, error.field.as_deref()), (ErrorCode::LimitExceeded, Some("scene")), "{}", error.message);
+            assert!(error.message.contains(refused_image) && error.message.contains("max_texture_bytes"), "{max}: {}", error.message);
+        }
     }
 
     /// A folder `root` holding a height field as `box.gltf` beside `mesh data.bin`, a

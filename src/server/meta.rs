@@ -14,6 +14,7 @@ pub(super) async fn limits(State(state): State<Arc<AppState>>) -> Json<Value> {
         "max_triangles": limits.max_triangles,
         "max_light_image_dim": limits.max_light_image_dim,
         "max_texture_dim": limits.max_texture_dim,
+        "max_texture_bytes": limits.max_texture_bytes,
         "max_json_depth": limits.max_json_depth,
         "max_vertices": limits.max_vertices,
         "max_samples": limits.max_samples,
