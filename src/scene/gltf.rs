@@ -611,18 +611,31 @@ pub fn height_field_glb(n: u32, seed: u32) -> Vec<u8> {
 /// its own whose base colour is a `side × side` PNG of that colour type (3 bytes a texel
 /// decoded for RGB, 4 as a texture): for tests of what textures may take.
 pub fn textured_height_field_glb(colors: &[image::ColorType], side: u32) -> Vec<u8> {
+    let images: Vec<Vec<u8>> = colors
+        .iter()
+        .enumerate()
+        .map(|(k, &color)| {
+            let texels = vec![(40 * k) as u8; (side * side) as usize * usize::from(color.bytes_per_pixel())];
+            let mut png = Vec::new();
+            image::ImageEncoder::write_image(image::codecs::png::PngEncoder::new(&mut png), &texels, side, side, color.into())
+                .expect("a PNG of whole texels encodes");
+            png
+        })
+        .collect();
+    height_field_with_images(&images)
+}
+
+/// `height_field_glb(3, 1)` drawn in one part per image file of `images` (stored in the BIN
+/// chunk as they are), each part with a material whose base colour is that image.
+fn height_field_with_images(images: &[Vec<u8>]) -> Vec<u8> {
     let (mut document, mut bin) = height_field(3, 1);
     let mut views = Vec::new();
-    for (k, &color) in colors.iter().enumerate() {
-        let texels = vec![(40 * k) as u8; (side * side) as usize * usize::from(color.bytes_per_pixel())];
-        let mut png = Vec::new();
-        image::ImageEncoder::write_image(image::codecs::png::PngEncoder::new(&mut png), &texels, side, side, color.into())
-            .expect("a PNG of whole texels encodes");
-        views.push(serde_json::json!({"buffer": 0, "byteOffset": bin.len(), "byteLength": png.len()}));
-        bin.extend_from_slice(&png);
+    for file in images {
+        views.push(serde_json::json!({"buffer": 0, "byteOffset": bin.len(), "byteLength": file.len()}));
+        bin.extend_from_slice(file);
         bin.resize(bin.len().next_multiple_of(4), 0);
     }
-    let parts = colors.len();
+    let parts = images.len();
     document["buffers"][0]["byteLength"] = bin.len().into();
     document["bufferViews"].as_array_mut().expect("the height field's views").extend(views);
     document["images"] = (0..parts).map(|k| serde_json::json!({"bufferView": 2 + k, "mimeType": "image/png"})).collect();
@@ -750,16 +763,7 @@ mod tests {
     #[test]
     fn a_texture_whose_exr_parts_exceed_the_limits_is_refused() {
         let exr = include_bytes!("../../fuzz/regressions/light_image-exr-data-window.exr");
-        let (mut document, mut bin) = height_field(3, 1);
-        let view = serde_json::json!({"buffer": 0, "byteOffset": bin.len(), "byteLength": exr.len()});
-        bin.extend_from_slice(exr);
-        document["buffers"][0]["byteLength"] = bin.len().into();
-        document["bufferViews"].as_array_mut().unwrap().push(view);
-        document["images"] = serde_json::json!([{"bufferView": 2, "mimeType": "image/png"}]);
-        document["textures"] = serde_json::json!([{"source": 0}]);
-        document["materials"] = serde_json::json!([{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}]);
-        document["meshes"][0]["primitives"][0]["material"] = 0.into();
-        let error = load(&glb(&document, &bin), &Limits::default(), "scene").unwrap_err();
+        let error = load(&height_field_with_images(&[exr.to_vec()]), &Limits::default(), "scene").unwrap_err();
         assert_eq!((error.code, error.field.as_deref()), (ErrorCode::LimitExceeded, Some("scene")), "{}", error.message);
         assert!(error.message.contains("data window"), "{}", error.message);
     }
