@@ -436,6 +436,38 @@ fn reference_is_gray_under_white_and_colored_where_the_model_says() {
     assert!(agree as f32 >= 0.95 * colored.len() as f32, "{agree} of {} agree", colored.len());
 }
 
+#[test]
+fn reference_maps_cropped_to_the_receivers_see_what_whole_maps_see() {
+    // Seen from above, only the middle of `crowd` is in view: each sample's map is drawn only
+    // where those receivers fall in it.
+    let render = |crop: bool| {
+        let job = job(json!({
+            "scene": {"builtin": "crowd"},
+            "camera": {"eye": [0, 12, 0.0], "target": [0, 0, 0], "up": [0, 0, -1], "fov_y_deg": 24, "near": 5, "far": 20},
+            "light": {"image": {"builtin": "stripes"}},
+            "method": {"name": "reference", "samples": 32, "resolution": 1024, "crop": crop},
+            "output": {"width": 128, "height": 128, "format": "exr"}
+        }));
+        let (frame, _) = common::engine().render_frame(&job, &()).unwrap();
+        let crop = frame.counters["map_crop"];
+        (frame.visibility.unwrap(), crop)
+    };
+    let ((cropped, crop), (whole, side)) = (render(true), render(false));
+    assert_eq!(side, 1024.0);
+    assert!(crop <= 512.0, "the view holds a small part of the scene: a {crop}² crop of each 1024² map");
+    // The same maps where receivers read them. A texel centre on a triangle's edge may fall
+    // either side of it once the map is shifted and scaled (floating-point rounding, in x and
+    // y only), so a few pixels may see a sample differently; no more.
+    let shaded = whole.iter().filter(|v| v[0] < 1.0).count();
+    let differing: Vec<f32> =
+        cropped.iter().zip(&whole).map(|(a, b)| (Vec3::from(*a) - Vec3::from(*b)).abs().max_element()).filter(|d| *d > 0.0).collect();
+    eprintln!("reference cropped to {crop}² of 1024²: {} of {} pixels differ, {shaded} shaded", differing.len(), cropped.len());
+    assert!(shaded > 500, "the view holds shadows ({shaded} pixels)");
+    assert!(differing.len() * 200 <= cropped.len(), "{} of {} pixels differ", differing.len(), cropped.len());
+    let mean = differing.iter().sum::<f32>() / cropped.len() as f32;
+    assert!(mean < 1e-4, "mean difference {mean}");
+}
+
 /// `penumbra bench` in small (CI's form): every method and the timed reference per case, the
 /// floor summed from its phases, errors against the reference, E0 checked against the exact
 /// sum. Its own engine: the bench switches the renderer's E0 mode while it measures.

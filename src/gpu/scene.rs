@@ -196,8 +196,9 @@ impl GpuScene {
     }
 }
 
-/// The eight corners of the box [a, b].
-fn box_corners(a: Vec3, b: Vec3) -> [Vec3; 8] {
+/// The eight corners of the box [a, b], corner k taking b's coordinate where bit 0 (x), 1 (y)
+/// or 2 (z) of k is set.
+pub fn box_corners(a: Vec3, b: Vec3) -> [Vec3; 8] {
     [0, 1, 2, 3, 4, 5, 6, 7]
         .map(|k| Vec3::new(if k & 1 == 0 { a.x } else { b.x }, if k & 2 == 0 { a.y } else { b.y }, if k & 4 == 0 { a.z } else { b.z }))
 }

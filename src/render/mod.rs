@@ -4,6 +4,7 @@
 //! job; each phase is submitted and waited for on its own so its wall time is honest even on
 //! adapters without timestamp queries.
 
+pub mod convex;
 mod draw;
 pub mod frame;
 pub mod method;

@@ -32,22 +32,22 @@ override LAST: bool = false;
 struct BatchSample {
     origin: vec4<f32>,   // xyz: the sample point y in view coordinates (rotation · y); w: its map's near plane, metres
     radiance: vec4<f32>, // rgb: L(y) × stratum area, the sample's weight in the estimator
-    lens: vec4<f32>,     // x: texels per unit of tan from the map's centre (resolution / (2·tan of its half angle)); y: a texel's width per metre of depth (2·tan / resolution)
+    lens: vec4<f32>,     // x: texels per unit of tan from the map's centre (resolution / (2·tan of its half angle)); y: a texel's width per metre of depth (2·tan / resolution); zw: the whole-map texel where its layer's crop begins
 }
 
 struct Batch {
     // Rows of the rotation into view coordinates (x right, y up, z away from the light normal).
     rotation: array<vec4<f32>, 3>,
-    resolution: u32,         // texels per side of a map
+    resolution: u32,         // texels per side of a whole map
     bias_texels: f32,        // constant bias of the visibility test, texels
     slope_bias_texels: f32,  // slope-scaled bias, texels × tanθ at the receiver
-    pad: u32,
+    crop: u32,               // texels per side of a layer: the part of each map drawn (`MapCrop`)
     samples: array<BatchSample, MAX_SAMPLES>, // sample k has layer k of `depths`
 }
 
 @group(1) @binding(0) var<uniform> batch: Batch;
 // The batch's depth maps, a layer each: near / (view depth of the nearest surface), 0 where
-// the map holds nothing. Read where they were drawn: a texel fetch costs more than a buffer
+// the map holds nothing. A layer holds the crop of its map where the frame's receivers fall. Read where they were drawn: a texel fetch costs more than a buffer
 // load on lavapipe, but less than copying every map into a buffer.
 @group(1) @binding(1) var depths: texture_depth_2d_array;
 // Per covered pixel, 2·CHANNELS floats: Σ L·G·V, then Σ L·G (what the batches so far added).
@@ -73,7 +73,7 @@ fn add_sample(sums: ptr<function, Sums>, x: vec3<f32>, n: vec3<f32>, bias: f32, 
     let half = 0.5 * f32(batch.resolution);
     let f = v.xy * (s.lens.x / depth);
     let t = vec2<f32>(half + f.x, half - f.y);
-    let texel = vec2<u32>(clamp(t, vec2<f32>(0.0), vec2<f32>(f32(batch.resolution) - 1.0)));
+    let texel = vec2<u32>(clamp(t - s.lens.zw, vec2<f32>(0.0), vec2<f32>(f32(batch.crop) - 1.0)));
     let stored = textureLoad(depths, texel, layer, 0);
     // The bias in metres at the receiver (texels of this map there × `bias`) shrinks with the
     // resolution, so the estimate converges to true visibility. Lit when the receiver, brought
