@@ -99,7 +99,7 @@ struct BatchUniforms {
     resolution: u32,
     bias_texels: f32,
     slope_bias_texels: f32,
-    crop: u32,
+    pad: u32,
     samples: [BatchSample; BATCH_SAMPLES],
 }
 
@@ -121,56 +121,57 @@ const CROP_MARGIN_TEXELS: f32 = 2.0;
 /// reuse the pool's layers instead of allocating a new size each (llvmpipe's tiles are 64²).
 const CROP_GRANULE: u32 = 64;
 
-/// Which part of each sample's map is drawn: a square of `side` texels of the whole
+/// Which part of each sample's map is drawn: a rectangle of `size` texels of the whole
 /// `resolution`² map, at each sample's `origins` (its top-left texel in the whole map; `None`
 /// where no receiver of the frame falls in the map). Only texels a receiver can fall in are
-/// read, so drawing the rest — clearing it, filling it, and on lavapipe setting up the
-/// triangles that fall there — buys nothing. Within the crop every texel sees the same scene
-/// at the same depth as in the whole map: the same frustum, shifted and scaled in x and y
-/// only, which leaves the depth as it was (the clip z and w rows are untouched).
+/// read, so drawing the rest — clearing and filling it — buys nothing. Within the crop every
+/// texel sees the same scene at the same depth as in the whole map: the same frustum, shifted
+/// and scaled in x and y only, which leaves the depth as it was (the clip z and w rows are
+/// untouched). Only rounding differs: a texel centre on a triangle's edge may fall the other
+/// side of it.
 #[derive(Debug, Clone, PartialEq)]
 struct MapCrop {
-    side: u32,
+    size: UVec2,
     origins: Vec<Option<UVec2>>,
 }
 
 impl MapCrop {
     /// Every map whole.
     fn whole(samples: usize, resolution: u32) -> Self {
-        Self { side: resolution, origins: vec![Some(UVec2::ZERO); samples] }
+        Self { size: UVec2::splat(resolution), origins: vec![Some(UVec2::ZERO); samples] }
     }
 
-    /// The smallest square crop, a multiple of `CROP_GRANULE`, that holds every sample's
+    /// The smallest crop, whole multiples of `CROP_GRANULE` a side, that holds every sample's
     /// receivers (`bounds`, in texels of its whole map) with a margin.
     fn fit(bounds: Vec<Option<(Vec2, Vec2)>>, resolution: u32) -> Self {
-        let side = resolution as f32;
+        let whole = Vec2::splat(resolution as f32);
         let rects: Vec<Option<(UVec2, UVec2)>> = bounds
             .into_iter()
             .map(|bounds| {
                 let (lo, hi) = bounds?;
-                let lo = (lo - CROP_MARGIN_TEXELS).floor().clamp(Vec2::ZERO, Vec2::splat(side));
-                let hi = (hi + CROP_MARGIN_TEXELS).ceil().clamp(Vec2::ZERO, Vec2::splat(side));
+                let lo = (lo - CROP_MARGIN_TEXELS).floor().clamp(Vec2::ZERO, whole);
+                let hi = (hi + CROP_MARGIN_TEXELS).ceil().clamp(Vec2::ZERO, whole);
                 (lo.x < hi.x && lo.y < hi.y).then(|| (lo.as_uvec2(), hi.as_uvec2()))
             })
             .collect();
-        let extent = rects.iter().flatten().map(|(lo, hi)| (*hi - *lo).max_element()).max().unwrap_or(1);
-        let crop = extent.next_multiple_of(CROP_GRANULE).min(resolution);
-        let origins = rects.iter().map(|rect| rect.map(|(lo, _)| lo.min(UVec2::splat(resolution - crop)))).collect();
-        Self { side: crop, origins }
+        let extent = rects.iter().flatten().fold(UVec2::ONE, |extent, (lo, hi)| extent.max(*hi - *lo));
+        let size =
+            UVec2::new(extent.x.next_multiple_of(CROP_GRANULE), extent.y.next_multiple_of(CROP_GRANULE)).min(UVec2::splat(resolution));
+        let origins = rects.iter().map(|rect| rect.map(|(lo, _)| lo.min(UVec2::splat(resolution) - size))).collect();
+        Self { size, origins }
     }
 
     /// The projection that draws a crop of the map `view_proj` draws: x and y scaled by
-    /// resolution / side and shifted so that whole-map texel `origin + i` lands on crop
+    /// resolution / size and shifted so that whole-map texel `origin + i` lands on crop
     /// texel `i`; `view_proj` itself for a whole map.
     fn layer_view_proj(&self, origin: Option<UVec2>, resolution: u32, view_proj: Mat4) -> Mat4 {
-        let (Some(origin), true) = (origin, self.side < resolution) else { return view_proj };
-        let (whole, crop) = (resolution as f32, self.side as f32);
-        let o = origin.as_vec2();
+        let (Some(origin), false) = (origin, self.size == UVec2::splat(resolution)) else { return view_proj };
+        let (whole, crop, o) = (resolution as f32, self.size.as_vec2(), origin.as_vec2());
         Mat4::from_cols(
-            Vec4::new(whole / crop, 0.0, 0.0, 0.0),
-            Vec4::new(0.0, whole / crop, 0.0, 0.0),
+            Vec4::new(whole / crop.x, 0.0, 0.0, 0.0),
+            Vec4::new(0.0, whole / crop.y, 0.0, 0.0),
             Vec4::Z,
-            Vec4::new((whole - 2.0 * o.x) / crop - 1.0, 1.0 - (whole - 2.0 * o.y) / crop, 0.0, 1.0),
+            Vec4::new((whole - 2.0 * o.x) / crop.x - 1.0, 1.0 - (whole - 2.0 * o.y) / crop.y, 0.0, 1.0),
         ) * view_proj
     }
 }
@@ -286,7 +287,6 @@ impl ShadowMethod for Reference {
                 batch.resolution = resolution;
                 batch.bias_texels = params.get(&BIAS_TEXELS);
                 batch.slope_bias_texels = params.get(&SLOPE_BIAS_TEXELS);
-                batch.crop = crop.side;
                 batch.samples[..chunk.len()].copy_from_slice(chunk);
                 (chunk.len() as u32, batch)
             })
@@ -302,8 +302,8 @@ impl ShadowMethod for Reference {
         // The depth maps are the depth buffers themselves (`sample_depth.wgsl`), one layer each.
         let depth = ctx.scratch_texture(TextureKey {
             label: "Reference::depths",
-            width: crop.side,
-            height: crop.side,
+            width: crop.size.x,
+            height: crop.size.y,
             layers,
             format: DEPTH_BUFFER_FORMAT,
             usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
@@ -427,7 +427,7 @@ impl ShadowMethod for Reference {
             ("samples".to_owned(), total as f64),
             ("samples_skipped_black".to_owned(), f64::from(strata) - total as f64),
             ("resolution".to_owned(), f64::from(resolution)),
-            ("map_crop".to_owned(), f64::from(crop.side)),
+            ("map_crop_fraction".to_owned(), f64::from(crop.size.element_product()) / f64::from(resolution).powi(2)),
         ]))
     }
 }
@@ -474,9 +474,9 @@ mod tests {
             Some((Vec2::new(1700.0, -20.0), Vec2::new(2100.0, 380.0))),
         ];
         let crop = MapCrop::fit(bounds, resolution);
-        // The widest extent with its margins (900.7 + 2 → 903, 300.2 − 2 → 298: 605 texels),
-        // rounded up to whole granules.
-        assert_eq!(crop.side, 640);
+        // The widest extents with their margins (900.7 + 2 → 903, 300.2 − 2 → 298: 605 texels
+        // across; 998 to 1503: 505 down), rounded up to whole granules.
+        assert_eq!(crop.size, UVec2::new(640, 512));
         assert_eq!(crop.origins, vec![Some(UVec2::new(298, 998)), None, Some(UVec2::new(2048 - 640, 0))]);
         // A point's texel in its crop is its texel in the whole map less the crop's origin.
         let view_proj =
@@ -489,7 +489,8 @@ mod tests {
             let layer = crop.layer_view_proj(origin, resolution, view_proj);
             for p in [Vec3::new(0.3, 0.0, -1.2), Vec3::new(-2.0, 1.0, 2.5), Vec3::new(1.7, 0.4, 0.9)] {
                 let whole = texel(view_proj, p, resolution);
-                let cropped = texel(layer, p, crop.side);
+                let c = layer * p.extend(1.0);
+                let cropped = Vec2::new(c.x / c.w + 1.0, 1.0 - c.y / c.w) * 0.5 * crop.size.as_vec2();
                 assert!((cropped - (whole - origin.unwrap().as_vec2())).abs().max_element() < 1e-3, "{cropped} against {whole}");
                 // The depth is untouched: the same z and w.
                 let (a, b) = (view_proj * p.extend(1.0), layer * p.extend(1.0));
@@ -498,11 +499,11 @@ mod tests {
         }
         // A crop as large as the map is the whole map, drawn as before.
         let whole = MapCrop::fit(vec![Some((Vec2::new(-5.0, 10.0), Vec2::new(2000.0, 2047.0)))], resolution);
-        assert_eq!((whole.side, whole.origins[0]), (resolution, Some(UVec2::ZERO)));
+        assert_eq!((whole.size, whole.origins[0]), (UVec2::splat(resolution), Some(UVec2::ZERO)));
         assert_eq!(whole.layer_view_proj(whole.origins[0], resolution, view_proj), view_proj);
         assert_eq!(MapCrop::whole(2, resolution).layer_view_proj(Some(UVec2::ZERO), resolution, view_proj), view_proj);
         // No receiver in any map: the smallest crop, nothing drawn.
-        assert_eq!(MapCrop::fit(vec![None, None], resolution), MapCrop { side: CROP_GRANULE, origins: vec![None, None] });
+        assert_eq!(MapCrop::fit(vec![None, None], resolution), MapCrop { size: UVec2::splat(CROP_GRANULE), origins: vec![None, None] });
     }
 
     #[test]

@@ -41,7 +41,7 @@ struct Batch {
     resolution: u32,         // texels per side of a whole map
     bias_texels: f32,        // constant bias of the visibility test, texels
     slope_bias_texels: f32,  // slope-scaled bias, texels × tanθ at the receiver
-    crop: u32,               // texels per side of a layer: the part of each map drawn (`MapCrop`)
+    pad: u32,
     samples: array<BatchSample, MAX_SAMPLES>, // sample k has layer k of `depths`
 }
 
@@ -61,8 +61,8 @@ struct Sums {
 }
 
 // Sample `layer`'s L·G·V and L·G at x (normal n), both in view coordinates; `bias` is the
-// pixel's bias of the visibility test in texels.
-fn add_sample(sums: ptr<function, Sums>, x: vec3<f32>, n: vec3<f32>, bias: f32, layer: u32, s: BatchSample) {
+// pixel's bias of the visibility test in texels, `last` the last texel of a layer.
+fn add_sample(sums: ptr<function, Sums>, x: vec3<f32>, n: vec3<f32>, bias: f32, last: vec2<f32>, layer: u32, s: BatchSample) {
     let v = x - s.origin.xyz; // from the sample to x
     let depth = -v.z;         // along the light normal
     let inv_dist = inverseSqrt(dot(v, v));
@@ -73,7 +73,7 @@ fn add_sample(sums: ptr<function, Sums>, x: vec3<f32>, n: vec3<f32>, bias: f32, 
     let half = 0.5 * f32(batch.resolution);
     let f = v.xy * (s.lens.x / depth);
     let t = vec2<f32>(half + f.x, half - f.y);
-    let texel = vec2<u32>(clamp(t - s.lens.zw, vec2<f32>(0.0), vec2<f32>(f32(batch.crop) - 1.0)));
+    let texel = vec2<u32>(clamp(t - s.lens.zw, vec2<f32>(0.0), last));
     let stored = textureLoad(depths, texel, layer, 0);
     // The bias in metres at the receiver (texels of this map there × `bias`) shrinks with the
     // resolution, so the estimate converges to true visibility. Lit when the receiver, brought
@@ -118,39 +118,41 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     let cos_c = clamp(dot(normal, normalize(frame.light_center.xyz - world)), 0.0, 1.0);
     let tan_c = min(sqrt(1.0 - cos_c * cos_c) / max(cos_c, 0.05), 10.0);
     let bias = batch.bias_texels + batch.slope_bias_texels * tan_c;
+    // The last texel of a layer: each holds its map's crop (`MapCrop`), all the same size.
+    let last = vec2<f32>(textureDimensions(depths)) - 1.0;
     var s = Sums(vec3<f32>(0.0), vec3<f32>(0.0));
-    if SAMPLES > 0u { add_sample(&s, x, n, bias, 0u, batch.samples[0]); }
-    if SAMPLES > 1u { add_sample(&s, x, n, bias, 1u, batch.samples[1]); }
-    if SAMPLES > 2u { add_sample(&s, x, n, bias, 2u, batch.samples[2]); }
-    if SAMPLES > 3u { add_sample(&s, x, n, bias, 3u, batch.samples[3]); }
-    if SAMPLES > 4u { add_sample(&s, x, n, bias, 4u, batch.samples[4]); }
-    if SAMPLES > 5u { add_sample(&s, x, n, bias, 5u, batch.samples[5]); }
-    if SAMPLES > 6u { add_sample(&s, x, n, bias, 6u, batch.samples[6]); }
-    if SAMPLES > 7u { add_sample(&s, x, n, bias, 7u, batch.samples[7]); }
-    if SAMPLES > 8u { add_sample(&s, x, n, bias, 8u, batch.samples[8]); }
-    if SAMPLES > 9u { add_sample(&s, x, n, bias, 9u, batch.samples[9]); }
-    if SAMPLES > 10u { add_sample(&s, x, n, bias, 10u, batch.samples[10]); }
-    if SAMPLES > 11u { add_sample(&s, x, n, bias, 11u, batch.samples[11]); }
-    if SAMPLES > 12u { add_sample(&s, x, n, bias, 12u, batch.samples[12]); }
-    if SAMPLES > 13u { add_sample(&s, x, n, bias, 13u, batch.samples[13]); }
-    if SAMPLES > 14u { add_sample(&s, x, n, bias, 14u, batch.samples[14]); }
-    if SAMPLES > 15u { add_sample(&s, x, n, bias, 15u, batch.samples[15]); }
-    if SAMPLES > 16u { add_sample(&s, x, n, bias, 16u, batch.samples[16]); }
-    if SAMPLES > 17u { add_sample(&s, x, n, bias, 17u, batch.samples[17]); }
-    if SAMPLES > 18u { add_sample(&s, x, n, bias, 18u, batch.samples[18]); }
-    if SAMPLES > 19u { add_sample(&s, x, n, bias, 19u, batch.samples[19]); }
-    if SAMPLES > 20u { add_sample(&s, x, n, bias, 20u, batch.samples[20]); }
-    if SAMPLES > 21u { add_sample(&s, x, n, bias, 21u, batch.samples[21]); }
-    if SAMPLES > 22u { add_sample(&s, x, n, bias, 22u, batch.samples[22]); }
-    if SAMPLES > 23u { add_sample(&s, x, n, bias, 23u, batch.samples[23]); }
-    if SAMPLES > 24u { add_sample(&s, x, n, bias, 24u, batch.samples[24]); }
-    if SAMPLES > 25u { add_sample(&s, x, n, bias, 25u, batch.samples[25]); }
-    if SAMPLES > 26u { add_sample(&s, x, n, bias, 26u, batch.samples[26]); }
-    if SAMPLES > 27u { add_sample(&s, x, n, bias, 27u, batch.samples[27]); }
-    if SAMPLES > 28u { add_sample(&s, x, n, bias, 28u, batch.samples[28]); }
-    if SAMPLES > 29u { add_sample(&s, x, n, bias, 29u, batch.samples[29]); }
-    if SAMPLES > 30u { add_sample(&s, x, n, bias, 30u, batch.samples[30]); }
-    if SAMPLES > 31u { add_sample(&s, x, n, bias, 31u, batch.samples[31]); }
+    if SAMPLES > 0u { add_sample(&s, x, n, bias, last, 0u, batch.samples[0]); }
+    if SAMPLES > 1u { add_sample(&s, x, n, bias, last, 1u, batch.samples[1]); }
+    if SAMPLES > 2u { add_sample(&s, x, n, bias, last, 2u, batch.samples[2]); }
+    if SAMPLES > 3u { add_sample(&s, x, n, bias, last, 3u, batch.samples[3]); }
+    if SAMPLES > 4u { add_sample(&s, x, n, bias, last, 4u, batch.samples[4]); }
+    if SAMPLES > 5u { add_sample(&s, x, n, bias, last, 5u, batch.samples[5]); }
+    if SAMPLES > 6u { add_sample(&s, x, n, bias, last, 6u, batch.samples[6]); }
+    if SAMPLES > 7u { add_sample(&s, x, n, bias, last, 7u, batch.samples[7]); }
+    if SAMPLES > 8u { add_sample(&s, x, n, bias, last, 8u, batch.samples[8]); }
+    if SAMPLES > 9u { add_sample(&s, x, n, bias, last, 9u, batch.samples[9]); }
+    if SAMPLES > 10u { add_sample(&s, x, n, bias, last, 10u, batch.samples[10]); }
+    if SAMPLES > 11u { add_sample(&s, x, n, bias, last, 11u, batch.samples[11]); }
+    if SAMPLES > 12u { add_sample(&s, x, n, bias, last, 12u, batch.samples[12]); }
+    if SAMPLES > 13u { add_sample(&s, x, n, bias, last, 13u, batch.samples[13]); }
+    if SAMPLES > 14u { add_sample(&s, x, n, bias, last, 14u, batch.samples[14]); }
+    if SAMPLES > 15u { add_sample(&s, x, n, bias, last, 15u, batch.samples[15]); }
+    if SAMPLES > 16u { add_sample(&s, x, n, bias, last, 16u, batch.samples[16]); }
+    if SAMPLES > 17u { add_sample(&s, x, n, bias, last, 17u, batch.samples[17]); }
+    if SAMPLES > 18u { add_sample(&s, x, n, bias, last, 18u, batch.samples[18]); }
+    if SAMPLES > 19u { add_sample(&s, x, n, bias, last, 19u, batch.samples[19]); }
+    if SAMPLES > 20u { add_sample(&s, x, n, bias, last, 20u, batch.samples[20]); }
+    if SAMPLES > 21u { add_sample(&s, x, n, bias, last, 21u, batch.samples[21]); }
+    if SAMPLES > 22u { add_sample(&s, x, n, bias, last, 22u, batch.samples[22]); }
+    if SAMPLES > 23u { add_sample(&s, x, n, bias, last, 23u, batch.samples[23]); }
+    if SAMPLES > 24u { add_sample(&s, x, n, bias, last, 24u, batch.samples[24]); }
+    if SAMPLES > 25u { add_sample(&s, x, n, bias, last, 25u, batch.samples[25]); }
+    if SAMPLES > 26u { add_sample(&s, x, n, bias, last, 26u, batch.samples[26]); }
+    if SAMPLES > 27u { add_sample(&s, x, n, bias, last, 27u, batch.samples[27]); }
+    if SAMPLES > 28u { add_sample(&s, x, n, bias, last, 28u, batch.samples[28]); }
+    if SAMPLES > 29u { add_sample(&s, x, n, bias, last, 29u, batch.samples[29]); }
+    if SAMPLES > 30u { add_sample(&s, x, n, bias, last, 30u, batch.samples[30]); }
+    if SAMPLES > 31u { add_sample(&s, x, n, bias, last, 31u, batch.samples[31]); }
     let base = 2u * CHANNELS * (pixel.y * frame.sizes.x + pixel.x);
     if !FIRST {
         for (var c = 0u; c < CHANNELS; c++) {
