@@ -253,7 +253,8 @@ impl ShadowMethod for Reference {
         let (samples, strata) = light_samples(&spec.light, &spec.light_image, params.get(&SAMPLES), u64::from(params.get(&SEED)));
         let corners = ctx.scene.shadow_fit_points(&spec.light);
         let rotation = sample_rotation(&spec.light);
-        let view_projs: Vec<(Mat4, LightProjection)> = samples
+        // Each sample's frustum: its map's projection and the whole map's view-projection.
+        let frusta: Vec<(Mat4, LightProjection)> = samples
             .iter()
             .map(|sample| {
                 let projection = LightProjection::fit(&AreaLight { center: sample.position, ..spec.light }, &corners);
@@ -262,16 +263,18 @@ impl ShadowMethod for Reference {
             })
             .collect();
         let crop = if params.get(&CROP) {
+            // Every receiver of the frame (a G-buffer position) lies in what the camera sees of
+            // the scene's bounds.
             let receivers = ConvexSolid::frustum(spec.camera.view_proj(ctx.width as f32 / ctx.height as f32))
                 .intersect(&ConvexSolid::cuboid(ctx.scene.bounds_min, ctx.scene.bounds_max));
-            MapCrop::fit(view_projs.iter().map(|(view_proj, _)| map_bounds(&receivers, *view_proj, resolution)).collect(), resolution)
+            MapCrop::fit(frusta.iter().map(|(view_proj, _)| map_bounds(&receivers, *view_proj, resolution)).collect(), resolution)
         } else {
             MapCrop::whole(samples.len(), resolution)
         };
         // Per sample: its map's projection (the depth pass) and what the accumulate pass needs.
         let (view_projs, slots): (Vec<[[f32; 4]; 4]>, Vec<BatchSample>) = samples
             .iter()
-            .zip(&view_projs)
+            .zip(&frusta)
             .zip(&crop.origins)
             .map(|((sample, (view_proj, projection)), origin)| {
                 let slot = BatchSample {
