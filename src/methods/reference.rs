@@ -253,13 +253,15 @@ impl ShadowMethod for Reference {
         let (samples, strata) = light_samples(&spec.light, &spec.light_image, params.get(&SAMPLES), u64::from(params.get(&SEED)));
         let corners = ctx.scene.shadow_fit_points(&spec.light);
         let rotation = sample_rotation(&spec.light);
-        // Each sample's frustum: its map's projection and the whole map's view-projection.
-        let frusta: Vec<(Mat4, LightProjection)> = samples
+        // Each sample's frustum: the whole map's view-projection, its texels per unit of tan
+        // from the map's centre, and the fit it came from.
+        let frusta: Vec<(Mat4, f32, LightProjection)> = samples
             .iter()
             .map(|sample| {
                 let projection = LightProjection::fit(&AreaLight { center: sample.position, ..spec.light }, &corners);
                 let view = rotation * Mat4::from_translation(-sample.position);
-                (reversed_projection(&projection) * view, projection)
+                let proj = reversed_projection(&projection);
+                (proj * view, proj.y_axis.y * resolution as f32 * 0.5, projection)
             })
             .collect();
         let crop = if params.get(&CROP) {
@@ -267,7 +269,7 @@ impl ShadowMethod for Reference {
             // the scene's bounds.
             let receivers = ConvexSolid::frustum(spec.camera.view_proj(ctx.width as f32 / ctx.height as f32))
                 .intersect(&ConvexSolid::cuboid(ctx.scene.bounds_min, ctx.scene.bounds_max));
-            MapCrop::fit(frusta.iter().map(|(view_proj, _)| map_bounds(&receivers, *view_proj, resolution)).collect(), resolution)
+            MapCrop::fit(frusta.iter().map(|(view_proj, ..)| map_bounds(&receivers, *view_proj, resolution)).collect(), resolution)
         } else {
             MapCrop::whole(samples.len(), resolution)
         };
@@ -276,12 +278,12 @@ impl ShadowMethod for Reference {
             .iter()
             .zip(&frusta)
             .zip(&crop.origins)
-            .map(|((sample, (view_proj, projection)), origin)| {
+            .map(|((sample, (view_proj, texels_per_tan, projection)), origin)| {
                 let slot = BatchSample {
                     origin: rotation.transform_point3(sample.position).extend(projection.near).to_array(),
                     radiance: sample.weight.extend(0.0).to_array(),
                     lens: [
-                        reversed_projection(projection).y_axis.y * resolution as f32 * 0.5,
+                        *texels_per_tan,
                         2.0 * projection.tan_half / resolution as f32,
                         origin.map_or(0.0, |o| o.x as f32),
                         origin.map_or(0.0, |o| o.y as f32),
@@ -496,16 +498,15 @@ mod tests {
         // A point's texel in its crop is its texel in the whole map less the crop's origin.
         let view_proj =
             Mat4::perspective_infinite_reverse_rh(1.1, 1.0, 0.3) * Mat4::look_to_rh(Vec3::new(0.5, 8.0, 0.2), -Vec3::Y, -Vec3::Z);
-        let texel = |m: Mat4, p: Vec3, side: u32| {
+        let texel = |m: Mat4, p: Vec3, size: Vec2| {
             let c = m * p.extend(1.0);
-            Vec2::new(c.x / c.w + 1.0, 1.0 - c.y / c.w) * (0.5 * side as f32)
+            Vec2::new(c.x / c.w + 1.0, 1.0 - c.y / c.w) * 0.5 * size
         };
         for origin in [crop.origins[0], crop.origins[2]] {
             let layer = crop.layer_view_proj(origin, resolution, view_proj);
             for p in [Vec3::new(0.3, 0.0, -1.2), Vec3::new(-2.0, 1.0, 2.5), Vec3::new(1.7, 0.4, 0.9)] {
-                let whole = texel(view_proj, p, resolution);
-                let c = layer * p.extend(1.0);
-                let cropped = Vec2::new(c.x / c.w + 1.0, 1.0 - c.y / c.w) * 0.5 * crop.size.as_vec2();
+                let whole = texel(view_proj, p, Vec2::splat(resolution as f32));
+                let cropped = texel(layer, p, crop.size.as_vec2());
                 assert!((cropped - (whole - origin.unwrap().as_vec2())).abs().max_element() < 1e-3, "{cropped} against {whole}");
                 // The depth is untouched: the same z and w.
                 let (a, b) = (view_proj * p.extend(1.0), layer * p.extend(1.0));

@@ -18,12 +18,17 @@ pub struct ConvexSolid {
 /// x, bit 1: y, bit 2: z), each a loop of four corners.
 const BOX_FACES: [[usize; 4]; 6] = [[0, 2, 6, 4], [1, 3, 7, 5], [0, 1, 5, 4], [2, 3, 7, 6], [0, 1, 3, 2], [4, 5, 7, 6]];
 
+/// The faces of a hexahedron (a box, or a frustum: its image) from its corners, numbered as
+/// `box_corners` numbers a box's.
+fn hexahedron_faces(corners: [Vec3; 8]) -> Vec<Vec<Vec3>> {
+    BOX_FACES.iter().map(|face| face.map(|k| corners[k]).to_vec()).collect()
+}
+
 impl ConvexSolid {
     /// The box [lo, hi].
     pub fn cuboid(lo: Vec3, hi: Vec3) -> Self {
-        let corners = box_corners(lo, hi);
         Self {
-            faces: BOX_FACES.iter().map(|face| face.map(|k| corners[k]).to_vec()).collect(),
+            faces: hexahedron_faces(box_corners(lo, hi)),
             planes: vec![
                 Vec4::new(1.0, 0.0, 0.0, -lo.x),
                 Vec4::new(-1.0, 0.0, 0.0, hi.x),
@@ -41,10 +46,7 @@ impl ConvexSolid {
         let inverse = view_proj.inverse();
         let corners = box_corners(Vec3::new(-1.0, -1.0, 0.0), Vec3::ONE).map(|c| inverse.project_point3(c));
         let [r0, r1, r2, r3] = [0, 1, 2, 3].map(|i| view_proj.row(i));
-        Self {
-            faces: BOX_FACES.iter().map(|face| face.map(|k| corners[k]).to_vec()).collect(),
-            planes: vec![r3 + r0, r3 - r0, r3 + r1, r3 - r1, r2, r3 - r2],
-        }
+        Self { faces: hexahedron_faces(corners), planes: vec![r3 + r0, r3 - r0, r3 + r1, r3 - r1, r2, r3 - r2] }
     }
 
     /// The part both solids share. Every face of it is a face of one of them clipped by the
