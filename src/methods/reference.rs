@@ -99,7 +99,7 @@ struct BatchUniforms {
     resolution: u32,
     bias_texels: f32,
     slope_bias_texels: f32,
-    pad: u32,
+    plane: f32,
     samples: [BatchSample; BATCH_SAMPLES],
 }
 
@@ -304,6 +304,7 @@ impl ShadowMethod for Reference {
                 batch.resolution = resolution;
                 batch.bias_texels = params.get(&BIAS_TEXELS);
                 batch.slope_bias_texels = params.get(&SLOPE_BIAS_TEXELS);
+                batch.plane = rotation.transform_point3(spec.light.center).z;
                 batch.samples[..chunk.len()].copy_from_slice(chunk);
                 (chunk.len() as u32, batch)
             })
