@@ -13,8 +13,8 @@
 //! Batching changes only the order of the additions (the same samples, maps and tests).
 //! Numerator and denominator share the same samples, so lit and umbra pixels are exact and the
 //! noise lives only in the penumbra. At 1080p on lavapipe a sample with a 2048² map costs
-//! ~1.4 ms to clear it, ~2 ms to draw it and ~7 ms (one channel) to ~9 ms (three) to test and
-//! add it at every pixel. Only the part of each map where the frame's receivers can fall is
+//! ~2 ms to clear it, ~2 ms to draw `crowd` into it and ~6–8 ms (one channel) to ~8–9 ms
+//! (three) to test and add it at every pixel. Only the part of each map where the frame's receivers can fall is
 //! drawn (`MapCrop`, from the camera's view of the scene's bounds: `render::convex`), which
 //! takes a fifth to a half off the maps of a scene the camera sees only part of.
 //!
@@ -55,11 +55,12 @@ const CROP: Param<bool> = Param::boolean(
 
 const PARAMS: &[ParamSpec] = &[SAMPLES.spec, RESOLUTION.spec, BIAS_TEXELS.spec, SLOPE_BIAS_TEXELS.spec, SEED.spec, CROP.spec];
 
-/// The projection a sample's depth map is drawn with: the frustum `fit` gives that sample,
-/// reversed-Z with the far plane at infinity, so the stored depth is `near / view depth`
-/// (`sample_depth.wgsl`) and float depth keeps the same relative precision at every distance.
-fn reversed_projection(projection: &LightProjection) -> Mat4 {
-    Mat4::perspective_infinite_reverse_rh(2.0 * projection.tan_half.atan(), 1.0, projection.near)
+/// The projection a sample's depth map is drawn with: the angle `fit` gives that sample and the
+/// near plane every map shares, reversed-Z with the far plane at infinity, so the stored depth
+/// is `near / view depth` (`sample_depth.wgsl`) and float depth keeps the same relative
+/// precision at every distance.
+fn reversed_projection(tan_half: f32, near: f32) -> Mat4 {
+    Mat4::perspective_infinite_reverse_rh(2.0 * tan_half.atan(), 1.0, near)
 }
 
 /// The rotation into every sample's view coordinates: each frustum looks along the light
@@ -100,6 +101,8 @@ struct BatchUniforms {
     bias_texels: f32,
     slope_bias_texels: f32,
     plane: f32,
+    near: f32,
+    pad: [u32; 3],
     samples: [BatchSample; BATCH_SAMPLES],
 }
 
@@ -109,7 +112,6 @@ struct BatchUniforms {
 struct BatchSample {
     origin: [f32; 4],
     radiance: [f32; 4],
-    lens: [f32; 4],
 }
 
 /// Texels of margin around where the receivers fall in a sample's map (`map_bounds`): the
@@ -253,15 +255,20 @@ impl ShadowMethod for Reference {
         let (samples, strata) = light_samples(&spec.light, &spec.light_image, params.get(&SAMPLES), u64::from(params.get(&SEED)));
         let corners = ctx.scene.shadow_fit_points(&spec.light);
         let rotation = sample_rotation(&spec.light);
-        // Each sample's frustum: the whole map's view-projection, its texels per unit of tan
-        // from the map's centre, and the fit it came from.
-        let frusta: Vec<(Mat4, f32, LightProjection)> = samples
+        // Each sample's frustum: its angle fitted to the scene from its point, and one near
+        // plane for every map (the nearest any fit allows), so that the accumulate pass reads
+        // it once per pixel, not per sample. The whole map's view-projection and its texels
+        // per unit of tan from the map's centre.
+        let fits: Vec<LightProjection> =
+            samples.iter().map(|sample| LightProjection::fit(&AreaLight { center: sample.position, ..spec.light }, &corners)).collect();
+        let near = fits.iter().map(|fit| fit.near).reduce(f32::min).unwrap_or(1.0);
+        let frusta: Vec<(Mat4, f32)> = samples
             .iter()
-            .map(|sample| {
-                let projection = LightProjection::fit(&AreaLight { center: sample.position, ..spec.light }, &corners);
+            .zip(&fits)
+            .map(|(sample, fit)| {
                 let view = rotation * Mat4::from_translation(-sample.position);
-                let proj = reversed_projection(&projection);
-                (proj * view, proj.y_axis.y * resolution as f32 * 0.5, projection)
+                let proj = reversed_projection(fit.tan_half, near);
+                (proj * view, proj.y_axis.y * resolution as f32 * 0.5)
             })
             .collect();
         let crop = if params.get(&CROP) {
@@ -278,16 +285,14 @@ impl ShadowMethod for Reference {
             .iter()
             .zip(&frusta)
             .zip(&crop.origins)
-            .map(|((sample, (view_proj, texels_per_tan, projection)), origin)| {
+            .map(|((sample, (view_proj, texels_per_tan)), origin)| {
+                // The crop's first texel, x and y in one word: indices under 2¹² leave the float
+                // exponent short of all ones, so the word is never a NaN to be canonicalised.
+                let crop_origin = origin.map_or(0, |o| o.x | o.y << 16);
+                let view = rotation.transform_point3(sample.position);
                 let slot = BatchSample {
-                    origin: rotation.transform_point3(sample.position).extend(projection.near).to_array(),
-                    radiance: sample.weight.extend(0.0).to_array(),
-                    lens: [
-                        *texels_per_tan,
-                        2.0 * projection.tan_half / resolution as f32,
-                        origin.map_or(0.0, |o| o.x as f32),
-                        origin.map_or(0.0, |o| o.y as f32),
-                    ],
+                    origin: [view.x, view.y, f32::from_bits(crop_origin), 0.0],
+                    radiance: sample.weight.extend(*texels_per_tan).to_array(),
                 };
                 (crop.layer_view_proj(*origin, resolution, *view_proj).to_cols_array_2d(), slot)
             })
@@ -305,6 +310,7 @@ impl ShadowMethod for Reference {
                 batch.bias_texels = params.get(&BIAS_TEXELS);
                 batch.slope_bias_texels = params.get(&SLOPE_BIAS_TEXELS);
                 batch.plane = rotation.transform_point3(spec.light.center).z;
+                batch.near = near;
                 batch.samples[..chunk.len()].copy_from_slice(chunk);
                 (chunk.len() as u32, batch)
             })
@@ -379,12 +385,14 @@ impl ShadowMethod for Reference {
             });
             {
                 // One pipeline per batch size (`SAMPLES` in accumulate.wgsl: all but the last
-                // batch are full), channels of the sums, and whether it is the first or last.
+                // batch are full), channels of the sums, whether it is the first or last, and
+                // whether the maps are cropped.
                 let (first, last) = (b == 0, b + 1 == batches.len());
+                let cropped = crop.size != UVec2::splat(resolution);
                 let pipeline = ctx.screen_specialized(
                     PipelineKey {
                         name: "reference.accumulate",
-                        variant: count | channels << 8 | u32::from(first) << 16 | u32::from(last) << 17,
+                        variant: count | channels << 8 | u32::from(first) << 16 | u32::from(last) << 17 | u32::from(cropped) << 18,
                     },
                     ("methods/reference/accumulate.wgsl", "main"),
                     &[
@@ -407,6 +415,7 @@ impl ShadowMethod for Reference {
                         ("CHANNELS", f64::from(channels)),
                         ("FIRST", f64::from(u8::from(first))),
                         ("LAST", f64::from(u8::from(last))),
+                        ("CROPPED", f64::from(u8::from(cropped))),
                     ],
                 );
                 let group = ctx.bind(

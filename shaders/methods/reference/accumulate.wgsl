@@ -7,13 +7,18 @@
 // the G-buffer reads and the sums' update every sample, so a batch reads and updates each
 // pixel once; a branch no lane takes still runs its code, so the number of samples is a
 // pipeline constant (`SAMPLES`) and the unused slots compile away instead of being skipped by
-// a test; a sample's uniforms indexed by a loop counter were loaded lane by lane, so the
-// samples are spelled out one by one (constant indices: scalar loads). Every sample's frustum
-// looks along the light normal with the image's up, so they share one rotation: the pixel is
-// rotated into it once per batch and each sample costs a subtraction, not a matrix. And every
-// sample lies on the light's plane, so a pixel's depth along the normal is the same from each:
-// its reciprocal, square and bias are taken once per pixel (`Receiver`), not once per sample
-// (3–6 % of the pass at 1080p, measured with `penumbra bench`).
+// a test; a loop over the samples ran slower than the samples spelled out one by one (constant
+// indices). llvmpipe (Mesa 22.3) loads every float of a uniform lane by lane, ~20 instructions
+// each whatever its index, and fetches a texel by a call, after which it loads every uniform
+// again (read in its generated code with perf and gdb): so a sample carries as few floats as
+// it can — its point, its weight and its map's scale (4 with one channel, 6 with three), its
+// crop's origin (both texels in one word) only where the maps are cropped (`CROPPED`) — and
+// what the batch shares (one near plane for every map, the map's size) is loaded once per
+// pixel into `Receiver`: 12–22 % off the pass against 10 floats a sample. Every sample's
+// frustum looks along the light normal with the image's up, so they share one rotation: the
+// pixel is rotated into it once per batch and each sample costs a subtraction, not a matrix.
+// And every sample lies on the light's plane, so a pixel's depth along the normal is the same
+// from each: its reciprocal, square and bias are taken once per pixel too (3–6 % of the pass).
 
 #import common/frame_inputs.wgsl
 
@@ -31,11 +36,12 @@ override FIRST: bool = false;
 // stores costs about as much as a sample's test, so the sums are stored once fewer and
 // never read back by a pass of their own.
 override LAST: bool = false;
+// Whether the maps are crops (`BatchSample::origin.z`); whole maps begin at texel 0.
+override CROPPED: bool = true;
 
 struct BatchSample {
-    origin: vec4<f32>,   // xy: the sample point y in view coordinates (rotation · y; its z is `Batch::plane`); w: its map's near plane, metres
-    radiance: vec4<f32>, // rgb: L(y) × stratum area, the sample's weight in the estimator
-    lens: vec4<f32>,     // x: texels per unit of tan from the map's centre (resolution / (2·tan of its half angle)); y: a texel's width per metre of depth (2·tan / resolution); zw: the whole-map texel where its layer's crop begins
+    origin: vec4<f32>,   // xy: the sample point y in view coordinates (rotation · y; its z is `Batch::plane`); z: the whole-map texel where its layer's crop begins, x | y << 16 (one float fewer to load); w: unused
+    radiance: vec4<f32>, // rgb: L(y) × stratum area, the sample's weight in the estimator; w: its map's texels per unit of tan from the centre (resolution / (2·tan of its half angle))
 }
 
 struct Batch {
@@ -45,6 +51,10 @@ struct Batch {
     bias_texels: f32,        // constant bias of the visibility test, texels
     slope_bias_texels: f32,  // slope-scaled bias, texels × tanθ at the receiver
     plane: f32,              // the light's plane in view coordinates: z of every sample point
+    near: f32,               // every map's near plane, metres
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
     samples: array<BatchSample, MAX_SAMPLES>, // sample k has layer k of `depths`
 }
 
@@ -75,6 +85,10 @@ struct Receiver {
     n_dot_z: f32,        // n·v's part along the normal, the same from every sample: n.z·(−depth)
     g_depth: f32,        // cosθy·|v| = depth, 0 behind the light's plane
     bias_depth2: f32,    // depth² × the test's bias in texels
+    // The batch's own uniforms, loaded once here: llvmpipe calls a function for each texel
+    // fetch, and loads a uniform read after it again, lane by lane, for every sample.
+    half: f32,           // half a whole map's side, texels
+    near: f32,           // every map's near plane
 }
 
 // Sample `layer`'s L·G·V and L·G at receiver `r`; `last` is the last texel of a layer.
@@ -85,19 +99,23 @@ fn add_sample(sums: ptr<function, Sums>, r: Receiver, last: vec2<f32>, layer: u3
     // G = cosθx·cosθy/|v|² with cosθx = −n·v/|v|, cosθy = depth/|v|; 0 behind either surface.
     let g = max(-fma(r.n.x, d.x, fma(r.n.y, d.y, r.n_dot_z)), 0.0) * r.g_depth * inv_dist2 * inv_dist2;
     // The map's texel coordinates (x right, y down from its top-left corner), less its crop's
-    // origin; `f` is from the map's centre.
-    let half = 0.5 * f32(batch.resolution);
-    let f = d * (s.lens.x * r.inv_depth);
-    let t = vec2<f32>(half - s.lens.z + f.x, half - s.lens.w - f.y);
+    // origin; `f` is from the map's centre, `k` its texels per unit of tan.
+    let k = s.radiance.w;
+    let f = d * (k * r.inv_depth);
+    var t = vec2<f32>(r.half + f.x, r.half - f.y);
+    if CROPPED {
+        let crop = bitcast<u32>(s.origin.z);
+        t -= vec2<f32>(f32(crop & 0xffffu), f32(crop >> 16u));
+    }
     let stored = textureLoad(depths, vec2<u32>(clamp(t, vec2<f32>(0.0), last)), layer, 0);
-    // The bias in metres at the receiver (texels of this map there × `bias`: depth·lens.y·bias)
+    // The bias in metres at the receiver (texels of this map there × `bias`: depth·bias/k)
     // shrinks with the resolution, so the estimate converges to true visibility. Lit when the
     // receiver, brought that much nearer along its ray (its depth less bias_m·cosθy), is no
-    // deeper than the nearest surface, near/stored: multiplied out so that an empty texel (0)
-    // is lit without a division. Outside the frustum nothing is recorded: lit. (Behind the
-    // sample, G is 0 whatever the test says.)
-    let inside = all(abs(f) < vec2<f32>(half));
-    let visible = !inside || (r.depth - r.bias_depth2 * s.lens.y * inv_dist) * stored <= s.origin.w;
+    // deeper than the nearest surface, near/stored: multiplied out (and by k) so that an
+    // empty texel (0) is lit without a division. Outside the frustum nothing is recorded: lit.
+    // (Behind the sample, G is 0 whatever the test says.)
+    let inside = all(abs(f) < vec2<f32>(r.half));
+    let visible = !inside || (r.depth * k - r.bias_depth2 * inv_dist) * stored <= r.near * k;
     if CHANNELS == 1u {
         (*sums).shadowed.x += s.radiance.r * select(0.0, g, visible);
         (*sums).unshadowed.x += s.radiance.r * g;
@@ -133,7 +151,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     let tan_c = min(sqrt(1.0 - cos_c * cos_c) / max(cos_c, 0.05), 10.0);
     let bias = batch.bias_texels + batch.slope_bias_texels * tan_c;
     let depth = batch.plane - x.z;
-    let receiver = Receiver(x.xy, n, depth, 1.0 / depth, depth * depth, -n.z * depth, max(depth, 0.0), depth * depth * bias);
+    let receiver = Receiver(x.xy, n, depth, 1.0 / depth, depth * depth, -n.z * depth, max(depth, 0.0), depth * depth * bias, 0.5 * f32(batch.resolution), batch.near);
     // The last texel of a layer: each holds its map's crop (`MapCrop`), all the same size.
     let last = vec2<f32>(textureDimensions(depths)) - 1.0;
     var s = Sums(vec3<f32>(0.0), vec3<f32>(0.0));
