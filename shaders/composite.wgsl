@@ -14,6 +14,7 @@ const INV_PI: f32 = 0.31830988618;
 
 @compute @workgroup_size(8, 8)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
+    frame = frame_uniform;
     let pixel = id.xy;
     if any(pixel >= frame.sizes.xy) {
         return;
@@ -46,6 +47,7 @@ fn linear_to_srgb(c: vec3<f32>) -> vec3<f32> {
 // what `output::encode` would make from the linear colour, without reading that back.
 @compute @workgroup_size(8, 8)
 fn srgb8(@builtin(global_invocation_id) id: vec3<u32>) {
+    frame = frame_uniform;
     let pixel = id.xy;
     if any(pixel >= frame.sizes.xy) {
         return;

@@ -138,6 +138,7 @@ fn pixel_terms(pixel: vec2<u32>) -> Corner {
 // Pass 1: Φ per channel and the exact E0 at every block corner.
 @compute @workgroup_size(8, 8)
 fn block_corners(@builtin(global_invocation_id) id: vec3<u32>) {
+    frame = frame_uniform;
     let count = corner_count();
     if any(id.xy >= count) {
         return;
@@ -417,6 +418,7 @@ fn append_rows(to_above: bool, origin: vec2<u32>, first_row: u32, mask: u32) {
 // whatever the lanes read, so loading them per pixel cost more than the interpolation itself.
 @compute @workgroup_size(64)
 fn interpolate_blocks(@builtin(global_invocation_id) id: vec3<u32>) {
+    frame = frame_uniform;
     let block = id.xy;
     if any(block >= corner_count() - 1u) {
         return;
@@ -465,6 +467,7 @@ fn interpolate_blocks(@builtin(global_invocation_id) id: vec3<u32>) {
 // measured against.
 @compute @workgroup_size(8, 8)
 fn exact(@builtin(global_invocation_id) id: vec3<u32>) {
+    frame = frame_uniform;
     let origin = 2u * id.xy;
     if any(origin >= frame.sizes.xy) {
         return;
@@ -486,6 +489,7 @@ fn screen_surface(pixel: vec2<u32>) -> Surface {
 // The sizes of the two exact passes' dispatches.
 @compute @workgroup_size(1)
 fn exact_sizes() {
+    frame = frame_uniform;
     above_groups = list_dispatch((atomicLoad(&above.count) + QUAD - 1u) / QUAD);
     clipped_groups = list_dispatch((atomicLoad(&clipped.count) + QUAD - 1u) / QUAD);
 }
@@ -539,6 +543,7 @@ fn quad_positions(group: vec3<u32>, lane: u32, count: u32) -> vec4<u32> {
 // `polygon_irradiance` computes there, in the same order, at about half the cost.
 @compute @workgroup_size(64)
 fn exact_above(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) lane: u32) {
+    frame = frame_uniform;
     let count = atomicLoad(&above.count);
     if QUAD * list_position(group, lane) >= count {
         return;
@@ -572,6 +577,7 @@ fn clipped_quad(q: Quad) -> mat4x3<f32> {
 // The pixels of `clipped`, summed exactly with each cell clipped to the hemisphere.
 @compute @workgroup_size(64)
 fn exact_clipped(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) lane: u32) {
+    frame = frame_uniform;
     let count = atomicLoad(&clipped.count);
     if QUAD * list_position(group, lane) >= count {
         return;

@@ -25,11 +25,13 @@ fn refine_group(id: vec3<u32>, marking: bool) {
 // Before the search pass: lists the pixels the refinement will need searched.
 @compute @workgroup_size(64)
 fn mark_searches(@builtin(global_invocation_id) id: vec3<u32>) {
+    frame = frame_uniform;
     refine_group(id, true);
 }
 
 // After it: interpolates.
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
+    frame = frame_uniform;
     refine_group(id, false);
 }

@@ -5,6 +5,7 @@
 
 @compute @workgroup_size(1)
 fn listed_size() {
+    frame = frame_uniform;
     search_groups = list_dispatch(atomicLoad(&to_search.count));
 }
 
@@ -12,11 +13,13 @@ fn listed_size() {
 // so the constant compiles the jitter out of the first (see `search`).
 @compute @workgroup_size(64)
 fn search_listed(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) lane: u32) {
+    frame = frame_uniform;
     search_list_position(list_position(group, lane), false);
 }
 
 @compute @workgroup_size(64)
 fn search_listed_jittered(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) lane: u32) {
+    frame = frame_uniform;
     search_list_position(list_position(group, lane), true);
 }
 

@@ -21,6 +21,7 @@
 // (`covers`).
 @compute @workgroup_size(8, 8)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
+    frame = frame_uniform;
     let pixel = id.xy;
     let size = frame.sizes.xy;
     if any(pixel >= size) {
@@ -42,6 +43,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
 // that order).
 @compute @workgroup_size(8, 8)
 fn mark_boundary(@builtin(global_invocation_id) id: vec3<u32>) {
+    frame = frame_uniform;
     let pixel = id.xy;
     let size = frame.sizes.xy;
     if any(pixel >= size) || (flags[pixel.y * size.x + pixel.x] & HARD) == 0u {
@@ -86,12 +88,14 @@ fn mark_boundary(@builtin(global_invocation_id) id: vec3<u32>) {
 // Step 3a: the size of step 3's dispatch.
 @compute @workgroup_size(1)
 fn boundary_size() {
+    frame = frame_uniform;
     boundary_groups = list_dispatch(atomicLoad(&boundary.count));
 }
 
 // Step 3, the listed boundary pixels: their seeds.
 @compute @workgroup_size(64)
 fn seed_listed(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) lane: u32) {
+    frame = frame_uniform;
     let i = list_position(group, lane);
     if i >= atomicLoad(&boundary.count) {
         return;

@@ -132,6 +132,7 @@ fn map_depth_at(t: vec2<i32>) -> f32 {
 // flooded.
 @compute @workgroup_size(8, 8)
 fn list_tiles(@builtin(global_invocation_id) id: vec3<u32>) {
+    frame = frame_uniform;
     let tile = vec2<i32>(id.xy);
     if any(tile >= tile_count()) {
         return;
@@ -145,12 +146,14 @@ fn list_tiles(@builtin(global_invocation_id) id: vec3<u32>) {
 // The round's grid: one workgroup per listed tile.
 @compute @workgroup_size(1)
 fn tiles_size() {
+    frame = frame_uniform;
     let n = atomicLoad(&tile_list.count);
     tile_groups = array<u32, 3>(min(n, LIST_MAX_GROUPS), (n + LIST_MAX_GROUPS - 1u) / LIST_MAX_GROUPS, 1u);
 }
 
 @compute @workgroup_size(1)
 fn tiles_reset() {
+    frame = frame_uniform;
     atomicStore(&tile_list.count, 0u);
 }
 

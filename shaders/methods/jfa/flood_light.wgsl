@@ -13,6 +13,7 @@
 // One workgroup per listed tile (`list_tiles` in common.wgsl).
 @compute @workgroup_size(8, 8)
 fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_id) local: vec3<u32>) {
+    frame = frame_uniform;
     let p = listed_cell(group, local);
     let res = i32(frame.sizes.z);
     if p.x < 0 || any(p >= vec2<i32>(res)) {

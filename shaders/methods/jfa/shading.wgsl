@@ -37,6 +37,7 @@ fn list_run_for_shading(first: vec2<u32>, listing: u32, hard: u32) {
 // The size of `shade_listed`'s dispatch.
 @compute @workgroup_size(1)
 fn shaded_size() {
+    frame = frame_uniform;
     shaded_groups = list_dispatch(atomicLoad(&shaded.count));
 }
 
@@ -52,6 +53,7 @@ struct FinalClass {
 // pixel listed for `shade_listed`.
 @compute @workgroup_size(8, 8)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
+    frame = frame_uniform;
     let first = vec2<u32>(id.x * ROW_PIXELS, id.y);
     if any(first >= frame.sizes.xy) {
         return;

@@ -232,6 +232,7 @@ const ROW_PIXELS: u32 = 8u;
 // others listed.
 @compute @workgroup_size(8, 8)
 fn classify(@builtin(global_invocation_id) id: vec3<u32>) {
+    frame = frame_uniform;
     let first = vec2<u32>(id.x * ROW_PIXELS, id.y);
     if any(first >= frame.sizes.xy) {
         return;
@@ -273,12 +274,14 @@ fn classify(@builtin(global_invocation_id) id: vec3<u32>) {
 // Pass 2: the size of pass 3's dispatch.
 @compute @workgroup_size(1)
 fn listed_size() {
+    frame = frame_uniform;
     listed_groups = list_dispatch(atomicLoad(&listed.count));
 }
 
 // Pass 3: the search and the filter, over the listed pixels.
 @compute @workgroup_size(64)
 fn filter_listed(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) lane: u32) {
+    frame = frame_uniform;
     let i = list_position(group, lane);
     if i < atomicLoad(&listed.count) {
         let pixel = listed_pixel(listed.pixels[i]);

@@ -127,6 +127,7 @@ fn add_sample(sums: ptr<function, Sums>, r: Receiver, last: vec2<f32>, layer: u3
 
 @compute @workgroup_size(8, 8)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
+    frame = frame_uniform;
     let pixel = id.xy;
     if any(pixel >= frame.sizes.xy) {
         return;

@@ -10,6 +10,7 @@
 
 @compute @workgroup_size(LANES)
 fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>, @builtin(local_invocation_index) local: u32) {
+    frame = frame_uniform;
     let item = tile_item(group, groups, local);
     if !item.valid {
         return;
@@ -29,6 +30,7 @@ fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) groups
 // group's code for all of its lanes).
 @compute @workgroup_size(LANES)
 fn mark_inside(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>, @builtin(local_invocation_index) local: u32) {
+    frame = frame_uniform;
     let item = tile_item(group, groups, local);
     if !item.valid {
         return;
@@ -46,6 +48,7 @@ fn mark_inside(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups)
 // The size of `shade_listed`'s dispatch; counts the pairs it shades.
 @compute @workgroup_size(1)
 fn inside_size() {
+    frame = frame_uniform;
     let count = atomicLoad(&inside.count);
     inside_groups = list_dispatch(count);
     atomicAdd(&counters[2], count);
@@ -54,6 +57,7 @@ fn inside_size() {
 // The listed pairs: each one's share of the light.
 @compute @workgroup_size(64)
 fn shade_listed(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) lane: u32) {
+    frame = frame_uniform;
     let i = list_position(group, lane);
     if i < atomicLoad(&inside.count) {
         let pair = inside.pairs[i];
@@ -66,5 +70,6 @@ fn shade_listed(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocati
 // Empties the list for the next chunk.
 @compute @workgroup_size(1)
 fn inside_reset() {
+    frame = frame_uniform;
     atomicStore(&inside.count, 0u);
 }

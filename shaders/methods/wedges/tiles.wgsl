@@ -10,6 +10,7 @@
 
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
+    frame = frame_uniform;
     let tiles = tile_grid();
     if id.x >= tiles.x * tiles.y {
         return;
