@@ -10,11 +10,14 @@ struct HardParams {
 }
 
 @group(1) @binding(0) var<storage, read_write> visibility_out: array<vec4<f32>>;
-@group(1) @binding(1) var<uniform> params: HardParams;
+@group(1) @binding(1) var<uniform> params_uniform: HardParams;
+// Read through a private copy, as `frame` is (`common/frame_inputs.wgsl`).
+var<private> params: HardParams;
 
 @compute @workgroup_size(8, 8)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     frame = frame_uniform;
+    params = params_uniform;
     let pixel = id.xy;
     if any(pixel >= frame.sizes.xy) {
         return;

@@ -55,7 +55,9 @@ struct Counters {
     unresolved: atomic<u32>, // pixels left without t: a bug if ever not 0
 }
 
-@group(1) @binding(0) var<uniform> params: BrabecParams;
+@group(1) @binding(0) var<uniform> params_uniform: BrabecParams;
+// Read through a private copy, as `frame` is (`common/frame_inputs.wgsl`).
+var<private> params: BrabecParams;
 @group(1) @binding(1) var<storage, read_write> state: array<PixelState>;
 @group(1) @binding(2) var<storage, read_write> counters: Counters;
 @group(1) @binding(3) var<storage, read_write> visibility_out: array<vec4<f32>>;

@@ -23,6 +23,7 @@ fn refine_group(id: vec3<u32>, marking: bool) {
 @compute @workgroup_size(64)
 fn mark_searches(@builtin(global_invocation_id) id: vec3<u32>) {
     frame = frame_uniform;
+    params = params_uniform;
     refine_group(id, true);
 }
 
@@ -30,5 +31,6 @@ fn mark_searches(@builtin(global_invocation_id) id: vec3<u32>) {
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     frame = frame_uniform;
+    params = params_uniform;
     refine_group(id, false);
 }

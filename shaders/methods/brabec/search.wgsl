@@ -6,6 +6,7 @@
 @compute @workgroup_size(1)
 fn listed_size() {
     frame = frame_uniform;
+    params = params_uniform;
     search_groups = list_dispatch(atomicLoad(&to_search.count));
 }
 
@@ -14,12 +15,14 @@ fn listed_size() {
 @compute @workgroup_size(64)
 fn search_listed(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) lane: u32) {
     frame = frame_uniform;
+    params = params_uniform;
     search_list_position(list_position(group, lane), false);
 }
 
 @compute @workgroup_size(64)
 fn search_listed_jittered(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) lane: u32) {
     frame = frame_uniform;
+    params = params_uniform;
     search_list_position(list_position(group, lane), true);
 }
 

@@ -8,6 +8,7 @@
 @compute @workgroup_size(8, 8)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     frame = frame_uniform;
+    params = params_uniform;
     let blocks = summary_blocks();
     if any(id.xy >= vec2<u32>(u32(blocks))) {
         return;

@@ -22,6 +22,7 @@
 @compute @workgroup_size(8, 8)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     frame = frame_uniform;
+    params = params_uniform;
     let pixel = id.xy;
     let size = frame.sizes.xy;
     if any(pixel >= size) {
@@ -44,6 +45,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
 @compute @workgroup_size(8, 8)
 fn mark_boundary(@builtin(global_invocation_id) id: vec3<u32>) {
     frame = frame_uniform;
+    params = params_uniform;
     let pixel = id.xy;
     let size = frame.sizes.xy;
     if any(pixel >= size) || (flags[pixel.y * size.x + pixel.x] & HARD) == 0u {
@@ -89,6 +91,7 @@ fn mark_boundary(@builtin(global_invocation_id) id: vec3<u32>) {
 @compute @workgroup_size(1)
 fn boundary_size() {
     frame = frame_uniform;
+    params = params_uniform;
     boundary_groups = list_dispatch(atomicLoad(&boundary.count));
 }
 
@@ -96,6 +99,7 @@ fn boundary_size() {
 @compute @workgroup_size(64)
 fn seed_listed(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) lane: u32) {
     frame = frame_uniform;
+    params = params_uniform;
     let i = list_position(group, lane);
     if i >= atomicLoad(&boundary.count) {
         return;

@@ -31,7 +31,9 @@ struct JfaParams {
 // pixel, z the key, w the angle of the silhouette's normal at the occluder point in light
 // coordinates (`NO_NORMAL` where there is none). The rgb intensity is not stored: the final pass recomputes it from the
 // occluder (§4.1 "Generating Final Image" does so for jfa-l; jfa-e gets the same value).
-@group(1) @binding(0) var<uniform> params: JfaParams;
+@group(1) @binding(0) var<uniform> params_uniform: JfaParams;
+// Read through a private copy, as `frame` is (`common/frame_inputs.wgsl`).
+var<private> params: JfaParams;
 // The light's edge table (`light::tables::edge_table`, read through common/edge_table.wgsl).
 @group(1) @binding(1) var<storage, read> edge_table: array<vec4<f32>>;
 // The rounds' keys over the light (`light::tables::key_table`): per cell of a KEY_CELLS²
@@ -133,6 +135,7 @@ fn map_depth_at(t: vec2<i32>) -> f32 {
 @compute @workgroup_size(8, 8)
 fn list_tiles(@builtin(global_invocation_id) id: vec3<u32>) {
     frame = frame_uniform;
+    params = params_uniform;
     let tile = vec2<i32>(id.xy);
     if any(tile >= tile_count()) {
         return;
@@ -147,6 +150,7 @@ fn list_tiles(@builtin(global_invocation_id) id: vec3<u32>) {
 @compute @workgroup_size(1)
 fn tiles_size() {
     frame = frame_uniform;
+    params = params_uniform;
     let n = atomicLoad(&tile_list.count);
     tile_groups = array<u32, 3>(min(n, LIST_MAX_GROUPS), (n + LIST_MAX_GROUPS - 1u) / LIST_MAX_GROUPS, 1u);
 }
@@ -154,6 +158,7 @@ fn tiles_size() {
 @compute @workgroup_size(1)
 fn tiles_reset() {
     frame = frame_uniform;
+    params = params_uniform;
     atomicStore(&tile_list.count, 0u);
 }
 

@@ -48,6 +48,7 @@ fn final_class(pixel: vec2<u32>) -> FinalClass {
 @compute @workgroup_size(64)
 fn shade_listed(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) lane: u32) {
     frame = frame_uniform;
+    params = params_uniform;
     let listed = listed_for_shading(group, lane);
     if listed.z > 1u {
         return;

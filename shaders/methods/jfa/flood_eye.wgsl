@@ -73,6 +73,7 @@ fn midpoint_holds(r: Receiver, k: u32) -> bool {
 @compute @workgroup_size(8, 8)
 fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_id) local: vec3<u32>) {
     frame = frame_uniform;
+    params = params_uniform;
     let cell = listed_cell(group, local);
     if cell.x < 0 || any(vec2<u32>(cell) >= frame.sizes.xy) {
         return;

@@ -14,6 +14,7 @@
 @compute @workgroup_size(8, 8)
 fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_id) local: vec3<u32>) {
     frame = frame_uniform;
+    params = params_uniform;
     let p = listed_cell(group, local);
     let res = i32(frame.sizes.z);
     if p.x < 0 || any(p >= vec2<i32>(res)) {

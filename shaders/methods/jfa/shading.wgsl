@@ -38,6 +38,7 @@ fn list_run_for_shading(first: vec2<u32>, listing: u32, hard: u32) {
 @compute @workgroup_size(1)
 fn shaded_size() {
     frame = frame_uniform;
+    params = params_uniform;
     shaded_groups = list_dispatch(atomicLoad(&shaded.count));
 }
 
@@ -54,6 +55,7 @@ struct FinalClass {
 @compute @workgroup_size(8, 8)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     frame = frame_uniform;
+    params = params_uniform;
     let first = vec2<u32>(id.x * ROW_PIXELS, id.y);
     if any(first >= frame.sizes.xy) {
         return;

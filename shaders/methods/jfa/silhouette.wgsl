@@ -16,6 +16,7 @@ const ROW_TEXELS: i32 = 4;
 @compute @workgroup_size(8, 8)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     frame = frame_uniform;
+    params = params_uniform;
     let res = i32(frame.sizes.z);
     let first = vec2<i32>(i32(id.x) * ROW_TEXELS, i32(id.y));
     if any(first >= vec2<i32>(res)) {

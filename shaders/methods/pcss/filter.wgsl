@@ -28,7 +28,9 @@ struct FilterParams {
 }
 
 @group(1) @binding(0) var<storage, read_write> visibility_out: array<vec4<f32>>;
-@group(1) @binding(1) var<uniform> params: FilterParams;
+@group(1) @binding(1) var<uniform> params_uniform: FilterParams;
+// Read through a private copy, as `frame` is (`common/frame_inputs.wgsl`).
+var<private> params: FilterParams;
 // chun-oh: the light image integrated over the filter's quadtree (`light_regions` in
 // `src/methods/chun_oh.rs`): 0–15 the 4×4 cells, 16–19 the 2×2, 20 the whole light; rgb the
 // emission, w the relative colour variance. Indexed in filter order: the light frame's
@@ -233,6 +235,7 @@ const ROW_PIXELS: u32 = 8u;
 @compute @workgroup_size(8, 8)
 fn classify(@builtin(global_invocation_id) id: vec3<u32>) {
     frame = frame_uniform;
+    params = params_uniform;
     let first = vec2<u32>(id.x * ROW_PIXELS, id.y);
     if any(first >= frame.sizes.xy) {
         return;
@@ -275,6 +278,7 @@ fn classify(@builtin(global_invocation_id) id: vec3<u32>) {
 @compute @workgroup_size(1)
 fn listed_size() {
     frame = frame_uniform;
+    params = params_uniform;
     listed_groups = list_dispatch(atomicLoad(&listed.count));
 }
 
@@ -282,6 +286,7 @@ fn listed_size() {
 @compute @workgroup_size(64)
 fn filter_listed(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) lane: u32) {
     frame = frame_uniform;
+    params = params_uniform;
     let i = list_position(group, lane);
     if i < atomicLoad(&listed.count) {
         let pixel = listed_pixel(listed.pixels[i]);

@@ -51,7 +51,9 @@ struct WorkItem {
     origin: u32, // the tile's first pixel: x in the low 16 bits, y in the high
 }
 
-@group(1) @binding(0) var<uniform> params: WedgeParams;
+@group(1) @binding(0) var<uniform> params_uniform: WedgeParams;
+// Read through a private copy, as `frame` is (`common/frame_inputs.wgsl`).
+var<private> params: WedgeParams;
 @group(1) @binding(1) var<storage, read> polygons: array<VolumePolygon>;
 @group(1) @binding(2) var<storage, read> wedges: array<Wedge>;
 @group(1) @binding(3) var<storage, read> work: array<WorkItem>;

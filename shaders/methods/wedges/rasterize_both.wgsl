@@ -8,6 +8,7 @@
 @compute @workgroup_size(LANES)
 fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>, @builtin(local_invocation_index) local: u32) {
     frame = frame_uniform;
+    params = params_uniform;
     let item = tile_item(group, groups, local);
     if !item.valid {
         return;

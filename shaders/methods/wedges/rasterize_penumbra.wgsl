@@ -11,6 +11,7 @@
 @compute @workgroup_size(LANES)
 fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>, @builtin(local_invocation_index) local: u32) {
     frame = frame_uniform;
+    params = params_uniform;
     let item = tile_item(group, groups, local);
     if !item.valid {
         return;
@@ -31,6 +32,7 @@ fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) groups
 @compute @workgroup_size(LANES)
 fn mark_inside(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>, @builtin(local_invocation_index) local: u32) {
     frame = frame_uniform;
+    params = params_uniform;
     let item = tile_item(group, groups, local);
     if !item.valid {
         return;
@@ -49,6 +51,7 @@ fn mark_inside(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups)
 @compute @workgroup_size(1)
 fn inside_size() {
     frame = frame_uniform;
+    params = params_uniform;
     let count = atomicLoad(&inside.count);
     inside_groups = list_dispatch(count);
     atomicAdd(&counters[2], count);
@@ -58,6 +61,7 @@ fn inside_size() {
 @compute @workgroup_size(64)
 fn shade_listed(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) lane: u32) {
     frame = frame_uniform;
+    params = params_uniform;
     let i = list_position(group, lane);
     if i < atomicLoad(&inside.count) {
         let pair = inside.pairs[i];
@@ -71,5 +75,6 @@ fn shade_listed(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocati
 @compute @workgroup_size(1)
 fn inside_reset() {
     frame = frame_uniform;
+    params = params_uniform;
     atomicStore(&inside.count, 0u);
 }

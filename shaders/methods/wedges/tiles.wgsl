@@ -11,6 +11,7 @@
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     frame = frame_uniform;
+    params = params_uniform;
     let tiles = tile_grid();
     if id.x >= tiles.x * tiles.y {
         return;
