@@ -60,8 +60,9 @@ struct Batch {
 
 @group(1) @binding(0) var<uniform> batch: Batch;
 // The batch's depth maps, a layer each: near / (view depth of the nearest surface), 0 where
-// the map holds nothing. A layer holds the crop of its map where the frame's receivers fall. Read where they were drawn: a texel fetch costs more than a buffer
-// load on lavapipe, but less than copying every map into a buffer.
+// the map holds nothing. A layer holds the crop of its map where the frame's receivers fall.
+// Read where they were drawn: a texel fetch costs more than a buffer load on lavapipe, but
+// less than copying every map into a buffer.
 @group(1) @binding(1) var depths: texture_depth_2d_array;
 // Per covered pixel, 2·CHANNELS floats: Σ L·G·V, then Σ L·G (what the batches so far added).
 @group(1) @binding(2) var<storage, read_write> sums: array<f32>;
