@@ -94,7 +94,8 @@ fn exact_terms(x: vec3<f32>, nx: vec3<f32>, depth: f32) -> Corner {
     var e0_above = vec3<f32>(0.0);
     for (var k = 0u; k < frame.sizes.w; k++) {
         let cell = light_cells[k];
-        let phi_cell = polygon_vector(x, cell.corners);
+        let corners = cell_corners(cell);
+        let phi_cell = polygon_vector(x, corners);
         phi += mat3x3<f32>(phi_cell * cell.radiance.r, phi_cell * cell.radiance.g, phi_cell * cell.radiance.b);
         e0_above += cell.radiance.rgb * abs(dot(nx, phi_cell));
     }
@@ -112,7 +113,8 @@ fn clipped_sum(x: vec3<f32>, nx: vec3<f32>, straddles: bool) -> vec3<f32> {
     var e0 = vec3<f32>(0.0);
     for (var k = 0u; k < select(0u, frame.sizes.w, straddles); k++) {
         let cell = light_cells[k];
-        e0 += cell.radiance.rgb * polygon_irradiance(x, nx, cell.corners);
+        let corners = cell_corners(cell);
+        e0 += cell.radiance.rgb * polygon_irradiance(x, nx, corners);
     }
     return e0;
 }
@@ -553,10 +555,11 @@ fn exact_above(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocatio
     var e0 = mat4x3<f32>(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0));
     for (var k = 0u; k < frame.sizes.w; k++) {
         let cell = light_cells[k];
-        e0[0] += cell.radiance.rgb * abs(dot(q.a.nx, polygon_vector(q.a.x, cell.corners)));
-        e0[1] += cell.radiance.rgb * abs(dot(q.b.nx, polygon_vector(q.b.x, cell.corners)));
-        e0[2] += cell.radiance.rgb * abs(dot(q.c.nx, polygon_vector(q.c.x, cell.corners)));
-        e0[3] += cell.radiance.rgb * abs(dot(q.d.nx, polygon_vector(q.d.x, cell.corners)));
+        let corners = cell_corners(cell);
+        e0[0] += cell.radiance.rgb * abs(dot(q.a.nx, polygon_vector(q.a.x, corners)));
+        e0[1] += cell.radiance.rgb * abs(dot(q.b.nx, polygon_vector(q.b.x, corners)));
+        e0[2] += cell.radiance.rgb * abs(dot(q.c.nx, polygon_vector(q.c.x, corners)));
+        e0[3] += cell.radiance.rgb * abs(dot(q.d.nx, polygon_vector(q.d.x, corners)));
     }
     store_quad(q, e0);
 }
@@ -566,10 +569,11 @@ fn clipped_quad(q: Quad) -> mat4x3<f32> {
     var e0 = mat4x3<f32>(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0));
     for (var k = 0u; k < frame.sizes.w; k++) {
         let cell = light_cells[k];
-        e0[0] += cell.radiance.rgb * polygon_irradiance(q.a.x, q.a.nx, cell.corners);
-        e0[1] += cell.radiance.rgb * polygon_irradiance(q.b.x, q.b.nx, cell.corners);
-        e0[2] += cell.radiance.rgb * polygon_irradiance(q.c.x, q.c.nx, cell.corners);
-        e0[3] += cell.radiance.rgb * polygon_irradiance(q.d.x, q.d.nx, cell.corners);
+        let corners = cell_corners(cell);
+        e0[0] += cell.radiance.rgb * polygon_irradiance(q.a.x, q.a.nx, corners);
+        e0[1] += cell.radiance.rgb * polygon_irradiance(q.b.x, q.b.nx, corners);
+        e0[2] += cell.radiance.rgb * polygon_irradiance(q.c.x, q.c.nx, corners);
+        e0[3] += cell.radiance.rgb * polygon_irradiance(q.d.x, q.d.nx, corners);
     }
     return e0;
 }

@@ -21,6 +21,19 @@ var<private> frame: Frame;
 @group(0) @binding(6) var shadow_id: texture_2d<u32>;     // object id seen from the light centre
 @group(0) @binding(7) var<uniform> light_cells: array<LightCell, 64>; // frame.sizes.w of them (light::E0_GRID²)
 
+// Cell `cell`'s corners in world space, counter-clockwise seen from the lit side: bottom-left,
+// bottom-right, top-right, top-left (`light::irradiance::light_cells`).
+fn cell_corners(cell: LightCell) -> array<vec4<f32>, 4> {
+    let c = frame.light_center.xyz;
+    let r = frame.light_r.xyz;
+    let u = frame.light_u.xyz;
+    let left = c + cell.rect.x * r;
+    let right = c + cell.rect.y * r;
+    let bottom = cell.rect.z * u;
+    let top = cell.rect.w * u;
+    return array<vec4<f32>, 4>(vec4<f32>(left + bottom, 1.0), vec4<f32>(right + bottom, 1.0), vec4<f32>(right + top, 1.0), vec4<f32>(left + top, 1.0));
+}
+
 // Distance from the light's centre to its rectangle's edge along unit direction `e` (light
 // coordinates: x along r, y along u).
 fn light_reach(e: vec2<f32>) -> f32 {

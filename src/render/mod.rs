@@ -24,7 +24,7 @@ use crate::gpu::readback::Readback;
 use crate::gpu::scene::GpuScene;
 use crate::gpu::timing::GpuTimer;
 use crate::gpu::GpuContext;
-use crate::light::{cells_bounds, LightCell, E0_GRID};
+use crate::light::{cells_bounds, AreaLight, LightCell, E0_GRID};
 use crate::render::method::{Counters, MethodContext, Scratch};
 use crate::supervise::{cancelled_error, Supervisor};
 use crate::timing::Timings;
@@ -60,7 +60,7 @@ pub struct FrameUniforms {
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 struct LightCellGpu {
-    corners: [[f32; 4]; 4],
+    rect: [f32; 4],
     radiance: [f32; 4],
 }
 
@@ -380,7 +380,7 @@ impl Renderer {
             cells_bounds: cells_bounds(light, &spec.cells),
         };
         self.gpu.queue.write_buffer(&self.uniforms, 0, bytemuck::bytes_of(&uniforms));
-        let cells: Vec<LightCellGpu> = spec.cells.iter().map(cell_to_gpu).collect();
+        let cells: Vec<LightCellGpu> = spec.cells.iter().map(|cell| cell_to_gpu(light, cell)).collect();
         if !cells.is_empty() {
             self.gpu.queue.write_buffer(&self.cells, 0, bytemuck::cast_slice(&cells));
         }
@@ -406,6 +406,12 @@ impl Renderer {
     }
 }
 
-fn cell_to_gpu(cell: &LightCell) -> LightCellGpu {
-    LightCellGpu { corners: cell.corners.map(|c| [c.x, c.y, c.z, 1.0]), radiance: [cell.radiance.x, cell.radiance.y, cell.radiance.z, 0.0] }
+fn cell_to_gpu(light: &AreaLight, cell: &LightCell) -> LightCellGpu {
+    // Corners 0 (bottom-left) and 2 (top-right) in the light's frame (`LightCell` in
+    // `shaders/common/light.wgsl`).
+    let [lo, _, hi, _] = cell.corners.map(|c| c - light.center);
+    LightCellGpu {
+        rect: [lo.dot(light.r), hi.dot(light.r), lo.dot(light.u), hi.dot(light.u)],
+        radiance: [cell.radiance.x, cell.radiance.y, cell.radiance.z, 0.0],
+    }
 }
