@@ -82,8 +82,7 @@ pub fn light_cells(light: &AreaLight, image: &LightImage) -> Vec<LightCell> {
 /// side of a receiver's horizon where the whole rectangle does not (`cells_horizon` in
 /// `shaders/e0.wgsl`). The whole rectangle where there are no cells.
 pub fn cells_bounds(light: &AreaLight, cells: &[LightCell]) -> [f32; 4] {
-    let along = |p: Vec3| glam::Vec2::new((p - light.center).dot(light.r), (p - light.center).dot(light.u));
-    let mut corners = cells.iter().flat_map(|c| c.corners).map(along);
+    let mut corners = cells.iter().flat_map(|c| c.corners).map(|p| light.plane_point(p));
     let Some(first) = corners.next() else {
         return [0.0, 0.0, 0.5 * light.size_m.x, 0.5 * light.size_m.y];
     };

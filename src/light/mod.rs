@@ -66,6 +66,13 @@ impl AreaLight {
         self.center + self.r * ((s - 0.5) * self.size_m.x) + self.u * ((0.5 - t) * self.size_m.y)
     }
 
+    /// Where `p` lies in the light's frame: metres along `r` and `u` from its centre (a point
+    /// of the light's plane: the inverse of `image_point` up to the image's scale).
+    pub fn plane_point(&self, p: Vec3) -> Vec2 {
+        let d = p - self.center;
+        Vec2::new(d.dot(self.r), d.dot(self.u))
+    }
+
     pub fn area_m2(&self) -> f32 {
         self.size_m.x * self.size_m.y
     }

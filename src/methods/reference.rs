@@ -14,9 +14,10 @@
 //! Numerator and denominator share the same samples, so lit and umbra pixels are exact and the
 //! noise lives only in the penumbra. At 1080p on lavapipe a sample with a 2048² map costs
 //! ~2 ms to clear it, ~2 ms to draw `crowd` into it and ~6–8 ms (one channel) to ~8–9 ms
-//! (three) to test and add it at every pixel. Only the part of each map where the frame's receivers can fall is
-//! drawn (`MapCrop`, from the camera's view of the scene's bounds: `render::convex`), which
-//! takes a fifth to a half off the maps of a scene the camera sees only part of.
+//! (three) to test and add it at every pixel. Only the part of each map where the frame's
+//! receivers can fall is drawn (`MapCrop`, from the camera's view of the scene's bounds:
+//! `render::convex`) where that is at most a quarter of the map, which takes about half off the
+//! maps of a scene the camera sees only a small part of.
 //!
 //! Bias controls: the visibility test forgives `bias_texels + slope_bias_texels·tanθ` texels
 //! of each sample's map (θ between the receiver's normal and the direction to the light's
@@ -262,6 +263,8 @@ impl ShadowMethod for Reference {
         let fits: Vec<LightProjection> =
             samples.iter().map(|sample| LightProjection::fit(&AreaLight { center: sample.position, ..spec.light }, &corners)).collect();
         let near = fits.iter().map(|fit| fit.near).reduce(f32::min).unwrap_or(1.0);
+        // Every sample point's z in view coordinates: they all lie on the light's plane.
+        let plane = rotation.transform_point3(spec.light.center).z;
         let frusta: Vec<(Mat4, f32)> = samples
             .iter()
             .zip(&fits)
@@ -309,7 +312,7 @@ impl ShadowMethod for Reference {
                 batch.resolution = resolution;
                 batch.bias_texels = params.get(&BIAS_TEXELS);
                 batch.slope_bias_texels = params.get(&SLOPE_BIAS_TEXELS);
-                batch.plane = rotation.transform_point3(spec.light.center).z;
+                batch.plane = plane;
                 batch.near = near;
                 batch.samples[..chunk.len()].copy_from_slice(chunk);
                 (chunk.len() as u32, batch)

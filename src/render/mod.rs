@@ -409,9 +409,6 @@ impl Renderer {
 fn cell_to_gpu(light: &AreaLight, cell: &LightCell) -> LightCellGpu {
     // Corners 0 (bottom-left) and 2 (top-right) in the light's frame (`LightCell` in
     // `shaders/common/light.wgsl`).
-    let [lo, _, hi, _] = cell.corners.map(|c| c - light.center);
-    LightCellGpu {
-        rect: [lo.dot(light.r), hi.dot(light.r), lo.dot(light.u), hi.dot(light.u)],
-        radiance: [cell.radiance.x, cell.radiance.y, cell.radiance.z, 0.0],
-    }
+    let [lo, _, hi, _] = cell.corners.map(|c| light.plane_point(c));
+    LightCellGpu { rect: [lo.x, hi.x, lo.y, hi.y], radiance: [cell.radiance.x, cell.radiance.y, cell.radiance.z, 0.0] }
 }
