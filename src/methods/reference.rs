@@ -358,7 +358,11 @@ impl ShadowMethod for Reference {
         let mut before = 0;
         for (b, &(count, _)) in batches.iter().enumerate() {
             // The batch's maps, timed together where timestamps can be written between passes
-            // (a scope per map would take the timer's queries at 256 samples).
+            // (a scope per map would take the timer's queries at 256 samples). A render pass
+            // each, though lavapipe begins every pass by waiting until the one before is
+            // rasterised (~a quarter of `terrain`'s maps): six maps a multiview pass took 2 %
+            // off and needs a guard against a lavapipe bug, and a batch in one pass (an atlas)
+            // would round each map's vertices differently (`docs/performance-log.md`).
             let scene = ctx.scene;
             ctx.timer.time_encoder(ctx.encoder, "method", "reference_maps", |encoder| {
                 for layer in 0..count {
