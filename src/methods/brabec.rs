@@ -250,10 +250,7 @@ impl ShadowMethod for Brabec {
         listing.push(("brabec_search_size", &list_size, (1, 1)));
         interpolation.push(("brabec_finish", &finish, (w.div_ceil(8), h.div_ceil(8))));
         {
-            let mut pass = ctx.encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("Brabec::passes"),
-                timestamp_writes: ctx.timer.compute_scope("method", "Brabec::passes"),
-            });
+            let mut pass = ctx.timer.begin_compute_pass(ctx.encoder, "method", "Brabec::passes");
             pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
             pass.set_bind_group(1, &bind_group, &[]);
             for (name, pipeline, (x, y)) in listing {

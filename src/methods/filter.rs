@@ -162,10 +162,7 @@ pub(super) fn run(
         (bind(&classify, &listed.groups), bind(&size, &listed.groups), bind(&filter, &listed.stand_in));
     let (gx, gy) = ctx.dispatch_size();
     {
-        let mut pass = ctx.encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some(name),
-            timestamp_writes: ctx.timer.compute_scope("method", name),
-        });
+        let mut pass = ctx.timer.begin_compute_pass(ctx.encoder, "method", name);
         pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
         // The classification takes `CLASSIFY_ROW` pixels of a row per invocation.
         pass.set_pipeline(&classify);

@@ -369,10 +369,7 @@ fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Unif
     ctx.encoder.clear_buffer(&tiles, 0, None);
     let groups = (grid.0.div_ceil(TILE), grid.1.div_ceil(TILE));
     {
-        let mut pass = ctx.encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some("Jfa::passes"),
-            timestamp_writes: ctx.timer.compute_scope("method", "Jfa::passes"),
-        });
+        let mut pass = ctx.timer.begin_compute_pass(ctx.encoder, "method", "Jfa::passes");
         pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
         // Seeds go to a. jfa-l's silhouette pass takes `SILHOUETTE_ROW` texels per invocation.
         pass.set_pipeline(&seed);

@@ -435,10 +435,7 @@ impl ShadowMethod for Reference {
                         ctx.visibility.as_entire_binding(),
                     ],
                 );
-                let mut pass = ctx.encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                    label: Some("Reference::accumulate"),
-                    timestamp_writes: ctx.timer.compute_scope("method", "reference_accumulate"),
-                });
+                let mut pass = ctx.timer.begin_compute_pass(ctx.encoder, "method", "reference_accumulate");
                 pass.set_pipeline(&pipeline);
                 pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
                 pass.set_bind_group(1, &group, &[layout::slot_offset_of::<BatchUniforms>(b)]);

@@ -212,10 +212,7 @@ impl MethodContext<'_> {
     /// frame inputs in group 0, `group` in group 1.
     pub fn dispatch_screen(&mut self, label: &'static str, pipeline: &wgpu::ComputePipeline, group: &wgpu::BindGroup) {
         let (gx, gy) = self.dispatch_size();
-        let mut pass = self.encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some(label),
-            timestamp_writes: self.timer.compute_scope("method", label),
-        });
+        let mut pass = self.timer.begin_compute_pass(self.encoder, "method", label);
         pass.set_pipeline(pipeline);
         pass.set_bind_group(0, &self.inputs.bind_group, &[]);
         pass.set_bind_group(1, group, &[]);

@@ -200,8 +200,7 @@ impl Renderer {
             })
         };
         let (io, listed_io) = (bind(&above.groups, &clipped.groups), bind(&above.stand_in, &clipped.stand_in));
-        let mut pass = encoder
-            .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("e0"), timestamp_writes: self.timer.compute_scope("e0", "e0") });
+        let mut pass = self.timer.begin_compute_pass(encoder, "e0", "e0");
         pass.set_bind_group(0, &inputs.bind_group, &[]);
         pass.set_bind_group(1, &io, &[]);
         if !interpolate {
@@ -286,10 +285,7 @@ impl Renderer {
         io: &wgpu::BindGroup,
         spec: &FrameSpec,
     ) {
-        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some(label),
-            timestamp_writes: self.timer.compute_scope(label, label),
-        });
+        let mut pass = self.timer.begin_compute_pass(encoder, label, label);
         pass.set_pipeline(pipeline);
         pass.set_bind_group(0, &inputs.bind_group, &[]);
         pass.set_bind_group(1, io, &[]);

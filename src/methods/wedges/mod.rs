@@ -303,10 +303,7 @@ impl ShadowMethod for Wedges {
         let mut setup = setup_start.elapsed();
         {
             let group = bind(&no_work, &inside.groups);
-            let mut pass = ctx.encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("Wedges::tiles"),
-                timestamp_writes: ctx.timer.compute_scope("method", "Wedges::tiles"),
-            });
+            let mut pass = ctx.timer.begin_compute_pass(ctx.encoder, "method", "Wedges::tiles");
             pass.set_pipeline(&tiles_pipeline);
             pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
             pass.set_bind_group(1, &group, &[]);
@@ -339,10 +336,7 @@ impl ShadowMethod for Wedges {
         let resolve_group = bind(&no_work, &inside.groups);
         let screen = ctx.dispatch_size();
         {
-            let mut pass = ctx.encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("Wedges::rasterize"),
-                timestamp_writes: ctx.timer.compute_scope("method", "Wedges::rasterize"),
-            });
+            let mut pass = ctx.timer.begin_compute_pass(ctx.encoder, "method", "Wedges::rasterize");
             pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
             for ((pipeline, items), work) in chunks.iter().zip(&works) {
                 // One workgroup per item, in rows of at most 65 535.
