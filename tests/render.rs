@@ -516,13 +516,15 @@ fn bench_writes_its_phase_table_and_the_e0_check() {
     }
     // The same pass over the same frame is timed alike whatever ran before it: the composite
     // after the reference (whose last pass is a dispatch) read ~0 where lavapipe wrote a
-    // compute pass's first timestamp at the next flush (`GpuTimer::settling`). Not a speed:
-    // each composite against the others of this run, within a factor of 4.
+    // compute pass's first timestamp at the next flush (`GpuTimer::settling`; 0.006 ms
+    // against a median of 0.4). Not a speed: each composite against the median of this run's,
+    // from below only (a busy machine stretches a pass, it never shrinks one).
     if engine.gpu().timestamps {
-        let composites: Vec<f64> =
+        let mut composites: Vec<f64> =
             report.rows.iter().map(|r| r.phases.iter().find(|(p, _)| p == "composite").map(|(_, ms)| *ms).unwrap()).collect();
-        let (least, most) = composites.iter().fold((f64::INFINITY, 0.0_f64), |(lo, hi), ms| (lo.min(*ms), hi.max(*ms)));
-        assert!(least * 4.0 >= most, "composite GPU ms from {least} to {most}: {composites:?}");
+        composites.sort_by(f64::total_cmp);
+        let median = composites[composites.len() / 2];
+        assert!(composites[0] * 8.0 >= median, "composite GPU ms from {} with a median of {median}: {composites:?}", composites[0]);
     }
     let hard = report.rows.iter().find(|r| r.method == "hard" && r.light == "flame").unwrap();
     let wedges = report.rows.iter().find(|r| r.method == "wedges" && r.light == "flame").unwrap();
