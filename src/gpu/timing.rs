@@ -148,14 +148,15 @@ impl GpuTimer {
         pass: &'static str,
         record: impl FnOnce(&mut wgpu::CommandEncoder),
     ) {
+        // `open` gives a scope only where there are queries.
         let begin = if self.inside_passes { self.open(phase, pass).map(|(_, i)| i) } else { None };
-        match (begin, &self.queries) {
-            (Some(i), Some(_)) => {
+        match begin {
+            Some(i) => {
                 self.write_settled(encoder, i);
                 record(encoder);
                 self.write_settled(encoder, i + 1);
             }
-            _ => record(encoder),
+            None => record(encoder),
         }
     }
 
