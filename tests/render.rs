@@ -468,6 +468,37 @@ fn reference_maps_cropped_to_the_receivers_see_what_whole_maps_see() {
     assert!(mean < 1e-4, "mean difference {mean}");
 }
 
+#[test]
+fn reference_tests_only_the_row_segments_that_hold_a_receiver() {
+    // `terrain` under its own camera shows sky above the horizon; an odd width ends every row
+    // in a part segment, and 40 samples at 512² make two batches (the first and the last).
+    let (w, h) = (101usize, 57usize);
+    let job = job(json!({
+        "scene": {"builtin": "terrain", "triangles": 2000},
+        "light": {"image": {"builtin": "stripes"}},
+        "method": {"name": "reference", "samples": 40, "resolution": 512},
+        "output": {"width": w, "height": h, "format": "exr"}
+    }));
+    let (frame, _) = common::engine().render_frame(&job, &()).unwrap();
+    let (depth, visibility) = (frame.depth.unwrap(), frame.visibility.unwrap());
+    let covered = |x: usize, y: usize| depth[y * w + x].is_finite();
+    let segments = (0..h).map(|y| (0..w).step_by(8).filter(|&x0| (x0..(x0 + 8).min(w)).any(|x| covered(x, y))).count()).sum::<usize>();
+    let sky = (0..w * h).filter(|&i| !depth[i].is_finite()).count();
+    assert!(sky > w * h / 10 && sky < w * h * 9 / 10, "the view holds sky and ground: {sky} of {} pixels sky", w * h);
+    // Every segment with a covered pixel tested, and no other.
+    assert_eq!(frame.counters["segments_tested"], segments as f64, "{:?}", frame.counters);
+    assert!(segments < w.div_ceil(8) * h);
+    // The sky lit, listed or not; the ground shaded in places and every value a visibility.
+    for (i, v) in visibility.iter().enumerate() {
+        if depth[i].is_finite() {
+            assert!(v.iter().all(|c| (0.0..=1.0).contains(c)), "pixel {i}: {v:?}");
+        } else {
+            assert_eq!(*v, [1.0; 3], "sky pixel {i}");
+        }
+    }
+    assert!(visibility.iter().filter(|v| v[0] < 0.5).count() > 20, "the ground holds shadows");
+}
+
 /// `penumbra bench` in small (CI's form): every method and the timed reference per case, the
 /// floor summed from its phases, errors against the reference, E0 checked against the exact
 /// sum. Its own engine: the bench switches the renderer's E0 mode while it measures.

@@ -8,7 +8,9 @@
 //! (`sample_depth.wgsl`: the rasteriser's reversed-Z depth alone, no fragment shader), a layer
 //! of an array; once per batch of up to 32 samples every pixel adds the batch's `L·G·V`
 //! and `L·G` to two sums (`accumulate.wgsl`: the first batch writes them, the last writes
-//! their ratio instead). The sums have one channel where every sample's weight is gray (a white or
+//! their ratio instead), over the row segments of eight pixels that hold a receiver, listed
+//! once per frame (`list_segments`): on lavapipe a pixel of sky cost its tests as a receiver
+//! does. The sums have one channel where every sample's weight is gray (a white or
 //! shaped white light, whose three channels' sums would be equal) and three otherwise.
 //! Batching changes only the order of the additions (the same samples, maps and tests).
 //! Numerator and denominator share the same samples, so lit and umbra pixels are exact and the
@@ -35,7 +37,7 @@ use crate::gpu::layout;
 use crate::gpu::pool::{PipelineKey, TextureKey};
 use crate::light::{AreaLight, LightImage};
 use crate::render::convex::{map_bounds, ConvexSolid};
-use crate::render::LightProjection;
+use crate::render::{LightProjection, PixelListBuffers};
 use crate::render::{ScenePipeline, DEPTH_BUFFER_FORMAT};
 
 pub struct Reference;
@@ -114,6 +116,10 @@ struct BatchSample {
     origin: [f32; 4],
     radiance: [f32; 4],
 }
+
+/// Pixels of a row per listed segment; mirrors `SEGMENT` in `accumulate.wgsl` (checked by a
+/// test below).
+const SEGMENT: u32 = 8;
 
 /// Texels of margin around where the receivers fall in a sample's map (`map_bounds`): the
 /// accumulate pass finds a receiver's texel by arithmetic of its own, and a G-buffer position
@@ -353,7 +359,7 @@ impl ShadowMethod for Reference {
             layout: &depth_pipeline.get_bind_group_layout(0),
             entries: &layout::entries(&[layout::slot_binding::<[[f32; 4]; 4]>(&uniform_buffer)]),
         });
-        let (gx, gy) = ctx.dispatch_size();
+        let (segments, segments_count) = list_segments(ctx);
         let total = samples.len() as u64;
         let mut before = 0;
         for (b, &(count, _)) in batches.iter().enumerate() {
@@ -416,6 +422,7 @@ impl ShadowMethod for Reference {
                         },
                         layout::storage_read_write(2),
                         layout::storage_read_write(3),
+                        layout::storage_read_write(4),
                     ],
                     &[
                         ("SAMPLES", f64::from(count)),
@@ -433,13 +440,14 @@ impl ShadowMethod for Reference {
                         wgpu::BindingResource::TextureView(&depths_view),
                         sums.as_entire_binding(),
                         ctx.visibility.as_entire_binding(),
+                        segments.list.as_entire_binding(),
                     ],
                 );
                 let mut pass = ctx.timer.begin_compute_pass(ctx.encoder, "method", "reference_accumulate");
                 pass.set_pipeline(&pipeline);
                 pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
                 pass.set_bind_group(1, &group, &[layout::slot_offset_of::<BatchUniforms>(b)]);
-                pass.dispatch_workgroups(gx, gy, 1);
+                pass.dispatch_workgroups_indirect(&segments.groups, 0);
             }
             let done = before + u64::from(count);
             let flush = done / BATCH > before / BATCH || done == total;
@@ -454,13 +462,70 @@ impl ShadowMethod for Reference {
                 }
             }
         }
+        let segments_tested = ctx.read_counters(&segments_count)?[0];
         Ok(Counters::from([
             ("samples".to_owned(), total as f64),
+            ("segments_tested".to_owned(), f64::from(segments_tested)),
             ("samples_skipped_black".to_owned(), f64::from(strata) - total as f64),
             ("resolution".to_owned(), f64::from(resolution)),
             ("map_crop_fraction".to_owned(), f64::from(crop.size.element_product()) / f64::from(resolution).powi(2)),
         ]))
     }
+}
+
+/// Lists the frame's row segments that hold a covered pixel (`list_segments` in
+/// accumulate.wgsl, which writes the others' visibility) and sizes the batches' dispatch over
+/// them: recorded once, before the first batch.
+fn list_segments(ctx: &mut MethodContext<'_>) -> (PixelListBuffers, wgpu::Buffer) {
+    let segments = u64::from(ctx.width.div_ceil(SEGMENT)) * u64::from(ctx.height);
+    let list = PixelListBuffers::new(&ctx.gpu.device, ctx.encoder, "Reference::segments", segments);
+    let shader = "methods/reference/accumulate.wgsl";
+    let lister = ctx.screen_entry(
+        PipelineKey::new("reference.list_segments"),
+        shader,
+        "list_segments",
+        &[layout::storage_read_write(3), layout::storage_read_write(4)],
+    );
+    let sizer = ctx.screen_entry(
+        PipelineKey::new("reference.segments_size"),
+        shader,
+        "segments_size",
+        &[layout::storage_read_write(4), layout::storage_read_write(5)],
+    );
+    let lister_group = ctx.gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("Reference::list_segments"),
+        layout: &lister.get_bind_group_layout(1),
+        entries: &[
+            wgpu::BindGroupEntry { binding: 3, resource: ctx.visibility.as_entire_binding() },
+            wgpu::BindGroupEntry { binding: 4, resource: list.list.as_entire_binding() },
+        ],
+    });
+    let sizer_group = ctx.gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("Reference::segments_size"),
+        layout: &sizer.get_bind_group_layout(1),
+        entries: &[
+            wgpu::BindGroupEntry { binding: 4, resource: list.list.as_entire_binding() },
+            wgpu::BindGroupEntry { binding: 5, resource: list.groups.as_entire_binding() },
+        ],
+    });
+    let mut pass = ctx.timer.begin_compute_pass(ctx.encoder, "method", "reference_list");
+    pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
+    pass.set_pipeline(&lister);
+    pass.set_bind_group(1, &lister_group, &[]);
+    pass.dispatch_workgroups(ctx.width.div_ceil(SEGMENT * 8), ctx.height.div_ceil(8), 1);
+    pass.set_pipeline(&sizer);
+    pass.set_bind_group(1, &sizer_group, &[]);
+    pass.dispatch_workgroups(1, 1, 1);
+    drop(pass);
+    // The count, for the counter `segments_tested`.
+    let count = ctx.gpu.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("Reference::segments_count"),
+        size: 4,
+        usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
+        mapped_at_creation: false,
+    });
+    ctx.encoder.copy_buffer_to_buffer(&list.list, 0, &count, 0, 4);
+    (list, count)
 }
 
 impl Reference {
@@ -494,6 +559,7 @@ mod tests {
     fn the_batch_matches_its_wgsl_mirror() {
         let declaration = format!("const MAX_SAMPLES: u32 = {BATCH_SAMPLES}u;");
         crate::gpu::shaders::assert_declares("methods/reference/accumulate.wgsl", &declaration);
+        crate::gpu::shaders::assert_declares("methods/reference/accumulate.wgsl", &format!("const SEGMENT: u32 = {SEGMENT}u;"));
     }
 
     #[test]
