@@ -537,6 +537,10 @@ fn bench_writes_its_phase_table_and_the_e0_check() {
             let e0_passes: &[&str] =
                 if row.light == "flame" { &["e0_corners", "e0_interpolate", "e0_exact_above", "e0_exact_clipped"] } else { &["e0"] };
             assert!(e0_passes.iter().all(|p| names.contains(p)) || !engine.gpu().timestamps_inside_passes, "{names:?}");
+            // The shadow map from the light's centre is drawn only for the methods that read
+            // it: not for `wedges` (shadow volumes) nor `reference` (a map per sample).
+            let reads_shadow_map = !(row.method.starts_with("reference") || row.method == "wedges");
+            assert_eq!(names.contains(&"ShadowMap::pass"), reads_shadow_map, "{}: {names:?}", row.method);
             // The reference says what its samples cost: the maps' raster and the tests.
             if row.method.starts_with("reference") {
                 assert!(names.contains(&"reference_accumulate"), "{names:?}");

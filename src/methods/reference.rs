@@ -255,6 +255,11 @@ impl ShadowMethod for Reference {
         PARAMS
     }
 
+    /// A depth map of its own from every sample, none from the light's centre.
+    fn reads_shadow_map(&self) -> bool {
+        false
+    }
+
     fn record(&self, ctx: &mut MethodContext<'_>, params: &Params) -> JobResult<Counters> {
         let device = ctx.gpu.device.clone();
         let spec = ctx.spec;

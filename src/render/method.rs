@@ -261,6 +261,14 @@ pub trait ShadowMethod: Send + Sync {
     /// Records the passes that fill `ctx.visibility`.
     /// Fails the job on a GPU error (a failed map or poll), never panics.
     fn record(&self, ctx: &mut MethodContext<'_>, params: &Params) -> JobResult<Counters>;
+    /// Whether the method reads the shadow map from the light's centre at all (`shadow_depth`,
+    /// `MethodContext::shadow_depth`). One that does not — `wedges` works on the triangles,
+    /// `reference` draws a map per sample — says so, and the frame skips the pass (its phase
+    /// then takes no time): 7–8 ms of a 2048² map at 1080p on lavapipe, ~20 ms over
+    /// `terrain`'s 100k triangles.
+    fn reads_shadow_map(&self) -> bool {
+        true
+    }
     /// Whether the method reads what the shadow map sees besides its depth — object ids
     /// (`shadow_id`; world positions come from the depth, `shadow_point`). A method that does
     /// says so; for the others the shadow-map pass writes depth alone: at 2048² the ids are

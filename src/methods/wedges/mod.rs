@@ -155,6 +155,11 @@ impl ShadowMethod for Wedges {
         true
     }
 
+    /// Shadow volumes of the scene's triangles: no shadow map.
+    fn reads_shadow_map(&self) -> bool {
+        false
+    }
+
     fn summary(&self) -> &'static str {
         "Assarsson & Akenine-Möller 2003: soft shadow volumes — silhouette edges from the light centre, penumbra wedges, LI buffer, umbra by z-pass or z-fail, zmin/zmax tile occlusion culling, three-pass or single-pass"
     }
