@@ -497,22 +497,20 @@ fn list_segments(ctx: &mut MethodContext<'_>) -> (PixelListBuffers, wgpu::Buffer
         "segments_size",
         &[layout::storage_read_write(4), layout::storage_read_write(5)],
     );
-    let lister_group = ctx.gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some("Reference::list_segments"),
-        layout: &lister.get_bind_group_layout(1),
-        entries: &[
-            wgpu::BindGroupEntry { binding: 3, resource: ctx.visibility.as_entire_binding() },
-            wgpu::BindGroupEntry { binding: 4, resource: list.list.as_entire_binding() },
-        ],
-    });
-    let sizer_group = ctx.gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some("Reference::segments_size"),
-        layout: &sizer.get_bind_group_layout(1),
-        entries: &[
-            wgpu::BindGroupEntry { binding: 4, resource: list.list.as_entire_binding() },
-            wgpu::BindGroupEntry { binding: 5, resource: list.groups.as_entire_binding() },
-        ],
-    });
+    // Group 1 of a pipeline whose bindings are numbered as the batches' (`accumulate.wgsl`).
+    let bind = |label: &'static str, pipeline: &wgpu::ComputePipeline, buffers: &[(u32, &wgpu::Buffer)]| {
+        let entries: Vec<wgpu::BindGroupEntry<'_>> = buffers
+            .iter()
+            .map(|(binding, buffer)| wgpu::BindGroupEntry { binding: *binding, resource: buffer.as_entire_binding() })
+            .collect();
+        ctx.gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some(label),
+            layout: &pipeline.get_bind_group_layout(1),
+            entries: &entries,
+        })
+    };
+    let lister_group = bind("Reference::list_segments", &lister, &[(3, ctx.visibility), (4, &list.list)]);
+    let sizer_group = bind("Reference::segments_size", &sizer, &[(4, &list.list), (5, &list.groups)]);
     let mut pass = ctx.timer.begin_compute_pass(ctx.encoder, "method", "reference_list");
     pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
     pass.set_pipeline(&lister);
