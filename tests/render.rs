@@ -550,16 +550,26 @@ fn bench_writes_its_phase_table_and_the_e0_check() {
         }
     }
     // The same pass over the same frame is timed alike whatever ran before it: the composite
-    // after the reference (whose last pass is a dispatch) read ~0 where lavapipe wrote a
-    // compute pass's first timestamp at the next flush (`GpuTimer::settling`; 0.006 ms
-    // against a median of 0.4). Not a speed: each composite against the median of this run's,
-    // from below only (a busy machine stretches a pass, it never shrinks one).
+    // after the reference (whose last pass is a dispatch) read ~0 in every row where lavapipe
+    // wrote a compute pass's first timestamp at the next flush (`GpuTimer::settling`; 0.006 ms
+    // against a median of 0.4). Not a speed: per method, the larger of its composites (one per
+    // light) against the median of this run's, from below only. One row alone may still read
+    // low on a loaded machine — lavapipe's rasteriser threads take the time of a settled
+    // timestamp when they get to it (once 0.02 against 0.36 ms in CI, with the other render
+    // tests running beside it) — but not every row of a method.
     if engine.gpu().timestamps {
-        let mut composites: Vec<f64> =
-            report.rows.iter().map(|r| r.phases.iter().find(|(p, _)| p == "composite").map(|(_, ms)| *ms).unwrap()).collect();
+        let composite = |r: &penumbra::eval::bench::BenchRow| r.phases.iter().find(|(p, _)| p == "composite").map(|(_, ms)| *ms).unwrap();
+        let mut composites: Vec<f64> = report.rows.iter().map(composite).collect();
         composites.sort_by(f64::total_cmp);
         let median = composites[composites.len() / 2];
-        assert!(composites[0] * 8.0 >= median, "composite GPU ms from {} with a median of {median}: {composites:?}", composites[0]);
+        for row in &report.rows {
+            let largest = report.rows.iter().filter(|r| r.method == row.method).map(composite).fold(0.0, f64::max);
+            assert!(
+                largest * 8.0 >= median,
+                "{}: composite GPU ms at most {largest} with a median of {median}: {composites:?}",
+                row.method
+            );
+        }
     }
     let hard = report.rows.iter().find(|r| r.method == "hard" && r.light == "flame").unwrap();
     let wedges = report.rows.iter().find(|r| r.method == "wedges" && r.light == "flame").unwrap();
