@@ -526,6 +526,8 @@ fn bench_writes_its_phase_table_and_the_e0_check() {
         let floor = phase("e0") + phase("composite") + phase("readback") + phase("encode");
         assert!((row.floor_ms - floor).abs() < 1e-9 && phase("gbuffer") > 0.0 && row.whole_ms >= floor, "{row:?}");
         assert!(row.penumbra_error > 0.0 && row.penumbra_error < 0.5, "{row:?}");
+        // What the request cost the process in CPU time: every request uses some.
+        assert!(row.cpu_ms > 0.0 && row.cpu_ms.is_finite(), "{row:?}");
         if engine.gpu().timestamps {
             // Each pass (each dispatch, where timestamps can be written inside passes) is
             // listed under its phase; the GPU-timed phases are the sums of their passes.

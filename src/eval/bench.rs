@@ -74,6 +74,10 @@ pub struct BenchRow {
     pub whole_ms: f64,
     /// `whole_ms` over the G-buffer phase's median.
     pub whole_over_gbuffer: f64,
+    /// Median CPU time of the whole request, ms: user and system time of every thread of the
+    /// process. On a software adapter the device's work runs on this process's threads, so
+    /// this is what the request cost in cores; over `whole_ms`, how many it kept busy.
+    pub cpu_ms: f64,
     /// Mean |V − Vref| over the reference's penumbra, and over the frame.
     pub penumbra_error: f64,
     pub frame_error: f64,
@@ -181,14 +185,15 @@ pub fn run(engine: &Engine, options: &BenchOptions) -> anyhow::Result<BenchRepor
                 progress.inc(1);
             }
             // Whole PNG requests, round-robin.
-            let mut runs: Vec<Vec<Timings>> = vec![Vec::new(); methods.len()];
+            let mut runs: Vec<Vec<(Timings, f64)>> = vec![Vec::new(); methods.len()];
             for repetition in 0..options.repeat {
                 for ((label, method), runs) in methods.iter().zip(&mut runs) {
                     progress.set_message(format!("{case}: {label} ({}/{})", repetition + 1, options.repeat));
+                    let cpu_before = process_cpu_ms();
                     let rendered = engine
                         .render(&Job { method: method.clone(), ..base.clone() }, &())
                         .map_err(|e| anyhow::anyhow!("{case}: {label}: {e}"))?;
-                    runs.push(rendered.timings);
+                    runs.push((rendered.timings, process_cpu_ms() - cpu_before));
                     progress.inc(1);
                 }
             }
@@ -219,11 +224,28 @@ fn phase_ms(t: &Timings, name: &str) -> f64 {
     t.get(name).map(|p| p.gpu_ms.unwrap_or(p.cpu_ms)).unwrap_or(0.0)
 }
 
-fn bench_row(scene: &str, light: &str, method: &str, runs: Vec<Timings>, penumbra_error: f64, frame_error: f64) -> BenchRow {
-    let mut totals: Vec<f64> = runs.iter().map(|t| t.total_ms).collect();
-    totals.sort_by(f64::total_cmp);
-    let whole_ms = totals[totals.len() / 2];
-    let median = median_timings(runs);
+/// CPU time this process has used so far, user and system, all threads, in ms.
+fn process_cpu_ms() -> f64 {
+    let mut usage = std::mem::MaybeUninit::<libc::rusage>::uninit();
+    // SAFETY: `getrusage` fills the struct when it returns 0, and only then is it read.
+    if unsafe { libc::getrusage(libc::RUSAGE_SELF, usage.as_mut_ptr()) } != 0 {
+        return f64::NAN;
+    }
+    let usage = unsafe { usage.assume_init() };
+    let ms = |t: libc::timeval| t.tv_sec as f64 * 1e3 + t.tv_usec as f64 * 1e-3;
+    ms(usage.ru_utime) + ms(usage.ru_stime)
+}
+
+/// The middle value (the upper of the two middle ones for an even count).
+fn middle(mut values: Vec<f64>) -> f64 {
+    values.sort_by(f64::total_cmp);
+    values[values.len() / 2]
+}
+
+fn bench_row(scene: &str, light: &str, method: &str, runs: Vec<(Timings, f64)>, penumbra_error: f64, frame_error: f64) -> BenchRow {
+    let whole_ms = middle(runs.iter().map(|(t, _)| t.total_ms).collect());
+    let cpu_ms = middle(runs.iter().map(|(_, cpu)| *cpu).collect());
+    let median = median_timings(runs.into_iter().map(|(t, _)| t).collect());
     let phases: Vec<(String, f64)> = PHASES.iter().map(|p| (p.to_string(), phase_ms(&median, p))).collect();
     let gbuffer = phase_ms(&median, "gbuffer");
     BenchRow {
@@ -234,6 +256,7 @@ fn bench_row(scene: &str, light: &str, method: &str, runs: Vec<Timings>, penumbr
         whole_over_gbuffer: if gbuffer > 0.0 { whole_ms / gbuffer } else { f64::NAN },
         phases,
         whole_ms,
+        cpu_ms,
         penumbra_error,
         frame_error,
         triangles: median.scene_triangles,
@@ -310,8 +333,9 @@ fn markdown(report: &BenchReport) -> Result<String, std::fmt::Error> {
         "Adapter: {} ({}, {}). {}×{}, shadow map {}², whole PNG requests of a warm engine, medians of {} runs of every \
          method, interleaved. Phases in ms (GPU time where timestamps exist; readback and encode are wall time); \
          *floor* = E0 + composite + readback + encode, what every method shares after its own pass; *÷ G-buffer* = \
-         the whole request over the G-buffer pass, the ratio to compare between machines. Error: mean |V − Vref| \
-         over the penumbra of a {}-sample reference.\n",
+         the whole request over the G-buffer pass, the ratio to compare between machines; *CPU* = the process's CPU \
+         time over the request (every thread: on a software adapter, the device's work too) and *cores* = CPU over \
+         whole, how many cores it kept busy. Error: mean |V − Vref| over the penumbra of a {}-sample reference.\n",
         a.name, a.backend, a.device_type, report.width, report.height, report.shadow_map, report.repeat, report.samples
     )?;
     let mut cases: Vec<(&str, &str)> = Vec::new();
@@ -324,18 +348,20 @@ fn markdown(report: &BenchReport) -> Result<String, std::fmt::Error> {
         let rows: Vec<&BenchRow> = report.rows.iter().filter(|r| r.scene == scene && r.light == light).collect();
         let triangles = rows.first().map(|r| r.triangles).unwrap_or(0);
         writeln!(md, "## {scene}, {light} ({triangles} triangles)\n")?;
-        writeln!(md, "| method | shadow map | G-buffer | E0 | method | composite | readback | encode | floor | whole | ÷ G-buffer | penumbra error |")?;
-        writeln!(md, "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")?;
+        writeln!(md, "| method | shadow map | G-buffer | E0 | method | composite | readback | encode | floor | whole | ÷ G-buffer | CPU | cores | penumbra error |")?;
+        writeln!(md, "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")?;
         for row in &rows {
             let phases: Vec<String> = row.phases.iter().map(|(_, ms)| format!("{ms:.0}")).collect();
             writeln!(
                 md,
-                "| {} | {} | {:.0} | {:.0} | {:.1} | {:.4} |",
+                "| {} | {} | {:.0} | {:.0} | {:.1} | {:.0} | {:.2} | {:.4} |",
                 row.method,
                 phases.join(" | "),
                 row.floor_ms,
                 row.whole_ms,
                 row.whole_over_gbuffer,
+                row.cpu_ms,
+                row.cpu_ms / row.whole_ms,
                 row.penumbra_error
             )?;
         }
