@@ -261,7 +261,62 @@ impl ShadowMethod for Reference {
     }
 
     fn record(&self, ctx: &mut MethodContext<'_>, params: &Params) -> JobResult<Counters> {
-        let device = ctx.gpu.device.clone();
+        let plan = SamplePlan::new(ctx, params);
+        let (view_projs, slots) = plan.slots();
+        let layers = batch_layers(plan.resolution).min(slots.len().max(1) as u32);
+        let batches = plan.batches(&slots, layers, params);
+        let maps = DepthMaps::new(ctx, plan.crop.size, layers, &view_projs);
+        let accumulation = Accumulation::new(ctx, &plan, &batches);
+        let total = plan.samples.len() as u64;
+        let mut before = 0;
+        for (b, &(count, _)) in batches.iter().enumerate() {
+            let first = before as usize;
+            maps.draw(ctx, first, &plan.crop.origins[first..first + count as usize]);
+            accumulation.record(ctx, &maps, b, count, b + 1 == batches.len());
+            let done = before + u64::from(count);
+            let flush = done / BATCH > before / BATCH || done == total;
+            before = done;
+            if flush {
+                ctx.flush()?;
+                ctx.supervisor.progress(done, total);
+                // Cancelled: the renderer discards this frame, so the remaining batches
+                // would only keep the device from the next job.
+                if ctx.supervisor.cancelled() {
+                    break;
+                }
+            }
+        }
+        let segments_tested = ctx.read_counters(&accumulation.segments_count)?[0];
+        Ok(Counters::from([
+            ("samples".to_owned(), total as f64),
+            ("segments_tested".to_owned(), f64::from(segments_tested)),
+            ("samples_skipped_black".to_owned(), f64::from(plan.strata) - total as f64),
+            ("resolution".to_owned(), f64::from(plan.resolution)),
+            ("map_crop_fraction".to_owned(), f64::from(plan.crop.size.element_product()) / f64::from(plan.resolution).powi(2)),
+        ]))
+    }
+}
+
+/// A frame's light samples and how each one's map is drawn and read.
+struct SamplePlan {
+    samples: Vec<LightSample>,
+    /// Strata of the light, black ones included (`samples_skipped_black`).
+    strata: u32,
+    resolution: u32,
+    /// Into every sample's view coordinates (`sample_rotation`).
+    rotation: Mat4,
+    /// The near plane every map shares.
+    near: f32,
+    /// Every sample point's z in view coordinates: they all lie on the light's plane.
+    plane: f32,
+    /// Per sample, its whole map's view-projection and its texels per unit of tan from the
+    /// map's centre.
+    frusta: Vec<(Mat4, f32)>,
+    crop: MapCrop,
+}
+
+impl SamplePlan {
+    fn new(ctx: &MethodContext<'_>, params: &Params) -> Self {
         let spec = ctx.spec;
         let resolution = params.get(&RESOLUTION);
         let (samples, strata) = light_samples(&spec.light, &spec.light_image, params.get(&SAMPLES), u64::from(params.get(&SEED)));
@@ -269,12 +324,10 @@ impl ShadowMethod for Reference {
         let rotation = sample_rotation(&spec.light);
         // Each sample's frustum: its angle fitted to the scene from its point, and one near
         // plane for every map (the nearest any fit allows), so that the accumulate pass reads
-        // it once per pixel, not per sample. The whole map's view-projection and its texels
-        // per unit of tan from the map's centre.
+        // it once per pixel, not per sample.
         let fits: Vec<LightProjection> =
             samples.iter().map(|sample| LightProjection::fit(&AreaLight { center: sample.position, ..spec.light }, &corners)).collect();
         let near = fits.iter().map(|fit| fit.near).reduce(f32::min).unwrap_or(1.0);
-        // Every sample point's z in view coordinates: they all lie on the light's plane.
         let plane = rotation.transform_point3(spec.light.center).z;
         let frusta: Vec<(Mat4, f32)> = samples
             .iter()
@@ -294,59 +347,86 @@ impl ShadowMethod for Reference {
         } else {
             MapCrop::whole(samples.len(), resolution)
         };
-        // Per sample: its map's projection (the depth pass) and what the accumulate pass needs.
-        let (view_projs, slots): (Vec<[[f32; 4]; 4]>, Vec<BatchSample>) = samples
+        Self { samples, strata, resolution, rotation, near, plane, frusta, crop }
+    }
+
+    /// Per sample: its map's projection (the depth pass) and what the accumulate pass needs.
+    fn slots(&self) -> (Vec<[[f32; 4]; 4]>, Vec<BatchSample>) {
+        self.samples
             .iter()
-            .zip(&frusta)
-            .zip(&crop.origins)
+            .zip(&self.frusta)
+            .zip(&self.crop.origins)
             .map(|((sample, (view_proj, texels_per_tan)), origin)| {
                 // The crop's first texel, x and y in one word: indices under 2¹² leave the float
                 // exponent short of all ones, so the word is never a NaN to be canonicalised.
                 let crop_origin = origin.map_or(0, |o| o.x | o.y << 16);
-                let view = rotation.transform_point3(sample.position);
+                let view = self.rotation.transform_point3(sample.position);
                 let slot = BatchSample {
                     origin: [view.x, view.y, f32::from_bits(crop_origin), 0.0],
                     radiance: sample.weight.extend(*texels_per_tan).to_array(),
                 };
-                (crop.layer_view_proj(*origin, resolution, *view_proj).to_cols_array_2d(), slot)
+                (self.crop.layer_view_proj(*origin, self.resolution, *view_proj).to_cols_array_2d(), slot)
             })
-            .unzip();
-        let uniform_buffer = layout::uniform_slots(&device, "Reference::samples", &view_projs);
-        let layers = batch_layers(resolution).min(slots.len().max(1) as u32);
-        // No samples (a black light): one empty batch, whose ratio is 1 everywhere.
+            .unzip()
+    }
+
+    /// The accumulate passes' uniforms, `layers` samples a pass (the last may hold fewer),
+    /// each with its count of samples. No samples (a black light): one empty batch, whose
+    /// ratio is 1 everywhere.
+    fn batches(&self, slots: &[BatchSample], layers: u32, params: &Params) -> Vec<(u32, BatchUniforms)> {
         let chunks: Vec<&[BatchSample]> = if slots.is_empty() { vec![&[]] } else { slots.chunks(layers as usize).collect() };
-        let batches: Vec<(u32, BatchUniforms)> = chunks
+        chunks
             .into_iter()
             .map(|chunk| {
                 let mut batch = BatchUniforms::zeroed();
-                batch.rotation = [0, 1, 2].map(|i| rotation.row(i).to_array());
-                batch.resolution = resolution;
+                batch.rotation = [0, 1, 2].map(|i| self.rotation.row(i).to_array());
+                batch.resolution = self.resolution;
                 batch.bias_texels = params.get(&BIAS_TEXELS);
                 batch.slope_bias_texels = params.get(&SLOPE_BIAS_TEXELS);
-                batch.plane = plane;
-                batch.near = near;
+                batch.plane = self.plane;
+                batch.near = self.near;
                 batch.samples[..chunk.len()].copy_from_slice(chunk);
                 (chunk.len() as u32, batch)
             })
-            .collect();
-        let batch_buffer = layout::uniform_slots(&device, "Reference::batches", &batches.iter().map(|(_, b)| *b).collect::<Vec<_>>());
-        let pixels = u64::from(ctx.width) * u64::from(ctx.height);
-        // One channel where every weight is gray (its three sums would be equal), else three.
-        let channels: u32 = if samples.iter().all(|s| s.weight.x == s.weight.y && s.weight.x == s.weight.z) { 1 } else { 3 };
-        // From the pool: the first batch writes every covered pixel's sums and the last reads
-        // them (a single batch needs none), and every map's layer is cleared before it is drawn.
-        let sums_bytes = if batches.len() > 1 { pixels * 8 * u64::from(channels) } else { 16 };
-        let sums = ctx.scratch_buffer("Reference::sums", sums_bytes, wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST);
-        // The depth maps are the depth buffers themselves (`sample_depth.wgsl`), one layer each.
+            .collect()
+    }
+
+    /// Channels of the sums: one where every sample's weight is gray (its three sums would be
+    /// equal), else three.
+    fn channels(&self) -> u32 {
+        if self.samples.iter().all(|s| s.weight.x == s.weight.y && s.weight.x == s.weight.z) {
+            1
+        } else {
+            3
+        }
+    }
+}
+
+/// A batch's depth maps: the depth buffers themselves (`sample_depth.wgsl`), one layer each of
+/// a pooled array the size of the crop, drawn with every sample's projection.
+struct DepthMaps {
+    /// Where each layer is drawn.
+    layer_views: Vec<wgpu::TextureView>,
+    /// The whole array, as the accumulate pass reads it.
+    array_view: wgpu::TextureView,
+    pipeline: std::sync::Arc<wgpu::RenderPipeline>,
+    /// Every sample's projection, one slot each (`layout::uniform_slots`).
+    projections: wgpu::BindGroup,
+}
+
+impl DepthMaps {
+    fn new(ctx: &mut MethodContext<'_>, size: UVec2, layers: u32, view_projs: &[[[f32; 4]; 4]]) -> Self {
+        let device = ctx.gpu.device.clone();
+        let uniform_buffer = layout::uniform_slots(&device, "Reference::samples", view_projs);
         let depth = ctx.scratch_texture(TextureKey {
             label: "Reference::depths",
-            width: crop.size.x,
-            height: crop.size.y,
+            width: size.x,
+            height: size.y,
             layers,
             format: DEPTH_BUFFER_FORMAT,
             usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
         });
-        let layer_views: Vec<wgpu::TextureView> = (0..layers)
+        let layer_views = (0..layers)
             .map(|layer| {
                 depth.create_view(&wgpu::TextureViewDescriptor {
                     dimension: Some(wgpu::TextureViewDimension::D2),
@@ -356,125 +436,138 @@ impl ShadowMethod for Reference {
                 })
             })
             .collect();
-        let depths_view =
+        let array_view =
             depth.create_view(&wgpu::TextureViewDescriptor { dimension: Some(wgpu::TextureViewDimension::D2Array), ..Default::default() });
-        let depth_pipeline = self.depth_pipeline(ctx);
-        let depth_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+        let pipeline = depth_pipeline(ctx);
+        let projections = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("Reference::sample"),
-            layout: &depth_pipeline.get_bind_group_layout(0),
+            layout: &pipeline.get_bind_group_layout(0),
             entries: &layout::entries(&[layout::slot_binding::<[[f32; 4]; 4]>(&uniform_buffer)]),
         });
+        Self { layer_views, array_view, pipeline, projections }
+    }
+
+    /// Draws a batch's maps: samples `first..` of the frame, whose crop origins are `origins`
+    /// (`None`: no receiver of the frame falls in that map, cleared and left empty), into
+    /// layers `0..`. Timed together where timestamps can be written between passes (a scope per
+    /// map would take the timer's queries at 256 samples). A render pass each, though lavapipe
+    /// begins every pass by waiting until the one before is rasterised (~a quarter of
+    /// `terrain`'s maps): six maps a multiview pass took 2 % off and needs a guard against a
+    /// lavapipe bug, and a batch in one pass (an atlas) would round each map's vertices
+    /// differently (`docs/performance-log.md`).
+    fn draw(&self, ctx: &mut MethodContext<'_>, first: usize, origins: &[Option<UVec2>]) {
+        let scene = ctx.scene;
+        ctx.timer.time_encoder(ctx.encoder, "method", "reference_maps", |encoder| {
+            for (layer, origin) in origins.iter().enumerate() {
+                let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                    label: Some("Reference::sample_depth"),
+                    color_attachments: &[],
+                    depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                        view: &self.layer_views[layer],
+                        depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(0.0), store: wgpu::StoreOp::Store }),
+                        stencil_ops: None,
+                    }),
+                    timestamp_writes: None,
+                    occlusion_query_set: None,
+                    multiview_mask: None,
+                });
+                if origin.is_none() {
+                    continue;
+                }
+                pass.set_pipeline(&self.pipeline);
+                pass.set_bind_group(0, &self.projections, &[layout::slot_offset(first + layer)]);
+                pass.set_vertex_buffer(0, scene.vertex_buffer.slice(..));
+                pass.set_index_buffer(scene.index_buffer.slice(..), wgpu::IndexFormat::Uint32);
+                pass.draw_indexed(0..scene.index_count, 0, 0..1);
+            }
+        });
+    }
+}
+
+/// What every batch's accumulate pass binds besides its maps, and what picks its pipeline.
+struct Accumulation {
+    /// The batches' uniforms, a slot each.
+    batches: wgpu::Buffer,
+    /// Every covered pixel's two sums, per channel: the first batch writes them and the last
+    /// reads them (a single batch needs none).
+    sums: wgpu::Buffer,
+    /// The row segments that hold a receiver, and the dispatch over them.
+    segments: PixelListBuffers,
+    /// How many were listed, for the counter `segments_tested`.
+    segments_count: wgpu::Buffer,
+    channels: u32,
+    cropped: bool,
+}
+
+impl Accumulation {
+    /// Takes the sums from the pool and lists the segments (recorded here, before the first
+    /// batch's maps).
+    fn new(ctx: &mut MethodContext<'_>, plan: &SamplePlan, batches: &[(u32, BatchUniforms)]) -> Self {
+        let uniforms: Vec<BatchUniforms> = batches.iter().map(|(_, b)| *b).collect();
+        let batches_buffer = layout::uniform_slots(&ctx.gpu.device, "Reference::batches", &uniforms);
+        let channels = plan.channels();
+        let pixels = u64::from(ctx.width) * u64::from(ctx.height);
+        let sums_bytes = if batches.len() > 1 { pixels * 8 * u64::from(channels) } else { 16 };
+        let sums = ctx.scratch_buffer("Reference::sums", sums_bytes, wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST);
         let (segments, segments_count) = list_segments(ctx);
-        let total = samples.len() as u64;
-        let mut before = 0;
-        for (b, &(count, _)) in batches.iter().enumerate() {
-            // The batch's maps, timed together where timestamps can be written between passes
-            // (a scope per map would take the timer's queries at 256 samples). A render pass
-            // each, though lavapipe begins every pass by waiting until the one before is
-            // rasterised (~a quarter of `terrain`'s maps): six maps a multiview pass took 2 %
-            // off and needs a guard against a lavapipe bug, and a batch in one pass (an atlas)
-            // would round each map's vertices differently (`docs/performance-log.md`).
-            let scene = ctx.scene;
-            ctx.timer.time_encoder(ctx.encoder, "method", "reference_maps", |encoder| {
-                for layer in 0..count {
-                    let k = before as usize + layer as usize;
-                    let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                        label: Some("Reference::sample_depth"),
-                        color_attachments: &[],
-                        depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                            view: &layer_views[layer as usize],
-                            depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(0.0), store: wgpu::StoreOp::Store }),
-                            stencil_ops: None,
-                        }),
-                        timestamp_writes: None,
-                        occlusion_query_set: None,
-                        multiview_mask: None,
-                    });
-                    // No receiver of the frame falls in this sample's map: cleared, nothing drawn.
-                    if crop.origins[k].is_none() {
-                        continue;
-                    }
-                    pass.set_pipeline(&depth_pipeline);
-                    pass.set_bind_group(0, &depth_group, &[layout::slot_offset(k)]);
-                    pass.set_vertex_buffer(0, scene.vertex_buffer.slice(..));
-                    pass.set_index_buffer(scene.index_buffer.slice(..), wgpu::IndexFormat::Uint32);
-                    pass.draw_indexed(0..scene.index_count, 0, 0..1);
-                }
-            });
-            {
-                // One pipeline per batch size (`SAMPLES` in accumulate.wgsl: all but the last
-                // batch are full), channels of the sums, whether it is the first or last, and
-                // whether the maps are cropped.
-                let (first, last) = (b == 0, b + 1 == batches.len());
-                let cropped = crop.size != UVec2::splat(resolution);
-                let pipeline = ctx.screen_specialized(
-                    PipelineKey {
-                        name: "reference.accumulate",
-                        variant: count | channels << 8 | u32::from(first) << 16 | u32::from(last) << 17 | u32::from(cropped) << 18,
+        let cropped = plan.crop.size != UVec2::splat(plan.resolution);
+        Self { batches: batches_buffer, sums, segments, segments_count, channels, cropped }
+    }
+
+    /// Records batch `b`'s pass over the listed segments: each pixel tests the batch's `count`
+    /// maps and adds `L·G·V` and `L·G` to its sums (the first batch writes them, the `last`
+    /// writes their ratio to the visibility instead).
+    fn record(&self, ctx: &mut MethodContext<'_>, maps: &DepthMaps, b: usize, count: u32, last: bool) {
+        // One pipeline per batch size (`SAMPLES` in accumulate.wgsl: all but the last batch
+        // are full), channels of the sums, whether it is the first or last, and whether the
+        // maps are cropped.
+        let first = b == 0;
+        let pipeline = ctx.screen_specialized(
+            PipelineKey {
+                name: "reference.accumulate",
+                variant: count | self.channels << 8 | u32::from(first) << 16 | u32::from(last) << 17 | u32::from(self.cropped) << 18,
+            },
+            ("methods/reference/accumulate.wgsl", "main"),
+            &[
+                layout::uniform_dynamic(0),
+                wgpu::BindGroupLayoutEntry {
+                    binding: 1,
+                    visibility: wgpu::ShaderStages::COMPUTE,
+                    ty: wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Depth,
+                        view_dimension: wgpu::TextureViewDimension::D2Array,
+                        multisampled: false,
                     },
-                    ("methods/reference/accumulate.wgsl", "main"),
-                    &[
-                        layout::uniform_dynamic(0),
-                        wgpu::BindGroupLayoutEntry {
-                            binding: 1,
-                            visibility: wgpu::ShaderStages::COMPUTE,
-                            ty: wgpu::BindingType::Texture {
-                                sample_type: wgpu::TextureSampleType::Depth,
-                                view_dimension: wgpu::TextureViewDimension::D2Array,
-                                multisampled: false,
-                            },
-                            count: None,
-                        },
-                        layout::storage_read_write(2),
-                        layout::storage_read_write(3),
-                        layout::storage_read_write(4),
-                    ],
-                    &[
-                        ("SAMPLES", f64::from(count)),
-                        ("CHANNELS", f64::from(channels)),
-                        ("FIRST", f64::from(u8::from(first))),
-                        ("LAST", f64::from(u8::from(last))),
-                        ("CROPPED", f64::from(u8::from(cropped))),
-                    ],
-                );
-                let group = ctx.bind(
-                    "Reference::accumulate",
-                    &pipeline,
-                    &[
-                        layout::slot_binding::<BatchUniforms>(&batch_buffer),
-                        wgpu::BindingResource::TextureView(&depths_view),
-                        sums.as_entire_binding(),
-                        ctx.visibility.as_entire_binding(),
-                        segments.list.as_entire_binding(),
-                    ],
-                );
-                let mut pass = ctx.timer.begin_compute_pass(ctx.encoder, "method", "reference_accumulate");
-                pass.set_pipeline(&pipeline);
-                pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
-                pass.set_bind_group(1, &group, &[layout::slot_offset_of::<BatchUniforms>(b)]);
-                pass.dispatch_workgroups_indirect(&segments.groups, 0);
-            }
-            let done = before + u64::from(count);
-            let flush = done / BATCH > before / BATCH || done == total;
-            before = done;
-            if flush {
-                ctx.flush()?;
-                ctx.supervisor.progress(done, total);
-                // Cancelled: the renderer discards this frame, so the remaining batches
-                // would only keep the device from the next job.
-                if ctx.supervisor.cancelled() {
-                    break;
-                }
-            }
-        }
-        let segments_tested = ctx.read_counters(&segments_count)?[0];
-        Ok(Counters::from([
-            ("samples".to_owned(), total as f64),
-            ("segments_tested".to_owned(), f64::from(segments_tested)),
-            ("samples_skipped_black".to_owned(), f64::from(strata) - total as f64),
-            ("resolution".to_owned(), f64::from(resolution)),
-            ("map_crop_fraction".to_owned(), f64::from(crop.size.element_product()) / f64::from(resolution).powi(2)),
-        ]))
+                    count: None,
+                },
+                layout::storage_read_write(2),
+                layout::storage_read_write(3),
+                layout::storage_read_write(4),
+            ],
+            &[
+                ("SAMPLES", f64::from(count)),
+                ("CHANNELS", f64::from(self.channels)),
+                ("FIRST", f64::from(u8::from(first))),
+                ("LAST", f64::from(u8::from(last))),
+                ("CROPPED", f64::from(u8::from(self.cropped))),
+            ],
+        );
+        let group = ctx.bind(
+            "Reference::accumulate",
+            &pipeline,
+            &[
+                layout::slot_binding::<BatchUniforms>(&self.batches),
+                wgpu::BindingResource::TextureView(&maps.array_view),
+                self.sums.as_entire_binding(),
+                ctx.visibility.as_entire_binding(),
+                self.segments.list.as_entire_binding(),
+            ],
+        );
+        let mut pass = ctx.timer.begin_compute_pass(ctx.encoder, "method", "reference_accumulate");
+        pass.set_pipeline(&pipeline);
+        pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
+        pass.set_bind_group(1, &group, &[layout::slot_offset_of::<BatchUniforms>(b)]);
+        pass.dispatch_workgroups_indirect(&self.segments.groups, 0);
     }
 }
 
@@ -531,26 +624,24 @@ fn list_segments(ctx: &mut MethodContext<'_>) -> (PixelListBuffers, wgpu::Buffer
     (list, count)
 }
 
-impl Reference {
-    /// The depth-only pipeline that draws a sample's map.
-    fn depth_pipeline(&self, ctx: &mut MethodContext<'_>) -> std::sync::Arc<wgpu::RenderPipeline> {
-        let device = &ctx.gpu.device;
-        ctx.pipelines.render(PipelineKey::new("reference.sample_depth"), || {
-            let sample_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                label: Some("Reference::sample_layout"),
-                entries: &[layout::uniform_dynamic(0)],
-            });
-            let pipeline = ScenePipeline {
-                label: "Reference::sample_depth",
-                shader: "methods/reference/sample_depth.wgsl",
-                fragment: None,
-                bind_group_layouts: &[&sample_layout],
-                targets: &[],
-                depth_compare: wgpu::CompareFunction::Greater,
-            };
-            pipeline.build(device)
-        })
-    }
+/// The depth-only pipeline that draws a sample's map.
+fn depth_pipeline(ctx: &mut MethodContext<'_>) -> std::sync::Arc<wgpu::RenderPipeline> {
+    let device = &ctx.gpu.device;
+    ctx.pipelines.render(PipelineKey::new("reference.sample_depth"), || {
+        let sample_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("Reference::sample_layout"),
+            entries: &[layout::uniform_dynamic(0)],
+        });
+        let pipeline = ScenePipeline {
+            label: "Reference::sample_depth",
+            shader: "methods/reference/sample_depth.wgsl",
+            fragment: None,
+            bind_group_layouts: &[&sample_layout],
+            targets: &[],
+            depth_compare: wgpu::CompareFunction::Greater,
+        };
+        pipeline.build(device)
+    })
 }
 
 #[cfg(test)]
