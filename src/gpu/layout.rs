@@ -5,7 +5,7 @@ use wgpu::{BindGroupLayoutEntry as Entry, BindingType, ShaderStages, TextureSamp
 
 const ALL: ShaderStages = ShaderStages::VERTEX_FRAGMENT.union(ShaderStages::COMPUTE);
 
-pub fn uniform(binding: u32) -> Entry {
+pub const fn uniform(binding: u32) -> Entry {
     Entry {
         binding,
         visibility: ALL,
@@ -15,7 +15,7 @@ pub fn uniform(binding: u32) -> Entry {
 }
 
 /// A uniform buffer bound with a dynamic offset (one slot per draw or dispatch).
-pub fn uniform_dynamic(binding: u32) -> Entry {
+pub const fn uniform_dynamic(binding: u32) -> Entry {
     Entry {
         binding,
         visibility: ALL,
@@ -24,7 +24,7 @@ pub fn uniform_dynamic(binding: u32) -> Entry {
     }
 }
 
-pub fn storage_read(binding: u32) -> Entry {
+pub const fn storage_read(binding: u32) -> Entry {
     Entry {
         binding,
         visibility: ALL,
@@ -37,7 +37,7 @@ pub fn storage_read(binding: u32) -> Entry {
     }
 }
 
-pub fn storage_read_write(binding: u32) -> Entry {
+pub const fn storage_read_write(binding: u32) -> Entry {
     Entry {
         binding,
         visibility: ShaderStages::COMPUTE.union(ShaderStages::FRAGMENT),

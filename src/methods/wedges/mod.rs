@@ -46,6 +46,8 @@
 //!   (`light::tables::emitting_octagon`): the light it hides lies beyond that edge, so it
 //!   hides only black. Under a flame-shaped light that was two in three wedge pixels.
 
+use std::sync::Arc;
+
 use wgpu::util::DeviceExt;
 
 mod culling;
@@ -185,202 +187,32 @@ impl ShadowMethod for Wedges {
             "zpass" => false,
             _ => eye_in_shadow(&mesh, c, camera.eye),
         };
-
         let volume = Volume::build(&mesh, &silhouette, light, reach, zfail);
-        let Volume { polygons, caps, wedges, .. } = &volume;
+        let uniforms = Uniforms::new(ctx, params, zfail, volume.polygons.len());
+        let pipelines = Pipelines::new(ctx, &uniforms);
+        let buffers = Buffers::new(ctx, &volume, &uniforms);
+        let mut setup = setup_start.elapsed();
 
         // Tile depth ranges from the GPU, then culling on the CPU.
-        let tile = params.get(&TILE);
-        let culling = params.get(&CULLING);
-        let device = ctx.gpu.device.clone();
-        let grid_size = (spec.width.div_ceil(tile), spec.height.div_ceil(tile));
-        let tile_count = (grid_size.0 * grid_size.1) as usize;
-        let colored = !spec.light_image.is_uniform();
-        let (emitting_lo, emitting_hi) = emitting_octagon(light, &spec.light_image);
-        let uniforms = Uniforms {
-            tile,
-            zfail: u32::from(zfail),
-            full: FULL,
-            polygon_count: polygons.len() as u32,
-            object_ids: u32::from(params.get(&OBJECT_IDS)),
-            channels: if colored { 3 } else { 1 },
-            color_angles: params.get(&COLOR_ANGLES),
-            sector_angles: SECTOR_ANGLES,
-            sector_stations: SECTOR_STATIONS,
-            _pad: [0; 3],
-            emitting_lo,
-            emitting_hi,
-        };
-        let storage = |label, contents: &[u8]| {
-            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some(label),
-                // wgpu refuses empty bindings: keep at least one element's worth.
-                contents: if contents.is_empty() { &[0; 64] } else { contents },
-                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-            })
-        };
-        let uniform_buffer = ctx.uniforms("Wedges::uniforms", &uniforms);
-        let polygon_buffer = storage("Wedges::polygons", bytemuck::cast_slice(&volume.polygons_gpu()));
-        let wedge_buffer = storage("Wedges::wedges", bytemuck::cast_slice(wedges));
-        let ranges = storage("Wedges::tile_ranges", &vec![0u8; tile_count * 64]);
-        // From the pool: the LI buffer is cleared before the rasteriser runs, and the tiles pass
-        // writes every pixel's receiver record.
-        let pixels = u64::from(spec.width) * u64::from(spec.height);
-        let li = ctx.scratch_buffer(
-            "Wedges::li",
-            pixels * 4 * u64::from(uniforms.channels),
-            wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-        );
-        let counters = storage("Wedges::counters", &[0u8; 16]);
-        let receivers = ctx.scratch_buffer("Wedges::receivers", pixels * 32, wgpu::BufferUsages::STORAGE);
-        let io = [
-            layout::uniform(0),
-            layout::storage_read(1),
-            layout::storage_read(2),
-            layout::storage_read(3),
-            layout::storage_read_write(4),
-            layout::storage_read_write(5),
-            layout::storage_read_write(6),
-            layout::storage_read_write(7),
-            layout::storage_read_write(8),
-            layout::storage_read(9),
-            layout::storage_read(10),
-            layout::storage_read_write(11),
-            layout::storage_read_write(12),
-        ];
-        let tiles_pipeline = ctx.screen_pipeline(PipelineKey::new("wedges.tiles"), "methods/wedges/tiles.wgsl", &io);
-        let resolve = ctx.screen_pipeline(PipelineKey::new("wedges.resolve"), "methods/wedges/resolve.wgsl", &io);
-        // The rasteriser's pipelines are specialised by the LI buffer's channels and the colour
-        // steps (pipeline constants in rasterize.wgsl): a uniform light's passes hold no colour
-        // code, and the colour loop has a fixed count; by the tile's side (a pixel's place in
-        // its tile is a shift, not a division); and by `ACUTE_EDGES` (common/light.wgsl).
-        // `LANES` in rasterize.wgsl, by the kind of device (fixed per pipeline cache).
-        let lanes: u32 = if ctx.gpu.software { 8 } else { 64 };
-        let constants = [
-            ("CHANNELS", f64::from(uniforms.channels)),
-            ("COLOR_ANGLES", f64::from(uniforms.color_angles)),
-            ("TILE", f64::from(tile)),
-            ("LANES", f64::from(lanes)),
-            spec.acute_edges_constant(),
-        ];
-        let variant = u32::from(spec.acute_edges) << 24 | uniforms.channels << 16 | tile << 6 | uniforms.color_angles;
-        let mut raster = |name: &'static str, shader: &'static str, entry: &'static str| {
-            ctx.screen_specialized(PipelineKey { name, variant }, (shader, entry), &io, &constants)
-        };
-        let umbra_pipeline = raster("wedges.umbra", "methods/wedges/rasterize_umbra.wgsl", "main");
-        let penumbra_pipeline = raster("wedges.penumbra", "methods/wedges/rasterize_penumbra.wgsl", "main");
-        let both_pipeline = raster("wedges.both", "methods/wedges/rasterize_both.wgsl", "main");
-        let penumbra = "methods/wedges/rasterize_penumbra.wgsl";
-        let (mark, size, shade, reset) = (
-            raster("wedges.inside", penumbra, "mark_inside"),
-            raster("wedges.inside_size", penumbra, "inside_size"),
-            raster("wedges.shade", penumbra, "shade_listed"),
-            raster("wedges.inside_reset", penumbra, "inside_reset"),
-        );
-        let sectors =
-            if colored { ctx.light_table("wedges.sectors", sector_table) } else { std::sync::Arc::new(storage("Wedges::no_sectors", &[])) };
-        let tile_pixels = u64::from(tile) * u64::from(tile);
-        // The penumbra pass lists the pixels inside each wedge, a chunk of items at a time.
-        let inside_items = (INSIDE_PAIRS / tile_pixels).max(1) as usize;
-        let inside = crate::render::PixelListBuffers::new_of(&device, ctx.encoder, "Wedges::inside", inside_items as u64 * tile_pixels, 8);
-        let bind = |work: &wgpu::Buffer, inside_groups: &wgpu::Buffer| {
-            device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("Wedges::bind_group"),
-                layout: &tiles_pipeline.get_bind_group_layout(1),
-                entries: &layout::entries(&[
-                    uniform_buffer.as_entire_binding(),
-                    polygon_buffer.as_entire_binding(),
-                    wedge_buffer.as_entire_binding(),
-                    work.as_entire_binding(),
-                    li.as_entire_binding(),
-                    ranges.as_entire_binding(),
-                    counters.as_entire_binding(),
-                    ctx.visibility.as_entire_binding(),
-                    receivers.as_entire_binding(),
-                    sectors.as_entire_binding(),
-                    ctx.e0.as_entire_binding(),
-                    inside.list.as_entire_binding(),
-                    inside_groups.as_entire_binding(),
-                ]),
-            })
-        };
-        let no_work = storage("Wedges::no_work", &[]);
-        let mut setup = setup_start.elapsed();
-        {
-            let group = bind(&no_work, &inside.groups);
-            let mut pass = ctx.timer.begin_compute_pass(ctx.encoder, "method", "Wedges::tiles");
-            pass.set_pipeline(&tiles_pipeline);
-            pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
-            pass.set_bind_group(1, &group, &[]);
-            pass.dispatch_workgroups((tile_count as u32).div_ceil(64), 1, 1);
-        }
-        ctx.flush()?;
-        let tile_ranges: Vec<[[f32; 4]; 4]> = bytemuck::cast_slice(&read_buffer(ctx.gpu, &ranges)?).to_vec();
+        let tile_ranges = buffers.measure_tiles(ctx, &pipelines)?;
         let culling_start = std::time::Instant::now();
-        let grid = TileGrid::new(grid_size, tile, (spec.width, spec.height), &tile_ranges, camera, &view_proj);
-
-        let work = cull(&volume, &silhouette, light, reach, &grid, &view_proj, camera.eye, culling, zfail);
+        let grid = TileGrid::new(buffers.grid_size, uniforms.tile, (spec.width, spec.height), &tile_ranges, camera, &view_proj);
+        let work = cull(&volume, &silhouette, light, reach, &grid, &view_proj, camera.eye, params.get(&CULLING), zfail);
         let single = params.get(&PASSES) == "single";
-        let passes = work.passes(single, [&*umbra_pipeline, &*penumbra_pipeline, &*both_pipeline]);
+        let passes = work.passes(single, [&*pipelines.umbra, &*pipelines.penumbra, &*pipelines.both]);
         let kept: usize = passes.iter().map(|(_, items)| items.len()).sum::<usize>();
         let (tested, rasterized) = (work.tested, work.rasterized());
-
         setup += culling_start.elapsed();
-        ctx.encoder.clear_buffer(&li, 0, None);
-        // Work lists go to the GPU in chunks a storage binding can hold, in pass order; the
-        // penumbra pass's in chunks whose pixels the inside list can hold.
-        let max_items = (device.limits().max_storage_buffer_binding_size as usize / std::mem::size_of::<WorkItem>()).min(1 << 22);
-        let chunks: Vec<(&wgpu::ComputePipeline, &[WorkItem])> = passes
-            .iter()
-            .flat_map(|(pipeline, items)| {
-                let size = if std::ptr::eq(*pipeline, &*penumbra_pipeline) { inside_items.min(max_items) } else { max_items };
-                items.chunks(size).map(move |chunk| (*pipeline, chunk))
-            })
-            .collect();
-        let works: Vec<wgpu::Buffer> = chunks.iter().map(|(_, items)| storage("Wedges::work", bytemuck::cast_slice(items))).collect();
-        let resolve_group = bind(&no_work, &inside.groups);
-        let screen = ctx.dispatch_size();
-        {
-            let mut pass = ctx.timer.begin_compute_pass(ctx.encoder, "method", "Wedges::rasterize");
-            pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
-            for ((pipeline, items), work) in chunks.iter().zip(&works) {
-                // One workgroup per item, in rows of at most 65 535.
-                let (x, y) = item_grid(items.len() as u32);
-                let group = bind(work, &inside.groups);
-                pass.set_bind_group(1, &group, &[]);
-                if std::ptr::eq(*pipeline, &*penumbra_pipeline) {
-                    pass.set_pipeline(&mark);
-                    pass.dispatch_workgroups(x, y, 1);
-                    ctx.timer.mark(&mut pass, "wedges_penumbra_inside");
-                    pass.set_pipeline(&size);
-                    pass.dispatch_workgroups(1, 1, 1);
-                    pass.set_bind_group(1, &bind(work, &inside.stand_in), &[]);
-                    pass.set_pipeline(&shade);
-                    pass.dispatch_workgroups_indirect(&inside.groups, 0);
-                    ctx.timer.mark(&mut pass, "wedges_penumbra_shade");
-                    pass.set_bind_group(1, &group, &[]);
-                    pass.set_pipeline(&reset);
-                    pass.dispatch_workgroups(1, 1, 1);
-                    ctx.timer.mark(&mut pass, "wedges_penumbra_reset");
-                } else {
-                    pass.set_pipeline(pipeline);
-                    pass.dispatch_workgroups(x, y, 1);
-                    ctx.timer.mark(&mut pass, if std::ptr::eq(*pipeline, &*umbra_pipeline) { "wedges_umbra" } else { "wedges_both" });
-                }
-            }
-            pass.set_pipeline(&resolve);
-            pass.set_bind_group(1, &resolve_group, &[]);
-            pass.dispatch_workgroups(screen.0, screen.1, 1);
-            ctx.timer.mark(&mut pass, "wedges_resolve");
-        }
+
+        buffers.rasterize(ctx, &pipelines, &passes);
         ctx.flush()?;
-        let counts: Vec<u32> = bytemuck::cast_slice(&read_buffer(ctx.gpu, &counters)?).to_vec();
+        let counts: Vec<u32> = bytemuck::cast_slice(&read_buffer(ctx.gpu, &buffers.counters)?).to_vec();
         let stats = mesh.stats;
         Ok(Counters::from([
             ("silhouette_edges".to_owned(), silhouette.len() as f64),
             ("setup_cpu_ms".to_owned(), setup.as_secs_f64() * 1e3),
-            ("volume_polygons".to_owned(), polygons.len() as f64),
-            ("cap_polygons".to_owned(), *caps as f64),
+            ("volume_polygons".to_owned(), volume.polygons.len() as f64),
+            ("cap_polygons".to_owned(), volume.caps as f64),
             ("zfail".to_owned(), f64::from(u8::from(zfail))),
             ("tiles_tested".to_owned(), tested as f64),
             ("tiles_culled".to_owned(), (tested - rasterized) as f64),
@@ -392,6 +224,271 @@ impl ShadowMethod for Wedges {
             ("non_manifold_edges".to_owned(), stats.non_manifold_edges as f64),
             ("channels".to_owned(), f64::from(uniforms.channels)),
         ]))
+    }
+}
+
+impl Uniforms {
+    fn new(ctx: &MethodContext<'_>, params: &Params, zfail: bool, polygon_count: usize) -> Self {
+        let spec = ctx.spec;
+        let (emitting_lo, emitting_hi) = emitting_octagon(&spec.light, &spec.light_image);
+        Self {
+            tile: params.get(&TILE),
+            zfail: u32::from(zfail),
+            full: FULL,
+            polygon_count: polygon_count as u32,
+            object_ids: u32::from(params.get(&OBJECT_IDS)),
+            channels: if spec.light_image.is_uniform() { 1 } else { 3 },
+            color_angles: params.get(&COLOR_ANGLES),
+            sector_angles: SECTOR_ANGLES,
+            sector_stations: SECTOR_STATIONS,
+            _pad: [0; 3],
+            emitting_lo,
+            emitting_hi,
+        }
+    }
+}
+
+/// Group 1 of every pass (`common.wgsl`): one layout for all of them.
+const BINDINGS: [wgpu::BindGroupLayoutEntry; 13] = [
+    layout::uniform(0),
+    layout::storage_read(1),
+    layout::storage_read(2),
+    layout::storage_read(3),
+    layout::storage_read_write(4),
+    layout::storage_read_write(5),
+    layout::storage_read_write(6),
+    layout::storage_read_write(7),
+    layout::storage_read_write(8),
+    layout::storage_read(9),
+    layout::storage_read(10),
+    layout::storage_read_write(11),
+    layout::storage_read_write(12),
+];
+
+/// The method's passes: the tiles' depth ranges, the rasterisers of the umbra polygons, the
+/// wedges and both (§6), the penumbra pass's steps over the pixels inside its wedges, and
+/// the resolve into visibility.
+struct Pipelines {
+    tiles: Arc<wgpu::ComputePipeline>,
+    umbra: Arc<wgpu::ComputePipeline>,
+    penumbra: Arc<wgpu::ComputePipeline>,
+    both: Arc<wgpu::ComputePipeline>,
+    /// Per chunk of penumbra items: list the pixels inside each wedge, size the dispatch over
+    /// them, shade them, empty the list.
+    mark_inside: Arc<wgpu::ComputePipeline>,
+    inside_size: Arc<wgpu::ComputePipeline>,
+    shade_listed: Arc<wgpu::ComputePipeline>,
+    inside_reset: Arc<wgpu::ComputePipeline>,
+    resolve: Arc<wgpu::ComputePipeline>,
+}
+
+impl Pipelines {
+    fn new(ctx: &mut MethodContext<'_>, uniforms: &Uniforms) -> Self {
+        let tiles = ctx.screen_pipeline(PipelineKey::new("wedges.tiles"), "methods/wedges/tiles.wgsl", &BINDINGS);
+        let resolve = ctx.screen_pipeline(PipelineKey::new("wedges.resolve"), "methods/wedges/resolve.wgsl", &BINDINGS);
+        // The rasteriser's pipelines are specialised by the LI buffer's channels and the colour
+        // steps (pipeline constants in rasterize.wgsl): a uniform light's passes hold no colour
+        // code, and the colour loop has a fixed count; by the tile's side (a pixel's place in
+        // its tile is a shift, not a division); and by `ACUTE_EDGES` (common/light.wgsl).
+        // `LANES` in rasterize.wgsl, by the kind of device (fixed per pipeline cache).
+        let lanes: u32 = if ctx.gpu.software { 8 } else { 64 };
+        let spec = ctx.spec;
+        let constants = [
+            ("CHANNELS", f64::from(uniforms.channels)),
+            ("COLOR_ANGLES", f64::from(uniforms.color_angles)),
+            ("TILE", f64::from(uniforms.tile)),
+            ("LANES", f64::from(lanes)),
+            spec.acute_edges_constant(),
+        ];
+        let variant = u32::from(spec.acute_edges) << 24 | uniforms.channels << 16 | uniforms.tile << 6 | uniforms.color_angles;
+        let mut raster = |name: &'static str, shader: &'static str, entry: &'static str| {
+            ctx.screen_specialized(PipelineKey { name, variant }, (shader, entry), &BINDINGS, &constants)
+        };
+        let penumbra = "methods/wedges/rasterize_penumbra.wgsl";
+        Self {
+            umbra: raster("wedges.umbra", "methods/wedges/rasterize_umbra.wgsl", "main"),
+            penumbra: raster("wedges.penumbra", penumbra, "main"),
+            both: raster("wedges.both", "methods/wedges/rasterize_both.wgsl", "main"),
+            mark_inside: raster("wedges.inside", penumbra, "mark_inside"),
+            inside_size: raster("wedges.inside_size", penumbra, "inside_size"),
+            shade_listed: raster("wedges.shade", penumbra, "shade_listed"),
+            inside_reset: raster("wedges.inside_reset", penumbra, "inside_reset"),
+            tiles,
+            resolve,
+        }
+    }
+}
+
+/// A storage buffer holding `contents`; wgpu refuses empty bindings, so an empty one holds
+/// one element's worth of zeros.
+fn storage(device: &wgpu::Device, label: &str, contents: &[u8]) -> wgpu::Buffer {
+    device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some(label),
+        contents: if contents.is_empty() { &[0; 64] } else { contents },
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+    })
+}
+
+/// What the passes bind in group 1 but the work list and the dispatch arguments: the volume,
+/// the tiles' ranges, the LI buffer and the rest (`common.wgsl`).
+struct Buffers {
+    device: wgpu::Device,
+    grid_size: (u32, u32),
+    uniforms: wgpu::Buffer,
+    polygons: wgpu::Buffer,
+    wedges: wgpu::Buffer,
+    /// Each tile's depth range and receivers' box, written by the tiles pass.
+    ranges: wgpu::Buffer,
+    /// The LI buffer: light intensity per pixel and channel, fixed point.
+    li: wgpu::Buffer,
+    /// Depth reads, LI writes and wedge pixels inside, counted on the GPU.
+    counters: wgpu::Buffer,
+    /// Every pixel's receiver record, written by the tiles pass.
+    receivers: wgpu::Buffer,
+    /// A coloured light's sector table (`light::tables`).
+    sectors: Arc<wgpu::Buffer>,
+    visibility: wgpu::Buffer,
+    e0: wgpu::Buffer,
+    /// The pixels inside each wedge of a chunk of penumbra items.
+    inside: crate::render::PixelListBuffers,
+    /// The work list's binding where a pass reads none.
+    no_work: wgpu::Buffer,
+    /// Items of the penumbra pass in one chunk: as many as the inside list holds the pixels of.
+    inside_items: usize,
+}
+
+impl Buffers {
+    fn new(ctx: &mut MethodContext<'_>, volume: &Volume, uniforms: &Uniforms) -> Self {
+        let device = ctx.gpu.device.clone();
+        let (width, height) = (ctx.spec.width, ctx.spec.height);
+        let grid_size = (width.div_ceil(uniforms.tile), height.div_ceil(uniforms.tile));
+        let tile_count = (grid_size.0 * grid_size.1) as usize;
+        // From the pool: the LI buffer is cleared before the rasteriser runs, and the tiles pass
+        // writes every pixel's receiver record.
+        let pixels = u64::from(width) * u64::from(height);
+        let li = ctx.scratch_buffer(
+            "Wedges::li",
+            pixels * 4 * u64::from(uniforms.channels),
+            wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+        );
+        let receivers = ctx.scratch_buffer("Wedges::receivers", pixels * 32, wgpu::BufferUsages::STORAGE);
+        let sectors = if uniforms.channels == 3 {
+            ctx.light_table("wedges.sectors", sector_table)
+        } else {
+            Arc::new(storage(&device, "Wedges::no_sectors", &[]))
+        };
+        let tile_pixels = u64::from(uniforms.tile) * u64::from(uniforms.tile);
+        // The penumbra pass lists the pixels inside each wedge, a chunk of items at a time.
+        let inside_items = (INSIDE_PAIRS / tile_pixels).max(1) as usize;
+        let inside = crate::render::PixelListBuffers::new_of(&device, ctx.encoder, "Wedges::inside", inside_items as u64 * tile_pixels, 8);
+        Self {
+            grid_size,
+            uniforms: ctx.uniforms("Wedges::uniforms", uniforms),
+            polygons: storage(&device, "Wedges::polygons", bytemuck::cast_slice(&volume.polygons_gpu())),
+            wedges: storage(&device, "Wedges::wedges", bytemuck::cast_slice(&volume.wedges)),
+            ranges: storage(&device, "Wedges::tile_ranges", &vec![0u8; tile_count * 64]),
+            li,
+            counters: storage(&device, "Wedges::counters", &[0u8; 16]),
+            receivers,
+            sectors,
+            visibility: ctx.visibility.clone(),
+            e0: ctx.e0.clone(),
+            inside,
+            no_work: storage(&device, "Wedges::no_work", &[]),
+            inside_items,
+            device,
+        }
+    }
+
+    /// Group 1 with `work` as the work list and `inside_groups` where the inside list's
+    /// dispatch arguments are written (a stand-in while a dispatch reads them).
+    fn bind(&self, pipelines: &Pipelines, work: &wgpu::Buffer, inside_groups: &wgpu::Buffer) -> wgpu::BindGroup {
+        self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("Wedges::bind_group"),
+            layout: &pipelines.tiles.get_bind_group_layout(1),
+            entries: &layout::entries(&[
+                self.uniforms.as_entire_binding(),
+                self.polygons.as_entire_binding(),
+                self.wedges.as_entire_binding(),
+                work.as_entire_binding(),
+                self.li.as_entire_binding(),
+                self.ranges.as_entire_binding(),
+                self.counters.as_entire_binding(),
+                self.visibility.as_entire_binding(),
+                self.receivers.as_entire_binding(),
+                self.sectors.as_entire_binding(),
+                self.e0.as_entire_binding(),
+                self.inside.list.as_entire_binding(),
+                inside_groups.as_entire_binding(),
+            ]),
+        })
+    }
+
+    /// Runs the tiles pass (each tile's depth range and receivers, §4) and reads the ranges
+    /// back for the culling.
+    fn measure_tiles(&self, ctx: &mut MethodContext<'_>, pipelines: &Pipelines) -> JobResult<Vec<[[f32; 4]; 4]>> {
+        {
+            let group = self.bind(pipelines, &self.no_work, &self.inside.groups);
+            let mut pass = ctx.timer.begin_compute_pass(ctx.encoder, "method", "Wedges::tiles");
+            pass.set_pipeline(&pipelines.tiles);
+            pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
+            pass.set_bind_group(1, &group, &[]);
+            pass.dispatch_workgroups((self.grid_size.0 * self.grid_size.1).div_ceil(64), 1, 1);
+        }
+        ctx.flush()?;
+        Ok(bytemuck::cast_slice(&read_buffer(ctx.gpu, &self.ranges)?).to_vec())
+    }
+
+    /// Clears the LI buffer, runs the culled work items pass by pass (`passes`, in order) and
+    /// resolves the LI buffer into visibility.
+    fn rasterize(&self, ctx: &mut MethodContext<'_>, pipelines: &Pipelines, passes: &[(&wgpu::ComputePipeline, Vec<WorkItem>)]) {
+        ctx.encoder.clear_buffer(&self.li, 0, None);
+        // Work lists go to the GPU in chunks a storage binding can hold, in pass order; the
+        // penumbra pass's in chunks whose pixels the inside list can hold.
+        let max_items = (self.device.limits().max_storage_buffer_binding_size as usize / std::mem::size_of::<WorkItem>()).min(1 << 22);
+        let is_penumbra = |pipeline: &wgpu::ComputePipeline| std::ptr::eq(pipeline, &*pipelines.penumbra);
+        let chunks: Vec<(&wgpu::ComputePipeline, &[WorkItem])> = passes
+            .iter()
+            .flat_map(|(pipeline, items)| {
+                let size = if is_penumbra(pipeline) { self.inside_items.min(max_items) } else { max_items };
+                items.chunks(size).map(move |chunk| (*pipeline, chunk))
+            })
+            .collect();
+        let works: Vec<wgpu::Buffer> =
+            chunks.iter().map(|(_, items)| storage(&self.device, "Wedges::work", bytemuck::cast_slice(items))).collect();
+        let resolve_group = self.bind(pipelines, &self.no_work, &self.inside.groups);
+        let screen = ctx.dispatch_size();
+        let mut pass = ctx.timer.begin_compute_pass(ctx.encoder, "method", "Wedges::rasterize");
+        pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
+        for ((pipeline, items), work) in chunks.iter().zip(&works) {
+            // One workgroup per item, in rows of at most 65 535.
+            let (x, y) = item_grid(items.len() as u32);
+            let group = self.bind(pipelines, work, &self.inside.groups);
+            pass.set_bind_group(1, &group, &[]);
+            if is_penumbra(pipeline) {
+                pass.set_pipeline(&pipelines.mark_inside);
+                pass.dispatch_workgroups(x, y, 1);
+                ctx.timer.mark(&mut pass, "wedges_penumbra_inside");
+                pass.set_pipeline(&pipelines.inside_size);
+                pass.dispatch_workgroups(1, 1, 1);
+                pass.set_bind_group(1, &self.bind(pipelines, work, &self.inside.stand_in), &[]);
+                pass.set_pipeline(&pipelines.shade_listed);
+                pass.dispatch_workgroups_indirect(&self.inside.groups, 0);
+                ctx.timer.mark(&mut pass, "wedges_penumbra_shade");
+                pass.set_bind_group(1, &group, &[]);
+                pass.set_pipeline(&pipelines.inside_reset);
+                pass.dispatch_workgroups(1, 1, 1);
+                ctx.timer.mark(&mut pass, "wedges_penumbra_reset");
+            } else {
+                pass.set_pipeline(pipeline);
+                pass.dispatch_workgroups(x, y, 1);
+                ctx.timer.mark(&mut pass, if std::ptr::eq(*pipeline, &*pipelines.umbra) { "wedges_umbra" } else { "wedges_both" });
+            }
+        }
+        pass.set_pipeline(&pipelines.resolve);
+        pass.set_bind_group(1, &resolve_group, &[]);
+        pass.dispatch_workgroups(screen.0, screen.1, 1);
+        ctx.timer.mark(&mut pass, "wedges_resolve");
     }
 }
 
