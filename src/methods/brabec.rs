@@ -30,6 +30,8 @@
 //! derived from the light's size instead of the ad-hoc `r_scale`, `r_bias`, `r_shrink` (the
 //! paper's §6 future work), which remain as overrides.
 
+use std::sync::Arc;
+
 use super::{Counters, MethodContext, Param, ParamSpec, Params, ShadowMethod, BIAS_TEXELS, SLOPE_BIAS_TEXELS};
 use crate::error::JobResult;
 use crate::gpu::layout;
@@ -135,6 +137,32 @@ impl ShadowMethod for Brabec {
     }
 
     fn record(&self, ctx: &mut MethodContext<'_>, params: &Params) -> JobResult<Counters> {
+        let uniforms = Uniforms::new(ctx, params);
+        let pipelines = Pipelines::new(ctx, uniforms.jitter > 0.0);
+        let buffers = Buffers::new(ctx, &uniforms);
+        buffers.record(ctx, &pipelines, uniforms.lattice_stride);
+        let raw = ctx.read_counters(&buffers.counters)?;
+        let (searches, interpolated, radius_16, shaded, unresolved) = (raw[0], raw[1], raw[2], raw[3], raw[4]);
+        let mut counters = Counters::from([
+            ("pixels_shaded".to_owned(), f64::from(shaded)),
+            ("searches".to_owned(), f64::from(searches)),
+            ("pixels_interpolated".to_owned(), f64::from(interpolated)),
+            ("searched_fraction".to_owned(), if shaded > 0 { f64::from(searches) / f64::from(shaded) } else { 0.0 }),
+            ("avg_search_radius_texels".to_owned(), if searches > 0 { f64::from(radius_16) / 16.0 / f64::from(searches) } else { 0.0 }),
+            ("k_texels".to_owned(), f64::from(uniforms.k)),
+        ]);
+        if unresolved > 0 {
+            // Every pixel is on the lattice, searched or interpolated; one that is not is a bug
+            // in the passes' order, shown lit and reported rather than hidden.
+            tracing::error!(unresolved, "brabec left pixels without a penumbra coordinate");
+            counters.insert("pixels_unresolved".to_owned(), f64::from(unresolved));
+        }
+        Ok(counters)
+    }
+}
+
+impl Uniforms {
+    fn new(ctx: &MethodContext<'_>, params: &Params) -> Self {
         let spec = ctx.spec;
         let light = &spec.light;
         let projection = ctx.projection;
@@ -147,8 +175,7 @@ impl ShadowMethod for Brabec {
         let k = width_m * spec.shadow_resolution as f32 / (2.0 * projection.tan_half);
         let derived_search = params.get(&R_SCALE) < 0.0 && params.get(&R_BIAS) < 0.0;
         let derived_hit = params.get(&R_SHRINK) < 0.0;
-        let adaptive = params.get(&ADAPTIVE);
-        let uniforms = Uniforms {
+        Self {
             r_scale: params.get(&R_SCALE).max(0.0),
             r_bias: params.get(&R_BIAS).max(0.0),
             r_shrink: params.get(&R_SHRINK).max(0.0),
@@ -162,130 +189,180 @@ impl ShadowMethod for Brabec {
             falloff: u32::from(params.get(&FALLOFF) == "sine"),
             inner_depth: u32::from(params.get(&INNER_DEPTH) == "paper"),
             derived: [u32::from(derived_search), u32::from(derived_hit)],
-            lattice_stride: if adaptive { BLOCK } else { 1 },
+            lattice_stride: if params.get(&ADAPTIVE) { BLOCK } else { 1 },
             use_ids: u32::from(params.get(&OBJECT_IDS)),
             colored: u32::from(!spec.light_image.is_uniform()),
             _pad: [0; 3],
-        };
+        }
+    }
+}
+
+/// Group 1 of every pass (`common.wgsl`).
+const BINDINGS: [wgpu::BindGroupLayoutEntry; 9] = [
+    layout::uniform(0),
+    layout::storage_read_write(1),
+    layout::storage_read_write(2),
+    layout::storage_read_write(3),
+    layout::storage_read(4),
+    layout::storage_read_write(5),
+    layout::storage_read_write(6),
+    layout::storage_read_write(7),
+    layout::storage_read_write(8),
+];
+
+/// The passes, in the order of the module's list.
+struct Pipelines {
+    summarize: Arc<wgpu::ComputePipeline>,
+    classify: Arc<wgpu::ComputePipeline>,
+    lattice: Arc<wgpu::ComputePipeline>,
+    /// Before the search: the refinement's listing along columns, then rows, and the size of
+    /// the search's dispatch.
+    mark_columns: Arc<wgpu::ComputePipeline>,
+    mark_rows: Arc<wgpu::ComputePipeline>,
+    list_size: Arc<wgpu::ComputePipeline>,
+    search: Arc<wgpu::ComputePipeline>,
+    /// After it: the refinement's interpolation along columns, then rows.
+    columns: Arc<wgpu::ComputePipeline>,
+    rows: Arc<wgpu::ComputePipeline>,
+    finish: Arc<wgpu::ComputePipeline>,
+}
+
+impl Pipelines {
+    fn new(ctx: &mut MethodContext<'_>, jittered: bool) -> Self {
+        let mut pipeline = |name, shader| ctx.screen_pipeline(PipelineKey::new(name), shader, &BINDINGS);
+        let (summarize, classify, lattice) = (
+            pipeline("brabec.summary", "methods/brabec/summary.wgsl"),
+            pipeline("brabec.classify", "methods/brabec/classify.wgsl"),
+            pipeline("brabec.lattice", "methods/brabec/lattice.wgsl"),
+        );
+        let (columns, rows, finish) = (
+            pipeline("brabec.columns", "methods/brabec/columns.wgsl"),
+            pipeline("brabec.rows", "methods/brabec/rows.wgsl"),
+            pipeline("brabec.finish", "methods/brabec/finish.wgsl"),
+        );
+        let mut entry = |name, shader, entry| ctx.screen_entry(PipelineKey::new(name), shader, entry, &BINDINGS);
+        // The jitter's hash is compiled out of the search unless asked for (`search.wgsl`).
+        let (search_key, search_entry) =
+            if jittered { ("brabec.search.jittered", "search_listed_jittered") } else { ("brabec.search", "search_listed") };
+        Self {
+            mark_columns: entry("brabec.columns.mark", "methods/brabec/columns.wgsl", "mark_searches"),
+            mark_rows: entry("brabec.rows.mark", "methods/brabec/rows.wgsl", "mark_searches"),
+            list_size: entry("brabec.search.size", "methods/brabec/search.wgsl", "listed_size"),
+            search: entry(search_key, "methods/brabec/search.wgsl", search_entry),
+            summarize,
+            classify,
+            lattice,
+            columns,
+            rows,
+            finish,
+        }
+    }
+}
+
+/// What the passes bind in group 1 (`common.wgsl`).
+struct Buffers {
+    uniforms: wgpu::Buffer,
+    /// Every pixel's state: `classify` writes it all.
+    state: wgpu::Buffer,
+    /// Searches, pixels interpolated, summed search radius, pixels shaded, pixels unresolved.
+    counters: wgpu::Buffer,
+    /// The light's edge table (`light::tables`); a stand-in under a uniform light, whose
+    /// colours are its gray level.
+    edges: Arc<wgpu::Buffer>,
+    /// Per 8×8 block of the light's map its depth range and id, and the map's texels.
+    summary: wgpu::Buffer,
+    map_texels: wgpu::Buffer,
+    summary_side: u32,
+    /// The pixels to search, and the search's dispatch over them.
+    to_search: PixelListBuffers,
+}
+
+impl Buffers {
+    fn new(ctx: &mut MethodContext<'_>, uniforms: &Uniforms) -> Self {
         let device = ctx.gpu.device.clone();
-        let uniform_buffer = ctx.uniforms("Brabec::uniforms", &uniforms);
+        let resolution = ctx.spec.shadow_resolution;
         let pixels = u64::from(ctx.width) * u64::from(ctx.height);
+        let uniforms_buffer = ctx.uniforms("Brabec::uniforms", uniforms);
         // From the pool: `classify` writes every pixel's state, `summary` every block and texel.
         let state = ctx.scratch_buffer("Brabec::state", pixels * 24, wgpu::BufferUsages::STORAGE);
         let counters = ctx.counters("Brabec::counters", 5);
-        let io = [
-            layout::uniform(0),
-            layout::storage_read_write(1),
-            layout::storage_read_write(2),
-            layout::storage_read_write(3),
-            layout::storage_read(4),
-            layout::storage_read_write(5),
-            layout::storage_read_write(6),
-            layout::storage_read_write(7),
-            layout::storage_read_write(8),
-        ];
-        let summary_side = spec.shadow_resolution.div_ceil(SUMMARY_BLOCK);
+        let summary_side = resolution.div_ceil(SUMMARY_BLOCK);
         let summary = ctx.scratch_buffer("Brabec::summary", u64::from(summary_side).pow(2) * 16, wgpu::BufferUsages::STORAGE);
-        let map_texels =
-            ctx.scratch_buffer("Brabec::map_texels", u64::from(spec.shadow_resolution).pow(2) * 8, wgpu::BufferUsages::STORAGE);
-        let summarize = ctx.screen_pipeline(PipelineKey::new("brabec.summary"), "methods/brabec/summary.wgsl", &io);
-        let classify = ctx.screen_pipeline(PipelineKey::new("brabec.classify"), "methods/brabec/classify.wgsl", &io);
-        let lattice = ctx.screen_pipeline(PipelineKey::new("brabec.lattice"), "methods/brabec/lattice.wgsl", &io);
-        let mark_columns = ctx.screen_entry(PipelineKey::new("brabec.columns.mark"), "methods/brabec/columns.wgsl", "mark_searches", &io);
-        let mark_rows = ctx.screen_entry(PipelineKey::new("brabec.rows.mark"), "methods/brabec/rows.wgsl", "mark_searches", &io);
-        let list_size = ctx.screen_entry(PipelineKey::new("brabec.search.size"), "methods/brabec/search.wgsl", "listed_size", &io);
-        // The jitter's hash is compiled out of the search unless asked for (`search.wgsl`).
-        let (search_key, search_entry) =
-            if uniforms.jitter > 0.0 { ("brabec.search.jittered", "search_listed_jittered") } else { ("brabec.search", "search_listed") };
-        let search = ctx.screen_entry(PipelineKey::new(search_key), "methods/brabec/search.wgsl", search_entry, &io);
-        let columns = ctx.screen_pipeline(PipelineKey::new("brabec.columns"), "methods/brabec/columns.wgsl", &io);
-        let rows = ctx.screen_pipeline(PipelineKey::new("brabec.rows"), "methods/brabec/rows.wgsl", &io);
-        let finish = ctx.screen_pipeline(PipelineKey::new("brabec.finish"), "methods/brabec/finish.wgsl", &io);
-        // A uniform light needs no table: its colours are its gray level.
-        let edges = if uniforms.colored == 1 {
-            ctx.light_table("edge_table", edge_table)
-        } else {
-            std::sync::Arc::new(ctx.counters("Brabec::no_table", 4))
-        };
+        let map_texels = ctx.scratch_buffer("Brabec::map_texels", u64::from(resolution).pow(2) * 8, wgpu::BufferUsages::STORAGE);
+        let edges =
+            if uniforms.colored == 1 { ctx.light_table("edge_table", edge_table) } else { Arc::new(ctx.counters("Brabec::no_table", 4)) };
         let to_search = PixelListBuffers::new(&device, ctx.encoder, "Brabec", pixels);
-        let bind = |groups: &wgpu::Buffer| {
-            ctx.bind(
-                "Brabec::bind_group",
-                &classify,
-                &[
-                    uniform_buffer.as_entire_binding(),
-                    state.as_entire_binding(),
-                    counters.as_entire_binding(),
-                    ctx.visibility.as_entire_binding(),
-                    edges.as_entire_binding(),
-                    summary.as_entire_binding(),
-                    to_search.list.as_entire_binding(),
-                    groups.as_entire_binding(),
-                    map_texels.as_entire_binding(),
-                ],
-            )
-        };
-        let (bind_group, search_group) = (bind(&to_search.groups), bind(&to_search.stand_in));
+        Self { uniforms: uniforms_buffer, state, counters, edges, summary, map_texels, summary_side, to_search }
+    }
 
+    /// Group 1, with the search's dispatch grid bound as `groups` (its stand-in while the
+    /// search reads the grid).
+    fn bind(&self, ctx: &MethodContext<'_>, pipelines: &Pipelines, groups: &wgpu::Buffer) -> wgpu::BindGroup {
+        ctx.bind(
+            "Brabec::bind_group",
+            &pipelines.classify,
+            &[
+                self.uniforms.as_entire_binding(),
+                self.state.as_entire_binding(),
+                self.counters.as_entire_binding(),
+                ctx.visibility.as_entire_binding(),
+                self.edges.as_entire_binding(),
+                self.summary.as_entire_binding(),
+                self.to_search.list.as_entire_binding(),
+                groups.as_entire_binding(),
+                self.map_texels.as_entire_binding(),
+            ],
+        )
+    }
+
+    /// Records the passes: with adaptive sampling (a lattice `stride` of `BLOCK`) the
+    /// refinement along columns and rows, without it (stride 1) a search at every pixel.
+    fn record(&self, ctx: &mut MethodContext<'_>, pipelines: &Pipelines, stride: u32) {
+        let (bind_group, search_group) =
+            (self.bind(ctx, pipelines, &self.to_search.groups), self.bind(ctx, pipelines, &self.to_search.stand_in));
         let (w, h) = (ctx.width, ctx.height);
-        let stride = uniforms.lattice_stride;
         let lattice_size = ((w - 1) / stride + 2, (h - 1) / stride + 2);
         let line_groups = |n: u32| (n + 2) / BLOCK;
         let column_count = (w - 1) / BLOCK + 1 + u32::from((w - 1) % BLOCK != 0);
         let column_groups = ((column_count * line_groups(h)).div_ceil(64), 1);
         let row_groups = ((h * line_groups(w)).div_ceil(64), 1);
+        let side = self.summary_side;
         // Which pixels are searched depends on the keys alone: the lattice and the refinement
         // list them first, one compacted pass searches them all, then the refinement
         // interpolates (`refine` in common.wgsl says why).
         let mut listing = vec![
-            ("brabec_summary", &summarize, (summary_side.div_ceil(8), summary_side.div_ceil(8))),
-            ("brabec_classify", &classify, (w.div_ceil(8), h.div_ceil(8))),
-            ("brabec_lattice", &lattice, (lattice_size.0.div_ceil(8), lattice_size.1.div_ceil(8))),
+            ("brabec_summary", &pipelines.summarize, (side.div_ceil(8), side.div_ceil(8))),
+            ("brabec_classify", &pipelines.classify, (w.div_ceil(8), h.div_ceil(8))),
+            ("brabec_lattice", &pipelines.lattice, (lattice_size.0.div_ceil(8), lattice_size.1.div_ceil(8))),
         ];
         let mut interpolation = vec![];
-        if adaptive {
-            listing.extend([("brabec_list_columns", &mark_columns, column_groups), ("brabec_list_rows", &mark_rows, row_groups)]);
-            interpolation.extend([("brabec_columns", &columns, column_groups), ("brabec_rows", &rows, row_groups)]);
+        if stride == BLOCK {
+            listing.extend([
+                ("brabec_list_columns", &pipelines.mark_columns, column_groups),
+                ("brabec_list_rows", &pipelines.mark_rows, row_groups),
+            ]);
+            interpolation.extend([("brabec_columns", &pipelines.columns, column_groups), ("brabec_rows", &pipelines.rows, row_groups)]);
         }
-        listing.push(("brabec_search_size", &list_size, (1, 1)));
-        interpolation.push(("brabec_finish", &finish, (w.div_ceil(8), h.div_ceil(8))));
-        {
-            let mut pass = ctx.timer.begin_compute_pass(ctx.encoder, "method", "Brabec::passes");
-            pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
-            pass.set_bind_group(1, &bind_group, &[]);
-            for (name, pipeline, (x, y)) in listing {
-                pass.set_pipeline(pipeline);
-                pass.dispatch_workgroups(x, y, 1);
-                ctx.timer.mark(&mut pass, name);
-            }
-            pass.set_pipeline(&search);
-            pass.set_bind_group(1, &search_group, &[]);
-            pass.dispatch_workgroups_indirect(&to_search.groups, 0);
-            ctx.timer.mark(&mut pass, "brabec_search");
-            pass.set_bind_group(1, &bind_group, &[]);
-            for (name, pipeline, (x, y)) in interpolation {
-                pass.set_pipeline(pipeline);
-                pass.dispatch_workgroups(x, y, 1);
-                ctx.timer.mark(&mut pass, name);
-            }
+        listing.push(("brabec_search_size", &pipelines.list_size, (1, 1)));
+        interpolation.push(("brabec_finish", &pipelines.finish, (w.div_ceil(8), h.div_ceil(8))));
+        let mut pass = ctx.timer.begin_compute_pass(ctx.encoder, "method", "Brabec::passes");
+        pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
+        pass.set_bind_group(1, &bind_group, &[]);
+        for (name, pipeline, (x, y)) in listing {
+            pass.set_pipeline(pipeline);
+            pass.dispatch_workgroups(x, y, 1);
+            ctx.timer.mark(&mut pass, name);
         }
-        let raw = ctx.read_counters(&counters)?;
-        let (searches, interpolated, radius_16, shaded, unresolved) = (raw[0], raw[1], raw[2], raw[3], raw[4]);
-        let mut counters = Counters::from([
-            ("pixels_shaded".to_owned(), f64::from(shaded)),
-            ("searches".to_owned(), f64::from(searches)),
-            ("pixels_interpolated".to_owned(), f64::from(interpolated)),
-            ("searched_fraction".to_owned(), if shaded > 0 { f64::from(searches) / f64::from(shaded) } else { 0.0 }),
-            ("avg_search_radius_texels".to_owned(), if searches > 0 { f64::from(radius_16) / 16.0 / f64::from(searches) } else { 0.0 }),
-            ("k_texels".to_owned(), f64::from(k)),
-        ]);
-        if unresolved > 0 {
-            // Every pixel is on the lattice, searched or interpolated; one that is not is a bug
-            // in the passes' order, shown lit and reported rather than hidden.
-            tracing::error!(unresolved, "brabec left pixels without a penumbra coordinate");
-            counters.insert("pixels_unresolved".to_owned(), f64::from(unresolved));
+        pass.set_pipeline(&pipelines.search);
+        pass.set_bind_group(1, &search_group, &[]);
+        pass.dispatch_workgroups_indirect(&self.to_search.groups, 0);
+        ctx.timer.mark(&mut pass, "brabec_search");
+        pass.set_bind_group(1, &bind_group, &[]);
+        for (name, pipeline, (x, y)) in interpolation {
+            pass.set_pipeline(pipeline);
+            pass.dispatch_workgroups(x, y, 1);
+            ctx.timer.mark(&mut pass, name);
         }
-        Ok(counters)
     }
 }
 
