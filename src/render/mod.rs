@@ -22,7 +22,7 @@ use crate::gpu::layout;
 use crate::gpu::pool::{BufferPool, DerivedResources, PipelinePool, ReadbackPool, TexturePool};
 use crate::gpu::readback::Readback;
 use crate::gpu::scene::GpuScene;
-use crate::gpu::timing::GpuTimer;
+use crate::gpu::timing::{GpuTimer, PassTime};
 use crate::gpu::GpuContext;
 use crate::light::{cells_bounds, AreaLight, LightCell, E0_GRID};
 use crate::render::method::{Counters, MethodContext, Scratch};
@@ -239,7 +239,7 @@ impl Renderer {
         let go_on = || if supervisor.cancelled() { Err(cancelled_error()) } else { Ok(()) };
         let projection = LightProjection::fit(&spec.light, &scene.shadow_fit_points(&spec.light));
         self.write_constants(spec, &projection);
-        let encoder = || device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("Renderer::encoder") });
+        let encoder = || frame_encoder(device);
         let submit = |encoder: wgpu::CommandEncoder| -> JobResult<()> {
             gpu.queue.submit([encoder.finish()]);
             Ok(gpu.wait_idle()?)
@@ -273,35 +273,7 @@ impl Renderer {
         go_on()?;
 
         // The method's visibility.
-        let mut enc = encoder();
-        let (counters, scratch) = {
-            let mut ctx = MethodContext {
-                gpu: &gpu,
-                pipelines: &mut self.pipelines,
-                derived: &mut self.derived,
-                buffers: &mut self.buffers,
-                textures: &mut self.textures,
-                scratch: Scratch::default(),
-                inputs: &inputs,
-                shadow_depth: &targets.shadow_depth.texture,
-                visibility: &targets.visibility.buffer,
-                e0: &targets.e0.buffer,
-                width: spec.width,
-                height: spec.height,
-                encoder: &mut enc,
-                timer: &mut self.timer,
-                scene,
-                spec,
-                projection: &projection,
-                supervisor,
-            };
-            let counters = spec.method.record(&mut ctx, &spec.params);
-            (counters, std::mem::take(&mut ctx.scratch))
-        };
-        let mut counters = counters?;
-        submit(enc)?;
-        // The method's scratch buffers are free once its passes have run.
-        scratch.release(&mut self.buffers, &mut self.textures);
+        let counters = self.record_method(targets, scene, spec, &inputs, &projection, supervisor)?;
         let start = timings.phase("method", start);
         // A long method stops recording its batches once cancelled; what it left is discarded.
         go_on()?;
@@ -321,14 +293,79 @@ impl Renderer {
         let start = timings.phase("composite", start);
 
         // Readback of what the output format needs, and of the GPU timestamps.
-        let mut enc = encoder();
+        let (frame, gpu_times) = self.read_back(targets, scene, spec, srgb8_buffer.as_ref(), e0_listed, counters)?;
+        timings.phase("readback", start);
+        for time in gpu_times {
+            timings.add_gpu(time.phase, time.pass, time.ms);
+        }
+        Ok(frame)
+    }
+
+    /// Records the method's passes (`MethodContext`), runs them, and gives the pools back
+    /// the method's scratch buffers, which are free once its passes have run.
+    fn record_method(
+        &mut self,
+        targets: &FrameTargets,
+        scene: &GpuScene,
+        spec: &FrameSpec,
+        inputs: &FrameInputs,
+        projection: &LightProjection,
+        supervisor: &dyn Supervisor,
+    ) -> JobResult<Counters> {
+        let gpu = self.gpu.clone();
+        let mut enc = frame_encoder(&gpu.device);
+        let (counters, scratch) = {
+            let mut ctx = MethodContext {
+                gpu: &gpu,
+                pipelines: &mut self.pipelines,
+                derived: &mut self.derived,
+                buffers: &mut self.buffers,
+                textures: &mut self.textures,
+                scratch: Scratch::default(),
+                inputs,
+                shadow_depth: &targets.shadow_depth.texture,
+                visibility: &targets.visibility.buffer,
+                e0: &targets.e0.buffer,
+                width: spec.width,
+                height: spec.height,
+                encoder: &mut enc,
+                timer: &mut self.timer,
+                scene,
+                spec,
+                projection,
+                supervisor,
+            };
+            let counters = spec.method.record(&mut ctx, &spec.params);
+            (counters, std::mem::take(&mut ctx.scratch))
+        };
+        let counters = counters?;
+        gpu.queue.submit([enc.finish()]);
+        gpu.wait_idle()?;
+        scratch.release(&mut self.buffers, &mut self.textures);
+        Ok(counters)
+    }
+
+    /// Copies back what the output format needs — the colour (linear, or the PNG's sRGB8
+    /// pixels from `srgb8_buffer`), visibility, E0 and depth as asked, and the count of pixels
+    /// E0 summed exactly (`e0_listed`, into `counters`) — and reads the passes' GPU times.
+    fn read_back(
+        &mut self,
+        targets: &FrameTargets,
+        scene: &GpuScene,
+        spec: &FrameSpec,
+        srgb8_buffer: Option<&wgpu::Buffer>,
+        e0_listed: Option<wgpu::Buffer>,
+        mut counters: Counters,
+    ) -> JobResult<(FrameOutput, Vec<PassTime>)> {
+        let gpu = self.gpu.clone();
+        let mut enc = frame_encoder(&gpu.device);
         let mut readback = Readback::new();
         let pool = &mut self.readbacks;
         let float_color = spec.extra_images.float_color;
         let color_index = if float_color {
             readback.copy_buffer(&gpu, pool, &mut enc, &targets.color.buffer)
         } else {
-            readback.copy_buffer(&gpu, pool, &mut enc, srgb8_buffer.as_ref().expect("made when the float colour is not read back"))
+            readback.copy_buffer(&gpu, pool, &mut enc, srgb8_buffer.expect("made when the float colour is not read back"))
         };
         let visibility_index = spec.extra_images.visibility.then(|| readback.copy_buffer(&gpu, pool, &mut enc, &targets.visibility.buffer));
         let e0_index = spec.extra_images.visibility.then(|| readback.copy_buffer(&gpu, pool, &mut enc, &targets.e0.buffer));
@@ -356,12 +393,9 @@ impl Renderer {
             let listed: u32 = bytemuck::cast_slice::<u8, u32>(&images[i][..8]).iter().sum();
             counters.insert(E0_SUMMED_EXACTLY.to_owned(), f64::from(listed));
         }
-        timings.phase("readback", start);
-        for time in gpu_times {
-            timings.add_gpu(time.phase, time.pass, time.ms);
-        }
         let warnings = scene.warnings.clone();
-        Ok(FrameOutput { width: spec.width, height: spec.height, color, srgb8, visibility, depth, e0, counters, warnings })
+        let frame = FrameOutput { width: spec.width, height: spec.height, color, srgb8, visibility, depth, e0, counters, warnings };
+        Ok((frame, gpu_times))
     }
 
     fn write_constants(&self, spec: &FrameSpec, projection: &LightProjection) {
@@ -407,6 +441,11 @@ impl Renderer {
         });
         FrameInputs { layout: self.layouts.inputs.clone(), bind_group }
     }
+}
+
+/// A command encoder for one phase of the frame.
+fn frame_encoder(device: &wgpu::Device) -> wgpu::CommandEncoder {
+    device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("Renderer::encoder") })
 }
 
 fn cell_to_gpu(light: &AreaLight, cell: &LightCell) -> LightCellGpu {
