@@ -79,6 +79,44 @@ fn check_glb_container(bytes: &[u8], field: &str) -> JobResult<()> {
 }
 
 fn load_unchecked(bytes: &[u8], limits: &Limits, field: &str, uris: &UriReader<'_>) -> JobResult<Scene> {
+    let gltf = parse_document(bytes, field)?;
+    let buffers = read_buffers(&gltf, limits, field, uris)?;
+    let instances = mesh_instances(&gltf.document, field)?;
+    // Object ids: each mesh node's rank among the scene's mesh nodes (by index).
+    let mut mesh_nodes: Vec<usize> = instances.iter().map(|(n, _)| n.index()).collect();
+    mesh_nodes.dedup();
+    let id_of: HashMap<usize, u32> = mesh_nodes.iter().enumerate().map(|(id, &node)| (node, id as u32)).collect();
+
+    let mut loader = Loader {
+        builder: SceneBuilder::default(),
+        limits,
+        field,
+        uris,
+        buffers: &buffers,
+        materials: BTreeMap::new(),
+        textures: HashMap::new(),
+        texture_bytes: 0,
+        skipped_primitives: 0,
+        untextured: Vec::new(),
+        vertices: 0,
+        declared_triangles: 0,
+    };
+    warn_of_what_is_ignored(&gltf.document, &mut loader.builder);
+    for &node_index in &mesh_nodes {
+        let node = gltf.document.nodes().nth(node_index).expect("index from this document");
+        loader.builder.begin_object(node.name().map(str::to_owned).unwrap_or_else(|| format!("node-{node_index}")));
+    }
+    for (node, world) in &instances {
+        let mesh = node.mesh().expect("mesh nodes only");
+        for primitive in mesh.primitives() {
+            loader.add_primitive(&primitive, mesh.index(), id_of[&node.index()], *world)?;
+        }
+    }
+    loader.finish(instances.len())
+}
+
+/// Parses the document, refusing one that requires an extension, then validates its indices.
+fn parse_document(bytes: &[u8], field: &str) -> JobResult<gltf::Gltf> {
     check_glb_container(bytes, field)?;
     let not_valid = |e: gltf::Error| invalid(field, format!("not a valid glTF 2.0 document: {e}"));
     let parsed = gltf::Gltf::from_slice_without_validation(bytes)
@@ -92,9 +130,13 @@ fn load_unchecked(bytes: &[u8], limits: &Limits, field: &str, uris: &UriReader<'
             format!("the document requires extension `{name}`, which penumbra does not support (it reads plain glTF 2.0 meshes)"),
         ));
     }
-    let gltf = gltf::Gltf { document: gltf::Document::from_json(document.into_json()).map_err(not_valid)?, blob };
-    let buffers = gltf
-        .document
+    Ok(gltf::Gltf { document: gltf::Document::from_json(document.into_json()).map_err(not_valid)?, blob })
+}
+
+/// Every buffer's bytes: the GLB binary chunk or what its URI names, each within
+/// `max_body_bytes` and at least as long as it declares.
+fn read_buffers(gltf: &gltf::Gltf, limits: &Limits, field: &str, uris: &UriReader<'_>) -> JobResult<Vec<Vec<u8>>> {
+    gltf.document
         .buffers()
         .map(|buffer| {
             let data = match buffer.source() {
@@ -118,13 +160,16 @@ fn load_unchecked(bytes: &[u8], limits: &Limits, field: &str, uris: &UriReader<'
             }
             Ok(data)
         })
-        .collect::<JobResult<Vec<_>>>()?;
+        .collect()
+}
 
-    // Mesh nodes in traversal order with their world transforms.
-    let scene = gltf.document.default_scene().or_else(|| gltf.document.scenes().next());
+/// The mesh nodes of the default scene (else the first, else every node) with their world
+/// transforms, one entry per instance, sorted by node index.
+fn mesh_instances<'d>(document: &'d gltf::Document, field: &str) -> JobResult<Vec<(gltf::Node<'d>, Mat4)>> {
+    let scene = document.default_scene().or_else(|| document.scenes().next());
     let roots: Vec<gltf::Node> = match &scene {
         Some(scene) => scene.nodes().collect(),
-        None => gltf.document.nodes().collect(),
+        None => document.nodes().collect(),
     };
     let mut instances: Vec<(gltf::Node, Mat4)> = Vec::new();
     let mut stack: Vec<(gltf::Node, Mat4, u32)> = roots.into_iter().map(|n| (n, Mat4::IDENTITY, 0)).collect();
@@ -140,139 +185,161 @@ fn load_unchecked(bytes: &[u8], limits: &Limits, field: &str, uris: &UriReader<'
             stack.push((child, world, depth + 1));
         }
     }
-    let mut mesh_nodes: Vec<usize> = instances.iter().map(|(n, _)| n.index()).collect();
-    mesh_nodes.sort_unstable();
-    mesh_nodes.dedup();
-    let id_of: HashMap<usize, u32> = mesh_nodes.iter().enumerate().map(|(id, &node)| (node, id as u32)).collect();
     instances.sort_by_key(|(n, _)| n.index());
+    Ok(instances)
+}
 
-    let mut builder = SceneBuilder::default();
-    warn_of_what_is_ignored(&gltf.document, &mut builder);
-    for &node_index in &mesh_nodes {
-        let node = gltf.document.nodes().nth(node_index).expect("index from this document");
-        builder.begin_object(node.name().map(str::to_owned).unwrap_or_else(|| format!("node-{node_index}")));
+/// The triangles of a primitive's index list (`flat`) in its mode; `None` for points and
+/// lines, which cast no area shadow.
+fn triangles(mode: gltf::mesh::Mode, flat: &[u32]) -> Option<Vec<u32>> {
+    match mode {
+        gltf::mesh::Mode::Triangles => Some(flat.chunks_exact(3).flatten().copied().collect()),
+        gltf::mesh::Mode::TriangleStrip => Some(
+            (2..flat.len())
+                .flat_map(|k| if k % 2 == 0 { [flat[k - 2], flat[k - 1], flat[k]] } else { [flat[k - 1], flat[k - 2], flat[k]] })
+                .collect(),
+        ),
+        gltf::mesh::Mode::TriangleFan => Some((2..flat.len()).flat_map(|k| [flat[0], flat[k - 1], flat[k]]).collect()),
+        _ => None,
     }
-    let mut materials: BTreeMap<Option<usize>, u32> = BTreeMap::new();
-    let mut textures: HashMap<usize, usize> = HashMap::new();
-    // What the textures decoded so far take (`max_texture_bytes`).
-    let mut texture_bytes = 0u64;
-    let mut skipped_primitives = 0usize;
-    let mut untextured: Vec<String> = Vec::new();
-    let (mut vertices, mut declared_triangles) = (0u64, 0u64);
-    for (node, world) in &instances {
-        let object_id = id_of[&node.index()];
-        let mesh = node.mesh().expect("mesh nodes only");
-        for primitive in mesh.primitives() {
-            // Refused from the counts the accessors declare, before a vertex or index is read:
-            // a strip of one-byte indices would otherwise grow twelvefold into triangles.
-            let declared_vertices = primitive.get(&gltf::Semantic::Positions).map_or(0, |a| a.count() as u64);
-            let declared_indices = primitive.indices().map_or(declared_vertices, |a| a.count() as u64);
-            declared_triangles += match primitive.mode() {
-                gltf::mesh::Mode::Triangles => declared_indices / 3,
-                gltf::mesh::Mode::TriangleStrip | gltf::mesh::Mode::TriangleFan => declared_indices.saturating_sub(2),
-                _ => 0,
-            };
-            vertices += declared_vertices;
-            if vertices > limits.max_vertices {
-                let message = format!("the scene has more than {} vertices (max_vertices)", limits.max_vertices);
-                return Err(JobError::field(ErrorCode::LimitExceeded, field, message));
-            }
-            if declared_triangles > limits.max_triangles {
-                let message = format!("the scene has more than {} triangles (max_triangles)", limits.max_triangles);
-                return Err(JobError::field(ErrorCode::LimitExceeded, field, message));
-            }
-            let reader = primitive.reader(|b| buffers.get(b.index()).map(Vec::as_slice));
-            let Some(positions) = reader.read_positions() else {
-                skipped_primitives += 1;
-                continue;
-            };
-            let positions: Vec<Vec3> = positions.map(Vec3::from).collect();
-            let count = positions.len() as u32;
-            let flat: Vec<u32> = match reader.read_indices() {
-                Some(indices) => indices.into_u32().collect(),
-                None => (0..count).collect(),
-            };
-            let indices = match primitive.mode() {
-                gltf::mesh::Mode::Triangles => flat.chunks_exact(3).flatten().copied().collect(),
-                gltf::mesh::Mode::TriangleStrip => (2..flat.len())
-                    .flat_map(|k| if k % 2 == 0 { [flat[k - 2], flat[k - 1], flat[k]] } else { [flat[k - 1], flat[k - 2], flat[k]] })
-                    .collect(),
-                gltf::mesh::Mode::TriangleFan => (2..flat.len()).flat_map(|k| [flat[0], flat[k - 1], flat[k]]).collect(),
-                _ => {
-                    // Points and lines cast no area shadow; they are left out.
-                    skipped_primitives += 1;
-                    continue;
-                }
-            };
-            let indices: Vec<u32> = indices;
-            if indices.iter().any(|&i| i >= count) {
-                return Err(invalid(field, format!("mesh {} indexes past its vertices", mesh.index())));
-            }
-            let normals: Vec<Vec3> = reader.read_normals().map(|n| n.map(Vec3::from).collect()).unwrap_or_default();
-            let pbr = primitive.material().pbr_metallic_roughness();
-            let texture_info = pbr.base_color_texture();
-            let uvs: Vec<Vec2> = texture_info
-                .as_ref()
-                .and_then(|info| reader.read_tex_coords(info.tex_coord()))
-                .map(|uv| uv.into_f32().map(Vec2::from).collect())
-                .unwrap_or_default();
-            if let Some(info) = texture_info.as_ref().filter(|_| uvs.len() != positions.len()) {
-                untextured.push(format!("mesh {} (TEXCOORD_{})", mesh.index(), info.tex_coord()));
-            }
-            let material_key = primitive.material().index();
-            let material = match materials.get(&material_key) {
-                Some(&m) => m,
-                None => {
-                    let texture = match &texture_info {
-                        Some(info) => {
-                            let image = info.texture().source();
-                            let slot = match textures.get(&image.index()) {
-                                Some(&slot) => slot,
-                                None => {
-                                    let data = decode_texture(&image, &buffers, uris, texture_bytes)?;
-                                    texture_bytes += data.rgba8.len() as u64;
-                                    let slot = builder.add_texture(data);
-                                    textures.insert(image.index(), slot);
-                                    slot
-                                }
-                            };
-                            Some(slot)
-                        }
-                        None => None,
-                    };
-                    let m = builder.add_material(Material { base_color: pbr.base_color_factor(), texture });
-                    materials.insert(material_key, m);
-                    m
-                }
-            };
-            let mesh_data = MeshData {
-                normals: if normals.len() == positions.len() { normals } else { Vec::new() },
-                uvs: if uvs.len() == positions.len() { uvs } else { Vec::new() },
-                positions,
-                indices,
-            };
-            builder.add_mesh(object_id, &mesh_data, *world, material);
-        }
-    }
-    if builder.triangle_count() == 0 {
-        let why = match (skipped_primitives, instances.len()) {
-            (0, 0) => "its scene has no node with a mesh".to_owned(),
-            (0, _) => "its meshes have no triangles".to_owned(),
-            (n, _) => format!("its {n} primitive(s) draw points or lines, which cast no area shadow"),
+}
+
+/// A document's primitives going into a `SceneBuilder`, with what the limits count and what
+/// the warnings report.
+struct Loader<'a> {
+    builder: SceneBuilder,
+    limits: &'a Limits,
+    field: &'a str,
+    uris: &'a UriReader<'a>,
+    buffers: &'a [Vec<u8>],
+    /// The builder's material for each glTF material (`None`: the default one).
+    materials: BTreeMap<Option<usize>, u32>,
+    /// The builder's texture for each glTF image.
+    textures: HashMap<usize, usize>,
+    /// What the textures decoded so far take (`max_texture_bytes`).
+    texture_bytes: u64,
+    skipped_primitives: usize,
+    /// Meshes whose base-colour texture names coordinates they do not have.
+    untextured: Vec<String>,
+    vertices: u64,
+    declared_triangles: u64,
+}
+
+impl Loader<'_> {
+    /// Adds one primitive of mesh `mesh_index` as part of object `object_id`, placed by `world`.
+    fn add_primitive(&mut self, primitive: &gltf::Primitive<'_>, mesh_index: usize, object_id: u32, world: Mat4) -> JobResult<()> {
+        let (limits, field) = (self.limits, self.field);
+        // Refused from the counts the accessors declare, before a vertex or index is read:
+        // a strip of one-byte indices would otherwise grow twelvefold into triangles.
+        let declared_vertices = primitive.get(&gltf::Semantic::Positions).map_or(0, |a| a.count() as u64);
+        let declared_indices = primitive.indices().map_or(declared_vertices, |a| a.count() as u64);
+        self.declared_triangles += match primitive.mode() {
+            gltf::mesh::Mode::Triangles => declared_indices / 3,
+            gltf::mesh::Mode::TriangleStrip | gltf::mesh::Mode::TriangleFan => declared_indices.saturating_sub(2),
+            _ => 0,
         };
-        return Err(invalid(field, format!("the scene holds no triangles: {why}")));
+        self.vertices += declared_vertices;
+        if self.vertices > limits.max_vertices {
+            let message = format!("the scene has more than {} vertices (max_vertices)", limits.max_vertices);
+            return Err(JobError::field(ErrorCode::LimitExceeded, field, message));
+        }
+        if self.declared_triangles > limits.max_triangles {
+            let message = format!("the scene has more than {} triangles (max_triangles)", limits.max_triangles);
+            return Err(JobError::field(ErrorCode::LimitExceeded, field, message));
+        }
+        let buffers = self.buffers;
+        let reader = primitive.reader(|b| buffers.get(b.index()).map(Vec::as_slice));
+        let Some(positions) = reader.read_positions() else {
+            self.skipped_primitives += 1;
+            return Ok(());
+        };
+        let positions: Vec<Vec3> = positions.map(Vec3::from).collect();
+        let count = positions.len() as u32;
+        let flat: Vec<u32> = match reader.read_indices() {
+            Some(indices) => indices.into_u32().collect(),
+            None => (0..count).collect(),
+        };
+        let Some(indices) = triangles(primitive.mode(), &flat) else {
+            self.skipped_primitives += 1;
+            return Ok(());
+        };
+        if indices.iter().any(|&i| i >= count) {
+            return Err(invalid(field, format!("mesh {mesh_index} indexes past its vertices")));
+        }
+        let normals: Vec<Vec3> = reader.read_normals().map(|n| n.map(Vec3::from).collect()).unwrap_or_default();
+        let texture_info = primitive.material().pbr_metallic_roughness().base_color_texture();
+        let uvs: Vec<Vec2> = texture_info
+            .as_ref()
+            .and_then(|info| reader.read_tex_coords(info.tex_coord()))
+            .map(|uv| uv.into_f32().map(Vec2::from).collect())
+            .unwrap_or_default();
+        if let Some(info) = texture_info.as_ref().filter(|_| uvs.len() != positions.len()) {
+            self.untextured.push(format!("mesh {mesh_index} (TEXCOORD_{})", info.tex_coord()));
+        }
+        let material = self.material(&primitive.material())?;
+        let mesh_data = MeshData {
+            normals: if normals.len() == positions.len() { normals } else { Vec::new() },
+            uvs: if uvs.len() == positions.len() { uvs } else { Vec::new() },
+            positions,
+            indices,
+        };
+        self.builder.add_mesh(object_id, &mesh_data, world, material);
+        Ok(())
     }
-    if skipped_primitives > 0 {
-        builder.warn(format!("{skipped_primitives} primitive(s) of points or lines were left out: they cast no area shadow"));
+
+    /// The builder's material for `material`, added (with its base-colour texture, decoded
+    /// once per image) the first time it is used.
+    fn material(&mut self, material: &gltf::Material<'_>) -> JobResult<u32> {
+        if let Some(&m) = self.materials.get(&material.index()) {
+            return Ok(m);
+        }
+        let pbr = material.pbr_metallic_roughness();
+        let texture = match pbr.base_color_texture() {
+            Some(info) => {
+                let image = info.texture().source();
+                let slot = match self.textures.get(&image.index()) {
+                    Some(&slot) => slot,
+                    None => {
+                        let data = decode_texture(&image, self.buffers, self.uris, self.texture_bytes)?;
+                        self.texture_bytes += data.rgba8.len() as u64;
+                        let slot = self.builder.add_texture(data);
+                        self.textures.insert(image.index(), slot);
+                        slot
+                    }
+                };
+                Some(slot)
+            }
+            None => None,
+        };
+        let m = self.builder.add_material(Material { base_color: pbr.base_color_factor(), texture });
+        self.materials.insert(material.index(), m);
+        Ok(m)
     }
-    if !untextured.is_empty() {
-        untextured.dedup();
-        let list = untextured.join(", ");
-        builder.warn(format!(
-            "base-colour textures without the texture coordinates they name are drawn in their first texel's colour: {list}"
-        ));
+
+    /// The scene, or why there is none (no triangles among `instances` mesh instances), with
+    /// the warnings of what was left out.
+    fn finish(mut self, instances: usize) -> JobResult<Scene> {
+        if self.builder.triangle_count() == 0 {
+            let why = match (self.skipped_primitives, instances) {
+                (0, 0) => "its scene has no node with a mesh".to_owned(),
+                (0, _) => "its meshes have no triangles".to_owned(),
+                (n, _) => format!("its {n} primitive(s) draw points or lines, which cast no area shadow"),
+            };
+            return Err(invalid(self.field, format!("the scene holds no triangles: {why}")));
+        }
+        if self.skipped_primitives > 0 {
+            self.builder
+                .warn(format!("{} primitive(s) of points or lines were left out: they cast no area shadow", self.skipped_primitives));
+        }
+        if !self.untextured.is_empty() {
+            self.untextured.dedup();
+            let list = self.untextured.join(", ");
+            self.builder.warn(format!(
+                "base-colour textures without the texture coordinates they name are drawn in their first texel's colour: {list}"
+            ));
+        }
+        Ok(self.builder.finish(fitted_defaults))
     }
-    Ok(builder.finish(fitted_defaults))
 }
 
 /// The gltf crate requires `nodes` in every scene, which glTF 2.0 makes optional (§5.29, a
