@@ -1,7 +1,7 @@
 //! The `penumbra` command line: `serve` runs the daemon, `render` runs one job through the
 //! same engine without HTTP.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
 
@@ -149,85 +149,94 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             penumbra::bench::run(gpu, &bench)?;
             Ok(())
         }
-        Command::Submit(options) => {
-            let bar = if options.quiet { indicatif::ProgressBar::hidden() } else { indicatif::ProgressBar::new(0) };
-            bar.set_style(
-                indicatif::ProgressStyle::with_template("{bar:40} {percent:>3}% {pos}/{len} {elapsed_precise}")
-                    .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-            );
-            let runtime = tokio::runtime::Runtime::new()?;
-            let report = runtime.block_on(penumbra::client::submit(&options, &|done, total| {
-                // Methods without steps report 0 of 0: one step, done when the job is.
-                bar.set_length(total.max(1));
-                bar.set_position(if total == 0 { 0 } else { done });
-            }))?;
-            bar.set_position(bar.length().unwrap_or(1));
-            bar.finish();
-            println!("{}", serde_json::to_string(&report)?);
-            eprintln!("wrote {} ({} bytes)", options.output.display(), report.output_bytes);
-            Ok(())
-        }
-        Command::Probe { path, mut listen } => {
-            if listen.ip().is_unspecified() {
-                listen.set_ip(std::net::Ipv4Addr::LOCALHOST.into());
-            }
-            let runtime = tokio::runtime::Builder::new_current_thread().enable_all().build()?;
-            let status = runtime.block_on(async {
-                let client = reqwest::Client::builder().timeout(std::time::Duration::from_secs(3)).build()?;
-                client.get(format!("http://{listen}{path}")).send().await.map(|r| r.status())
-            })?;
-            anyhow::ensure!(status.is_success(), "{path} answered {status}");
-            Ok(())
-        }
-        Command::Render { job, output, timings_json, options } => {
-            let mut job = match &job {
-                Some(path) if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("gltf") || e.eq_ignore_ascii_case("glb")) => {
-                    // Soft shadows on a floor, camera and light fitted: what the file looks like.
-                    let mut job = Job::embedded_default();
-                    job.scene = penumbra::job::SceneRef {
-                        asset: penumbra::job::AssetRef::Path(path.clone()),
-                        floor: Some(penumbra::job::FloorSpec::default()),
-                    };
-                    job.method.name = "pcss".into();
-                    job
-                }
-                Some(path) => {
-                    let bytes = std::fs::read(path).map_err(|e| anyhow::anyhow!("cannot read {}: {e}", path.display()))?;
-                    Job::from_json(&bytes)?
-                }
-                None => Job::embedded_default(),
-            };
-            job.output.format = OutputFormat::from_extension(&output)
-                .ok_or_else(|| anyhow::anyhow!("the output file must end in .png or .exr: {}", output.display()))?;
-            let gpu = open_gpu(&options)?;
-            let engine = Engine::new(gpu, options.limits.limits(), PathPolicy::Any);
-            // Long methods (the reference) report samples done; show them as a progress bar.
-            let bar = indicatif::ProgressBar::hidden();
-            bar.set_style(
-                indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} samples {elapsed_precise}")
-                    .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-            );
-            let rendered = engine.render(&job, &|done, total| {
-                if bar.is_hidden() {
-                    bar.set_draw_target(indicatif::ProgressDrawTarget::stderr());
-                }
-                bar.set_length(total);
-                bar.set_position(done);
-            })?;
-            bar.finish_and_clear();
-            for warning in &rendered.warnings {
-                eprintln!("warning: {warning}");
-            }
-            std::fs::write(&output, &rendered.bytes)?;
-            print_timings(&rendered.timings);
-            if let Some(path) = timings_json {
-                let report = serde_json::json!({"timings": rendered.timings, "counters": rendered.counters});
-                std::fs::write(path, serde_json::to_vec_pretty(&report)?)?;
-            }
-            eprintln!("wrote {} ({}×{}, {} bytes)", output.display(), rendered.width, rendered.height, rendered.bytes.len());
-            Ok(())
-        }
+        Command::Submit(options) => submit(&options),
+        Command::Probe { path, listen } => probe(&path, listen),
+        Command::Render { job, output, timings_json, options } => render(job.as_deref(), &output, timings_json.as_deref(), &options),
     }
+}
+
+/// `penumbra submit`: one job through a running daemon, with a progress bar.
+fn submit(options: &penumbra::client::SubmitOptions) -> anyhow::Result<()> {
+    let bar = if options.quiet { indicatif::ProgressBar::hidden() } else { indicatif::ProgressBar::new(0) };
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{bar:40} {percent:>3}% {pos}/{len} {elapsed_precise}")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    let runtime = tokio::runtime::Runtime::new()?;
+    let report = runtime.block_on(penumbra::client::submit(options, &|done, total| {
+        // Methods without steps report 0 of 0: one step, done when the job is.
+        bar.set_length(total.max(1));
+        bar.set_position(if total == 0 { 0 } else { done });
+    }))?;
+    bar.set_position(bar.length().unwrap_or(1));
+    bar.finish();
+    println!("{}", serde_json::to_string(&report)?);
+    eprintln!("wrote {} ({} bytes)", options.output.display(), report.output_bytes);
+    Ok(())
+}
+
+/// `penumbra probe`: a container's health check — `path` on the daemon at `listen` answers 2xx.
+fn probe(path: &str, mut listen: std::net::SocketAddr) -> anyhow::Result<()> {
+    if listen.ip().is_unspecified() {
+        listen.set_ip(std::net::Ipv4Addr::LOCALHOST.into());
+    }
+    let runtime = tokio::runtime::Builder::new_current_thread().enable_all().build()?;
+    let status = runtime.block_on(async {
+        let client = reqwest::Client::builder().timeout(std::time::Duration::from_secs(3)).build()?;
+        client.get(format!("http://{listen}{path}")).send().await.map(|r| r.status())
+    })?;
+    anyhow::ensure!(status.is_success(), "{path} answered {status}");
+    Ok(())
+}
+
+/// `penumbra render`: one job (a JSON job, a scene file, or the embedded default) to a file.
+fn render(job: Option<&Path>, output: &Path, timings_json: Option<&Path>, options: &RenderOptions) -> anyhow::Result<()> {
+    let mut job = match job {
+        Some(path) if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("gltf") || e.eq_ignore_ascii_case("glb")) => {
+            // Soft shadows on a floor, camera and light fitted: what the file looks like.
+            let mut job = Job::embedded_default();
+            job.scene = penumbra::job::SceneRef {
+                asset: penumbra::job::AssetRef::Path(path.to_path_buf()),
+                floor: Some(penumbra::job::FloorSpec::default()),
+            };
+            job.method.name = "pcss".into();
+            job
+        }
+        Some(path) => {
+            let bytes = std::fs::read(path).map_err(|e| anyhow::anyhow!("cannot read {}: {e}", path.display()))?;
+            Job::from_json(&bytes)?
+        }
+        None => Job::embedded_default(),
+    };
+    job.output.format = OutputFormat::from_extension(output)
+        .ok_or_else(|| anyhow::anyhow!("the output file must end in .png or .exr: {}", output.display()))?;
+    let gpu = open_gpu(options)?;
+    let engine = Engine::new(gpu, options.limits.limits(), PathPolicy::Any);
+    // Long methods (the reference) report samples done; show them as a progress bar.
+    let bar = indicatif::ProgressBar::hidden();
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} samples {elapsed_precise}")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    let rendered = engine.render(&job, &|done, total| {
+        if bar.is_hidden() {
+            bar.set_draw_target(indicatif::ProgressDrawTarget::stderr());
+        }
+        bar.set_length(total);
+        bar.set_position(done);
+    })?;
+    bar.finish_and_clear();
+    for warning in &rendered.warnings {
+        eprintln!("warning: {warning}");
+    }
+    std::fs::write(output, &rendered.bytes)?;
+    print_timings(&rendered.timings);
+    if let Some(path) = timings_json {
+        let report = serde_json::json!({"timings": rendered.timings, "counters": rendered.counters});
+        std::fs::write(path, serde_json::to_vec_pretty(&report)?)?;
+    }
+    eprintln!("wrote {} ({}×{}, {} bytes)", output.display(), rendered.width, rendered.height, rendered.bytes.len());
+    Ok(())
 }
 
 fn print_timings(timings: &Timings) {
