@@ -14,10 +14,9 @@ use anyhow::Context as _;
 use serde::Serialize;
 use serde_json::Map;
 
-use super::{median_timings, parse_method, parse_named, parse_scene, parse_size};
+use super::{case_job, every_method_but_reference, median_timings, parse_methods, parse_named, parse_size, reference_of};
 use crate::engine::Engine;
-use crate::job::{AssetRef, Job, MethodSpec, OutputFormat};
-use crate::methods::REGISTRY;
+use crate::job::{Job, MethodSpec, OutputFormat};
 use crate::render::{E0Mode, FrameOutput};
 use crate::timing::Timings;
 
@@ -120,15 +119,7 @@ pub struct BenchReport {
 /// Runs the benchmark and writes `bench.md` and `bench.json` under `options.out`.
 pub fn run(engine: &Engine, options: &BenchOptions) -> anyhow::Result<BenchReport> {
     let (width, height) = parse_size(&options.size)?;
-    let mut methods: Vec<(String, MethodSpec)> = if options.methods.is_empty() {
-        REGISTRY
-            .iter()
-            .filter(|m| m.name() != "reference")
-            .map(|m| (m.name().to_owned(), MethodSpec { name: m.name().into(), params: Map::new() }))
-            .collect()
-    } else {
-        options.methods.iter().map(|text| Ok((text.clone(), parse_method(text)?))).collect::<anyhow::Result<_>>()?
-    };
+    let mut methods = if options.methods.is_empty() { every_method_but_reference() } else { parse_methods(&options.methods)? };
     let mut timed_reference = MethodSpec { name: "reference".into(), params: Map::new() };
     timed_reference.params.insert("samples".into(), options.reference_samples.into());
     timed_reference.params.insert("resolution".into(), options.shadow_map.into());
@@ -146,25 +137,12 @@ pub fn run(engine: &Engine, options: &BenchOptions) -> anyhow::Result<BenchRepor
     for scene in &options.scenes {
         for light in &options.lights {
             let case = format!("{scene}, {light}");
-            let (light_name, light_params) = parse_named(light)?;
-            let base = Job {
-                scene: parse_scene(scene)?.into(),
-                light: crate::job::LightSpec {
-                    image: Some(AssetRef::Builtin { name: light_name, params: light_params }),
-                    ..Default::default()
-                },
-                shadow_map: crate::job::ShadowMapSpec { resolution: options.shadow_map },
-                output: crate::job::OutputSpec { width, height, format: OutputFormat::Png, exposure: 0.0 },
-                ..Job::embedded_default()
-            };
+            let base = case_job(scene, light, options.shadow_map, (width, height), OutputFormat::Png)?;
             let exr = |job: &Job| Job { output: crate::job::OutputSpec { format: OutputFormat::Exr, ..job.output.clone() }, ..job.clone() };
             let frame = |job: &Job, what: &str| engine.render_frame(&exr(job), &()).map_err(|e| anyhow::anyhow!("{case}: {what}: {e}"));
 
             progress.set_message(format!("{case}: reference, {} samples", options.samples));
-            let mut truth_job = base.reference_job();
-            truth_job.method.params.insert("samples".into(), options.samples.into());
-            truth_job.method.params.insert("resolution".into(), options.shadow_map.into());
-            let (truth, _) = frame(&truth_job, "reference")?;
+            let (truth, _) = frame(&reference_of(&base, options.samples, options.shadow_map), "reference")?;
             progress.inc(1);
 
             progress.set_message(format!("{case}: E0, exact and interpolated"));

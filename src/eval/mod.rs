@@ -321,18 +321,48 @@ fn parse_size(text: &str) -> anyhow::Result<(u32, u32)> {
     Ok((w.trim().parse()?, h.trim().parse()?))
 }
 
+/// Every registered method but `reference` (which the others are measured against), each
+/// labelled by its name.
+fn every_method_but_reference() -> Vec<(String, MethodSpec)> {
+    REGISTRY
+        .iter()
+        .filter(|m| m.name() != "reference")
+        .map(|m| (m.name().to_owned(), MethodSpec { name: m.name().into(), params: Map::new() }))
+        .collect()
+}
+
+/// Methods as given on the command line (`name:key=value`), each labelled by its text.
+fn parse_methods(listed: &[String]) -> anyhow::Result<Vec<(String, MethodSpec)>> {
+    listed.iter().map(|text| Ok((text.clone(), parse_method(text)?))).collect()
+}
+
+/// A case's job: a built-in scene under a built-in light image (each as given on the command
+/// line), at this output size and format and this shadow-map resolution, with the embedded
+/// default's camera and method.
+fn case_job(scene: &str, light: &str, shadow_map: u32, (width, height): (u32, u32), format: OutputFormat) -> anyhow::Result<Job> {
+    let (light_name, light_params) = parse_named(light)?;
+    Ok(Job {
+        scene: parse_scene(scene)?.into(),
+        light: crate::job::LightSpec { image: Some(AssetRef::Builtin { name: light_name, params: light_params }), ..Default::default() },
+        shadow_map: crate::job::ShadowMapSpec { resolution: shadow_map },
+        output: crate::job::OutputSpec { width, height, format, exposure: 0.0 },
+        ..Job::embedded_default()
+    })
+}
+
+/// `job` rendered by `reference` with `samples` light samples and maps of `resolution`².
+fn reference_of(job: &Job, samples: u32, resolution: u32) -> Job {
+    let mut reference = job.reference_job();
+    reference.method.params.insert("samples".into(), samples.into());
+    reference.method.params.insert("resolution".into(), resolution.into());
+    reference
+}
+
 /// Runs the suite and writes the results under `options.out`.
 pub fn run(engine: &Engine, options: &EvalOptions) -> anyhow::Result<EvalReport> {
     let sweep = options.sweep.as_deref().map(parse_sweep).transpose()?;
-    let mut methods: Vec<(String, MethodSpec)> = if options.methods.is_empty() && sweep.is_none() {
-        REGISTRY
-            .iter()
-            .filter(|m| m.name() != "reference")
-            .map(|m| (m.name().to_owned(), MethodSpec { name: m.name().into(), params: Map::new() }))
-            .collect()
-    } else {
-        options.methods.iter().map(|text| Ok((text.clone(), parse_method(text)?))).collect::<anyhow::Result<_>>()?
-    };
+    let mut methods =
+        if options.methods.is_empty() && sweep.is_none() { every_method_but_reference() } else { parse_methods(&options.methods)? };
     if let Some(sweep) = &sweep {
         for (_, label) in &sweep.points {
             methods.push((label.clone(), parse_method(label)?));
@@ -350,76 +380,105 @@ pub fn run(engine: &Engine, options: &EvalOptions) -> anyhow::Result<EvalReport>
         indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} {elapsed_precise} {msg}")
             .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
     );
-    let mut rows = Vec::new();
-    let mut flooding = Vec::new();
-    let mut files = Vec::new();
+    let suite = Suite { engine, options, methods: &methods, sweep: sweep.as_ref(), progress: &progress };
+    let (mut rows, mut flooding, mut files) = (Vec::new(), Vec::new(), Vec::new());
     for scene in &options.scenes {
-        let scene_ref = parse_scene(scene)?;
         for light in &options.lights {
-            for (&(width, height), &shadow_map) in sizes.iter().flat_map(|s| options.shadow_map.iter().map(move |m| (s, m))) {
-                let scene_label = sanitize(scene);
-                let case = if options.shadow_map.len() > 1 {
-                    format!("{scene_label}-{}-{width}x{height}-map{shadow_map}", sanitize(light))
-                } else {
-                    format!("{scene_label}-{}-{width}x{height}", sanitize(light))
-                };
-                let (light_name, light_params) = parse_named(light)?;
-                let base = Job {
-                    scene: scene_ref.clone().into(),
-                    light: crate::job::LightSpec {
-                        image: Some(AssetRef::Builtin { name: light_name, params: light_params }),
-                        ..Default::default()
-                    },
-                    shadow_map: crate::job::ShadowMapSpec { resolution: shadow_map },
-                    output: crate::job::OutputSpec { width, height, format: OutputFormat::Exr, exposure: 0.0 },
-                    ..Job::embedded_default()
-                };
-                progress.set_message(format!("{case}: reference"));
-                let mut reference_job = base.reference_job();
-                reference_job.method.params.insert("samples".into(), options.samples.into());
-                reference_job.method.params.insert("resolution".into(), shadow_map.into());
-                let (reference, reference_timings) = engine
-                    .render_frame(&reference_job, &|done, total| progress.set_message(format!("{case}: reference {done}/{total} samples")))
-                    .with_context(|| format!("{case}: reference"))?;
-                progress.inc(1);
-                let mut case_rows = vec![row(scene, light, shadow_map, "reference", reference_timings, &reference, &reference)];
-                let mut frames = Vec::new();
-                let mut runs: Vec<Vec<Timings>> = vec![Vec::new(); methods.len()];
-                for repetition in 0..options.repeat {
-                    for ((label, method), runs) in methods.iter().zip(&mut runs) {
-                        progress.set_message(format!("{case}: {label} ({}/{})", repetition + 1, options.repeat));
-                        let job = Job { method: method.clone(), ..base.clone() };
-                        let (frame, timings) = engine.render_frame(&job, &()).map_err(|e| anyhow::anyhow!("{case}: {label}: {e}"))?;
-                        runs.push(timings);
-                        if repetition == 0 {
-                            frames.push((label.clone(), frame));
-                        }
-                    }
-                }
-                for (((label, _), runs), (_, frame)) in methods.iter().zip(runs).zip(&frames) {
-                    case_rows.push(row(scene, light, shadow_map, label, median_timings(runs), frame, &reference));
-                    progress.inc(1);
-                }
-                let hard_ms = case_rows.iter().find(|r| r.method == "hard").map(|r| r.timings.total_ms);
-                for r in &mut case_rows {
-                    r.ratio_to_hard = hard_ms.map(|h| r.timings.total_ms / h);
-                }
-                for (label, frame) in &frames {
-                    let twin = jump_twin(label).and_then(|jump| frames.iter().find(|(l, _)| *l == jump));
-                    if let Some((jump_label, jump)) = twin {
-                        flooding.push(compare_flooding(&case, jump_label, jump, frame));
-                    }
-                }
-                files.extend(write_pictures(&options.out, &case, &reference, &frames)?);
-                if let Some(sweep) = &sweep {
-                    files.push(plot_sweep(&options.out, &case, sweep, &case_rows)?);
-                }
-                rows.extend(case_rows);
+            for (&size, &shadow_map) in sizes.iter().flat_map(|s| options.shadow_map.iter().map(move |m| (s, m))) {
+                let case = suite.run_case(scene, light, size, shadow_map)?;
+                rows.extend(case.rows);
+                flooding.extend(case.flooding);
+                files.extend(case.files);
             }
         }
     }
     progress.finish_and_clear();
-    if options.shadow_map.len() > 1 || sizes.len() > 1 {
+    files.extend(plot_scalings(options, sizes.len(), &rows)?);
+    let colored = if options.colored { colored_ratios(&rows, &lights) } else { Vec::new() };
+    let report = EvalReport { adapter: engine.gpu().adapter.clone(), repeat: options.repeat, rows, flooding, colored, files };
+    write_tables(&options.out, &report, &methods.iter().map(|(l, _)| l.clone()).collect::<Vec<_>>(), sweep.as_ref())?;
+    Ok(report)
+}
+
+/// What every case of a suite shares.
+struct Suite<'a> {
+    engine: &'a Engine,
+    options: &'a EvalOptions,
+    methods: &'a [(String, MethodSpec)],
+    sweep: Option<&'a Sweep>,
+    progress: &'a indicatif::ProgressBar,
+}
+
+/// One case's rows (the reference's first), flooding comparisons and files written.
+struct CaseResults {
+    rows: Vec<Row>,
+    flooding: Vec<FloodingComparison>,
+    files: Vec<PathBuf>,
+}
+
+impl Suite<'_> {
+    /// Renders the reference and every method (`repeat` times, round-robin) for one scene,
+    /// light, output size and shadow map, and writes the case's pictures (and sweep plot).
+    fn run_case(&self, scene: &str, light: &str, (width, height): (u32, u32), shadow_map: u32) -> anyhow::Result<CaseResults> {
+        let (engine, options, progress) = (self.engine, self.options, self.progress);
+        let scene_label = sanitize(scene);
+        let case = if options.shadow_map.len() > 1 {
+            format!("{scene_label}-{}-{width}x{height}-map{shadow_map}", sanitize(light))
+        } else {
+            format!("{scene_label}-{}-{width}x{height}", sanitize(light))
+        };
+        let base = case_job(scene, light, shadow_map, (width, height), OutputFormat::Exr)?;
+        progress.set_message(format!("{case}: reference"));
+        let (reference, reference_timings) = engine
+            .render_frame(&reference_of(&base, options.samples, shadow_map), &|done, total| {
+                progress.set_message(format!("{case}: reference {done}/{total} samples"))
+            })
+            .with_context(|| format!("{case}: reference"))?;
+        progress.inc(1);
+        let mut rows = vec![row(scene, light, shadow_map, "reference", reference_timings, &reference, &reference)];
+        let mut frames = Vec::new();
+        let mut runs: Vec<Vec<Timings>> = vec![Vec::new(); self.methods.len()];
+        for repetition in 0..options.repeat {
+            for ((label, method), runs) in self.methods.iter().zip(&mut runs) {
+                progress.set_message(format!("{case}: {label} ({}/{})", repetition + 1, options.repeat));
+                let job = Job { method: method.clone(), ..base.clone() };
+                let (frame, timings) = engine.render_frame(&job, &()).map_err(|e| anyhow::anyhow!("{case}: {label}: {e}"))?;
+                runs.push(timings);
+                if repetition == 0 {
+                    frames.push((label.clone(), frame));
+                }
+            }
+        }
+        for (((label, _), runs), (_, frame)) in self.methods.iter().zip(runs).zip(&frames) {
+            rows.push(row(scene, light, shadow_map, label, median_timings(runs), frame, &reference));
+            progress.inc(1);
+        }
+        let hard_ms = rows.iter().find(|r| r.method == "hard").map(|r| r.timings.total_ms);
+        for r in &mut rows {
+            r.ratio_to_hard = hard_ms.map(|h| r.timings.total_ms / h);
+        }
+        let mut flooding = Vec::new();
+        for (label, frame) in &frames {
+            let twin = jump_twin(label).and_then(|jump| frames.iter().find(|(l, _)| *l == jump));
+            if let Some((jump_label, jump)) = twin {
+                flooding.push(compare_flooding(&case, jump_label, jump, frame));
+            }
+        }
+        let mut files = write_pictures(&options.out, &case, &reference, &frames)?;
+        if let Some(sweep) = self.sweep {
+            files.push(plot_sweep(&options.out, &case, sweep, &rows)?);
+        }
+        Ok(CaseResults { rows, flooding, files })
+    }
+}
+
+/// Cost against the size of the problem: per scene and light against the shadow map's
+/// resolution or the output's pixels where the suite has several (of `sizes` output sizes);
+/// per built-in scene run at several sizes (`terrain:triangles=…`) against its triangles,
+/// where the object-space method grows and the image-space ones stay flat.
+fn plot_scalings(options: &EvalOptions, sizes: usize, rows: &[Row]) -> anyhow::Result<Vec<PathBuf>> {
+    let mut files = Vec::new();
+    if options.shadow_map.len() > 1 || sizes > 1 {
         for scene in &options.scenes {
             for light in &options.lights {
                 let by_map = options.shadow_map.len() > 1;
@@ -432,8 +491,6 @@ pub fn run(engine: &Engine, options: &EvalOptions) -> anyhow::Result<EvalReport>
             }
         }
     }
-    // One built-in scene at several sizes (`terrain:triangles=…`): cost against triangles, where
-    // the object-space method grows and the image-space ones stay flat.
     let bases: Vec<&str> = options.scenes.iter().map(|s| s.split(':').next().unwrap_or_default()).collect();
     for base in bases.iter().copied().collect::<std::collections::BTreeSet<_>>() {
         if bases.iter().filter(|b| **b == base).count() < 2 {
@@ -453,10 +510,7 @@ pub fn run(engine: &Engine, options: &EvalOptions) -> anyhow::Result<EvalReport>
             )?);
         }
     }
-    let colored = if options.colored { colored_ratios(&rows, &lights) } else { Vec::new() };
-    let report = EvalReport { adapter: engine.gpu().adapter.clone(), repeat: options.repeat, rows, flooding, colored, files };
-    write_tables(&options.out, &report, &methods.iter().map(|(l, _)| l.clone()).collect::<Vec<_>>(), sweep.as_ref())?;
-    Ok(report)
+    Ok(files)
 }
 
 /// Per phase, the median over repeated runs of one job (wall and GPU time separately).
