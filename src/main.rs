@@ -218,6 +218,7 @@ fn render(job: Option<&Path>, output: &Path, timings_json: Option<&Path>, option
         indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} samples {elapsed_precise}")
             .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
     );
+    let cpu_before = penumbra::timing::process_cpu_ms();
     let rendered = engine.render(&job, &|done, total| {
         if bar.is_hidden() {
             bar.set_draw_target(indicatif::ProgressDrawTarget::stderr());
@@ -225,25 +226,28 @@ fn render(job: Option<&Path>, output: &Path, timings_json: Option<&Path>, option
         bar.set_length(total);
         bar.set_position(done);
     })?;
+    let cpu_ms = penumbra::timing::process_cpu_ms() - cpu_before;
     bar.finish_and_clear();
     for warning in &rendered.warnings {
         eprintln!("warning: {warning}");
     }
     std::fs::write(output, &rendered.bytes)?;
-    print_timings(&rendered.timings);
+    print_timings(&rendered.timings, cpu_ms);
     if let Some(path) = timings_json {
-        let report = serde_json::json!({"timings": rendered.timings, "counters": rendered.counters});
+        let report = serde_json::json!({"timings": rendered.timings, "counters": rendered.counters, "process_cpu_ms": cpu_ms});
         std::fs::write(path, serde_json::to_vec_pretty(&report)?)?;
     }
     eprintln!("wrote {} ({}×{}, {} bytes)", output.display(), rendered.width, rendered.height, rendered.bytes.len());
     Ok(())
 }
 
-fn print_timings(timings: &Timings) {
+/// The phase table, and what the render cost the process in CPU time (`cpu_ms`, every thread).
+fn print_timings(timings: &Timings, cpu_ms: f64) {
     eprintln!("{:<12} {:>10} {:>10}", "phase", "wall ms", "gpu ms");
     for phase in &timings.phases {
         let gpu = phase.gpu_ms.map(|g| format!("{g:.2}")).unwrap_or_else(|| "-".into());
         eprintln!("{:<12} {:>10.2} {:>10}", phase.name, phase.cpu_ms, gpu);
     }
     eprintln!("{:<12} {:>10.2}", "total", timings.total_ms);
+    eprintln!("{:<12} {:>10.2}   ({:.2} cores)", "cpu", cpu_ms, cpu_ms / timings.total_ms);
 }

@@ -84,3 +84,17 @@ impl Timings {
         parts.join(", ")
     }
 }
+
+/// CPU time this process has used so far, user and system, all threads, in ms: on a software
+/// adapter the device's work runs on the process's threads, so the difference over a render
+/// is what it cost in cores (where nothing else runs beside it: `penumbra render`, `bench`).
+pub fn process_cpu_ms() -> f64 {
+    let mut usage = std::mem::MaybeUninit::<libc::rusage>::uninit();
+    // SAFETY: `getrusage` fills the struct when it returns 0, and only then is it read.
+    if unsafe { libc::getrusage(libc::RUSAGE_SELF, usage.as_mut_ptr()) } != 0 {
+        return f64::NAN;
+    }
+    let usage = unsafe { usage.assume_init() };
+    let ms = |t: libc::timeval| t.tv_sec as f64 * 1e3 + t.tv_usec as f64 * 1e-3;
+    ms(usage.ru_utime) + ms(usage.ru_stime)
+}

@@ -364,6 +364,8 @@ fn cli_renders_the_embedded_default_and_example_jobs() {
     assert_eq!((image.width(), image.height()), (512, 512));
     let report: Value = serde_json::from_slice(&std::fs::read(&timings).unwrap()).unwrap();
     assert!(report["timings"]["phases"].as_array().unwrap().len() >= 8);
+    // What the render cost the process in CPU time: some, whatever the machine.
+    assert!(report["process_cpu_ms"].as_f64().unwrap() > 0.0, "{report}");
 
     let example = concat!(env!("CARGO_MANIFEST_DIR"), "/api/examples/torus-stripes.json");
     let exr = dir.path().join("example.exr");

@@ -167,11 +167,11 @@ pub fn run(engine: &Engine, options: &BenchOptions) -> anyhow::Result<BenchRepor
             for repetition in 0..options.repeat {
                 for ((label, method), runs) in methods.iter().zip(&mut runs) {
                     progress.set_message(format!("{case}: {label} ({}/{})", repetition + 1, options.repeat));
-                    let cpu_before = process_cpu_ms();
+                    let cpu_before = crate::timing::process_cpu_ms();
                     let rendered = engine
                         .render(&Job { method: method.clone(), ..base.clone() }, &())
                         .map_err(|e| anyhow::anyhow!("{case}: {label}: {e}"))?;
-                    runs.push((rendered.timings, process_cpu_ms() - cpu_before));
+                    runs.push((rendered.timings, crate::timing::process_cpu_ms() - cpu_before));
                     progress.inc(1);
                 }
             }
@@ -200,18 +200,6 @@ pub fn run(engine: &Engine, options: &BenchOptions) -> anyhow::Result<BenchRepor
 /// A phase's time: GPU time where measured, else wall time.
 fn phase_ms(t: &Timings, name: &str) -> f64 {
     t.get(name).map(|p| p.gpu_ms.unwrap_or(p.cpu_ms)).unwrap_or(0.0)
-}
-
-/// CPU time this process has used so far, user and system, all threads, in ms.
-fn process_cpu_ms() -> f64 {
-    let mut usage = std::mem::MaybeUninit::<libc::rusage>::uninit();
-    // SAFETY: `getrusage` fills the struct when it returns 0, and only then is it read.
-    if unsafe { libc::getrusage(libc::RUSAGE_SELF, usage.as_mut_ptr()) } != 0 {
-        return f64::NAN;
-    }
-    let usage = unsafe { usage.assume_init() };
-    let ms = |t: libc::timeval| t.tv_sec as f64 * 1e3 + t.tv_usec as f64 * 1e-3;
-    ms(usage.ru_utime) + ms(usage.ru_stime)
 }
 
 /// The middle value (the upper of the two middle ones for an even count).
