@@ -206,6 +206,13 @@ impl GpuContext {
         self.fail_next_readback.store(true, std::sync::atomic::Ordering::SeqCst);
     }
 
+    /// Submits what `encoder` recorded and blocks until the GPU has run it (and everything
+    /// before it).
+    pub fn submit_and_wait(&self, encoder: wgpu::CommandEncoder) -> Result<(), GpuError> {
+        self.queue.submit([encoder.finish()]);
+        self.wait_idle()
+    }
+
     /// Blocks until the GPU has finished everything submitted so far.
     pub fn wait_idle(&self) -> Result<(), GpuError> {
         let polled = self.device.poll(wgpu::PollType::wait_indefinitely());

@@ -84,8 +84,7 @@ impl MethodContext<'_> {
     pub fn flush(&mut self) -> JobResult<()> {
         let fresh = self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("MethodContext::encoder") });
         let done = std::mem::replace(self.encoder, fresh);
-        self.gpu.queue.submit([done.finish()]);
-        Ok(self.gpu.wait_idle()?)
+        Ok(self.gpu.submit_and_wait(done)?)
     }
 
     /// A screen-space compute pipeline from the pool: group 0 the frame inputs, group 1 the

@@ -240,10 +240,7 @@ impl Renderer {
         let projection = LightProjection::fit(&spec.light, &scene.shadow_fit_points(&spec.light));
         self.write_constants(spec, &projection);
         let encoder = || frame_encoder(device);
-        let submit = |encoder: wgpu::CommandEncoder| -> JobResult<()> {
-            gpu.queue.submit([encoder.finish()]);
-            Ok(gpu.wait_idle()?)
-        };
+        let submit = |encoder: wgpu::CommandEncoder| gpu.submit_and_wait(encoder);
 
         // Shadow map from the light centre, where the method reads it (its phase is timed
         // either way, so that every frame's breakdown has the same phases).
@@ -339,8 +336,7 @@ impl Renderer {
             (counters, std::mem::take(&mut ctx.scratch))
         };
         let counters = counters?;
-        gpu.queue.submit([enc.finish()]);
-        gpu.wait_idle()?;
+        gpu.submit_and_wait(enc)?;
         scratch.release(&mut self.buffers, &mut self.textures);
         Ok(counters)
     }
