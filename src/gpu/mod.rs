@@ -97,6 +97,30 @@ pub struct GpuContext {
     fail_next_readback: std::sync::atomic::AtomicBool,
 }
 
+/// The adapter `choice` allows, the fastest kind first (a discrete GPU before an integrated
+/// one, any GPU before a software rasteriser).
+fn pick_adapter(adapters: Vec<wgpu::Adapter>, choice: AdapterChoice) -> Result<wgpu::Adapter, GpuError> {
+    let rank = |t: wgpu::DeviceType| match t {
+        wgpu::DeviceType::DiscreteGpu => 0,
+        wgpu::DeviceType::IntegratedGpu => 1,
+        wgpu::DeviceType::VirtualGpu => 2,
+        wgpu::DeviceType::Other => 3,
+        wgpu::DeviceType::Cpu => 4,
+    };
+    adapters
+        .into_iter()
+        .filter(|a| {
+            let software = a.get_info().device_type == wgpu::DeviceType::Cpu;
+            match choice {
+                AdapterChoice::Auto => true,
+                AdapterChoice::Hardware => !software,
+                AdapterChoice::Software => software,
+            }
+        })
+        .min_by_key(|a| rank(a.get_info().device_type))
+        .ok_or(GpuError::NoAdapter(choice))
+}
+
 impl GpuContext {
     /// Opens the preferred Vulkan adapter headless. Blocks; call it once at start-up.
     pub fn new(choice: AdapterChoice) -> Result<Self, GpuError> {
@@ -108,27 +132,7 @@ impl GpuContext {
             backends: wgpu::Backends::VULKAN,
             ..wgpu::InstanceDescriptor::new_without_display_handle()
         });
-        let adapters = instance.enumerate_adapters(wgpu::Backends::VULKAN).await;
-        // Prefer the fastest kind of device that the choice allows.
-        let rank = |t: wgpu::DeviceType| match t {
-            wgpu::DeviceType::DiscreteGpu => 0,
-            wgpu::DeviceType::IntegratedGpu => 1,
-            wgpu::DeviceType::VirtualGpu => 2,
-            wgpu::DeviceType::Other => 3,
-            wgpu::DeviceType::Cpu => 4,
-        };
-        let adapter = adapters
-            .into_iter()
-            .filter(|a| {
-                let software = a.get_info().device_type == wgpu::DeviceType::Cpu;
-                match choice {
-                    AdapterChoice::Auto => true,
-                    AdapterChoice::Hardware => !software,
-                    AdapterChoice::Software => software,
-                }
-            })
-            .min_by_key(|a| rank(a.get_info().device_type))
-            .ok_or(GpuError::NoAdapter(choice))?;
+        let adapter = pick_adapter(instance.enumerate_adapters(wgpu::Backends::VULKAN).await, choice)?;
         let info = adapter.get_info();
         let timestamps = adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY);
         let inside = wgpu::Features::TIMESTAMP_QUERY_INSIDE_PASSES | wgpu::Features::TIMESTAMP_QUERY_INSIDE_ENCODERS;

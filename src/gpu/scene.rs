@@ -86,51 +86,7 @@ impl GpuScene {
             contents: bytemuck::cast_slice(&material_data),
             usage: wgpu::BufferUsages::STORAGE,
         });
-        let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
-            label: Some("GpuScene::sampler"),
-            address_mode_u: wgpu::AddressMode::Repeat,
-            address_mode_v: wgpu::AddressMode::Repeat,
-            mag_filter: wgpu::FilterMode::Linear,
-            min_filter: wgpu::FilterMode::Linear,
-            ..Default::default()
-        });
-        let upload_texture = |width: u32, height: u32, rgba8: &[u8]| {
-            let texture = device.create_texture_with_data(
-                &gpu.queue,
-                &wgpu::TextureDescriptor {
-                    label: Some("GpuScene::texture"),
-                    size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
-                    mip_level_count: 1,
-                    sample_count: 1,
-                    dimension: wgpu::TextureDimension::D2,
-                    // sRGB storage: the sampler returns linear albedo (contract §1).
-                    format: wgpu::TextureFormat::Rgba8UnormSrgb,
-                    usage: wgpu::TextureUsages::TEXTURE_BINDING,
-                    view_formats: &[],
-                },
-                wgpu::util::TextureDataOrder::LayerMajor,
-                rgba8,
-            );
-            texture.create_view(&wgpu::TextureViewDescriptor::default())
-        };
-        let white = upload_texture(1, 1, &[255; 4]);
-        let views: Vec<wgpu::TextureView> = scene.textures.iter().map(|t| upload_texture(t.width, t.height, &t.rgba8)).collect();
-        let (material_bind_groups, textured) = scene
-            .materials
-            .iter()
-            .map(|m| {
-                let texture = m.texture.and_then(|t| views.get(t));
-                let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some("GpuScene::material_bind_group"),
-                    layout: material_layout,
-                    entries: &super::layout::entries(&[
-                        wgpu::BindingResource::TextureView(texture.unwrap_or(&white)),
-                        wgpu::BindingResource::Sampler(&sampler),
-                    ]),
-                });
-                (group, texture.is_some())
-            })
-            .unzip();
+        let (material_bind_groups, textured) = material_bind_groups(gpu, scene, material_layout);
         Self {
             vertex_buffer,
             index_buffer,
@@ -194,6 +150,57 @@ impl GpuScene {
         }
         points
     }
+}
+
+/// Each material's bind group (its texture, or a white texel, and the scene's sampler) and
+/// whether it has a texture: the scene's textures uploaded once, shared by their materials.
+fn material_bind_groups(gpu: &GpuContext, scene: &Scene, material_layout: &wgpu::BindGroupLayout) -> (Vec<wgpu::BindGroup>, Vec<bool>) {
+    let device = &gpu.device;
+    let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+        label: Some("GpuScene::sampler"),
+        address_mode_u: wgpu::AddressMode::Repeat,
+        address_mode_v: wgpu::AddressMode::Repeat,
+        mag_filter: wgpu::FilterMode::Linear,
+        min_filter: wgpu::FilterMode::Linear,
+        ..Default::default()
+    });
+    let upload_texture = |width: u32, height: u32, rgba8: &[u8]| {
+        let texture = device.create_texture_with_data(
+            &gpu.queue,
+            &wgpu::TextureDescriptor {
+                label: Some("GpuScene::texture"),
+                size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                // sRGB storage: the sampler returns linear albedo (contract §1).
+                format: wgpu::TextureFormat::Rgba8UnormSrgb,
+                usage: wgpu::TextureUsages::TEXTURE_BINDING,
+                view_formats: &[],
+            },
+            wgpu::util::TextureDataOrder::LayerMajor,
+            rgba8,
+        );
+        texture.create_view(&wgpu::TextureViewDescriptor::default())
+    };
+    let white = upload_texture(1, 1, &[255; 4]);
+    let views: Vec<wgpu::TextureView> = scene.textures.iter().map(|t| upload_texture(t.width, t.height, &t.rgba8)).collect();
+    scene
+        .materials
+        .iter()
+        .map(|m| {
+            let texture = m.texture.and_then(|t| views.get(t));
+            let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("GpuScene::material_bind_group"),
+                layout: material_layout,
+                entries: &super::layout::entries(&[
+                    wgpu::BindingResource::TextureView(texture.unwrap_or(&white)),
+                    wgpu::BindingResource::Sampler(&sampler),
+                ]),
+            });
+            (group, texture.is_some())
+        })
+        .unzip()
 }
 
 /// The eight corners of the box [a, b], corner k taking b's coordinate where bit 0 (x), 1 (y)

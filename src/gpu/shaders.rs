@@ -103,6 +103,32 @@ pub fn module(device: &wgpu::Device, name: &str) -> wgpu::ShaderModule {
     unsafe { device.create_shader_module_trusted(descriptor, checks) }
 }
 
+/// A compute pipeline of `shader`'s `entry` over these bind groups (group *k* is `groups[k]`),
+/// with values for the shader's pipeline-overridable constants.
+pub fn compute_pipeline(
+    device: &wgpu::Device,
+    label: &str,
+    (shader, entry): (&str, &str),
+    groups: &[&wgpu::BindGroupLayout],
+    constants: &[(&str, f64)],
+) -> wgpu::ComputePipeline {
+    let module = module(device, shader);
+    let groups: Vec<Option<&wgpu::BindGroupLayout>> = groups.iter().map(|g| Some(*g)).collect();
+    let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some(label),
+        bind_group_layouts: &groups,
+        immediate_size: 0,
+    });
+    device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some(label),
+        layout: Some(&layout),
+        module: &module,
+        entry_point: Some(entry),
+        compilation_options: wgpu::PipelineCompilationOptions { constants, ..Default::default() },
+        cache: None,
+    })
+}
+
 /// Asserts that the WGSL file `name` declares `declaration` verbatim: a constant a shader
 /// hard-codes (its passes bind no uniform for it) as Rust defines it. For tests.
 #[cfg(test)]

@@ -128,20 +128,13 @@ pub fn quadtree_probe(
         label: Some("Probe::layout"),
         entries: &[layout::storage_read(0), layout::storage_read(1), layout::uniform(2), layout::storage_read_write(3)],
     });
-    let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-        label: Some("Probe::pipeline_layout"),
-        bind_group_layouts: &[Some(&bind_layout)],
-        immediate_size: 0,
-    });
-    let module = crate::gpu::shaders::module(device, "methods/pcss/quadtree_probe.wgsl");
-    let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-        label: Some("Probe::pipeline"),
-        layout: Some(&pipeline_layout),
-        module: &module,
-        entry_point: Some("main"),
-        compilation_options: Default::default(),
-        cache: None,
-    });
+    let pipeline = crate::gpu::shaders::compute_pipeline(
+        device,
+        "Probe::pipeline",
+        ("methods/pcss/quadtree_probe.wgsl", "main"),
+        &[&bind_layout],
+        &[],
+    );
     let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
         label: Some("Probe::bind_group"),
         layout: &bind_layout,

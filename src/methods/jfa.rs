@@ -540,20 +540,8 @@ pub fn voronoi(
             layout::storage_read_write(4),
         ],
     });
-    let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-        label: Some("Voronoi::pipeline_layout"),
-        bind_group_layouts: &[Some(&bind_layout)],
-        immediate_size: 0,
-    });
-    let module = crate::gpu::shaders::module(device, "methods/jfa/voronoi.wgsl");
-    let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-        label: Some("Voronoi::pipeline"),
-        layout: Some(&pipeline_layout),
-        module: &module,
-        entry_point: Some("main"),
-        compilation_options: Default::default(),
-        cache: None,
-    });
+    let pipeline =
+        crate::gpu::shaders::compute_pipeline(device, "Voronoi::pipeline", ("methods/jfa/voronoi.wgsl", "main"), &[&bind_layout], &[]);
     let group = |src: &wgpu::Buffer, dst: &wgpu::Buffer| {
         device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("Voronoi::bind_group"),

@@ -20,21 +20,7 @@ pub async fn serve(config: ServeConfig, engine: Arc<Engine>) -> anyhow::Result<(
         tracing::info!(metrics_open = auth.metrics_open, "bearer tokens required on /v1");
         state = state.with_auth(auth);
     }
-    match config.job_store.as_str() {
-        "memory" => tracing::warn!("job store in memory: submitted jobs are lost when the daemon stops"),
-        "embedded" => {
-            let store = crate::store::EmbeddedStore::open(&config.data_dir)?;
-            tracing::info!(data_dir = %config.data_dir.display(), min_free_bytes = config.min_free_bytes, "job store: embedded");
-            state = state.with_store(Store::new(Arc::new(store), "embedded", config.min_free_bytes));
-        }
-        url if url.starts_with("redis://") => {
-            let claim_idle = std::time::Duration::from_secs_f64(config.claim_idle_secs.max(0.5));
-            let store = crate::store::RedisStore::open(url, ttl, claim_idle)?;
-            tracing::info!("job store: redis (shared queue; this replica takes jobs from it)");
-            state = state.with_store(Store::new(Arc::new(store), "redis", 0));
-        }
-        other => anyhow::bail!("unknown --job-store `{other}` (embedded, memory or redis://HOST:PORT/DB)"),
-    }
+    state = with_job_store(state, &config, ttl)?;
     let tracker = connections::Tracker::new(connections::ConnectionLimits::from_config(&config).within_fd_limit());
     let state = Arc::new(
         state.with_store_retry(std::time::Duration::from_secs_f64(config.store_retry_secs.max(0.0))).with_connections(tracker.clone()),
@@ -53,25 +39,8 @@ pub async fn serve(config: ServeConfig, engine: Arc<Engine>) -> anyhow::Result<(
     tracing::info!(address = %listener.local_addr()?, lavapipe_threads, max_connections = tracker.stats().max, "listening");
     tracker.spawn_sweeper();
     let listener = connections::TrackedListener::new(listener, tracker);
-    let warm = state.clone();
-    let no_warm_up = config.no_warm_up;
     let replica = std::env::var("HOSTNAME").ok().filter(|h| !h.is_empty()).unwrap_or_else(|| config.listen.to_string());
-    tokio::spawn(async move {
-        let started = std::time::Instant::now();
-        if !no_warm_up {
-            let engine = warm.engine.clone();
-            if let Err(error) =
-                tokio::task::spawn_blocking(move || engine.warm_up()).await.unwrap_or_else(|e| Err(JobError::internal(e.to_string())))
-            {
-                tracing::error!(%error, "warm-up failed");
-                return;
-            }
-        }
-        warm.set_ready();
-        tracing::info!(duration_ms = started.elapsed().as_millis() as u64, "ready: pipelines compiled, default scene uploaded");
-        // A replica of a shared store takes jobs only once it is warm.
-        warm.spawn_workers(&replica);
-    });
+    spawn_warm_up(state.clone(), !config.no_warm_up, replica);
     let stopping = state.clone();
     let signal = async move {
         shutdown_signal().await;
@@ -87,6 +56,50 @@ pub async fn serve(config: ServeConfig, engine: Arc<Engine>) -> anyhow::Result<(
     }
     tracing::info!("shut down");
     Ok(())
+}
+
+/// `state` with the job store `--job-store` names: none (in memory), the embedded one under
+/// `--data-dir`, or a Redis queue shared with other replicas.
+fn with_job_store(state: AppState, config: &ServeConfig, ttl: std::time::Duration) -> anyhow::Result<AppState> {
+    Ok(match config.job_store.as_str() {
+        "memory" => {
+            tracing::warn!("job store in memory: submitted jobs are lost when the daemon stops");
+            state
+        }
+        "embedded" => {
+            let store = crate::store::EmbeddedStore::open(&config.data_dir)?;
+            tracing::info!(data_dir = %config.data_dir.display(), min_free_bytes = config.min_free_bytes, "job store: embedded");
+            state.with_store(Store::new(Arc::new(store), "embedded", config.min_free_bytes))
+        }
+        url if url.starts_with("redis://") => {
+            let claim_idle = std::time::Duration::from_secs_f64(config.claim_idle_secs.max(0.5));
+            let store = crate::store::RedisStore::open(url, ttl, claim_idle)?;
+            tracing::info!("job store: redis (shared queue; this replica takes jobs from it)");
+            state.with_store(Store::new(Arc::new(store), "redis", 0))
+        }
+        other => anyhow::bail!("unknown --job-store `{other}` (embedded, memory or redis://HOST:PORT/DB)"),
+    })
+}
+
+/// Compiles the pipelines and uploads the default scene (unless `warm_up` is false) in the
+/// background, then marks the daemon ready and starts its workers as `replica`.
+fn spawn_warm_up(state: Arc<AppState>, warm_up: bool, replica: String) {
+    tokio::spawn(async move {
+        let started = std::time::Instant::now();
+        if warm_up {
+            let engine = state.engine.clone();
+            if let Err(error) =
+                tokio::task::spawn_blocking(move || engine.warm_up()).await.unwrap_or_else(|e| Err(JobError::internal(e.to_string())))
+            {
+                tracing::error!(%error, "warm-up failed");
+                return;
+            }
+        }
+        state.set_ready();
+        tracing::info!(duration_ms = started.elapsed().as_millis() as u64, "ready: pipelines compiled, default scene uploaded");
+        // A replica of a shared store takes jobs only once it is warm.
+        state.spawn_workers(&replica);
+    });
 }
 
 async fn shutdown_signal() {
