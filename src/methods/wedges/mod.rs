@@ -332,7 +332,6 @@ fn storage(device: &wgpu::Device, label: &str, contents: &[u8]) -> wgpu::Buffer 
 /// What the passes bind in group 1 but the work list and the dispatch arguments: the volume,
 /// the tiles' ranges, the LI buffer and the rest (`common.wgsl`).
 struct Buffers {
-    device: wgpu::Device,
     grid_size: (u32, u32),
     uniforms: wgpu::Buffer,
     polygons: wgpu::Buffer,
@@ -396,17 +395,16 @@ impl Buffers {
             inside,
             no_work: storage(&device, "Wedges::no_work", &[]),
             inside_items,
-            device,
         }
     }
 
     /// Group 1 with `work` as the work list and `inside_groups` where the inside list's
     /// dispatch arguments are written (a stand-in while a dispatch reads them).
-    fn bind(&self, pipelines: &Pipelines, work: &wgpu::Buffer, inside_groups: &wgpu::Buffer) -> wgpu::BindGroup {
-        self.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("Wedges::bind_group"),
-            layout: &pipelines.tiles.get_bind_group_layout(1),
-            entries: &layout::entries(&[
+    fn bind(&self, ctx: &MethodContext<'_>, pipelines: &Pipelines, work: &wgpu::Buffer, inside_groups: &wgpu::Buffer) -> wgpu::BindGroup {
+        ctx.bind(
+            "Wedges::bind_group",
+            &pipelines.tiles,
+            &[
                 self.uniforms.as_entire_binding(),
                 self.polygons.as_entire_binding(),
                 self.wedges.as_entire_binding(),
@@ -420,15 +418,15 @@ impl Buffers {
                 self.e0.as_entire_binding(),
                 self.inside.list.as_entire_binding(),
                 inside_groups.as_entire_binding(),
-            ]),
-        })
+            ],
+        )
     }
 
     /// Runs the tiles pass (each tile's depth range and receivers, §4) and reads the ranges
     /// back for the culling.
     fn measure_tiles(&self, ctx: &mut MethodContext<'_>, pipelines: &Pipelines) -> JobResult<Vec<[[f32; 4]; 4]>> {
         {
-            let group = self.bind(pipelines, &self.no_work, &self.inside.groups);
+            let group = self.bind(ctx, pipelines, &self.no_work, &self.inside.groups);
             let mut pass = ctx.timer.begin_compute_pass(ctx.encoder, "method", "Wedges::tiles");
             pass.set_pipeline(&pipelines.tiles);
             pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
@@ -445,7 +443,7 @@ impl Buffers {
         ctx.encoder.clear_buffer(&self.li, 0, None);
         // Work lists go to the GPU in chunks a storage binding can hold, in pass order; the
         // penumbra pass's in chunks whose pixels the inside list can hold.
-        let max_items = (self.device.limits().max_storage_buffer_binding_size as usize / std::mem::size_of::<WorkItem>()).min(1 << 22);
+        let max_items = (ctx.gpu.device.limits().max_storage_buffer_binding_size as usize / std::mem::size_of::<WorkItem>()).min(1 << 22);
         let is_penumbra = |pipeline: &wgpu::ComputePipeline| std::ptr::eq(pipeline, &*pipelines.penumbra);
         let chunks: Vec<(&wgpu::ComputePipeline, &[WorkItem])> = passes
             .iter()
@@ -454,28 +452,34 @@ impl Buffers {
                 items.chunks(size).map(move |chunk| (*pipeline, chunk))
             })
             .collect();
-        let works: Vec<wgpu::Buffer> =
-            chunks.iter().map(|(_, items)| storage(&self.device, "Wedges::work", bytemuck::cast_slice(items))).collect();
-        let resolve_group = self.bind(pipelines, &self.no_work, &self.inside.groups);
+        // Per chunk, group 1 with its work list, and with the stand-in for the inside list's
+        // dispatch arguments (for the dispatch that reads them).
+        let groups: Vec<(wgpu::BindGroup, wgpu::BindGroup)> = chunks
+            .iter()
+            .map(|(_, items)| {
+                let work = storage(&ctx.gpu.device, "Wedges::work", bytemuck::cast_slice(items));
+                (self.bind(ctx, pipelines, &work, &self.inside.groups), self.bind(ctx, pipelines, &work, &self.inside.stand_in))
+            })
+            .collect();
+        let resolve_group = self.bind(ctx, pipelines, &self.no_work, &self.inside.groups);
         let screen = ctx.dispatch_size();
         let mut pass = ctx.timer.begin_compute_pass(ctx.encoder, "method", "Wedges::rasterize");
         pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
-        for ((pipeline, items), work) in chunks.iter().zip(&works) {
+        for ((pipeline, items), (group, reading_groups)) in chunks.iter().zip(&groups) {
             // One workgroup per item, in rows of at most 65 535.
             let (x, y) = item_grid(items.len() as u32);
-            let group = self.bind(pipelines, work, &self.inside.groups);
-            pass.set_bind_group(1, &group, &[]);
+            pass.set_bind_group(1, group, &[]);
             if is_penumbra(pipeline) {
                 pass.set_pipeline(&pipelines.mark_inside);
                 pass.dispatch_workgroups(x, y, 1);
                 ctx.timer.mark(&mut pass, "wedges_penumbra_inside");
                 pass.set_pipeline(&pipelines.inside_size);
                 pass.dispatch_workgroups(1, 1, 1);
-                pass.set_bind_group(1, &self.bind(pipelines, work, &self.inside.stand_in), &[]);
+                pass.set_bind_group(1, reading_groups, &[]);
                 pass.set_pipeline(&pipelines.shade_listed);
                 pass.dispatch_workgroups_indirect(&self.inside.groups, 0);
                 ctx.timer.mark(&mut pass, "wedges_penumbra_shade");
-                pass.set_bind_group(1, &group, &[]);
+                pass.set_bind_group(1, group, &[]);
                 pass.set_pipeline(&pipelines.inside_reset);
                 pass.dispatch_workgroups(1, 1, 1);
                 ctx.timer.mark(&mut pass, "wedges_penumbra_reset");
