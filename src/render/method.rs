@@ -122,7 +122,7 @@ impl MethodContext<'_> {
         let inputs_layout = &self.inputs.layout;
         self.pipelines.compute(key, || {
             let io_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(key.name), entries: io });
-            crate::render::screen_compute_specialized(device, inputs_layout, key.name, (shader, entry), &io_layout, constants)
+            crate::render::screen_compute_pipeline(device, inputs_layout, key.name, (shader, entry), &io_layout, constants)
         })
     }
 

@@ -30,7 +30,7 @@ use crate::supervise::{cancelled_error, Supervisor};
 use crate::timing::Timings;
 pub use draw::{vertex_layout, ScenePipeline, DEPTH_BUFFER_FORMAT};
 pub use frame::{Camera, ExtraImages, FrameSpec, LightProjection};
-pub use passes::{screen_compute_entry, screen_compute_pipeline, screen_compute_specialized, E0Mode};
+pub use passes::{screen_compute_pipeline, E0Mode};
 pub use pixel_list::PixelListBuffers;
 use targets::FrameTargets;
 

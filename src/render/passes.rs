@@ -137,7 +137,8 @@ impl Renderer {
     ) -> Arc<wgpu::ComputePipeline> {
         let device = &self.gpu.device;
         let inputs_layout = &self.layouts.inputs;
-        self.pipelines.compute(PipelineKey::new(name), || screen_compute_pipeline(device, inputs_layout, name, shader, io_layout))
+        self.pipelines
+            .compute(PipelineKey::new(name), || screen_compute_pipeline(device, inputs_layout, name, (shader, "main"), io_layout, &[]))
     }
 
     /// E0 (`shaders/e0.wgsl`). Under a light of more than `E0_EXACT_CELLS` cells: the exact
@@ -165,7 +166,7 @@ impl Renderer {
         let constants = [spec.acute_edges_constant()];
         let mut entry = |name: &'static str, entry: &'static str| {
             self.pipelines.compute(PipelineKey { name, variant: u32::from(spec.acute_edges) }, || {
-                screen_compute_specialized(device, inputs_layout, name, ("e0.wgsl", entry), &io_layout, &constants)
+                screen_compute_pipeline(device, inputs_layout, name, ("e0.wgsl", entry), &io_layout, &constants)
             })
         };
         let interpolate = self.e0_mode == E0Mode::Interpolated && spec.cells.len() > E0_EXACT_CELLS;
@@ -250,7 +251,7 @@ impl Renderer {
             Some(_) => {
                 let (device, inputs_layout) = (&self.gpu.device, &self.layouts.inputs);
                 self.pipelines.compute(PipelineKey::new("composite_srgb8"), || {
-                    screen_compute_entry(device, inputs_layout, "composite_srgb8", "composite.wgsl", "srgb8", &io_layout)
+                    screen_compute_pipeline(device, inputs_layout, "composite_srgb8", ("composite.wgsl", "srgb8"), &io_layout, &[])
                 })
             }
         };
@@ -293,32 +294,10 @@ impl Renderer {
     }
 }
 
-/// A compute pipeline over the screen (8×8 workgroups, entry `main`): group 0 is the frame
-/// inputs (`shaders/common/frame_inputs.wgsl`), group 1 the pass's own bindings.
+/// A compute pipeline over the screen (8×8 workgroups) of `shader`'s `entry`, with values for
+/// its pipeline-overridable constants: group 0 is the frame inputs
+/// (`shaders/common/frame_inputs.wgsl`), group 1 the pass's own bindings.
 pub fn screen_compute_pipeline(
-    device: &wgpu::Device,
-    inputs_layout: &wgpu::BindGroupLayout,
-    label: &'static str,
-    shader: &str,
-    io_layout: &wgpu::BindGroupLayout,
-) -> wgpu::ComputePipeline {
-    screen_compute_entry(device, inputs_layout, label, shader, "main", io_layout)
-}
-
-/// `screen_compute_pipeline` with another entry point.
-pub fn screen_compute_entry(
-    device: &wgpu::Device,
-    inputs_layout: &wgpu::BindGroupLayout,
-    label: &'static str,
-    shader: &str,
-    entry: &str,
-    io_layout: &wgpu::BindGroupLayout,
-) -> wgpu::ComputePipeline {
-    screen_compute_specialized(device, inputs_layout, label, (shader, entry), io_layout, &[])
-}
-
-/// `screen_compute_entry` with values for the shader's pipeline-overridable constants.
-pub fn screen_compute_specialized(
     device: &wgpu::Device,
     inputs_layout: &wgpu::BindGroupLayout,
     label: &'static str,
