@@ -8,7 +8,7 @@ use crate::color::srgb_to_linear;
 use crate::error::{ErrorCode, JobError, JobResult};
 
 /// Names of the built-in light images, in the order `GET /v1/methods` lists them.
-pub const BUILTIN_LIGHT_IMAGES: &[&str] = &["white", "disk", "star", "stripes", "flame", "quadrants"];
+pub const BUILTIN_LIGHT_IMAGES: &[&str] = &["white", "disk", "star", "stripes", "flame", "quadrants", "mosaic"];
 
 /// A light image in linear RGBA: piecewise constant, one uniform sub-rectangle per texel.
 #[derive(Debug, Clone, PartialEq)]
@@ -168,6 +168,14 @@ impl LightImage {
                 (false, true) => [0.0, 1.0, 0.0, 1.0],
                 (true, false) => [0.0, 0.0, 1.0, 1.0],
                 (false, false) => [1.0, 1.0, 0.0, 1.0],
+            }),
+            // Stained glass: 8 × 8 panes, no two of one colour — red growing to the right,
+            // green upwards, blue in a third pattern — so that E0 sums the most cells it ever
+            // does (`light::irradiance::E0_GRID`²), as under a photograph of a light.
+            "mosaic" => Self::from_fn(8, 8, |s, t| {
+                let (i, j) = (((s * 8.0) as u32).min(7), 7 - ((t * 8.0) as u32).min(7));
+                let level = |k: u32| (k + 1) as f32 / 8.0;
+                [level(i), level(j), level((3 * i + 5 * j) % 8), 1.0]
             }),
             _ => {
                 return Err(JobError::field(

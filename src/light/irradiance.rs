@@ -252,6 +252,8 @@ mod tests {
         let none = Map::new();
         assert_eq!(light_cells(&light, &LightImage::builtin("white", &none, "f").unwrap()).len(), 1);
         assert_eq!(light_cells(&light, &LightImage::builtin("stripes", &none, "f").unwrap()).len(), 6);
+        // `mosaic`: no two panes alike, so every cell of the grid stays: the most E0 sums.
+        assert_eq!(light_cells(&light, &LightImage::builtin("mosaic", &none, "f").unwrap()).len(), (E0_GRID * E0_GRID) as usize);
         let disk = light_cells(&light, &LightImage::builtin("disk", &none, "f").unwrap());
         assert!(disk.len() < 64 && !disk.is_empty());
         // Total flux is preserved by merging: Σ radiance × area equals the image mean × area.

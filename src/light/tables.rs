@@ -373,7 +373,7 @@ mod tests {
     fn uniform_images_are_recognised() {
         let builtin = |name| LightImage::builtin(name, &Default::default(), "f").unwrap();
         assert!(builtin("white").is_uniform());
-        for name in ["disk", "star", "stripes", "flame", "quadrants"] {
+        for name in ["disk", "star", "stripes", "flame", "quadrants", "mosaic"] {
             assert!(!builtin(name).is_uniform(), "{name}");
         }
     }
