@@ -41,7 +41,7 @@ enum Command {
         options: RenderOptions,
     },
     /// Measure what a 1080p frame costs, phase by phase, as users request it (warm, whole PNG
-    /// requests, every method on the built-in scenes under three lights) with each method's
+    /// requests, every method on the built-in scenes under four lights) with each method's
     /// penumbra error and the interpolated E0's error beside it: `bench.md`, `bench.json`.
     Bench {
         #[command(flatten)]
