@@ -452,30 +452,31 @@ impl Buffers {
                 items.chunks(size).map(move |chunk| (*pipeline, chunk))
             })
             .collect();
-        // Per chunk, group 1 with its work list, and with the stand-in for the inside list's
-        // dispatch arguments (for the dispatch that reads them).
-        let groups: Vec<(wgpu::BindGroup, wgpu::BindGroup)> = chunks
+        // Per chunk, group 1 with its work list; a penumbra chunk's also with the stand-in for
+        // the inside list's dispatch arguments (for the dispatch that reads them).
+        let groups: Vec<(wgpu::BindGroup, Option<wgpu::BindGroup>)> = chunks
             .iter()
-            .map(|(_, items)| {
+            .map(|(pipeline, items)| {
                 let work = storage(&ctx.gpu.device, "Wedges::work", bytemuck::cast_slice(items));
-                (self.bind(ctx, pipelines, &work, &self.inside.groups), self.bind(ctx, pipelines, &work, &self.inside.stand_in))
+                let reading = is_penumbra(pipeline).then(|| self.bind(ctx, pipelines, &work, &self.inside.stand_in));
+                (self.bind(ctx, pipelines, &work, &self.inside.groups), reading)
             })
             .collect();
         let resolve_group = self.bind(ctx, pipelines, &self.no_work, &self.inside.groups);
         let screen = ctx.dispatch_size();
         let mut pass = ctx.timer.begin_compute_pass(ctx.encoder, "method", "Wedges::rasterize");
         pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
-        for ((pipeline, items), (group, reading_groups)) in chunks.iter().zip(&groups) {
+        for ((pipeline, items), (group, reading_group)) in chunks.iter().zip(&groups) {
             // One workgroup per item, in rows of at most 65 535.
             let (x, y) = item_grid(items.len() as u32);
             pass.set_bind_group(1, group, &[]);
-            if is_penumbra(pipeline) {
+            if let Some(reading_group) = reading_group {
                 pass.set_pipeline(&pipelines.mark_inside);
                 pass.dispatch_workgroups(x, y, 1);
                 ctx.timer.mark(&mut pass, "wedges_penumbra_inside");
                 pass.set_pipeline(&pipelines.inside_size);
                 pass.dispatch_workgroups(1, 1, 1);
-                pass.set_bind_group(1, reading_groups, &[]);
+                pass.set_bind_group(1, reading_group, &[]);
                 pass.set_pipeline(&pipelines.shade_listed);
                 pass.dispatch_workgroups_indirect(&self.inside.groups, 0);
                 ctx.timer.mark(&mut pass, "wedges_penumbra_shade");
