@@ -61,6 +61,14 @@ struct ClippedEdges {
 
 const HORIZON_EPS: f32 = 1e-6;
 
+// The unit direction from x to where edge a→b (relative to x, heights da, db above x's
+// plane) crosses the horizon, HORIZON_EPS above the plane: a + (b − a)(ε − da)/(db − da),
+// scaled by db − da (no division) — its direction is all `edge_vector` needs, so the scale
+// only has to keep its sign. Meaningless where both ends lie on one side.
+fn horizon_crossing(a: vec3<f32>, b: vec3<f32>, da: f32, db: f32) -> vec3<f32> {
+    return normalize((a * (db - HORIZON_EPS) + b * (HORIZON_EPS - da)) * sign(db - da));
+}
+
 // Adds edge a→b (relative to x, unit directions ua, ub, heights da, db above the plane),
 // clipped to the half-space. Straight-line code with selects rather than branches: lavapipe
 // runs both sides of every branch that differs between neighbouring pixels, so the crossing
@@ -68,9 +76,7 @@ const HORIZON_EPS: f32 = 1e-6;
 fn clip_edge(e: ptr<function, ClippedEdges>, a: vec3<f32>, b: vec3<f32>, ua: vec3<f32>, ub: vec3<f32>, da: f32, db: f32) {
     let above_a = da > HORIZON_EPS;
     let above_b = db > HORIZON_EPS;
-    // The crossing a + (b − a)(ε − da)/(db − da), scaled by db − da (no division): its
-    // direction is all `edge_vector` needs, so the scale only has to keep its sign.
-    let q = normalize((a * (db - HORIZON_EPS) + b * (HORIZON_EPS - da)) * sign(db - da));
+    let q = horizon_crossing(a, b, da, db);
     let term = edge_vector(select(q, ua, above_a), select(q, ub, above_b));
     (*e).sum += select(vec3<f32>(0.0), term, above_a || above_b);
     (*e).exit = select((*e).exit, q, above_a && !above_b);

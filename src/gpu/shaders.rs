@@ -1,6 +1,8 @@
-//! WGSL sources, embedded in the binary, and the one mechanism that composes them: a line
+//! WGSL sources, embedded in the binary, and the two directives that compose them: a line
 //! `#import common/NAME.wgsl` is replaced by that file (each file at most once per shader),
-//! so shared code (frame constants, light frame, shadow lookups) is written once.
+//! so shared code (frame constants, light frame, shadow lookups) is written once; and a block
+//! `#unroll i in A..B { … }` is written out once per value of `i`, each copy a block that
+//! begins `let i = Ku;` (`unroll`).
 
 use std::collections::HashSet;
 
@@ -15,6 +17,7 @@ pub const SOURCES: &[(&str, &str)] = &[
     ("shadow_map.wgsl", include_str!("../../shaders/shadow_map.wgsl")),
     ("gbuffer.wgsl", include_str!("../../shaders/gbuffer.wgsl")),
     ("e0.wgsl", include_str!("../../shaders/e0.wgsl")),
+    ("e0_grid.wgsl", include_str!("../../shaders/e0_grid.wgsl")),
     ("composite.wgsl", include_str!("../../shaders/composite.wgsl")),
     ("methods/hard.wgsl", include_str!("../../shaders/methods/hard.wgsl")),
     ("methods/brabec/common.wgsl", include_str!("../../shaders/methods/brabec/common.wgsl")),
@@ -79,14 +82,55 @@ fn append(name: &str, out: &mut String, seen: &mut HashSet<String>) {
         return;
     }
     let text = source(name).unwrap_or_else(|| panic!("shader `{name}` is not listed in gpu::shaders::SOURCES"));
-    for line in text.lines() {
-        match line.trim().strip_prefix("#import ") {
-            Some(import) => append(import.trim(), out, seen),
-            None => {
-                out.push_str(line);
-                out.push('\n');
-            }
+    let mut lines = text.lines();
+    while let Some(line) = lines.next() {
+        if let Some(import) = line.trim().strip_prefix("#import ") {
+            append(import.trim(), out, seen);
+        } else if let Some(header) = line.trim().strip_prefix("#unroll ") {
+            unroll(name, header, &mut lines, out);
+        } else {
+            out.push_str(line);
+            out.push('\n');
         }
+    }
+}
+
+/// Writes out the block `#unroll i in A..B {` … `}` (its header after `#unroll`, its body the
+/// lines up to the `}` that closes it) once per value of `i`. On lavapipe an array that a
+/// loop indexes by its counter lives in memory, a load and a store lane by lane per access,
+/// where one indexed by constants lives in registers: a loop over the columns of E0's grid
+/// (`shaders/e0_grid.wgsl`) whose carried state is arrays made its clipped pass 35 × slower
+/// than the same loop unrolled. Mesa unrolls only small loops itself; this unrolls the ones a
+/// shader marks. Each copy is a block that binds `i` as a `let` constant, so the body is the
+/// loop's body unchanged.
+fn unroll<'a>(name: &str, header: &str, lines: &mut impl Iterator<Item = &'a str>, out: &mut String) {
+    let malformed = format!("{name}: `#unroll {header}` is not `#unroll NAME in A..B {{`");
+    let parsed = header.split_once(" in ").and_then(|(counter, range)| {
+        let (start, end) = range.trim().strip_suffix('{')?.trim().split_once("..")?;
+        Some((counter.trim(), start.trim().parse::<u32>().ok()?, end.trim().parse::<u32>().ok()?))
+    });
+    let (counter, start, end) = parsed.unwrap_or_else(|| panic!("{malformed}"));
+    let mut body = Vec::new();
+    let mut depth = 1usize;
+    for line in lines.by_ref() {
+        // Braces in a comment do not count.
+        let code = line.split("//").next().unwrap_or_default();
+        depth += code.matches('{').count();
+        depth = depth.checked_sub(code.matches('}').count()).unwrap_or_else(|| panic!("{name}: unbalanced `}}` in `#unroll {header}`"));
+        if depth == 0 {
+            assert_eq!(code.trim(), "}", "{name}: `#unroll {header}` closes on a line of its own");
+            break;
+        }
+        body.push(line);
+    }
+    assert_eq!(depth, 0, "{name}: `#unroll {header}` is not closed");
+    for value in start..end {
+        out.push_str(&format!("{{ let {counter} = {value}u;\n"));
+        for line in &body {
+            out.push_str(line);
+            out.push('\n');
+        }
+        out.push_str("}\n");
     }
 }
 
@@ -164,5 +208,25 @@ mod tests {
         // checked beside their definitions: `render::passes`, `methods::brabec`,
         // `methods::reference`.)
         assert_declares("common/frame_inputs.wgsl", &format!("array<LightCell, {}>", E0_GRID * E0_GRID));
+        assert_declares("e0_grid.wgsl", &format!("const SIDE: u32 = {E0_GRID}u;"));
+    }
+
+    #[test]
+    fn unroll_writes_the_block_once_per_value_and_stops_at_its_brace() {
+        let text = "    x[i] = y; // a brace in a comment: {\n    if i > 0u {\n        y += 1.0;\n    }\n}\nafter();";
+        let mut lines = text.lines();
+        let mut out = String::new();
+        unroll("test", "i in 1..3 {", &mut lines, &mut out);
+        let copy = |k: u32| {
+            format!("{{ let i = {k}u;\n    x[i] = y; // a brace in a comment: {{\n    if i > 0u {{\n        y += 1.0;\n    }}\n}}\n")
+        };
+        assert_eq!(out, copy(1) + &copy(2));
+        assert_eq!(lines.next(), Some("after();"), "the lines after the block are the caller's");
+    }
+
+    #[test]
+    #[should_panic(expected = "is not closed")]
+    fn an_unclosed_unroll_is_refused() {
+        unroll("test", "i in 0..2 {", &mut "    x[i] = 0.0;".lines(), &mut String::new());
     }
 }

@@ -264,6 +264,32 @@ mod tests {
         assert!((flux - image.mean_emission()).length() < 1e-4, "{flux} vs {}", image.mean_emission());
     }
 
+    /// What E0's grid sums read of a light of `E0_GRID`² cells (`shaders/e0_grid.wgsl`): the
+    /// cells row by row from the image's top, left to right, each sharing its right edge with
+    /// the next and its bottom edge with the one below.
+    #[test]
+    fn a_full_grid_of_cells_comes_row_by_row_from_the_top() {
+        let light = AreaLight::new(Vec3::new(1.0, 3.0, -2.0), Vec3::new(0.2, -1.0, 0.1), -Vec3::Z, Vec2::new(2.0, 1.0), 1.0).unwrap();
+        let cells = light_cells(&light, &LightImage::builtin("mosaic", &Map::new(), "f").unwrap());
+        let side = E0_GRID as usize;
+        assert_eq!(cells.len(), side * side);
+        let cell = |row: usize, column: usize| cells[row * side + column].corners;
+        // Corners: bottom-left, bottom-right, top-right, top-left; the image's top is +u.
+        assert!(cell(0, 0)[3].distance(light.image_point(0.0, 0.0)) < 1e-6);
+        assert!(cell(side - 1, side - 1)[1].distance(light.image_point(1.0, 1.0)) < 1e-6);
+        for row in 0..side {
+            for column in 0..side {
+                let [bottom_left, bottom_right, top_right, _] = cell(row, column);
+                if column + 1 < side {
+                    assert_eq!([bottom_right, top_right], [cell(row, column + 1)[0], cell(row, column + 1)[3]], "({row}, {column})");
+                }
+                if row + 1 < side {
+                    assert_eq!([bottom_left, bottom_right], [cell(row + 1, column)[3], cell(row + 1, column)[2]], "({row}, {column})");
+                }
+            }
+        }
+    }
+
     #[test]
     fn the_cells_bounds_hold_every_cell_and_no_more() {
         let light = AreaLight::new(Vec3::new(1.0, 3.0, -2.0), -Vec3::Y, -Vec3::Z, Vec2::new(2.0, 1.0), 1.0).unwrap();

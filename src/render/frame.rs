@@ -9,7 +9,7 @@ use glam::{Mat4, Vec2, Vec3};
 use crate::error::{JobError, JobResult};
 use crate::gpu::scene::GpuScene;
 use crate::job::{Job, OutputFormat};
-use crate::light::{edges_acute_from, light_cells, AreaLight, LightCell, LightImage};
+use crate::light::{edges_acute_from, light_cells, AreaLight, LightCell, LightImage, E0_GRID};
 use crate::params::Params;
 use crate::render::method::ShadowMethod;
 
@@ -132,6 +132,14 @@ impl FrameSpec {
     /// whose shaders sum Lambert's edge terms (E0, `wedges`).
     pub fn acute_edges_constant(&self) -> (&'static str, f64) {
         ("ACUTE_EDGES", f64::from(u8::from(self.acute_edges)))
+    }
+
+    /// The light's cells are its whole `E0_GRID` × `E0_GRID` grid, none merged and none black
+    /// (so listed row by row from the image's top, left to right: `light_cells`), as under a
+    /// photograph: E0 sums each of the grid's corners and edges once for the cells that share
+    /// it (`GRID` in `shaders/e0_grid.wgsl`).
+    pub fn full_grid(&self) -> bool {
+        self.cells.len() == (E0_GRID * E0_GRID) as usize
     }
 
     /// Merges the job over the scene's defaults and checks what the merge produced; `method`

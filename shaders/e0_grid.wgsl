@@ -1,0 +1,243 @@
+// E0's exact sums over a light of 64 cells — its whole 8 × 8 grid, none merged and none
+// black, as a photograph's are (`light::irradiance::light_cells` lists them row by row from
+// the image's top, left to right): a corner of the grid belongs to up to four cells and an
+// edge to two, so walking the grid a row at a time, with the corners and edge terms of the
+// line above the row carried from the row before, takes each of the 81 corners and 144 edges
+// once where the cells' own sums (`polygon_vector`, `polygon_irradiance`) take 256 of each.
+// The same terms as the cells' sums, in another order: equal up to f32 rounding. `GRID`, a
+// pipeline constant, is set for such a light (`render::FrameSpec::full_grid`).
+//
+// A cell's boundary runs bottom, right, top, left (`cell_corners`): its bottom edge is the
+// grid's edge along the line below it, left to right; its right edge the vertical between
+// the two lines, upward; its top and left edges are its upper and left neighbours' bottom
+// and right edges, reversed — the same Θ Γ negated (Θ is symmetric, Γ ∝ a × b is not).
+// Only n · Θ Γ enters a receiver's sum, so an edge's term is carried as that one number.
+
+#import common/frame_inputs.wgsl
+
+override GRID: bool = false;
+
+// Cells per side of the grid; mirrors `light::E0_GRID`.
+const SIDE: u32 = 8u;
+
+// The grid's vertical lines, metres along r from the light's centre: the columns' left
+// edges, then the last column's right edge.
+fn grid_columns() -> array<f32, 9> {
+    var x: array<f32, 9>;
+    #unroll i in 0..8 {
+        x[i] = light_cells[i].rect.x;
+    }
+    x[SIDE] = light_cells[SIDE - 1u].rect.y;
+    return x;
+}
+
+// The point of the grid on vertical line `column` and horizontal line `line` (metres along
+// u), as `cell_corners` makes a cell's corner.
+fn grid_point(column: f32, line: f32) -> vec3<f32> {
+    return (frame.light_center.xyz + column * frame.light_r.xyz) + line * frame.light_u.xyz;
+}
+
+// One row of cells: its top and bottom lines, metres along u, and the cells' radiance.
+struct GridRow {
+    top: f32,
+    bottom: f32,
+    radiance: array<vec3<f32>, 8>,
+}
+
+fn grid_row(row: u32) -> GridRow {
+    var r: GridRow;
+    let first = light_cells[row * SIDE];
+    r.top = first.rect.w;
+    r.bottom = first.rect.z;
+    #unroll i in 0..8 {
+        r.radiance[i] = light_cells[row * SIDE + i].radiance.rgb;
+    }
+    return r;
+}
+
+// The corners of one horizontal line seen from x: unit directions, and their offsets from x
+// (for the horizon's crossings) with heights above x's horizon.
+struct GridLine {
+    dir: array<vec3<f32>, 9>,
+    offset: array<vec3<f32>, 9>,
+    height: array<f32, 9>,
+}
+
+fn grid_line(x: vec3<f32>, nx: vec3<f32>, columns: array<f32, 9>, line: f32) -> GridLine {
+    var l: GridLine;
+    #unroll i in 0..9 {
+        let p = grid_point(columns[i], line) - x;
+        l.offset[i] = p;
+        l.dir[i] = normalize(p);
+        l.height[i] = dot(p, nx);
+    }
+    return l;
+}
+
+// --- Every cell above the horizon: |n · Φ| per cell (`exact_above`) ----------------------
+
+// A pixel's walk down the grid: the line above the row (directions to its corners) and the
+// n · Θ Γ of its edges left to right, and the sum so far.
+struct AboveWalk {
+    dir: array<vec3<f32>, 9>,
+    edge: array<f32, 8>,
+    e0: vec3<f32>,
+}
+
+fn above_start(x: vec3<f32>, nx: vec3<f32>, columns: array<f32, 9>, line: f32) -> AboveWalk {
+    var w: AboveWalk;
+    #unroll i in 0..9 {
+        w.dir[i] = normalize(grid_point(columns[i], line) - x);
+    }
+    #unroll i in 0..8 {
+        w.edge[i] = dot(nx, edge_vector(w.dir[i], w.dir[i + 1u]));
+    }
+    w.e0 = vec3<f32>(0.0);
+    return w;
+}
+
+// Adds a row's cells, each ½ |n · (bottom + right − top − left)| times its radiance.
+fn above_row(w: ptr<function, AboveWalk>, x: vec3<f32>, nx: vec3<f32>, columns: array<f32, 9>, row: GridRow) {
+    var below: array<vec3<f32>, 9>;
+    var up: array<f32, 9>;
+    #unroll i in 0..9 {
+        below[i] = normalize(grid_point(columns[i], row.bottom) - x);
+        up[i] = dot(nx, edge_vector(below[i], (*w).dir[i]));
+    }
+    #unroll i in 0..8 {
+        let bottom = dot(nx, edge_vector(below[i], below[i + 1u]));
+        (*w).e0 += row.radiance[i] * (0.5 * abs(bottom + up[i + 1u] - (*w).edge[i] - up[i]));
+        (*w).edge[i] = bottom;
+    }
+    (*w).dir = below;
+}
+
+// --- Φ, the light's vector irradiance (the block corners' and checks' `exact_terms`) -----
+
+// A pixel's walk for Φ: the line above the row, its edges' Θ Γ left to right, and per
+// channel Φ so far (columns) with the sum of |n · Φ| of each cell (E0 where every cell lies
+// above the horizon).
+struct PhiWalk {
+    dir: array<vec3<f32>, 9>,
+    edge: array<vec3<f32>, 8>,
+    phi: mat3x3<f32>,
+    e0: vec3<f32>,
+}
+
+// Φ per channel (columns) and Σ radiance × |n · the cell's Φ| at x, over the grid.
+fn grid_phi(x: vec3<f32>, nx: vec3<f32>) -> PhiWalk {
+    let columns = grid_columns();
+    var w: PhiWalk;
+    let line = light_cells[0u].rect.w;
+    #unroll i in 0..9 {
+        w.dir[i] = normalize(grid_point(columns[i], line) - x);
+    }
+    #unroll i in 0..8 {
+        w.edge[i] = edge_vector(w.dir[i], w.dir[i + 1u]);
+    }
+    w.phi = mat3x3<f32>(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0));
+    w.e0 = vec3<f32>(0.0);
+    for (var r = 0u; r < SIDE; r++) {
+        let row = grid_row(r);
+        var below: array<vec3<f32>, 9>;
+        var up: array<vec3<f32>, 9>;
+        #unroll i in 0..9 {
+            below[i] = normalize(grid_point(columns[i], row.bottom) - x);
+            up[i] = edge_vector(below[i], w.dir[i]);
+        }
+        #unroll i in 0..8 {
+            let bottom = edge_vector(below[i], below[i + 1u]);
+            let cell = 0.5 * (bottom + up[i + 1u] - w.edge[i] - up[i]);
+            let l = row.radiance[i];
+            w.phi += mat3x3<f32>(cell * l.r, cell * l.g, cell * l.b);
+            w.e0 += l * abs(dot(nx, cell));
+            w.edge[i] = bottom;
+        }
+        w.dir = below;
+    }
+    return w;
+}
+
+// --- Cells clipped to the hemisphere (`exact_clipped`, and every straddling corner) ----
+
+// A grid edge clipped to x's hemisphere, as `clip_edge` clips a cell's: n · Θ Γ of its part
+// above the horizon (0 where it has none), and where the horizon crosses it.
+struct ClippedEdge {
+    term: f32,
+    crossing: vec3<f32>,
+}
+
+// The edge a → b: the corners' offsets from x, their unit directions and their heights
+// above x's horizon.
+fn clipped_edge(nx: vec3<f32>, a: vec3<f32>, b: vec3<f32>, ua: vec3<f32>, ub: vec3<f32>, da: f32, db: f32) -> ClippedEdge {
+    let above_a = da > HORIZON_EPS;
+    let above_b = db > HORIZON_EPS;
+    let q = horizon_crossing(a, b, da, db);
+    let term = dot(nx, edge_vector(select(q, ua, above_a), select(q, ub, above_b)));
+    return ClippedEdge(select(0.0, term, above_a || above_b), q);
+}
+
+// The edge along the horizon that closes a straddling cell's clipped polygon, from where its
+// boundary leaves the hemisphere to where it re-enters (`polygon_irradiance`): corners
+// above it (bottom-left, bottom-right, top-right, top-left) and the crossings of the edges
+// that start at each, in the boundary's order.
+fn closing_term(nx: vec3<f32>, above: vec4<bool>, bottom: vec3<f32>, right: vec3<f32>, top: vec3<f32>, left: vec3<f32>) -> f32 {
+    let leaves = above & !above.yzwx;
+    let enters = above.yzwx & !above;
+    let exit = select(select(select(left, top, leaves.z), right, leaves.y), bottom, leaves.x);
+    let entry = select(select(select(left, top, enters.z), right, enters.y), bottom, enters.x);
+    return select(0.0, dot(nx, edge_vector(exit, entry)), any(above) && !all(above));
+}
+
+// A pixel's walk down the grid: the line above the row (directions to its corners) and the
+// clipped edges along it, left to right, and the sum so far.
+struct ClippedWalk {
+    dir: array<vec3<f32>, 9>,
+    edge: array<ClippedEdge, 8>,
+    e0: vec3<f32>,
+}
+
+fn clipped_start(x: vec3<f32>, nx: vec3<f32>, columns: array<f32, 9>, line: f32) -> ClippedWalk {
+    let top = grid_line(x, nx, columns, line);
+    var w: ClippedWalk;
+    w.dir = top.dir;
+    #unroll i in 0..8 {
+        w.edge[i] = clipped_edge(nx, top.offset[i], top.offset[i + 1u], top.dir[i], top.dir[i + 1u], top.height[i], top.height[i + 1u]);
+    }
+    w.e0 = vec3<f32>(0.0);
+    return w;
+}
+
+// Adds a row's cells, each clipped: ½ |n · (its clipped edges + the closing edge)| times its
+// radiance. The top line's offsets and heights are made again (a subtraction and a dot
+// product each) rather than carried.
+fn clipped_row(w: ptr<function, ClippedWalk>, x: vec3<f32>, nx: vec3<f32>, columns: array<f32, 9>, row: GridRow) {
+    let below = grid_line(x, nx, columns, row.bottom);
+    var top_offset: array<vec3<f32>, 9>;
+    var top_height: array<f32, 9>;
+    var up: array<ClippedEdge, 9>;
+    #unroll i in 0..9 {
+        top_offset[i] = grid_point(columns[i], row.top) - x;
+        top_height[i] = dot(top_offset[i], nx);
+        up[i] = clipped_edge(nx, below.offset[i], top_offset[i], below.dir[i], (*w).dir[i], below.height[i], top_height[i]);
+    }
+    #unroll i in 0..8 {
+        let bottom = clipped_edge(nx, below.offset[i], below.offset[i + 1u], below.dir[i], below.dir[i + 1u], below.height[i], below.height[i + 1u]);
+        let above = vec4<f32>(below.height[i], below.height[i + 1u], top_height[i + 1u], top_height[i]) > vec4<f32>(HORIZON_EPS);
+        let closing = closing_term(nx, above, bottom.crossing, up[i + 1u].crossing, (*w).edge[i].crossing, up[i].crossing);
+        let sum = bottom.term + up[i + 1u].term - (*w).edge[i].term - up[i].term + closing;
+        (*w).e0 += row.radiance[i] * (0.5 * abs(sum));
+        (*w).edge[i] = bottom;
+    }
+    (*w).dir = below.dir;
+}
+
+// The clipped sum at one point (the corners' and the checks' `clipped_sum`, `exact_clipped`).
+fn grid_clipped(x: vec3<f32>, nx: vec3<f32>) -> vec3<f32> {
+    let columns = grid_columns();
+    var w = clipped_start(x, nx, columns, light_cells[0u].rect.w);
+    for (var row = 0u; row < SIDE; row++) {
+        clipped_row(&w, x, nx, columns, grid_row(row));
+    }
+    return w.e0;
+}
