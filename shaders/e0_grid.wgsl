@@ -90,7 +90,7 @@ fn above_start(x: vec3<f32>, nx: vec3<f32>, columns: array<f32, 9>, line: f32) -
         w.dir[i] = normalize(grid_point(columns[i], line) - x);
     }
     #unroll i in 0..8 {
-        w.edge[i] = dot(nx, edge_vector(w.dir[i], w.dir[i + 1u]));
+        w.edge[i] = edge_term(nx, w.dir[i], w.dir[i + 1u]);
     }
     w.e0 = vec3<f32>(0.0);
     return w;
@@ -102,10 +102,10 @@ fn above_row(w: ptr<function, AboveWalk>, x: vec3<f32>, nx: vec3<f32>, columns: 
     var up: array<f32, 9>;
     #unroll i in 0..9 {
         below[i] = normalize(grid_point(columns[i], row.bottom) - x);
-        up[i] = dot(nx, edge_vector(below[i], (*w).dir[i]));
+        up[i] = edge_term(nx, below[i], (*w).dir[i]);
     }
     #unroll i in 0..8 {
-        let bottom = dot(nx, edge_vector(below[i], below[i + 1u]));
+        let bottom = edge_term(nx, below[i], below[i + 1u]);
         (*w).e0 += row.radiance[i] * (0.5 * abs(bottom + up[i + 1u] - (*w).edge[i] - up[i]));
         (*w).edge[i] = bottom;
     }
@@ -173,8 +173,13 @@ fn clipped_edge(nx: vec3<f32>, a: vec3<f32>, b: vec3<f32>, ua: vec3<f32>, ub: ve
     let above_a = da > HORIZON_EPS;
     let above_b = db > HORIZON_EPS;
     let q = horizon_crossing(a, b, da, db);
-    let term = dot(nx, edge_vector(select(q, ua, above_a), select(q, ub, above_b)));
-    return ClippedEdge(select(0.0, term, above_a || above_b), q);
+    // With neither end above, the edge from ua to itself, whose term is exactly 0 (q is no
+    // crossing there, and NaN where da = db). Chosen among the directions, not among the
+    // terms: an edge with both ends above then takes the arithmetic of `above_row`, term and
+    // sum alike, bit for bit (`exact_above` and `exact_clipped` agree where both apply).
+    let neither = !above_a && !above_b;
+    let term = edge_term(nx, select(q, ua, above_a || neither), select(select(q, ub, above_b), ua, neither));
+    return ClippedEdge(term, q);
 }
 
 // The edge along the horizon that closes a straddling cell's clipped polygon, from where its
@@ -186,7 +191,7 @@ fn closing_term(nx: vec3<f32>, above: vec4<bool>, bottom: vec3<f32>, right: vec3
     let enters = above.yzwx & !above;
     let exit = select(select(select(left, top, leaves.z), right, leaves.y), bottom, leaves.x);
     let entry = select(select(select(left, top, enters.z), right, enters.y), bottom, enters.x);
-    return select(0.0, dot(nx, edge_vector(exit, entry)), any(above) && !all(above));
+    return select(0.0, edge_term(nx, exit, entry), any(above) && !all(above));
 }
 
 // A pixel's walk down the grid: the line above the row (directions to its corners) and the

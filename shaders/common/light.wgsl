@@ -34,6 +34,21 @@ fn edge_vector(a: vec3<f32>, b: vec3<f32>) -> vec3<f32> {
     return select(vec3<f32>(0.0), c * ratio, sin2 > 1e-24 || cos_theta >= 0.0);
 }
 
+// n · `edge_vector(a, b)`, the edge's term in a receiver's sum: the scale applied to the
+// one number rather than to the vector (E0's grid sums, shaders/e0_grid.wgsl).
+fn edge_term(nx: vec3<f32>, a: vec3<f32>, b: vec3<f32>) -> f32 {
+    let c = cross(a, b);
+    let cos_theta = dot(a, b);
+    let acute = theta_over_sin(1.0 - abs(cos_theta));
+    let height = dot(nx, c);
+    if ACUTE_EDGES {
+        return height * acute;
+    }
+    let sin2 = dot(c, c);
+    let ratio = select(acute, PI * inverseSqrt(sin2) - acute, cos_theta < 0.0);
+    return select(0.0, height * ratio, sin2 > 1e-24 || cos_theta >= 0.0);
+}
+
 const PI: f32 = 3.14159265;
 
 // Set (a pipeline constant) where no receiver of the frame can see an edge of the light under
