@@ -23,30 +23,26 @@ struct LightCell {
 // obtuse (`ACUTE_EDGES`).
 fn edge_vector(a: vec3<f32>, b: vec3<f32>) -> vec3<f32> {
     let c = cross(a, b);
-    let cos_theta = dot(a, b);
+    return c * edge_scale(c, dot(a, b));
+}
+
+// n · `edge_vector(a, b)`, the edge's term in a receiver's sum: the scale applied to the one
+// number rather than to the vector (E0's grid sums, shaders/e0_grid.wgsl: `exact_above` −9 %).
+fn edge_term(nx: vec3<f32>, a: vec3<f32>, b: vec3<f32>) -> f32 {
+    let c = cross(a, b);
+    return dot(nx, c) * edge_scale(c, dot(a, b));
+}
+
+// Θ / sin Θ for the edge whose a × b is c and a · b is cos Θ (`edge_vector`).
+fn edge_scale(c: vec3<f32>, cos_theta: f32) -> f32 {
     let acute = theta_over_sin(1.0 - abs(cos_theta));
     if ACUTE_EDGES {
-        return c * acute;
+        return acute;
     }
     let sin2 = dot(c, c);
     let ratio = select(acute, PI * inverseSqrt(sin2) - acute, cos_theta < 0.0);
     // a = −b (the point on the edge's line between its ends): no plane, no term.
-    return select(vec3<f32>(0.0), c * ratio, sin2 > 1e-24 || cos_theta >= 0.0);
-}
-
-// n · `edge_vector(a, b)`, the edge's term in a receiver's sum: the scale applied to the
-// one number rather than to the vector (E0's grid sums, shaders/e0_grid.wgsl).
-fn edge_term(nx: vec3<f32>, a: vec3<f32>, b: vec3<f32>) -> f32 {
-    let c = cross(a, b);
-    let cos_theta = dot(a, b);
-    let acute = theta_over_sin(1.0 - abs(cos_theta));
-    let height = dot(nx, c);
-    if ACUTE_EDGES {
-        return height * acute;
-    }
-    let sin2 = dot(c, c);
-    let ratio = select(acute, PI * inverseSqrt(sin2) - acute, cos_theta < 0.0);
-    return select(0.0, height * ratio, sin2 > 1e-24 || cos_theta >= 0.0);
+    return select(0.0, ratio, sin2 > 1e-24 || cos_theta >= 0.0);
 }
 
 const PI: f32 = 3.14159265;
