@@ -178,33 +178,38 @@ fn png_pixels_made_on_the_gpu_match_the_cpu_transfer_function() {
 fn e0_on_the_gpu_matches_its_cpu_twin() {
     // Pixel (16, 16) of a 33×33 view looking straight down at (3, 0, 3) sees exactly that
     // point of the floor (albedo 0.7), lit by a tilted coloured light and unshadowed — under
-    // each of four lights, for both forms of Lambert's edge term (`edge_vector` in
-    // shaders/common/light.wgsl): the first three lie within the scene's reach, so their
-    // frames take the general form, and the second hangs 0.15 m above the point, where the
-    // light's long edges subtend obtuse angles; the third stands on the floor facing the
-    // point, its lower part below the point's horizon, so its cells are clipped; the fourth is
-    // far above the scene (`ACUTE_EDGES`). Under `stripes` (cells merged into stripes) and
-    // under `mosaic` (the whole 8 × 8 grid, summed by the grid's shared corners and edges:
-    // shaders/e0_grid.wgsl). The pixel is a corner of E0's blocks, summed exactly.
+    // each of six lights, for both forms of Lambert's edge term (`edge_vector` in
+    // shaders/common/light.wgsl): all but the last lie within the scene's reach, so their
+    // frames take the general form; the second hangs 0.15 m above the point, where the
+    // light's long edges subtend obtuse angles; the third, fourth and fifth stand on the floor
+    // facing the point — the third's and fourth's lower parts below the point's horizon, so
+    // their cells are clipped, the horizon parallel to the third's vertical edges and across
+    // the fourth's at a slant; the fifth's bottom edge lies on the floor, in the horizon's
+    // plane; the last is far above the scene (`ACUTE_EDGES`). Under `stripes` (cells merged
+    // into stripes) and under `mosaic` (the whole 8 × 8 grid, summed by the grid's shared
+    // corners and edges: shaders/e0_grid.wgsl). The pixel is a corner of E0's blocks, summed
+    // exactly. (centre, direction, up, acute, whether the cells straddle the horizon)
     let lights = [
-        (Vec3::new(2.0, 1.5, 2.5), Vec3::new(0.3, -1.0, 0.2), false),
-        (Vec3::new(3.0, 0.15, 3.0), Vec3::new(0.0, -1.0, 0.1), false),
-        (Vec3::new(3.0, 0.25, 2.4), Vec3::new(0.0, -0.3, 1.0), false),
-        (Vec3::new(3.0, 6.0, 3.0), Vec3::new(0.1, -1.0, 0.0), true),
+        (Vec3::new(2.0, 1.5, 2.5), Vec3::new(0.3, -1.0, 0.2), Vec3::X, false, false),
+        (Vec3::new(3.0, 0.15, 3.0), Vec3::new(0.0, -1.0, 0.1), Vec3::X, false, false),
+        (Vec3::new(3.0, 0.25, 2.4), Vec3::new(0.0, -0.3, 1.0), Vec3::X, false, true),
+        (Vec3::new(3.0, 0.3, 2.3), Vec3::new(0.2, -0.4, 1.0), Vec3::new(1.0, 0.6, 0.0), false, true),
+        (Vec3::new(3.0, 0.35, 2.4), Vec3::Z, Vec3::Y, false, false),
+        (Vec3::new(3.0, 6.0, 3.0), Vec3::new(0.1, -1.0, 0.0), Vec3::X, true, false),
     ];
     let size = Vec2::new(1.5, 0.7);
     // The torus scene: its 12 m floor, and a box holding the torus above it too.
     let (floor_min, floor_max, scene_max) = (Vec3::new(-6.0, 0.0, -6.0), Vec3::new(6.0, 0.0, 6.0), Vec3::new(6.0, 2.0, 6.0));
     let point = Vec3::new(3.0, 0.0, 3.0);
     let mut ratios = Vec::new();
-    for (center, direction, acute) in lights {
-        let light = AreaLight::new(center, direction, Vec3::X, size, 10.0).unwrap();
+    for (center, direction, up, acute, straddles) in lights {
+        let light = AreaLight::new(center, direction, up, size, 10.0).unwrap();
         // What the frame takes: acute within a box holding the scene, or general within one
         // the scene holds.
         let (min, max) = if acute { (floor_min, scene_max) } else { (floor_min, floor_max) };
         assert_eq!(edges_acute_from(&light, min, max), acute, "light at {center}");
         for image in ["stripes", "mosaic"] {
-            let light_json = json!({"center": center.to_array(), "direction": direction.to_array(), "up": [1, 0, 0],
+            let light_json = json!({"center": center.to_array(), "direction": direction.to_array(), "up": up.to_array(),
                                     "size": size.to_array(), "intensity": 10, "image": {"builtin": image}});
             let job = job(json!({
                 "scene": {"builtin": "torus"},
@@ -215,10 +220,9 @@ fn e0_on_the_gpu_matches_its_cpu_twin() {
             let (frame, _) = common::engine().render_frame(&job, &()).unwrap();
             let cells = light_cells(&light, &LightImage::builtin(image, &Default::default(), "light.image").unwrap());
             assert_eq!(cells.len() == 64, image == "mosaic", "{image}: {} cells", cells.len());
-            // The third light's cells straddle the point's horizon (its clipped sums).
             let heights: Vec<f32> = cells.iter().flat_map(|c| c.corners).map(|corner| corner.y).collect();
-            let straddles = heights.iter().any(|&h| h > 0.0) && heights.iter().any(|&h| h < 0.0);
-            assert_eq!(straddles, center.y < 0.3 && direction.z > 0.5, "light at {center}: the cells' heights {heights:?}");
+            let crossed = heights.iter().any(|&h| h > 0.0) && heights.iter().any(|&h| h < 0.0);
+            assert_eq!(crossed, straddles, "light at {center}: the cells' heights {heights:?}");
             let expected = unshadowed_irradiance(&light, &cells, point, Vec3::Y) * 0.7 / std::f32::consts::PI;
             let got = frame.color[16 * 33 + 16];
             for k in 0..3 {
