@@ -99,13 +99,15 @@ fn above_start(x: vec3<f32>, nx: vec3<f32>, columns: array<f32, 9>, line: f32) -
 // Adds a row's cells, each ½ |n · (bottom + right − top − left)| times its radiance.
 fn above_row(w: ptr<function, AboveWalk>, x: vec3<f32>, nx: vec3<f32>, columns: array<f32, 9>, row: GridRow) {
     var below: array<vec3<f32>, 9>;
+    var turned: array<vec3<f32>, 9>;
     var up: array<f32, 9>;
     #unroll i in 0..9 {
         below[i] = normalize(grid_point(columns[i], row.bottom) - x);
-        up[i] = edge_term(nx, below[i], (*w).dir[i]);
+        turned[i] = cross(nx, below[i]);
+        up[i] = edge_term_turned(turned[i], below[i], (*w).dir[i]);
     }
     #unroll i in 0..8 {
-        let bottom = edge_term(nx, below[i], below[i + 1u]);
+        let bottom = edge_term_turned(turned[i], below[i], below[i + 1u]);
         (*w).e0 += row.radiance[i] * (0.5 * abs(bottom + up[i + 1u] - (*w).edge[i] - up[i]));
         (*w).edge[i] = bottom;
     }

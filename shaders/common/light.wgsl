@@ -29,8 +29,15 @@ fn edge_vector(a: vec3<f32>, b: vec3<f32>) -> vec3<f32> {
 // n · `edge_vector(a, b)`, the edge's term in a receiver's sum: the scale applied to the one
 // number rather than to the vector (E0's grid sums, shaders/e0_grid.wgsl: `exact_above` −9 %).
 fn edge_term(nx: vec3<f32>, a: vec3<f32>, b: vec3<f32>) -> f32 {
-    let c = cross(a, b);
-    return dot(nx, c) * edge_scale(c, dot(a, b));
+    return edge_term_turned(cross(nx, a), a, b);
+}
+
+// `edge_term` with n × a given: n · (a × b) = (n × a) · b, so a corner's n × a serves every
+// edge that starts at it (E0's grid walk starts two at each corner: `exact_above` 32 → 29 ms
+// on `terrain` under `mosaic`). a × b itself is left to `edge_scale`, which reads it only
+// where an edge may be obtuse.
+fn edge_term_turned(turned: vec3<f32>, a: vec3<f32>, b: vec3<f32>) -> f32 {
+    return dot(turned, b) * edge_scale(cross(a, b), dot(a, b));
 }
 
 // Θ / sin Θ for the edge whose a × b is c and a · b is cos Θ (`edge_vector`).
