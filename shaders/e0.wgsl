@@ -97,13 +97,14 @@ fn exact_terms(x: vec3<f32>, nx: vec3<f32>, depth: f32) -> Corner {
         let walk = grid_phi(x, nx);
         phi = walk.phi;
         e0_above = walk.e0;
-    }
-    for (var k = 0u; k < select(frame.sizes.w, 0u, GRID); k++) {
-        let cell = light_cells[k];
-        let corners = cell_corners(cell);
-        let phi_cell = polygon_vector(x, corners);
-        phi += mat3x3<f32>(phi_cell * cell.radiance.r, phi_cell * cell.radiance.g, phi_cell * cell.radiance.b);
-        e0_above += cell.radiance.rgb * abs(dot(nx, phi_cell));
+    } else {
+        for (var k = 0u; k < frame.sizes.w; k++) {
+            let cell = light_cells[k];
+            let corners = cell_corners(cell);
+            let phi_cell = polygon_vector(x, corners);
+            phi += mat3x3<f32>(phi_cell * cell.radiance.r, phi_cell * cell.radiance.g, phi_cell * cell.radiance.b);
+            e0_above += cell.radiance.rgb * abs(dot(nx, phi_cell));
+        }
     }
     let horizon = cells_horizon(x, nx);
     let e0 = select(clipped_sum(x, nx, !horizon.above && !horizon.below), e0_above, horizon.above);

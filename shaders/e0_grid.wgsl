@@ -37,6 +37,15 @@ fn grid_point(column: f32, line: f32) -> vec3<f32> {
     return (frame.light_center.xyz + column * frame.light_r.xyz) + line * frame.light_u.xyz;
 }
 
+// The unit directions from x to the corners of the horizontal line `line` (metres along u).
+fn grid_directions(x: vec3<f32>, columns: array<f32, 9>, line: f32) -> array<vec3<f32>, 9> {
+    var dir: array<vec3<f32>, 9>;
+    #unroll i in 0..9 {
+        dir[i] = normalize(grid_point(columns[i], line) - x);
+    }
+    return dir;
+}
+
 // One row of cells: its top and bottom lines, metres along u, and the cells' radiance.
 struct GridRow {
     top: f32,
@@ -86,9 +95,7 @@ struct AboveWalk {
 
 fn above_start(x: vec3<f32>, nx: vec3<f32>, columns: array<f32, 9>, line: f32) -> AboveWalk {
     var w: AboveWalk;
-    #unroll i in 0..9 {
-        w.dir[i] = normalize(grid_point(columns[i], line) - x);
-    }
+    w.dir = grid_directions(x, columns, line);
     #unroll i in 0..8 {
         w.edge[i] = edge_term(nx, w.dir[i], w.dir[i + 1u]);
     }
@@ -98,11 +105,10 @@ fn above_start(x: vec3<f32>, nx: vec3<f32>, columns: array<f32, 9>, line: f32) -
 
 // Adds a row's cells, each ½ |n · (bottom + right − top − left)| times its radiance.
 fn above_row(w: ptr<function, AboveWalk>, x: vec3<f32>, nx: vec3<f32>, columns: array<f32, 9>, row: GridRow) {
-    var below: array<vec3<f32>, 9>;
+    let below = grid_directions(x, columns, row.bottom);
     var turned: array<vec3<f32>, 9>;
     var up: array<f32, 9>;
     #unroll i in 0..9 {
-        below[i] = normalize(grid_point(columns[i], row.bottom) - x);
         turned[i] = cross(nx, below[i]);
         up[i] = edge_term_turned(turned[i], below[i], (*w).dir[i]);
     }
@@ -130,10 +136,7 @@ struct PhiWalk {
 fn grid_phi(x: vec3<f32>, nx: vec3<f32>) -> PhiWalk {
     let columns = grid_columns();
     var w: PhiWalk;
-    let line = light_cells[0u].rect.w;
-    #unroll i in 0..9 {
-        w.dir[i] = normalize(grid_point(columns[i], line) - x);
-    }
+    w.dir = grid_directions(x, columns, light_cells[0u].rect.w);
     #unroll i in 0..8 {
         w.edge[i] = edge_vector(w.dir[i], w.dir[i + 1u]);
     }
@@ -141,10 +144,9 @@ fn grid_phi(x: vec3<f32>, nx: vec3<f32>) -> PhiWalk {
     w.e0 = vec3<f32>(0.0);
     for (var r = 0u; r < SIDE; r++) {
         let row = grid_row(r);
-        var below: array<vec3<f32>, 9>;
+        let below = grid_directions(x, columns, row.bottom);
         var up: array<vec3<f32>, 9>;
         #unroll i in 0..9 {
-            below[i] = normalize(grid_point(columns[i], row.bottom) - x);
             up[i] = edge_vector(below[i], w.dir[i]);
         }
         #unroll i in 0..8 {

@@ -102,7 +102,7 @@ fn append(name: &str, out: &mut String, seen: &mut HashSet<String>) {
 /// (`shaders/e0_grid.wgsl`) whose carried state is arrays made its clipped pass 35 × slower
 /// than the same loop unrolled. Mesa unrolls only small loops itself; this unrolls the ones a
 /// shader marks. Each copy is a block that binds `i` as a `let` constant, so the body is the
-/// loop's body unchanged.
+/// loop's body unchanged — copied as it stands: a directive inside it is not read.
 fn unroll<'a>(name: &str, header: &str, lines: &mut impl Iterator<Item = &'a str>, out: &mut String) {
     let malformed = format!("{name}: `#unroll {header}` is not `#unroll NAME in A..B {{`");
     let parsed = header.split_once(" in ").and_then(|(counter, range)| {

@@ -163,8 +163,9 @@ impl Renderer {
         let io_layout = self.layouts.e0_output.clone();
         let device = &self.gpu.device;
         let inputs_layout = &self.layouts.inputs;
-        let constants = [spec.acute_edges_constant(), ("GRID", f64::from(u8::from(spec.full_grid())))];
-        let variant = u32::from(spec.acute_edges) | u32::from(spec.full_grid()) << 1;
+        let grid = spec.full_grid();
+        let constants = [spec.acute_edges_constant(), ("GRID", f64::from(u8::from(grid)))];
+        let variant = u32::from(spec.acute_edges) | u32::from(grid) << 1;
         let mut entry = |name: &'static str, entry: &'static str| {
             self.pipelines.compute(PipelineKey { name, variant }, || {
                 screen_compute_pipeline(device, inputs_layout, name, ("e0.wgsl", entry), &io_layout, &constants)
