@@ -297,41 +297,12 @@ fn clipped_row(w: ptr<function, ClippedWalk>, x: vec3<f32>, nx: vec3<f32>, colum
     (*w).crossing_angle = crossing_angle;
 }
 
-// The clipped sum at one point (the corners' and the checks' `clipped_sum`, `exact_clipped`),
-// over the rows not wholly below the horizon (`rows_above`): a row below adds nothing but
-// its terms' rounding (`exact_clipped` 62–64 → 55–58 ms on `terrain` under `mosaic`, four
-// rounds in turn; the horizon of a landscape's slope leaves the light's lower rows below it).
+// The clipped sum at one point (the corners' and the checks' `clipped_sum`, `exact_clipped`).
 fn grid_clipped(x: vec3<f32>, nx: vec3<f32>) -> vec3<f32> {
     let columns = grid_columns();
-    let rows = rows_above(x, nx, columns);
-    let top = light_cells[min(rows.x, SIDE - 1u) * SIDE].rect.w;
-    var w = clipped_start(x, nx, columns, top, light_cells[SIDE * SIDE - 1u].rect.z);
-    for (var row = rows.x; row < rows.y; row++) {
+    var w = clipped_start(x, nx, columns, light_cells[0u].rect.w, light_cells[SIDE * SIDE - 1u].rect.z);
+    for (var row = 0u; row < SIDE; row++) {
         clipped_row(&w, x, nx, columns, grid_row(row));
     }
     return w.e0;
-}
-
-// The rows of cells not wholly below x's horizon: the first, and the one past the last. They
-// form one run (the horizon is a straight line across the light), and a row lies below where
-// both its lines do — the height is linear along a line, so its ends are its extremes. A
-// line within rounding of the horizon can leave a corner between its ends above it by
-// rounding alone: such a cell is a sliver, and its term is rounding too.
-fn rows_above(x: vec3<f32>, nx: vec3<f32>, columns: array<f32, 9>) -> vec2<u32> {
-    var first = SIDE;
-    var last = 0u;
-    for (var row = 0u; row < SIDE; row++) {
-        let rect = light_cells[row * SIDE].rect;
-        if line_above(x, nx, columns, rect.w) || line_above(x, nx, columns, rect.z) {
-            first = min(first, row);
-            last = row + 1u;
-        }
-    }
-    return vec2<u32>(first, max(first, last));
-}
-
-// Whether any corner of the horizontal line `line` lies above x's horizon, as the walk judges.
-fn line_above(x: vec3<f32>, nx: vec3<f32>, columns: array<f32, 9>, line: f32) -> bool {
-    let ends = vec2<f32>(dot(grid_point(columns[0], line) - x, nx), dot(grid_point(columns[SIDE], line) - x, nx));
-    return max(ends.x, ends.y) > HORIZON_EPS;
 }
