@@ -196,7 +196,7 @@ fn clipped_term(nx: vec3<f32>, q: vec3<f32>, ua: vec3<f32>, ub: vec3<f32>, da: f
 // about n from its exit to its entry: the difference of the two crossings' angles from one
 // direction of the circle (`horizon_angle`). Each crossing's angle is made once, where the
 // crossing is found (18 a pixel), instead of an edge term per cell (64: `exact_clipped`
-// 62–67 → 54–58 ms on `terrain` under `mosaic`, three rounds in turn).
+// ~62 → ~52 ms on `terrain` under `mosaic`, medians of six rounds in turn).
 struct HorizonCircle {
     origin: vec3<f32>,  // the direction to the point of the line nearest the light's centre
     quarter: vec3<f32>, // n × origin, a quarter turn on
