@@ -431,10 +431,16 @@ fn tile_pixel(origin: vec2<u32>, k: u32) -> TilePixel {
     if any(pixel >= frame.sizes.xy) {
         return px;
     }
-    px.at = pixel.y * frame.sizes.x + pixel.x;
+    px.at = tile_pixel_index(origin, k);
     px.receiver = receivers[2u * px.at];
     px.valid = px.receiver.w != NOT_COVERED;
     return px;
+}
+
+// The index into per-pixel buffers of the k-th pixel of a tile known to lie on screen.
+fn tile_pixel_index(origin: vec2<u32>, k: u32) -> u32 {
+    let pixel = origin + vec2<u32>(k % TILE, k / TILE);
+    return pixel.y * frame.sizes.x + pixel.x;
 }
 
 fn add_light(at: u32, delta: vec3<i32>) {

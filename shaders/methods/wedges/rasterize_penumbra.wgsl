@@ -64,10 +64,20 @@ fn shade_listed(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocati
     params = params_uniform;
     let i = list_position(group, lane);
     if i < atomicLoad(&inside.count) {
+        // Only the fields the share reads, each float a load lane by lane on lavapipe: the
+        // item's primitive and tile, the wedge's edge (its planes were `mark_inside`'s), the
+        // pixel's index without its receiver record (listed pixels lie on screen and are
+        // covered; `penumbra_delta_inside` reads the record) — the pass −3 % on `terrain`.
         let pair = inside.pairs[i];
-        let job = work[pair.x];
-        let at = tile_pixel(tile_origin(job), pair.y).at;
-        add_light(at, penumbra_delta_inside(wedges[job.primitive - params.polygon_count], at));
+        var job: WorkItem;
+        job.primitive = work[pair.x].primitive;
+        job.origin = work[pair.x].origin;
+        let at = tile_pixel_index(tile_origin(job), pair.y);
+        var w: Wedge;
+        let index = job.primitive - params.polygon_count;
+        w.a = wedges[index].a;
+        w.b = wedges[index].b;
+        add_light(at, penumbra_delta_inside(w, at));
     }
 }
 
