@@ -1228,8 +1228,12 @@ fn wedges_variants_agree_culling_changes_only_the_work() {
     let zfail = wedges_frame(json!({"name": "wedges", "volume": "zfail"}), None);
     // Tiles of 10 pixels do not divide the 128 × 96 frame: the last row and column are cut.
     let uneven = wedges_frame(json!({"name": "wedges", "tile": 10}), None);
+    // Tiles of 32 pixels: a lane of the penumbra pass's listing holds 128 of a tile's pixels
+    // on lavapipe and appends them 32 at a time (`mark_inside`).
+    let large = wedges_frame(json!({"name": "wedges", "tile": 32}), None);
     assert_eq!(culled.visibility, unculled.visibility, "culled and unculled render the same image");
     assert_eq!(culled.visibility, uneven.visibility, "tiles that do not divide the frame cull no receiver a primitive changes");
+    assert_eq!(culled.visibility, large.visibility, "a lane's pixels listed in several appends are all shaded");
     assert_eq!(culled.visibility, single.visibility, "three-pass and single-pass render the same image");
     // A landscape is one object whose slopes facing away from the light ignore its own
     // primitives: tiles of only such pixels are culled for them, and slopes seen at a grazing
