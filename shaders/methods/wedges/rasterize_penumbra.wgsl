@@ -62,7 +62,9 @@ fn mark_inside(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups)
 }
 
 // Appends the pairs of item `index` with the pixels first + LANES × b of its tile for each bit
-// b set in `mask`, with one atomic for the lot.
+// b set in `mask`, with one atomic for the lot — the append of E0's `append_rows` and `jfa`'s
+// `list_run_for_shading`, each written for its own list: WGSL passes no pointer to a storage
+// buffer into a function.
 fn append_pairs(index: u32, first: u32, mask: u32) {
     if mask == 0u {
         return;
