@@ -31,14 +31,20 @@ struct VolumePolygon {
     v3: vec4<f32>,
 }
 
-// A penumbra wedge: its silhouette edge a → b (oriented as the boundary of the light-facing
-// triangles), w of `a` the multiplicity, w of `b` the edge's object id, and its two planes
-// through the edge tangent to the light (the wedge on their positive side).
+// A penumbra wedge: its silhouette edge, and its two planes through the edge tangent to the
+// light (the wedge on their positive side).
 struct Wedge {
-    a: vec4<f32>,
-    b: vec4<f32>,
+    edge: WedgeEdge,
     front: vec4<f32>,
     back: vec4<f32>,
+}
+
+// A wedge's silhouette edge a → b (oriented as the boundary of the light-facing triangles), w
+// of `a` the multiplicity, w of `b` the edge's object id: all that a share at a point inside
+// the wedge reads (`wedge_share`), loaded alone where the planes were tested before.
+struct WedgeEdge {
+    a: vec4<f32>,
+    b: vec4<f32>,
 }
 
 // One unit of rasterisation work: a primitive over a tile. `primitive` < polygon_count is a

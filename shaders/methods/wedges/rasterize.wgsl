@@ -182,7 +182,7 @@ struct ProjectedEdge {
     crosses: bool,
 }
 
-fn projected_edge(w: Wedge, p: vec3<f32>) -> ProjectedEdge {
+fn projected_edge(w: WedgeEdge, p: vec3<f32>) -> ProjectedEdge {
     var edge: ProjectedEdge;
     let c = frame.light_center.xyz;
     let n = frame.light_n.xyz;
@@ -235,7 +235,7 @@ fn projected_edge(w: Wedge, p: vec3<f32>) -> ProjectedEdge {
 // signed fraction of the irradiance the whole light gives p, times the multiplicity; 0
 // outside the wedge. Per channel (`colored_share`) for a coloured light, where `e0` is p's
 // unshadowed irradiance.
-fn wedge_share(w: Wedge, p: vec3<f32>, normal: vec3<f32>, e0: vec3<f32>) -> vec3<f32> {
+fn wedge_share(w: WedgeEdge, p: vec3<f32>, normal: vec3<f32>, e0: vec3<f32>) -> vec3<f32> {
     let edge = projected_edge(w, p);
     if !edge.crosses {
         return vec3<f32>(0.0);
@@ -396,8 +396,9 @@ fn item_index(group: vec3<u32>, groups: vec3<u32>) -> u32 {
     return group.y * groups.x + group.x;
 }
 
-fn tile_origin(job: WorkItem) -> vec2<u32> {
-    return vec2<u32>(job.origin & 0xffffu, job.origin >> 16u);
+// A work item's tile's first pixel, from its packed `origin`.
+fn tile_origin(origin: u32) -> vec2<u32> {
+    return vec2<u32>(origin & 0xffffu, origin >> 16u);
 }
 
 fn tile_item(group: vec3<u32>, groups: vec3<u32>, local: u32) -> TileItem {
@@ -408,7 +409,7 @@ fn tile_item(group: vec3<u32>, groups: vec3<u32>, local: u32) -> TileItem {
         return item;
     }
     item.job = work[index];
-    item.origin = tile_origin(item.job);
+    item.origin = tile_origin(item.job.origin);
     if local == 0u {
         let span = min(item.origin + TILE, frame.sizes.xy) - item.origin;
         atomicAdd(&counters[0], span.x * span.y);
@@ -426,21 +427,20 @@ struct TilePixel {
 }
 
 fn tile_pixel(origin: vec2<u32>, k: u32) -> TilePixel {
-    let pixel = origin + vec2<u32>(k % TILE, k / TILE);
+    let pixel = tile_pixel_at(origin, k);
     var px: TilePixel;
     if any(pixel >= frame.sizes.xy) {
         return px;
     }
-    px.at = tile_pixel_index(origin, k);
+    px.at = pixel_index(pixel);
     px.receiver = receivers[2u * px.at];
     px.valid = px.receiver.w != NOT_COVERED;
     return px;
 }
 
-// The index into per-pixel buffers of the k-th pixel of a tile known to lie on screen.
-fn tile_pixel_index(origin: vec2<u32>, k: u32) -> u32 {
-    let pixel = origin + vec2<u32>(k % TILE, k / TILE);
-    return pixel.y * frame.sizes.x + pixel.x;
+// The k-th pixel of the tile whose first pixel is `origin`.
+fn tile_pixel_at(origin: vec2<u32>, k: u32) -> vec2<u32> {
+    return origin + vec2<u32>(k % TILE, k / TILE);
 }
 
 fn add_light(at: u32, delta: vec3<i32>) {
@@ -467,7 +467,7 @@ fn umbra_delta(poly: VolumePolygon, receiver: vec4<f32>) -> i32 {
 // §3: "if p is inside the wedge" — its plane equations, and not the wedge's own object.
 fn inside_wedge(w: Wedge, receiver: vec4<f32>) -> bool {
     let p = vec4<f32>(receiver.xyz, 1.0);
-    return w.b.w != receiver.w && dot(w.front, p) >= 0.0 && dot(w.back, p) >= 0.0;
+    return w.edge.b.w != receiver.w && dot(w.front, p) >= 0.0 && dot(w.back, p) >= 0.0;
 }
 
 // The penumbra term at a receiver (pixel `at`) for a wedge.
@@ -475,11 +475,11 @@ fn penumbra_delta(w: Wedge, px: TilePixel) -> vec3<i32> {
     if !inside_wedge(w, px.receiver) {
         return vec3<i32>(0);
     }
-    return penumbra_delta_inside(w, px.at);
+    return penumbra_delta_inside(w.edge, px.at);
 }
 
 // `penumbra_delta` for a receiver known to lie inside the wedge (listed by `mark_inside`).
-fn penumbra_delta_inside(w: Wedge, at: u32) -> vec3<i32> {
+fn penumbra_delta_inside(w: WedgeEdge, at: u32) -> vec3<i32> {
     var e0 = vec3<f32>(1.0);
     if CHANNELS == 3u {
         e0 = e0_in[at].rgb;

@@ -48,7 +48,7 @@ fn mark_inside(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups)
     var first = local;
     for (var k = local; k < TILE * TILE; k += LANES) {
         let px = tile_pixel(item.origin, k);
-        if px.valid && inside_wedge(w, px.receiver) && projected_edge(w, px.receiver.xyz).crosses {
+        if px.valid && inside_wedge(w, px.receiver) && projected_edge(w.edge, px.receiver.xyz).crosses {
             mask |= 1u << bit;
         }
         bit++;
@@ -101,15 +101,9 @@ fn shade_listed(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocati
         // pixel's index without its receiver record (listed pixels lie on screen and are
         // covered; `penumbra_delta_inside` reads the record) — the pass −3 % on `terrain`.
         let pair = inside.pairs[i];
-        var job: WorkItem;
-        job.primitive = work[pair.x].primitive;
-        job.origin = work[pair.x].origin;
-        let at = tile_pixel_index(tile_origin(job), pair.y);
-        var w: Wedge;
-        let index = job.primitive - params.polygon_count;
-        w.a = wedges[index].a;
-        w.b = wedges[index].b;
-        add_light(at, penumbra_delta_inside(w, at));
+        let at = pixel_index(tile_pixel_at(tile_origin(work[pair.x].origin), pair.y));
+        let edge = wedges[work[pair.x].primitive - params.polygon_count].edge;
+        add_light(at, penumbra_delta_inside(edge, at));
     }
 }
 

@@ -108,8 +108,8 @@ struct PolygonGpu {
     v: [[f32; 4]; 4],
 }
 
-/// `Wedge` in `common.wgsl`: a.w is the multiplicity, b.w the object id; the wedge's two
-/// tangent planes (inside ≥ 0; (0, 0, 0, 1) when there are none).
+/// `Wedge` in `common.wgsl` (a and b its `edge`): a.w is the multiplicity, b.w the object id;
+/// the wedge's two tangent planes (inside ≥ 0; (0, 0, 0, 1) when there are none).
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 struct WedgeGpu {
