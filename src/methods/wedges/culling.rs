@@ -26,6 +26,13 @@
 //!   of a landscape's far slopes needs none of the landscape's — on `terrain` under `stripes`
 //!   80 % of the work items that reached the rasteriser changed no pixel, most for this.
 //!
+//! A primitive's screen box (the tiles it is tested over) is its region's, cut where the
+//! region runs deeper below the light's plane than any receiver can lie — the scene's
+//! deepest point (and, for a z-pass volume polygon, the eye's depth: `crossing_part`). Wedges
+//! and side quads run out to `reach`, far below a landscape, and on `terrain` the cut took the
+//! culling from ~40 to ~25 ms of a frame's CPU time (while the device idles), and its tighter
+//! depth range 2 % of the work items.
+//!
 //! Each region holds every receiver the primitive changes, so culling changes no pixel (a test
 //! renders with and without it). The boxes are widened by half a pixel and a thousandth of
 //! their depth, so a receiver that the G-buffer places a rounding away from its pixel centre,
@@ -56,6 +63,13 @@ pub(super) struct Footprint {
     planes: Vec<Vec4>,
     /// The primitive's object: receivers that ignore it (`tiles.wgsl`) are not changed by it.
     object: u32,
+}
+
+impl Footprint {
+    /// No tiles: the primitive changes no receiver.
+    fn none(object: u32) -> Self {
+        Footprint { tiles_x: (0, 0), tiles_y: (0, 0), z: (0.0, 0.0), planes: Vec::new(), object }
+    }
 }
 
 /// An NDC box: (x0, x1, y0, y1, z0, z1).
@@ -145,13 +159,15 @@ pub(super) struct Work {
 }
 
 /// Culls every (primitive, tile) pair in each primitive's bounding box; without `culling`,
-/// every such pair survives.
+/// every such pair survives. `deepest`: how far below the light's plane the scene's deepest
+/// point lies (no receiver lies deeper).
 #[allow(clippy::too_many_arguments)]
 pub(super) fn cull(
     volume: &Volume,
     silhouette: &[SilhouetteEdge],
     light: &AreaLight,
     reach: f32,
+    deepest: f32,
     grid: &TileGrid,
     view_proj: &Mat4,
     eye: Vec3,
@@ -161,14 +177,18 @@ pub(super) fn cull(
     let to_ndc = view_proj.inverse().transpose();
     // Primitives are culled independently: on all cores (a frame's culling waits on the CPU
     // while the device idles; on `terrain` it was 64 ms on one core).
+    let deepest = deepest + 1e-5 * reach;
     let umbra: Vec<Footprint> = (volume.polygons.par_iter().zip(&volume.object))
-        .map(|(p, &object)| footprint(view_proj, p, crossing_region(p, eye, zfail), object, grid))
+        .map(|(p, &object)| match crossing_part(p, light, eye, deepest, zfail) {
+            part if part.is_empty() => Footprint::none(object),
+            part => footprint(view_proj, &part, crossing_region(p, eye, zfail), object, grid),
+        })
         .collect();
     let wedges: Vec<Footprint> = silhouette
         .par_iter()
-        .map(|e| match wedge_region(e, light, reach) {
+        .map(|e| match wedge_region(e, light, reach, deepest) {
             Some((hull, planes)) => footprint(view_proj, &hull, planes, e.object, grid),
-            None => Footprint { tiles_x: (0, 0), tiles_y: (0, 0), z: (0.0, 0.0), planes: Vec::new(), object: e.object },
+            None => Footprint::none(e.object),
         })
         .collect();
     let survivors = |footprint: &Footprint, umbra: bool| -> Vec<u32> {
@@ -420,15 +440,42 @@ fn crossing_region(polygon: &[Vec3; 4], eye: Vec3, zfail: bool) -> Vec<Vec4> {
     planes
 }
 
+/// The part of a volume polygon where an eye ray can cross it where the count looks. For
+/// z-pass the crossing lies on the segment from the eye to a receiver, so no deeper below the
+/// light's plane than the deeper of the two — the eye, or at most `deepest`, the scene's
+/// deepest point: the polygon is cut there (Sutherland–Hodgman against one plane; empty where
+/// all of it lies deeper). For z-fail the crossing lies beyond the receiver: the whole polygon.
+fn crossing_part(polygon: &[Vec3; 4], light: &AreaLight, eye: Vec3, deepest: f32, zfail: bool) -> Vec<Vec3> {
+    if zfail {
+        return polygon.to_vec();
+    }
+    let height = |p: Vec3| light.n.dot(p - light.center);
+    let limit = deepest.max(height(eye));
+    let mut part = Vec::with_capacity(5);
+    for k in 0..4 {
+        let (p, q) = (polygon[k], polygon[(k + 1) % 4]);
+        let (dp, dq) = (limit - height(p), limit - height(q));
+        if dp >= 0.0 {
+            part.push(p);
+        }
+        if (dp >= 0.0) != (dq >= 0.0) {
+            part.push(p + (q - p) * (dp / (dp - dq)));
+        }
+    }
+    part
+}
+
 /// Where a silhouette edge's wedge can change a receiver: the points from which some point of
 /// the edge a → b hides some point of the light, `p = e + s(e − y)` with `s ≥ 0`. That set lies
 /// in `conv{a, b} + cone{a − y, b − y}` over the light's corners y (`y` is a mean of corners, `e`
 /// of a and b); its planes are those spanned by two of the generators (the edge and the
 /// eight directions) that hold every direction and both ends. Returns points whose hull holds
-/// the region out to `reach` from the edge (for the screen bounding box) and the planes, or
+/// the region out to `reach` from the edge and no deeper below the light's plane than
+/// `deepest` (the scene's deepest point: every receiver lies above it), for the screen
+/// bounding box, and the planes, or
 /// None when the edge never hides the light from anything below it (it does not reach below
 /// the light's plane: `wedge_share` returns 0).
-fn wedge_region(e: &SilhouetteEdge, light: &AreaLight, reach: f32) -> Option<(Vec<Vec3>, Vec<Vec4>)> {
+fn wedge_region(e: &SilhouetteEdge, light: &AreaLight, reach: f32, deepest: f32) -> Option<(Vec<Vec3>, Vec<Vec4>)> {
     let corners = light_corners(light);
     let height = |p: Vec3| light.n.dot(p - light.center);
     let lowest = height(e.a).min(height(e.b));
@@ -438,9 +485,14 @@ fn wedge_region(e: &SilhouetteEdge, light: &AreaLight, reach: f32) -> Option<(Ve
         return None;
     }
     let directions: Vec<Vec3> = [e.a, e.b].iter().flat_map(|&p| corners.map(|y| p - y)).collect();
-    // Points e + s(e − y) with |p − e| ≤ reach have s ≤ reach / |e − y| ≤ reach / lowest: the
-    // hull of the ends and of each end pushed that far along each direction holds them.
-    let far = reach / lowest.max(1e-6 * reach);
+    // Points e + s(e − y) with |p − e| ≤ reach have s ≤ reach / |e − y| ≤ reach / lowest; and
+    // a receiver lies no deeper below the light's plane than `deepest`, where p's depth is
+    // h(e)(1 + s) (y lies on the plane), so s ≤ deepest / h(e) − 1 ≤ deepest / lowest − 1 too:
+    // the hull of the ends and of each end pushed the lesser along each direction holds them.
+    // On `terrain` the second is the tighter by far: an edge on a ridge, the landscape's
+    // lowest point a little below it.
+    let lowest = lowest.max(1e-6 * reach);
+    let far = (reach / lowest).min((deepest / lowest - 1.0).max(0.0));
     let mut hull = vec![e.a, e.b];
     hull.extend(directions.iter().zip([e.a, e.a, e.a, e.a, e.b, e.b, e.b, e.b]).map(|(d, p)| p + *d * far));
     let unit: Vec<Vec3> = directions.iter().map(|d| d.normalize_or_zero()).collect();
@@ -483,7 +535,7 @@ mod tests {
     fn the_wedge_region_holds_every_point_the_edge_hides_light_from() {
         let light = AreaLight::new(Vec3::Y * 3.0, -Vec3::Y, -Vec3::Z, Vec2::new(2.0, 1.0), 1.0).unwrap();
         let edge = SilhouetteEdge { a: Vec3::new(0.5, 1.0, -0.7), b: Vec3::new(0.2, 1.3, 0.6), multiplicity: 1, object: 0 };
-        let (_, planes) = wedge_region(&edge, &light, 20.0).unwrap();
+        let (_, planes) = wedge_region(&edge, &light, 20.0, 20.0).unwrap();
         assert!(planes.len() >= 4, "{planes:?}");
         // Points behind the edge as seen from any light point are inside.
         for (i, j, s) in [(0.0, 0.0, 0.5), (1.0, 1.0, 3.0), (0.3, 0.9, 10.0), (0.5, 0.2, 0.01)] {
@@ -496,7 +548,82 @@ mod tests {
         assert!(!inside(&planes, Vec3::new(8.0, 0.0, 0.0)));
         // An edge above the light's plane hides nothing below it.
         let above = SilhouetteEdge { a: Vec3::new(0.0, 4.0, 0.0), b: Vec3::new(1.0, 4.0, 0.0), multiplicity: 1, object: 0 };
-        assert!(wedge_region(&above, &light, 20.0).is_none());
+        assert!(wedge_region(&above, &light, 20.0, 20.0).is_none());
+    }
+
+    /// Whether `p` lies in the convex hull of `points`, judged by its support in many
+    /// directions (a point outside is beyond the hull's support in some direction).
+    fn within_hull(points: &[Vec3], p: Vec3) -> bool {
+        let steps = 24;
+        (0..steps).all(|i| {
+            (0..2 * steps).all(|j| {
+                let (theta, phi) = (std::f32::consts::PI * (i as f32 + 0.5) / steps as f32, std::f32::consts::PI * j as f32 / steps as f32);
+                let u = Vec3::new(theta.sin() * phi.cos(), theta.cos(), theta.sin() * phi.sin());
+                let support = points.iter().map(|v| u.dot(*v)).fold(f32::NEG_INFINITY, f32::max);
+                u.dot(p) <= support + 1e-4
+            })
+        })
+    }
+
+    #[test]
+    fn the_wedges_box_holds_every_hidden_receiver_no_deeper_than_the_scene() {
+        // The light 3 m up facing down; the scene's deepest point 2.2 m below it, 0.3 m under
+        // the edge's deeper end. Hidden points e + s(e − y) at that depth or above lie in the
+        // hull; the hull reaches no farther than the scene's depth allows, far short of `reach`.
+        let light = AreaLight::new(Vec3::Y * 3.0, -Vec3::Y, -Vec3::Z, Vec2::new(2.0, 1.0), 1.0).unwrap();
+        let edge = SilhouetteEdge { a: Vec3::new(0.5, 1.3, -0.7), b: Vec3::new(0.2, 1.1, 0.6), multiplicity: 1, object: 0 };
+        let (reach, deepest) = (20.0, 2.2);
+        let (hull, _) = wedge_region(&edge, &light, reach, deepest).unwrap();
+        let depth = |p: Vec3| light.n.dot(p - light.center);
+        let mut held = 0;
+        for i in 0..=4 {
+            for (j, k) in [(0.0, 0.0), (1.0, 1.0), (0.0, 1.0), (1.0, 0.0), (0.5, 0.5), (0.2, 0.7)] {
+                let e = edge.a.lerp(edge.b, i as f32 / 4.0);
+                // Down to the scene's depth exactly, the hull's extreme.
+                let bottom = deepest / depth(e) - 1.0 - 1e-5;
+                for s in [0.0, 0.05, 0.1, 0.2, 0.3, 0.6, 1.0, 3.0, bottom, 0.5 * bottom] {
+                    let p = e + (e - light.image_point(j, k)) * s;
+                    if depth(p) <= deepest {
+                        assert!(within_hull(&hull, p), "{i} {j} {k} {s}: {p}");
+                        held += 1;
+                    }
+                }
+            }
+        }
+        assert!(held > 60, "{held} points tested");
+        // Reaching down to the scene's depth from the higher end (1.7 m below the light) takes
+        // s ≤ 2.2 / 1.7 − 1 ≈ 0.29 along directions under 2.7 m long: the hull ends within
+        // 0.8 m of the edge.
+        let far = hull.iter().map(|v| v.distance(edge.a).min(v.distance(edge.b))).fold(0.0f32, f32::max);
+        assert!(far < 1.2, "{far}");
+        let (loose, _) = wedge_region(&edge, &light, reach, reach).unwrap();
+        assert!(loose.iter().any(|v| v.distance(edge.a) > 10.0), "without the scene's depth it reaches out to `reach`");
+    }
+
+    #[test]
+    fn a_z_pass_polygon_is_cut_where_no_eye_ray_to_a_receiver_crosses_it() {
+        // A side quad from an edge 2 m below the light down to 20 m below it, the scene no
+        // deeper than 2.5 m, the eye at 1 m: z-pass crossings lie above 2.5 m.
+        let light = AreaLight::new(Vec3::Y * 3.0, -Vec3::Y, -Vec3::Z, Vec2::new(2.0, 1.0), 1.0).unwrap();
+        let quad = [Vec3::new(0.0, 1.0, 0.0), Vec3::new(1.0, 1.0, 0.0), Vec3::new(1.5, -17.0, 0.5), Vec3::new(-0.5, -17.0, 0.5)];
+        let depth = |p: Vec3| light.n.dot(p - light.center);
+        let eye = Vec3::new(0.0, 2.0, 5.0);
+        let part = crossing_part(&quad, &light, eye, 2.5, false);
+        assert_eq!(part.len(), 4);
+        assert!(part.iter().all(|p| depth(*p) <= 2.5 + 1e-5), "{part:?}");
+        // Every point of the quad at most that deep lies in the part.
+        for (u, v) in [(0.0, 0.0), (1.0, 0.0), (0.5, 0.02), (0.9, 0.027), (0.1, 0.01)] {
+            let p = quad[0].lerp(quad[1], u).lerp(quad[3].lerp(quad[2], u), v);
+            assert!(depth(p) > 2.5 || within_hull(&part, p), "{u} {v}: {p}");
+        }
+        // An eye deeper than the scene keeps the crossings down to its own depth.
+        let low_eye = Vec3::new(0.0, -7.0, 5.0);
+        assert!(crossing_part(&quad, &light, low_eye, 2.5, false).iter().any(|p| depth(*p) > 9.9));
+        // z-fail counts crossings beyond the receiver: the whole quad; and a quad wholly deeper
+        // than the scene and the eye crosses no eye ray to a receiver.
+        assert_eq!(crossing_part(&quad, &light, eye, 2.5, true), quad.to_vec());
+        let deep = quad.map(|p| p - Vec3::Y * 30.0);
+        assert!(crossing_part(&deep, &light, eye, 2.5, false).is_empty());
     }
 
     /// An edge of `object` under a 2 × 1 m light, and its wedge's footprint over one tile with
@@ -504,7 +631,7 @@ mod tests {
     fn edge_under_light(object: u32) -> (AreaLight, SilhouetteEdge, Footprint) {
         let light = AreaLight::new(Vec3::Y * 3.0, -Vec3::Y, -Vec3::Z, Vec2::new(2.0, 1.0), 1.0).unwrap();
         let edge = SilhouetteEdge { a: Vec3::new(0.5, 1.0, -0.7), b: Vec3::new(0.2, 1.3, 0.6), multiplicity: 1, object };
-        let (_, planes) = wedge_region(&edge, &light, 20.0).unwrap();
+        let (_, planes) = wedge_region(&edge, &light, 20.0, 20.0).unwrap();
         (light, edge, Footprint { tiles_x: (0, 1), tiles_y: (0, 1), z: (f32::NEG_INFINITY, f32::INFINITY), planes, object })
     }
 

@@ -197,7 +197,9 @@ impl ShadowMethod for Wedges {
         let tile_ranges = buffers.measure_tiles(ctx, &pipelines)?;
         let culling_start = std::time::Instant::now();
         let grid = TileGrid::new(buffers.grid_size, uniforms.tile, (spec.width, spec.height), &tile_ranges, camera, &view_proj);
-        let work = cull(&volume, &silhouette, light, reach, &grid, &view_proj, camera.eye, params.get(&CULLING), zfail);
+        // How far below the light's plane the scene reaches: no receiver lies deeper.
+        let deepest = ctx.scene.corners().iter().map(|p| light.n.dot(*p - c)).fold(0.0f32, f32::max);
+        let work = cull(&volume, &silhouette, light, reach, deepest, &grid, &view_proj, camera.eye, params.get(&CULLING), zfail);
         let single = params.get(&PASSES) == "single";
         let passes = work.passes(single, [&*pipelines.umbra, &*pipelines.penumbra, &*pipelines.both]);
         let kept: usize = passes.iter().map(|(_, items)| items.len()).sum::<usize>();
