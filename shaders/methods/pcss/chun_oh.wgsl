@@ -16,13 +16,13 @@ fn unblocked_visibility() -> vec3<f32> {
 
 fn filtered_visibility(f: Filter) -> vec3<f32> {
     if !f.found_blocker {
-        atomicAdd(&counters[0], 1u);
+        tally_add(0u, 1u);
         return unblocked_visibility();
     }
     let e0 = f32(f.lit) / f32(f.taps);
     let s = subdivide(e0, QuadtreeParams(params.mode, params.threshold, params.light_threshold, params.lattice / 4u));
-    atomicAdd(&counters[4], 1u);
-    atomicAdd(&counters[3], s.forced);
-    atomicAdd(&counters[s.level], 1u);
+    tally_add(4u, 1u);
+    tally_add(3u, s.forced);
+    tally_add(s.level, 1u);
     return coloured_visibility(s, e0);
 }

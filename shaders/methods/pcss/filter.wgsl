@@ -50,6 +50,15 @@ var<private> params: FilterParams;
 
 const MODE_PCSS: u32 = 0u;
 
+// The filter pass's counts, tallied per workgroup and added to `counters` once per workgroup
+// (`filter_listed`): on lavapipe an atomic is a loop over the lanes, and both cores adding to
+// the same few counters for every pixel passed their cache line back and forth.
+var<workgroup> tally: array<atomic<u32>, 8>;
+
+fn tally_add(counter: u32, n: u32) {
+    atomicAdd(&tally[counter], n);
+}
+
 // A pixel's filter: how many of its lattice × lattice shadow tests are lit, and whether the
 // blocker search found anything (if not, the filter did not run: all lit).
 struct Filter {
@@ -207,6 +216,13 @@ fn run_filter(pixel: vec2<u32>) -> Filter {
     let kernel = lattice(ls.uv, clamp(cone_half_extent(d, z_avg), vec2<f32>(0.5 * texel), vec2<f32>(params.max_filter_texels * texel)), m);
     let cell_side = m / 4u;
     let cell_mask = (1u << cell_side) - 1u;
+    // chun-oh's 4×4 cells, a row of cells per vector, held in registers until the last row:
+    // `cells` indexed by the lattice's row lives in memory, where on lavapipe each update was
+    // a gather and a scatter lane by lane.
+    var cell_row0 = vec4<u32>(0u);
+    var cell_row1 = vec4<u32>(0u);
+    var cell_row2 = vec4<u32>(0u);
+    var cell_row3 = vec4<u32>(0u);
     for (var j = 0u; j < m; j++) {
         // The row's tests as bits: lit = set.
         let taps = tap_row(plane, kernel, j);
@@ -216,10 +232,25 @@ fn run_filter(pixel: vec2<u32>) -> Filter {
         }
         f.lit += countOneBits(row);
         if params.mode != MODE_PCSS {
-            let first = (j / cell_side) * 4u;
-            for (var x = 0u; x < 4u; x++) {
-                cells[first + x] += countOneBits(row & (cell_mask << (x * cell_side)));
-            }
+            let lit = vec4<u32>(
+                countOneBits(row & cell_mask),
+                countOneBits(row & (cell_mask << cell_side)),
+                countOneBits(row & (cell_mask << (2u * cell_side))),
+                countOneBits(row & (cell_mask << (3u * cell_side))),
+            );
+            let y = j / cell_side;
+            cell_row0 += select(vec4<u32>(0u), lit, y == 0u);
+            cell_row1 += select(vec4<u32>(0u), lit, y == 1u);
+            cell_row2 += select(vec4<u32>(0u), lit, y == 2u);
+            cell_row3 += select(vec4<u32>(0u), lit, y == 3u);
+        }
+    }
+    if params.mode != MODE_PCSS {
+        #unroll x in 0..4 {
+            cells[x] = cell_row0[x];
+            cells[4u + x] = cell_row1[x];
+            cells[8u + x] = cell_row2[x];
+            cells[12u + x] = cell_row3[x];
         }
     }
     return f;
@@ -291,7 +322,14 @@ fn filter_listed(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocat
     if i < atomicLoad(&listed.count) {
         let pixel = listed_pixel(listed.pixels[i]);
         let v = filtered_visibility(run_filter(pixel));
-        atomicAdd(&counters[5], 1u);
+        tally_add(5u, 1u);
         visibility_out[pixel_index(pixel)] = vec4<f32>(v, 1.0);
+    }
+    workgroupBarrier();
+    if lane < 8u {
+        let n = atomicLoad(&tally[lane]);
+        if n > 0u {
+            atomicAdd(&counters[lane], n);
+        }
     }
 }

@@ -11,7 +11,7 @@ fn unblocked_visibility() -> vec3<f32> {
 }
 
 fn filtered_visibility(f: Filter) -> vec3<f32> {
-    atomicAdd(&counters[0], 1u);
-    atomicAdd(&counters[4], u32(f.found_blocker));
+    tally_add(0u, 1u);
+    tally_add(4u, u32(f.found_blocker));
     return vec3<f32>(f32(f.lit) / f32(f.taps));
 }
