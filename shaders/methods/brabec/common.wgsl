@@ -490,8 +490,11 @@ fn known(p: vec2<u32>) -> f32 {
 // interpolation runs with every t it reads known. In one pass, one lane of an 8-wide SIMD
 // group searching kept the other seven waiting; the results are the same.
 fn refine(a: vec2<u32>, step: vec2<u32>, span: u32, marking: bool) {
-    var stack_lo: array<u32, 4>;
-    var stack_hi: array<u32, 4>;
+    // The stack of spans still to refine, as vectors: an array indexed by the lane's own `top`
+    // lives in memory on lavapipe (a gather or a scatter lane by lane per access), a vector's
+    // lane-varying component is a few selects in registers.
+    var stack_lo = vec4<u32>(0u);
+    var stack_hi = vec4<u32>(0u);
     var top = 1u;
     stack_lo[0] = 0u;
     stack_hi[0] = span;
