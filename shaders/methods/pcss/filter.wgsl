@@ -6,7 +6,8 @@
 // The passes (`src/methods/filter.rs`), after the shadow map is copied into a buffer: per pixel, the
 // uncovered ones and those outside the shadow frustum written at once, the others listed; then
 // the search and the filter over the listed pixels alone (common/pixel_list.wgsl says why). The importing method defines
-// `unblocked_visibility()` and `filtered_visibility(filter)`, which also counts the pixel.
+// `unblocked_visibility()` and `filtered_visibility(filter)`, which also counts the pixel
+// (`tally_add`).
 
 #import common/frame_inputs.wgsl
 #import common/shadow.wgsl
