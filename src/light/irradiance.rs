@@ -140,7 +140,7 @@ pub fn polygon_irradiance(x: Vec3, nx: Vec3, corners: &[Vec3; 4]) -> f32 {
 /// The unshadowed irradiance E0 at x (contract §1), per channel: the sum over light cells.
 pub fn unshadowed_irradiance(light: &AreaLight, cells: &[LightCell], x: Vec3, nx: Vec3) -> Vec3 {
     // One-sided emitter: only points on the lit side receive anything.
-    if (x - light.center).dot(light.n) <= 0.0 {
+    if light.depth(x) <= 0.0 {
         return Vec3::ZERO;
     }
     cells.iter().map(|c| c.radiance * polygon_irradiance(x, nx, &c.corners)).sum()

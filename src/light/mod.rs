@@ -73,6 +73,12 @@ impl AreaLight {
         Vec2::new(d.dot(self.r), d.dot(self.u))
     }
 
+    /// How far `p` lies below the light's plane, along its normal: positive on the side it
+    /// lights, 0 on the plane.
+    pub fn depth(&self, p: Vec3) -> f32 {
+        self.n.dot(p - self.center)
+    }
+
     pub fn area_m2(&self) -> f32 {
         self.size_m.x * self.size_m.y
     }

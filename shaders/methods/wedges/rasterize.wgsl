@@ -100,12 +100,6 @@ fn volume_crossing(poly: VolumePolygon, eye: vec3<f32>, p: vec3<f32>) -> i32 {
     return select(m, -m, entering == (params.zfail == 1u));
 }
 
-// The vertex after k of a polygon of `count`: a comparison, where `(k + 1) % count` was a
-// division lane by lane on lavapipe, in every turn of the polygon loops.
-fn next(k: u32, count: u32) -> u32 {
-    return select(k + 1u, 0u, k + 1u == count);
-}
-
 // The share's polygons (up to 8 light-plane points) live in registers: every access to a
 // vertex is at an index fixed when the shader is built — the clip's loop unrolled, a vertex at
 // a lane-varying index picked by a chain of selects (`polygon_vertex`), one written by a
@@ -286,8 +280,13 @@ fn wedge_share(w: WedgeEdge, p: vec3<f32>, normal: vec3<f32>, e0: vec3<f32>) -> 
     if below_horizon {
         // Part of the light lies below p's horizon, where Lambert's formula would need
         // clipping: weigh by area instead (E0 carries the exact horizon).
-        for (var k = 0u; k < count; k++) {
-            part += 0.5 * cross2(polygon_vertex(&poly, k), polygon_vertex(&poly, next(k, count)));
+        // Each vertex read once: an edge's end is the next edge's start.
+        let first = poly[0];
+        var a = first;
+        for (var k = 1u; k <= count; k++) {
+            let b = select(polygon_vertex(&poly, k), first, k == count);
+            part += 0.5 * cross2(a, b);
+            a = b;
         }
         part = abs(part);
         whole = 4.0 * half.x * half.y;

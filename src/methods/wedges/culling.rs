@@ -449,12 +449,11 @@ fn crossing_part(polygon: &[Vec3; 4], light: &AreaLight, eye: Vec3, deepest: f32
     if zfail {
         return polygon.to_vec();
     }
-    let height = |p: Vec3| light.n.dot(p - light.center);
-    let limit = deepest.max(height(eye));
+    let limit = deepest.max(light.depth(eye));
     let mut part = Vec::with_capacity(5);
     for k in 0..4 {
         let (p, q) = (polygon[k], polygon[(k + 1) % 4]);
-        let (dp, dq) = (limit - height(p), limit - height(q));
+        let (dp, dq) = (limit - light.depth(p), limit - light.depth(q));
         if dp >= 0.0 {
             part.push(p);
         }
@@ -477,8 +476,7 @@ fn crossing_part(polygon: &[Vec3; 4], light: &AreaLight, eye: Vec3, deepest: f32
 /// the light's plane: `wedge_share` returns 0).
 fn wedge_region(e: &SilhouetteEdge, light: &AreaLight, reach: f32, deepest: f32) -> Option<(Vec<Vec3>, Vec<Vec4>)> {
     let corners = light_corners(light);
-    let height = |p: Vec3| light.n.dot(p - light.center);
-    let lowest = height(e.a).min(height(e.b));
+    let lowest = light.depth(e.a).min(light.depth(e.b));
     // `wedge_share` gives 0 unless both ends lie below the light (min(ha, hb) > 0); the margin
     // keeps an edge whose GPU rounding could disagree.
     if lowest < -1e-5 * reach {
@@ -574,16 +572,15 @@ mod tests {
         let edge = SilhouetteEdge { a: Vec3::new(0.5, 1.3, -0.7), b: Vec3::new(0.2, 1.1, 0.6), multiplicity: 1, object: 0 };
         let (reach, deepest) = (20.0, 2.2);
         let (hull, _) = wedge_region(&edge, &light, reach, deepest).unwrap();
-        let depth = |p: Vec3| light.n.dot(p - light.center);
         let mut held = 0;
         for i in 0..=4 {
             for (j, k) in [(0.0, 0.0), (1.0, 1.0), (0.0, 1.0), (1.0, 0.0), (0.5, 0.5), (0.2, 0.7)] {
                 let e = edge.a.lerp(edge.b, i as f32 / 4.0);
                 // Down to the scene's depth exactly, the hull's extreme.
-                let bottom = deepest / depth(e) - 1.0 - 1e-5;
+                let bottom = deepest / light.depth(e) - 1.0 - 1e-5;
                 for s in [0.0, 0.05, 0.1, 0.2, 0.3, 0.6, 1.0, 3.0, bottom, 0.5 * bottom] {
                     let p = e + (e - light.image_point(j, k)) * s;
-                    if depth(p) <= deepest {
+                    if light.depth(p) <= deepest {
                         assert!(within_hull(&hull, p), "{i} {j} {k} {s}: {p}");
                         held += 1;
                     }
@@ -606,19 +603,18 @@ mod tests {
         // deeper than 2.5 m, the eye at 1 m: z-pass crossings lie above 2.5 m.
         let light = AreaLight::new(Vec3::Y * 3.0, -Vec3::Y, -Vec3::Z, Vec2::new(2.0, 1.0), 1.0).unwrap();
         let quad = [Vec3::new(0.0, 1.0, 0.0), Vec3::new(1.0, 1.0, 0.0), Vec3::new(1.5, -17.0, 0.5), Vec3::new(-0.5, -17.0, 0.5)];
-        let depth = |p: Vec3| light.n.dot(p - light.center);
         let eye = Vec3::new(0.0, 2.0, 5.0);
         let part = crossing_part(&quad, &light, eye, 2.5, false);
         assert_eq!(part.len(), 4);
-        assert!(part.iter().all(|p| depth(*p) <= 2.5 + 1e-5), "{part:?}");
+        assert!(part.iter().all(|p| light.depth(*p) <= 2.5 + 1e-5), "{part:?}");
         // Every point of the quad at most that deep lies in the part.
         for (u, v) in [(0.0, 0.0), (1.0, 0.0), (0.5, 0.02), (0.9, 0.027), (0.1, 0.01)] {
             let p = quad[0].lerp(quad[1], u).lerp(quad[3].lerp(quad[2], u), v);
-            assert!(depth(p) > 2.5 || within_hull(&part, p), "{u} {v}: {p}");
+            assert!(light.depth(p) > 2.5 || within_hull(&part, p), "{u} {v}: {p}");
         }
         // An eye deeper than the scene keeps the crossings down to its own depth.
         let low_eye = Vec3::new(0.0, -7.0, 5.0);
-        assert!(crossing_part(&quad, &light, low_eye, 2.5, false).iter().any(|p| depth(*p) > 9.9));
+        assert!(crossing_part(&quad, &light, low_eye, 2.5, false).iter().any(|p| light.depth(*p) > 9.9));
         // z-fail counts crossings beyond the receiver: the whole quad; and a quad wholly deeper
         // than the scene and the eye crosses no eye ray to a receiver.
         assert_eq!(crossing_part(&quad, &light, eye, 2.5, true), quad.to_vec());

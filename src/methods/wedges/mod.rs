@@ -198,7 +198,7 @@ impl ShadowMethod for Wedges {
         let culling_start = std::time::Instant::now();
         let grid = TileGrid::new(buffers.grid_size, uniforms.tile, (spec.width, spec.height), &tile_ranges, camera, &view_proj);
         // How far below the light's plane the scene reaches: no receiver lies deeper.
-        let deepest = ctx.scene.corners().iter().map(|p| light.n.dot(*p - c)).fold(0.0f32, f32::max);
+        let deepest = ctx.scene.corners().iter().map(|p| light.depth(*p)).fold(0.0f32, f32::max);
         let work = cull(&volume, &silhouette, light, reach, deepest, &grid, &view_proj, camera.eye, params.get(&CULLING), zfail);
         let single = params.get(&PASSES) == "single";
         let passes = work.passes(single, [&*pipelines.umbra, &*pipelines.penumbra, &*pipelines.both]);
