@@ -207,38 +207,13 @@ fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index
     // The last texel of a layer: each holds its map's crop (`MapCrop`), all the same size.
     let last = vec2<f32>(textureDimensions(depths)) - 1.0;
     var s = Sums(vec3<f32>(0.0), vec3<f32>(0.0));
-    if SAMPLES > 0u { add_sample(&s, receiver, last, 0u, batch.samples[0]); }
-    if SAMPLES > 1u { add_sample(&s, receiver, last, 1u, batch.samples[1]); }
-    if SAMPLES > 2u { add_sample(&s, receiver, last, 2u, batch.samples[2]); }
-    if SAMPLES > 3u { add_sample(&s, receiver, last, 3u, batch.samples[3]); }
-    if SAMPLES > 4u { add_sample(&s, receiver, last, 4u, batch.samples[4]); }
-    if SAMPLES > 5u { add_sample(&s, receiver, last, 5u, batch.samples[5]); }
-    if SAMPLES > 6u { add_sample(&s, receiver, last, 6u, batch.samples[6]); }
-    if SAMPLES > 7u { add_sample(&s, receiver, last, 7u, batch.samples[7]); }
-    if SAMPLES > 8u { add_sample(&s, receiver, last, 8u, batch.samples[8]); }
-    if SAMPLES > 9u { add_sample(&s, receiver, last, 9u, batch.samples[9]); }
-    if SAMPLES > 10u { add_sample(&s, receiver, last, 10u, batch.samples[10]); }
-    if SAMPLES > 11u { add_sample(&s, receiver, last, 11u, batch.samples[11]); }
-    if SAMPLES > 12u { add_sample(&s, receiver, last, 12u, batch.samples[12]); }
-    if SAMPLES > 13u { add_sample(&s, receiver, last, 13u, batch.samples[13]); }
-    if SAMPLES > 14u { add_sample(&s, receiver, last, 14u, batch.samples[14]); }
-    if SAMPLES > 15u { add_sample(&s, receiver, last, 15u, batch.samples[15]); }
-    if SAMPLES > 16u { add_sample(&s, receiver, last, 16u, batch.samples[16]); }
-    if SAMPLES > 17u { add_sample(&s, receiver, last, 17u, batch.samples[17]); }
-    if SAMPLES > 18u { add_sample(&s, receiver, last, 18u, batch.samples[18]); }
-    if SAMPLES > 19u { add_sample(&s, receiver, last, 19u, batch.samples[19]); }
-    if SAMPLES > 20u { add_sample(&s, receiver, last, 20u, batch.samples[20]); }
-    if SAMPLES > 21u { add_sample(&s, receiver, last, 21u, batch.samples[21]); }
-    if SAMPLES > 22u { add_sample(&s, receiver, last, 22u, batch.samples[22]); }
-    if SAMPLES > 23u { add_sample(&s, receiver, last, 23u, batch.samples[23]); }
-    if SAMPLES > 24u { add_sample(&s, receiver, last, 24u, batch.samples[24]); }
-    if SAMPLES > 25u { add_sample(&s, receiver, last, 25u, batch.samples[25]); }
-    if SAMPLES > 26u { add_sample(&s, receiver, last, 26u, batch.samples[26]); }
-    if SAMPLES > 27u { add_sample(&s, receiver, last, 27u, batch.samples[27]); }
-    if SAMPLES > 28u { add_sample(&s, receiver, last, 28u, batch.samples[28]); }
-    if SAMPLES > 29u { add_sample(&s, receiver, last, 29u, batch.samples[29]); }
-    if SAMPLES > 30u { add_sample(&s, receiver, last, 30u, batch.samples[30]); }
-    if SAMPLES > 31u { add_sample(&s, receiver, last, 31u, batch.samples[31]); }
+    // Spelled out by `#unroll` (a loop over them ran slower: constant indices); a slot past
+    // `SAMPLES` compiles away.
+    #unroll k in 0..32 {
+        if SAMPLES > k {
+            add_sample(&s, receiver, last, k, batch.samples[k]);
+        }
+    }
     let base = 2u * CHANNELS * (pixel.y * frame.sizes.x + pixel.x);
     if !FIRST {
         for (var c = 0u; c < CHANNELS; c++) {
