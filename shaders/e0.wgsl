@@ -57,6 +57,14 @@ const RAY_FIRST: f32 = 0.2;
 const RAY_SECOND: f32 = 6.0;
 // A block whose centre could not be checked.
 const UNCHECKED: f32 = 1e30;
+// Where the light straddles a pixel's horizon, its E0 is blended only in a block whose
+// corners' normals lie within BENT of its first corner's (`corners_agree`). A pixel of any
+// other block has a bend of at least BENT / 2 (the triangle inequality), and accepting its
+// blend would take an E0 at least BENT / (2 E0_TOLERANCE) ≈ 8 × |Φ|, which E0 (at most |Φ|
+// over the cosine of the light's angular radius) reaches only on a receiver touching the
+// light: so such a block's check skips the clipped sums its E0 derivative would need — the
+// dearest part of the check on a landscape, whose facets' normals all differ.
+const BENT: f32 = 1e-2;
 
 struct Corner {
     phi_r: vec4<f32>,    // xyz: Φ of the red channel; w: exact E0 (red) with the corner's own normal
@@ -89,7 +97,8 @@ fn corner_pixel(c: vec2<u32>) -> vec2<u32> {
 }
 
 // Φ per channel (columns) and the exact E0 with x's own normal (w of each column's vec4).
-fn exact_terms(x: vec3<f32>, nx: vec3<f32>, depth: f32) -> Corner {
+// `clip`: whether E0 is wanted where the light straddles the horizon (else it is 0 there).
+fn exact_terms(x: vec3<f32>, nx: vec3<f32>, depth: f32, clip: bool) -> Corner {
     var phi = mat3x3<f32>(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0));
     // With every cell above the horizon a cell's irradiance is |nx · its Φ| (`exact_above`).
     var e0_above = vec3<f32>(0.0);
@@ -107,7 +116,7 @@ fn exact_terms(x: vec3<f32>, nx: vec3<f32>, depth: f32) -> Corner {
         }
     }
     let horizon = cells_horizon(x, nx);
-    let e0 = select(clipped_sum(x, nx, !horizon.above && !horizon.below), e0_above, horizon.above);
+    let e0 = select(clipped_sum(x, nx, clip && !horizon.above && !horizon.below), e0_above, horizon.above);
     return Corner(vec4<f32>(phi[0], e0.r), vec4<f32>(phi[1], e0.g), vec4<f32>(phi[2], e0.b), vec4<f32>(x, 1.0), vec4<f32>(nx, depth));
 }
 
@@ -136,15 +145,16 @@ fn no_corner() -> Corner {
     return Corner(vec4<f32>(0.0), vec4<f32>(0.0), vec4<f32>(0.0), vec4<f32>(0.0), vec4<f32>(0.0));
 }
 
-// The exact terms at a pixel, or an invalid record where it holds no lit surface.
-fn pixel_terms(pixel: vec2<u32>) -> Corner {
+// The exact terms at a pixel, or an invalid record where it holds no lit surface
+// (`clip`: `exact_terms`).
+fn pixel_terms(pixel: vec2<u32>, clip: bool) -> Corner {
     // The normal texel once, for the coverage and the normal (`covers`; corners and centres
     // lie on the screen).
     let normal = textureLoad(gbuf_normal, pixel, 0);
     if covers(normal) {
         let x = textureLoad(gbuf_position, pixel, 0);
         if lit_side(x.xyz) {
-            return exact_terms(x.xyz, normal.xyz, x.w);
+            return exact_terms(x.xyz, normal.xyz, x.w, clip);
         }
     }
     return no_corner();
@@ -158,7 +168,7 @@ fn block_corners(@builtin(global_invocation_id) id: vec3<u32>) {
     if any(id.xy >= count) {
         return;
     }
-    corners[id.y * count.x + id.x] = pixel_terms(corner_pixel(id.xy));
+    corners[id.y * count.x + id.x] = pixel_terms(corner_pixel(id.xy), true);
 }
 
 // A block's four corner records.
@@ -250,6 +260,17 @@ fn bend(b: Block, nx: vec3<f32>) -> f32 {
     return sqrt(max(max(squares.x, squares.y), max(squares.z, squares.w)));
 }
 
+// Whether the corners' normals lie within BENT of the first corner's (compared squared).
+fn corners_agree(b: Block) -> bool {
+    let n = b.c00.normal.xyz;
+    let squares = vec3<f32>(
+        dot(b.c10.normal.xyz - n, b.c10.normal.xyz - n),
+        dot(b.c01.normal.xyz - n, b.c01.normal.xyz - n),
+        dot(b.c11.normal.xyz - n, b.c11.normal.xyz - n),
+    );
+    return max(squares.x, max(squares.y, squares.z)) <= BENT * BENT;
+}
+
 fn phi_size(c: Corner) -> vec3<f32> {
     return vec3<f32>(length(c.phi_r.xyz), length(c.phi_g.xyz), length(c.phi_b.xyz));
 }
@@ -270,11 +291,12 @@ struct Check {
     ray: f32,             // the centre's offset along its view ray from the corners' blend, m
     first: f32,           // the error per unit of |t − ray|/dist the centre does not see
     d_phi: mat3x3<f32>,   // ∂Φ/∂t per channel (columns)
-    d_e0: vec3<f32>,      // ∂E0/∂t with the centre's normal
+    d_e0: vec3<f32>,      // ∂E0/∂t with the centre's normal; taken only where `blends_e0`
+    blends_e0: bool,      // the corners' normals agree (`corners_agree`)
 }
 
 fn unchecked() -> Check {
-    return Check(UNCHECKED, 0.0, 0.0, mat3x3<f32>(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0)), vec3<f32>(0.0));
+    return Check(UNCHECKED, 0.0, 0.0, mat3x3<f32>(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0)), vec3<f32>(0.0), false);
 }
 
 fn phi_of(c: Corner) -> mat3x3<f32> {
@@ -306,7 +328,8 @@ fn ray_offset(x: vec3<f32>, mixed: Corner) -> f32 {
 // it) and bounds what its pixels' offsets add by Φ's gradient instead.
 fn block_check(block: vec2<u32>, b: Block) -> Check {
     let centre = min(block * BLOCK + BLOCK / 2u, frame.sizes.xy - 1u);
-    let exact = pixel_terms(centre);
+    let blends_e0 = corners_agree(b);
+    let exact = pixel_terms(centre, blends_e0);
     if !all_valid(b) || exact.position.w <= 0.0 {
         return unchecked();
     }
@@ -314,7 +337,7 @@ fn block_check(block: vec2<u32>, b: Block) -> Check {
     // The same blend as the block's pixels take (`interpolate_blocks`).
     let mixed = blend_at(b, centre - block * BLOCK, pixel_step(block));
     let t = ray_offset(x, mixed);
-    var check = Check(0.0, t, GRADIENT, mat3x3<f32>(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0)), vec3<f32>(0.0));
+    var check = Check(0.0, t, GRADIENT, mat3x3<f32>(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0)), vec3<f32>(0.0), blends_e0);
     let distance_to_light = light_distance(x);
     if abs(t) > FLAT * distance_to_light {
         let step = RAY_STEP * distance_to_light;
@@ -322,7 +345,7 @@ fn block_check(block: vec2<u32>, b: Block) -> Check {
         if !lit_side(beyond) {
             return unchecked();
         }
-        let ahead = exact_terms(beyond, exact.normal.xyz, exact.normal.w);
+        let ahead = exact_terms(beyond, exact.normal.xyz, exact.normal.w, blends_e0);
         check.first = RAY_FIRST;
         check.d_phi = (phi_of(ahead) - phi_of(exact)) * (1.0 / step);
         check.d_e0 = (e0_of(ahead) - e0_of(exact)) / step;
@@ -393,7 +416,7 @@ fn interpolated_e0(x: vec3<f32>, normal: vec4<f32>, b: Block, mixed: Corner, che
     // sides' signs kept (error ≥ 0, E0 may not be).
     let size2 = vec3<f32>(dot(phi[0], phi[0]), dot(phi[1], phi[1]), dot(phi[2], phi[2]));
     let bound = E0_TOLERANCE * e0;
-    let done = (all(error * error * size2 <= bound * abs(bound)) && check.error < UNCHECKED) || below;
+    let done = (all(error * error * size2 <= bound * abs(bound)) && check.error < UNCHECKED && (above || check.blends_e0)) || below;
     return vec4<f32>(e0, select(select(-1.0, 0.0, above), 1.0, done));
 }
 
