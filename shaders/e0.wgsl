@@ -160,7 +160,8 @@ fn pixel_terms(pixel: vec2<u32>, clip: bool) -> Corner {
     return no_corner();
 }
 
-// Pass 1: Φ per channel and the exact E0 at every block corner.
+// Pass 1: Φ per channel and the exact E0 at every block corner — where the light straddles
+// the corner's horizon, only where a block beside it may blend E0 (`beside_agreeing`).
 @compute @workgroup_size(8, 8)
 fn block_corners(@builtin(global_invocation_id) id: vec3<u32>) {
     frame = frame_uniform;
@@ -168,7 +169,21 @@ fn block_corners(@builtin(global_invocation_id) id: vec3<u32>) {
     if any(id.xy >= count) {
         return;
     }
-    corners[id.y * count.x + id.x] = pixel_terms(corner_pixel(id.xy), true);
+    corners[id.y * count.x + id.x] = pixel_terms(corner_pixel(id.xy), beside_agreeing(id.xy, count));
+}
+
+// Whether a block beside corner c may blend E0 where the light straddles a pixel's horizon,
+// the one use of a corner's clipped sum: such a block's corners lie within BENT of its first
+// (`corners_agree`), so within 2 BENT of each other, and it holds c and one of c's two
+// neighbours along the row. Where neither neighbour's normal lies that near c's (2.5 BENT:
+// room for rounding), no block takes c's clipped sum, and it is not made (a corner at the
+// row's end counts as its own neighbour, and always makes it).
+fn beside_agreeing(c: vec2<u32>, count: vec2<u32>) -> bool {
+    let n = textureLoad(gbuf_normal, corner_pixel(c), 0).xyz;
+    let left = textureLoad(gbuf_normal, corner_pixel(vec2<u32>(max(c.x, 1u) - 1u, c.y)), 0).xyz;
+    let right = textureLoad(gbuf_normal, corner_pixel(vec2<u32>(min(c.x + 1u, count.x - 1u), c.y)), 0).xyz;
+    let limit = (2.5 * BENT) * (2.5 * BENT);
+    return dot(left - n, left - n) <= limit || dot(right - n, right - n) <= limit;
 }
 
 // A block's four corner records.
