@@ -96,15 +96,26 @@ fn e0_interpolation_stays_within_a_thousandth_of_the_exact_sum() {
     // `terrain`: a bumpy receiver, whose pixels leave their block corners' blend along the
     // view ray (the derivative's correction, `shaders/e0.wgsl`).
     let terrain = json!({"builtin": "terrain", "triangles": 100000});
+    let image = |name: &str| json!({"image": {"builtin": name}});
+    // A light leaning over the floor of `occluder`, its lower edge 7 cm below the floor's
+    // plane: its rectangle straddles the horizon of every floor point it lights, so the
+    // floor's E0 is blended itself, a flat face's (every block's corners agree on the normal:
+    // `BENT` in shaders/e0.wgsl) — ~40 % of the lit pixels, none if that blend were refused.
+    let leaning = |name: &str| {
+        json!({"center": [0.0, 1.2, -2.0], "direction": [0.0, -0.7071, 0.7071], "up": [0.0, 0.7071, 0.7071], "size": [3.0, 3.6],
+               "image": {"builtin": name}})
+    };
     for (scene, light) in [
-        (json!({"builtin": "crowd"}), "flame"),
+        (json!({"builtin": "crowd"}), image("flame")),
         // 64 cells: the exact sums over the grid's shared corners and edges (GRID).
-        (json!({"builtin": "crowd"}), "mosaic"),
-        (json!({"builtin": "columns"}), "stripes"),
-        (json!({"builtin": "torus"}), "quadrants"),
-        (terrain, "stripes"),
+        (json!({"builtin": "crowd"}), image("mosaic")),
+        (json!({"builtin": "columns"}), image("stripes")),
+        (json!({"builtin": "torus"}), image("quadrants")),
+        (terrain, image("stripes")),
+        (json!({"builtin": "occluder"}), leaning("stripes")),
+        (json!({"builtin": "occluder"}), leaning("mosaic")),
     ] {
-        let job = job(json!({"scene": scene, "light": {"image": {"builtin": light}}, "method": {"name": "hard"},
+        let job = job(json!({"scene": scene, "light": light, "method": {"name": "hard"},
                              "output": {"width": 960, "height": 540, "format": "exr"}}));
         let mut frames = Vec::new();
         let mut listed = None;
