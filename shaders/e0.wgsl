@@ -58,7 +58,7 @@ const RAY_SECOND: f32 = 6.0;
 // A block whose centre could not be checked.
 const UNCHECKED: f32 = 1e30;
 // Where the light straddles a pixel's horizon, its E0 is blended only in a block whose
-// corners' normals lie within BENT of its first corner's (`corners_agree`). A pixel of any
+// corners' normals lie within BENT of its first corner's (`agrees`). A pixel of any
 // other block has a bend of at least BENT / 2 (the triangle inequality), and accepting its
 // blend would take an E0 at least BENT / (2 E0_TOLERANCE) ≈ 8 × |Φ|, which E0 (at most |Φ|
 // over the cosine of the light's angular radius) reaches only on a receiver touching the
@@ -148,9 +148,12 @@ fn no_corner() -> Corner {
 // The exact terms at a pixel, or an invalid record where it holds no lit surface
 // (`clip`: `exact_terms`).
 fn pixel_terms(pixel: vec2<u32>, clip: bool) -> Corner {
-    // The normal texel once, for the coverage and the normal (`covers`; corners and centres
-    // lie on the screen).
-    let normal = textureLoad(gbuf_normal, pixel, 0);
+    return surface_terms(pixel, textureLoad(gbuf_normal, pixel, 0), clip);
+}
+
+// `pixel_terms` at a pixel whose normal texel the caller has read (corners and centres lie
+// on the screen): the texel once, for the coverage and the normal (`covers`).
+fn surface_terms(pixel: vec2<u32>, normal: vec4<f32>, clip: bool) -> Corner {
     if covers(normal) {
         let x = textureLoad(gbuf_position, pixel, 0);
         if lit_side(x.xyz) {
@@ -169,17 +172,19 @@ fn block_corners(@builtin(global_invocation_id) id: vec3<u32>) {
     if any(id.xy >= count) {
         return;
     }
-    corners[id.y * count.x + id.x] = pixel_terms(corner_pixel(id.xy), beside_agreeing(id.xy, count));
+    let pixel = corner_pixel(id.xy);
+    let normal = textureLoad(gbuf_normal, pixel, 0);
+    corners[id.y * count.x + id.x] = surface_terms(pixel, normal, beside_agreeing(id.xy, count, normal.xyz));
 }
 
 // Whether a block beside corner c may blend E0 where the light straddles a pixel's horizon,
 // the one use of a corner's clipped sum: such a block's corners lie within BENT of its first
-// (`corners_agree`), so within 2 BENT of each other, and it holds c and one of c's two
+// (`agrees`), so within 2 BENT of each other, and it holds c and one of c's two
 // neighbours along the row. Where neither neighbour's normal lies that near c's (2.5 BENT:
 // room for rounding), no block takes c's clipped sum, and it is not made (a corner at the
 // row's end counts as its own neighbour, and always makes it).
-fn beside_agreeing(c: vec2<u32>, count: vec2<u32>) -> bool {
-    let n = textureLoad(gbuf_normal, corner_pixel(c), 0).xyz;
+// `n`: c's own normal.
+fn beside_agreeing(c: vec2<u32>, count: vec2<u32>, n: vec3<f32>) -> bool {
     let left = textureLoad(gbuf_normal, corner_pixel(vec2<u32>(max(c.x, 1u) - 1u, c.y)), 0).xyz;
     let right = textureLoad(gbuf_normal, corner_pixel(vec2<u32>(min(c.x + 1u, count.x - 1u), c.y)), 0).xyz;
     let limit = (2.5 * BENT) * (2.5 * BENT);
@@ -275,15 +280,9 @@ fn bend(b: Block, nx: vec3<f32>) -> f32 {
     return sqrt(max(max(squares.x, squares.y), max(squares.z, squares.w)));
 }
 
-// Whether the corners' normals lie within BENT of the first corner's (compared squared).
-fn corners_agree(b: Block) -> bool {
-    let n = b.c00.normal.xyz;
-    let squares = vec3<f32>(
-        dot(b.c10.normal.xyz - n, b.c10.normal.xyz - n),
-        dot(b.c01.normal.xyz - n, b.c01.normal.xyz - n),
-        dot(b.c11.normal.xyz - n, b.c11.normal.xyz - n),
-    );
-    return max(squares.x, max(squares.y, squares.z)) <= BENT * BENT;
+// Whether the corners' normals lie within BENT of the first corner's.
+fn agrees(b: Block) -> bool {
+    return bend(b, b.c00.normal.xyz) <= BENT;
 }
 
 fn phi_size(c: Corner) -> vec3<f32> {
@@ -307,7 +306,7 @@ struct Check {
     first: f32,           // the error per unit of |t − ray|/dist the centre does not see
     d_phi: mat3x3<f32>,   // ∂Φ/∂t per channel (columns)
     d_e0: vec3<f32>,      // ∂E0/∂t with the centre's normal; taken only where `blends_e0`
-    blends_e0: bool,      // the corners' normals agree (`corners_agree`)
+    blends_e0: bool,      // the corners' normals agree (`agrees`)
 }
 
 fn unchecked() -> Check {
@@ -343,7 +342,7 @@ fn ray_offset(x: vec3<f32>, mixed: Corner) -> f32 {
 // it) and bounds what its pixels' offsets add by Φ's gradient instead.
 fn block_check(block: vec2<u32>, b: Block) -> Check {
     let centre = min(block * BLOCK + BLOCK / 2u, frame.sizes.xy - 1u);
-    let blends_e0 = corners_agree(b);
+    let blends_e0 = agrees(b);
     let exact = pixel_terms(centre, blends_e0);
     if !all_valid(b) || exact.position.w <= 0.0 {
         return unchecked();
