@@ -102,7 +102,7 @@ fn e0_interpolation_stays_within_a_thousandth_of_the_exact_sum() {
     // floor's E0 is blended itself, a flat face's (every block's corners agree on the normal:
     // `BENT` in shaders/e0.wgsl) — ~40 % of the lit pixels, none if that blend were refused.
     let leaning = |name: &str| {
-        json!({"center": [0.0, 1.2, -2.0], "direction": [0.0, -0.7071, 0.7071], "up": [0.0, 0.7071, 0.7071], "size": [3.0, 3.6],
+        json!({"center": [0.0, 1.2, -2.0], "direction": [0.0, -1.0, 1.0], "up": [0.0, 1.0, 1.0], "size": [3.0, 3.6],
                "image": {"builtin": name}})
     };
     for (scene, light) in [
