@@ -653,6 +653,8 @@ mod tests {
     fn the_batch_matches_its_wgsl_mirror() {
         let declaration = format!("const MAX_SAMPLES: u32 = {BATCH_SAMPLES}u;");
         crate::gpu::shaders::assert_declares("methods/reference/accumulate.wgsl", &declaration);
+        // The pass spells its samples out by `#unroll`, whose bound is a literal: one per slot.
+        crate::gpu::shaders::assert_declares("methods/reference/accumulate.wgsl", &format!("#unroll k in 0..{BATCH_SAMPLES} {{"));
         crate::gpu::shaders::assert_declares("methods/reference/accumulate.wgsl", &format!("const SEGMENT: u32 = {SEGMENT}u;"));
     }
 
