@@ -307,10 +307,15 @@ struct Check {
     d_phi: mat3x3<f32>,   // ∂Φ/∂t per channel (columns)
     d_e0: vec3<f32>,      // ∂E0/∂t with the centre's normal; taken only where `blends_e0`
     blends_e0: bool,      // the corners' normals agree (`agrees`)
+    // A bound on |E0's corrected blend − its exact sum| over the block, per channel
+    // (`e0_blend_error`), by which a pixel the light straddles the horizon of is judged;
+    // UNCHECKED where the block does not blend E0 or its centre sees every cell on one side
+    // of its horizon (its pixels' E0 is then |n · Φ| or 0, or summed exactly).
+    e0_error: vec3<f32>,
 }
 
 fn unchecked() -> Check {
-    return Check(UNCHECKED, 0.0, 0.0, mat3x3<f32>(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0)), vec3<f32>(0.0), false);
+    return Check(UNCHECKED, 0.0, 0.0, mat3x3<f32>(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0)), vec3<f32>(0.0), false, vec3<f32>(UNCHECKED));
 }
 
 fn phi_of(c: Corner) -> mat3x3<f32> {
@@ -351,7 +356,7 @@ fn block_check(block: vec2<u32>, b: Block) -> Check {
     // The same blend as the block's pixels take (`interpolate_blocks`).
     let mixed = blend_at(b, centre - block * BLOCK, pixel_step(block));
     let t = ray_offset(x, mixed);
-    var check = Check(0.0, t, GRADIENT, mat3x3<f32>(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0)), vec3<f32>(0.0), blends_e0);
+    var check = Check(0.0, t, GRADIENT, mat3x3<f32>(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0)), vec3<f32>(0.0), blends_e0, vec3<f32>(UNCHECKED));
     let distance_to_light = light_distance(x);
     if abs(t) > FLAT * distance_to_light {
         let step = RAY_STEP * distance_to_light;
@@ -372,7 +377,82 @@ fn block_check(block: vec2<u32>, b: Block) -> Check {
         distance(phi[2], exact.phi_b.xyz),
     );
     check.error = max3(phi_error / size);
+    // Where E0 itself is blended (the light straddles the horizon, on a flat face): a bound
+    // on its own error over the block (`e0_blend_error`).
+    let horizon = cells_horizon(x, exact.normal.xyz);
+    if blends_e0 && !horizon.above && !horizon.below {
+        check.e0_error = e0_blend_error(block, b, e0_of(mixed) + check.d_e0 * t - e0_of(exact));
+    }
     return check;
+}
+
+// Corner c's exact E0 (xyz) and view depth (w) where it lies on the grid, on a lit surface
+// and on the face whose normal is n (within BENT); w = 0 otherwise.
+fn face_corner(c: vec2<i32>, n: vec3<f32>) -> vec4<f32> {
+    let count = vec2<i32>(corner_count());
+    let i = u32(clamp(c.y, 0, count.y - 1) * count.x + clamp(c.x, 0, count.x - 1));
+    // A corner with no lit surface has a zero normal (`no_corner`), which fails the test.
+    let normal = corners[i].normal;
+    let usable = all(c >= vec2<i32>(0)) && all(c < count) && dot(normal.xyz - n, normal.xyz - n) <= BENT * BENT;
+    return select(vec4<f32>(0.0), vec4<f32>(corners[i].phi_r.w, corners[i].phi_g.w, corners[i].phi_b.w, normal.w), usable);
+}
+
+// The error of the blend between corners `before` and `after` (E0 and view depth, as
+// `face_corner` gives them), two blocks apart, at the corner `middle` between them, the
+// fraction `f` of the way (½ but next to the frame's last row or column, whose block is
+// narrower): the blend the block's pixels take (perspective-correct), over twice the block's
+// width. Per channel; w = 0 where an end does not lie on the face.
+fn wide_blend_error(before: vec4<f32>, middle: Corner, after: vec4<f32>, f: f32) -> vec4<f32> {
+    let w = vec2<f32>((1.0 - f) / max(before.w, 1e-20), f / max(after.w, 1e-20));
+    let blend = (before.xyz * w.x + after.xyz * w.y) / (w.x + w.y);
+    return select(vec4<f32>(0.0), vec4<f32>(abs(blend - e0_of(middle)), 1.0), before.w > 0.0 && after.w > 0.0);
+}
+
+// A bound on the error of E0's blend over the block, per channel; `centre`, its signed
+// error at the block's centre. A bilinear blend reproduces a quadratic's cross term, so its
+// error at (u, v) in the block is ½ (u(1−u) a + v(1−v) b), a and b the second differences
+// along the block's sides: (a + b)/8 at the centre and at most (|a| + |b|)/8 anywhere. The
+// centre alone does not bound it: where a ≈ −b (a saddle, as E0 under a light standing on
+// the receiver's plane) it reads ~0 while the middle of an edge is off by |a|/8 — judged by
+// Φ's error at the centre instead, such pixels departed from the exact sum by up to
+// 1.04·10⁻³ (a steep `stripes` light over `occluder`'s floor). So a and b are measured too,
+// with no exact sum more: the same blend between the corners two blocks apart misses the
+// corner halfway between them by |a|/2 (along a row; |b|/2 down a column), read at each of
+// the block's four corners from its neighbour beyond it on the same face (the largest, per
+// direction: a and b may differ between the block's two rows or columns). UNCHECKED where a
+// direction has none: a block along the face's edge or the frame's.
+fn e0_blend_error(block: vec2<u32>, b: Block, centre: vec3<f32>) -> vec3<f32> {
+    let n = b.c00.normal.xyz;
+    let c = vec2<i32>(block);
+    let left0 = face_corner(c + vec2<i32>(-1, 0), n);
+    let left1 = face_corner(c + vec2<i32>(-1, 1), n);
+    let right0 = face_corner(c + vec2<i32>(2, 0), n);
+    let right1 = face_corner(c + vec2<i32>(2, 1), n);
+    let up0 = face_corner(c + vec2<i32>(0, -1), n);
+    let up1 = face_corner(c + vec2<i32>(1, -1), n);
+    let down0 = face_corner(c + vec2<i32>(0, 2), n);
+    let down1 = face_corner(c + vec2<i32>(1, 2), n);
+    let c00 = vec4<f32>(e0_of(b.c00), b.c00.normal.w);
+    let c10 = vec4<f32>(e0_of(b.c10), b.c10.normal.w);
+    let c01 = vec4<f32>(e0_of(b.c01), b.c01.normal.w);
+    let c11 = vec4<f32>(e0_of(b.c11), b.c11.normal.w);
+    // Where the block's first and second corners lie between their neighbours, per axis
+    // (corner_pixel's spacing: BLOCK, but the last one's).
+    let p0 = vec2<f32>(corner_pixel(block));
+    let p1 = vec2<f32>(corner_pixel(block + 1u));
+    let first = f32(BLOCK) / (p1 - p0 + f32(BLOCK));
+    let second = (p1 - p0) / (vec2<f32>(corner_pixel(block + 2u)) - p0);
+    let across = max(
+        max(wide_blend_error(left0, b.c00, c10, first.x), wide_blend_error(c00, b.c10, right0, second.x)),
+        max(wide_blend_error(left1, b.c01, c11, first.x), wide_blend_error(c01, b.c11, right1, second.x)),
+    );
+    let down = max(
+        max(wide_blend_error(up0, b.c00, c01, first.y), wide_blend_error(c00, b.c01, down0, second.y)),
+        max(wide_blend_error(up1, b.c10, c11, first.y), wide_blend_error(c10, b.c11, down1, second.y)),
+    );
+    // |a|/8 = |across| / 4, |b|/8 = |down| / 4.
+    let sides = (across.xyz + down.xyz) * 0.25;
+    return select(vec3<f32>(UNCHECKED), max(abs(centre), sides), across.w > 0.0 && down.w > 0.0);
 }
 
 // Where the light's cells lie against the horizon of x (the plane through it with normal
@@ -414,7 +494,9 @@ fn interpolated_e0(x: vec3<f32>, normal: vec4<f32>, b: Block, mixed: Corner, che
     let dist = light_distance(x);
     let reach = t / dist;
     let beyond = abs(t - check.ray) / dist;
-    let relative = ERROR_MARGIN * check.error + check.first * beyond + RAY_SECOND * reach * reach;
+    let first_order = check.first * beyond;
+    let second_order = RAY_SECOND * reach * reach;
+    let relative = ERROR_MARGIN * check.error + first_order + second_order;
     let phi = phi_of(mixed) + check.d_phi * t;
     // Both cases in straight-line code (lavapipe runs both sides of a branch its SIMD group
     // splits on, and a landscape splits most groups): with every cell above the horizon
@@ -425,12 +507,20 @@ fn interpolated_e0(x: vec3<f32>, normal: vec4<f32>, b: Block, mixed: Corner, che
     let above = horizon.above;
     let below = horizon.below;
     let e0 = select(select(e0_of(mixed) + check.d_e0 * t, abs(nx * phi), above), vec3<f32>(0.0), below);
-    let error = relative + select(bend(b, nx), 0.0, above);
-    // error × |Φ| ≤ E0_TOLERANCE × E0, compared squared (no square root per channel); both
-    // sides' signs kept (error ≥ 0, E0 may not be).
     let size2 = vec3<f32>(dot(phi[0], phi[0]), dot(phi[1], phi[1]), dot(phi[2], phi[2]));
     let bound = E0_TOLERANCE * e0;
-    let done = (all(error * error * size2 <= bound * abs(bound)) && check.error < UNCHECKED && (above || check.blends_e0)) || below;
+    // Every cell above: relative × |Φ| ≤ E0_TOLERANCE × E0, compared squared (no square root
+    // per channel); both sides' signs kept (relative ≥ 0, E0 may not be).
+    let fits_above = all(relative * relative * size2 <= bound * abs(bound));
+    // Straddled, on a flat face: E0's own error over the block with the margin, plus what
+    // lies off the centre in units of |Φ| — the ray terms and the pixel's bend from the
+    // corners' normals (E0 moves by up to |Φ| per unit of normal) — at most E0_TOLERANCE × E0:
+    // what the first leaves, squared, against the second's square (no square root either).
+    // UNCHECKED fails it.
+    let off_centre = first_order + second_order + bend(b, nx);
+    let room = bound - ERROR_MARGIN * check.e0_error;
+    let fits_straddled = all(room >= vec3<f32>(0.0)) && all(off_centre * off_centre * size2 <= room * room);
+    let done = (select(fits_straddled, fits_above, above) && check.error < UNCHECKED) || below;
     return vec4<f32>(e0, select(select(-1.0, 0.0, above), 1.0, done));
 }
 
