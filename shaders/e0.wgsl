@@ -13,7 +13,8 @@
 // The blend is corrected along the pixel's view ray (`ray_offset`), where a bumpy surface
 // leaves the corners' blend. Where the light straddles the receiver's horizon E0 depends on
 // the normal through the clipping; on a flat face (the four corners' normal equal to the
-// pixel's) E0 itself is a smooth function of position and is interpolated instead.
+// pixel's) E0 itself is a smooth function of position and is interpolated instead, judged by
+// a bound on its own error over the block (`e0_blend_error`).
 
 #import common/frame_inputs.wgsl
 #import common/pixel_list.wgsl
