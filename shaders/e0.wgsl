@@ -98,7 +98,8 @@ fn corner_pixel(c: vec2<u32>) -> vec2<u32> {
 }
 
 // Φ per channel (columns) and the exact E0 with x's own normal (w of each column's vec4).
-// `clip`: whether E0 is wanted where the light straddles the horizon (else it is 0 there).
+// `clip`: whether E0 is wanted where the light straddles the horizon (else it is −1 there,
+// no sum — E0 is never negative — which `face_corner` tells from one).
 fn exact_terms(x: vec3<f32>, nx: vec3<f32>, depth: f32, clip: bool) -> Corner {
     var phi = mat3x3<f32>(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0));
     // With every cell above the horizon a cell's irradiance is |nx · its Φ| (`exact_above`).
@@ -117,7 +118,9 @@ fn exact_terms(x: vec3<f32>, nx: vec3<f32>, depth: f32, clip: bool) -> Corner {
         }
     }
     let horizon = cells_horizon(x, nx);
-    let e0 = select(clipped_sum(x, nx, clip && !horizon.above && !horizon.below), e0_above, horizon.above);
+    let straddles = !horizon.above && !horizon.below;
+    let clipped = select(clipped_sum(x, nx, clip && straddles), vec3<f32>(-1.0), straddles && !clip);
+    let e0 = select(clipped, e0_above, horizon.above);
     return Corner(vec4<f32>(phi[0], e0.r), vec4<f32>(phi[1], e0.g), vec4<f32>(phi[2], e0.b), vec4<f32>(x, 1.0), vec4<f32>(nx, depth));
 }
 
@@ -388,13 +391,15 @@ fn block_check(block: vec2<u32>, b: Block) -> Check {
 }
 
 // Corner c's exact E0 (xyz) and view depth (w) where it lies on the grid, on a lit surface
-// and on the face whose normal is n (within BENT); w = 0 otherwise.
+// and on the face whose normal is n (within BENT), and its E0 was summed; w = 0 otherwise.
 fn face_corner(c: vec2<i32>, n: vec3<f32>) -> vec4<f32> {
     let count = vec2<i32>(corner_count());
     let i = u32(clamp(c.y, 0, count.y - 1) * count.x + clamp(c.x, 0, count.x - 1));
-    // A corner with no lit surface has a zero normal (`no_corner`), which fails the test.
+    // A corner with no lit surface has a zero normal (`no_corner`), which fails the test; one
+    // whose clipped sum was not made (`beside_agreeing`) holds −1 (`exact_terms`).
     let normal = corners[i].normal;
-    let usable = all(c >= vec2<i32>(0)) && all(c < count) && dot(normal.xyz - n, normal.xyz - n) <= BENT * BENT;
+    let usable = all(c >= vec2<i32>(0)) && all(c < count) && dot(normal.xyz - n, normal.xyz - n) <= BENT * BENT
+        && corners[i].phi_r.w >= 0.0;
     return select(vec4<f32>(0.0), vec4<f32>(corners[i].phi_r.w, corners[i].phi_g.w, corners[i].phi_b.w, normal.w), usable);
 }
 
