@@ -309,17 +309,17 @@ struct Check {
     ray: f32,             // the centre's offset along its view ray from the corners' blend, m
     first: f32,           // the error per unit of |t − ray|/dist the centre does not see
     d_phi: mat3x3<f32>,   // ∂Φ/∂t per channel (columns)
-    d_e0: vec3<f32>,      // ∂E0/∂t with the centre's normal; taken only where `blends_e0`
-    blends_e0: bool,      // the corners' normals agree (`agrees`)
+    d_e0: vec3<f32>,      // ∂E0/∂t with the centre's normal; taken only where the block blends E0
     // A bound on |E0's corrected blend − its exact sum| over the block, per channel
     // (`e0_blend_error`), by which a pixel the light straddles the horizon of is judged;
-    // UNCHECKED where the block does not blend E0 or its centre sees every cell on one side
-    // of its horizon (its pixels' E0 is then |n · Φ| or 0, or summed exactly).
+    // UNCHECKED where the block does not blend E0 — its corners' normals disagree (`agrees`)
+    // — or its centre sees every cell on one side of its horizon (its pixels' E0 is then
+    // |n · Φ| or 0, or summed exactly).
     e0_error: vec3<f32>,
 }
 
 fn unchecked() -> Check {
-    return Check(UNCHECKED, 0.0, 0.0, mat3x3<f32>(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0)), vec3<f32>(0.0), false, vec3<f32>(UNCHECKED));
+    return Check(UNCHECKED, 0.0, 0.0, mat3x3<f32>(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0)), vec3<f32>(0.0), vec3<f32>(UNCHECKED));
 }
 
 fn phi_of(c: Corner) -> mat3x3<f32> {
@@ -360,7 +360,7 @@ fn block_check(block: vec2<u32>, b: Block) -> Check {
     // The same blend as the block's pixels take (`interpolate_blocks`).
     let mixed = blend_at(b, centre - block * BLOCK, pixel_step(block));
     let t = ray_offset(x, mixed);
-    var check = Check(0.0, t, GRADIENT, mat3x3<f32>(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0)), vec3<f32>(0.0), blends_e0, vec3<f32>(UNCHECKED));
+    var check = Check(0.0, t, GRADIENT, mat3x3<f32>(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0)), vec3<f32>(0.0), vec3<f32>(UNCHECKED));
     let distance_to_light = light_distance(x);
     if abs(t) > FLAT * distance_to_light {
         let step = RAY_STEP * distance_to_light;
