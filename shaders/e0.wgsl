@@ -112,7 +112,7 @@ fn exact_terms(x: vec3<f32>, nx: vec3<f32>, depth: f32, clip: bool) -> Corner {
         for (var k = 0u; k < frame.sizes.w; k++) {
             let cell = light_cells[k];
             let corners = cell_corners(cell);
-            let phi_cell = polygon_vector(x, corners);
+            let phi_cell = polygon_vector(x, corners, cell_edges(cell));
             phi += mat3x3<f32>(phi_cell * cell.radiance.r, phi_cell * cell.radiance.g, phi_cell * cell.radiance.b);
             e0_above += cell.radiance.rgb * abs(dot(nx, phi_cell));
         }
@@ -140,7 +140,7 @@ fn clipped_sum(x: vec3<f32>, nx: vec3<f32>, straddles: bool) -> vec3<f32> {
     for (var k = 0u; k < select(0u, frame.sizes.w, straddles); k++) {
         let cell = light_cells[k];
         let corners = cell_corners(cell);
-        e0 += cell.radiance.rgb * polygon_irradiance(x, nx, corners);
+        e0 += cell.radiance.rgb * polygon_irradiance(x, nx, corners, cell_edges(cell));
     }
     return e0;
 }
@@ -706,10 +706,11 @@ fn exact_above(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocatio
     for (var k = 0u; k < frame.sizes.w; k++) {
         let cell = light_cells[k];
         let corners = cell_corners(cell);
-        e0[0] += cell.radiance.rgb * abs(dot(q.a.nx, polygon_vector(q.a.x, corners)));
-        e0[1] += cell.radiance.rgb * abs(dot(q.b.nx, polygon_vector(q.b.x, corners)));
-        e0[2] += cell.radiance.rgb * abs(dot(q.c.nx, polygon_vector(q.c.x, corners)));
-        e0[3] += cell.radiance.rgb * abs(dot(q.d.nx, polygon_vector(q.d.x, corners)));
+        let edges = cell_edges(cell);
+        e0[0] += cell.radiance.rgb * abs(dot(q.a.nx, polygon_vector(q.a.x, corners, edges)));
+        e0[1] += cell.radiance.rgb * abs(dot(q.b.nx, polygon_vector(q.b.x, corners, edges)));
+        e0[2] += cell.radiance.rgb * abs(dot(q.c.nx, polygon_vector(q.c.x, corners, edges)));
+        e0[3] += cell.radiance.rgb * abs(dot(q.d.nx, polygon_vector(q.d.x, corners, edges)));
     }
     store_quad(q, e0);
 }
@@ -726,10 +727,11 @@ fn clipped_quad(q: Quad) -> mat4x3<f32> {
     for (var k = 0u; k < frame.sizes.w; k++) {
         let cell = light_cells[k];
         let corners = cell_corners(cell);
-        e0[0] += cell.radiance.rgb * polygon_irradiance(q.a.x, q.a.nx, corners);
-        e0[1] += cell.radiance.rgb * polygon_irradiance(q.b.x, q.b.nx, corners);
-        e0[2] += cell.radiance.rgb * polygon_irradiance(q.c.x, q.c.nx, corners);
-        e0[3] += cell.radiance.rgb * polygon_irradiance(q.d.x, q.d.nx, corners);
+        let edges = cell_edges(cell);
+        e0[0] += cell.radiance.rgb * polygon_irradiance(q.a.x, q.a.nx, corners, edges);
+        e0[1] += cell.radiance.rgb * polygon_irradiance(q.b.x, q.b.nx, corners, edges);
+        e0[2] += cell.radiance.rgb * polygon_irradiance(q.c.x, q.c.nx, corners, edges);
+        e0[3] += cell.radiance.rgb * polygon_irradiance(q.d.x, q.d.nx, corners, edges);
     }
     return e0;
 }

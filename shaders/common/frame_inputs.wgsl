@@ -34,6 +34,16 @@ fn cell_corners(cell: LightCell) -> array<vec4<f32>, 4> {
     return array<vec4<f32>, 4>(vec4<f32>(left + bottom, 1.0), vec4<f32>(right + bottom, 1.0), vec4<f32>(right + top, 1.0), vec4<f32>(left + top, 1.0));
 }
 
+// Cell `cell`'s edge vectors, corner i to corner i + 1 of `cell_corners`: its width along r,
+// its height along u, then both back — from its rectangle, exact to a rounding of the
+// lengths, rather than as differences of corners metres from the origin (each edge term is
+// made along its edge: `edge_along` in common/light.wgsl).
+fn cell_edges(cell: LightCell) -> array<vec3<f32>, 4> {
+    let across = (cell.rect.y - cell.rect.x) * frame.light_r.xyz;
+    let up = (cell.rect.w - cell.rect.z) * frame.light_u.xyz;
+    return array<vec3<f32>, 4>(across, up, -across, -up);
+}
+
 // Distance from the light's centre to its rectangle's edge along unit direction `e` (light
 // coordinates: x along r, y along u).
 fn light_reach(e: vec2<f32>) -> f32 {
