@@ -130,6 +130,29 @@ fn clip_edge(edges: ptr<function, ClippedEdges>, a: vec3<f32>, e: vec3<f32>, ua:
     (*edges).entry = select((*edges).entry, q, above_b && !above_a);
 }
 
+// A quad's corners seen from x: their offsets from it, their unit directions and their inverse
+// distances (what each edge term along its edge needs: `edge_along`, `clip_edge`).
+struct SeenQuad {
+    p0: vec3<f32>,
+    p1: vec3<f32>,
+    p2: vec3<f32>,
+    p3: vec3<f32>,
+    u0: vec3<f32>,
+    u1: vec3<f32>,
+    u2: vec3<f32>,
+    u3: vec3<f32>,
+    inv: vec4<f32>,
+}
+
+fn seen_quad(x: vec3<f32>, corners: array<vec4<f32>, 4>) -> SeenQuad {
+    let p0 = corners[0].xyz - x;
+    let p1 = corners[1].xyz - x;
+    let p2 = corners[2].xyz - x;
+    let p3 = corners[3].xyz - x;
+    let inv = inverseSqrt(vec4<f32>(dot(p0, p0), dot(p1, p1), dot(p2, p2), dot(p3, p3)));
+    return SeenQuad(p0, p1, p2, p3, p0 * inv.x, p1 * inv.y, p2 * inv.z, p3 * inv.w, inv);
+}
+
 // ∫ cosθx dω over the quad seen from x (normal nx), clipped to the hemisphere above x:
 // ½ |Σ Θᵢ (nx · Γᵢ)| over the clipped polygon's edges. A convex quad cut by a plane leaves it
 // at most once and re-enters at most once, so the clipped polygon is the clipped edges plus
@@ -138,21 +161,13 @@ fn clip_edge(edges: ptr<function, ClippedEdges>, a: vec3<f32>, e: vec3<f32>, ua:
 // lavapipe). Five edge terms whatever the clipping.
 // `edges`: the quad's edge vectors, corner i to corner i + 1 (`cell_edges`).
 fn polygon_irradiance(x: vec3<f32>, nx: vec3<f32>, corners: array<vec4<f32>, 4>, edges: array<vec3<f32>, 4>) -> f32 {
-    let p0 = corners[0].xyz - x;
-    let p1 = corners[1].xyz - x;
-    let p2 = corners[2].xyz - x;
-    let p3 = corners[3].xyz - x;
-    let inv = inverseSqrt(vec4<f32>(dot(p0, p0), dot(p1, p1), dot(p2, p2), dot(p3, p3)));
-    let u0 = p0 * inv.x;
-    let u1 = p1 * inv.y;
-    let u2 = p2 * inv.z;
-    let u3 = p3 * inv.w;
-    let d = vec4<f32>(dot(p0, nx), dot(p1, nx), dot(p2, nx), dot(p3, nx));
+    let q = seen_quad(x, corners);
+    let d = vec4<f32>(dot(q.p0, nx), dot(q.p1, nx), dot(q.p2, nx), dot(q.p3, nx));
     var e = ClippedEdges(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0));
-    clip_edge(&e, p0, edges[0], u0, u1, inv.y, d.x, d.y);
-    clip_edge(&e, p1, edges[1], u1, u2, inv.z, d.y, d.z);
-    clip_edge(&e, p2, edges[2], u2, u3, inv.w, d.z, d.w);
-    clip_edge(&e, p3, edges[3], u3, u0, inv.x, d.w, d.x);
+    clip_edge(&e, q.p0, edges[0], q.u0, q.u1, q.inv.y, d.x, d.y);
+    clip_edge(&e, q.p1, edges[1], q.u1, q.u2, q.inv.z, d.y, d.z);
+    clip_edge(&e, q.p2, edges[2], q.u2, q.u3, q.inv.w, d.z, d.w);
+    clip_edge(&e, q.p3, edges[3], q.u3, q.u0, q.inv.x, d.w, d.x);
     let crossed = any(d > vec4<f32>(HORIZON_EPS)) && any(d <= vec4<f32>(HORIZON_EPS));
     let sum = e.sum + select(vec3<f32>(0.0), edge_vector(e.exit, e.entry), crossed);
     return 0.5 * abs(dot(nx, sum));
@@ -162,15 +177,7 @@ fn polygon_irradiance(x: vec3<f32>, nx: vec3<f32>, corners: array<vec4<f32>, 4>,
 // corners' winding; independent of any normal): where the quad lies wholly above x's
 // horizon, `polygon_irradiance` is |nx · it|. Each edge term along its edge (`edge_along`).
 fn polygon_vector(x: vec3<f32>, corners: array<vec4<f32>, 4>, edges: array<vec3<f32>, 4>) -> vec3<f32> {
-    let p0 = corners[0].xyz - x;
-    let p1 = corners[1].xyz - x;
-    let p2 = corners[2].xyz - x;
-    let p3 = corners[3].xyz - x;
-    let inv = inverseSqrt(vec4<f32>(dot(p0, p0), dot(p1, p1), dot(p2, p2), dot(p3, p3)));
-    let u0 = p0 * inv.x;
-    let u1 = p1 * inv.y;
-    let u2 = p2 * inv.z;
-    let u3 = p3 * inv.w;
-    return 0.5 * (edge_along(u0, u1, edges[0], inv.y) + edge_along(u1, u2, edges[1], inv.z) + edge_along(u2, u3, edges[2], inv.w)
-        + edge_along(u3, u0, edges[3], inv.x));
+    let q = seen_quad(x, corners);
+    return 0.5 * (edge_along(q.u0, q.u1, edges[0], q.inv.y) + edge_along(q.u1, q.u2, edges[1], q.inv.z)
+        + edge_along(q.u2, q.u3, edges[2], q.inv.w) + edge_along(q.u3, q.u0, edges[3], q.inv.x));
 }
