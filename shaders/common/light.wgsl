@@ -79,8 +79,9 @@ struct ClippedEdges {
 
 const HORIZON_EPS: f32 = 1e-6;
 
-// The unit direction from x to where edge a→b (relative to x, heights da, db above x's
-// plane) crosses the horizon, HORIZON_EPS above the plane: a + (b − a)(ε − da)/(db − da),
+// The grid walks' crossing (shaders/e0_grid.wgsl; `clip_edge` finds a cell's own as a + t e,
+// along its edge): the unit direction from x to where edge a→b (relative to x, heights da,
+// db above x's plane) crosses the horizon, HORIZON_EPS above it: a + (b − a)(ε − da)/(db − da),
 // scaled by db − da (no division) — its direction is all `edge_vector` needs, so the scale
 // only has to keep its sign. Meaningless where both ends lie on one side.
 fn horizon_crossing(a: vec3<f32>, b: vec3<f32>, da: f32, db: f32) -> vec3<f32> {
@@ -107,7 +108,7 @@ fn edge_along(a: vec3<f32>, b: vec3<f32>, e: vec3<f32>, inv_b: f32) -> vec3<f32>
     return edge_part(a, e, 0.0, 1.0, inv_b, dot(a, b));
 }
 
-// Adds edge a→b (relative to x, unit directions ua, ub, inverse distances inv_a, inv_b,
+// Adds edge a→b (a relative to x; unit directions ua, ub; b's inverse distance inv_b;
 // heights da, db above the plane; `e` = b − a from the light's frame), clipped to the
 // half-space. Straight-line code with selects rather than branches: lavapipe runs both sides
 // of every branch that differs between neighbouring pixels, so the crossing point and one
