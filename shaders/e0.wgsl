@@ -761,10 +761,10 @@ fn grid_above_quad(q: Quad) -> mat4x3<f32> {
     var d = above_start(q.d.x, q.d.nx, columns, top);
     for (var r = 0u; r < SIDE; r++) {
         let row = grid_row(r);
-        above_row(&a, q.a.x, q.a.nx, columns, row);
-        above_row(&b, q.b.x, q.b.nx, columns, row);
-        above_row(&c, q.c.x, q.c.nx, columns, row);
-        above_row(&d, q.d.x, q.d.nx, columns, row);
+        above_row(&a, q.a.x, columns, row);
+        above_row(&b, q.b.x, columns, row);
+        above_row(&c, q.c.x, columns, row);
+        above_row(&d, q.d.x, columns, row);
     }
     return mat4x3<f32>(a.e0, b.e0, c.e0, d.e0);
 }

@@ -11,7 +11,8 @@
 // grid's edge along the line below it, left to right; its right edge the vertical between
 // the two lines, upward; its top and left edges are its upper and left neighbours' bottom
 // and right edges, reversed — the same Θ Γ negated (Θ is symmetric, Γ ∝ a × b is not).
-// Only n · Θ Γ enters a receiver's sum, so an edge's term is carried as that one number.
+// Only n · Θ Γ enters a receiver's sum, so an edge's term is carried as that one number,
+// and made along its line of the grid (`GridPlanes`), not from its ends' unit directions.
 
 #import common/frame_inputs.wgsl
 
@@ -37,15 +38,6 @@ fn grid_point(column: f32, line: f32) -> vec3<f32> {
     return (frame.light_center.xyz + column * frame.light_r.xyz) + line * frame.light_u.xyz;
 }
 
-// The unit directions from x to the corners of the horizontal line `line` (metres along u).
-fn grid_directions(x: vec3<f32>, columns: array<f32, 9>, line: f32) -> array<vec3<f32>, 9> {
-    var dir: array<vec3<f32>, 9>;
-    #unroll i in 0..9 {
-        dir[i] = normalize(grid_point(columns[i], line) - x);
-    }
-    return dir;
-}
-
 // One row of cells: its top and bottom lines, metres along u, and the cells' radiance.
 struct GridRow {
     top: f32,
@@ -64,60 +56,116 @@ fn grid_row(row: u32) -> GridRow {
     return r;
 }
 
-// The corners of one horizontal line seen from x: unit directions, and their offsets from x
-// (for the horizon's crossings) with heights above x's horizon.
-struct GridLine {
+// The corners of the horizontal line `line` (metres along u) seen from x: unit directions and
+// inverse distances.
+struct SeenLine {
     dir: array<vec3<f32>, 9>,
-    offset: array<vec3<f32>, 9>,
-    height: array<f32, 9>,
+    inv: array<f32, 9>,
 }
 
-fn grid_line(x: vec3<f32>, nx: vec3<f32>, columns: array<f32, 9>, line: f32) -> GridLine {
-    var l: GridLine;
+fn seen_line(x: vec3<f32>, columns: array<f32, 9>, line: f32) -> SeenLine {
+    var l: SeenLine;
     #unroll i in 0..9 {
         let p = grid_point(columns[i], line) - x;
-        l.offset[i] = p;
-        l.dir[i] = normalize(p);
-        l.height[i] = dot(p, nx);
+        l.inv[i] = inverseSqrt(dot(p, p));
+        l.dir[i] = p * l.inv[i];
     }
     return l;
 }
 
+// Every edge of the grid lies on a line along r or u, and every point p of one line (relative
+// to x) has the same p × r (a horizontal line) or p × u (a vertical one): (C − x) × r + y (u × r)
+// for the line y metres along u, (C − x) × u + X (r × u) for the line X metres along r (C, the
+// light's centre). So the cross product of the directions to two of its points a, b is that
+// vector times the length from a to b over |a| |b| — exactly, and made without the two
+// products near 1 that cancel to sin Θ when it is taken from the directions themselves: from
+// metres away the grid's cells subtend a few hundredths of a radian, a × b of unit vectors
+// keeps a few ulps of 1 of error, and a cell's four terms cancel again to its solid angle
+// (the exact sum under `mosaic` was 1.9·10⁻³ off an f64 sum at receivers 5 m away; see
+// `edge_part`, which takes a cell's own edges the same way).
+struct GridPlanes {
+    across: vec3<f32>, // (C − x) × r
+    up: vec3<f32>,     // (C − x) × u
+    slope: vec3<f32>,  // r × u: the horizontal lines' vector falls by it per metre along u, the vertical lines' rises per metre along r
+}
+
+fn grid_planes(x: vec3<f32>) -> GridPlanes {
+    let c = frame.light_center.xyz - x;
+    return GridPlanes(cross(c, frame.light_r.xyz), cross(c, frame.light_u.xyz), cross(frame.light_r.xyz, frame.light_u.xyz));
+}
+
+// n · the planes' vectors, for the walks that need only a receiver's terms.
+struct GridHeights {
+    across: f32,
+    up: f32,
+    slope: f32,
+}
+
+fn grid_heights(x: vec3<f32>, nx: vec3<f32>) -> GridHeights {
+    let p = grid_planes(x);
+    return GridHeights(dot(nx, p.across), dot(nx, p.up), dot(nx, p.slope));
+}
+
+// n · (p × r) for the points p of the horizontal line `line`, and n · (p × u) for those of the
+// vertical line `column` (`GridPlanes`).
+fn across_height(h: GridHeights, line: f32) -> f32 {
+    return h.across - line * h.slope;
+}
+
+fn up_height(h: GridHeights, column: f32) -> f32 {
+    return h.up + column * h.slope;
+}
+
+// n · Θ Γ of the part of a grid line from a to b (unit directions ua, ub, inverse distances
+// inv_a, inv_b; `length`, metres from a to b along the line's axis; `height`, the line's n ·
+// (p × axis)): n · (a × b) = height × length / (|a| |b|), times Θ / sin Θ.
+fn line_term(height: f32, length: f32, inv_a: f32, inv_b: f32, ua: vec3<f32>, ub: vec3<f32>) -> f32 {
+    return height * (length * inv_a * inv_b) * edge_scale(cross(ua, ub), dot(ua, ub));
+}
+
+// Θ Γ itself, `plane` the line's p × axis.
+fn line_vector(plane: vec3<f32>, length: f32, inv_a: f32, inv_b: f32, ua: vec3<f32>, ub: vec3<f32>) -> vec3<f32> {
+    let c = plane * (length * inv_a * inv_b);
+    return c * edge_scale(c, dot(ua, ub));
+}
+
 // --- Every cell above the horizon: |n · Φ| per cell (`exact_above`) ----------------------
 
-// A pixel's walk down the grid: the line above the row (directions to its corners) and the
+// A pixel's walk down the grid: the line above the row (its corners seen from x) and the
 // n · Θ Γ of its edges left to right, and the sum so far.
 struct AboveWalk {
-    dir: array<vec3<f32>, 9>,
+    line: SeenLine,
     edge: array<f32, 8>,
+    heights: GridHeights,
     e0: vec3<f32>,
 }
 
 fn above_start(x: vec3<f32>, nx: vec3<f32>, columns: array<f32, 9>, line: f32) -> AboveWalk {
     var w: AboveWalk;
-    w.dir = grid_directions(x, columns, line);
+    w.line = seen_line(x, columns, line);
+    w.heights = grid_heights(x, nx);
+    let height = across_height(w.heights, line);
     #unroll i in 0..8 {
-        w.edge[i] = edge_term(nx, w.dir[i], w.dir[i + 1u]);
+        w.edge[i] = line_term(height, columns[i + 1u] - columns[i], w.line.inv[i], w.line.inv[i + 1u], w.line.dir[i], w.line.dir[i + 1u]);
     }
     w.e0 = vec3<f32>(0.0);
     return w;
 }
 
 // Adds a row's cells, each ½ |n · (bottom + right − top − left)| times its radiance.
-fn above_row(w: ptr<function, AboveWalk>, x: vec3<f32>, nx: vec3<f32>, columns: array<f32, 9>, row: GridRow) {
-    let below = grid_directions(x, columns, row.bottom);
-    var turned: array<vec3<f32>, 9>;
+fn above_row(w: ptr<function, AboveWalk>, x: vec3<f32>, columns: array<f32, 9>, row: GridRow) {
+    let below = seen_line(x, columns, row.bottom);
+    let across = across_height((*w).heights, row.bottom);
     var up: array<f32, 9>;
     #unroll i in 0..9 {
-        turned[i] = cross(nx, below[i]);
-        up[i] = edge_term_turned(turned[i], below[i], (*w).dir[i]);
+        up[i] = line_term(up_height((*w).heights, columns[i]), row.top - row.bottom, below.inv[i], (*w).line.inv[i], below.dir[i], (*w).line.dir[i]);
     }
     #unroll i in 0..8 {
-        let bottom = edge_term_turned(turned[i], below[i], below[i + 1u]);
+        let bottom = line_term(across, columns[i + 1u] - columns[i], below.inv[i], below.inv[i + 1u], below.dir[i], below.dir[i + 1u]);
         (*w).e0 += row.radiance[i] * (0.5 * abs(bottom + up[i + 1u] - (*w).edge[i] - up[i]));
         (*w).edge[i] = bottom;
     }
-    (*w).dir = below;
+    (*w).line = below;
 }
 
 // --- Φ, the light's vector irradiance (the block corners' and checks' `exact_terms`) -----
@@ -126,7 +174,7 @@ fn above_row(w: ptr<function, AboveWalk>, x: vec3<f32>, nx: vec3<f32>, columns: 
 // channel Φ so far (columns) with the sum of |n · Φ| of each cell (E0 where every cell lies
 // above the horizon).
 struct PhiWalk {
-    dir: array<vec3<f32>, 9>,
+    line: SeenLine,
     edge: array<vec3<f32>, 8>,
     phi: mat3x3<f32>,
     e0: vec3<f32>,
@@ -135,59 +183,85 @@ struct PhiWalk {
 // Φ per channel (columns) and Σ radiance × |n · the cell's Φ| at x, over the grid.
 fn grid_phi(x: vec3<f32>, nx: vec3<f32>) -> PhiWalk {
     let columns = grid_columns();
+    let planes = grid_planes(x);
     var w: PhiWalk;
-    w.dir = grid_directions(x, columns, light_cells[0u].rect.w);
+    let top = light_cells[0u].rect.w;
+    w.line = seen_line(x, columns, top);
+    let top_plane = planes.across - top * planes.slope;
     #unroll i in 0..8 {
-        w.edge[i] = edge_vector(w.dir[i], w.dir[i + 1u]);
+        w.edge[i] = line_vector(top_plane, columns[i + 1u] - columns[i], w.line.inv[i], w.line.inv[i + 1u], w.line.dir[i], w.line.dir[i + 1u]);
     }
     w.phi = mat3x3<f32>(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0));
     w.e0 = vec3<f32>(0.0);
     for (var r = 0u; r < SIDE; r++) {
         let row = grid_row(r);
-        let below = grid_directions(x, columns, row.bottom);
+        let below = seen_line(x, columns, row.bottom);
+        let across = planes.across - row.bottom * planes.slope;
         var up: array<vec3<f32>, 9>;
         #unroll i in 0..9 {
-            up[i] = edge_vector(below[i], w.dir[i]);
+            up[i] = line_vector(planes.up + columns[i] * planes.slope, row.top - row.bottom, below.inv[i], w.line.inv[i], below.dir[i], w.line.dir[i]);
         }
         #unroll i in 0..8 {
-            let bottom = edge_vector(below[i], below[i + 1u]);
+            let bottom = line_vector(across, columns[i + 1u] - columns[i], below.inv[i], below.inv[i + 1u], below.dir[i], below.dir[i + 1u]);
             let cell = 0.5 * (bottom + up[i + 1u] - w.edge[i] - up[i]);
             let l = row.radiance[i];
             w.phi += mat3x3<f32>(cell * l.r, cell * l.g, cell * l.b);
             w.e0 += l * abs(dot(nx, cell));
             w.edge[i] = bottom;
         }
-        w.dir = below;
+        w.line = below;
     }
     return w;
 }
 
 // --- Cells clipped to the hemisphere (`exact_clipped`, and every straddling corner) ----
 
-// Where the horizon crosses the straight line of the grid from corner a to corner b (their
-// offsets from x, a's direction, their heights above x's horizon): the point at height
-// HORIZON_EPS, as `clip_edge` finds it on a cell's edge. A line crosses the horizon's plane
-// once at most, so the crossing of whichever of its edges crosses is the line's, found once
-// for the line's eight edges (for `exact_clipped` on `terrain` under `mosaic`, 18 crossings
-// a pixel instead of 152: 70 → 57 ms). Where the line's ends lie on one side, an edge of it that
-// its corners' heights say crosses does so by rounding alone: the whole line then lies within
-// rounding of the horizon, and a's direction stands in for the crossing — moving a vertex of
-// the clipped polygon along the horizon changes its projected solid angle by nothing.
-fn line_crossing(a: vec3<f32>, b: vec3<f32>, ua: vec3<f32>, da: f32, db: f32) -> vec3<f32> {
-    return select(ua, horizon_crossing(a, b, da, db), (da > HORIZON_EPS) != (db > HORIZON_EPS));
+// Where the horizon crosses the straight line of the grid from its end a to its end b (their
+// places along the line's axis, metres; their heights above x's horizon): the place of the
+// point at height HORIZON_EPS, as `clip_edge` finds it on a cell's edge. A line crosses the
+// horizon's plane once at most, so the crossing of whichever of its edges crosses is the
+// line's, found once for the line's eight edges (for `exact_clipped` on `terrain` under
+// `mosaic`, 18 crossings a pixel instead of 152: 70 → 57 ms). Where the line's ends lie on one
+// side, an edge of it that its corners' heights say crosses does so by rounding alone: the
+// whole line then lies within rounding of the horizon, and a stands in for the crossing —
+// moving a vertex of the clipped polygon along the horizon changes its projected solid angle
+// by nothing.
+fn line_crossing(a: f32, b: f32, da: f32, db: f32) -> f32 {
+    let t = (HORIZON_EPS - da) / (db - da);
+    return select(a, a + t * (b - a), (da > HORIZON_EPS) != (db > HORIZON_EPS));
 }
 
-// n · Θ Γ of the part of edge ua → ub above x's horizon (heights da, db), q its line's
-// crossing (`line_crossing`), as `clip_edge` clips a cell's edge. With neither end above,
-// the edge from ua to itself, whose term is exactly 0 (q is no crossing there). Chosen among
-// the directions, not among the terms: an edge with both ends above then takes the
-// arithmetic of `above_row`, term and sum alike, bit for bit (`exact_above` and
-// `exact_clipped` agree where both apply).
-fn clipped_term(nx: vec3<f32>, q: vec3<f32>, ua: vec3<f32>, ub: vec3<f32>, da: f32, db: f32) -> f32 {
+// A point of the grid seen from x: its place along its line's axis, its unit direction and
+// inverse distance.
+struct SeenPoint {
+    at: f32,
+    dir: vec3<f32>,
+    inv: f32,
+}
+
+fn seen_point(x: vec3<f32>, at: f32, point: vec3<f32>) -> SeenPoint {
+    let p = point - x;
+    let inv = inverseSqrt(dot(p, p));
+    return SeenPoint(at, p * inv, inv);
+}
+
+// n · Θ Γ of the part of the grid line's edge a → b above x's horizon (heights da, db), q
+// its line's crossing (`line_crossing`), as `clip_edge` clips a cell's edge; with neither end
+// above, 0 (q is no crossing there). Chosen among the points, not among the terms: an edge
+// with both ends above then takes the arithmetic of `above_row`, term and sum alike, bit for
+// bit (`exact_above` and `exact_clipped` agree where both apply).
+fn clipped_term(height: f32, q: SeenPoint, a: SeenPoint, b: SeenPoint, da: f32, db: f32) -> f32 {
     let above_a = da > HORIZON_EPS;
     let above_b = db > HORIZON_EPS;
-    let neither = !above_a && !above_b;
-    return edge_term(nx, select(q, ua, above_a || neither), select(select(q, ub, above_b), ua, neither));
+    let start = pick(q, a, above_a);
+    let end = pick(q, b, above_b);
+    let length = select(0.0, end.at - start.at, above_a || above_b);
+    return line_term(height, length, start.inv, end.inv, start.dir, end.dir);
+}
+
+// `select` for a `SeenPoint`: `t` where `take`, else `f`.
+fn pick(f: SeenPoint, t: SeenPoint, take: bool) -> SeenPoint {
+    return SeenPoint(select(f.at, t.at, take), select(f.dir, t.dir, take), select(f.inv, t.inv, take));
 }
 
 // Every crossing of the horizon lies on one great circle of directions from x, the horizon's,
@@ -237,35 +311,68 @@ fn closing_term(above: vec4<bool>, bottom: f32, right: f32, top: f32, left: f32)
     return select(0.0, entry - exit, any(above) && !all(above));
 }
 
-// A pixel's walk down the grid: the line above the row (directions to its corners, the
-// clipped terms of its edges left to right, where the horizon crosses it), where the
-// horizon crosses each vertical line of the grid, and the sum so far.
+// The corners of one horizontal line seen from x (`seen_line`) and their heights above x's
+// horizon.
+struct ClippedLine {
+    seen: SeenLine,
+    height: array<f32, 9>,
+}
+
+fn clipped_line(x: vec3<f32>, nx: vec3<f32>, columns: array<f32, 9>, line: f32) -> ClippedLine {
+    var l: ClippedLine;
+    #unroll i in 0..9 {
+        let p = grid_point(columns[i], line) - x;
+        l.seen.inv[i] = inverseSqrt(dot(p, p));
+        l.seen.dir[i] = p * l.seen.inv[i];
+        l.height[i] = dot(p, nx);
+    }
+    return l;
+}
+
+// Corner i of a line as a `SeenPoint` along the line (`columns[i]` metres along r).
+fn line_point(l: SeenLine, columns: array<f32, 9>, i: u32) -> SeenPoint {
+    return SeenPoint(columns[i], l.dir[i], l.inv[i]);
+}
+
+// Where the horizon crosses the horizontal line `line` (metres along u) whose corners are `l`.
+fn across_crossing(x: vec3<f32>, columns: array<f32, 9>, line: f32, l: ClippedLine) -> SeenPoint {
+    let at = line_crossing(columns[0], columns[SIDE], l.height[0], l.height[SIDE]);
+    return seen_point(x, at, grid_point(at, line));
+}
+
+// A pixel's walk down the grid: the line above the row (its corners seen from x, the clipped
+// terms of its edges left to right, the angle of its crossing on the horizon's circle), where
+// the horizon crosses each vertical line of the grid, and the sum so far.
 struct ClippedWalk {
-    dir: array<vec3<f32>, 9>,
+    line: SeenLine,
     edge: array<f32, 8>,
-    crossing: vec3<f32>,
-    vertical: array<vec3<f32>, 9>,
-    // The crossings' angles on the horizon's circle (`closing_term`).
     crossing_angle: f32,
+    // The crossings of the vertical lines, and their angles on the horizon's circle
+    // (`closing_term`).
+    vertical: array<SeenPoint, 9>,
     vertical_angle: array<f32, 9>,
     circle: HorizonCircle,
+    heights: GridHeights,
     e0: vec3<f32>,
 }
 
 fn clipped_start(x: vec3<f32>, nx: vec3<f32>, columns: array<f32, 9>, top_line: f32, bottom_line: f32) -> ClippedWalk {
-    let top = grid_line(x, nx, columns, top_line);
+    let top = clipped_line(x, nx, columns, top_line);
     var w: ClippedWalk;
     w.circle = horizon_circle(x, nx);
-    w.dir = top.dir;
-    w.crossing = line_crossing(top.offset[0], top.offset[SIDE], top.dir[0], top.height[0], top.height[SIDE]);
-    w.crossing_angle = horizon_angle(w.circle, w.crossing);
+    w.heights = grid_heights(x, nx);
+    w.line = top.seen;
+    let crossing = across_crossing(x, columns, top_line, top);
+    w.crossing_angle = horizon_angle(w.circle, crossing.dir);
+    let across = across_height(w.heights, top_line);
     #unroll i in 0..8 {
-        w.edge[i] = clipped_term(nx, w.crossing, top.dir[i], top.dir[i + 1u], top.height[i], top.height[i + 1u]);
+        w.edge[i] = clipped_term(across, crossing, line_point(top.seen, columns, i), line_point(top.seen, columns, i + 1u), top.height[i], top.height[i + 1u]);
     }
     #unroll i in 0..9 {
-        let bottom = grid_point(columns[i], bottom_line) - x;
-        w.vertical[i] = line_crossing(top.offset[i], bottom, top.dir[i], top.height[i], dot(bottom, nx));
-        w.vertical_angle[i] = horizon_angle(w.circle, w.vertical[i]);
+        let bottom = dot(grid_point(columns[i], bottom_line) - x, nx);
+        let at = line_crossing(top_line, bottom_line, top.height[i], bottom);
+        w.vertical[i] = seen_point(x, at, grid_point(columns[i], at));
+        w.vertical_angle[i] = horizon_angle(w.circle, w.vertical[i].dir);
     }
     w.e0 = vec3<f32>(0.0);
     return w;
@@ -275,25 +382,27 @@ fn clipped_start(x: vec3<f32>, nx: vec3<f32>, columns: array<f32, 9>, top_line: 
 // radiance. The top line's heights are made again (a subtraction and a dot product each)
 // rather than carried.
 fn clipped_row(w: ptr<function, ClippedWalk>, x: vec3<f32>, nx: vec3<f32>, columns: array<f32, 9>, row: GridRow) {
-    let below = grid_line(x, nx, columns, row.bottom);
-    let crossing = line_crossing(below.offset[0], below.offset[SIDE], below.dir[0], below.height[0], below.height[SIDE]);
-    let crossing_angle = horizon_angle((*w).circle, crossing);
+    let below = clipped_line(x, nx, columns, row.bottom);
+    let crossing = across_crossing(x, columns, row.bottom, below);
+    let crossing_angle = horizon_angle((*w).circle, crossing.dir);
     var top_height: array<f32, 9>;
     var up: array<f32, 9>;
     #unroll i in 0..9 {
         top_height[i] = dot(grid_point(columns[i], row.top) - x, nx);
-        up[i] = clipped_term(nx, (*w).vertical[i], below.dir[i], (*w).dir[i], below.height[i], top_height[i]);
+        let bottom = SeenPoint(row.bottom, below.seen.dir[i], below.seen.inv[i]);
+        let top = SeenPoint(row.top, (*w).line.dir[i], (*w).line.inv[i]);
+        up[i] = clipped_term(up_height((*w).heights, columns[i]), (*w).vertical[i], bottom, top, below.height[i], top_height[i]);
     }
+    let across = across_height((*w).heights, row.bottom);
     #unroll i in 0..8 {
-        let bottom = clipped_term(nx, crossing, below.dir[i], below.dir[i + 1u], below.height[i], below.height[i + 1u]);
+        let bottom = clipped_term(across, crossing, line_point(below.seen, columns, i), line_point(below.seen, columns, i + 1u), below.height[i], below.height[i + 1u]);
         let above = vec4<f32>(below.height[i], below.height[i + 1u], top_height[i + 1u], top_height[i]) > vec4<f32>(HORIZON_EPS);
         let closing = closing_term(above, crossing_angle, (*w).vertical_angle[i + 1u], (*w).crossing_angle, (*w).vertical_angle[i]);
         let sum = bottom + up[i + 1u] - (*w).edge[i] - up[i] + closing;
         (*w).e0 += row.radiance[i] * (0.5 * abs(sum));
         (*w).edge[i] = bottom;
     }
-    (*w).dir = below.dir;
-    (*w).crossing = crossing;
+    (*w).line = below.seen;
     (*w).crossing_angle = crossing_angle;
 }
 

@@ -26,16 +26,10 @@ fn edge_vector(a: vec3<f32>, b: vec3<f32>) -> vec3<f32> {
     return c * edge_scale(c, dot(a, b));
 }
 
-// n · `edge_vector(a, b)`, the edge's term in a receiver's sum: the scale applied to the one
-// number rather than to the vector (E0's grid sums, shaders/e0_grid.wgsl: `exact_above` −9 %).
-fn edge_term(nx: vec3<f32>, a: vec3<f32>, b: vec3<f32>) -> f32 {
-    return edge_term_turned(cross(nx, a), a, b);
-}
-
-// `edge_term` with n × a given: n · (a × b) = (n × a) · b, so a corner's n × a serves every
-// edge that starts at it (E0's grid walk starts two at each corner: `exact_above` 32 → 29 ms
-// on `terrain` under `mosaic`). a × b itself is left to `edge_scale`, which reads it only
-// where an edge may be obtuse.
+// n · `edge_vector(a, b)` with n × a given as `turned`: n · (a × b) = (n × a) · b. The signed
+// angle about n from a to b where both lie in the plane normal to n (the horizon's circle,
+// `horizon_angle` in shaders/e0_grid.wgsl). a × b itself is left to `edge_scale`, which reads
+// it only where an edge may be obtuse.
 fn edge_term_turned(turned: vec3<f32>, a: vec3<f32>, b: vec3<f32>) -> f32 {
     return dot(turned, b) * edge_scale(cross(a, b), dot(a, b));
 }
@@ -78,15 +72,6 @@ struct ClippedEdges {
 }
 
 const HORIZON_EPS: f32 = 1e-6;
-
-// The grid walks' crossing (shaders/e0_grid.wgsl; `clip_edge` finds a cell's own as a + t e,
-// along its edge): the unit direction from x to where edge a→b (relative to x, heights da,
-// db above x's plane) crosses the horizon, HORIZON_EPS above it: a + (b − a)(ε − da)/(db − da),
-// scaled by db − da (no division) — its direction is all `edge_vector` needs, so the scale
-// only has to keep its sign. Meaningless where both ends lie on one side.
-fn horizon_crossing(a: vec3<f32>, b: vec3<f32>, da: f32, db: f32) -> vec3<f32> {
-    return normalize((a * (db - HORIZON_EPS) + b * (HORIZON_EPS - da)) * sign(db - da));
-}
 
 // Θ Γ for the part of an edge from s0 to s1 (fractions of the way along it), whose start
 // there has unit direction `start` and whose end has inverse distance `inv_end` from x; `e`,
