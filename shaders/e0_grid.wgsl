@@ -320,11 +320,9 @@ struct ClippedLine {
 
 fn clipped_line(x: vec3<f32>, nx: vec3<f32>, columns: array<f32, 9>, line: f32) -> ClippedLine {
     var l: ClippedLine;
+    l.seen = seen_line(x, columns, line);
     #unroll i in 0..9 {
-        let p = grid_point(columns[i], line) - x;
-        l.seen.inv[i] = inverseSqrt(dot(p, p));
-        l.seen.dir[i] = p * l.seen.inv[i];
-        l.height[i] = dot(p, nx);
+        l.height[i] = dot(grid_point(columns[i], line) - x, nx);
     }
     return l;
 }
