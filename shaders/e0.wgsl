@@ -181,6 +181,12 @@ fn block_corners(@builtin(global_invocation_id) id: vec3<u32>) {
     corners[id.y * count.x + id.x] = surface_terms(pixel, normal, beside_agreeing(id.xy, count, normal.xyz));
 }
 
+// |a − b|², the squared distance between two unit normals: how far apart the corners' and
+// pixels' normals lie (`BENT`), compared squared where a bound is (no square root).
+fn normal_gap2(a: vec3<f32>, b: vec3<f32>) -> f32 {
+    return dot(a - b, a - b);
+}
+
 // Whether a block beside corner c may blend E0 where the light straddles a pixel's horizon,
 // the one use of a corner's clipped sum: such a block's corners lie within BENT of its first
 // (`agrees`), so within 2 BENT of each other, and it holds c and one of c's two
@@ -192,7 +198,7 @@ fn beside_agreeing(c: vec2<u32>, count: vec2<u32>, n: vec3<f32>) -> bool {
     let left = textureLoad(gbuf_normal, corner_pixel(vec2<u32>(max(c.x, 1u) - 1u, c.y)), 0).xyz;
     let right = textureLoad(gbuf_normal, corner_pixel(vec2<u32>(min(c.x + 1u, count.x - 1u), c.y)), 0).xyz;
     let limit = (2.5 * BENT) * (2.5 * BENT);
-    return dot(left - n, left - n) <= limit || dot(right - n, right - n) <= limit;
+    return normal_gap2(left, n) <= limit || normal_gap2(right, n) <= limit;
 }
 
 // A block's four corner records.
@@ -276,10 +282,10 @@ fn all_valid(b: Block) -> bool {
 // largest square (the same value: the root is monotonic and correctly rounded).
 fn bend(b: Block, nx: vec3<f32>) -> f32 {
     let squares = vec4<f32>(
-        dot(b.c00.normal.xyz - nx, b.c00.normal.xyz - nx),
-        dot(b.c10.normal.xyz - nx, b.c10.normal.xyz - nx),
-        dot(b.c01.normal.xyz - nx, b.c01.normal.xyz - nx),
-        dot(b.c11.normal.xyz - nx, b.c11.normal.xyz - nx),
+        normal_gap2(b.c00.normal.xyz, nx),
+        normal_gap2(b.c10.normal.xyz, nx),
+        normal_gap2(b.c01.normal.xyz, nx),
+        normal_gap2(b.c11.normal.xyz, nx),
     );
     return sqrt(max(max(squares.x, squares.y), max(squares.z, squares.w)));
 }
@@ -398,7 +404,7 @@ fn face_corner(c: vec2<i32>, n: vec3<f32>) -> vec4<f32> {
     // A corner with no lit surface has a zero normal (`no_corner`), which fails the test; one
     // whose clipped sum was not made (`beside_agreeing`) holds −1 (`exact_terms`).
     let normal = corners[i].normal;
-    let usable = all(c >= vec2<i32>(0)) && all(c < count) && dot(normal.xyz - n, normal.xyz - n) <= BENT * BENT
+    let usable = all(c >= vec2<i32>(0)) && all(c < count) && normal_gap2(normal.xyz, n) <= BENT * BENT
         && corners[i].phi_r.w >= 0.0;
     return select(vec4<f32>(0.0), vec4<f32>(corners[i].phi_r.w, corners[i].phi_g.w, corners[i].phi_b.w, normal.w), usable);
 }
