@@ -94,33 +94,34 @@ fn grid_planes(x: vec3<f32>) -> GridPlanes {
     return GridPlanes(cross(c, frame.light_r.xyz), cross(c, frame.light_u.xyz), cross(frame.light_r.xyz, frame.light_u.xyz));
 }
 
-// n · the planes' vectors, for the walks that need only a receiver's terms.
-struct GridHeights {
+// n · the planes' vectors — a line's moment about x along n, n · (p × axis), the same for every
+// point of the line — for the walks that need only a receiver's terms.
+struct GridMoments {
     across: f32,
     up: f32,
     slope: f32,
 }
 
-fn grid_heights(x: vec3<f32>, nx: vec3<f32>) -> GridHeights {
+fn grid_moments(x: vec3<f32>, nx: vec3<f32>) -> GridMoments {
     let p = grid_planes(x);
-    return GridHeights(dot(nx, p.across), dot(nx, p.up), dot(nx, p.slope));
+    return GridMoments(dot(nx, p.across), dot(nx, p.up), dot(nx, p.slope));
 }
 
-// n · (p × r) for the points p of the horizontal line `line`, and n · (p × u) for those of the
-// vertical line `column` (`GridPlanes`).
-fn across_height(h: GridHeights, line: f32) -> f32 {
+// The moment n · (p × r) of the horizontal line `line`, and n · (p × u) of the vertical line
+// `column` (`GridPlanes`).
+fn across_moment(h: GridMoments, line: f32) -> f32 {
     return h.across - line * h.slope;
 }
 
-fn up_height(h: GridHeights, column: f32) -> f32 {
+fn up_moment(h: GridMoments, column: f32) -> f32 {
     return h.up + column * h.slope;
 }
 
 // n · Θ Γ of the part of a grid line from a to b (unit directions ua, ub, inverse distances
-// inv_a, inv_b; `length`, metres from a to b along the line's axis; `height`, the line's n ·
-// (p × axis)): n · (a × b) = height × length / (|a| |b|), times Θ / sin Θ.
-fn line_term(height: f32, length: f32, inv_a: f32, inv_b: f32, ua: vec3<f32>, ub: vec3<f32>) -> f32 {
-    return height * (length * inv_a * inv_b) * edge_scale(cross(ua, ub), dot(ua, ub));
+// inv_a, inv_b; `length`, metres from a to b along the line's axis; `moment`, the line's n ·
+// (p × axis)): n · (a × b) = moment × length / (|a| |b|), times Θ / sin Θ.
+fn line_term(moment: f32, length: f32, inv_a: f32, inv_b: f32, ua: vec3<f32>, ub: vec3<f32>) -> f32 {
+    return moment * (length * inv_a * inv_b) * edge_scale(cross(ua, ub), dot(ua, ub));
 }
 
 // Θ Γ itself, `plane` the line's p × axis.
@@ -136,17 +137,17 @@ fn line_vector(plane: vec3<f32>, length: f32, inv_a: f32, inv_b: f32, ua: vec3<f
 struct AboveWalk {
     line: SeenLine,
     edge: array<f32, 8>,
-    heights: GridHeights,
+    moments: GridMoments,
     e0: vec3<f32>,
 }
 
 fn above_start(x: vec3<f32>, nx: vec3<f32>, columns: array<f32, 9>, line: f32) -> AboveWalk {
     var w: AboveWalk;
     w.line = seen_line(x, columns, line);
-    w.heights = grid_heights(x, nx);
-    let height = across_height(w.heights, line);
+    w.moments = grid_moments(x, nx);
+    let moment = across_moment(w.moments, line);
     #unroll i in 0..8 {
-        w.edge[i] = line_term(height, columns[i + 1u] - columns[i], w.line.inv[i], w.line.inv[i + 1u], w.line.dir[i], w.line.dir[i + 1u]);
+        w.edge[i] = line_term(moment, columns[i + 1u] - columns[i], w.line.inv[i], w.line.inv[i + 1u], w.line.dir[i], w.line.dir[i + 1u]);
     }
     w.e0 = vec3<f32>(0.0);
     return w;
@@ -155,10 +156,10 @@ fn above_start(x: vec3<f32>, nx: vec3<f32>, columns: array<f32, 9>, line: f32) -
 // Adds a row's cells, each ½ |n · (bottom + right − top − left)| times its radiance.
 fn above_row(w: ptr<function, AboveWalk>, x: vec3<f32>, columns: array<f32, 9>, row: GridRow) {
     let below = seen_line(x, columns, row.bottom);
-    let across = across_height((*w).heights, row.bottom);
+    let across = across_moment((*w).moments, row.bottom);
     var up: array<f32, 9>;
     #unroll i in 0..9 {
-        up[i] = line_term(up_height((*w).heights, columns[i]), row.top - row.bottom, below.inv[i], (*w).line.inv[i], below.dir[i], (*w).line.dir[i]);
+        up[i] = line_term(up_moment((*w).moments, columns[i]), row.top - row.bottom, below.inv[i], (*w).line.inv[i], below.dir[i], (*w).line.dir[i]);
     }
     #unroll i in 0..8 {
         let bottom = line_term(across, columns[i + 1u] - columns[i], below.inv[i], below.inv[i + 1u], below.dir[i], below.dir[i + 1u]);
@@ -245,18 +246,19 @@ fn seen_point(x: vec3<f32>, at: f32, point: vec3<f32>) -> SeenPoint {
     return SeenPoint(at, p * inv, inv);
 }
 
-// n · Θ Γ of the part of the grid line's edge a → b above x's horizon (heights da, db), q
-// its line's crossing (`line_crossing`), as `clip_edge` clips a cell's edge; with neither end
-// above, 0 (q is no crossing there). Chosen among the points, not among the terms: an edge
-// with both ends above then takes the arithmetic of `above_row`, term and sum alike, bit for
-// bit (`exact_above` and `exact_clipped` agree where both apply).
-fn clipped_term(height: f32, q: SeenPoint, a: SeenPoint, b: SeenPoint, da: f32, db: f32) -> f32 {
+// n · Θ Γ of the part of the grid line's edge a → b above x's horizon (heights da, db;
+// `moment`, the line's: `line_term`), q its line's crossing (`line_crossing`), as `clip_edge`
+// clips a cell's edge; with neither end above, 0 (q is no crossing there). Chosen among the
+// points, not among the terms: an edge with both ends above then takes the arithmetic of
+// `above_row`, term and sum alike, bit for bit (`exact_above` and `exact_clipped` agree where
+// both apply).
+fn clipped_term(moment: f32, q: SeenPoint, a: SeenPoint, b: SeenPoint, da: f32, db: f32) -> f32 {
     let above_a = da > HORIZON_EPS;
     let above_b = db > HORIZON_EPS;
     let start = pick(q, a, above_a);
     let end = pick(q, b, above_b);
     let length = select(0.0, end.at - start.at, above_a || above_b);
-    return line_term(height, length, start.inv, end.inv, start.dir, end.dir);
+    return line_term(moment, length, start.inv, end.inv, start.dir, end.dir);
 }
 
 // `select` for a `SeenPoint`: `t` where `take`, else `f`.
@@ -350,7 +352,7 @@ struct ClippedWalk {
     vertical: array<SeenPoint, 9>,
     vertical_angle: array<f32, 9>,
     circle: HorizonCircle,
-    heights: GridHeights,
+    moments: GridMoments,
     e0: vec3<f32>,
 }
 
@@ -358,11 +360,11 @@ fn clipped_start(x: vec3<f32>, nx: vec3<f32>, columns: array<f32, 9>, top_line: 
     let top = clipped_line(x, nx, columns, top_line);
     var w: ClippedWalk;
     w.circle = horizon_circle(x, nx);
-    w.heights = grid_heights(x, nx);
+    w.moments = grid_moments(x, nx);
     w.line = top.seen;
     let crossing = across_crossing(x, columns, top_line, top);
     w.crossing_angle = horizon_angle(w.circle, crossing.dir);
-    let across = across_height(w.heights, top_line);
+    let across = across_moment(w.moments, top_line);
     #unroll i in 0..8 {
         w.edge[i] = clipped_term(across, crossing, line_point(top.seen, columns, i), line_point(top.seen, columns, i + 1u), top.height[i], top.height[i + 1u]);
     }
@@ -389,9 +391,9 @@ fn clipped_row(w: ptr<function, ClippedWalk>, x: vec3<f32>, nx: vec3<f32>, colum
         top_height[i] = dot(grid_point(columns[i], row.top) - x, nx);
         let bottom = SeenPoint(row.bottom, below.seen.dir[i], below.seen.inv[i]);
         let top = SeenPoint(row.top, (*w).line.dir[i], (*w).line.inv[i]);
-        up[i] = clipped_term(up_height((*w).heights, columns[i]), (*w).vertical[i], bottom, top, below.height[i], top_height[i]);
+        up[i] = clipped_term(up_moment((*w).moments, columns[i]), (*w).vertical[i], bottom, top, below.height[i], top_height[i]);
     }
-    let across = across_height((*w).heights, row.bottom);
+    let across = across_moment((*w).moments, row.bottom);
     #unroll i in 0..8 {
         let bottom = clipped_term(across, crossing, line_point(below.seen, columns, i), line_point(below.seen, columns, i + 1u), below.height[i], below.height[i + 1u]);
         let above = vec4<f32>(below.height[i], below.height[i + 1u], top_height[i + 1u], top_height[i]) > vec4<f32>(HORIZON_EPS);
