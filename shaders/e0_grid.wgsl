@@ -56,6 +56,20 @@ fn grid_row(row: u32) -> GridRow {
     return r;
 }
 
+// A point of the grid seen from x: its place along its line's axis, its unit direction and
+// inverse distance.
+struct SeenPoint {
+    at: f32,
+    dir: vec3<f32>,
+    inv: f32,
+}
+
+fn seen_point(x: vec3<f32>, at: f32, point: vec3<f32>) -> SeenPoint {
+    let p = point - x;
+    let inv = inverseSqrt(dot(p, p));
+    return SeenPoint(at, p * inv, inv);
+}
+
 // The corners of the horizontal line `line` (metres along u) seen from x: unit directions and
 // inverse distances.
 struct SeenLine {
@@ -66,9 +80,9 @@ struct SeenLine {
 fn seen_line(x: vec3<f32>, columns: array<f32, 9>, line: f32) -> SeenLine {
     var l: SeenLine;
     #unroll i in 0..9 {
-        let p = grid_point(columns[i], line) - x;
-        l.inv[i] = inverseSqrt(dot(p, p));
-        l.dir[i] = p * l.inv[i];
+        let corner = seen_point(x, columns[i], grid_point(columns[i], line));
+        l.dir[i] = corner.dir;
+        l.inv[i] = corner.inv;
     }
     return l;
 }
@@ -107,8 +121,17 @@ fn grid_moments(x: vec3<f32>, nx: vec3<f32>) -> GridMoments {
     return GridMoments(dot(nx, p.across), dot(nx, p.up), dot(nx, p.slope));
 }
 
+// The vector p × r of the horizontal line `line`, and p × u of the vertical line `column`.
+fn across_plane(p: GridPlanes, line: f32) -> vec3<f32> {
+    return p.across - line * p.slope;
+}
+
+fn up_plane(p: GridPlanes, column: f32) -> vec3<f32> {
+    return p.up + column * p.slope;
+}
+
 // The moment n · (p × r) of the horizontal line `line`, and n · (p × u) of the vertical line
-// `column` (`GridPlanes`).
+// `column` (`GridPlanes`; n · `across_plane`, `up_plane`).
 fn across_moment(h: GridMoments, line: f32) -> f32 {
     return h.across - line * h.slope;
 }
@@ -188,7 +211,7 @@ fn grid_phi(x: vec3<f32>, nx: vec3<f32>) -> PhiWalk {
     var w: PhiWalk;
     let top = light_cells[0u].rect.w;
     w.line = seen_line(x, columns, top);
-    let top_plane = planes.across - top * planes.slope;
+    let top_plane = across_plane(planes, top);
     #unroll i in 0..8 {
         w.edge[i] = line_vector(top_plane, columns[i + 1u] - columns[i], w.line.inv[i], w.line.inv[i + 1u], w.line.dir[i], w.line.dir[i + 1u]);
     }
@@ -197,10 +220,10 @@ fn grid_phi(x: vec3<f32>, nx: vec3<f32>) -> PhiWalk {
     for (var r = 0u; r < SIDE; r++) {
         let row = grid_row(r);
         let below = seen_line(x, columns, row.bottom);
-        let across = planes.across - row.bottom * planes.slope;
+        let across = across_plane(planes, row.bottom);
         var up: array<vec3<f32>, 9>;
         #unroll i in 0..9 {
-            up[i] = line_vector(planes.up + columns[i] * planes.slope, row.top - row.bottom, below.inv[i], w.line.inv[i], below.dir[i], w.line.dir[i]);
+            up[i] = line_vector(up_plane(planes, columns[i]), row.top - row.bottom, below.inv[i], w.line.inv[i], below.dir[i], w.line.dir[i]);
         }
         #unroll i in 0..8 {
             let bottom = line_vector(across, columns[i + 1u] - columns[i], below.inv[i], below.inv[i + 1u], below.dir[i], below.dir[i + 1u]);
@@ -230,20 +253,6 @@ fn grid_phi(x: vec3<f32>, nx: vec3<f32>) -> PhiWalk {
 fn line_crossing(a: f32, b: f32, da: f32, db: f32) -> f32 {
     let t = (HORIZON_EPS - da) / (db - da);
     return select(a, a + t * (b - a), (da > HORIZON_EPS) != (db > HORIZON_EPS));
-}
-
-// A point of the grid seen from x: its place along its line's axis, its unit direction and
-// inverse distance.
-struct SeenPoint {
-    at: f32,
-    dir: vec3<f32>,
-    inv: f32,
-}
-
-fn seen_point(x: vec3<f32>, at: f32, point: vec3<f32>) -> SeenPoint {
-    let p = point - x;
-    let inv = inverseSqrt(dot(p, p));
-    return SeenPoint(at, p * inv, inv);
 }
 
 // n · Θ Γ of the part of the grid line's edge a → b above x's horizon (heights da, db;
@@ -282,7 +291,8 @@ struct HorizonCircle {
 // crosses the light, so that point lies within the light's circumscribed circle, and the
 // crossings' angles from it are no wider than the light seen from x — a difference of two of
 // them loses little to rounding — and within half a turn of it, as all of a line's points are
-// (`edge_term`, with its obtuse branch where the frame needs it, measures such an angle). The
+// (`edge_term_turned`, with `edge_scale`'s obtuse branch where the frame needs it, measures
+// such an angle). The
 // point: C + s e, e = n − (n · n_l) n_l the light plane's direction across the line, s making
 // its height above x's horizon 0. Where the two planes are parallel no cell straddles and any
 // direction in the horizon will do.
