@@ -91,8 +91,7 @@ fn light_image_lands_the_documented_way_round() {
 /// the E0 mode is the renderer's, and the shared engine renders other tests' frames.
 #[test]
 fn e0_interpolation_stays_within_a_thousandth_of_the_exact_sum() {
-    let gpu = penumbra::gpu::GpuContext::new(penumbra::gpu::AdapterChoice::Auto).unwrap();
-    let engine = penumbra::engine::Engine::new(std::sync::Arc::new(gpu), Limits::default(), penumbra::engine::PathPolicy::Any);
+    let engine = common::own_engine();
     // `terrain`: a bumpy receiver, whose pixels leave their block corners' blend along the
     // view ray (the derivative's correction, `shaders/e0.wgsl`).
     let terrain = json!({"builtin": "terrain", "triangles": 100000});
@@ -190,8 +189,7 @@ fn e0_interpolation_stays_within_a_thousandth_of_the_exact_sum() {
 #[test]
 fn exact_e0_matches_an_f64_sum() {
     use glam::DVec3;
-    let gpu = penumbra::gpu::GpuContext::new(penumbra::gpu::AdapterChoice::Auto).unwrap();
-    let engine = penumbra::engine::Engine::new(std::sync::Arc::new(gpu), Limits::default(), penumbra::engine::PathPolicy::Any);
+    let engine = common::own_engine();
     let (w, h) = (960usize, 540usize);
     let eye = DVec3::new(0.0, 7.0, 5.0);
     let fov_y = 45.0f64;
@@ -681,8 +679,7 @@ fn reference_tests_only_the_row_segments_that_hold_a_receiver() {
 /// sum. Its own engine: the bench switches the renderer's E0 mode while it measures.
 #[test]
 fn bench_writes_its_phase_table_and_the_e0_check() {
-    let gpu = penumbra::gpu::GpuContext::new(penumbra::gpu::AdapterChoice::Auto).unwrap();
-    let engine = penumbra::engine::Engine::new(std::sync::Arc::new(gpu), Limits::default(), penumbra::engine::PathPolicy::Any);
+    let engine = common::own_engine();
     let out = std::env::temp_dir().join(format!("penumbra-bench-{}", std::process::id()));
     let options = penumbra::eval::bench::BenchOptions {
         scenes: vec!["crowd".into()],

@@ -22,12 +22,14 @@ use serde_json::json;
 /// tests as they do in the daemon.
 pub fn engine() -> Arc<Engine> {
     static ENGINE: OnceLock<Arc<Engine>> = OnceLock::new();
-    ENGINE
-        .get_or_init(|| {
-            let gpu = GpuContext::new(AdapterChoice::Auto).expect("a Vulkan adapter (lavapipe: apt-get install mesa-vulkan-drivers)");
-            Arc::new(Engine::new(Arc::new(gpu), Limits::default(), PathPolicy::Any))
-        })
-        .clone()
+    ENGINE.get_or_init(|| Arc::new(own_engine())).clone()
+}
+
+/// An engine of the test's own, for a test that changes the renderer's state (its E0 mode),
+/// which the shared engine's other tests must not see.
+pub fn own_engine() -> Engine {
+    let gpu = GpuContext::new(AdapterChoice::Auto).expect("a Vulkan adapter (lavapipe: apt-get install mesa-vulkan-drivers)");
+    Engine::new(Arc::new(gpu), Limits::default(), PathPolicy::Any)
 }
 
 /// Decodes an EXR written by penumbra into channels by name, and its size.
