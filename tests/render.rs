@@ -3,7 +3,7 @@
 
 mod common;
 
-use glam::{Vec2, Vec3};
+use glam::{DVec3, Vec2, Vec3};
 use penumbra::job::{AssetRef, Job, Limits, OutputFormat};
 use penumbra::light::{edges_acute_from, light_cells, unshadowed_irradiance, AreaLight, LightImage};
 use penumbra::methods::chun_oh::quadtree_probe;
@@ -176,8 +176,8 @@ fn e0_interpolation_stays_within_a_thousandth_of_the_exact_sum() {
     }
 }
 
-/// Contract §1 "E0": the exact sum is Lambert's to within f32 rounding, against an f64 sum
-/// made here (each cell clipped to the receiver's hemisphere, Θ by atan2) at floor points of
+/// Contract §1 "E0": the exact sum is Lambert's to within f32 rounding, against the f64 sum of
+/// `light::unshadowed_irradiance` (each cell clipped to the receiver's hemisphere, Θ by atan2) at floor points of
 /// `occluder`, under lights where a cross product of two nearly parallel unit directions lost
 /// up to ~2·10⁻³ of a small cell's sum before each edge term was taken along its edge
 /// (`edge_part` in shaders/common/light.wgsl, `line_term` in shaders/e0_grid.wgsl): a 0.5 m
@@ -188,7 +188,6 @@ fn e0_interpolation_stays_within_a_thousandth_of_the_exact_sum() {
 /// within 10⁻³ of the exact sum there too.
 #[test]
 fn exact_e0_matches_an_f64_sum() {
-    use glam::DVec3;
     let engine = common::own_engine();
     let (w, h) = (960usize, 540usize);
     let eye = DVec3::new(0.0, 7.0, 5.0);
@@ -240,7 +239,7 @@ fn exact_e0_matches_an_f64_sum() {
                         && (x - center.as_dvec3()).dot(direction.as_dvec3()) > 0.0
                         && (view_depth - depth[pixel] as f64).abs() <= 1e-5 * view_depth
                     {
-                        points.push((pixel, f64_irradiance(&cells, x)));
+                        points.push((pixel, unshadowed_irradiance(&light, &cells, x, DVec3::Y)));
                     }
                 }
             }
@@ -271,37 +270,6 @@ fn exact_e0_matches_an_f64_sum() {
     }
     // The interpolation ran (under the sunk light it refuses every block: E0 varies too much).
     assert!(all_blended * 5 > all_samples, "{all_blended} of {all_samples} samples interpolated");
-}
-
-/// Σ radiance × ½ |n · Σ Θ Γ| over the cells, each clipped to the hemisphere above the floor
-/// point x (n = +y), in f64: the yardstick of `exact_e0_matches_an_f64_sum`.
-fn f64_irradiance(cells: &[penumbra::light::LightCell], x: glam::DVec3) -> glam::DVec3 {
-    use glam::DVec3;
-    let mut e0 = DVec3::ZERO;
-    for cell in cells {
-        // Sutherland–Hodgman against y > 0.
-        let corners = cell.corners.map(|c| c.as_dvec3() - x);
-        let mut clipped = Vec::new();
-        for i in 0..4 {
-            let (a, b) = (corners[i], corners[(i + 1) % 4]);
-            if a.y > 0.0 {
-                clipped.push(a);
-            }
-            if (a.y > 0.0) != (b.y > 0.0) {
-                clipped.push(a + (b - a) * (a.y / (a.y - b.y)));
-            }
-        }
-        let mut sum = DVec3::ZERO;
-        for i in 0..clipped.len() {
-            let (a, b) = (clipped[i].normalize(), clipped[(i + 1) % clipped.len()].normalize());
-            let sin = a.cross(b).length();
-            if sin > 0.0 {
-                sum += a.cross(b) * (sin.atan2(a.dot(b)) / sin);
-            }
-        }
-        e0 += cell.radiance.as_dvec3() * (0.5 * sum.y.abs());
-    }
-    e0
 }
 
 /// A PNG's pixels made on the GPU (`composite.wgsl`, `srgb8`) are what the CPU makes from the
@@ -372,7 +340,7 @@ fn e0_on_the_gpu_matches_its_cpu_twin() {
             let heights: Vec<f32> = cells.iter().flat_map(|c| c.corners).map(|corner| corner.y).collect();
             let crossed = heights.iter().any(|&h| h > 0.0) && heights.iter().any(|&h| h < 0.0);
             assert_eq!(crossed, straddles, "light at {center}: the cells' heights {heights:?}");
-            let expected = unshadowed_irradiance(&light, &cells, point, Vec3::Y) * 0.7 / std::f32::consts::PI;
+            let expected = (unshadowed_irradiance(&light, &cells, point.as_dvec3(), DVec3::Y) * 0.7 / std::f64::consts::PI).as_vec3();
             let got = frame.color[16 * 33 + 16];
             for k in 0..3 {
                 let rel = (got[k] - expected[k]).abs() / expected[k].max(1e-6);
@@ -512,21 +480,22 @@ fn analytic_visibility(light: &AreaLight, cells: &[penumbra::light::LightCell], 
     let (sz0, sz1) = (project(-half, x.z), project(half, x.z));
     let rect = |x0: f32, x1: f32, z0: f32, z1: f32| {
         let y = light.center.y;
-        [Vec3::new(x0, y, z0), Vec3::new(x1, y, z0), Vec3::new(x1, y, z1), Vec3::new(x0, y, z1)]
+        [Vec3::new(x0, y, z0), Vec3::new(x1, y, z0), Vec3::new(x1, y, z1), Vec3::new(x0, y, z1)].map(|p| p.as_dvec3())
     };
-    let (mut lit, mut all) = (Vec3::ZERO, Vec3::ZERO);
+    let x_64 = x.as_dvec3();
+    let (mut lit, mut all) = (DVec3::ZERO, DVec3::ZERO);
     for cell in cells {
         let xs = cell.corners.iter().map(|c| c.x);
         let zs = cell.corners.iter().map(|c| c.z);
         let (cx0, cx1) = (xs.clone().fold(f32::MAX, f32::min), xs.fold(f32::MIN, f32::max));
         let (cz0, cz1) = (zs.clone().fold(f32::MAX, f32::min), zs.fold(f32::MIN, f32::max));
-        let full = polygon_irradiance(x, Vec3::Y, &rect(cx0, cx1, cz0, cz1));
+        let full = polygon_irradiance(x_64, DVec3::Y, &rect(cx0, cx1, cz0, cz1));
         let (ix0, ix1, iz0, iz1) = (cx0.max(sx0), cx1.min(sx1), cz0.max(sz0), cz1.min(sz1));
-        let hidden = if ix0 < ix1 && iz0 < iz1 { polygon_irradiance(x, Vec3::Y, &rect(ix0, ix1, iz0, iz1)) } else { 0.0 };
-        lit += cell.radiance * (full - hidden);
-        all += cell.radiance * full;
+        let hidden = if ix0 < ix1 && iz0 < iz1 { polygon_irradiance(x_64, DVec3::Y, &rect(ix0, ix1, iz0, iz1)) } else { 0.0 };
+        lit += cell.radiance.as_dvec3() * (full - hidden);
+        all += cell.radiance.as_dvec3() * full;
     }
-    Vec3::new(lit.x / all.x, lit.y / all.y, lit.z / all.z)
+    (lit / all).as_vec3()
 }
 
 /// Renders `reference` on the occluder scene seen from straight above and returns the mean

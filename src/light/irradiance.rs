@@ -2,7 +2,7 @@
 //! uniform cells, and Lambert's closed form for a polygon clipped to the receiver's
 //! hemisphere — the CPU twin of `shaders/common/light.wgsl` and `shaders/e0.wgsl`.
 
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 
 use super::{AreaLight, LightImage};
 
@@ -105,19 +105,22 @@ pub fn edges_acute_from(light: &AreaLight, min: Vec3, max: Vec3) -> bool {
 
 /// `∫ cosθx dω` over a polygon seen from `x` with normal `nx`, after clipping the polygon
 /// to the hemisphere above x (Lambert's closed form for the vector irradiance: ½ Σ Θᵢ n·Γᵢ).
-/// The CPU twin of `polygon_irradiance` in `shaders/common/light.wgsl`.
-pub fn polygon_irradiance(x: Vec3, nx: Vec3, corners: &[Vec3; 4]) -> f32 {
-    const EPS: f32 = 1e-6;
-    let mut clipped: Vec<Vec3> = Vec::with_capacity(5);
+/// The CPU twin of `polygon_irradiance` in `shaders/common/light.wgsl`, clipped as it is
+/// (`HORIZON_EPS` above the plane) but in f64 and with Θ from atan2: the yardstick the GPU's
+/// f32 sums are measured against, whose own rounding (`sin Θ` from the product of two nearly
+/// parallel unit directions) would otherwise be as large as what it measures.
+pub fn polygon_irradiance(x: DVec3, nx: DVec3, corners: &[DVec3; 4]) -> f64 {
+    const HORIZON_EPS: f64 = 1e-6;
+    let mut clipped: Vec<DVec3> = Vec::with_capacity(5);
     for k in 0..4 {
         let a = corners[k] - x;
         let b = corners[(k + 1) % 4] - x;
         let (da, db) = (a.dot(nx), b.dot(nx));
-        if da > EPS {
+        if da > HORIZON_EPS {
             clipped.push(a);
         }
-        if (da > EPS) != (db > EPS) {
-            let t = (EPS - da) / (db - da);
+        if (da > HORIZON_EPS) != (db > HORIZON_EPS) {
+            let t = (HORIZON_EPS - da) / (db - da);
             clipped.push(a + (b - a) * t);
         }
     }
@@ -129,21 +132,22 @@ pub fn polygon_irradiance(x: Vec3, nx: Vec3, corners: &[Vec3; 4]) -> f32 {
         let a = clipped[k].normalize();
         let b = clipped[(k + 1) % clipped.len()].normalize();
         let c = a.cross(b);
-        let len = c.length();
-        if len > 1e-12 {
-            sum += len.atan2(a.dot(b)) * nx.dot(c / len);
+        let sin = c.length();
+        if sin > 0.0 {
+            sum += sin.atan2(a.dot(b)) * nx.dot(c / sin);
         }
     }
     0.5 * sum.abs()
 }
 
-/// The unshadowed irradiance E0 at x (contract §1), per channel: the sum over light cells.
-pub fn unshadowed_irradiance(light: &AreaLight, cells: &[LightCell], x: Vec3, nx: Vec3) -> Vec3 {
+/// The unshadowed irradiance E0 at x (contract §1), per channel: the sum over light cells,
+/// each by `polygon_irradiance` (in f64).
+pub fn unshadowed_irradiance(light: &AreaLight, cells: &[LightCell], x: DVec3, nx: DVec3) -> DVec3 {
     // One-sided emitter: only points on the lit side receive anything.
-    if light.depth(x) <= 0.0 {
-        return Vec3::ZERO;
+    if light.n.as_dvec3().dot(x - light.center.as_dvec3()) <= 0.0 {
+        return DVec3::ZERO;
     }
-    cells.iter().map(|c| c.radiance * polygon_irradiance(x, nx, &c.corners)).sum()
+    cells.iter().map(|c| c.radiance.as_dvec3() * polygon_irradiance(x, nx, &c.corners.map(|p| p.as_dvec3()))).sum()
 }
 
 #[cfg(test)]
@@ -174,7 +178,7 @@ mod tests {
         // A tiny square light straight above: E ≈ L·A·cosθx·cosθy / d².
         let light = overhead_light(0.01);
         let cells = light_cells(&light, &LightImage::builtin("white", &Map::new(), "f").unwrap());
-        let e = unshadowed_irradiance(&light, &cells, Vec3::ZERO, Vec3::Y);
+        let e = unshadowed_irradiance(&light, &cells, DVec3::ZERO, DVec3::Y);
         let expected = 1e-4 / 4.0;
         assert!((e.x - expected).abs() / expected < 1e-3, "{e} vs {expected}");
     }
@@ -184,8 +188,8 @@ mod tests {
         // An enormous light covers the whole hemisphere: ∫ cosθ dω = π.
         let light = overhead_light(1e4);
         let cells = light_cells(&light, &LightImage::builtin("white", &Map::new(), "f").unwrap());
-        let e = unshadowed_irradiance(&light, &cells, Vec3::ZERO, Vec3::Y);
-        assert!((e.x - std::f32::consts::PI).abs() < 1e-2, "{e}");
+        let e = unshadowed_irradiance(&light, &cells, DVec3::ZERO, DVec3::Y);
+        assert!((e.x - std::f64::consts::PI).abs() < 1e-2, "{e}");
     }
 
     #[test]
@@ -229,7 +233,7 @@ mod tests {
         let cells = light_cells(&light, &LightImage::builtin("white", &Map::new(), "f").unwrap());
         let x = Vec3::new(0.3, 0.0, 0.1);
         let nx = Vec3::new(1.0, 0.3, 0.0).normalize();
-        let analytic = unshadowed_irradiance(&light, &cells, x, nx).x;
+        let analytic = unshadowed_irradiance(&light, &cells, x.as_dvec3(), nx.as_dvec3()).x as f32;
         // Midpoint quadrature of ∫ cosθx cosθy / d² dA.
         let n = 400;
         let mut sum = 0.0f64;
@@ -321,8 +325,8 @@ mod tests {
         // under the −r edge of the light gets more red than blue, and the +r edge the reverse.
         let light = overhead_light(1.0);
         let cells = light_cells(&light, &LightImage::builtin("stripes", &Map::new(), "f").unwrap());
-        let under_minus_r = unshadowed_irradiance(&light, &cells, -light.r * 0.8, Vec3::Y);
-        let under_plus_r = unshadowed_irradiance(&light, &cells, light.r * 0.8, Vec3::Y);
+        let under = |side: f32| unshadowed_irradiance(&light, &cells, (light.r * side * 0.8).as_dvec3(), DVec3::Y);
+        let (under_minus_r, under_plus_r) = (under(-1.0), under(1.0));
         assert!(under_minus_r.x > under_minus_r.z);
         assert!(under_plus_r.z > under_plus_r.x);
     }
