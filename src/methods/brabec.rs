@@ -9,7 +9,7 @@
 //!   the key the adaptive sampling compares (§4.3).
 //! - `lattice`: lists for the search (§3.2 outer, §3.3 inner penumbra) every 4th pixel of
 //!   every 4th row, or every pixel with `adaptive` off.
-//! - `columns`, `rows`: the adaptive sampling of §4.3 — groups of 5 pixels along columns,
+//! - `refine` (along columns, then rows): the adaptive sampling of §4.3 — groups of 5 pixels along columns,
 //!   then rows, interpolated where ids and hard results agree, refined otherwise. Which pixels
 //!   the refinement searches depends on the keys alone, so each first lists them
 //!   (`mark_searches`); `search` then searches every listed pixel in one compacted dispatch
@@ -235,18 +235,23 @@ impl Pipelines {
             pipeline("brabec.classify", "methods/brabec/classify.wgsl"),
             pipeline("brabec.lattice", "methods/brabec/lattice.wgsl"),
         );
-        let (columns, rows, finish) = (
-            pipeline("brabec.columns", "methods/brabec/columns.wgsl"),
-            pipeline("brabec.rows", "methods/brabec/rows.wgsl"),
-            pipeline("brabec.finish", "methods/brabec/finish.wgsl"),
-        );
+        let finish = pipeline("brabec.finish", "methods/brabec/finish.wgsl");
+        // The refinement along columns, then rows: one shader, its direction a constant
+        // (`refine.wgsl`), each before the search (listing) and after it (interpolating).
+        let mut refine = |name, entry, along_rows: bool| {
+            let constants = [("ALONG_ROWS", f64::from(u8::from(along_rows)))];
+            ctx.screen_specialized(PipelineKey::new(name), ("methods/brabec/refine.wgsl", entry), &BINDINGS, &constants)
+        };
+        let (mark_columns, mark_rows) =
+            (refine("brabec.columns.mark", "mark_searches", false), refine("brabec.rows.mark", "mark_searches", true));
+        let (columns, rows) = (refine("brabec.columns", "main", false), refine("brabec.rows", "main", true));
         let mut entry = |name, shader, entry| ctx.screen_entry(PipelineKey::new(name), shader, entry, &BINDINGS);
         // The jitter's hash is compiled out of the search unless asked for (`search.wgsl`).
         let (search_key, search_entry) =
             if jittered { ("brabec.search.jittered", "search_listed_jittered") } else { ("brabec.search", "search_listed") };
         Self {
-            mark_columns: entry("brabec.columns.mark", "methods/brabec/columns.wgsl", "mark_searches"),
-            mark_rows: entry("brabec.rows.mark", "methods/brabec/rows.wgsl", "mark_searches"),
+            mark_columns,
+            mark_rows,
             list_size: entry("brabec.search.size", "methods/brabec/search.wgsl", "listed_size"),
             search: entry(search_key, "methods/brabec/search.wgsl", search_entry),
             summarize,
