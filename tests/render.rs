@@ -613,51 +613,6 @@ fn reference_maps_cropped_to_the_receivers_see_what_whole_maps_see() {
 }
 
 #[test]
-fn reference_maps_in_an_atlas_see_what_maps_in_layers_see() {
-    // ~48 samples at 1024²: two batches (32 maps, then the rest), each drawn in one render pass as
-    // tiles of one texture, or a pass per map into layers of an array; whole maps and crops.
-    for (camera, crop) in [(json!({}), false), (json!({"eye": [0, 12, 0.0], "target": [0, 0, 0], "up": [0, 0, -1], "fov_y_deg": 24}), true)]
-    {
-        let render = |atlas: bool| {
-            let mut job = json!({
-                "scene": {"builtin": "crowd"},
-                "light": {"image": {"builtin": "stripes"}},
-                "method": {"name": "reference", "samples": 48, "resolution": 1024, "atlas": atlas},
-                "output": {"width": 160, "height": 120, "format": "exr"}
-            });
-            if !camera.as_object().unwrap().is_empty() {
-                job["camera"] = camera.clone();
-            }
-            let (frame, _) = common::engine().render_frame(&self::job(job), &()).unwrap();
-            let counter = |name: &str| frame.counters[name];
-            let counted = (counter("samples"), counter("map_passes"), counter("map_crop_fraction"));
-            (frame.visibility.unwrap(), counted)
-        };
-        let ((tiled, (samples, tiled_passes, tiled_crop)), (layered, (_, layered_passes, layered_crop))) = (render(true), render(false));
-        assert!((33.0..=64.0).contains(&samples), "{samples} samples: two batches");
-        assert_eq!((tiled_passes, layered_passes), (2.0, samples));
-        assert_eq!(tiled_crop, layered_crop);
-        assert_eq!(tiled_crop < 1.0, crop, "crop fraction {tiled_crop}");
-        // The same maps where receivers read them. A vertex's window coordinate is larger in a
-        // tile away from the texture's origin, so it rounds to a coarser step: a texel centre on
-        // a triangle's edge may fall either side of it, and a few pixels see a sample the other
-        // way; no more.
-        let shaded = layered.iter().filter(|v| v[0] < 1.0).count();
-        let differing: Vec<f32> =
-            tiled.iter().zip(&layered).map(|(a, b)| (Vec3::from(*a) - Vec3::from(*b)).abs().max_element()).filter(|d| *d > 0.0).collect();
-        let mean = differing.iter().sum::<f32>() / tiled.len() as f32;
-        eprintln!(
-            "reference maps in an atlas (crop {tiled_crop}): {} of {} pixels differ, {shaded} shaded, mean {mean:e}",
-            differing.len(),
-            tiled.len()
-        );
-        assert!(shaded > 500, "the view holds shadows ({shaded} pixels)");
-        assert!(differing.len() * 200 <= tiled.len(), "{} of {} pixels differ", differing.len(), tiled.len());
-        assert!(mean < 1e-4, "mean difference {mean}");
-    }
-}
-
-#[test]
 fn reference_tests_only_the_row_segments_that_hold_a_receiver() {
     // `terrain` under its own camera shows sky above the horizon; an odd width ends every row
     // in a part segment, and 40 samples at 512² make two batches (the first and the last).

@@ -35,7 +35,6 @@ use super::{Cap, Counters, MethodContext, Param, ParamSpec, Params, ShadowMethod
 use crate::error::JobResult;
 use crate::gpu::layout;
 use crate::gpu::pool::{PipelineKey, TextureKey};
-use crate::gpu::scene::GpuScene;
 use crate::light::{AreaLight, LightImage};
 use crate::render::convex::{map_bounds, ConvexSolid};
 use crate::render::{LightProjection, PixelListBuffers};
@@ -57,13 +56,7 @@ const CROP: Param<bool> = Param::boolean(
     "draw each sample's map only over the texels where the frame's receivers can fall (the same maps there: less to clear and draw)",
 );
 
-const ATLAS: Param<bool> = Param::boolean(
-    "atlas",
-    true,
-    "draw a batch's maps as tiles of one texture in one render pass, not a pass each (the same maps but for the rounding of texel centres on triangle edges)",
-);
-
-const PARAMS: &[ParamSpec] = &[SAMPLES.spec, RESOLUTION.spec, BIAS_TEXELS.spec, SLOPE_BIAS_TEXELS.spec, SEED.spec, CROP.spec, ATLAS.spec];
+const PARAMS: &[ParamSpec] = &[SAMPLES.spec, RESOLUTION.spec, BIAS_TEXELS.spec, SLOPE_BIAS_TEXELS.spec, SEED.spec, CROP.spec];
 
 /// The projection a sample's depth map is drawn with: the angle `fit` gives that sample and the
 /// near plane every map shares, reversed-Z with the far plane at infinity, so the stored depth
@@ -269,13 +262,11 @@ impl ShadowMethod for Reference {
 
     fn record(&self, ctx: &mut MethodContext<'_>, params: &Params) -> JobResult<Counters> {
         let plan = SamplePlan::new(ctx, params);
-        let layers = batch_layers(plan.resolution).min(plan.samples.len().max(1) as u32);
-        let largest = ctx.gpu.limits.max_texture_dimension_2d;
-        let atlas = if params.get(&ATLAS) { Atlas::fit(plan.crop.size, layers, largest) } else { None };
-        let (view_projs, slots) = plan.slots(layers, atlas);
+        let (view_projs, slots) = plan.slots();
+        let layers = batch_layers(plan.resolution).min(slots.len().max(1) as u32);
         let batches = plan.batches(&slots, layers, params);
-        let maps = DepthMaps::new(ctx, plan.crop.size, layers, atlas, &view_projs);
-        let accumulation = Accumulation::new(ctx, &plan, &batches, atlas.is_some());
+        let maps = DepthMaps::new(ctx, plan.crop.size, layers, &view_projs);
+        let accumulation = Accumulation::new(ctx, &plan, &batches);
         let total = plan.samples.len() as u64;
         let mut before = 0;
         for (b, &(count, _)) in batches.iter().enumerate() {
@@ -302,7 +293,6 @@ impl ShadowMethod for Reference {
             ("samples_skipped_black".to_owned(), f64::from(plan.strata) - total as f64),
             ("resolution".to_owned(), f64::from(plan.resolution)),
             ("map_crop_fraction".to_owned(), f64::from(plan.crop.size.element_product()) / f64::from(plan.resolution).powi(2)),
-            ("map_passes".to_owned(), f64::from(maps_passes(total, layers, atlas.is_some()))),
         ]))
     }
 }
@@ -360,24 +350,19 @@ impl SamplePlan {
         Self { samples, strata, resolution, rotation, near, plane, frusta, crop }
     }
 
-    /// Per sample: its map's projection (the depth pass) and what the accumulate pass needs,
-    /// `layers` samples a batch, drawn in `atlas` where there is one.
-    fn slots(&self, layers: u32, atlas: Option<Atlas>) -> (Vec<[[f32; 4]; 4]>, Vec<BatchSample>) {
+    /// Per sample: its map's projection (the depth pass) and what the accumulate pass needs.
+    fn slots(&self) -> (Vec<[[f32; 4]; 4]>, Vec<BatchSample>) {
         self.samples
             .iter()
             .zip(&self.frusta)
             .zip(&self.crop.origins)
-            .enumerate()
-            .map(|(k, ((sample, (view_proj, texels_per_tan)), origin))| {
-                // What takes a whole-map texel to where it is read: its tile's origin less its
-                // crop's, each axis stored above `SHIFT_BIAS` and the two in one word. Under
-                // 2¹⁵ (`Atlas::LARGEST` plus the bias) an offset leaves the float exponent short
-                // of all ones, so the word is never a NaN to be canonicalised.
-                let tile = atlas.map_or(UVec2::ZERO, |atlas| atlas.origin(k as u32 % layers, self.crop.size));
-                let shift = (tile + UVec2::splat(SHIFT_BIAS)) - origin.unwrap_or(UVec2::ZERO);
+            .map(|((sample, (view_proj, texels_per_tan)), origin)| {
+                // The crop's first texel, x and y in one word: indices under 2¹² leave the float
+                // exponent short of all ones, so the word is never a NaN to be canonicalised.
+                let crop_origin = origin.map_or(0, |o| o.x | o.y << 16);
                 let view = self.rotation.transform_point3(sample.position);
                 let slot = BatchSample {
-                    origin: [view.x, view.y, f32::from_bits(shift.x | shift.y << 16), 0.0],
+                    origin: [view.x, view.y, f32::from_bits(crop_origin), 0.0],
                     radiance: sample.weight.extend(*texels_per_tan).to_array(),
                 };
                 (self.crop.layer_view_proj(*origin, self.resolution, *view_proj).to_cols_array_2d(), slot)
@@ -417,91 +402,31 @@ impl SamplePlan {
     }
 }
 
-/// Texels a sample's shift is stored above (`SHIFT_BIAS` in `accumulate.wgsl`, checked by a
-/// test below): a crop's origin is less than the largest map's side.
-const SHIFT_BIAS: u32 = 4096;
-
-/// A batch's maps as tiles of one texture, `columns` a row, row after row: drawn in one render
-/// pass, each through a viewport of its own. lavapipe begins every render pass by waiting
-/// until everything before it is rasterised (Mesa's render-pass barrier), so with a pass per
-/// map its submitting thread bins a map while its rasteriser threads wait, then they draw it
-/// while it waits; in one pass the binning of the next map overlaps the drawing of this one.
-/// A tile's texels see what its map's do, but where a vertex lands is computed from a larger
-/// window coordinate, so it rounds to a coarser step (2⁻⁹ of a texel at 16,384 against 2⁻¹³
-/// near 0): a texel centre on a triangle's edge may fall the other side of it, as with a crop.
-#[derive(Debug, Clone, Copy, PartialEq)]
-struct Atlas {
-    columns: u32,
-    rows: u32,
-}
-
-impl Atlas {
-    /// The largest side of an atlas: the device's limit, but no more than keeps a tile's
-    /// offset and `SHIFT_BIAS` under 2¹⁵ (`SamplePlan::slots`).
-    const LARGEST: u32 = 16_384;
-
-    /// The atlas of `layers` tiles of `tile` texels within the device's `largest` side: the
-    /// fewest tiles (memory that no map uses), then the squarest, then the widest; `None`
-    /// where they do not fit in one texture.
-    fn fit(tile: UVec2, layers: u32, largest: u32) -> Option<Self> {
-        let largest = largest.min(Self::LARGEST);
-        (1..=(largest / tile.x).min(layers))
-            .map(|columns| Self { columns, rows: layers.div_ceil(columns) })
-            .filter(|atlas| atlas.rows * tile.y <= largest)
-            .min_by_key(|atlas| {
-                let (width, height) = (atlas.columns * tile.x, atlas.rows * tile.y);
-                (atlas.columns * atlas.rows, width.abs_diff(height), std::cmp::Reverse(atlas.columns))
-            })
-    }
-
-    /// Tile `k`'s first texel.
-    fn origin(&self, k: u32, tile: UVec2) -> UVec2 {
-        UVec2::new(k % self.columns, k / self.columns) * tile
-    }
-}
-
-/// Render passes drawing `samples` maps, `layers` a batch.
-fn maps_passes(samples: u64, layers: u32, atlas: bool) -> u32 {
-    if atlas {
-        samples.div_ceil(u64::from(layers)) as u32
-    } else {
-        samples as u32
-    }
-}
-
-/// A batch's depth maps: the depth buffers themselves (`sample_depth.wgsl`), drawn with every
-/// sample's projection, the size of the crop: one layer each of a pooled array, or one tile
-/// each of a pooled atlas (`Atlas`).
+/// A batch's depth maps: the depth buffers themselves (`sample_depth.wgsl`), one layer each of
+/// a pooled array the size of the crop, drawn with every sample's projection.
 struct DepthMaps {
-    /// Where the maps are drawn: a view per layer, or the atlas's one.
-    targets: Vec<wgpu::TextureView>,
-    /// The whole texture, as the accumulate pass reads it (the atlas: an array of one layer).
+    /// Where each layer is drawn.
+    layer_views: Vec<wgpu::TextureView>,
+    /// The whole array, as the accumulate pass reads it.
     array_view: wgpu::TextureView,
-    /// Each map's size, and the atlas its tiles are laid out in.
-    tile: UVec2,
-    atlas: Option<Atlas>,
     pipeline: std::sync::Arc<wgpu::RenderPipeline>,
     /// Every sample's projection, one slot each (`layout::uniform_slots`).
     projections: wgpu::BindGroup,
 }
 
 impl DepthMaps {
-    fn new(ctx: &mut MethodContext<'_>, tile: UVec2, layers: u32, atlas: Option<Atlas>, view_projs: &[[[f32; 4]; 4]]) -> Self {
+    fn new(ctx: &mut MethodContext<'_>, size: UVec2, layers: u32, view_projs: &[[[f32; 4]; 4]]) -> Self {
         let device = ctx.gpu.device.clone();
         let uniform_buffer = layout::uniform_slots(&device, "Reference::samples", view_projs);
-        let (size, texture_layers) = match atlas {
-            Some(atlas) => (tile * UVec2::new(atlas.columns, atlas.rows), 1),
-            None => (tile, layers),
-        };
         let depth = ctx.scratch_texture(TextureKey {
-            label: if atlas.is_some() { "Reference::atlas" } else { "Reference::depths" },
+            label: "Reference::depths",
             width: size.x,
             height: size.y,
-            layers: texture_layers,
+            layers,
             format: DEPTH_BUFFER_FORMAT,
             usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
         });
-        let targets = (0..texture_layers)
+        let layer_views = (0..layers)
             .map(|layer| {
                 depth.create_view(&wgpu::TextureViewDescriptor {
                     dimension: Some(wgpu::TextureViewDimension::D2),
@@ -519,63 +444,41 @@ impl DepthMaps {
             layout: &pipeline.get_bind_group_layout(0),
             entries: &layout::entries(&[layout::slot_binding::<[[f32; 4]; 4]>(&uniform_buffer)]),
         });
-        Self { targets, array_view, tile, atlas, pipeline, projections }
-    }
-
-    /// A render pass that clears `target` and draws the scene's triangles with the maps'
-    /// pipeline.
-    fn begin_pass<'e>(&self, encoder: &'e mut wgpu::CommandEncoder, target: &wgpu::TextureView, scene: &GpuScene) -> wgpu::RenderPass<'e> {
-        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some("Reference::sample_depth"),
-            color_attachments: &[],
-            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                view: target,
-                depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(0.0), store: wgpu::StoreOp::Store }),
-                stencil_ops: None,
-            }),
-            timestamp_writes: None,
-            occlusion_query_set: None,
-            multiview_mask: None,
-        });
-        pass.set_pipeline(&self.pipeline);
-        pass.set_vertex_buffer(0, scene.vertex_buffer.slice(..));
-        pass.set_index_buffer(scene.index_buffer.slice(..), wgpu::IndexFormat::Uint32);
-        pass
+        Self { layer_views, array_view, pipeline, projections }
     }
 
     /// Draws a batch's maps: samples `first..` of the frame, whose crop origins are `origins`
     /// (`None`: no receiver of the frame falls in that map, cleared and left empty), into
-    /// layers or tiles `0..`. Timed together where timestamps can be written between passes (a
-    /// scope per map would take the timer's queries at 256 samples). In an atlas, one render
-    /// pass for the batch; else a pass each, which lavapipe serialises (`Atlas`).
+    /// layers `0..`. Timed together where timestamps can be written between passes (a scope per
+    /// map would take the timer's queries at 256 samples). A render pass each, though lavapipe
+    /// begins every pass by waiting until the one before is rasterised (~a quarter of
+    /// `terrain`'s maps): six maps a multiview pass took 2 % off and needs a guard against a
+    /// lavapipe bug, and a batch in one pass (an atlas) would round each map's vertices
+    /// differently (`docs/performance-log.md`).
     fn draw(&self, ctx: &mut MethodContext<'_>, first: usize, origins: &[Option<UVec2>]) {
         let scene = ctx.scene;
-        let draw = |pass: &mut wgpu::RenderPass<'_>, k: usize| {
-            pass.set_bind_group(0, &self.projections, &[layout::slot_offset(first + k)]);
-            pass.draw_indexed(0..scene.index_count, 0, 0..1);
-        };
-        ctx.timer.time_encoder(ctx.encoder, "method", "reference_maps", |encoder| match self.atlas {
-            Some(atlas) => {
-                let mut pass = self.begin_pass(encoder, &self.targets[0], scene);
-                for (k, origin) in origins.iter().enumerate() {
-                    if origin.is_some() {
-                        // The tile's viewport maps the map's clip volume onto it; the scissor
-                        // keeps whatever rounds past its edge out of the next tile.
-                        let at = atlas.origin(k as u32, self.tile);
-                        let (x, y, w, h) = (at.x as f32, at.y as f32, self.tile.x as f32, self.tile.y as f32);
-                        pass.set_viewport(x, y, w, h, 0.0, 1.0);
-                        pass.set_scissor_rect(at.x, at.y, self.tile.x, self.tile.y);
-                        draw(&mut pass, k);
-                    }
+        ctx.timer.time_encoder(ctx.encoder, "method", "reference_maps", |encoder| {
+            for (layer, origin) in origins.iter().enumerate() {
+                let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                    label: Some("Reference::sample_depth"),
+                    color_attachments: &[],
+                    depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                        view: &self.layer_views[layer],
+                        depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(0.0), store: wgpu::StoreOp::Store }),
+                        stencil_ops: None,
+                    }),
+                    timestamp_writes: None,
+                    occlusion_query_set: None,
+                    multiview_mask: None,
+                });
+                if origin.is_none() {
+                    continue;
                 }
-            }
-            None => {
-                for (k, origin) in origins.iter().enumerate() {
-                    let mut pass = self.begin_pass(encoder, &self.targets[k], scene);
-                    if origin.is_some() {
-                        draw(&mut pass, k);
-                    }
-                }
+                pass.set_pipeline(&self.pipeline);
+                pass.set_bind_group(0, &self.projections, &[layout::slot_offset(first + layer)]);
+                pass.set_vertex_buffer(0, scene.vertex_buffer.slice(..));
+                pass.set_index_buffer(scene.index_buffer.slice(..), wgpu::IndexFormat::Uint32);
+                pass.draw_indexed(0..scene.index_count, 0, 0..1);
             }
         });
     }
@@ -593,15 +496,13 @@ struct Accumulation {
     /// How many were listed, for the counter `segments_tested`.
     segments_count: wgpu::Buffer,
     channels: u32,
-    /// Whether a sample's texels are read shifted: its map is a crop, or a tile of an atlas.
-    shifted: bool,
-    atlas: bool,
+    cropped: bool,
 }
 
 impl Accumulation {
     /// Takes the sums from the pool and lists the segments (recorded here, before the first
     /// batch's maps).
-    fn new(ctx: &mut MethodContext<'_>, plan: &SamplePlan, batches: &[(u32, BatchUniforms)], atlas: bool) -> Self {
+    fn new(ctx: &mut MethodContext<'_>, plan: &SamplePlan, batches: &[(u32, BatchUniforms)]) -> Self {
         let uniforms: Vec<BatchUniforms> = batches.iter().map(|(_, b)| *b).collect();
         let batches_buffer = layout::uniform_slots(&ctx.gpu.device, "Reference::batches", &uniforms);
         let channels = plan.channels();
@@ -609,8 +510,8 @@ impl Accumulation {
         let sums_bytes = if batches.len() > 1 { pixels * 8 * u64::from(channels) } else { 16 };
         let sums = ctx.scratch_buffer("Reference::sums", sums_bytes, wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST);
         let (segments, segments_count) = list_segments(ctx);
-        let shifted = atlas || plan.crop.size != UVec2::splat(plan.resolution);
-        Self { batches: batches_buffer, sums, segments, segments_count, channels, shifted, atlas }
+        let cropped = plan.crop.size != UVec2::splat(plan.resolution);
+        Self { batches: batches_buffer, sums, segments, segments_count, channels, cropped }
     }
 
     /// Records batch `b`'s pass over the listed segments: each pixel tests the batch's `count`
@@ -619,16 +520,13 @@ impl Accumulation {
     fn record(&self, ctx: &mut MethodContext<'_>, maps: &DepthMaps, b: usize, count: u32, last: bool) {
         // One pipeline per batch size (`SAMPLES` in accumulate.wgsl: all but the last batch
         // are full), channels of the sums, whether it is the first or last, and whether the
-        // maps are read shifted and from an atlas.
+        // maps are cropped.
         let first = b == 0;
-        let variant = count
-            | self.channels << 8
-            | u32::from(first) << 16
-            | u32::from(last) << 17
-            | u32::from(self.shifted) << 18
-            | u32::from(self.atlas) << 19;
         let pipeline = ctx.screen_specialized(
-            PipelineKey { name: "reference.accumulate", variant },
+            PipelineKey {
+                name: "reference.accumulate",
+                variant: count | self.channels << 8 | u32::from(first) << 16 | u32::from(last) << 17 | u32::from(self.cropped) << 18,
+            },
             ("methods/reference/accumulate.wgsl", "main"),
             &[
                 layout::uniform_dynamic(0),
@@ -651,8 +549,7 @@ impl Accumulation {
                 ("CHANNELS", f64::from(self.channels)),
                 ("FIRST", f64::from(u8::from(first))),
                 ("LAST", f64::from(u8::from(last))),
-                ("SHIFTED", f64::from(u8::from(self.shifted))),
-                ("ATLAS", f64::from(u8::from(self.atlas))),
+                ("CROPPED", f64::from(u8::from(self.cropped))),
             ],
         );
         let group = ctx.bind(
@@ -759,37 +656,6 @@ mod tests {
         // The pass spells its samples out by `#unroll`, whose bound is a literal: one per slot.
         crate::gpu::shaders::assert_declares("methods/reference/accumulate.wgsl", &format!("#unroll k in 0..{BATCH_SAMPLES} {{"));
         crate::gpu::shaders::assert_declares("methods/reference/accumulate.wgsl", &format!("const SEGMENT: u32 = {SEGMENT}u;"));
-        crate::gpu::shaders::assert_declares("methods/reference/accumulate.wgsl", &format!("const SHIFT_BIAS: f32 = {SHIFT_BIAS}.0;"));
-        // A crop's origin is under the largest map's side, so a shift is never negative.
-        let crate::params::ParamKind::Integer { max, .. } = RESOLUTION.spec.kind else { panic!("resolution is an integer") };
-        assert_eq!(i64::from(SHIFT_BIAS), max);
-    }
-
-    #[test]
-    fn an_atlas_holds_every_tile_within_the_largest_side() {
-        // 32 maps of 2048²: 8 × 4 on lavapipe's 16,384, the same where the device allows more.
-        assert_eq!(Atlas::fit(UVec2::splat(2048), 32, 16_384), Some(Atlas { columns: 8, rows: 4 }));
-        assert_eq!(Atlas::fit(UVec2::splat(2048), 32, 32_768), Some(Atlas { columns: 8, rows: 4 }));
-        // 32 crops of 640 × 512: no tile unused, and of those the squarest, 2,560 × 4,096 (8
-        // columns would make 5,120 × 2,048; 6, of 6 rows, four tiles unused).
-        let atlas = Atlas::fit(UVec2::new(640, 512), 32, 16_384).unwrap();
-        assert_eq!(atlas, Atlas { columns: 4, rows: 8 });
-        // Tiles row by row, each within the texture.
-        for k in 0..32 {
-            let at = atlas.origin(k, UVec2::new(640, 512));
-            assert!(at.x + 640 <= atlas.columns * 640 && at.y + 512 <= atlas.rows * 512);
-        }
-        assert_eq!(atlas.origin(atlas.columns + 1, UVec2::new(640, 512)), UVec2::new(640, 512));
-        // One map: one tile. Eight of 4096² fill 16,384 × 8,192.
-        assert_eq!(Atlas::fit(UVec2::splat(1024), 1, 16_384), Some(Atlas { columns: 1, rows: 1 }));
-        assert_eq!(Atlas::fit(UVec2::splat(4096), 8, 16_384), Some(Atlas { columns: 4, rows: 2 }));
-        // What does not fit is drawn into layers: a device whose side holds one map.
-        assert_eq!(Atlas::fit(UVec2::splat(4096), 8, 4096), None);
-        assert_eq!(Atlas::fit(UVec2::splat(4096), 8, 2048), None);
-        // The pass count the counter `map_passes` reports.
-        assert_eq!(maps_passes(64, 32, true), 2);
-        assert_eq!(maps_passes(49, 32, true), 2);
-        assert_eq!(maps_passes(49, 32, false), 49);
     }
 
     #[test]

@@ -12,8 +12,7 @@
 // each whatever its index, and fetches a texel by a call, after which it loads every uniform
 // again (read in its generated code with perf and gdb): so a sample carries as few floats as
 // it can — its point, its weight and its map's scale (4 with one channel, 6 with three), its
-// shift (its crop's and its tile's origins, both texels in one word) only where the maps are
-// cropped or tiled (`SHIFTED`) — and
+// crop's origin (both texels in one word) only where the maps are cropped (`CROPPED`) — and
 // what the batch shares (one near plane for every map, the map's size) is loaded once per
 // pixel into `Receiver`: 12–22 % off the pass against 10 floats a sample. Every sample's
 // frustum looks along the light normal with the image's up, so they share one rotation: the
@@ -40,19 +39,11 @@ override FIRST: bool = false;
 // stores costs about as much as a sample's test, so the sums are stored once fewer and
 // never read back by a pass of their own.
 override LAST: bool = false;
-// Whether a sample's texels are shifted where they are read (`BatchSample::origin.z`): its map
-// is a crop, or a tile of an atlas, or both; an uncropped map in a layer of its own begins at
-// texel 0.
-override SHIFTED: bool = true;
-// Whether the batch's maps are tiles of one texture (layer 0), drawn in one render pass, or
-// a layer each (`DepthMaps` in `methods::reference` says why).
-override ATLAS: bool = false;
-// What `BatchSample::origin.z`'s two texel offsets are stored above, so that a negative one
-// packs as a positive integer.
-const SHIFT_BIAS: f32 = 4096.0;
+// Whether the maps are crops (`BatchSample::origin.z`); whole maps begin at texel 0.
+override CROPPED: bool = true;
 
 struct BatchSample {
-    origin: vec4<f32>,   // xy: the sample point y in view coordinates (rotation · y; its z is `Batch::plane`); z: what takes a whole-map texel to where it is read, its tile's origin less its crop's, plus SHIFT_BIAS, x | y << 16 (one float fewer to load); w: unused
+    origin: vec4<f32>,   // xy: the sample point y in view coordinates (rotation · y; its z is `Batch::plane`); z: the whole-map texel where its layer's crop begins, x | y << 16 (one float fewer to load); w: unused
     radiance: vec4<f32>, // rgb: L(y) × stratum area, the sample's weight in the estimator; w: its map's texels per unit of tan from the centre (resolution / (2·tan of its half angle))
 }
 
@@ -119,19 +110,16 @@ fn add_sample(sums: ptr<function, Sums>, r: Receiver, last: vec2<f32>, layer: u3
     let inv_dist2 = inv_dist * inv_dist;
     // G = cosθx·cosθy/|v|² with cosθx = −n·v/|v|, cosθy = depth/|v|; 0 behind either surface.
     let g = max(-fma(r.n.x, d.x, fma(r.n.y, d.y, r.n_dot_z)), 0.0) * r.g_depth * inv_dist2 * inv_dist2;
-    // The map's texel coordinates (x right, y down from its top-left corner), shifted to
-    // where its crop lies in the texture read; `f` is from the map's centre, `k` its texels
-    // per unit of tan.
+    // The map's texel coordinates (x right, y down from its top-left corner), less its crop's
+    // origin; `f` is from the map's centre, `k` its texels per unit of tan.
     let k = s.radiance.w;
     let f = d * (k * r.inv_depth);
     var t = vec2<f32>(r.half + f.x, r.half - f.y);
-    if SHIFTED {
-        let shift = bitcast<u32>(s.origin.z);
-        t += vec2<f32>(f32(shift & 0xffffu) - SHIFT_BIAS, f32(shift >> 16u) - SHIFT_BIAS);
+    if CROPPED {
+        let crop = bitcast<u32>(s.origin.z);
+        t -= vec2<f32>(f32(crop & 0xffffu), f32(crop >> 16u));
     }
-    // In an atlas every map is in layer 0; a receiver's texel stays in its map's tile (the
-    // crop holds every receiver with a margin, and outside a whole map the test is not read).
-    let stored = textureLoad(depths, vec2<u32>(clamp(t, vec2<f32>(0.0), last)), select(layer, 0u, ATLAS), 0);
+    let stored = textureLoad(depths, vec2<u32>(clamp(t, vec2<f32>(0.0), last)), layer, 0);
     // The bias in metres at the receiver (texels of this map there × `bias`: depth·bias/k)
     // shrinks with the resolution, so the estimate converges to true visibility. Lit when the
     // receiver, brought that much nearer along its ray (its depth less bias_m·cosθy), is no
@@ -216,8 +204,7 @@ fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index
     let bias = batch.bias_texels + batch.slope_bias_texels * tan_c;
     let depth = batch.plane - x.z;
     let receiver = Receiver(x.xy, n, depth, 1.0 / depth, depth * depth, -n.z * depth, max(depth, 0.0), depth * depth * bias, 0.5 * f32(batch.resolution), batch.near);
-    // The last texel of a layer: each holds its map's crop (`MapCrop`), all the same size, or
-    // an atlas of them.
+    // The last texel of a layer: each holds its map's crop (`MapCrop`), all the same size.
     let last = vec2<f32>(textureDimensions(depths)) - 1.0;
     var s = Sums(vec3<f32>(0.0), vec3<f32>(0.0));
     // Spelled out by `#unroll` (a loop over them ran slower: constant indices); a slot past
