@@ -176,9 +176,10 @@ fn e0_interpolation_stays_within_a_thousandth_of_the_exact_sum() {
     }
 }
 
-/// Contract §1 "E0": the exact sum is Lambert's to within f32 rounding, against the f64 sum of
-/// `light::unshadowed_irradiance` (each cell clipped to the receiver's hemisphere, Θ by atan2) at floor points of
-/// `occluder`, under lights where a cross product of two nearly parallel unit directions lost
+/// Contract §1 "E0": the exact sum is Lambert's to within f32 rounding, against the f64 sum
+/// of `light::unshadowed_irradiance` (each cell clipped to the receiver's hemisphere, Θ by
+/// atan2) at floor points of `occluder`, under lights where a cross product of two nearly
+/// parallel unit directions lost
 /// up to ~2·10⁻³ of a small cell's sum before each edge term was taken along its edge
 /// (`edge_part` in shaders/common/light.wgsl, `line_term` in shaders/e0_grid.wgsl): a 0.5 m
 /// light 2–7 m from the points; one 12 m away seen 1–4° above their horizon; one standing on

@@ -107,8 +107,8 @@ pub fn edges_acute_from(light: &AreaLight, min: Vec3, max: Vec3) -> bool {
 /// to the hemisphere above x (Lambert's closed form for the vector irradiance: ½ Σ Θᵢ n·Γᵢ).
 /// The CPU twin of `polygon_irradiance` in `shaders/common/light.wgsl`, clipped as it is
 /// (`HORIZON_EPS` above the plane) but in f64 and with Θ from atan2: the yardstick the GPU's
-/// f32 sums are measured against, whose own rounding (`sin Θ` from the product of two nearly
-/// parallel unit directions) would otherwise be as large as what it measures.
+/// f32 sums are measured against. In f32 its own rounding (`sin Θ` from the product of two
+/// nearly parallel unit directions) would be as large as the error it is there to measure.
 pub fn polygon_irradiance(x: DVec3, nx: DVec3, corners: &[DVec3; 4]) -> f64 {
     const HORIZON_EPS: f64 = 1e-6;
     let mut clipped: Vec<DVec3> = Vec::with_capacity(5);

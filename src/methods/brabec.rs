@@ -9,9 +9,9 @@
 //!   the key the adaptive sampling compares (§4.3).
 //! - `lattice`: lists for the search (§3.2 outer, §3.3 inner penumbra) every 4th pixel of
 //!   every 4th row, or every pixel with `adaptive` off.
-//! - `refine` (along columns, then rows): the adaptive sampling of §4.3 — groups of 5 pixels along columns,
-//!   then rows, interpolated where ids and hard results agree, refined otherwise. Which pixels
-//!   the refinement searches depends on the keys alone, so each first lists them
+//! - `refine`: the adaptive sampling of §4.3 — groups of 5 pixels along columns, then rows
+//!   (a pipeline each), interpolated where ids and hard results agree, refined otherwise.
+//!   Which pixels the refinement searches depends on the keys alone, so each first lists them
 //!   (`mark_searches`); `search` then searches every listed pixel in one compacted dispatch
 //!   (distances from the unrounded warped position, optionally to jittered blocker positions,
 //!   §4.3), and the interpolation runs after it. The paper searches inside the refinement;
