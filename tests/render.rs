@@ -505,6 +505,9 @@ fn reference_error(image: &str, samples: u32, resolution: u32) -> (f32, f32, Vec
     closed_form_error(json!({"name": "reference", "samples": samples, "resolution": resolution}), image)
 }
 
+/// The reference's two engines: the device's, and the CPU's (what `auto` takes on lavapipe).
+const ENGINES: [&str; 2] = ["gpu", "cpu"];
+
 /// Renders `method` on the occluder scene seen from straight above and returns the mean
 /// absolute error against the closed form over penumbra pixels, the largest one, and the pairs.
 fn closed_form_error(method: serde_json::Value, image: &str) -> (f32, f32, Vec<([f32; 3], Vec3)>) {
@@ -559,12 +562,55 @@ fn closed_form_error(method: serde_json::Value, image: &str) -> (f32, f32, Vec<(
 
 #[test]
 fn reference_converges_to_the_closed_form() {
-    let (coarse, _, _) = reference_error("white", 16, 512);
-    let (fine, worst, _) = reference_error("white", 1024, 1024);
-    eprintln!("reference vs closed form, mean penumbra error: 16 samples {coarse:.4}, 1024 samples {fine:.4} (worst {worst:.4})");
-    // Mean error over the penumbra: well under 2% with 1024 samples, and shrinking.
-    assert!(fine < 0.02, "mean penumbra error {fine} with 1024 samples (worst {worst})");
-    assert!(fine < coarse * 0.6, "error should shrink with samples: {coarse} → {fine}");
+    for engine in ENGINES {
+        let error = |samples: u32, resolution: u32| {
+            closed_form_error(json!({"name": "reference", "samples": samples, "resolution": resolution, "engine": engine}), "white")
+        };
+        let (coarse, _, _) = error(16, 512);
+        let (fine, worst, _) = error(1024, 1024);
+        eprintln!(
+            "reference ({engine}) vs closed form, mean penumbra error: 16 samples {coarse:.4}, 1024 samples {fine:.4} (worst {worst:.4})"
+        );
+        // Mean error over the penumbra: well under 2% with 1024 samples, and shrinking.
+        assert!(fine < 0.02, "{engine}: mean penumbra error {fine} with 1024 samples (worst {worst})");
+        assert!(fine < coarse * 0.6, "{engine}: error should shrink with samples: {coarse} → {fine}");
+    }
+}
+
+/// The CPU engine draws the GPU engine's maps and makes its tests: the same estimate, but for
+/// a texel centre on a triangle's edge rounded the other way, or a sum added in another order.
+#[test]
+fn reference_engines_draw_the_same_maps_and_make_the_same_tests() {
+    let cases = [
+        // Coloured, cropped maps.
+        json!({"scene": {"builtin": "crowd"}, "light": {"image": {"builtin": "stripes"}}}),
+        // A landscape seen to its horizon, whole maps, gray.
+        json!({"scene": {"builtin": "terrain", "triangles": 20000}, "light": {"image": {"builtin": "white"}}}),
+        // A light among the figures: the near plane of every map cuts through them.
+        json!({"scene": {"builtin": "crowd"}, "light": {"center": [0.3, 1.0, 0.2], "direction": [0, -1, 0], "up": [0, 0, -1], "size": [1.5, 1.5], "intensity": 20, "image": {"builtin": "mosaic"}}}),
+    ];
+    for case in cases {
+        let render = |engine: &str| {
+            let mut value = case.clone();
+            value["method"] = json!({"name": "reference", "samples": 24, "resolution": 512, "engine": engine});
+            value["output"] = json!({"width": 160, "height": 90, "format": "exr"});
+            let (frame, _) = common::engine().render_frame(&job(value), &()).unwrap();
+            (frame.visibility.unwrap(), frame.counters)
+        };
+        let ((gpu, gpu_counters), (cpu, cpu_counters)) = (render("gpu"), render("cpu"));
+        assert_eq!(cpu_counters["engine_cpu"], 1.0);
+        for counter in ["samples", "segments_tested", "map_crop_fraction"] {
+            assert_eq!(gpu_counters[counter], cpu_counters[counter], "{counter}: {case}");
+        }
+        let shaded = gpu.iter().filter(|v| v[0] < 0.99).count();
+        let differences: Vec<f32> = gpu.iter().zip(&cpu).map(|(a, b)| (Vec3::from(*a) - Vec3::from(*b)).abs().max_element()).collect();
+        let differing = differences.iter().filter(|&&d| d > 1e-4).count();
+        let mean = differences.iter().sum::<f32>() / differences.len() as f32;
+        eprintln!("reference engines on {}: {differing} of {} pixels differ, mean {mean:.2e}, {shaded} shaded", case["scene"], gpu.len());
+        assert!(shaded > 200, "the view holds shadows ({shaded} pixels): {case}");
+        assert!(differing * 200 <= gpu.len(), "{differing} of {} pixels differ: {case}", gpu.len());
+        assert!(mean < 1e-4, "mean difference {mean}: {case}");
+    }
 }
 
 #[test]
@@ -585,32 +631,38 @@ fn reference_is_gray_under_white_and_colored_where_the_model_says() {
 fn reference_maps_cropped_to_the_receivers_see_what_whole_maps_see() {
     // Seen from above, only the middle of `crowd` is in view: each sample's map is drawn only
     // where those receivers fall in it.
-    let render = |crop: bool| {
-        let job = job(json!({
-            "scene": {"builtin": "crowd"},
-            "camera": {"eye": [0, 12, 0.0], "target": [0, 0, 0], "up": [0, 0, -1], "fov_y_deg": 24, "near": 5, "far": 20},
-            "light": {"image": {"builtin": "stripes"}},
-            "method": {"name": "reference", "samples": 32, "resolution": 1024, "crop": crop},
-            "output": {"width": 128, "height": 128, "format": "exr"}
-        }));
-        let (frame, _) = common::engine().render_frame(&job, &()).unwrap();
-        let crop = frame.counters["map_crop_fraction"];
-        (frame.visibility.unwrap(), crop)
-    };
-    let ((cropped, crop), (whole, all)) = (render(true), render(false));
-    assert_eq!(all, 1.0);
-    assert!(crop <= 0.25, "the view holds a small part of the scene: {crop} of each map drawn");
-    // The same maps where receivers read them. A texel centre on a triangle's edge may fall
-    // either side of it once the map is shifted and scaled (floating-point rounding, in x and
-    // y only), so a few pixels may see a sample differently; no more.
-    let shaded = whole.iter().filter(|v| v[0] < 1.0).count();
-    let differing: Vec<f32> =
-        cropped.iter().zip(&whole).map(|(a, b)| (Vec3::from(*a) - Vec3::from(*b)).abs().max_element()).filter(|d| *d > 0.0).collect();
-    eprintln!("reference maps cropped to {crop} of their area: {} of {} pixels differ, {shaded} shaded", differing.len(), cropped.len());
-    assert!(shaded > 500, "the view holds shadows ({shaded} pixels)");
-    assert!(differing.len() * 200 <= cropped.len(), "{} of {} pixels differ", differing.len(), cropped.len());
-    let mean = differing.iter().sum::<f32>() / cropped.len() as f32;
-    assert!(mean < 1e-4, "mean difference {mean}");
+    for engine in ENGINES {
+        let render = |crop: bool| {
+            let job = job(json!({
+                "scene": {"builtin": "crowd"},
+                "camera": {"eye": [0, 12, 0.0], "target": [0, 0, 0], "up": [0, 0, -1], "fov_y_deg": 24, "near": 5, "far": 20},
+                "light": {"image": {"builtin": "stripes"}},
+                "method": {"name": "reference", "samples": 32, "resolution": 1024, "crop": crop, "engine": engine},
+                "output": {"width": 128, "height": 128, "format": "exr"}
+            }));
+            let (frame, _) = common::engine().render_frame(&job, &()).unwrap();
+            let crop = frame.counters["map_crop_fraction"];
+            (frame.visibility.unwrap(), crop)
+        };
+        let ((cropped, crop), (whole, all)) = (render(true), render(false));
+        assert_eq!(all, 1.0);
+        assert!(crop <= 0.25, "the view holds a small part of the scene: {crop} of each map drawn");
+        // The same maps where receivers read them. A texel centre on a triangle's edge may fall
+        // either side of it once the map is shifted and scaled (floating-point rounding, in x and
+        // y only), so a few pixels may see a sample differently; no more.
+        let shaded = whole.iter().filter(|v| v[0] < 1.0).count();
+        let differing: Vec<f32> =
+            cropped.iter().zip(&whole).map(|(a, b)| (Vec3::from(*a) - Vec3::from(*b)).abs().max_element()).filter(|d| *d > 0.0).collect();
+        eprintln!(
+            "reference ({engine}) maps cropped to {crop} of their area: {} of {} pixels differ, {shaded} shaded",
+            differing.len(),
+            cropped.len()
+        );
+        assert!(shaded > 500, "the view holds shadows ({shaded} pixels)");
+        assert!(differing.len() * 200 <= cropped.len(), "{engine}: {} of {} pixels differ", differing.len(), cropped.len());
+        let mean = differing.iter().sum::<f32>() / cropped.len() as f32;
+        assert!(mean < 1e-4, "{engine}: mean difference {mean}");
+    }
 }
 
 #[test]
@@ -618,30 +670,32 @@ fn reference_tests_only_the_row_segments_that_hold_a_receiver() {
     // `terrain` under its own camera shows sky above the horizon; an odd width ends every row
     // in a part segment, and 40 samples at 512² make two batches (the first and the last).
     let (w, h) = (101usize, 57usize);
-    let job = job(json!({
-        "scene": {"builtin": "terrain", "triangles": 2000},
-        "light": {"image": {"builtin": "stripes"}},
-        "method": {"name": "reference", "samples": 40, "resolution": 512},
-        "output": {"width": w, "height": h, "format": "exr"}
-    }));
-    let (frame, _) = common::engine().render_frame(&job, &()).unwrap();
-    let (depth, visibility) = (frame.depth.unwrap(), frame.visibility.unwrap());
-    let covered = |x: usize, y: usize| depth[y * w + x].is_finite();
-    let segments = (0..h).map(|y| (0..w).step_by(8).filter(|&x0| (x0..(x0 + 8).min(w)).any(|x| covered(x, y))).count()).sum::<usize>();
-    let sky = (0..w * h).filter(|&i| !depth[i].is_finite()).count();
-    assert!(sky > w * h / 10 && sky < w * h * 9 / 10, "the view holds sky and ground: {sky} of {} pixels sky", w * h);
-    // Every segment with a covered pixel tested, and no other.
-    assert_eq!(frame.counters["segments_tested"], segments as f64, "{:?}", frame.counters);
-    assert!(segments < w.div_ceil(8) * h);
-    // The sky lit, listed or not; the ground shaded in places and every value a visibility.
-    for (i, v) in visibility.iter().enumerate() {
-        if depth[i].is_finite() {
-            assert!(v.iter().all(|c| (0.0..=1.0).contains(c)), "pixel {i}: {v:?}");
-        } else {
-            assert_eq!(*v, [1.0; 3], "sky pixel {i}");
+    for engine in ENGINES {
+        let job = job(json!({
+            "scene": {"builtin": "terrain", "triangles": 2000},
+            "light": {"image": {"builtin": "stripes"}},
+            "method": {"name": "reference", "samples": 40, "resolution": 512, "engine": engine},
+            "output": {"width": w, "height": h, "format": "exr"}
+        }));
+        let (frame, _) = common::engine().render_frame(&job, &()).unwrap();
+        let (depth, visibility) = (frame.depth.unwrap(), frame.visibility.unwrap());
+        let covered = |x: usize, y: usize| depth[y * w + x].is_finite();
+        let segments = (0..h).map(|y| (0..w).step_by(8).filter(|&x0| (x0..(x0 + 8).min(w)).any(|x| covered(x, y))).count()).sum::<usize>();
+        let sky = (0..w * h).filter(|&i| !depth[i].is_finite()).count();
+        assert!(sky > w * h / 10 && sky < w * h * 9 / 10, "the view holds sky and ground: {sky} of {} pixels sky", w * h);
+        // Every segment with a covered pixel tested, and no other.
+        assert_eq!(frame.counters["segments_tested"], segments as f64, "{:?}", frame.counters);
+        assert!(segments < w.div_ceil(8) * h);
+        // The sky lit, listed or not; the ground shaded in places and every value a visibility.
+        for (i, v) in visibility.iter().enumerate() {
+            if depth[i].is_finite() {
+                assert!(v.iter().all(|c| (0.0..=1.0).contains(c)), "pixel {i}: {v:?}");
+            } else {
+                assert_eq!(*v, [1.0; 3], "sky pixel {i}");
+            }
         }
+        assert!(visibility.iter().filter(|v| v[0] < 0.5).count() > 20, "{engine}: the ground holds shadows");
     }
-    assert!(visibility.iter().filter(|v| v[0] < 0.5).count() > 20, "the ground holds shadows");
 }
 
 /// `penumbra bench` in small (CI's form): every method and the timed reference per case, the
@@ -688,7 +742,16 @@ fn bench_writes_its_phase_table_and_the_e0_check() {
             let reads_shadow_map = !(row.method.starts_with("reference") || row.method == "wedges");
             assert_eq!(names.contains(&"ShadowMap::pass"), reads_shadow_map, "{}: {names:?}", row.method);
             // The reference says what its samples cost: the maps' raster and the tests.
-            if row.method.starts_with("reference") {
+            // On a software adapter (engine `auto`: the CPU's) as passes timed on the CPU.
+            if row.method.starts_with("reference") && engine.gpu().software {
+                assert!(
+                    ["reference_cpu_receivers", "reference_cpu_maps", "reference_cpu_tests", "reference_cpu_visibility"]
+                        .iter()
+                        .all(|p| names.contains(p)),
+                    "{names:?}"
+                );
+                assert!((passes("method") - phase("method")).abs() < 1e-6 * phase("method").max(1.0), "{row:?}");
+            } else if row.method.starts_with("reference") {
                 assert!(names.contains(&"reference_accumulate"), "{names:?}");
                 assert!(names.contains(&"reference_maps") || !engine.gpu().timestamps_inside_passes, "{names:?}");
                 assert!((passes("method") - phase("method")).abs() < 1e-6 * phase("method").max(1.0), "{row:?}");

@@ -121,6 +121,16 @@ impl GpuScene {
     }
 
     /// The eight corners of the scene's bounding box.
+    /// Every vertex's position, as the vertex buffer holds them.
+    pub fn positions(&self) -> &[Vec3] {
+        &self.positions
+    }
+
+    /// The triangles' vertex indices, three a triangle.
+    pub fn indices(&self) -> &[u32] {
+        &self.indices
+    }
+
     pub fn corners(&self) -> [Vec3; 8] {
         box_corners(self.bounds_min, self.bounds_max)
     }

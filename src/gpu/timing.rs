@@ -37,6 +37,8 @@ pub struct GpuTimer {
     scopes: Vec<Scope>,
     used: u32,
     period_ns: f64,
+    /// Passes run on the CPU instead (`cpu_pass`), wall time, reported after the GPU's.
+    cpu: Vec<PassTime>,
 }
 
 impl GpuTimer {
@@ -70,6 +72,7 @@ impl GpuTimer {
             scopes: Vec::new(),
             used: 0,
             period_ns: f64::from(gpu.queue.get_timestamp_period()),
+            cpu: Vec::new(),
         }
     }
 
@@ -77,6 +80,14 @@ impl GpuTimer {
     pub fn begin_frame(&mut self) {
         self.scopes.clear();
         self.used = 0;
+        self.cpu.clear();
+    }
+
+    /// Records a pass of a phase that ran on the CPU, by its wall time: a method's work done
+    /// there rather than on the device (`reference`'s engine `cpu`) counts in its phase as a
+    /// pass does.
+    pub fn cpu_pass(&mut self, phase: &'static str, pass: &'static str, ms: f64) {
+        self.cpu.push(PassTime { phase, pass, ms });
     }
 
     /// `count` fresh query indices, or None when timestamps are off or the frame ran out.
@@ -189,6 +200,13 @@ impl GpuTimer {
     /// Reads back this frame's passes (dispatches, where marked) in the order they were
     /// recorded, as milliseconds. Blocks until the GPU is done.
     pub fn read(&self, gpu: &GpuContext) -> Result<Vec<PassTime>, GpuError> {
+        let mut times = self.read_gpu(gpu)?;
+        times.extend(self.cpu.iter().cloned());
+        Ok(times)
+    }
+
+    /// The passes timed on the device.
+    fn read_gpu(&self, gpu: &GpuContext) -> Result<Vec<PassTime>, GpuError> {
         let Some(queries) = &self.queries else { return Ok(Vec::new()) };
         if self.used == 0 {
             return Ok(Vec::new());

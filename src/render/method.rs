@@ -40,6 +40,34 @@ impl Scratch {
 /// Method-specific counters (JFA rounds, searches skipped …), reported with the timings.
 pub type Counters = BTreeMap<String, f64>;
 
+/// The G-buffer on the CPU (`MethodContext::read_gbuffer`), as copied into buffers: rows
+/// `*_pitch` bytes apart from the top-left, read in place.
+pub struct GBufferView<'a> {
+    positions: &'a [u8],
+    normals: &'a [u8],
+    position_pitch: usize,
+    normal_pitch: usize,
+    pub width: u32,
+    pub height: u32,
+}
+
+impl GBufferView<'_> {
+    /// Pixel (x, y)'s world position (`Rgba32Float`).
+    pub fn position(&self, x: u32, y: u32) -> glam::Vec3 {
+        let at = y as usize * self.position_pitch + x as usize * 16;
+        let word = |i: usize| f32::from_le_bytes(self.positions[at + 4 * i..at + 4 * i + 4].try_into().expect("four bytes"));
+        glam::Vec3::new(word(0), word(1), word(2))
+    }
+
+    /// Pixel (x, y)'s unit normal facing the eye (`Rgba16Float`), `None` where no surface
+    /// covers the pixel (w ≤ 0.5).
+    pub fn normal(&self, x: u32, y: u32) -> Option<glam::Vec3> {
+        let at = y as usize * self.normal_pitch + x as usize * 8;
+        let half = |i: usize| half::f16::from_le_bytes([self.normals[at + 2 * i], self.normals[at + 2 * i + 1]]).to_f32();
+        (half(3) > 0.5).then(|| glam::Vec3::new(half(0), half(1), half(2)))
+    }
+}
+
 /// What a method gets to record its passes.
 pub struct MethodContext<'a> {
     pub gpu: &'a GpuContext,
@@ -57,6 +85,10 @@ pub struct MethodContext<'a> {
     /// The shadow map's linear depth (`R32Float`, bound in `inputs` too), for methods that
     /// copy it into a buffer.
     pub shadow_depth: &'a wgpu::Texture,
+    /// The G-buffer's world positions (`Rgba32Float`) and normals (`Rgba16Float`, w > 0.5
+    /// where a surface covers the pixel), bound in `inputs` too, for `read_gbuffer`.
+    pub gbuffer_position: &'a wgpu::Texture,
+    pub gbuffer_normal: &'a wgpu::Texture,
     /// Where the method writes its visibility: `array<vec4<f32>>`, one per pixel row-major,
     /// rgb = V per channel (`render::targets` says why a buffer).
     pub visibility: &'a wgpu::Buffer,
@@ -169,6 +201,41 @@ impl MethodContext<'_> {
             )
         });
         (buffer, pitch / 4)
+    }
+
+    /// Hands `read` the G-buffer's positions and normals on the CPU, once what was recorded so
+    /// far has run: for work done on the CPU. Copied into pooled buffers (on lavapipe a fresh
+    /// one costs a page fault a page the first time it is written) and read where they lie.
+    pub fn read_gbuffer<R>(&mut self, read: impl FnOnce(&GBufferView<'_>) -> R) -> JobResult<R> {
+        let (width, height) = (self.width, self.height);
+        let (position_texture, normal_texture) = (self.gbuffer_position, self.gbuffer_normal);
+        let mut copy = |label: &'static str, texture: &wgpu::Texture, bytes_per_texel: u32| {
+            let pitch = (width * bytes_per_texel).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
+            let usage = wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST;
+            let buffer = self.scratch_buffer(label, u64::from(pitch) * u64::from(height), usage);
+            self.encoder.copy_texture_to_buffer(
+                texture.as_image_copy(),
+                wgpu::TexelCopyBufferInfo {
+                    buffer: &buffer,
+                    layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(pitch), rows_per_image: None },
+                },
+                wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
+            );
+            (buffer, pitch as usize)
+        };
+        let (positions, position_pitch) = copy("MethodContext::gbuffer_positions", position_texture, 16);
+        let (normals, normal_pitch) = copy("MethodContext::gbuffer_normals", normal_texture, 8);
+        self.flush()?;
+        self.gpu.map_for_reading(&[positions.slice(..), normals.slice(..)])?;
+        let map_error = |e: wgpu::MapRangeError| crate::gpu::GpuError::Map(e.to_string());
+        let result = {
+            let (position_bytes, normal_bytes) =
+                (positions.slice(..).get_mapped_range().map_err(map_error)?, normals.slice(..).get_mapped_range().map_err(map_error)?);
+            read(&GBufferView { positions: &position_bytes, normals: &normal_bytes, position_pitch, normal_pitch, width, height })
+        };
+        positions.unmap();
+        normals.unmap();
+        Ok(result)
     }
 
     /// A uniform buffer holding `value` (laid out as its WGSL struct).

@@ -321,6 +321,8 @@ impl Renderer {
                 scratch: Scratch::default(),
                 inputs,
                 shadow_depth: &targets.shadow_depth.texture,
+                gbuffer_position: &targets.position.texture,
+                gbuffer_normal: &targets.normal.texture,
                 visibility: &targets.visibility.buffer,
                 e0: &targets.e0.buffer,
                 width: spec.width,

@@ -53,20 +53,24 @@ impl FrameTargets {
             |label, w, h, format, usage| textures.alloc(device, TextureKey { label, width: w, height: h, layers: 1, format, usage });
         let pixels = u64::from(width) * u64::from(height);
         let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
-        let mut image = |label, bytes_per_pixel: u64| buffers.alloc(device, BufferKey { label, size: pixels * bytes_per_pixel, usage });
+        let mut image = |label, bytes_per_pixel: u64, extra: wgpu::BufferUsages| {
+            buffers.alloc(device, BufferKey { label, size: pixels * bytes_per_pixel, usage: usage | extra })
+        };
         Self {
             shadow_depth_buffer: get("FrameTargets::shadow_depth_buffer", shadow, shadow, DEPTH_BUFFER_FORMAT, U::RENDER_ATTACHMENT),
             shadow_depth: get("FrameTargets::shadow_depth", shadow, shadow, SHADOW_DEPTH_FORMAT, attachment | U::COPY_SRC),
             shadow_id: get("FrameTargets::shadow_id", shadow, shadow, ID_FORMAT, attachment),
             depth_buffer: get("FrameTargets::depth_buffer", width, height, DEPTH_BUFFER_FORMAT, U::RENDER_ATTACHMENT),
-            position: get("FrameTargets::position", width, height, POSITION_FORMAT, attachment),
-            normal: get("FrameTargets::normal", width, height, NORMAL_FORMAT, attachment),
+            // Read back by an engine that works on the CPU (`MethodContext::read_gbuffer`).
+            position: get("FrameTargets::position", width, height, POSITION_FORMAT, attachment | U::COPY_SRC),
+            normal: get("FrameTargets::normal", width, height, NORMAL_FORMAT, attachment | U::COPY_SRC),
             albedo: get("FrameTargets::albedo", width, height, ALBEDO_FORMAT, attachment),
             object_id: get("FrameTargets::object_id", width, height, ID_FORMAT, attachment),
-            e0: image("FrameTargets::e0", 16),
-            visibility: image("FrameTargets::visibility", 16),
-            color: image("FrameTargets::color", 16),
-            depth: image("FrameTargets::depth", 4),
+            e0: image("FrameTargets::e0", 16, wgpu::BufferUsages::empty()),
+            // Written by the CPU where a method works there (`reference`'s engine `cpu`).
+            visibility: image("FrameTargets::visibility", 16, wgpu::BufferUsages::COPY_DST),
+            color: image("FrameTargets::color", 16, wgpu::BufferUsages::empty()),
+            depth: image("FrameTargets::depth", 4, wgpu::BufferUsages::empty()),
         }
     }
 

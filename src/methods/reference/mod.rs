@@ -31,6 +31,8 @@ use glam::{Mat4, UVec2, Vec2, Vec3, Vec4};
 
 use bytemuck::Zeroable as _;
 
+mod cpu;
+
 use super::{Cap, Counters, MethodContext, Param, ParamSpec, Params, ShadowMethod};
 use crate::error::JobResult;
 use crate::gpu::layout;
@@ -56,7 +58,14 @@ const CROP: Param<bool> = Param::boolean(
     "draw each sample's map only over the texels where the frame's receivers can fall (the same maps there: less to clear and draw)",
 );
 
-const PARAMS: &[ParamSpec] = &[SAMPLES.spec, RESOLUTION.spec, BIAS_TEXELS.spec, SLOPE_BIAS_TEXELS.spec, SEED.spec, CROP.spec];
+const ENGINE: Param<&str> = Param::choice(
+    "engine",
+    "auto",
+    &["auto", "gpu", "cpu"],
+    "where the maps are drawn and tested: the device (gpu), the CPU's cores (cpu: the same maps and tests, ~2.5× as fast on a software adapter), or cpu on a software adapter and gpu on a GPU (auto)",
+);
+
+const PARAMS: &[ParamSpec] = &[SAMPLES.spec, RESOLUTION.spec, BIAS_TEXELS.spec, SLOPE_BIAS_TEXELS.spec, SEED.spec, CROP.spec, ENGINE.spec];
 
 /// The projection a sample's depth map is drawn with: the angle `fit` gives that sample and the
 /// near plane every map shares, reversed-Z with the far plane at infinity, so the stored depth
@@ -262,6 +271,14 @@ impl ShadowMethod for Reference {
 
     fn record(&self, ctx: &mut MethodContext<'_>, params: &Params) -> JobResult<Counters> {
         let plan = SamplePlan::new(ctx, params);
+        let on_cpu = match params.get(&ENGINE) {
+            "cpu" => true,
+            "gpu" => false,
+            _ => ctx.gpu.software,
+        };
+        if on_cpu {
+            return record_on_cpu(ctx, params, &plan);
+        }
         let (view_projs, slots) = plan.slots();
         let layers = batch_layers(plan.resolution).min(slots.len().max(1) as u32);
         let batches = plan.batches(&slots, layers, params);
@@ -293,8 +310,76 @@ impl ShadowMethod for Reference {
             ("samples_skipped_black".to_owned(), f64::from(plan.strata) - total as f64),
             ("resolution".to_owned(), f64::from(plan.resolution)),
             ("map_crop_fraction".to_owned(), f64::from(plan.crop.size.element_product()) / f64::from(plan.resolution).powi(2)),
+            ("engine_cpu".to_owned(), 0.0),
         ]))
     }
+}
+
+/// Engine `cpu` (`cpu.rs`): the G-buffer read back, the same maps and tests on the CPU's
+/// cores, and the visibility written to the frame's buffer.
+fn record_on_cpu(ctx: &mut MethodContext<'_>, params: &Params, plan: &SamplePlan) -> JobResult<Counters> {
+    let started = std::time::Instant::now();
+    let constants = cpu::TestConstants {
+        rotation: plan.rotation,
+        plane: plan.plane,
+        near: plan.near,
+        resolution: plan.resolution,
+        bias_texels: params.get(&BIAS_TEXELS),
+        slope_bias_texels: params.get(&SLOPE_BIAS_TEXELS),
+        light_center: ctx.spec.light.center,
+    };
+    let receivers = ctx.read_gbuffer(|gbuffer| cpu::Receivers::new(gbuffer, SEGMENT, &constants))?;
+    let (view_projs, _) = plan.slots();
+    let samples: Vec<cpu::CpuSample> = plan
+        .samples
+        .iter()
+        .zip(&plan.frusta)
+        .zip(&plan.crop.origins)
+        .zip(&view_projs)
+        .map(|(((sample, (_, texels_per_tan)), origin), view_proj)| {
+            let view = plan.rotation.transform_point3(sample.position);
+            cpu::CpuSample {
+                view_proj: Mat4::from_cols_array_2d(view_proj),
+                origin: [view.x, view.y],
+                texels_per_tan: *texels_per_tan,
+                crop_origin: *origin,
+                weight: sample.weight,
+            }
+        })
+        .collect();
+    let channels = plan.channels() as usize;
+    let read_ms = started.elapsed().as_secs_f64() * 1e3;
+    let total = samples.len() as u64;
+    let supervisor = ctx.supervisor;
+    let mut before = 0;
+    let (sums, spent) =
+        cpu::estimate(&receivers, &samples, &constants, (ctx.scene.positions(), ctx.scene.indices()), channels, plan.crop.size, |done| {
+            // Progress as often as the GPU engine reports it: each time another `BATCH` are done.
+            let done = done as u64;
+            if done / BATCH > before / BATCH || done == total {
+                supervisor.progress(done, total);
+            }
+            before = done;
+            // Cancelled: the renderer discards this frame.
+            !supervisor.cancelled()
+        });
+    let written = std::time::Instant::now();
+    let mut visibility = vec![0u8; ctx.width as usize * ctx.height as usize * 16];
+    cpu::write_visibility(&receivers, &sums, channels, ctx.width, &mut visibility);
+    ctx.gpu.queue.write_buffer(ctx.visibility, 0, &visibility);
+    let write_ms = written.elapsed().as_secs_f64() * 1e3;
+    ctx.timer.cpu_pass("method", "reference_cpu_receivers", read_ms);
+    ctx.timer.cpu_pass("method", "reference_cpu_maps", spent.maps_ms);
+    ctx.timer.cpu_pass("method", "reference_cpu_tests", spent.tests_ms);
+    ctx.timer.cpu_pass("method", "reference_cpu_visibility", write_ms);
+    Ok(Counters::from([
+        ("samples".to_owned(), total as f64),
+        ("segments_tested".to_owned(), f64::from(receivers.segments)),
+        ("samples_skipped_black".to_owned(), f64::from(plan.strata) - total as f64),
+        ("resolution".to_owned(), f64::from(plan.resolution)),
+        ("map_crop_fraction".to_owned(), f64::from(plan.crop.size.element_product()) / f64::from(plan.resolution).powi(2)),
+        ("engine_cpu".to_owned(), 1.0),
+    ]))
 }
 
 /// A frame's light samples and how each one's map is drawn and read.
