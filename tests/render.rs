@@ -608,6 +608,14 @@ fn reference_engines_draw_the_same_maps_and_make_the_same_tests() {
         let mean = differences.iter().sum::<f32>() / differences.len() as f32;
         eprintln!("reference engines on {}: {differing} of {} pixels differ, mean {mean:.2e}, {shaded} shaded", case["scene"], gpu.len());
         assert!(shaded > 200, "the view holds shadows ({shaded} pixels): {case}");
+        // The CPU engine's image is the same whatever the number of threads: each receiver
+        // adds its samples in their order.
+        for threads in [1, 3] {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            let (alone, counters) = pool.install(|| render("cpu"));
+            assert_eq!(counters["cpu_threads"], threads as f64);
+            assert!(alone == cpu, "{threads} threads: another image");
+        }
         assert!(differing * 200 <= gpu.len(), "{differing} of {} pixels differ: {case}", gpu.len());
         assert!(mean < 1e-4, "mean difference {mean}: {case}");
     }

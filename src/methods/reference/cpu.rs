@@ -156,11 +156,13 @@ struct Map {
     empty: bool,
 }
 
-/// Wall time of the two kinds of work, summed over the rounds (ms).
+/// Wall time of the two kinds of work, summed over the rounds (ms), and the maps a round drew
+/// at once (the threads that drew them).
 #[derive(Debug, Default, Clone, Copy)]
 pub(super) struct Spent {
     pub maps_ms: f64,
     pub tests_ms: f64,
+    pub round: usize,
 }
 
 /// Estimates every receiver's sums over `samples` (drawn from the triangles `positions` /
@@ -181,6 +183,7 @@ pub(super) fn estimate(
     // One map per thread in flight, within the GPU engine's budget for a batch's maps.
     let map_bytes = crop_size.x as usize * crop_size.y as usize * 4;
     let round = threads.min((super::BATCH_MAP_BYTES as usize / map_bytes.max(1)).max(1));
+    spent.round = round;
     let mut maps: Vec<Map> = (0..round).map(|_| Map { size: crop_size, depths: Vec::new(), empty: true }).collect();
     let avx2 = has_avx2();
     let mut done = 0;

@@ -379,6 +379,7 @@ fn record_on_cpu(ctx: &mut MethodContext<'_>, params: &Params, plan: &SamplePlan
         ("resolution".to_owned(), f64::from(plan.resolution)),
         ("map_crop_fraction".to_owned(), f64::from(plan.crop.size.element_product()) / f64::from(plan.resolution).powi(2)),
         ("engine_cpu".to_owned(), 1.0),
+        ("cpu_threads".to_owned(), spent.round as f64),
     ]))
 }
 
