@@ -802,7 +802,7 @@ fn bench_writes_its_phase_table_and_the_e0_check() {
     assert!((0.0..=1.0).contains(&share("flame")), "{:?}", report.e0);
     let md = std::fs::read_to_string(out.join("bench.md")).unwrap();
     assert!(md.contains("## crowd, flame (") && md.contains("| reference (8 samples) |") && md.contains("## E0: interpolated"), "{md}");
-    assert!(!engine.gpu().timestamps || md.contains("GPU ms per pass"), "{md}");
+    assert!(!engine.gpu().timestamps || md.contains("ms per pass (medians; GPU time"), "{md}");
     let json: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("bench.json")).unwrap()).unwrap();
     assert_eq!(json["rows"].as_array().unwrap().len(), 2 * methods);
     std::fs::remove_dir_all(&out).ok();

@@ -365,7 +365,7 @@ fn passes_markdown(md: &mut String, rows: &[&BenchRow]) -> std::fmt::Result {
     if rows.iter().all(|r| r.passes.is_empty()) {
         return Ok(());
     }
-    writeln!(md, "GPU ms per pass (medians), E0 then the method:\n")?;
+    writeln!(md, "ms per pass (medians; GPU time, or wall time on the CPU for a pass named `*_cpu_*`), E0 then the method:\n")?;
     for row in rows {
         let list: Vec<String> = row
             .passes
