@@ -120,7 +120,6 @@ impl GpuScene {
         self.edge_mesh.get_or_init(|| std::sync::Arc::new(EdgeMesh::build(&self.positions, &self.indices, &self.vertex_objects))).clone()
     }
 
-    /// The eight corners of the scene's bounding box.
     /// Every vertex's position, as the vertex buffer holds them.
     pub fn positions(&self) -> &[Vec3] {
         &self.positions
@@ -131,6 +130,7 @@ impl GpuScene {
         &self.indices
     }
 
+    /// The eight corners of the scene's bounding box.
     pub fn corners(&self) -> [Vec3; 8] {
         box_corners(self.bounds_min, self.bounds_max)
     }

@@ -4,7 +4,7 @@
 //! code on the CPU's cores. On a software adapter the GPU *is* those cores, and lavapipe
 //! pays ~0.28 µs of a core to set up, bin and rasterise each triangle of a map and ~6 ns for
 //! each test, where this code takes ~0.1 µs and ~2.5 ns (`docs/performance-log.md`, the
-//! stops based on 5c048a5 and 0bd81cb). On a GPU the GPU engine is the fast one.
+//! stop based on 5c048a5). On a GPU the GPU engine is the fast one.
 //!
 //! The work goes in rounds of as many samples as there are threads: each thread draws one
 //! sample's map, then each takes a share of the receivers and tests them against the round's
