@@ -304,14 +304,9 @@ impl ShadowMethod for Reference {
             }
         }
         let segments_tested = ctx.read_counters(&accumulation.segments_count)?[0];
-        Ok(Counters::from([
-            ("samples".to_owned(), total as f64),
-            ("segments_tested".to_owned(), f64::from(segments_tested)),
-            ("samples_skipped_black".to_owned(), f64::from(plan.strata) - total as f64),
-            ("resolution".to_owned(), f64::from(plan.resolution)),
-            ("map_crop_fraction".to_owned(), f64::from(plan.crop.size.element_product()) / f64::from(plan.resolution).powi(2)),
-            ("engine_cpu".to_owned(), 0.0),
-        ]))
+        let mut counters = plan.counters(segments_tested);
+        counters.insert("engine_cpu".to_owned(), 0.0);
+        Ok(counters)
     }
 }
 
@@ -372,15 +367,9 @@ fn record_on_cpu(ctx: &mut MethodContext<'_>, params: &Params, plan: &SamplePlan
     ctx.timer.cpu_pass("method", "reference_cpu_maps", spent.maps_ms);
     ctx.timer.cpu_pass("method", "reference_cpu_tests", spent.tests_ms);
     ctx.timer.cpu_pass("method", "reference_cpu_visibility", write_ms);
-    Ok(Counters::from([
-        ("samples".to_owned(), total as f64),
-        ("segments_tested".to_owned(), f64::from(receivers.segments)),
-        ("samples_skipped_black".to_owned(), f64::from(plan.strata) - total as f64),
-        ("resolution".to_owned(), f64::from(plan.resolution)),
-        ("map_crop_fraction".to_owned(), f64::from(plan.crop.size.element_product()) / f64::from(plan.resolution).powi(2)),
-        ("engine_cpu".to_owned(), 1.0),
-        ("cpu_threads".to_owned(), spent.round as f64),
-    ]))
+    let mut counters = plan.counters(receivers.segments);
+    counters.extend([("engine_cpu".to_owned(), 1.0), ("cpu_threads".to_owned(), spent.round as f64)]);
+    Ok(counters)
 }
 
 /// A frame's light samples and how each one's map is drawn and read.
@@ -475,6 +464,19 @@ impl SamplePlan {
                 (chunk.len() as u32, batch)
             })
             .collect()
+    }
+
+    /// The counters either engine reports: samples taken and left out, the row segments
+    /// tested, the maps' resolution and the part of each map drawn.
+    fn counters(&self, segments_tested: u32) -> Counters {
+        let total = self.samples.len() as f64;
+        Counters::from([
+            ("samples".to_owned(), total),
+            ("segments_tested".to_owned(), f64::from(segments_tested)),
+            ("samples_skipped_black".to_owned(), f64::from(self.strata) - total),
+            ("resolution".to_owned(), f64::from(self.resolution)),
+            ("map_crop_fraction".to_owned(), f64::from(self.crop.size.element_product()) / f64::from(self.resolution).powi(2)),
+        ])
     }
 
     /// Channels of the sums: one where every sample's weight is gray (its three sums would be
