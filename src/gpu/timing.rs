@@ -198,7 +198,8 @@ impl GpuTimer {
     }
 
     /// Reads back this frame's passes (dispatches, where marked) in the order they were
-    /// recorded, as milliseconds. Blocks until the GPU is done.
+    /// recorded, as milliseconds, then the passes run on the CPU (`cpu_pass`). Blocks until
+    /// the GPU is done.
     pub fn read(&self, gpu: &GpuContext) -> Result<Vec<PassTime>, GpuError> {
         let mut times = self.read_gpu(gpu)?;
         times.extend(self.cpu.iter().cloned());

@@ -40,6 +40,19 @@ impl Scratch {
 /// Method-specific counters (JFA rounds, searches skipped …), reported with the timings.
 pub type Counters = BTreeMap<String, f64>;
 
+/// Records the copy of the whole of `texture` into `buffer`, rows `pitch` bytes apart
+/// (`MethodContext::rows_buffer`).
+fn copy_rows(encoder: &mut wgpu::CommandEncoder, texture: &wgpu::Texture, buffer: &wgpu::Buffer, pitch: u32) {
+    encoder.copy_texture_to_buffer(
+        texture.as_image_copy(),
+        wgpu::TexelCopyBufferInfo {
+            buffer,
+            layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(pitch), rows_per_image: None },
+        },
+        texture.size(),
+    );
+}
+
 /// The G-buffer on the CPU (`MethodContext::read_gbuffer`), as copied into buffers: rows
 /// `*_pitch` bytes apart from the top-left, read in place.
 pub struct GBufferView<'a> {
@@ -185,53 +198,50 @@ impl MethodContext<'_> {
     /// ~25 ms at 2048²).
     pub fn shadow_depth_copy(&mut self, label: &'static str, pass: &'static str) -> (wgpu::Buffer, u32) {
         let texture = self.shadow_depth;
-        let side = texture.width();
-        let pitch = (4 * side).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
-        // The copy writes all of it.
-        let buffer =
-            self.scratch_buffer(label, u64::from(pitch) * u64::from(side), wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST);
-        self.timer.time_encoder(self.encoder, "method", pass, |encoder| {
-            encoder.copy_texture_to_buffer(
-                texture.as_image_copy(),
-                wgpu::TexelCopyBufferInfo {
-                    buffer: &buffer,
-                    layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(pitch), rows_per_image: None },
-                },
-                texture.size(),
-            )
-        });
+        let (buffer, pitch) = self.rows_buffer(label, texture, 4, wgpu::BufferUsages::STORAGE);
+        self.timer.time_encoder(self.encoder, "method", pass, |encoder| copy_rows(encoder, texture, &buffer, pitch));
         (buffer, pitch / 4)
+    }
+
+    /// A pooled buffer (`usage`, and the copy's destination) for `texture`'s rows of
+    /// `bytes_per_texel`-byte texels, padded to the copy alignment, and that pitch in bytes.
+    /// The copy writes all of it.
+    fn rows_buffer(
+        &mut self,
+        label: &'static str,
+        texture: &wgpu::Texture,
+        bytes_per_texel: u32,
+        usage: wgpu::BufferUsages,
+    ) -> (wgpu::Buffer, u32) {
+        let pitch = (bytes_per_texel * texture.width()).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
+        let buffer = self.scratch_buffer(label, u64::from(pitch) * u64::from(texture.height()), usage | wgpu::BufferUsages::COPY_DST);
+        (buffer, pitch)
     }
 
     /// Hands `read` the G-buffer's positions and normals on the CPU, once what was recorded so
     /// far has run: for work done on the CPU. Copied into pooled buffers (on lavapipe a fresh
     /// one costs a page fault a page the first time it is written) and read where they lie.
     pub fn read_gbuffer<R>(&mut self, read: impl FnOnce(&GBufferView<'_>) -> R) -> JobResult<R> {
-        let (width, height) = (self.width, self.height);
         let (position_texture, normal_texture) = (self.gbuffer_position, self.gbuffer_normal);
-        let mut copy = |label: &'static str, texture: &wgpu::Texture, bytes_per_texel: u32| {
-            let pitch = (width * bytes_per_texel).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
-            let usage = wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST;
-            let buffer = self.scratch_buffer(label, u64::from(pitch) * u64::from(height), usage);
-            self.encoder.copy_texture_to_buffer(
-                texture.as_image_copy(),
-                wgpu::TexelCopyBufferInfo {
-                    buffer: &buffer,
-                    layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(pitch), rows_per_image: None },
-                },
-                wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
-            );
-            (buffer, pitch as usize)
-        };
-        let (positions, position_pitch) = copy("MethodContext::gbuffer_positions", position_texture, 16);
-        let (normals, normal_pitch) = copy("MethodContext::gbuffer_normals", normal_texture, 8);
+        let (positions, position_pitch) =
+            self.rows_buffer("MethodContext::gbuffer_positions", position_texture, 16, wgpu::BufferUsages::MAP_READ);
+        let (normals, normal_pitch) = self.rows_buffer("MethodContext::gbuffer_normals", normal_texture, 8, wgpu::BufferUsages::MAP_READ);
+        copy_rows(self.encoder, position_texture, &positions, position_pitch);
+        copy_rows(self.encoder, normal_texture, &normals, normal_pitch);
         self.flush()?;
         self.gpu.map_for_reading(&[positions.slice(..), normals.slice(..)])?;
         let map_error = |e: wgpu::MapRangeError| crate::gpu::GpuError::Map(e.to_string());
         let result = {
             let (position_bytes, normal_bytes) =
                 (positions.slice(..).get_mapped_range().map_err(map_error)?, normals.slice(..).get_mapped_range().map_err(map_error)?);
-            read(&GBufferView { positions: &position_bytes, normals: &normal_bytes, position_pitch, normal_pitch, width, height })
+            read(&GBufferView {
+                positions: &position_bytes,
+                normals: &normal_bytes,
+                position_pitch: position_pitch as usize,
+                normal_pitch: normal_pitch as usize,
+                width: self.width,
+                height: self.height,
+            })
         };
         positions.unmap();
         normals.unmap();

@@ -123,14 +123,14 @@ impl Receivers {
         let segments = rows.iter().map(|(_, count)| count).sum();
         let pixels: Vec<u32> = rows.into_iter().flat_map(|(pixels, _)| pixels).collect();
         let width = gbuffer.width;
-        let rows = [0, 1, 2].map(|i| c.rotation.row(i).truncate());
+        let rotation = [0, 1, 2].map(|i| c.rotation.row(i).truncate());
         let mut blocks = vec![ReceiverBlock::default(); pixels.len().div_ceil(LANES)];
         blocks.par_iter_mut().zip(pixels.par_chunks(LANES)).for_each(|(b, block_pixels)| {
             for (l, &pixel) in block_pixels.iter().enumerate() {
                 let (px, py) = (pixel % width, pixel / width);
                 let (world, normal) = (gbuffer.position(px, py), gbuffer.normal(px, py).unwrap_or_default());
-                let x = Vec3::new(rows[0].dot(world), rows[1].dot(world), rows[2].dot(world));
-                let n = Vec3::new(rows[0].dot(normal), rows[1].dot(normal), rows[2].dot(normal));
+                let x = Vec3::new(rotation[0].dot(world), rotation[1].dot(world), rotation[2].dot(world));
+                let n = Vec3::new(rotation[0].dot(normal), rotation[1].dot(normal), rotation[2].dot(normal));
                 // The bias in texels, constant plus slope-scaled by tanθ to the light's centre.
                 let cos_c = normal.dot((c.light_center - world).normalize()).clamp(0.0, 1.0);
                 let tan_c = ((1.0 - cos_c * cos_c).sqrt() / cos_c.max(0.05)).min(10.0);
@@ -644,6 +644,16 @@ mod tests {
         Vec4::new(2.0 * x / s - 1.0, 1.0 - 2.0 * y / s, z, 1.0)
     }
 
+    /// A repeatable stream of numbers in [0, 1] (xorshift32 from `seed`).
+    fn xorshift(mut state: u32) -> impl FnMut() -> f32 {
+        move || {
+            state ^= state << 13;
+            state ^= state >> 17;
+            state ^= state << 5;
+            state as f32 / u32::MAX as f32
+        }
+    }
+
     fn covered(map: &Map) -> Vec<(u32, u32)> {
         (0..map.size.y)
             .flat_map(|y| (0..map.size.x).map(move |x| (x, y)))
@@ -678,13 +688,7 @@ mod tests {
     #[test]
     fn rows_solved_for_their_span_cover_what_testing_every_texel_covers() {
         let size = 64;
-        let mut state = 0x9e37_79b9u32;
-        let mut random = || {
-            state ^= state << 13;
-            state ^= state >> 17;
-            state ^= state << 5;
-            state as f32 / u32::MAX as f32
-        };
+        let mut random = xorshift(0x9e37_79b9);
         let mut drawn = 0;
         for k in 0..400 {
             // Large and small triangles, some reaching past the map, some with vertices on
@@ -766,13 +770,7 @@ mod tests {
         }
         let size = 64u32;
         let mut map = blank(size);
-        let mut state = 0x1234_5678u32;
-        let mut random = || {
-            state ^= state << 13;
-            state ^= state >> 17;
-            state ^= state << 5;
-            state as f32 / u32::MAX as f32
-        };
+        let mut random = xorshift(0x1234_5678);
         for texel in &mut map.depths {
             *texel = if random() < 0.3 { 0.0 } else { random() };
         }

@@ -324,22 +324,18 @@ fn record_on_cpu(ctx: &mut MethodContext<'_>, params: &Params, plan: &SamplePlan
         light_center: ctx.spec.light.center,
     };
     let receivers = ctx.read_gbuffer(|gbuffer| cpu::Receivers::new(gbuffer, SEGMENT, &constants))?;
-    let (view_projs, _) = plan.slots();
-    let samples: Vec<cpu::CpuSample> = plan
-        .samples
+    // Each sample as the GPU engine's accumulate pass reads it, with its crop's projection.
+    let (view_projs, slots) = plan.slots();
+    let samples: Vec<cpu::CpuSample> = slots
         .iter()
-        .zip(&plan.frusta)
-        .zip(&plan.crop.origins)
         .zip(&view_projs)
-        .map(|(((sample, (_, texels_per_tan)), origin), view_proj)| {
-            let view = plan.rotation.transform_point3(sample.position);
-            cpu::CpuSample {
-                view_proj: Mat4::from_cols_array_2d(view_proj),
-                origin: [view.x, view.y],
-                texels_per_tan: *texels_per_tan,
-                crop_origin: *origin,
-                weight: sample.weight,
-            }
+        .zip(&plan.crop.origins)
+        .map(|((slot, view_proj), origin)| cpu::CpuSample {
+            view_proj: Mat4::from_cols_array_2d(view_proj),
+            origin: [slot.origin[0], slot.origin[1]],
+            texels_per_tan: slot.radiance[3],
+            crop_origin: *origin,
+            weight: Vec3::from_slice(&slot.radiance[..3]),
         })
         .collect();
     let channels = plan.channels() as usize;
