@@ -23,7 +23,8 @@ use crate::timing::Timings;
 /// What to run.
 #[derive(Debug, Clone, clap::Args)]
 pub struct BenchOptions {
-    /// Built-in scenes, comma-separated, each optionally with parameters.
+    /// Scenes, comma-separated: built-in ones, each optionally with parameters, scene files
+    /// and folders of them (real models, staged on a floor as `eval` stages them).
     #[arg(long, value_delimiter = ',', default_value = "crowd,columns,terrain:triangles=100000")]
     pub scenes: Vec<String>,
     /// Built-in light images, comma-separated: by default 1, 6, 26 and 64 uniform cells (the
@@ -128,17 +129,19 @@ pub fn run(engine: &Engine, options: &BenchOptions) -> anyhow::Result<BenchRepor
     std::fs::create_dir_all(&options.out).with_context(|| format!("cannot create {}", options.out.display()))?;
     engine.warm_up().context("warm-up")?;
 
-    let cases = options.scenes.len() * options.lights.len();
+    let scenes = super::suite::scenes(&options.scenes)?;
+    let cases = scenes.len() * options.lights.len();
     let progress = indicatif::ProgressBar::new((cases * (methods.len() * (options.repeat as usize + 1) + 3)) as u64);
     progress.set_style(
         indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} {elapsed_precise} {msg}")
             .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
     );
     let (mut rows, mut e0) = (Vec::new(), Vec::new());
-    for scene in &options.scenes {
+    for suite_scene in &scenes {
+        let scene = &suite_scene.label;
         for light in &options.lights {
             let case = format!("{scene}, {light}");
-            let base = case_job(scene, light, options.shadow_map, (width, height), OutputFormat::Png)?;
+            let base = case_job(suite_scene, light, options.shadow_map, (width, height), OutputFormat::Png)?;
             let exr = |job: &Job| Job { output: crate::job::OutputSpec { format: OutputFormat::Exr, ..job.output.clone() }, ..job.clone() };
             let frame = |job: &Job, what: &str| engine.render_frame(&exr(job), &()).map_err(|e| anyhow::anyhow!("{case}: {what}: {e}"));
 

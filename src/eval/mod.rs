@@ -6,10 +6,15 @@
 //! Timings in one run are comparable with each other: the engine is warmed up first (no
 //! pipeline compilation in any row) and every row reports its ratio to `hard` in the same
 //! case. Quote those ratios, not absolute times: these machines are noisy.
+//!
+//! Scenes are built-ins or real models (`suite.rs`): files made by others, staged on a floor
+//! with the fitted camera and light; their rows are also summed up per method (`real.rs`).
 
 pub mod bench;
 mod pictures;
 mod plots;
+mod real;
+mod suite;
 mod tables;
 
 use std::path::PathBuf;
@@ -26,12 +31,16 @@ use crate::render::FrameOutput;
 use crate::timing::Timings;
 use pictures::{sanitize, write_pictures};
 use plots::{plot_scaling, plot_sweep};
+pub use real::RealSummary;
+pub use suite::SuiteScene;
 use tables::write_tables;
 
 /// What to run.
 #[derive(Debug, Clone, clap::Args)]
 pub struct EvalOptions {
-    /// Built-in scenes, comma-separated.
+    /// Scenes, comma-separated: built-in ones (`name[:key=value…]`), scene files (`.glb`,
+    /// `.gltf`) and folders of them (the real-model suite: `deploy/real-models.sh`). A file is
+    /// staged on a floor with the fitted camera and light (contract §3).
     #[arg(long, value_delimiter = ',', default_value = "torus,crowd,columns,terrain")]
     pub scenes: Vec<String>,
     /// Built-in light images, comma-separated, each optionally with parameters
@@ -111,6 +120,10 @@ fn parse_sweep(text: &str) -> anyhow::Result<Sweep> {
 #[derive(Debug, Clone, Serialize)]
 pub struct Row {
     pub scene: String,
+    /// Whether the scene is a real model (a file), not a built-in.
+    pub real_model: bool,
+    /// The case's name in its pictures (`sheet-{case}.png`).
+    pub case: String,
     pub light: String,
     pub width: u32,
     pub height: u32,
@@ -134,6 +147,10 @@ pub struct EvalReport {
     /// With `--colored`: each method's penumbra error under each coloured light against its
     /// error under the light's white twin.
     pub colored: Vec<ColoredRatio>,
+    /// With real models: each method's penumbra error over them, per light.
+    pub real_models: Vec<RealSummary>,
+    /// Real models left out of the suite, and why (penumbra refused them, or a method failed).
+    pub skipped: Vec<(String, String)>,
     pub files: Vec<PathBuf>,
 }
 
@@ -310,12 +327,6 @@ fn parse_method(text: &str) -> anyhow::Result<MethodSpec> {
     Ok(MethodSpec { name, params })
 }
 
-/// A built-in scene with parameters, e.g. `terrain:triangles=100000`.
-fn parse_scene(text: &str) -> anyhow::Result<AssetRef> {
-    let (name, params) = parse_named(text)?;
-    Ok(AssetRef::Builtin { name, params })
-}
-
 fn parse_size(text: &str) -> anyhow::Result<(u32, u32)> {
     let (w, h) = text.split_once('x').with_context(|| format!("size `{text}` must be WIDTHxHEIGHT"))?;
     Ok((w.trim().parse()?, h.trim().parse()?))
@@ -336,13 +347,13 @@ fn parse_methods(listed: &[String]) -> anyhow::Result<Vec<(String, MethodSpec)>>
     listed.iter().map(|text| Ok((text.clone(), parse_method(text)?))).collect()
 }
 
-/// A case's job: a built-in scene under a built-in light image (each as given on the command
-/// line), at this output size and format and this shadow-map resolution, with the embedded
-/// default's camera and method.
-fn case_job(scene: &str, light: &str, shadow_map: u32, (width, height): (u32, u32), format: OutputFormat) -> anyhow::Result<Job> {
+/// A case's job: a suite's scene under a built-in light image (as given on the command line),
+/// at this output size and format and this shadow-map resolution, with the scene's default
+/// camera and light (fitted, for a file) and the embedded default's method.
+fn case_job(scene: &SuiteScene, light: &str, shadow_map: u32, (width, height): (u32, u32), format: OutputFormat) -> anyhow::Result<Job> {
     let (light_name, light_params) = parse_named(light)?;
     Ok(Job {
-        scene: parse_scene(scene)?.into(),
+        scene: scene.scene.clone(),
         light: crate::job::LightSpec { image: Some(AssetRef::Builtin { name: light_name, params: light_params }), ..Default::default() },
         shadow_map: crate::job::ShadowMapSpec { resolution: shadow_map },
         output: crate::job::OutputSpec { width, height, format, exposure: 0.0 },
@@ -370,7 +381,12 @@ pub fn run(engine: &Engine, options: &EvalOptions) -> anyhow::Result<EvalReport>
     }
     let sizes: Vec<(u32, u32)> = options.sizes.iter().map(|s| parse_size(s)).collect::<anyhow::Result<_>>()?;
     let lights = with_white_twins(&options.lights, options.colored)?;
-    let options = &EvalOptions { lights: lights.iter().map(|l| l.label.clone()).collect(), ..options.clone() };
+    let scenes = suite::scenes(&options.scenes)?;
+    let options = &EvalOptions {
+        lights: lights.iter().map(|l| l.label.clone()).collect(),
+        scenes: scenes.iter().map(|s| s.label.clone()).collect(),
+        ..options.clone()
+    };
     std::fs::create_dir_all(&options.out).with_context(|| format!("cannot create {}", options.out.display()))?;
     engine.warm_up().context("warm-up")?;
 
@@ -381,21 +397,34 @@ pub fn run(engine: &Engine, options: &EvalOptions) -> anyhow::Result<EvalReport>
             .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
     );
     let suite = Suite { engine, options, methods: &methods, sweep: sweep.as_ref(), progress: &progress };
-    let (mut rows, mut flooding, mut files) = (Vec::new(), Vec::new(), Vec::new());
-    for scene in &options.scenes {
+    let (mut rows, mut flooding, mut files, mut skipped) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    for scene in &scenes {
         for light in &options.lights {
             for (&size, &shadow_map) in sizes.iter().flat_map(|s| options.shadow_map.iter().map(move |m| (s, m))) {
-                let case = suite.run_case(scene, light, size, shadow_map)?;
-                rows.extend(case.rows);
-                flooding.extend(case.flooding);
-                files.extend(case.files);
+                match suite.run_case(scene, light, size, shadow_map) {
+                    Ok(case) => {
+                        rows.extend(case.rows);
+                        flooding.extend(case.flooding);
+                        files.extend(case.files);
+                    }
+                    // A model others made may be one penumbra refuses, or one a method fails
+                    // on: the suite goes on, and the report names it.
+                    Err(error) if scene.real => {
+                        progress.println(format!("skipped {}: {error:#}", scene.label));
+                        skipped.push((scene.label.clone(), format!("{error:#}")));
+                    }
+                    Err(error) => return Err(error),
+                }
             }
         }
     }
     progress.finish_and_clear();
     files.extend(plot_scalings(options, sizes.len(), &rows)?);
     let colored = if options.colored { colored_ratios(&rows, &lights) } else { Vec::new() };
-    let report = EvalReport { adapter: engine.gpu().adapter.clone(), repeat: options.repeat, rows, flooding, colored, files };
+    let real_models = real::summarize(&rows);
+    files.extend(pictures::write_worst_sheets(&options.out, &real_models, &methods)?);
+    let report =
+        EvalReport { adapter: engine.gpu().adapter.clone(), repeat: options.repeat, rows, flooding, colored, real_models, skipped, files };
     write_tables(&options.out, &report, &methods.iter().map(|(l, _)| l.clone()).collect::<Vec<_>>(), sweep.as_ref())?;
     Ok(report)
 }
@@ -419,14 +448,12 @@ struct CaseResults {
 impl Suite<'_> {
     /// Renders the reference and every method (`repeat` times, round-robin) for one scene,
     /// light, output size and shadow map, and writes the case's pictures (and sweep plot).
-    fn run_case(&self, scene: &str, light: &str, (width, height): (u32, u32), shadow_map: u32) -> anyhow::Result<CaseResults> {
+    fn run_case(&self, scene: &SuiteScene, light: &str, (width, height): (u32, u32), shadow_map: u32) -> anyhow::Result<CaseResults> {
         let (engine, options, progress) = (self.engine, self.options, self.progress);
-        let scene_label = sanitize(scene);
-        let case = if options.shadow_map.len() > 1 {
-            format!("{scene_label}-{}-{width}x{height}-map{shadow_map}", sanitize(light))
-        } else {
-            format!("{scene_label}-{}-{width}x{height}", sanitize(light))
-        };
+        let scene_label = sanitize(&scene.label);
+        let name = case_name(&scene_label, light, (width, height), (options.shadow_map.len() > 1).then_some(shadow_map));
+        let key = Case { scene, name, light, shadow_map };
+        let case = &key.name;
         let base = case_job(scene, light, shadow_map, (width, height), OutputFormat::Exr)?;
         progress.set_message(format!("{case}: reference"));
         let (reference, reference_timings) = engine
@@ -435,7 +462,7 @@ impl Suite<'_> {
             })
             .with_context(|| format!("{case}: reference"))?;
         progress.inc(1);
-        let mut rows = vec![row(scene, light, shadow_map, "reference", reference_timings, &reference, &reference)];
+        let mut rows = vec![key.row("reference", reference_timings, &reference, &reference)];
         let mut frames = Vec::new();
         let mut runs: Vec<Vec<Timings>> = vec![Vec::new(); self.methods.len()];
         for repetition in 0..options.repeat {
@@ -450,7 +477,7 @@ impl Suite<'_> {
             }
         }
         for (((label, _), runs), (_, frame)) in self.methods.iter().zip(runs).zip(&frames) {
-            rows.push(row(scene, light, shadow_map, label, median_timings(runs), frame, &reference));
+            rows.push(key.row(label, median_timings(runs), frame, &reference));
             progress.inc(1);
         }
         let hard_ms = rows.iter().find(|r| r.method == "hard").map(|r| r.timings.total_ms);
@@ -461,12 +488,12 @@ impl Suite<'_> {
         for (label, frame) in &frames {
             let twin = jump_twin(label).and_then(|jump| frames.iter().find(|(l, _)| *l == jump));
             if let Some((jump_label, jump)) = twin {
-                flooding.push(compare_flooding(&case, jump_label, jump, frame));
+                flooding.push(compare_flooding(case, jump_label, jump, frame));
             }
         }
-        let mut files = write_pictures(&options.out, &case, &reference, &frames)?;
+        let mut files = write_pictures(&options.out, case, &reference, &frames)?;
         if let Some(sweep) = self.sweep {
-            files.push(plot_sweep(&options.out, &case, sweep, &rows)?);
+            files.push(plot_sweep(&options.out, case, sweep, &rows)?);
         }
         Ok(CaseResults { rows, flooding, files })
     }
@@ -547,19 +574,41 @@ fn median_timings(mut runs: Vec<Timings>) -> Timings {
     result
 }
 
-fn row(scene: &str, light: &str, shadow_map: u32, method: &str, mut timings: Timings, frame: &FrameOutput, reference: &FrameOutput) -> Row {
-    timings.total_ms = timings.phases.iter().map(|p| p.cpu_ms).sum();
-    Row {
-        scene: scene.into(),
-        light: light.into(),
-        width: frame.width,
-        height: frame.height,
-        shadow_map,
-        method: method.into(),
-        timings,
-        ratio_to_hard: None,
-        quality: quality::compare(frame, reference, 0.0),
-        counters: frame.counters.clone(),
+/// The name of a case's pictures: scene, light, size, and the shadow map's resolution where
+/// the suite runs several.
+fn case_name(scene: &str, light: &str, (width, height): (u32, u32), shadow_map: Option<u32>) -> String {
+    match shadow_map {
+        Some(map) => format!("{scene}-{}-{width}x{height}-map{map}", sanitize(light)),
+        None => format!("{scene}-{}-{width}x{height}", sanitize(light)),
+    }
+}
+
+/// What one case's rows share: its scene, its name in pictures, its light and shadow map.
+struct Case<'a> {
+    scene: &'a SuiteScene,
+    name: String,
+    light: &'a str,
+    shadow_map: u32,
+}
+
+impl Case<'_> {
+    /// A method's row: its frame against the reference.
+    fn row(&self, method: &str, mut timings: Timings, frame: &FrameOutput, reference: &FrameOutput) -> Row {
+        timings.total_ms = timings.phases.iter().map(|p| p.cpu_ms).sum();
+        Row {
+            scene: self.scene.label.clone(),
+            real_model: self.scene.real,
+            case: self.name.clone(),
+            light: self.light.into(),
+            width: frame.width,
+            height: frame.height,
+            shadow_map: self.shadow_map,
+            method: method.into(),
+            timings,
+            ratio_to_hard: None,
+            quality: quality::compare(frame, reference, 0.0),
+            counters: frame.counters.clone(),
+        }
     }
 }
 

@@ -59,3 +59,41 @@ pub(super) fn write_pictures(
 pub(super) fn sanitize(label: &str) -> String {
     label.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' { c } else { '_' }).collect()
 }
+
+/// The real models a method does worst on, as many as a sheet shows.
+const WORST_SHOWN: usize = 4;
+
+/// Per light and method, a sheet of its worst real models (`worst-{light}-{method}.png`), one
+/// row each, worst first: the reference, the method, and under them Vref and |V − Vref|, cut
+/// from the cases' sheets (the method's column is its place in `methods`).
+pub(super) fn write_worst_sheets(
+    out: &Path,
+    summaries: &[super::RealSummary],
+    methods: &[(String, crate::job::MethodSpec)],
+) -> anyhow::Result<Vec<PathBuf>> {
+    let mut files = Vec::new();
+    for summary in summaries {
+        let Some(column) = methods.iter().position(|(label, _)| *label == summary.method) else { continue };
+        let mut tiles = Vec::new();
+        for (_, case, _) in summary.ranked.iter().take(WORST_SHOWN) {
+            let sheet = image::open(out.join(format!("sheet-{case}.png")))?.into_rgb8();
+            let (w, h) = (sheet.width() / (methods.len() as u32 + 1), sheet.height());
+            let mut tile = image::RgbImage::new(2 * w, h);
+            for (to, from) in [(0, 0), (1, column as u32 + 1)] {
+                let part = image::imageops::crop_imm(&sheet, from * w, 0, w, h).to_image();
+                image::imageops::replace(&mut tile, &part, i64::from(to * w), 0);
+            }
+            tiles.push(tile);
+        }
+        let Some(first) = tiles.first() else { continue };
+        let (w, h) = (first.width(), first.height());
+        let mut sheet = image::RgbImage::new(w, h * tiles.len() as u32);
+        for (k, tile) in tiles.iter().enumerate() {
+            image::imageops::replace(&mut sheet, tile, 0, i64::from(h) * k as i64);
+        }
+        let path = out.join(format!("worst-{}-{}.png", sanitize(&summary.light), sanitize(&summary.method)));
+        sheet.save(&path)?;
+        files.push(path);
+    }
+    Ok(files)
+}

@@ -43,6 +43,7 @@ pub(super) fn write_tables(out: &Path, report: &EvalReport, methods: &[String], 
     write_preamble(&mut md, report, methods)?;
     write_cost(&mut md, report)?;
     write_quality(&mut md, report)?;
+    write_real_models(&mut md, report)?;
     write_colored(&mut md, report)?;
     write_flooding(&mut md, report)?;
     write_subdivision(&mut md, report)?;
@@ -113,6 +114,71 @@ fn write_quality(md: &mut String, report: &EvalReport) -> std::fmt::Result {
             v.penumbra.rmse, v.penumbra.mae, psnr(v.penumbra.psnr_db), v.penumbra.ssim, v.penumbra.flip,
             c.whole.rmse, psnr(c.whole.psnr_db), c.whole.ssim, c.whole.flip, c.penumbra.rmse, c.penumbra.flip
         )?;
+    }
+    Ok(())
+}
+
+/// The real models: per light, each method's mean and worst penumbra error over them, how often
+/// it does worse than `pcss` on the same model, its mean on the built-ins beside it; then every
+/// model's error per method, and the models left out.
+fn write_real_models(md: &mut String, report: &EvalReport) -> std::fmt::Result {
+    if report.real_models.is_empty() && report.skipped.is_empty() {
+        return Ok(());
+    }
+    writeln!(md, "\n## Real models\n")?;
+    writeln!(md, "Mean |V − Vref| over the reference's penumbra, per model (each staged on a floor with the fitted")?;
+    writeln!(md, "camera and light). `> 1.25 × pcss`, `> 1.5 × pcss`: models where the method's error exceeds")?;
+    writeln!(md, "`pcss`'s on the same model by that factor. `real / built-in`: the mean over real models over")?;
+    writeln!(md, "the mean over the built-in scenes of this run. `worst-{{light}}-{{method}}.png`: the worst models,")?;
+    writeln!(md, "reference and method, with Vref and |V − Vref| under them.\n")?;
+    writeln!(
+        md,
+        "| light | method | models | mean | worst | worst model | > 1.25 × pcss | > 1.5 × pcss | built-in mean | real / built-in |"
+    )?;
+    writeln!(md, "|---|---|---:|---:|---:|---|---:|---:|---:|---:|")?;
+    for s in &report.real_models {
+        writeln!(
+            md,
+            "| {} | {} | {} | {:.4} | {:.4} | {} | {} | {} | {} | {} |",
+            s.light,
+            s.method,
+            s.models,
+            s.mean,
+            s.worst,
+            s.worst_model,
+            s.over_baseline_125,
+            s.over_baseline_150,
+            s.builtin_mean.map_or_else(|| "-".into(), |m| format!("{m:.4}")),
+            s.over_builtin().map_or_else(|| "-".into(), |r| format!("{r:.2}")),
+        )?;
+    }
+    let mut methods: Vec<&str> = Vec::new();
+    for s in &report.real_models {
+        if !methods.contains(&s.method.as_str()) {
+            methods.push(&s.method);
+        }
+    }
+    writeln!(md, "\nPer model:\n")?;
+    writeln!(md, "| model | light | penumbra px | {} |", methods.join(" | "))?;
+    writeln!(md, "|---|---|---:|{}", "---:|".repeat(methods.len()))?;
+    for reference in report.rows.iter().filter(|r| r.real_model && r.method == "reference") {
+        let cells: Vec<String> = methods
+            .iter()
+            .map(|m| {
+                report
+                    .rows
+                    .iter()
+                    .find(|r| r.case == reference.case && r.method == *m)
+                    .map_or_else(|| "-".into(), |r| format!("{:.4}", r.quality.visibility.penumbra.mae))
+            })
+            .collect();
+        writeln!(md, "| {} | {} | {} | {} |", reference.scene, reference.light, reference.quality.penumbra_pixels, cells.join(" | "))?;
+    }
+    if !report.skipped.is_empty() {
+        writeln!(md, "\nLeft out:\n")?;
+        for (model, why) in &report.skipped {
+            writeln!(md, "- {model}: {why}")?;
+        }
     }
     Ok(())
 }
