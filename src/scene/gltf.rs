@@ -214,8 +214,8 @@ struct Loader<'a> {
     buffers: &'a [Vec<u8>],
     /// The builder's material for each glTF material (`None`: the default one).
     materials: BTreeMap<Option<usize>, u32>,
-    /// The builder's texture for each glTF image.
-    textures: HashMap<usize, usize>,
+    /// The builder's texture for each glTF image (`None`: skipped, and said so once).
+    textures: HashMap<usize, Option<usize>>,
     /// What the textures decoded so far take (`max_texture_bytes`).
     texture_bytes: u64,
     skipped_primitives: usize,
@@ -297,23 +297,46 @@ impl Loader<'_> {
         let texture = match pbr.base_color_texture() {
             Some(info) => {
                 let image = info.texture().source();
-                let slot = match self.textures.get(&image.index()) {
+                match self.textures.get(&image.index()) {
                     Some(&slot) => slot,
                     None => {
-                        let data = decode_texture(&image, self.buffers, self.uris, self.texture_bytes)?;
-                        self.texture_bytes += data.rgba8.len() as u64;
-                        let slot = self.builder.add_texture(data);
+                        let slot = self.texture(&image)?;
                         self.textures.insert(image.index(), slot);
                         slot
                     }
-                };
-                Some(slot)
+                }
             }
             None => None,
         };
         let m = self.builder.add_material(Material { base_color: pbr.base_color_factor(), texture });
         self.materials.insert(material.index(), m);
         Ok(m)
+    }
+
+    /// The builder's texture for `image`, decoded; `None` where the image cannot be read or
+    /// decoded — missing, outside the directory the server reads, in a format glTF does not
+    /// allow — with a warning naming it (contract §3: a texture never stops a shadow; the
+    /// material keeps its base colour factor). Only a limit stops the scene: the operator set
+    /// it, and the answer says which.
+    fn texture(&mut self, image: &gltf::Image<'_>) -> JobResult<Option<usize>> {
+        let named = match image.source() {
+            gltf::image::Source::Uri { uri, .. } if !uri.starts_with("data:") => format!("image {} (`{uri}`)", image.index()),
+            _ => format!("image {}", image.index()),
+        };
+        match decode_texture(image, self.buffers, self.uris, self.texture_bytes) {
+            Ok((data, read_as)) => {
+                if let Some(path) = read_as {
+                    self.builder.warn(format!("{named} was read from `{}` beside the document, as its exporter meant", path.display()));
+                }
+                self.texture_bytes += data.rgba8.len() as u64;
+                Ok(Some(self.builder.add_texture(data)))
+            }
+            Err(error) if error.code == ErrorCode::LimitExceeded => Err(error),
+            Err(error) => {
+                self.builder.warn(format!("{named} is not used, its materials take their base colour factor alone: {}", error.message));
+                Ok(None)
+            }
+        }
     }
 
     /// The scene, or why there is none (no triangles among `instances` mesh instances), with
@@ -442,7 +465,7 @@ impl UriReader<'_> {
         if let Some(rest) = uri.strip_prefix("data:") {
             return decode_data_uri(rest, self.field);
         }
-        let Resources::Beside { folder, confined_to } = self.resources else {
+        let Resources::Beside { .. } = self.resources else {
             return Err(invalid(
                 self.field,
                 format!(
@@ -451,21 +474,52 @@ impl UriReader<'_> {
                 ),
             ));
         };
-        let refused = |why: &str| JobError::field(ErrorCode::PathNotAllowed, self.field, format!("URI `{uri}`: {why}"));
-        let relative = relative_uri_path(uri).map_err(refused)?;
+        let relative = relative_uri_path(uri).map_err(|why| self.refused(uri, why))?;
+        self.read_relative(&relative, uri)
+    }
+
+    /// Reads an image the document names: as written, else where an exporter's spelling of a
+    /// path means it (`exporter_spellings`). Answers the bytes and, when a spelling found them,
+    /// the path they were read from; the first error when none did (a limit at once).
+    fn read_image(&self, uri: &str) -> JobResult<(Vec<u8>, Option<PathBuf>)> {
+        let first = match self.read(uri) {
+            Ok(bytes) => return Ok((bytes, None)),
+            Err(error) if error.code == ErrorCode::LimitExceeded => return Err(error),
+            Err(error) => error,
+        };
+        if matches!(self.resources, Resources::Beside { .. }) {
+            for relative in exporter_spellings(uri) {
+                match self.read_relative(&relative, uri) {
+                    Ok(bytes) => return Ok((bytes, Some(relative))),
+                    Err(error) if error.code == ErrorCode::LimitExceeded => return Err(error),
+                    Err(_) => {}
+                }
+            }
+        }
+        Err(first)
+    }
+
+    fn refused(&self, uri: &str, why: &str) -> JobError {
+        JobError::field(ErrorCode::PathNotAllowed, self.field, format!("URI `{uri}`: {why}"))
+    }
+
+    /// Reads `relative` (what `uri` names) from beside the document, inside the directory the
+    /// server reads and within the document's budget.
+    fn read_relative(&self, relative: &Path, uri: &str) -> JobResult<Vec<u8>> {
+        let Resources::Beside { folder, confined_to } = self.resources else { unreachable!("only documents from disk name files") };
         // Judged on the path as written first, so that a refusal says nothing about what
         // exists outside the directory; then again with symlinks resolved.
         let outside = "leads outside the directory this server reads scenes from";
-        let joined = lexical_join(folder, &relative).ok_or_else(|| refused(outside))?;
+        let joined = lexical_join(folder, relative).ok_or_else(|| self.refused(uri, outside))?;
         if confined_to.is_some_and(|root| !joined.starts_with(root)) {
-            return Err(refused(outside));
+            return Err(self.refused(uri, outside));
         }
         let resolved = std::fs::canonicalize(&joined)
             .ok()
             .filter(|p| p.is_file())
             .ok_or_else(|| invalid(self.field, format!("URI `{uri}`: no file `{}` beside the document", relative.display())))?;
         if confined_to.is_some_and(|root| !resolved.starts_with(root)) {
-            return Err(refused(outside));
+            return Err(self.refused(uri, outside));
         }
         let length = std::fs::metadata(&resolved).map(|m| m.len()).unwrap_or(u64::MAX);
         let budget = self.limits.max_body_bytes as u64;
@@ -477,6 +531,28 @@ impl UriReader<'_> {
         self.read.set(self.read.get() + bytes.len() as u64);
         Ok(bytes)
     }
+}
+
+/// Where exporters that do not write glTF's URIs mean a file beside the document, in the
+/// order tried: the path with Windows' backslashes as separators and without Blender's `//`
+/// ("relative to the .blend") prefix; then the file's name alone, beside the document (an
+/// absolute path on the author's machine, `D:\models\wood.jpg`, or a relative one into a folder
+/// the model was not shipped with). Each is still read as a relative path is: inside the
+/// folder the server reads, never from an absolute path.
+fn exporter_spellings(uri: &str) -> Vec<PathBuf> {
+    let slashed = uri.replace('\\', "/");
+    let trimmed = slashed.strip_prefix("//").unwrap_or(&slashed);
+    let mut candidates = Vec::new();
+    let drive = trimmed.as_bytes().get(1) == Some(&b':');
+    if !trimmed.starts_with('/') && !drive && !trimmed.contains("://") {
+        candidates.push(PathBuf::from(trimmed));
+    }
+    if let Some(name) = trimmed.rsplit('/').next().filter(|n| !n.is_empty() && *n != "." && *n != "..") {
+        candidates.push(PathBuf::from(name));
+    }
+    candidates.retain(|c| c.as_os_str() != uri);
+    candidates.dedup();
+    candidates
 }
 
 /// The path a relative URI reference names (glTF 2.0 §3.2 "URIs": relative to the document,
@@ -537,7 +613,10 @@ fn decode_data_uri(rest: &str, field: &str) -> JobResult<Vec<u8>> {
 /// Decodes image `image` into 8-bit RGBA, `taken` bytes of `max_texture_bytes` having gone to
 /// the scene's textures before it: its decoder may allocate what is left and no more, and its
 /// texels must fit there.
-fn decode_texture(image: &gltf::Image, buffers: &[Vec<u8>], uris: &UriReader<'_>, taken: u64) -> JobResult<TextureData> {
+///
+/// Answers, with the texels, the path an exporter's spelling of its URI was read from
+/// (`UriReader::read_image`), if one was.
+fn decode_texture(image: &gltf::Image, buffers: &[Vec<u8>], uris: &UriReader<'_>, taken: u64) -> JobResult<(TextureData, Option<PathBuf>)> {
     let (limits, field) = (uris.limits, uris.field);
     let left = limits.max_texture_bytes.saturating_sub(taken);
     let too_large = |what: String| {
@@ -549,15 +628,15 @@ fn decode_texture(image: &gltf::Image, buffers: &[Vec<u8>], uris: &UriReader<'_>
         );
         JobError::field(ErrorCode::LimitExceeded, field, message)
     };
-    let bytes: Vec<u8> = match image.source() {
+    let (bytes, read_as) = match image.source() {
         gltf::image::Source::View { view, .. } => {
             let buffer = &buffers[view.buffer().index()];
-            buffer
+            let bytes = buffer
                 .get(view.offset()..view.offset() + view.length())
-                .ok_or_else(|| invalid(field, "an image's buffer view lies outside its buffer"))?
-                .to_vec()
+                .ok_or_else(|| invalid(field, "an image's buffer view lies outside its buffer"))?;
+            (bytes.to_vec(), None)
         }
-        gltf::image::Source::Uri { uri, .. } => uris.read(uri)?,
+        gltf::image::Source::Uri { uri, .. } => uris.read_image(uri)?,
     };
     use crate::image_input::{self, Refusal};
     // glTF 2.0 images are PNG or JPEG; an EXR is taken as well, as it always was.
@@ -575,7 +654,7 @@ fn decode_texture(image: &gltf::Image, buffers: &[Vec<u8>], uris: &UriReader<'_>
         return Err(too_large(format!("{}×{} texels, {rgba_bytes} bytes as RGBA", decoded.width(), decoded.height())));
     }
     let rgba = decoded.into_rgba8();
-    Ok(TextureData { width: rgba.width(), height: rgba.height(), rgba8: rgba.into_raw() })
+    Ok((TextureData { width: rgba.width(), height: rgba.height(), rgba8: rgba.into_raw() }, read_as))
 }
 
 /// Packs a `.gltf` document read from `folder`, and the files its relative URIs name, into one
@@ -622,11 +701,17 @@ pub fn pack(bytes: &[u8], folder: &Path, limits: &Limits, field: &str) -> JobRes
     let mut images = items(&document, "images");
     for image in images.iter_mut().filter(|image| names_a_file(image)) {
         let uri = image["uri"].as_str().unwrap_or_default().to_owned();
-        let data = uris.read(&uri)?;
+        // An image that cannot be read, or is neither PNG nor JPEG (glTF 2.0 §3.8.2), stays a
+        // URI: the scene still loads, with a warning naming it (a texture never stops a shadow).
+        let data = match uris.read_image(&uri) {
+            Ok((data, _)) => data,
+            Err(error) if error.code == ErrorCode::LimitExceeded => return Err(error),
+            Err(_) => continue,
+        };
         let mime = match data.as_slice() {
             [0x89, b'P', b'N', b'G', ..] => "image/png",
             [0xFF, 0xD8, ..] => "image/jpeg",
-            _ => return Err(invalid(field, format!("image `{uri}` is neither PNG nor JPEG (glTF 2.0 §3.8.2)"))),
+            _ => continue,
         };
         views.push(serde_json::json!({"buffer": 0, "byteOffset": bin.len(), "byteLength": data.len()}));
         bin.extend_from_slice(&data);
@@ -944,6 +1029,80 @@ mod tests {
         let glb_bytes = height_field_glb(3, 1);
         assert_eq!(pack(&glb_bytes, &files.root, &Limits::default(), "scene").unwrap(), glb_bytes);
         let error = pack(&files.document("gone.bin"), &files.root, &Limits::default(), "scene").unwrap_err();
+        assert!(error.message.contains("`gone.bin`"), "{}", error.message);
+    }
+
+    /// Contract §3: a texture never stops a shadow. Images an exporter names its own way are
+    /// found beside the document; the ones that cannot be read or decoded are skipped with a
+    /// warning naming them; a missing buffer still refuses the scene.
+    #[test]
+    fn textures_that_cannot_be_read_are_skipped_by_name_and_exporters_spellings_are_found() {
+        let files = MultiFile::new("textures");
+        let mut png = Vec::new();
+        image::RgbaImage::from_pixel(2, 2, image::Rgba([200, 100, 50, 255]))
+            .write_to(&mut Cursor::new(&mut png), image::ImageFormat::Png)
+            .unwrap();
+        std::fs::write(files.root.join("sub/wood.png"), &png).unwrap();
+        std::fs::write(files.root.join("wood.png"), &png).unwrap();
+        std::fs::write(files.root.join("paint.tga"), [0u8, 0, 2, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1, 0, 1, 0, 24, 0, 1, 2, 3]).unwrap();
+        std::fs::write(files.top.join("outside.png"), &png).unwrap();
+        let uris = [
+            "sub/wood.png",              // as glTF writes it
+            "D:\\models\\sub\\wood.png", // the author's absolute path: its name beside the document
+            ".\\sub\\wood.png",          // Windows separators
+            "//sub/wood.png",            // Blender's "relative to the .blend"
+            "missing.png",
+            "paint.tga",                     // a format glTF does not allow
+            "../outside.png",                // outside the directory the server reads
+            "Procedural,num=0,type=Voronoi", // not a file at all
+        ];
+        let mut document: serde_json::Value = serde_json::from_slice(&files.document("mesh%20data.bin")).unwrap();
+        document["images"] = uris.iter().map(|uri| serde_json::json!({"uri": uri})).collect();
+        document["textures"] = (0..uris.len()).map(|k| serde_json::json!({"source": k})).collect();
+        document["materials"] = (0..uris.len())
+            .map(|k| serde_json::json!({"pbrMetallicRoughness": {"baseColorTexture": {"index": k}, "baseColorFactor": [0.5, 0.25, 0.125, 1.0]}}))
+            .collect();
+        let primitive = document["meshes"][0]["primitives"][0].clone();
+        document["meshes"][0]["primitives"] = (0..uris.len())
+            .map(|k| {
+                let mut primitive = primitive.clone();
+                primitive["material"] = k.into();
+                primitive
+            })
+            .collect();
+        let bytes = serde_json::to_vec(&document).unwrap();
+        let resources = Resources::Beside { folder: &files.root, confined_to: Some(&files.root) };
+        let scene = load_from(&bytes, &Limits::default(), "scene", resources).expect("textures never stop a shadow");
+        assert_eq!(scene.textures.len(), 4, "{:?}", scene.warnings);
+        assert!(scene.materials.iter().all(|m| m.base_color == [0.5, 0.25, 0.125, 1.0]));
+        assert_eq!(scene.materials.iter().filter(|m| m.texture.is_none()).count(), 4);
+        let said = |uri: &str, what: &str| {
+            assert!(
+                scene.warnings.iter().any(|w| w.contains(&format!("(`{uri}`)")) && w.contains(what)),
+                "{uri}: {what}: {:?}",
+                scene.warnings
+            )
+        };
+        said("D:\\models\\sub\\wood.png", "read from `wood.png`");
+        said(".\\sub\\wood.png", "read from `./sub/wood.png`");
+        said("//sub/wood.png", "read from `sub/wood.png`");
+        said("missing.png", "is not used");
+        said("paint.tga", "PNG, a JPEG or an OpenEXR");
+        said("../outside.png", "outside the directory");
+        said("Procedural,num=0,type=Voronoi", "is not used");
+        assert!(!scene.warnings.iter().any(|w| w.contains("(`sub/wood.png`)")), "read as written: nothing to say");
+        // The name alone is read beside the document only, never above it.
+        assert!(exporter_spellings("D:\\x\\..\\..").iter().all(|p| p.components().all(|c| matches!(c, Component::Normal(_)))));
+
+        // `penumbra submit` packs what it can embed (its user's own files: `..` too) and leaves
+        // the rest to the same warnings.
+        let packed = pack(&bytes, &files.root, &Limits::default(), "scene").unwrap();
+        let uploaded = load(&packed, &Limits::default(), "scene").unwrap();
+        assert_eq!(uploaded.textures.len(), 5, "{:?}", uploaded.warnings);
+        assert!(uploaded.warnings.iter().any(|w| w.contains("(`missing.png`)") && w.contains("self-contained")), "{:?}", uploaded.warnings);
+
+        // Geometry is another matter: a missing buffer is refused, naming it.
+        let error = files.load("gone.bin", true, &Limits::default()).unwrap_err();
         assert!(error.message.contains("`gone.bin`"), "{}", error.message);
     }
 
