@@ -176,6 +176,7 @@ mod tests {
             e0: None,
             counters: Default::default(),
             warnings: Vec::new(),
+            staging: Default::default(),
         }
     }
 

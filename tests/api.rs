@@ -1617,3 +1617,76 @@ async fn relative_uris_are_read_inside_the_scene_directory_only() {
     let receipt: Value = response.json().await.unwrap();
     assert!(receipt["warnings"][0].as_str().unwrap().contains("KHR_texture_transform"), "{receipt}");
 }
+
+/// Contract §3: a texture never stops a shadow, and the answer says how the scene was staged.
+/// A file whose image lies outside `--scene-dir` renders, with a warning naming the image and
+/// nothing read from outside; the JSON answer and the job record name the camera, light and
+/// floor used and which of them were fitted; sent back as the job's own camera and light, they
+/// render the same pixels, and nothing is fitted any more.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_texture_never_stops_a_shadow_and_the_staging_is_said() {
+    let (base, dir) = start().await;
+    let outside = tempdir::Dir::new();
+    let (mut document, bin) = common::test_gltf();
+    let model = dir.path().join("model");
+    std::fs::create_dir_all(&model).unwrap();
+    std::fs::write(model.join("mesh.bin"), &bin).unwrap();
+    let png = image::RgbaImage::from_pixel(2, 2, image::Rgba([255, 0, 0, 255]));
+    png.save(outside.path().join("secret.png")).unwrap();
+    let escape = format!("../../{}/secret.png", outside.path().file_name().unwrap().to_str().unwrap());
+    document["buffers"][0]["uri"] = "mesh.bin".into();
+    document["images"] = json!([{"uri": escape}]);
+    std::fs::write(model.join("textured.gltf"), serde_json::to_vec(&document).unwrap()).unwrap();
+
+    let client = reqwest::Client::new();
+    let render = |job: Value| {
+        let (client, url) = (client.clone(), format!("{base}/v1/render"));
+        async move {
+            let response = client.post(url).header("accept", "application/json").json(&job).send().await.unwrap();
+            assert_eq!(response.status(), StatusCode::OK);
+            let answer: Value = response.json().await.unwrap();
+            let image = client.get(format!("{base}{}", answer["image"].as_str().unwrap())).send().await.unwrap().bytes().await.unwrap();
+            (answer, image)
+        }
+    };
+    let staged = json!({"scene": {"path": "model/textured.gltf", "floor": {"albedo": [0.5, 0.5, 0.5], "margin": 1.5}},
+                        "method": {"name": "pcss"}, "output": {"width": 96, "height": 64, "format": "exr"}});
+    let (answer, image) = render(staged.clone()).await;
+    let warnings: Vec<&str> = answer["warnings"].as_array().unwrap().iter().map(|w| w.as_str().unwrap()).collect();
+    assert!(warnings.iter().any(|w| w.contains(&format!("(`{escape}`)")) && w.contains("outside the directory")), "{warnings:?}");
+    assert_eq!(answer["timings"]["scene_textures"], 0, "nothing read from outside --scene-dir");
+
+    let staging = &answer["staging"];
+    let fitted: Vec<&str> = staging["fitted"].as_array().unwrap().iter().map(|f| f.as_str().unwrap()).collect();
+    assert!(fitted.contains(&"camera.eye") && fitted.contains(&"light.center") && fitted.contains(&"light.image"), "{staging}");
+    assert_eq!(staging["floor"]["albedo"], json!([0.5, 0.5, 0.5]));
+    assert_eq!(staging["floor"]["margin"], json!(1.5));
+    assert!(staging["floor"]["height"].as_f64().unwrap() < 0.5, "under the model: {staging}");
+    assert_eq!(staging["light"]["image"], json!({"builtin": "white"}));
+    // The same in the record of a submitted job.
+    let submitted = client.post(format!("{base}/v1/jobs")).json(&staged).send().await.unwrap();
+    assert_eq!(submitted.status(), StatusCode::ACCEPTED);
+    let id = submitted.json::<Value>().await.unwrap()["id"].as_str().unwrap().to_owned();
+    let record = loop {
+        let record: Value = client.get(format!("{base}/v1/jobs/{id}")).send().await.unwrap().json().await.unwrap();
+        if record["status"] != "queued" && record["status"] != "running" {
+            break record;
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+    };
+    assert_eq!(record["staging"], *staging, "{record}");
+
+    // Given back as the job's own camera and light: the same image, nothing fitted.
+    let mut explicit = staged.clone();
+    let (camera, light) = (&staging["camera"], &staging["light"]);
+    explicit["camera"] = json!({"eye": camera["eye"], "target": camera["target"], "up": camera["up"], "fov_y_deg": camera["fov_y_deg"],
+                                "near": camera["near"], "far": camera["far"]});
+    explicit["light"] = light.clone();
+    let (again, again_image) = render(explicit).await;
+    assert_eq!(again["staging"]["fitted"], json!([]), "{again}");
+    assert_eq!(again["staging"]["camera"], staging["camera"]);
+    assert_eq!(again["staging"]["light"], staging["light"]);
+    let (_, _, first) = common::decode_exr(&image);
+    let (_, _, second) = common::decode_exr(&again_image);
+    assert_eq!(first["R"], second["R"], "the staging reproduces the image");
+}

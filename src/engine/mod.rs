@@ -51,6 +51,8 @@ pub struct Rendered {
     pub quality: Option<QualityReport>,
     /// What penumbra left out of the scene or repaired in it (contract §3).
     pub warnings: Vec<String>,
+    /// The camera, light and floor it was rendered with (contract §3).
+    pub staging: crate::render::Staging,
 }
 
 /// Reference frames kept for `compare` (each is a few MB of floats).
@@ -207,6 +209,7 @@ impl Engine {
             counters: frame.counters,
             quality,
             warnings: frame.warnings,
+            staging: frame.staging,
         })
     }
 

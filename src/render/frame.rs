@@ -107,6 +107,62 @@ impl ExtraImages {
     }
 }
 
+/// The camera, light and floor a frame was rendered with, complete, in the job's own terms
+/// (contract §3): what a client needs to render the same image again, or to move the light
+/// from where penumbra put it. `fitted` lists the fields the job left out, which came from
+/// the scene's defaults (fitted to its bounds, for a file).
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
+pub struct Staging {
+    pub camera: StagedCamera,
+    pub light: StagedLight,
+    /// The floor under the scene (`"scene": {"floor": …}`), where the job asked for one.
+    pub floor: Option<StagedFloor>,
+    /// Fields taken from the scene's defaults: `camera.eye`, `light.center`, `light.image` …
+    pub fitted: Vec<&'static str>,
+}
+
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
+pub struct StagedCamera {
+    pub eye: [f32; 3],
+    pub target: [f32; 3],
+    pub up: [f32; 3],
+    pub fov_y_deg: f32,
+    pub near: f32,
+    pub far: f32,
+}
+
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct StagedLight {
+    pub center: [f32; 3],
+    pub direction: [f32; 3],
+    pub up: [f32; 3],
+    pub size: [f32; 2],
+    pub intensity: f32,
+    pub image: crate::job::AssetRef,
+}
+
+impl Default for StagedLight {
+    /// No light: a frame made without one (tests of what reads frames).
+    fn default() -> Self {
+        Self {
+            center: [0.0; 3],
+            direction: [0.0; 3],
+            up: [0.0; 3],
+            size: [0.0; 2],
+            intensity: 0.0,
+            image: crate::job::AssetRef::builtin("white"),
+        }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct StagedFloor {
+    pub albedo: [f32; 3],
+    pub margin: f32,
+    /// Its height (y), a hair below the lowest point of what stands on it.
+    pub height: f32,
+}
+
 /// Everything a frame needs, validated.
 pub struct FrameSpec {
     pub camera: Camera,
@@ -125,6 +181,8 @@ pub struct FrameSpec {
     /// The PNG's exposure in stops (the 8-bit colour is made on the GPU).
     pub exposure: f32,
     pub extra_images: ExtraImages,
+    /// The camera, light and floor as resolved, for the job's answer.
+    pub staging: Staging,
 }
 
 impl FrameSpec {
@@ -162,13 +220,54 @@ impl FrameSpec {
             &scene.corners(),
         )?;
         let l = &job.light;
+        let (direction, up) = (v3(l.direction, d.light_direction), v3(l.up, d.light_up));
         let light = AreaLight::new(
             v3(l.center, d.light_center),
-            v3(l.direction, d.light_direction),
-            v3(l.up, d.light_up),
+            direction,
+            up,
             l.size.map(Vec2::from).unwrap_or(d.light_size_m),
             l.intensity.unwrap_or(d.light_intensity),
         )?;
+        let (c, l) = (&job.camera, &job.light);
+        let given = [
+            ("camera.eye", c.eye.is_some()),
+            ("camera.target", c.target.is_some()),
+            ("camera.up", c.up.is_some()),
+            ("camera.fov_y_deg", c.fov_y_deg.is_some()),
+            ("camera.near", c.near.is_some()),
+            ("camera.far", c.far.is_some()),
+            ("light.center", l.center.is_some()),
+            ("light.direction", l.direction.is_some()),
+            ("light.up", l.up.is_some()),
+            ("light.size", l.size.is_some()),
+            ("light.intensity", l.intensity.is_some()),
+            ("light.image", l.image.is_some()),
+        ];
+        let staging = Staging {
+            camera: StagedCamera {
+                eye: camera.eye.to_array(),
+                target: camera.target.to_array(),
+                up: camera.up.to_array(),
+                fov_y_deg: camera.fov_y_deg,
+                near: camera.near,
+                far: camera.far,
+            },
+            // As the job would name it: the direction and up given (the frame derives n, u, r).
+            light: StagedLight {
+                center: light.center.to_array(),
+                direction: direction.to_array(),
+                up: up.to_array(),
+                size: light.size_m.to_array(),
+                intensity: light.intensity,
+                image: l.image.clone().unwrap_or_else(|| d.light_image.clone()),
+            },
+            floor: job.scene.floor.zip(scene.on_floor).map(|(floor, on)| StagedFloor {
+                albedo: floor.albedo,
+                margin: floor.margin,
+                height: on.height,
+            }),
+            fitted: given.iter().filter(|(_, given)| !given).map(|(name, _)| *name).collect(),
+        };
         Ok(Self {
             camera,
             cells: light_cells(&light, &light_image),
@@ -183,6 +282,7 @@ impl FrameSpec {
             ambient: job.ambient.map(Vec3::from).unwrap_or(Vec3::ZERO),
             exposure: job.output.exposure,
             extra_images: ExtraImages::for_job(job),
+            staging,
         })
     }
 }

@@ -29,7 +29,7 @@ use crate::render::method::{Counters, MethodContext, Scratch};
 use crate::supervise::{cancelled_error, Supervisor};
 use crate::timing::Timings;
 pub use draw::{vertex_layout, ScenePipeline, DEPTH_BUFFER_FORMAT};
-pub use frame::{Camera, ExtraImages, FrameSpec, LightProjection};
+pub use frame::{Camera, ExtraImages, FrameSpec, LightProjection, Staging};
 pub use passes::{screen_compute_pipeline, E0Mode};
 pub use pixel_list::PixelListBuffers;
 use targets::FrameTargets;
@@ -89,6 +89,8 @@ pub struct FrameOutput {
     pub counters: Counters,
     /// The scene's warnings (`Scene::warnings`), for the job's answer.
     pub warnings: Vec<String>,
+    /// The camera, light and floor it was rendered with, for the job's answer.
+    pub staging: Staging,
 }
 
 struct Layouts {
@@ -392,7 +394,9 @@ impl Renderer {
             counters.insert(E0_SUMMED_EXACTLY.to_owned(), f64::from(listed));
         }
         let warnings = scene.warnings.clone();
-        let frame = FrameOutput { width: spec.width, height: spec.height, color, srgb8, visibility, depth, e0, counters, warnings };
+        let staging = spec.staging.clone();
+        let frame =
+            FrameOutput { width: spec.width, height: spec.height, color, srgb8, visibility, depth, e0, counters, warnings, staging };
         Ok((frame, gpu_times))
     }
 

@@ -154,6 +154,7 @@ pub(super) fn job_json(id: &str, rendered: &Rendered) -> Value {
         "counters": rendered.counters,
         "quality": rendered.quality,
         "warnings": rendered.warnings,
+        "staging": rendered.staging,
         "image": format!("/v1/jobs/{id}/image"),
     })
 }
