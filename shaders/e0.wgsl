@@ -152,7 +152,7 @@ fn no_corner() -> Corner {
 // The exact terms at a pixel, or an invalid record where it holds no lit surface
 // (`clip`: `exact_terms`).
 fn pixel_terms(pixel: vec2<u32>, clip: bool) -> Corner {
-    return surface_terms(pixel, textureLoad(gbuf_normal, pixel, 0), clip);
+    return surface_terms(pixel, textureLoad(gbuf_shading, pixel, 0), clip);
 }
 
 // `pixel_terms` at a pixel whose normal texel the caller has read (corners and centres lie
@@ -177,7 +177,7 @@ fn block_corners(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let pixel = corner_pixel(id.xy);
-    let normal = textureLoad(gbuf_normal, pixel, 0);
+    let normal = textureLoad(gbuf_shading, pixel, 0);
     corners[id.y * count.x + id.x] = surface_terms(pixel, normal, beside_agreeing(id.xy, count, normal.xyz));
 }
 
@@ -195,8 +195,8 @@ fn normal_gap2(a: vec3<f32>, b: vec3<f32>) -> f32 {
 // row's end counts as its own neighbour, and always makes it).
 // `n`: c's own normal.
 fn beside_agreeing(c: vec2<u32>, count: vec2<u32>, n: vec3<f32>) -> bool {
-    let left = textureLoad(gbuf_normal, corner_pixel(vec2<u32>(max(c.x, 1u) - 1u, c.y)), 0).xyz;
-    let right = textureLoad(gbuf_normal, corner_pixel(vec2<u32>(min(c.x + 1u, count.x - 1u), c.y)), 0).xyz;
+    let left = textureLoad(gbuf_shading, corner_pixel(vec2<u32>(max(c.x, 1u) - 1u, c.y)), 0).xyz;
+    let right = textureLoad(gbuf_shading, corner_pixel(vec2<u32>(min(c.x + 1u, count.x - 1u), c.y)), 0).xyz;
     let limit = (2.5 * BENT) * (2.5 * BENT);
     return normal_gap2(left, n) <= limit || normal_gap2(right, n) <= limit;
 }
@@ -592,7 +592,7 @@ fn interpolate_blocks(@builtin(global_invocation_id) id: vec3<u32>) {
             if all(pixel < frame.sizes.xy) {
                 // Loaded once here: lavapipe runs the listing branch's code for every pixel.
                 let position = textureLoad(gbuf_position, pixel, 0).xyz;
-                let normal = textureLoad(gbuf_normal, pixel, 0);
+                let normal = textureLoad(gbuf_shading, pixel, 0);
                 let e0 = interpolated_e0(position, normal, b, blend_in_row(row, f32(x) * step.x), check);
                 // Stored whether or not the estimate holds: a refused pixel's value is
                 // overwritten by its exact pass, and lavapipe stores a whole SIMD group for
@@ -635,7 +635,7 @@ fn exact(@builtin(global_invocation_id) id: vec3<u32>) {
 // A pixel's surface, its normal zero where it receives no light (E0 = 0 then).
 fn screen_surface(pixel: vec2<u32>) -> Surface {
     let x = textureLoad(gbuf_position, pixel, 0).xyz;
-    let normal = textureLoad(gbuf_normal, pixel, 0);
+    let normal = textureLoad(gbuf_shading, pixel, 0);
     let lit = covers(normal) && lit_side(x);
     return Surface(pixel_index(pixel), x, select(vec3<f32>(0.0), normal.xyz, lit));
 }
@@ -657,7 +657,7 @@ struct Surface {
 
 fn listed_surface(entry: u32) -> Surface {
     let pixel = listed_pixel(entry);
-    return Surface(entry, textureLoad(gbuf_position, pixel, 0).xyz, textureLoad(gbuf_normal, pixel, 0).xyz);
+    return Surface(entry, textureLoad(gbuf_position, pixel, 0).xyz, textureLoad(gbuf_shading, pixel, 0).xyz);
 }
 
 // Listed pixels per invocation of the exact passes. On lavapipe a uniform-buffer load indexed

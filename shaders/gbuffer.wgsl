@@ -1,5 +1,12 @@
-// Eye-space G-buffer: world position and view depth, the normal turned towards the eye
-// (every triangle receives light on the side we see), linear albedo, object id.
+// Eye-space G-buffer: world position and view depth, the geometric normal turned towards the
+// eye (every triangle receives light on the side we see), linear albedo, the shading normal on
+// that same side, object id.
+//
+// Two normals, because a mesh's vertex normals need not be its surface's: an exporter smooths
+// a cube's eight corners, a low-poly sphere's facets bend away from their normals. E0's cosine
+// takes the shading normal (contract §1: the surface as authored); whatever asks where the
+// surface really is — a shadow map's bias, a receiver's plane, whether the light lies in front
+// of it — takes the plane of the triangle seen, or it shadows itself where the two disagree.
 
 #import common/frame.wgsl
 
@@ -48,19 +55,33 @@ struct GBuffer {
     @location(0) position: vec4<f32>,
     @location(1) normal: vec4<f32>,
     @location(2) albedo: vec4<f32>,
-    @location(3) object_id: u32,
+    @location(3) shading: vec4<f32>,
+    @location(4) object_id: u32,
 }
 
-// The G-buffer of a fragment whose linear albedo is `albedo`.
-fn gbuffer(in: VsOut, albedo: vec4<f32>) -> GBuffer {
+// The G-buffer of a fragment whose linear albedo is `albedo` and whose world position changes
+// by `dx` and `dy` from one pixel to the next: both lie in the triangle's plane (the quad's
+// helper lanes extend the same triangle), so their cross product is its normal, whatever the
+// winding. Seen edge-on they are parallel; the shading normal stands in there.
+fn gbuffer(in: VsOut, albedo: vec4<f32>, dx: vec3<f32>, dy: vec3<f32>) -> GBuffer {
+    let to_eye = frame.eye.xyz - in.world;
     var n = normalize(in.normal);
-    if dot(n, frame.eye.xyz - in.world) < 0.0 {
+    let across = cross(dx, dy);
+    var g = select(n, normalize(across), dot(across, across) > 1e-30);
+    if dot(g, to_eye) < 0.0 {
+        g = -g;
+    }
+    // The shading normal on the side seen: glTF flips it with the face (a double-sided
+    // material's back); judged against the plane, not the eye, so that a vertex normal bent
+    // past the silhouette stays as authored.
+    if dot(n, g) < 0.0 {
         n = -n;
     }
     var out: GBuffer;
-    out.position = vec4<f32>(in.world, dot(in.world - frame.eye.xyz, frame.view_dir.xyz));
-    out.normal = vec4<f32>(n, 1.0);
+    out.position = vec4<f32>(in.world, dot(-to_eye, frame.view_dir.xyz));
+    out.normal = vec4<f32>(g, 1.0);
     out.albedo = vec4<f32>(albedo.rgb, 1.0);
+    out.shading = vec4<f32>(n, 1.0);
     out.object_id = in.object_id;
     return out;
 }
@@ -68,7 +89,8 @@ fn gbuffer(in: VsOut, albedo: vec4<f32>) -> GBuffer {
 // A material with a base-colour texture.
 @fragment
 fn fs_main(in: VsOut) -> GBuffer {
-    return gbuffer(in, in.base_color * textureSample(base_color_texture, base_color_sampler, in.uv));
+    let albedo = in.base_color * textureSample(base_color_texture, base_color_sampler, in.uv);
+    return gbuffer(in, albedo, dpdx(in.world), dpdy(in.world));
 }
 
 // A material without one: its colour alone. The same value `fs_main` gives with the 1×1
@@ -76,5 +98,5 @@ fn fs_main(in: VsOut) -> GBuffer {
 // lavapipe a fifth of the pass on a 100k-triangle landscape.
 @fragment
 fn fs_untextured(in: VsOut) -> GBuffer {
-    return gbuffer(in, in.base_color);
+    return gbuffer(in, in.base_color, dpdx(in.world), dpdy(in.world));
 }

@@ -14,12 +14,13 @@
 // faster at 1080p.
 var<private> frame: Frame;
 @group(0) @binding(1) var gbuf_position: texture_2d<f32>; // xyz world position, w view depth (0: background)
-@group(0) @binding(2) var gbuf_normal: texture_2d<f32>;   // xyz unit normal facing the eye, w 1 where covered
+@group(0) @binding(2) var gbuf_normal: texture_2d<f32>;   // xyz unit geometric normal facing the eye, w 1 where covered
 @group(0) @binding(3) var gbuf_albedo: texture_2d<f32>;   // rgb linear albedo
 @group(0) @binding(4) var gbuf_id: texture_2d<u32>;       // object id
 @group(0) @binding(5) var shadow_depth: texture_2d<f32>;  // linear depth along the light normal
 @group(0) @binding(6) var shadow_id: texture_2d<u32>;     // object id seen from the light centre
 @group(0) @binding(7) var<uniform> light_cells: array<LightCell, 64>; // frame.sizes.w of them (light::E0_GRID²)
+@group(0) @binding(8) var gbuf_shading: texture_2d<f32>;  // xyz unit shading normal on the seen side, w 1 where covered (E0 only)
 
 // Cell `cell`'s corners in world space, counter-clockwise seen from the lit side: bottom-left,
 // bottom-right, top-right, top-left (`light::irradiance::light_cells`).

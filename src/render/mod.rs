@@ -139,6 +139,7 @@ impl Renderer {
                     layout::texture_float(5),
                     layout::texture_uint(6),
                     layout::uniform(7),
+                    layout::texture_float(8),
                 ],
             ),
             e0_output: bgl(
@@ -439,6 +440,7 @@ impl Renderer {
                 view(&targets.shadow_depth.view),
                 view(&targets.shadow_id.view),
                 self.cells.as_entire_binding(),
+                view(&targets.shading.view),
             ]),
         });
         FrameInputs { layout: self.layouts.inputs.clone(), bind_group }

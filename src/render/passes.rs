@@ -91,9 +91,9 @@ impl Renderer {
         // With `ids` (`ShadowMethod::reads_object_ids`) the object-id target too; without, the
         // fragment's id output has no attachment and is dropped.
         let formats: &[wgpu::TextureFormat] = if ids {
-            &[POSITION_FORMAT, NORMAL_FORMAT, ALBEDO_FORMAT, ID_FORMAT]
+            &[POSITION_FORMAT, NORMAL_FORMAT, ALBEDO_FORMAT, NORMAL_FORMAT, ID_FORMAT]
         } else {
-            &[POSITION_FORMAT, NORMAL_FORMAT, ALBEDO_FORMAT]
+            &[POSITION_FORMAT, NORMAL_FORMAT, ALBEDO_FORMAT, NORMAL_FORMAT]
         };
         let mut pipeline = |name: &'static str, fragment: &'static str| {
             self.pipelines.render(PipelineKey { name, variant: u32::from(ids) }, || {
@@ -115,6 +115,7 @@ impl Renderer {
             Some(clear_attachment(&targets.position.view, 0.0)),
             Some(clear_attachment(&targets.normal.view, 0.0)),
             Some(clear_attachment(&targets.albedo.view, 0.0)),
+            Some(clear_attachment(&targets.shading.view, 0.0)),
             Some(clear_attachment(&targets.object_id.view, f64::from(u32::MAX))),
         ];
         let colors = &colors[..formats.len()];

@@ -18,8 +18,14 @@ pub(super) struct FrameTargets {
     pub shadow_id: PooledTexture,
     pub depth_buffer: PooledTexture,
     pub position: PooledTexture,
+    /// The geometric normal: the plane of the triangle seen, facing the eye. Every
+    /// visibility test (biases, receiver planes, which side of a surface the light is on)
+    /// reads it.
     pub normal: PooledTexture,
     pub albedo: PooledTexture,
+    /// The shading normal (interpolated from the vertices) on the seen side: what E0's
+    /// cosine reads (contract §1).
+    pub shading: PooledTexture,
     pub object_id: PooledTexture,
     /// `array<vec4<f32>>`: rgb = E0 per channel.
     pub e0: PooledBuffer,
@@ -65,6 +71,7 @@ impl FrameTargets {
             position: get("FrameTargets::position", width, height, POSITION_FORMAT, attachment | U::COPY_SRC),
             normal: get("FrameTargets::normal", width, height, NORMAL_FORMAT, attachment | U::COPY_SRC),
             albedo: get("FrameTargets::albedo", width, height, ALBEDO_FORMAT, attachment),
+            shading: get("FrameTargets::shading", width, height, NORMAL_FORMAT, attachment),
             object_id: get("FrameTargets::object_id", width, height, ID_FORMAT, attachment),
             e0: image("FrameTargets::e0", 16, wgpu::BufferUsages::empty()),
             // Written by the CPU where a method works there (`reference`'s engine `cpu`).
@@ -83,6 +90,7 @@ impl FrameTargets {
             self.position,
             self.normal,
             self.albedo,
+            self.shading,
             self.object_id,
         ] {
             textures.release(t);
