@@ -702,7 +702,9 @@ fn reference_tests_only_the_row_segments_that_hold_a_receiver() {
                 assert_eq!(*v, [1.0; 3], "sky pixel {i}");
             }
         }
-        assert!(visibility.iter().filter(|v| v[0] < 0.5).count() > 20, "{engine}: the ground holds shadows");
+        // Shadows of its hills (its facets' own planes decide what shadows itself, not their
+        // smoothed normals, which cast false shadows that grew with the maps' resolution).
+        assert!(visibility.iter().filter(|v| v[0] < 0.7).count() > 20, "{engine}: the ground holds shadows");
     }
 }
 
