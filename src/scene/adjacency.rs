@@ -1,17 +1,37 @@
 //! Mesh adjacency for the object-space method `wedges` (Assarsson & Akenine-Möller 2003):
-//! vertices welded by position, every undirected edge with the triangles that use it, and the
-//! silhouette edges seen from a point.
+//! vertices welded by position, every undirected edge with the triangles that use it, the
+//! surfaces they make up, and the silhouette edges seen from a point.
 //!
-//! The silhouette is the oriented boundary of the triangles that face the point: each such
-//! triangle contributes its three edges in its own winding, and an edge's multiplicity is the
-//! number of uses a→b minus the uses b→a. Between a front- and a back-facing triangle of a
-//! consistently wound closed mesh that is ±1; between two front-facing ones 0. Being a
-//! boundary, the result is always closed — every vertex has as many silhouette edges in as
-//! out — whatever the mesh: an open mesh gets the border of its front-facing part (a surface
-//! facing away from the point casts nothing, as with back-face culling from the light),
-//! a non-manifold edge whatever its triangles add up to, and degenerate triangles are dropped.
+//! The paper's shadow volumes assume closed, consistently wound meshes; the ones users bring
+//! are often not (open CAD shells, a character's tail as a single sheet, flipped faces,
+//! duplicated faces, three faces on an edge). So, before any silhouette:
+//! - duplicate triangles (the same three vertices, either winding: a sheet modelled as two
+//!   faces back to back) are one sheet, and degenerate ones nothing;
+//! - each surface's winding is made consistent across its two-triangle edges (a flipped face
+//!   is turned back to its neighbours' way), and a closed surface is turned outward;
+//! - a *closed* surface — one component whose every edge its triangles run as often one way
+//!   as the other — casts from the side facing the point, as the paper does: a ray from the
+//!   light enters it through a face towards the light exactly as often as it leaves;
+//! - an *open* one (a border, an edge of three faces, a one-sided surface that will not
+//!   orient) casts from its front as a closed one does, and also from its back wherever
+//!   nothing of it closes the back off: a back face whose centre sees the point past no
+//!   front face of its own surface is the only layer there (a sheet seen from behind, a
+//!   box's floor under its missing lid), so it casts, turned over; one behind its own front
+//!   faces (a landscape's far slopes, a head's inside seen through its open neck) is the
+//!   second crossing of a layer already counted, so it does not. With this, an edge counts
+//!   with the multiplicity its casting triangles give it and a boundary edge is a silhouette
+//!   from every side where its triangle casts — the rule of robust shadow volumes for
+//!   arbitrary meshes (Aldridge & Woods 2004; McGuire 2004) — without counting a solid's
+//!   open shell twice, which the sum of layers (§2) would show as a penumbra twice as dark.
+//!
+//! The silhouette is then the oriented boundary of the casting triangles, each turned towards
+//! the point: an edge's multiplicity is the uses a→b minus the uses b→a. Between the front
+//! and back of a closed surface that is ±1; between two front faces 0; at the fold of an open
+//! sheet seen from the point 2 (two layers meet there); at its border 1. Being a boundary, the
+//! result is always closed — every vertex has as many silhouette edges in as out — whatever
+//! the mesh.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 
 use glam::Vec3;
 
@@ -24,7 +44,8 @@ pub struct Edge {
     use_count: u32,
 }
 
-/// A triangle's use of an edge: which triangle, and whether it runs a → b (else b → a).
+/// A triangle's use of an edge: which triangle, and whether it runs a → b (else b → a), in
+/// the triangle's winding as `EdgeMesh::triangles` holds it.
 #[derive(Debug, Clone, Copy)]
 struct EdgeUse {
     triangle: u32,
@@ -41,10 +62,18 @@ pub struct AdjacencyStats {
     pub boundary_edges: usize,
     /// Edges with more than two triangles.
     pub non_manifold_edges: usize,
-    /// Edges whose two triangles run them the same way (inconsistent winding).
+    /// Edges whose two triangles ran them the same way as the file wound them (inconsistent
+    /// winding), before the winding was made consistent.
     pub inconsistent_edges: usize,
     /// Triangles dropped for repeating a vertex or having no area.
     pub degenerate_triangles: usize,
+    /// Triangles dropped for repeating another's three vertices (either winding).
+    pub duplicate_triangles: usize,
+    /// Triangles whose winding was turned to agree with their surface (or turned outward).
+    pub reoriented_triangles: usize,
+    /// Connected surfaces (through shared edges), and those of them that are open.
+    pub surfaces: usize,
+    pub open_surfaces: usize,
 }
 
 /// A silhouette edge, oriented so that its multiplicity is positive.
@@ -52,22 +81,85 @@ pub struct AdjacencyStats {
 pub struct SilhouetteEdge {
     pub a: Vec3,
     pub b: Vec3,
-    /// How many times the front-facing triangles' boundary runs a → b (1 for a closed mesh).
+    /// How many times the casting triangles' boundary runs a → b (1 for a closed mesh).
     pub multiplicity: u32,
-    /// The object of a front-facing triangle on the edge.
+    /// The object of a casting triangle on the edge.
     pub object: u32,
 }
 
 pub struct EdgeMesh {
     pub positions: Vec<Vec3>,
+    /// Wound consistently within each surface, closed surfaces outward.
     pub triangles: Vec<[u32; 3]>,
     /// Object id by triangle.
     pub objects: Vec<u32>,
     /// Unnormalised normals (b − a) × (c − a), by triangle.
     normals: Vec<Vec3>,
+    /// By triangle: its surface (connected through edges), and by surface whether it is
+    /// closed (it casts from its front only).
+    surface: Vec<u32>,
+    closed: Vec<bool>,
     pub edges: Vec<Edge>,
     uses: Vec<EdgeUse>,
     pub stats: AdjacencyStats,
+}
+
+/// Disjoint sets of triangles (union by size, path halving).
+struct Sets {
+    parent: Vec<u32>,
+    size: Vec<u32>,
+}
+
+impl Sets {
+    fn new(n: usize) -> Self {
+        Self { parent: (0..n as u32).collect(), size: vec![1; n] }
+    }
+
+    fn find(&mut self, mut x: u32) -> u32 {
+        while self.parent[x as usize] != x {
+            let up = self.parent[self.parent[x as usize] as usize];
+            self.parent[x as usize] = up;
+            x = up;
+        }
+        x
+    }
+
+    fn union(&mut self, a: u32, b: u32) {
+        let (mut a, mut b) = (self.find(a), self.find(b));
+        if a == b {
+            return;
+        }
+        if self.size[a as usize] < self.size[b as usize] {
+            std::mem::swap(&mut a, &mut b);
+        }
+        self.parent[b as usize] = a;
+        self.size[a as usize] += self.size[b as usize];
+    }
+}
+
+/// Every directed use of an edge by `triangles`, sorted so that one edge's uses are adjacent,
+/// and the edges they make.
+fn edges_of(triangles: &[[u32; 3]]) -> (Vec<Edge>, Vec<EdgeUse>) {
+    let mut uses: Vec<(u32, u32, EdgeUse)> = triangles
+        .iter()
+        .enumerate()
+        .flat_map(|(t, tri)| {
+            (0..3).map(move |k| {
+                let (from, to) = (tri[k], tri[(k + 1) % 3]);
+                (from.min(to), from.max(to), EdgeUse { triangle: t as u32, forward: from < to })
+            })
+        })
+        .collect();
+    uses.sort_unstable_by_key(|&(a, b, u)| (a, b, u.triangle));
+    let mut edges = Vec::new();
+    let mut start = 0;
+    while start < uses.len() {
+        let (a, b) = (uses[start].0, uses[start].1);
+        let end = start + uses[start..].iter().take_while(|u| (u.0, u.1) == (a, b)).count();
+        edges.push(Edge { a, b, first_use: start as u32, use_count: (end - start) as u32 });
+        start = end;
+    }
+    (edges, uses.into_iter().map(|u| u.2).collect())
 }
 
 impl EdgeMesh {
@@ -88,8 +180,8 @@ impl EdgeMesh {
             .collect();
         let mut stats = AdjacencyStats { vertices: unique.len(), ..Default::default() };
         let mut triangles = Vec::with_capacity(indices.len() / 3);
-        let mut normals = Vec::with_capacity(indices.len() / 3);
         let mut objects = Vec::with_capacity(indices.len() / 3);
+        let mut seen: HashSet<[u32; 3]> = HashSet::new();
         for t in indices.chunks_exact(3) {
             let [a, b, c] = [remap[t[0] as usize], remap[t[1] as usize], remap[t[2] as usize]];
             let normal = (unique[b as usize] - unique[a as usize]).cross(unique[c as usize] - unique[a as usize]);
@@ -97,40 +189,35 @@ impl EdgeMesh {
                 stats.degenerate_triangles += 1;
                 continue;
             }
+            let mut key = [a, b, c];
+            key.sort_unstable();
+            if !seen.insert(key) {
+                stats.duplicate_triangles += 1;
+                continue;
+            }
             triangles.push([a, b, c]);
-            normals.push(normal);
             objects.push(vertex_objects.get(t[0] as usize).copied().unwrap_or(0));
         }
         stats.triangles = triangles.len();
-        // Every directed use of an edge, sorted so that one edge's uses are adjacent.
-        let mut uses: Vec<(u32, u32, EdgeUse)> = triangles
-            .iter()
-            .enumerate()
-            .flat_map(|(t, tri)| {
-                (0..3).map(move |k| {
-                    let (from, to) = (tri[k], tri[(k + 1) % 3]);
-                    (from.min(to), from.max(to), EdgeUse { triangle: t as u32, forward: from < to })
-                })
-            })
-            .collect();
-        uses.sort_unstable_by_key(|&(a, b, u)| (a, b, u.triangle));
-        let mut edges = Vec::new();
-        let mut start = 0;
-        while start < uses.len() {
-            let (a, b) = (uses[start].0, uses[start].1);
-            let end = start + uses[start..].iter().take_while(|u| (u.0, u.1) == (a, b)).count();
-            let count = end - start;
-            match count {
+        let (edges, uses) = edges_of(&triangles);
+        for e in &edges {
+            let uses = &uses[e.first_use as usize..(e.first_use + e.use_count) as usize];
+            match uses.len() {
                 1 => stats.boundary_edges += 1,
-                2 if uses[start].2.forward == uses[start + 1].2.forward => stats.inconsistent_edges += 1,
+                2 if uses[0].forward == uses[1].forward => stats.inconsistent_edges += 1,
                 2 => {}
                 _ => stats.non_manifold_edges += 1,
             }
-            edges.push(Edge { a, b, first_use: start as u32, use_count: count as u32 });
-            start = end;
         }
+        let (surface, closed) = orient(&unique, &mut triangles, &edges, &uses, &mut stats);
+        // The winding changed: the uses follow it.
+        let (edges, uses) = edges_of(&triangles);
+        let normals = triangles
+            .iter()
+            .map(|t| (unique[t[1] as usize] - unique[t[0] as usize]).cross(unique[t[2] as usize] - unique[t[0] as usize]))
+            .collect();
         stats.edges = edges.len();
-        Self { positions: unique, triangles, objects, normals, edges, uses: uses.into_iter().map(|u| u.2).collect(), stats }
+        Self { positions: unique, triangles, objects, normals, surface, closed, edges, uses, stats }
     }
 
     /// Whether triangle `t` faces `point` (its winding is counter-clockwise seen from there).
@@ -138,16 +225,49 @@ impl EdgeMesh {
         self.normals[t].dot(point - self.positions[self.triangles[t][0] as usize]) > 0.0
     }
 
-    /// The silhouette seen from `point`: the oriented boundary of the triangles facing it.
-    pub fn silhouette(&self, point: Vec3) -> Vec<SilhouetteEdge> {
-        let facing: Vec<bool> = (0..self.triangles.len()).map(|t| self.faces(t, point)).collect();
+    /// Which triangles cast a shadow from `point`, and which way round (the module doc).
+    pub fn casting(&self, point: Vec3) -> Casting {
+        let side = |t: usize| self.normals[t].dot(point - self.positions[self.triangles[t][0] as usize]);
+        let mut by_triangle: Vec<Option<bool>> = (0..self.triangles.len())
+            .map(|t| match side(t) {
+                s if s > 0.0 => Some(true),
+                s if s < 0.0 && !self.closed[self.surface[t] as usize] => Some(false),
+                _ => None,
+            })
+            .collect();
+        let backs: Vec<usize> = (0..by_triangle.len()).filter(|&t| by_triangle[t] == Some(false)).collect();
+        if !backs.is_empty() {
+            let fronts = FrontFaces::new(self, point, |t| by_triangle[t] == Some(true) && !self.closed[self.surface[t] as usize]);
+            for t in backs {
+                let [a, b, c] = self.triangles[t].map(|i| self.positions[i as usize]);
+                if fronts.hides(self, (a + b + c) / 3.0, self.surface[t]) {
+                    by_triangle[t] = None;
+                }
+            }
+        }
+        Casting { by_triangle }
+    }
+
+    /// The casting triangles, each turned towards the point: the caps of its volume.
+    pub fn casting_triangles<'a>(&'a self, casting: &'a Casting) -> impl Iterator<Item = (usize, [Vec3; 3])> + 'a {
+        casting.by_triangle.iter().enumerate().filter_map(move |(t, how)| {
+            let [a, b, c] = self.triangles[t].map(|i| self.positions[i as usize]);
+            how.map(|front| (t, if front { [a, b, c] } else { [a, c, b] }))
+        })
+    }
+
+    /// The silhouette seen from the point `casting` was made for: the oriented boundary of the
+    /// casting triangles.
+    pub fn silhouette(&self, casting: &Casting) -> Vec<SilhouetteEdge> {
+        let casting = &casting.by_triangle;
         self.edges
             .iter()
             .filter_map(|e| {
                 let uses = &self.uses[e.first_use as usize..(e.first_use + e.use_count) as usize];
-                let m: i32 = uses.iter().filter(|u| facing[u.triangle as usize]).map(|u| if u.forward { 1 } else { -1 }).sum();
+                let m: i32 =
+                    uses.iter().filter_map(|u| casting[u.triangle as usize].map(|front| if u.forward == front { 1 } else { -1 })).sum();
                 let (a, b) = (self.positions[e.a as usize], self.positions[e.b as usize]);
-                let object = uses.iter().find(|u| facing[u.triangle as usize]).map_or(0, |u| self.objects[u.triangle as usize]);
+                let object = uses.iter().find(|u| casting[u.triangle as usize].is_some()).map_or(0, |u| self.objects[u.triangle as usize]);
                 match m {
                     0 => None,
                     m if m > 0 => Some(SilhouetteEdge { a, b, multiplicity: m as u32, object }),
@@ -156,6 +276,234 @@ impl EdgeMesh {
             })
             .collect()
     }
+}
+
+/// How each triangle casts from one point: `Some(true)` in its own winding, `Some(false)`
+/// turned over (an open surface's back face that nothing of it closes off), `None` not at all.
+pub struct Casting {
+    by_triangle: Vec<Option<bool>>,
+}
+
+/// Front faces of open surfaces as seen from a point, in a grid over their projection, for
+/// asking whether a segment from a surface's back face to the point crosses the same surface
+/// first. The projection is the gnomonic one about the mean direction of the triangles'
+/// corners, so a segment to the point is a point in it; triangles with a corner near or
+/// behind the projection's plane are left out (they answer "not hidden": cast).
+struct FrontFaces {
+    point: Vec3,
+    axes: [Vec3; 3],
+    lo: glam::Vec2,
+    scale: glam::Vec2,
+    side: usize,
+    cells: Vec<Vec<u32>>,
+}
+
+impl FrontFaces {
+    fn new(mesh: &EdgeMesh, point: Vec3, chosen: impl Fn(usize) -> bool) -> Self {
+        let chosen: Vec<usize> = (0..mesh.triangles.len()).filter(|&t| chosen(t)).collect();
+        let mean = chosen
+            .iter()
+            .flat_map(|&t| mesh.triangles[t].map(|i| (mesh.positions[i as usize] - point).normalize_or_zero()))
+            .fold(Vec3::ZERO, |a, d| a + d);
+        let forward = mean.try_normalize().unwrap_or(Vec3::NEG_Y);
+        let right = forward.any_orthonormal_vector();
+        let axes = [right, forward.cross(right), forward];
+        let mut fronts = FrontFaces { point, axes, lo: glam::Vec2::ZERO, scale: glam::Vec2::ONE, side: 1, cells: vec![Vec::new()] };
+        let projected: Vec<(usize, [glam::Vec2; 3])> = chosen
+            .iter()
+            .filter_map(|&t| {
+                Some((
+                    t,
+                    mesh.triangles[t]
+                        .map(|i| fronts.project(mesh.positions[i as usize]))
+                        .into_iter()
+                        .collect::<Option<Vec<_>>>()?
+                        .try_into()
+                        .ok()?,
+                ))
+            })
+            .collect();
+        if projected.is_empty() {
+            return fronts;
+        }
+        let (lo, hi) =
+            projected.iter().flat_map(|(_, p)| *p).fold((glam::Vec2::MAX, glam::Vec2::MIN), |(lo, hi), p| (lo.min(p), hi.max(p)));
+        fronts.side = ((projected.len() as f32).sqrt() as usize).clamp(1, 512);
+        fronts.lo = lo;
+        fronts.scale = fronts.side as f32 / (hi - lo).max(glam::Vec2::splat(1e-12));
+        fronts.cells = vec![Vec::new(); fronts.side * fronts.side];
+        for (t, p) in projected {
+            let (a, b) = (fronts.cell(p[0].min(p[1]).min(p[2])), fronts.cell(p[0].max(p[1]).max(p[2])));
+            for y in a.1..=b.1 {
+                for x in a.0..=b.0 {
+                    fronts.cells[y * fronts.side + x].push(t as u32);
+                }
+            }
+        }
+        fronts
+    }
+
+    /// `p` in the projection, if it lies well in front of the projection's plane.
+    fn project(&self, p: Vec3) -> Option<glam::Vec2> {
+        let d = p - self.point;
+        let z = d.dot(self.axes[2]);
+        (z > 1e-3 * d.length()).then(|| glam::Vec2::new(d.dot(self.axes[0]), d.dot(self.axes[1])) / z)
+    }
+
+    fn cell(&self, p: glam::Vec2) -> (usize, usize) {
+        let c = ((p - self.lo) * self.scale).as_ivec2().clamp(glam::IVec2::ZERO, glam::IVec2::splat(self.side as i32 - 1));
+        (c.x as usize, c.y as usize)
+    }
+
+    /// Whether the open segment from `from` to the point crosses a front face of `surface`.
+    fn hides(&self, mesh: &EdgeMesh, from: Vec3, surface: u32) -> bool {
+        let Some(p) = self.project(from) else { return false };
+        let (x, y) = self.cell(p);
+        let dir = from - self.point;
+        self.cells[y * self.side + x].iter().any(|&t| {
+            mesh.surface[t as usize] == surface && {
+                let [a, b, c] = mesh.triangles[t as usize].map(|i| mesh.positions[i as usize]);
+                crosses(self.point, dir, [a, b, c])
+            }
+        })
+    }
+}
+
+/// Whether the open segment `origin + s·dir`, 0 < s < 1, crosses triangle `tri` (Möller–Trumbore).
+pub fn crosses(origin: Vec3, dir: Vec3, [a, b, c]: [Vec3; 3]) -> bool {
+    let (e1, e2) = (b - a, c - a);
+    let h = dir.cross(e2);
+    let det = e1.dot(h);
+    if det.abs() < 1e-12 {
+        return false;
+    }
+    let s = origin - a;
+    let u = s.dot(h) / det;
+    let q = s.cross(e1);
+    let v = dir.dot(q) / det;
+    let t = e2.dot(q) / det;
+    u >= 0.0 && v >= 0.0 && u + v <= 1.0 && t > 1e-6 && t < 1.0 - 1e-6
+}
+
+/// Makes each surface's winding consistent and each closed surface face outward, and says by
+/// triangle whether its surface is closed.
+///
+/// Winding spreads from triangle to triangle across edges of exactly two uses (where a third
+/// face joins, which side is which is not defined); a patch that meets itself the wrong way
+/// (a Möbius strip) cannot be oriented and stays open. Each patch keeps the winding most of
+/// its triangles had (what the author meant), then a closed one is turned outward by the sign
+/// of the volume it encloses. A surface — triangles connected through any edge — is closed when
+/// every one of its edges is run as often one way as the other.
+fn orient(
+    positions: &[Vec3],
+    triangles: &mut [[u32; 3]],
+    edges: &[Edge],
+    uses: &[EdgeUse],
+    stats: &mut AdjacencyStats,
+) -> (Vec<u32>, Vec<bool>) {
+    let n = triangles.len();
+    let mut surfaces = Sets::new(n);
+    // Per triangle, its neighbours across two-use edges and whether the pair runs the edge the
+    // same way (then one of them must turn over).
+    let mut across: Vec<Vec<(u32, bool)>> = vec![Vec::new(); n];
+    for e in edges {
+        let uses = &uses[e.first_use as usize..(e.first_use + e.use_count) as usize];
+        for u in &uses[1..] {
+            surfaces.union(uses[0].triangle, u.triangle);
+        }
+        if let [p, q] = uses {
+            let same = p.forward == q.forward;
+            across[p.triangle as usize].push((q.triangle, same));
+            across[q.triangle as usize].push((p.triangle, same));
+        }
+    }
+    let mut flip = vec![false; n];
+    let mut patch = vec![u32::MAX; n];
+    let mut unorientable = vec![false; n];
+    let mut patches: Vec<Vec<u32>> = Vec::new();
+    for seed in 0..n {
+        if patch[seed] != u32::MAX {
+            continue;
+        }
+        let id = patches.len() as u32;
+        let (mut members, mut stack, mut twisted) = (vec![seed as u32], vec![seed as u32], false);
+        patch[seed] = id;
+        while let Some(t) = stack.pop() {
+            for &(other, same) in &across[t as usize] {
+                let wanted = flip[t as usize] ^ same;
+                if patch[other as usize] == u32::MAX {
+                    patch[other as usize] = id;
+                    flip[other as usize] = wanted;
+                    members.push(other);
+                    stack.push(other);
+                } else if flip[other as usize] != wanted {
+                    twisted = true;
+                }
+            }
+        }
+        if 2 * members.iter().filter(|&&t| flip[t as usize]).count() > members.len() {
+            for &t in &members {
+                flip[t as usize] = !flip[t as usize];
+            }
+        }
+        if twisted {
+            for &t in &members {
+                unorientable[t as usize] = true;
+            }
+        }
+        patches.push(members);
+    }
+    let turn = |t: &mut [u32; 3]| t.swap(1, 2);
+    for (t, tri) in triangles.iter_mut().enumerate() {
+        if flip[t] {
+            turn(tri);
+        }
+    }
+    // Closed surfaces: every edge balanced in the winding now held.
+    let mut root_open: HashMap<u32, bool> = HashMap::new();
+    for e in edges {
+        let uses = &uses[e.first_use as usize..(e.first_use + e.use_count) as usize];
+        let balance: i32 = uses.iter().map(|u| if u.forward != flip[u.triangle as usize] { 1 } else { -1 }).sum();
+        let open = balance != 0 || uses.iter().any(|u| unorientable[u.triangle as usize]);
+        *root_open.entry(surfaces.find(uses[0].triangle)).or_default() |= open;
+    }
+    let closed: Vec<bool> = (0..n as u32).map(|t| !root_open.get(&surfaces.find(t)).copied().unwrap_or(true)).collect();
+    // Outward: a closed patch enclosing negative volume (about its own first vertex, which
+    // changes nothing for a closed surface) is inside out.
+    for members in &patches {
+        if !closed[members[0] as usize] {
+            continue;
+        }
+        let origin = positions[triangles[members[0] as usize][0] as usize];
+        let volume: f32 = members
+            .iter()
+            .map(|&t| {
+                let [a, b, c] = triangles[t as usize].map(|i| positions[i as usize] - origin);
+                a.dot(b.cross(c))
+            })
+            .sum();
+        if volume < 0.0 {
+            for &t in members {
+                turn(&mut triangles[t as usize]);
+                flip[t as usize] = !flip[t as usize];
+            }
+        }
+    }
+    stats.reoriented_triangles = flip.iter().filter(|&&f| f).count();
+    // Surfaces numbered from 0 in the order of their first triangle.
+    let mut ids: HashMap<u32, u32> = HashMap::new();
+    let mut closed_by_surface = Vec::new();
+    let surface: Vec<u32> = (0..n)
+        .map(|t| {
+            *ids.entry(surfaces.find(t as u32)).or_insert_with(|| {
+                closed_by_surface.push(closed[t]);
+                closed_by_surface.len() as u32 - 1
+            })
+        })
+        .collect();
+    stats.surfaces = closed_by_surface.len();
+    stats.open_surfaces = closed_by_surface.iter().filter(|closed| !**closed).count();
+    (surface, closed_by_surface)
 }
 
 #[cfg(test)]
@@ -193,6 +541,19 @@ mod tests {
         (positions, indices)
     }
 
+    /// The silhouette from `point`.
+    fn silhouette(mesh: &EdgeMesh, point: Vec3) -> Vec<SilhouetteEdge> {
+        mesh.silhouette(&mesh.casting(point))
+    }
+
+    /// The silhouette's edges as sorted pairs of welded positions, with their multiplicity.
+    fn loop_of(edges: &[SilhouetteEdge]) -> Vec<([i32; 3], [i32; 3], u32)> {
+        let key = |p: Vec3| (p * 100.0).round().as_ivec3().to_array();
+        let mut out: Vec<_> = edges.iter().map(|e| (key(e.a), key(e.b), e.multiplicity)).collect();
+        out.sort();
+        out
+    }
+
     #[test]
     fn a_closed_cube_welds_and_shows_a_hexagon_from_a_corner() {
         let (positions, indices) = cube();
@@ -202,25 +563,74 @@ mod tests {
             (mesh.stats.edges, mesh.stats.boundary_edges, mesh.stats.non_manifold_edges, mesh.stats.inconsistent_edges),
             (18, 0, 0, 0)
         );
-        let silhouette = mesh.silhouette(Vec3::new(5.0, 6.0, 7.0));
-        assert_eq!(silhouette.len(), 6, "{silhouette:?}");
-        assert!(silhouette.iter().all(|e| e.multiplicity == 1));
-        assert_closed(&silhouette);
+        assert_eq!((mesh.stats.surfaces, mesh.stats.open_surfaces, mesh.stats.reoriented_triangles), (1, 0, 0));
+        let corner = silhouette(&mesh, Vec3::new(5.0, 6.0, 7.0));
+        assert_eq!(corner.len(), 6, "{corner:?}");
+        assert!(corner.iter().all(|e| e.multiplicity == 1));
+        assert_closed(&corner);
         // From straight above one face only that face is seen: its 4 edges.
-        let above = mesh.silhouette(Vec3::new(0.2, 0.1, 9.0));
+        let above = silhouette(&mesh, Vec3::new(0.2, 0.1, 9.0));
         assert_eq!(above.len(), 4);
         assert_closed(&above);
     }
 
+    /// A flipped face is turned back, and a cube wound inside out is turned outward: both cast
+    /// as the cube does, from their front only.
     #[test]
-    fn an_open_quad_casts_from_its_front_only() {
+    fn flipped_faces_and_inside_out_surfaces_are_oriented_and_stay_closed() {
+        let (positions, indices) = cube();
+        let expected = loop_of(&silhouette(&EdgeMesh::build(&positions, &indices, &[]), Vec3::new(5.0, 6.0, 7.0)));
+        let mut one_flipped = indices.clone();
+        one_flipped.swap(7, 8);
+        let inside_out: Vec<u32> = indices.chunks_exact(3).flat_map(|t| [t[0], t[2], t[1]]).collect();
+        for (indices, reoriented) in [(one_flipped, 1), (inside_out, 12)] {
+            let mesh = EdgeMesh::build(&positions, &indices, &[]);
+            assert_eq!((mesh.stats.open_surfaces, mesh.stats.reoriented_triangles), (0, reoriented), "{:?}", mesh.stats);
+            assert_eq!(loop_of(&silhouette(&mesh, Vec3::new(5.0, 6.0, 7.0))), expected);
+        }
+    }
+
+    /// An open sheet is the only layer there is: it casts from either side, its border the
+    /// silhouette. A duplicate of it, even wound the other way (a sheet modelled as two faces
+    /// back to back), is the same sheet.
+    #[test]
+    fn an_open_sheet_casts_from_both_sides_and_its_duplicate_is_one_sheet() {
         let positions = [Vec3::ZERO, Vec3::X, Vec3::new(1.0, 1.0, 0.0), Vec3::Y];
-        let mesh = EdgeMesh::build(&positions, &[0, 1, 2, 0, 2, 3], &[]);
-        assert_eq!((mesh.stats.edges, mesh.stats.boundary_edges), (5, 4));
-        let front = mesh.silhouette(Vec3::new(0.3, 0.4, 2.0));
-        assert_eq!(front.len(), 4, "the border, not the diagonal");
-        assert_closed(&front);
-        assert!(mesh.silhouette(Vec3::new(0.3, 0.4, -2.0)).is_empty(), "facing away, it casts nothing");
+        for indices in [vec![0, 1, 2, 0, 2, 3], vec![0, 1, 2, 0, 2, 3, 0, 2, 1, 0, 3, 2, 0, 1, 2]] {
+            let mesh = EdgeMesh::build(&positions, &indices, &[]);
+            assert_eq!((mesh.stats.edges, mesh.stats.boundary_edges, mesh.stats.open_surfaces), (5, 4, 1));
+            assert_eq!(mesh.stats.duplicate_triangles, indices.len() / 3 - 2);
+            let front = silhouette(&mesh, Vec3::new(0.3, 0.4, 2.0));
+            let back = silhouette(&mesh, Vec3::new(0.3, 0.4, -2.0));
+            for edges in [&front, &back] {
+                assert_eq!(edges.len(), 4, "the border, not the diagonal: {edges:?}");
+                assert!(edges.iter().all(|e| e.multiplicity == 1));
+                assert_closed(edges);
+            }
+            // Seen from the other side, the same loop runs the other way.
+            let reversed: Vec<SilhouetteEdge> = back.iter().map(|e| SilhouetteEdge { a: e.b, b: e.a, ..*e }).collect();
+            assert_eq!(loop_of(&front), loop_of(&reversed));
+        }
+    }
+
+    /// A box without its lid: from above, its floor (a back face nothing closes off) casts, and
+    /// the rim is the silhouette; from the side, the far wall and the floor lie behind the near
+    /// wall, the same layer, and only the near wall casts.
+    #[test]
+    fn an_open_box_casts_its_back_faces_only_where_nothing_of_it_closes_them_off() {
+        let (positions, indices) = cube();
+        // The cube's faces are in the order −x, +x, −y, +y, −z, +z: leave out +z, the lid.
+        let open = &indices[..30];
+        let mesh = EdgeMesh::build(&positions, open, &[]);
+        assert_eq!((mesh.stats.boundary_edges, mesh.stats.open_surfaces), (4, 1));
+        let above = silhouette(&mesh, Vec3::new(0.2, 0.1, 9.0));
+        assert_eq!(above.len(), 4, "the rim: {above:?}");
+        assert!(above.iter().all(|e| e.multiplicity == 1 && e.a.z == 1.0 && e.b.z == 1.0), "{above:?}");
+        let casting = mesh.casting(Vec3::new(9.0, 0.1, 0.2));
+        assert_eq!(mesh.casting_triangles(&casting).count(), 2, "the near wall alone");
+        let side = mesh.silhouette(&casting);
+        assert_eq!(side.len(), 4, "{side:?}");
+        assert!(side.iter().all(|e| e.multiplicity == 1 && e.a.x == 1.0 && e.b.x == 1.0), "{side:?}");
     }
 
     #[test]
@@ -232,10 +642,10 @@ mod tests {
         assert_eq!(mesh.stats.degenerate_triangles, 2);
         assert_eq!(mesh.stats.non_manifold_edges, 1);
         for point in [Vec3::new(0.3, 0.3, 3.0), Vec3::new(-1.0, 2.0, -3.0), Vec3::new(0.5, -4.0, 0.5)] {
-            assert_closed(&mesh.silhouette(point));
+            assert_closed(&silhouette(&mesh, point));
         }
         let empty = EdgeMesh::build(&[], &[], &[]);
-        assert!(empty.silhouette(Vec3::ONE).is_empty());
+        assert!(silhouette(&empty, Vec3::ONE).is_empty());
     }
 }
 

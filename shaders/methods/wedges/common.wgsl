@@ -99,8 +99,9 @@ struct PairList {
 
 const NO_OBJECT: f32 = -1.0;
 const NOT_COVERED: f32 = -2.0;
-// cos of the angle to the light centre below which a receiver ignores its own object.
-const SELF_SHADOW_COS: f32 = 0.25;
+// cos of the angle to the light centre below which a receiver ignores its own object: a
+// receiver whose surface (the G-buffer's geometric normal) faces away from the centre.
+const SELF_SHADOW_COS: f32 = 0.0;
 
 fn tile_grid() -> vec2<u32> {
     return (frame.sizes.xy + params.tile - 1u) / params.tile;

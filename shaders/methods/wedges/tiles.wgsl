@@ -46,9 +46,9 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
             // segment to the centre runs through the object — yet the part of the light above
             // its horizon may well reach it, and E0 already leaves out the part below. So its
             // own object's volume and wedges do not count for it (as with Brabec & Seidel's
-            // ids); other objects' still do. "Away" has a margin: the G-buffer's smooth normal
-            // can face the light on a facet that does not, within about a facet's angle of the
-            // terminator.
+            // ids); other objects' still do. "Away" is judged by the plane of the triangle seen
+            // (the G-buffer's geometric normal), not its smoothed normal, which can face the
+            // light on a facet that does not.
             let grazing = dot(normal, normalize(frame.light_center.xyz - position.xyz)) < SELF_SHADOW_COS;
             let own_object = select(NO_OBJECT, f32(textureLoad(gbuf_id, pixel, 0).r), params.object_ids == 1u && grazing);
             receivers[at] = vec4<f32>(position.xyz, own_object);

@@ -6,7 +6,7 @@ use glam::{Vec3, Vec4};
 
 use super::{PolygonGpu, WedgeGpu};
 use crate::light::AreaLight;
-use crate::scene::adjacency::{EdgeMesh, SilhouetteEdge};
+use crate::scene::adjacency::{crosses, Casting, EdgeMesh, SilhouetteEdge};
 
 /// The primitives the rasteriser runs over: volume polygons (side quads, then caps) with
 /// their multiplicity and object, and one wedge per silhouette edge.
@@ -21,7 +21,7 @@ pub(super) struct Volume {
 
 impl Volume {
     /// The volume of the silhouette seen from the light centre, extruded to `reach`.
-    pub fn build(mesh: &EdgeMesh, silhouette: &[SilhouetteEdge], light: &AreaLight, reach: f32, zfail: bool) -> Self {
+    pub fn build(mesh: &EdgeMesh, casting: &Casting, silhouette: &[SilhouetteEdge], light: &AreaLight, reach: f32, zfail: bool) -> Self {
         let c = light.center;
         // The light centre's shadow volume: a side quad per silhouette edge, and for z-fail its
         // caps — the triangles facing the light (top) and the same pushed out to `reach` (bottom).
@@ -40,15 +40,14 @@ impl Volume {
         }
         let mut caps = 0usize;
         if zfail {
-            for (t, tri) in mesh.triangles.iter().enumerate() {
-                if mesh.faces(t, c) {
-                    let [a, b, d] = tri.map(|i| mesh.positions[i as usize]);
-                    polygons.push([a, b, d, d]);
-                    polygons.push([extrude(d), extrude(b), extrude(a), extrude(a)]);
-                    multiplicity.extend([1, 1]);
-                    object.extend([mesh.objects[t]; 2]);
-                    caps += 2;
-                }
+            // Each casting triangle turned towards the centre (an open surface's back face
+            // turned over), so that caps and side quads bound the same layers.
+            for (t, [a, b, d]) in mesh.casting_triangles(casting) {
+                polygons.push([a, b, d, d]);
+                polygons.push([extrude(d), extrude(b), extrude(a), extrude(a)]);
+                multiplicity.extend([1, 1]);
+                object.extend([mesh.objects[t]; 2]);
+                caps += 2;
             }
         }
         let wedges: Vec<WedgeGpu> = silhouette
@@ -82,28 +81,9 @@ impl Volume {
 }
 
 /// Whether the eye lies in the light centre's hard shadow: the segment from the eye to the
-/// centre passes through a light-facing triangle (then z-pass would count wrongly, §5).
-pub(super) fn eye_in_shadow(mesh: &EdgeMesh, c: Vec3, eye: Vec3) -> bool {
-    let dir = c - eye;
-    mesh.triangles.iter().enumerate().any(|(t, tri)| {
-        if !mesh.faces(t, c) {
-            return false;
-        }
-        // Möller–Trumbore, restricted to the open segment.
-        let [a, b, d] = tri.map(|i| mesh.positions[i as usize]);
-        let (e1, e2) = (b - a, d - a);
-        let h = dir.cross(e2);
-        let det = e1.dot(h);
-        if det.abs() < 1e-12 {
-            return false;
-        }
-        let s = eye - a;
-        let u = s.dot(h) / det;
-        let q = s.cross(e1);
-        let v = dir.dot(q) / det;
-        let t = e2.dot(q) / det;
-        u >= 0.0 && v >= 0.0 && u + v <= 1.0 && t > 1e-6 && t < 1.0 - 1e-6
-    })
+/// centre passes through a casting triangle (then z-pass would count wrongly, §5).
+pub(super) fn eye_in_shadow(mesh: &EdgeMesh, casting: &Casting, c: Vec3, eye: Vec3) -> bool {
+    mesh.casting_triangles(casting).any(|(_, triangle)| crosses(eye, c - eye, triangle))
 }
 
 /// The light rectangle's corners.

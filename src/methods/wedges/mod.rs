@@ -178,16 +178,17 @@ impl ShadowMethod for Wedges {
         let light = &spec.light;
         let c = light.center;
         let mesh = ctx.scene.edge_mesh();
-        let silhouette = mesh.silhouette(c);
+        let casting = mesh.casting(c);
+        let silhouette = mesh.silhouette(&casting);
         let camera = &spec.camera;
         let view_proj = camera.view_proj(spec.width as f32 / spec.height as f32);
         let reach = 2.0 * ctx.scene.corners().iter().map(|p| p.distance(c)).fold(0.0f32, f32::max).max(1e-3);
         let zfail = match params.get(&VOLUME) {
             "zfail" => true,
             "zpass" => false,
-            _ => eye_in_shadow(&mesh, c, camera.eye),
+            _ => eye_in_shadow(&mesh, &casting, c, camera.eye),
         };
-        let volume = Volume::build(&mesh, &silhouette, light, reach, zfail);
+        let volume = Volume::build(&mesh, &casting, &silhouette, light, reach, zfail);
         let uniforms = Uniforms::new(ctx, params, zfail, volume.polygons.len());
         let pipelines = Pipelines::new(ctx, &uniforms);
         let buffers = Buffers::new(ctx, &volume, &uniforms);
