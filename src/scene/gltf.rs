@@ -79,7 +79,7 @@ fn check_glb_container(bytes: &[u8], field: &str) -> JobResult<()> {
 }
 
 fn load_unchecked(bytes: &[u8], limits: &Limits, field: &str, uris: &UriReader<'_>) -> JobResult<Scene> {
-    let gltf = parse_document(bytes, field)?;
+    let (gltf, repaired) = parse_document(bytes, field)?;
     let buffers = read_buffers(&gltf, limits, field, uris)?;
     let instances = mesh_instances(&gltf.document, field)?;
     // Object ids: each mesh node's rank among the scene's mesh nodes (by index).
@@ -101,6 +101,9 @@ fn load_unchecked(bytes: &[u8], limits: &Limits, field: &str, uris: &UriReader<'
         vertices: 0,
         declared_triangles: 0,
     };
+    if let Some(repair) = repaired {
+        loader.builder.warn(repair);
+    }
     warn_of_what_is_ignored(&gltf.document, &mut loader.builder);
     for &node_index in &mesh_nodes {
         let node = gltf.document.nodes().nth(node_index).expect("index from this document");
@@ -116,11 +119,23 @@ fn load_unchecked(bytes: &[u8], limits: &Limits, field: &str, uris: &UriReader<'
 }
 
 /// Parses the document, refusing one that requires an extension, then validates its indices.
-fn parse_document(bytes: &[u8], field: &str) -> JobResult<gltf::Gltf> {
+/// Answers with it what was repaired to read it (for the scene's warnings).
+fn parse_document(bytes: &[u8], field: &str) -> JobResult<(gltf::Gltf, Option<&'static str>)> {
     check_glb_container(bytes, field)?;
     let not_valid = |e: gltf::Error| invalid(field, format!("not a valid glTF 2.0 document: {e}"));
-    let parsed = gltf::Gltf::from_slice_without_validation(bytes)
-        .or_else(|error| with_scene_nodes(bytes).map_or(Err(error), |patched| gltf::Gltf::from_slice_without_validation(&patched)));
+    let parse = |bytes: &[u8]| {
+        gltf::Gltf::from_slice_without_validation(bytes)
+            .or_else(|error| with_scene_nodes(bytes).map_or(Err(error), |patched| gltf::Gltf::from_slice_without_validation(&patched)))
+    };
+    let (parsed, repaired) = match parse(bytes) {
+        Err(error) => match with_utf8_json(bytes) {
+            Some(patched) => {
+                (parse(&patched), Some("its JSON was not UTF-8 (glTF 2.0 §3.1): the bytes that were not were read as U+FFFD in its names"))
+            }
+            None => (Err(error), None),
+        },
+        parsed => (parsed, None),
+    };
     let gltf::Gltf { document, blob } = parsed.map_err(not_valid)?;
     // Checked before the document's indices: a required extension such as Draco changes
     // what they mean, and the gltf crate's validation would report its symptoms instead.
@@ -130,7 +145,33 @@ fn parse_document(bytes: &[u8], field: &str) -> JobResult<gltf::Gltf> {
             format!("the document requires extension `{name}`, which penumbra does not support (it reads plain glTF 2.0 meshes)"),
         ));
     }
-    Ok(gltf::Gltf { document: gltf::Document::from_json(document.into_json()).map_err(not_valid)?, blob })
+    Ok((gltf::Gltf { document: gltf::Document::from_json(document.into_json()).map_err(not_valid)?, blob }, repaired))
+}
+
+/// Some exporters write names in an 8-bit code page where glTF's JSON must be UTF-8: the
+/// document (JSON, or GLB with its JSON chunk) with every byte that is not UTF-8 read as
+/// U+FFFD, or `None` if it is UTF-8 already. Only strings change: JSON's syntax is ASCII.
+fn with_utf8_json(bytes: &[u8]) -> Option<Vec<u8>> {
+    if !bytes.starts_with(b"glTF") {
+        return std::str::from_utf8(bytes).is_err().then(|| String::from_utf8_lossy(bytes).into_owned().into_bytes());
+    }
+    // The container was checked (`check_glb_container`): its first chunk is the JSON.
+    let length = u32::from_le_bytes(bytes.get(12..16)?.try_into().ok()?) as usize;
+    let json = bytes.get(20..20 + length)?;
+    if std::str::from_utf8(json).is_ok() {
+        return None;
+    }
+    let mut fixed = String::from_utf8_lossy(json).into_owned().into_bytes();
+    fixed.resize(fixed.len().next_multiple_of(4), b' ');
+    let rest = &bytes[20 + length..];
+    let mut out = Vec::with_capacity(20 + fixed.len() + rest.len());
+    out.extend_from_slice(&bytes[..8]);
+    out.extend_from_slice(&((20 + fixed.len() + rest.len()) as u32).to_le_bytes());
+    out.extend_from_slice(&(fixed.len() as u32).to_le_bytes());
+    out.extend_from_slice(b"JSON");
+    out.extend_from_slice(&fixed);
+    out.extend_from_slice(rest);
+    Some(out)
 }
 
 /// Every buffer's bytes: the GLB binary chunk or what its URI names, each within
@@ -1104,6 +1145,45 @@ mod tests {
         // Geometry is another matter: a missing buffer is refused, naming it.
         let error = files.load("gone.bin", true, &Limits::default()).unwrap_err();
         assert!(error.message.contains("`gone.bin`"), "{}", error.message);
+    }
+
+    /// An exporter that writes a Latin-1 name into the JSON (assimp's OBJ `regr01`): read,
+    /// the name's byte replaced, and said; in a GLB and in a `.gltf`.
+    #[test]
+    fn json_that_is_not_utf8_is_read_with_its_bad_bytes_replaced_and_said() {
+        let (mut document, bin) = height_field(3, 1);
+        document["nodes"][0]["name"] = "caf\u{e9}".into();
+        let latin1 = |json: Vec<u8>| -> Vec<u8> {
+            let at = json.windows(2).position(|w| w == "é".as_bytes()).expect("the name");
+            [&json[..at], &[0xE9u8][..], &json[at + 2..]].concat()
+        };
+        let glb_json = latin1(serde_json::to_vec(&document).unwrap());
+        let mut padded = glb_json.clone();
+        padded.resize(padded.len().next_multiple_of(4), b' ');
+        let glb_bytes = [
+            &b"glTF"[..],
+            &2u32.to_le_bytes(),
+            &((20 + padded.len() + 8 + bin.len()) as u32).to_le_bytes(),
+            &(padded.len() as u32).to_le_bytes(),
+            b"JSON",
+            &padded,
+            &(bin.len() as u32).to_le_bytes(),
+            b"BIN\0",
+            &bin,
+        ]
+        .concat();
+        let scene = load(&glb_bytes, &Limits::default(), "scene").expect("repaired");
+        assert!(scene.warnings.iter().any(|w| w.contains("UTF-8")), "{:?}", scene.warnings);
+        assert_eq!(scene.objects[0], "caf\u{fffd}");
+        assert_eq!(scene.triangle_count(), 8);
+        let mut embedded = document.clone();
+        embedded["buffers"][0]["uri"] =
+            format!("data:application/octet-stream;base64,{}", base64::engine::general_purpose::STANDARD.encode(&bin)).into();
+        let scene = load(&latin1(serde_json::to_vec(&embedded).unwrap()), &Limits::default(), "scene").expect("repaired");
+        assert!(scene.warnings.iter().any(|w| w.contains("UTF-8")), "{:?}", scene.warnings);
+        // Valid UTF-8 needs no repair, and garbage is still refused.
+        assert!(load(&height_field_glb(3, 1), &Limits::default(), "scene").unwrap().warnings.is_empty());
+        assert_eq!(load(b"{\"asset\": \xff}", &Limits::default(), "scene").unwrap_err().code, ErrorCode::InvalidAsset);
     }
 
     #[test]
