@@ -150,6 +150,7 @@ impl ShadowMethod for Brabec {
             ("searched_fraction".to_owned(), if shaded > 0 { f64::from(searches) / f64::from(shaded) } else { 0.0 }),
             ("avg_search_radius_texels".to_owned(), if searches > 0 { f64::from(radius_16) / 16.0 / f64::from(searches) } else { 0.0 }),
             ("k_texels".to_owned(), f64::from(uniforms.k)),
+            ("occluders_thin".to_owned(), super::light_view::thin_occluders(ctx, "brabec", "Brabec & Seidel 2002 §3.2–3.3")),
         ]);
         if unresolved > 0 {
             // Every pixel is on the lattice, searched or interpolated; one that is not is a bug

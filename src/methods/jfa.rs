@@ -186,6 +186,7 @@ impl ShadowMethod for JfaL {
         let uniforms = Uniforms { inner: u32::from(params.get(&INNER)), ..common_uniforms(params) };
         let (seeds, penumbra, steps, flooded) = flood(ctx, &LIGHT_SPACE, params, uniforms)?;
         Ok(Counters::from([
+            ("occluders_thin".to_owned(), super::light_view::thin_occluders(ctx, "jfa-l", "Rong & Tan 2006 §3, §4.1")),
             ("rounds".to_owned(), steps.len() as f64),
             ("max_reach_texels".to_owned(), f64::from(steps.iter().sum::<i32>())),
             ("silhouette_texels".to_owned(), f64::from(seeds)),
@@ -222,6 +223,7 @@ impl ShadowMethod for JfaE {
         };
         let (seeds, penumbra, steps, flooded) = flood(ctx, &EYE_SPACE, params, uniforms)?;
         Ok(Counters::from([
+            ("occluders_thin".to_owned(), super::light_view::thin_occluders(ctx, "jfa-e", "Rong & Tan 2006 §3, §5.1")),
             ("rounds".to_owned(), steps.len() as f64),
             ("max_reach_pixels".to_owned(), f64::from(steps.iter().sum::<i32>())),
             ("boundary_pixels".to_owned(), f64::from(seeds)),

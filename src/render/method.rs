@@ -121,6 +121,9 @@ pub struct MethodContext<'a> {
     /// Hears the progress of long methods (steps done, steps in all); a long method asks it
     /// between batches whether to stop (`Supervisor::cancelled`).
     pub supervisor: &'a dyn Supervisor,
+    /// What the method found in this scene that it cannot render faithfully, for the job's
+    /// `warnings` (contract §2: detect it and say so, never fail silently).
+    pub warnings: Vec<String>,
 }
 
 impl MethodContext<'_> {

@@ -87,7 +87,7 @@ pub struct FrameOutput {
     pub e0: Option<Vec<[f32; 3]>>,
     /// The method's counters, and `E0_SUMMED_EXACTLY` where E0 was interpolated.
     pub counters: Counters,
-    /// The scene's warnings (`Scene::warnings`), for the job's answer.
+    /// The scene's warnings (`Scene::warnings`) and the method's, for the job's answer.
     pub warnings: Vec<String>,
     /// The camera, light and floor it was rendered with, for the job's answer.
     pub staging: Staging,
@@ -273,7 +273,7 @@ impl Renderer {
         go_on()?;
 
         // The method's visibility.
-        let counters = self.record_method(targets, scene, spec, &inputs, &projection, supervisor)?;
+        let (counters, method_warnings) = self.record_method(targets, scene, spec, &inputs, &projection, supervisor)?;
         let start = timings.phase("method", start);
         // A long method stops recording its batches once cancelled; what it left is discarded.
         go_on()?;
@@ -293,7 +293,8 @@ impl Renderer {
         let start = timings.phase("composite", start);
 
         // Readback of what the output format needs, and of the GPU timestamps.
-        let (frame, gpu_times) = self.read_back(targets, scene, spec, srgb8_buffer.as_ref(), e0_listed, counters)?;
+        let warnings = scene.warnings.iter().cloned().chain(method_warnings).collect();
+        let (frame, gpu_times) = self.read_back(targets, spec, srgb8_buffer.as_ref(), e0_listed, (counters, warnings))?;
         timings.phase("readback", start);
         for time in gpu_times {
             timings.add_gpu(time.phase, time.pass, time.ms);
@@ -302,7 +303,8 @@ impl Renderer {
     }
 
     /// Records the method's passes (`MethodContext`), runs them, and gives the pools back
-    /// the method's scratch buffers, which are free once its passes have run.
+    /// the method's scratch buffers, which are free once its passes have run. Answers the
+    /// method's counters and warnings.
     fn record_method(
         &mut self,
         targets: &FrameTargets,
@@ -311,7 +313,7 @@ impl Renderer {
         inputs: &FrameInputs,
         projection: &LightProjection,
         supervisor: &dyn Supervisor,
-    ) -> JobResult<Counters> {
+    ) -> JobResult<(Counters, Vec<String>)> {
         let gpu = self.gpu.clone();
         let mut enc = frame_encoder(&gpu.device);
         let (counters, scratch) = {
@@ -336,9 +338,10 @@ impl Renderer {
                 spec,
                 projection,
                 supervisor,
+                warnings: Vec::new(),
             };
             let counters = spec.method.record(&mut ctx, &spec.params);
-            (counters, std::mem::take(&mut ctx.scratch))
+            (counters.map(|counters| (counters, std::mem::take(&mut ctx.warnings))), std::mem::take(&mut ctx.scratch))
         };
         let counters = counters?;
         gpu.submit_and_wait(enc)?;
@@ -352,11 +355,10 @@ impl Renderer {
     fn read_back(
         &mut self,
         targets: &FrameTargets,
-        scene: &GpuScene,
         spec: &FrameSpec,
         srgb8_buffer: Option<&wgpu::Buffer>,
         e0_listed: Option<wgpu::Buffer>,
-        mut counters: Counters,
+        (mut counters, warnings): (Counters, Vec<String>),
     ) -> JobResult<(FrameOutput, Vec<PassTime>)> {
         let gpu = self.gpu.clone();
         let mut enc = frame_encoder(&gpu.device);
@@ -394,7 +396,6 @@ impl Renderer {
             let listed: u32 = bytemuck::cast_slice::<u8, u32>(&images[i][..8]).iter().sum();
             counters.insert(E0_SUMMED_EXACTLY.to_owned(), f64::from(listed));
         }
-        let warnings = scene.warnings.clone();
         let staging = spec.staging.clone();
         let frame =
             FrameOutput { width: spec.width, height: spec.height, color, srgb8, visibility, depth, e0, counters, warnings, staging };

@@ -53,6 +53,7 @@ use wgpu::util::DeviceExt;
 mod culling;
 mod geometry;
 
+use super::light_view::{self, LightView};
 use super::{Counters, MethodContext, Param, ParamSpec, Params, ShadowMethod};
 use crate::error::JobResult;
 use crate::gpu::layout;
@@ -180,6 +181,15 @@ impl ShadowMethod for Wedges {
         let mesh = ctx.scene.edge_mesh();
         let casting = mesh.casting(c);
         let silhouette = mesh.silhouette(&casting);
+        let overlap = LightView::measure(&mesh, &casting, light).overlap;
+        if overlap > light_view::OVERLAP_WARNING {
+            ctx.warnings.push(format!(
+                "wedges: {:.0} % of the shadows' outline lies behind two occluding layers or more, seen from the light; wedges adds \
+                 what each silhouette hides (Assarsson & Akenine-Möller 2003 §2–3) rather than uniting it, so there its penumbrae \
+                 come out darker and harder than the light that gets through (pcss and reference unite them)",
+                100.0 * overlap
+            ));
+        }
         let camera = &spec.camera;
         let view_proj = camera.view_proj(spec.width as f32 / spec.height as f32);
         let reach = 2.0 * ctx.scene.corners().iter().map(|p| p.distance(c)).fold(0.0f32, f32::max).max(1e-3);
@@ -213,6 +223,7 @@ impl ShadowMethod for Wedges {
         let stats = mesh.stats;
         Ok(Counters::from([
             ("silhouette_edges".to_owned(), silhouette.len() as f64),
+            ("occluders_overlapping".to_owned(), overlap),
             ("setup_cpu_ms".to_owned(), setup.as_secs_f64() * 1e3),
             ("volume_polygons".to_owned(), volume.polygons.len() as f64),
             ("cap_polygons".to_owned(), volume.caps as f64),
