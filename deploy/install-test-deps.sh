@@ -6,7 +6,9 @@
 # ~/.cache/penumbra-tools) `hadolint`, `kubernetes-validate` (manifest checks) and
 # `schemathesis` (API conformance) and matplotlib (the load report's plot), and
 # `cargo-fuzz` (fuzzing); for the glTF corpus test, Debian's `assimp-testmodels` (glTF 2.0
-# samples made by others) and, under $PENUMBRA_TOOLS/node, Khronos' `gltf-validator` (npm).
+# samples made by others) and, under $PENUMBRA_TOOLS/node, Khronos' `gltf-validator` (npm);
+# for the real-model suite, Debian's `assimp-utils`, which converts the other formats of
+# `assimp-testmodels` into GLB under $PENUMBRA_TOOLS/real-models (`real-models.sh`, cached).
 # Idempotent: installs only what is missing. Used by the README's test command and CI.
 set -eu
 cd "$(dirname "$0")"
@@ -20,6 +22,7 @@ command -v redis-server >/dev/null 2>&1 || need="$need redis-server"
 command -v nginx >/dev/null 2>&1 || [ -x /usr/sbin/nginx ] || need="$need nginx"
 python3 -c 'import ensurepip' >/dev/null 2>&1 || need="$need python3-venv"
 [ -d /usr/share/assimp/models/glTF2 ] || need="$need assimp-testmodels"
+command -v assimp >/dev/null 2>&1 || need="$need assimp-utils"
 command -v node >/dev/null 2>&1 || need="$need nodejs"
 command -v npm >/dev/null 2>&1 || need="$need npm"
 command -v curl >/dev/null 2>&1 || need="$need curl"
@@ -53,3 +56,5 @@ if ! cargo fuzz --version >/dev/null 2>&1; then
     echo "install-test-deps: installing cargo-fuzz" >&2
     cargo install --locked cargo-fuzz
 fi
+
+./real-models.sh >/dev/null

@@ -78,7 +78,8 @@ enum Command {
         /// Output file; the extension (.png or .exr) picks the format.
         #[arg(short, long)]
         output: PathBuf,
-        /// Also write the timing breakdown as JSON to this file.
+        /// Also write the timing breakdown, counters, warnings and staging (the camera, light
+        /// and floor used) as JSON to this file.
         #[arg(long)]
         timings_json: Option<PathBuf>,
         #[command(flatten)]
@@ -234,7 +235,13 @@ fn render(job: Option<&Path>, output: &Path, timings_json: Option<&Path>, option
     std::fs::write(output, &rendered.bytes)?;
     print_timings(&rendered.timings, cpu_ms);
     if let Some(path) = timings_json {
-        let report = serde_json::json!({"timings": rendered.timings, "counters": rendered.counters, "process_cpu_ms": cpu_ms});
+        let report = serde_json::json!({
+            "timings": rendered.timings,
+            "counters": rendered.counters,
+            "process_cpu_ms": cpu_ms,
+            "warnings": rendered.warnings,
+            "staging": rendered.staging,
+        });
         std::fs::write(path, serde_json::to_vec_pretty(&report)?)?;
     }
     eprintln!("wrote {} ({}×{}, {} bytes)", output.display(), rendered.width, rendered.height, rendered.bytes.len());

@@ -1640,9 +1640,9 @@ async fn a_texture_never_stops_a_shadow_and_the_staging_is_said() {
 
     let client = reqwest::Client::new();
     let render = |job: Value| {
-        let (client, url) = (client.clone(), format!("{base}/v1/render"));
+        let (client, base) = (client.clone(), base.clone());
         async move {
-            let response = client.post(url).header("accept", "application/json").json(&job).send().await.unwrap();
+            let response = client.post(format!("{base}/v1/render")).header("accept", "application/json").json(&job).send().await.unwrap();
             assert_eq!(response.status(), StatusCode::OK);
             let answer: Value = response.json().await.unwrap();
             let image = client.get(format!("{base}{}", answer["image"].as_str().unwrap())).send().await.unwrap().bytes().await.unwrap();

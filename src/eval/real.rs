@@ -10,6 +10,15 @@ use super::Row;
 /// The baseline every soft method is held against, model by model.
 pub const BASELINE: &str = "pcss";
 
+/// A model whose reference has less penumbra than this share of the frame is left out of the
+/// summaries (its errors are a handful of pixels' noise), though its row is listed.
+pub const MIN_PENUMBRA_SHARE: f64 = 0.005;
+
+/// Whether a row's case has penumbra enough to be measured (`MIN_PENUMBRA_SHARE`).
+pub fn measurable(row: &Row) -> bool {
+    row.quality.penumbra_pixels as f64 >= MIN_PENUMBRA_SHARE * f64::from(row.width) * f64::from(row.height)
+}
+
 /// One method's penumbra error (mean |V − Vref| over the reference's penumbra) over the real
 /// models under one light.
 #[derive(Debug, Clone, Serialize)]
@@ -43,6 +52,7 @@ fn error(row: &Row) -> f64 {
 /// The summaries of every light and method that ran on real models (methods in run order).
 pub fn summarize(rows: &[Row]) -> Vec<RealSummary> {
     let mut keys: Vec<(&str, &str)> = Vec::new();
+    let rows: Vec<&Row> = rows.iter().filter(|r| measurable(r)).collect();
     for row in rows.iter().filter(|r| r.real_model && r.method != "reference") {
         if !keys.contains(&(row.light.as_str(), row.method.as_str())) {
             keys.push((&row.light, &row.method));
@@ -50,14 +60,17 @@ pub fn summarize(rows: &[Row]) -> Vec<RealSummary> {
     }
     keys.into_iter()
         .map(|(light, method)| {
-            let chosen: Vec<&Row> = rows.iter().filter(|r| r.real_model && r.light == light && r.method == method).collect();
+            let chosen: Vec<&Row> = rows.iter().copied().filter(|r| r.real_model && r.light == light && r.method == method).collect();
             let baseline = |row: &Row| {
-                rows.iter().find(|b| b.method == BASELINE && b.scene == row.scene && b.light == row.light && b.case == row.case).map(error)
+                rows.iter()
+                    .find(|b| b.method == BASELINE && b.scene == row.scene && b.light == row.light && b.case == row.case)
+                    .map(|b| error(b))
             };
             let over = |factor: f64| chosen.iter().filter(|r| baseline(r).is_some_and(|b| error(r) > factor * b)).count();
             let mut ranked: Vec<(String, String, f64)> = chosen.iter().map(|r| (r.scene.clone(), r.case.clone(), error(r))).collect();
             ranked.sort_by(|a, b| b.2.total_cmp(&a.2));
-            let builtin: Vec<f64> = rows.iter().filter(|r| !r.real_model && r.light == light && r.method == method).map(error).collect();
+            let builtin: Vec<f64> =
+                rows.iter().filter(|r| !r.real_model && r.light == light && r.method == method).map(|r| error(r)).collect();
             RealSummary {
                 light: light.to_owned(),
                 method: method.to_owned(),

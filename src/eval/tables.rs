@@ -130,7 +130,12 @@ fn write_real_models(md: &mut String, report: &EvalReport) -> std::fmt::Result {
     writeln!(md, "camera and light). `> 1.25 × pcss`, `> 1.5 × pcss`: models where the method's error exceeds")?;
     writeln!(md, "`pcss`'s on the same model by that factor. `real / built-in`: the mean over real models over")?;
     writeln!(md, "the mean over the built-in scenes of this run. `worst-{{light}}-{{method}}.png`: the worst models,")?;
-    writeln!(md, "reference and method, with Vref and |V − Vref| under them.\n")?;
+    writeln!(md, "reference and method, with Vref and |V − Vref| under them. A model whose reference has less")?;
+    writeln!(
+        md,
+        "penumbra than {} % of the frame is listed below but left out of the summary.\n",
+        super::real::MIN_PENUMBRA_SHARE * 100.0
+    )?;
     writeln!(
         md,
         "| light | method | models | mean | worst | worst model | > 1.25 × pcss | > 1.5 × pcss | built-in mean | real / built-in |"
