@@ -163,6 +163,52 @@ pub struct StagedFloor {
     pub height: f32,
 }
 
+impl Staging {
+    /// What `job` resolved to over `scene`'s defaults: `camera` and `light` as checked, the
+    /// light's `direction` and `up` as given (the frame derives its axes from them).
+    fn new(job: &Job, scene: &GpuScene, camera: &Camera, light: &AreaLight, (direction, up): (Vec3, Vec3)) -> Self {
+        let (c, l) = (&job.camera, &job.light);
+        let given = [
+            ("camera.eye", c.eye.is_some()),
+            ("camera.target", c.target.is_some()),
+            ("camera.up", c.up.is_some()),
+            ("camera.fov_y_deg", c.fov_y_deg.is_some()),
+            ("camera.near", c.near.is_some()),
+            ("camera.far", c.far.is_some()),
+            ("light.center", l.center.is_some()),
+            ("light.direction", l.direction.is_some()),
+            ("light.up", l.up.is_some()),
+            ("light.size", l.size.is_some()),
+            ("light.intensity", l.intensity.is_some()),
+            ("light.image", l.image.is_some()),
+        ];
+        Staging {
+            camera: StagedCamera {
+                eye: camera.eye.to_array(),
+                target: camera.target.to_array(),
+                up: camera.up.to_array(),
+                fov_y_deg: camera.fov_y_deg,
+                near: camera.near,
+                far: camera.far,
+            },
+            light: StagedLight {
+                center: light.center.to_array(),
+                direction: direction.to_array(),
+                up: up.to_array(),
+                size: light.size_m.to_array(),
+                intensity: light.intensity,
+                image: l.image.clone().unwrap_or_else(|| scene.defaults.light_image.clone()),
+            },
+            floor: job.scene.floor.zip(scene.on_floor).map(|(floor, on)| StagedFloor {
+                albedo: floor.albedo,
+                margin: floor.margin,
+                height: on.height,
+            }),
+            fitted: given.iter().filter(|(_, given)| !given).map(|(name, _)| *name).collect(),
+        }
+    }
+}
+
 /// Everything a frame needs, validated.
 pub struct FrameSpec {
     pub camera: Camera,
@@ -228,46 +274,7 @@ impl FrameSpec {
             l.size.map(Vec2::from).unwrap_or(d.light_size_m),
             l.intensity.unwrap_or(d.light_intensity),
         )?;
-        let (c, l) = (&job.camera, &job.light);
-        let given = [
-            ("camera.eye", c.eye.is_some()),
-            ("camera.target", c.target.is_some()),
-            ("camera.up", c.up.is_some()),
-            ("camera.fov_y_deg", c.fov_y_deg.is_some()),
-            ("camera.near", c.near.is_some()),
-            ("camera.far", c.far.is_some()),
-            ("light.center", l.center.is_some()),
-            ("light.direction", l.direction.is_some()),
-            ("light.up", l.up.is_some()),
-            ("light.size", l.size.is_some()),
-            ("light.intensity", l.intensity.is_some()),
-            ("light.image", l.image.is_some()),
-        ];
-        let staging = Staging {
-            camera: StagedCamera {
-                eye: camera.eye.to_array(),
-                target: camera.target.to_array(),
-                up: camera.up.to_array(),
-                fov_y_deg: camera.fov_y_deg,
-                near: camera.near,
-                far: camera.far,
-            },
-            // As the job would name it: the direction and up given (the frame derives n, u, r).
-            light: StagedLight {
-                center: light.center.to_array(),
-                direction: direction.to_array(),
-                up: up.to_array(),
-                size: light.size_m.to_array(),
-                intensity: light.intensity,
-                image: l.image.clone().unwrap_or_else(|| d.light_image.clone()),
-            },
-            floor: job.scene.floor.zip(scene.on_floor).map(|(floor, on)| StagedFloor {
-                albedo: floor.albedo,
-                margin: floor.margin,
-                height: on.height,
-            }),
-            fitted: given.iter().filter(|(_, given)| !given).map(|(name, _)| *name).collect(),
-        };
+        let staging = Staging::new(job, scene, &camera, &light, (direction, up));
         Ok(Self {
             camera,
             cells: light_cells(&light, &light_image),

@@ -312,15 +312,8 @@ impl FrontFaces {
         let projected: Vec<(usize, [glam::Vec2; 3])> = chosen
             .iter()
             .filter_map(|&t| {
-                Some((
-                    t,
-                    mesh.triangles[t]
-                        .map(|i| fronts.project(mesh.positions[i as usize]))
-                        .into_iter()
-                        .collect::<Option<Vec<_>>>()?
-                        .try_into()
-                        .ok()?,
-                ))
+                let [a, b, c] = mesh.triangles[t].map(|i| fronts.project(mesh.positions[i as usize]));
+                Some((t, [a?, b?, c?]))
             })
             .collect();
         if projected.is_empty() {
