@@ -7,7 +7,7 @@ use wgpu::util::DeviceExt;
 
 use super::GpuContext;
 use crate::light::AreaLight;
-use crate::scene::adjacency::EdgeMesh;
+use crate::scene::adjacency::{Casting, EdgeMesh};
 use crate::scene::{DrawRange, OnFloor, Scene, SceneDefaults};
 
 /// A material's constant part as the G-buffer shader reads it.
@@ -46,6 +46,9 @@ pub struct GpuScene {
     indices: Vec<u32>,
     /// Adjacency, built on first use and kept with the scene.
     edge_mesh: std::sync::OnceLock<std::sync::Arc<EdgeMesh>>,
+    /// The triangles casting from the last point asked (`casting_from`): the jobs that follow
+    /// one another on a scene mostly share their light.
+    casting: std::sync::Mutex<Option<([u32; 3], std::sync::Arc<Casting>)>>,
 }
 
 impl GpuScene {
@@ -108,6 +111,7 @@ impl GpuScene {
             vertex_objects: scene.vertices.iter().map(|v| v.object_id).collect(),
             indices: scene.indices.clone(),
             edge_mesh: Default::default(),
+            casting: Default::default(),
         }
     }
 
@@ -118,6 +122,21 @@ impl GpuScene {
     /// The scene's adjacency (welded vertices, edges with their triangles), built on first use.
     pub fn edge_mesh(&self) -> std::sync::Arc<EdgeMesh> {
         self.edge_mesh.get_or_init(|| std::sync::Arc::new(EdgeMesh::build(&self.positions, &self.indices, &self.vertex_objects))).clone()
+    }
+
+    /// Which triangles cast from `point` (`EdgeMesh::casting`), kept for the next job from the
+    /// same point.
+    pub fn casting_from(&self, point: Vec3) -> std::sync::Arc<Casting> {
+        let key = point.to_array().map(f32::to_bits);
+        let mut last = self.casting.lock().unwrap_or_else(|p| p.into_inner());
+        match &*last {
+            Some((at, casting)) if *at == key => casting.clone(),
+            _ => {
+                let casting = std::sync::Arc::new(self.edge_mesh().casting(point));
+                *last = Some((key, casting.clone()));
+                casting
+            }
+        }
     }
 
     /// Every vertex's position, as the vertex buffer holds them.

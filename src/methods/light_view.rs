@@ -127,7 +127,7 @@ impl LightView {
 pub fn thin_occluders(ctx: &mut super::MethodContext<'_>, method: &str, model: &str) -> f64 {
     let light = &ctx.spec.light;
     let mesh = ctx.scene.edge_mesh();
-    let thin = LightView::measure(&mesh, &mesh.casting(light.center), light).thin;
+    let thin = LightView::measure(&mesh, &ctx.scene.casting_from(light.center), light).thin;
     if thin > THIN_WARNING {
         ctx.warnings.push(format!(
             "{method}: {:.0} % of the occluders, seen from the light, are narrower than their penumbra; {method} shades a point \

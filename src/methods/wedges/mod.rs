@@ -179,7 +179,7 @@ impl ShadowMethod for Wedges {
         let light = &spec.light;
         let c = light.center;
         let mesh = ctx.scene.edge_mesh();
-        let casting = mesh.casting(c);
+        let casting = ctx.scene.casting_from(c);
         let silhouette = mesh.silhouette(&casting);
         let overlap = LightView::measure(&mesh, &casting, light).overlap;
         if overlap > light_view::OVERLAP_WARNING {
