@@ -1043,15 +1043,21 @@ mod tests {
         assert_eq!(files.load("mesh%20data.bin", true, &small).unwrap_err().code, ErrorCode::LimitExceeded);
     }
 
+    /// A 2×2 orange PNG.
+    fn orange_png() -> Vec<u8> {
+        let mut png = Vec::new();
+        image::RgbaImage::from_pixel(2, 2, image::Rgba([200, 100, 50, 255]))
+            .write_to(&mut Cursor::new(&mut png), image::ImageFormat::Png)
+            .unwrap();
+        png
+    }
+
     /// What `penumbra submit` uploads: the document and its files as one GLB, which loads
     /// alone to the same scene; an image file becomes a view of the BIN chunk.
     #[test]
     fn a_multi_file_document_packs_into_one_self_contained_glb() {
         let files = MultiFile::new("pack");
-        let mut png = Vec::new();
-        image::RgbaImage::from_pixel(2, 2, image::Rgba([200, 100, 50, 255]))
-            .write_to(&mut Cursor::new(&mut png), image::ImageFormat::Png)
-            .unwrap();
+        let png = orange_png();
         std::fs::write(files.root.join("sub/tex ture.png"), &png).unwrap();
         let mut document: serde_json::Value = serde_json::from_slice(&files.document("mesh%20data.bin")).unwrap();
         document["images"] = serde_json::json!([{"uri": "sub/tex%20ture.png"}]);
@@ -1079,10 +1085,7 @@ mod tests {
     #[test]
     fn textures_that_cannot_be_read_are_skipped_by_name_and_exporters_spellings_are_found() {
         let files = MultiFile::new("textures");
-        let mut png = Vec::new();
-        image::RgbaImage::from_pixel(2, 2, image::Rgba([200, 100, 50, 255]))
-            .write_to(&mut Cursor::new(&mut png), image::ImageFormat::Png)
-            .unwrap();
+        let png = orange_png();
         std::fs::write(files.root.join("sub/wood.png"), &png).unwrap();
         std::fs::write(files.root.join("wood.png"), &png).unwrap();
         std::fs::write(files.root.join("paint.tga"), [0u8, 0, 2, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1, 0, 1, 0, 24, 0, 1, 2, 3]).unwrap();
