@@ -27,6 +27,11 @@ use crate::scene::adjacency::{Casting, EdgeMesh};
 /// Cells along the longer side of the grid.
 const GRID: usize = 256;
 
+/// The most cells all triangles together may visit: past it (a hostile scene of millions of
+/// screen-filling triangles) the measure gives up and says nothing, rather than take the job's
+/// time. A real scene visits a few cells a triangle.
+const CELL_BUDGET: u64 = 1 << 26;
+
 /// Beyond these shares a method warns (chosen on the real-model suite: docs/methods.md).
 pub const OVERLAP_WARNING: f64 = 0.2;
 pub const THIN_WARNING: f64 = 0.25;
@@ -61,6 +66,7 @@ impl LightView {
         let mut layers = vec![0u16; w * h];
         let mut nearest = vec![f32::INFINITY; w * h];
         let mut deepest_seen = vec![0.0f32; w * h];
+        let mut visits = 0u64;
         for t in &triangles {
             let mut p = t.map(|(p, _)| (p - lo) / cell);
             let mut inverse = t.map(|(_, d)| 1.0 / d);
@@ -76,8 +82,16 @@ impl LightView {
             // A cell centre on an edge counts for one of the two triangles sharing it: the one
             // that runs the edge upwards (or rightwards, level), as a rasteriser's fill rule.
             let owns = |e: Vec2| e.y > 0.0 || (e.y == 0.0 && e.x > 0.0);
-            for y in (min.y.floor().max(0.0) as usize)..(max.y.ceil() as usize).min(h) {
-                for x in (min.x.floor().max(0.0) as usize)..(max.x.ceil() as usize).min(w) {
+            let (xs, ys) = (
+                (min.x.floor().max(0.0) as usize)..(max.x.ceil() as usize).min(w),
+                (min.y.floor().max(0.0) as usize)..(max.y.ceil() as usize).min(h),
+            );
+            visits += (xs.len() * ys.len()) as u64;
+            if visits > CELL_BUDGET {
+                return Self::default();
+            }
+            for y in ys {
+                for x in xs.clone() {
                     let c = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
                     let sides = [0, 1, 2].map(|k| (p[(k + 1) % 3] - p[k]).perp_dot(c - p[k]));
                     let inside = (0..3).all(|k| sides[k] > 0.0 || (sides[k] == 0.0 && owns(p[(k + 1) % 3] - p[k])));
@@ -214,6 +228,14 @@ mod tests {
         let view = measure(&[((-4.0, -4.0), (4.0, 4.0), 5.0), ((-3.0, -3.0), (4.5, 4.5), 6.0)]);
         assert!(view.overlap > 0.2, "{view:?}");
         assert_eq!(measure(&[((-4.0, -4.0), (-1.0, 4.0), 5.0), ((1.0, -4.0), (4.0, 4.0), 5.0)]).overlap, 0.0, "side by side");
+    }
+
+    /// A hostile scene: thousands of plates each covering the whole grid. The measure gives up
+    /// within its cell budget and says nothing rather than take the job's time.
+    #[test]
+    fn a_scene_of_huge_overlapping_plates_stays_within_the_cell_budget() {
+        let plates: Vec<_> = (0..3000).map(|k| ((-19.0, -19.0), (19.0, 19.0), 1.0 + 8.0 * k as f32 / 3000.0)).collect();
+        assert_eq!(measure(&plates), LightView::default());
     }
 
     #[test]

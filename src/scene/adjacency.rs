@@ -296,7 +296,14 @@ struct FrontFaces {
     scale: glam::Vec2,
     side: usize,
     cells: Vec<Vec<u32>>,
+    /// Triangles over more than `LARGE_CELLS` cells, tested by every query.
+    large: Vec<u32>,
 }
+
+/// A triangle over more cells than this is listed among `FrontFaces::large`.
+const LARGE_CELLS: usize = 64;
+/// The most large triangles kept: every query tests them all.
+const MAX_LARGE: usize = 1024;
 
 impl FrontFaces {
     fn new(mesh: &EdgeMesh, point: Vec3, chosen: impl Fn(usize) -> bool) -> Self {
@@ -308,7 +315,8 @@ impl FrontFaces {
         let forward = mean.try_normalize().unwrap_or(Vec3::NEG_Y);
         let right = forward.any_orthonormal_vector();
         let axes = [right, forward.cross(right), forward];
-        let mut fronts = FrontFaces { point, axes, lo: glam::Vec2::ZERO, scale: glam::Vec2::ONE, side: 1, cells: vec![Vec::new()] };
+        let mut fronts =
+            FrontFaces { point, axes, lo: glam::Vec2::ZERO, scale: glam::Vec2::ONE, side: 1, cells: vec![Vec::new()], large: Vec::new() };
         let projected: Vec<(usize, [glam::Vec2; 3])> = chosen
             .iter()
             .filter_map(|&t| {
@@ -327,6 +335,15 @@ impl FrontFaces {
         fronts.cells = vec![Vec::new(); fronts.side * fronts.side];
         for (t, p) in projected {
             let (a, b) = (fronts.cell(p[0].min(p[1]).min(p[2])), fronts.cell(p[0].max(p[1]).max(p[2])));
+            // A triangle over many cells is listed once, among the ones every query tests, so
+            // that a scene of large triangles costs lists, not cells; past `MAX_LARGE` of them
+            // the rest are left out (their back faces then cast: the paper's count, not none).
+            if (b.0 - a.0 + 1) * (b.1 - a.1 + 1) > LARGE_CELLS {
+                if fronts.large.len() < MAX_LARGE {
+                    fronts.large.push(t as u32);
+                }
+                continue;
+            }
             for y in a.1..=b.1 {
                 for x in a.0..=b.0 {
                     fronts.cells[y * fronts.side + x].push(t as u32);
@@ -353,7 +370,7 @@ impl FrontFaces {
         let Some(p) = self.project(from) else { return false };
         let (x, y) = self.cell(p);
         let dir = from - self.point;
-        self.cells[y * self.side + x].iter().any(|&t| {
+        self.cells[y * self.side + x].iter().chain(&self.large).any(|&t| {
             mesh.surface[t as usize] == surface && {
                 let [a, b, c] = mesh.triangles[t as usize].map(|i| mesh.positions[i as usize]);
                 crosses(self.point, dir, [a, b, c])
