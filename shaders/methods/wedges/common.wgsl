@@ -103,9 +103,8 @@ const NOT_COVERED: f32 = -2.0;
 // whose surface (the G-buffer's geometric normal) faces away from the centre, or within ~6°
 // of edge-on to it. Where it faces the centre at all its own volume starts at its own face
 // (its cap), so 0 would do; the margin keeps a landscape's grazing slopes, where E0 is under
-// a tenth of its face-on value, from taking the whole landscape's wedges: measured on the
-// real-model suite and `terrain` (docs/methods.md), 0.1 is as accurate as 0 (terrain more:
-// its overlapping hills are summed) at two thirds of the extra cost.
+// a tenth of its face-on value, from taking the whole landscape's wedges, for no loss of
+// accuracy on the real-model suite (docs/methods.md weighs the margins).
 const SELF_SHADOW_COS: f32 = 0.1;
 
 fn tile_grid() -> vec2<u32> {
