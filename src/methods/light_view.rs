@@ -61,13 +61,43 @@ impl LightView {
         }
         let cell = (hi - lo).max_element().max(1e-12) / GRID as f32;
         let (w, h) = ((((hi.x - lo.x) / cell) as usize + 1).min(GRID), (((hi.y - lo.y) / cell) as usize + 1).min(GRID));
-        // Per cell: its layers, and the nearest and deepest surface along its ray (1/depth is
-        // affine across a triangle seen from the centre).
-        let mut layers = vec![0u16; w * h];
-        let mut nearest = vec![f32::INFINITY; w * h];
-        let mut deepest_seen = vec![0.0f32; w * h];
+        let Some(Layers { layers, nearest, deepest }) = Layers::draw(&triangles, lo, cell, (w, h)) else { return Self::default() };
+        let occluder: Vec<bool> = layers.iter().map(|&l| l >= 2).collect();
+        let occluders = occluder.iter().filter(|o| **o).count();
+        if occluders == 0 {
+            return Self::default();
+        }
+        // The penumbra's half width per cell in the projection (tangents from the centre): the
+        // light's size carried from the occluder to its receiver, L·(d_r − d_o)/(d_o·d_r).
+        let light_size = (light.size_m.x * light.size_m.y).sqrt();
+        let radius: Vec<f32> = (0..w * h)
+            .map(|i| if occluder[i] { 0.5 * light_size * (deepest[i] - nearest[i]) / (nearest[i] * deepest[i]) / cell } else { 0.0 })
+            .collect();
+        let inside = distance_to(&occluder.iter().map(|o| !o).collect::<Vec<_>>(), w, h);
+        let band: Vec<usize> = (0..w * h).filter(|&i| occluder[i] && inside[i] < radius[i]).collect();
+        let overlap = if band.is_empty() { 0.0 } else { band.iter().filter(|&&i| layers[i] >= 3).count() as f64 / band.len() as f64 };
+        let core: Vec<bool> = (0..w * h).map(|i| occluder[i] && inside[i] >= radius[i]).collect();
+        let to_core = distance_to(&core, w, h);
+        let thin = (0..w * h).filter(|&i| occluder[i] && to_core[i] > radius[i]).count() as f64 / occluders as f64;
+        Self { overlap, thin }
+    }
+}
+
+/// The casting triangles drawn into the grid: per cell, its layers, and the nearest and the
+/// deepest surface along its ray.
+struct Layers {
+    layers: Vec<u16>,
+    nearest: Vec<f32>,
+    deepest: Vec<f32>,
+}
+
+impl Layers {
+    /// Draws `triangles` (projected corners and their depths) into a `w × h` grid of cells of
+    /// side `cell` from `lo`; `None` past `CELL_BUDGET`.
+    fn draw(triangles: &[[(Vec2, f32); 3]], lo: Vec2, cell: f32, (w, h): (usize, usize)) -> Option<Self> {
+        let mut out = Layers { layers: vec![0; w * h], nearest: vec![f32::INFINITY; w * h], deepest: vec![0.0; w * h] };
         let mut visits = 0u64;
-        for t in &triangles {
+        for t in triangles {
             let mut p = t.map(|(p, _)| (p - lo) / cell);
             let mut inverse = t.map(|(_, d)| 1.0 / d);
             let (min, max) = (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]));
@@ -88,49 +118,25 @@ impl LightView {
             );
             visits += (xs.len() * ys.len()) as u64;
             if visits > CELL_BUDGET {
-                return Self::default();
+                return None;
             }
             for y in ys {
                 for x in xs.clone() {
                     let c = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
                     let sides = [0, 1, 2].map(|k| (p[(k + 1) % 3] - p[k]).perp_dot(c - p[k]));
-                    let inside = (0..3).all(|k| sides[k] > 0.0 || (sides[k] == 0.0 && owns(p[(k + 1) % 3] - p[k])));
-                    if inside {
-                        // Side k is opposite corner k + 2.
+                    if (0..3).all(|k| sides[k] > 0.0 || (sides[k] == 0.0 && owns(p[(k + 1) % 3] - p[k]))) {
+                        // 1/depth is affine across a triangle seen from the centre; side k is
+                        // opposite corner k + 2.
                         let depth = area.abs() / (0..3).map(|k| sides[k] * inverse[(k + 2) % 3]).sum::<f32>();
                         let i = y * w + x;
-                        layers[i] = layers[i].saturating_add(1);
-                        nearest[i] = nearest[i].min(depth);
-                        deepest_seen[i] = deepest_seen[i].max(depth);
+                        out.layers[i] = out.layers[i].saturating_add(1);
+                        out.nearest[i] = out.nearest[i].min(depth);
+                        out.deepest[i] = out.deepest[i].max(depth);
                     }
                 }
             }
         }
-        let occluder: Vec<bool> = layers.iter().map(|&l| l >= 2).collect();
-        // The penumbra's half width per cell in the projection (tangents from the centre): the
-        // light's size carried from the occluder to its receiver, L·(d_r − d_o)/(d_o·d_r).
-        let light_size = (light.size_m.x * light.size_m.y).sqrt();
-        let radius: Vec<f32> =
-            (0..w * h)
-                .map(|i| {
-                    if occluder[i] {
-                        0.5 * light_size * (deepest_seen[i] - nearest[i]) / (nearest[i] * deepest_seen[i]) / cell
-                    } else {
-                        0.0
-                    }
-                })
-                .collect();
-        let inside = distance_to(&occluder.iter().map(|o| !o).collect::<Vec<_>>(), w, h);
-        let band: Vec<usize> = (0..w * h).filter(|&i| occluder[i] && inside[i] < radius[i]).collect();
-        let overlap = if band.is_empty() { 0.0 } else { band.iter().filter(|&&i| layers[i] >= 3).count() as f64 / band.len() as f64 };
-        let core: Vec<bool> = (0..w * h).map(|i| occluder[i] && inside[i] >= radius[i]).collect();
-        let to_core = distance_to(&core, w, h);
-        let occluders = occluder.iter().filter(|o| **o).count();
-        if occluders == 0 {
-            return Self::default();
-        }
-        let thin = (0..w * h).filter(|&i| occluder[i] && to_core[i] > radius[i]).count() as f64 / occluders as f64;
-        Self { overlap, thin }
+        Some(out)
     }
 }
 

@@ -220,16 +220,16 @@ impl EdgeMesh {
         Self { positions: unique, triangles, objects, normals, surface, closed, edges, uses, stats }
     }
 
-    /// Whether triangle `t` faces `point` (its winding is counter-clockwise seen from there).
-    pub fn faces(&self, t: usize, point: Vec3) -> bool {
-        self.normals[t].dot(point - self.positions[self.triangles[t][0] as usize]) > 0.0
+    /// Which side of triangle `t` `point` lies on: positive where it sees the triangle wound
+    /// counter-clockwise (the front), negative behind, 0 in its plane.
+    fn side(&self, t: usize, point: Vec3) -> f32 {
+        self.normals[t].dot(point - self.positions[self.triangles[t][0] as usize])
     }
 
     /// Which triangles cast a shadow from `point`, and which way round (the module doc).
     pub fn casting(&self, point: Vec3) -> Casting {
-        let side = |t: usize| self.normals[t].dot(point - self.positions[self.triangles[t][0] as usize]);
         let mut by_triangle: Vec<Option<bool>> = (0..self.triangles.len())
-            .map(|t| match side(t) {
+            .map(|t| match self.side(t, point) {
                 s if s > 0.0 => Some(true),
                 s if s < 0.0 && !self.closed[self.surface[t] as usize] => Some(false),
                 _ => None,
