@@ -566,8 +566,8 @@ fn append_rows(to_above: bool, origin: vec2<u32>, first_row: u32, mask: u32) {
 // Pass 2, one invocation per block (a row of blocks per workgroup row): the centre checks
 // the interpolation, then each of the block's pixels is interpolated where the estimate
 // allows and listed otherwise for the exact sum — in `above` where every cell lies above
-// its horizon, else in `clipped` — four rows at a time (an atomic append per pixel cost lavapipe
-// 9 of this pass's 50 ms on `terrain` under `flame`). One invocation loads the block's 20
+// its horizon, else in `clipped` — four rows at a time (an atomic append per pixel is a loop
+// over the lanes on lavapipe). One invocation loads the block's 20
 // corner vectors for its 64 pixels: on lavapipe a storage load is a gather lane by lane
 // whatever the lanes read, so loading them per pixel cost more than the interpolation itself.
 @compute @workgroup_size(64)
@@ -662,8 +662,7 @@ fn listed_surface(entry: u32) -> Surface {
 
 // Listed pixels per invocation of the exact passes. On lavapipe a uniform-buffer load indexed
 // by the loop over cells is a gather, lane by lane, and loading a cell cost more than summing
-// it for one pixel: four pixels per invocation load each cell once for all four (E0 under a
-// 26-cell light over `terrain`: the unclipped sums 36 → 22 ms, the clipped 54 → 40 ms).
+// it for one pixel: four pixels per invocation load each cell once for all four.
 const QUAD: u32 = 4u;
 
 // The four listed pixels of one invocation.
@@ -725,8 +724,7 @@ fn exact_above(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocatio
 fn clipped_quad(q: Quad) -> mat4x3<f32> {
     if GRID {
         // Pixel by pixel: the walk's carried state is twice the unclipped one's, and four
-        // walks side by side (the row's cells loaded once for all) spill more than they save
-        // (`exact_clipped` 72 → 65 ms on `terrain` under `mosaic`).
+        // walks side by side (the row's cells loaded once for all) spill more than they save.
         return mat4x3<f32>(grid_clipped(q.a.x, q.a.nx), grid_clipped(q.b.x, q.b.nx), grid_clipped(q.c.x, q.c.nx), grid_clipped(q.d.x, q.d.nx));
     }
     var e0 = mat4x3<f32>(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0));
@@ -756,8 +754,8 @@ fn exact_clipped(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocat
 }
 
 // The unclipped sums of a quad's pixels over the grid (`GRID`), a row of cells at a time for
-// all four: the row's cells are loaded once for the quad (`QUAD`; `exact_above` 39 → 30 ms
-// on `terrain` under `mosaic` against a pixel at a time).
+// all four: the row's cells are loaded once for the quad (`QUAD`), cheaper than a pixel at
+// a time.
 fn grid_above_quad(q: Quad) -> mat4x3<f32> {
     let columns = grid_columns();
     let top = light_cells[0u].rect.w;

@@ -244,8 +244,8 @@ fn grid_phi(x: vec3<f32>, nx: vec3<f32>) -> PhiWalk {
 // places along the line's axis, metres; their heights above x's horizon): the place of the
 // point at height HORIZON_EPS, as `clip_edge` finds it on a cell's edge. A line crosses the
 // horizon's plane once at most, so the crossing of whichever of its edges crosses is the
-// line's, found once for the line's eight edges (for `exact_clipped` on `terrain` under
-// `mosaic`, 18 crossings a pixel instead of 152: 70 → 57 ms). Where the line's ends lie on one
+// line's, found once for the line's eight edges (18 crossings a pixel instead of 152).
+// Where the line's ends lie on one
 // side, an edge of it that its corners' heights say crosses does so by rounding alone: the
 // whole line then lies within rounding of the horizon, and a stands in for the crossing —
 // moving a vertex of the clipped polygon along the horizon changes its projected solid angle
@@ -280,8 +280,7 @@ fn pick(f: SeenPoint, t: SeenPoint, take: bool) -> SeenPoint {
 // straddling the horizon runs along that circle, so its term n · Θ Γ is the signed angle
 // about n from its exit to its entry: the difference of the two crossings' angles from one
 // direction of the circle (`horizon_angle`). Each crossing's angle is made once, where the
-// crossing is found (18 a pixel), instead of an edge term per cell (64: `exact_clipped`
-// ~62 → ~52 ms on `terrain` under `mosaic`, medians of six rounds in turn).
+// crossing is found (18 a pixel), instead of an edge term per cell (64).
 struct HorizonCircle {
     origin: vec3<f32>,  // the direction to the point of the line nearest the light's centre
     quarter: vec3<f32>, // n × origin, a quarter turn on

@@ -88,9 +88,13 @@ enum Command {
 }
 
 fn main() -> ExitCode {
+    quiet_device_select();
     let cli = Cli::parse();
+    // A one-shot render prints its own table; its log says only what went wrong. The daemon and
+    // the measuring commands also log what they opened and did.
+    let level = if matches!(cli.command, Command::Render { .. }) { "warn" } else { "info" };
     let filter = tracing_subscriber::EnvFilter::try_from_env("PENUMBRA_LOG")
-        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info,wgpu_core=warn,wgpu_hal=warn,naga=warn"));
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(format!("{level},wgpu_core=warn,wgpu_hal=warn,naga=warn")));
     let logs = tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(std::io::stderr)
@@ -105,6 +109,20 @@ fn main() -> ExitCode {
             eprintln!("penumbra: {error:#}");
             ExitCode::from(2)
         }
+    }
+}
+
+/// Turns off Mesa's implicit Vulkan layer `VK_LAYER_MESA_device_select` unless the user asked
+/// for it (`MESA_VK_DEVICE_SELECT`) or already said (`NODEVICE_SELECT`). The layer orders the
+/// devices by the display it finds, and to find one it connects to Wayland: on a headless
+/// machine libwayland prints `error: XDG_RUNTIME_DIR is invalid or not set in the environment.`
+/// at every device enumeration, though nothing is wrong. penumbra picks its adapter itself
+/// (`--adapter`), so the layer has nothing to do here; real errors (no adapter, no driver)
+/// still come from the loader and `GpuContext::new`. Set before any thread starts, as
+/// `set_var` requires.
+fn quiet_device_select() {
+    if std::env::var_os("MESA_VK_DEVICE_SELECT").is_none() && std::env::var_os("NODEVICE_SELECT").is_none() {
+        std::env::set_var("NODEVICE_SELECT", "1");
     }
 }
 
@@ -212,6 +230,7 @@ fn render(job: Option<&Path>, output: &Path, timings_json: Option<&Path>, option
     job.output.format = OutputFormat::from_extension(output)
         .ok_or_else(|| anyhow::anyhow!("the output file must end in .png or .exr: {}", output.display()))?;
     let gpu = open_gpu(options)?;
+    let adapter = format!("{} ({})", gpu.adapter.name, gpu.adapter.device_type);
     let engine = Engine::new(gpu, options.limits.limits(), PathPolicy::Any);
     // Long methods (the reference) report samples done; show them as a progress bar.
     let bar = indicatif::ProgressBar::hidden();
@@ -233,7 +252,7 @@ fn render(job: Option<&Path>, output: &Path, timings_json: Option<&Path>, option
         eprintln!("warning: {warning}");
     }
     std::fs::write(output, &rendered.bytes)?;
-    print_timings(&rendered.timings, cpu_ms);
+    print_timings(&adapter, &rendered.timings, cpu_ms);
     if let Some(path) = timings_json {
         let report = serde_json::json!({
             "timings": rendered.timings,
@@ -248,8 +267,10 @@ fn render(job: Option<&Path>, output: &Path, timings_json: Option<&Path>, option
     Ok(())
 }
 
-/// The phase table, and what the render cost the process in CPU time (`cpu_ms`, every thread).
-fn print_timings(timings: &Timings, cpu_ms: f64) {
+/// The phase table: the adapter, each phase, and what the render cost the process in CPU time
+/// (`cpu_ms`, every thread).
+fn print_timings(adapter: &str, timings: &Timings, cpu_ms: f64) {
+    eprintln!("{:<12} {adapter}", "adapter");
     eprintln!("{:<12} {:>10} {:>10}", "phase", "wall ms", "gpu ms");
     for phase in &timings.phases {
         let gpu = phase.gpu_ms.map(|g| format!("{g:.2}")).unwrap_or_else(|| "-".into());

@@ -233,11 +233,23 @@ fn cli_renders_the_embedded_default_and_example_jobs() {
     let exe = env!("CARGO_BIN_EXE_penumbra");
     let png = dir.path().join("default.png");
     let timings = dir.path().join("timings.json");
-    let status = std::process::Command::new(exe)
+    // A quiet start, as on a headless machine: stderr holds the phase table and nothing else
+    // (no loader or layer noise, no log line when nothing is wrong).
+    let output = std::process::Command::new(exe)
         .args(["render", "-o", png.to_str().unwrap(), "--timings-json", timings.to_str().unwrap()])
-        .status()
+        .env_remove("XDG_RUNTIME_DIR")
+        .env_remove("NODEVICE_SELECT")
+        .env_remove("MESA_VK_DEVICE_SELECT")
+        .env_remove("PENUMBRA_LOG")
+        .output()
         .unwrap();
-    assert!(status.success());
+    assert!(output.status.success());
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    let table = ["adapter ", "phase ", "scene ", "shadow_map ", "gbuffer ", "e0 ", "method ", "composite ", "readback ", "encode ", "total ", "cpu ", "wrote "];
+    for line in stderr.lines() {
+        assert!(table.iter().any(|start| line.starts_with(start)), "stderr holds more than the phase table: {line:?}\n{stderr}");
+    }
+    assert!(stderr.lines().any(|l| l.starts_with("total ")), "{stderr}");
     let image = image::open(&png).unwrap();
     assert_eq!((image.width(), image.height()), (512, 512));
     let report: Value = serde_json::from_slice(&std::fs::read(&timings).unwrap()).unwrap();
@@ -249,7 +261,7 @@ fn cli_renders_the_embedded_default_and_example_jobs() {
     let exr = dir.path().join("example.exr");
     // Logs as JSON objects for collectors.
     let output =
-        std::process::Command::new(exe).args(["--log-format", "json", "render", example, "-o", exr.to_str().unwrap()]).output().unwrap();
+        std::process::Command::new(exe).args(["--log-format", "json", "render", example, "-o", exr.to_str().unwrap()]).env("PENUMBRA_LOG", "info").output().unwrap();
     assert!(output.status.success());
     let stderr = String::from_utf8_lossy(&output.stderr);
     let adapter_line = stderr.lines().find(|l| l.contains("GPU adapter")).expect("the adapter is logged");
@@ -1389,7 +1401,7 @@ async fn submitted_jobs_can_be_cancelled_waiting_or_running() {
 /// packed into one GLB) to the same pixels. Every other file is refused with a 4xx whose
 /// message names the problem, or renders with `warnings` naming what was repaired or ignored.
 /// The daemon serves a valid job after all of them. The thumbnails of what rendered are
-/// tiled into `gltf-corpus.png` under the test's target folder (the README's contact sheet).
+/// tiled into `gltf-corpus.png` under the test's target folder (docs/jobs.md's contact sheet).
 #[tokio::test(flavor = "multi_thread")]
 async fn the_assimp_gltf2_corpus_renders_with_shadows_or_is_refused_by_name() {
     let corpus = std::env::var_os("PENUMBRA_GLTF_CORPUS").map_or_else(|| "/usr/share/assimp/models/glTF2".into(), std::path::PathBuf::from);

@@ -373,7 +373,7 @@ fn three_replicas_behind_nginx_share_redis_and_survive_a_sigkill() {
     assert_eq!(status, 409, "a cancelled job is finished");
 }
 
-/// The cluster's figures quoted in the README, printed, never asserted (run by hand:
+/// The cluster's figures quoted in deploy/README.md, printed, never asserted (run by hand:
 /// `cargo test --release --test deploy -- --ignored --nocapture cluster_figures`): what a
 /// small job costs through nginx and Redis against one replica on the embedded store, how
 /// many jobs per second each store sustains on its own, and the scene-cache hit rate across

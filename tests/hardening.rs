@@ -22,7 +22,7 @@ fn tools_dir() -> std::path::PathBuf {
         .unwrap_or_else(|| std::path::PathBuf::from(std::env::var_os("HOME").expect("HOME")).join(".cache/penumbra-tools"))
 }
 
-/// Seconds per target: `PENUMBRA_FUZZ_SECS`, default 45 (the README's long form: 600).
+/// Seconds per target: `PENUMBRA_FUZZ_SECS`, default 45 (docs/testing.md's long form: 600).
 fn fuzz_seconds() -> u64 {
     std::env::var("PENUMBRA_FUZZ_SECS").ok().and_then(|s| s.parse().ok()).unwrap_or(45)
 }

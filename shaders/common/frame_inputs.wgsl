@@ -10,8 +10,7 @@
 // (`frame = frame_uniform;`). llvmpipe (Mesa 22.3) loads a uniform float lane by lane, ~20
 // instructions, and loads it again after each texture fetch, which it makes by a call (read
 // in its generated code); a private copy holds only the fields a pass reads, loaded once per
-// invocation and kept across the calls. Pixels identical; E0's interpolation pass 22–26 %
-// faster at 1080p.
+// invocation and kept across the calls.
 var<private> frame: Frame;
 @group(0) @binding(1) var gbuf_position: texture_2d<f32>; // xyz world position, w view depth (0: background)
 @group(0) @binding(2) var gbuf_normal: texture_2d<f32>;   // xyz unit geometric normal facing the eye, w 1 where covered

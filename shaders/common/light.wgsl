@@ -18,9 +18,8 @@ struct LightCell {
 // function of u = 1 − cos Θ (singular only at Θ = π, u = 2), held by `theta_over_sin`; an
 // obtuse one is π − the acute Θ' with the same sine, so Θ / sin Θ = π / sin Θ − Θ' / sin Θ.
 // No atan2 and no acos: as accurate as atan2 at every angle (1e-7 relative where f32 allows;
-// acos loses the tiny angles of distant cells), and on lavapipe E0 under a 26-cell light
-// over a 100k-triangle landscape took 162 ms instead of 190, 148 ms where no edge can be
-// obtuse (`ACUTE_EDGES`).
+// acos loses the tiny angles of distant cells), and cheaper on lavapipe, the more so where
+// no edge can be obtuse (`ACUTE_EDGES`).
 fn edge_vector(a: vec3<f32>, b: vec3<f32>) -> vec3<f32> {
     let c = cross(a, b);
     return c * edge_scale(c, dot(a, b));

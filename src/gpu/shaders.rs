@@ -98,8 +98,8 @@ fn append(name: &str, out: &mut String, seen: &mut HashSet<String>) {
 /// lines up to the `}` that closes it) once per value of `i`. On lavapipe an array that a
 /// loop indexes by its counter lives in memory, a load and a store lane by lane per access,
 /// where one indexed by constants lives in registers: a loop over the columns of E0's grid
-/// (`shaders/e0_grid.wgsl`) whose carried state is arrays made its clipped pass 35 × slower
-/// than the same loop unrolled. Mesa unrolls only small loops itself; this unrolls the ones a
+/// (`shaders/e0_grid.wgsl`) whose carried state is arrays runs many times slower than the
+/// same loop unrolled. Mesa unrolls only small loops itself; this unrolls the ones a
 /// shader marks. Each copy is a block that binds `i` as a `let` constant, so the body is the
 /// loop's body unchanged — copied as it stands: a directive inside it is not read.
 fn unroll<'a>(name: &str, header: &str, lines: &mut impl Iterator<Item = &'a str>, out: &mut String) {

@@ -2,33 +2,7 @@
 //! the GPU. The paper's CPU loop is the specification; its passes here are compute shaders
 //! under `shaders/methods/brabec/`:
 //!
-//! - `summary`: per 8×8 block of the light depth map its depth range and object id, so that a
-//!   search can prove its square empty before visiting a texel (not in the paper; bit-identical
-//!   results), and the map's depths and ids copied into a buffer the search reads.
-//! - `classify`: warp each eye pixel to the light (§3.2), hard test, object id (§3.2), and
-//!   the key the adaptive sampling compares (§4.3).
-//! - `lattice`: lists for the search (§3.2 outer, §3.3 inner penumbra) every 4th pixel of
-//!   every 4th row, or every pixel with `adaptive` off.
-//! - `refine`: the adaptive sampling of §4.3 — groups of 5 pixels along columns, then rows
-//!   (a pipeline each), interpolated where ids and hard results agree, refined otherwise.
-//!   Which pixels the refinement searches depends on the keys alone, so each first lists them
-//!   (`mark_searches`); `search` then searches every listed pixel in one compacted dispatch
-//!   (distances from the unrounded warped position, optionally to jittered blocker positions,
-//!   §4.3), and the interpolation runs after it. The paper searches inside the refinement;
-//!   the order changes no result, and on a CPU rasteriser it keeps SIMD lanes busy.
-//! - `finish`: visibility through the chosen fall-off, coloured (past the paper, whose light
-//!   is uniform; contract §1): the search also notes what it found, and the ray from the
-//!   receiver through the occluder there, with the silhouette's direction, gives the occluder
-//!   edge's line across the light; the light's edge table (`light::tables`) gives each
-//!   channel's share beyond it, and the pixel keeps the paper's gray level with that hue.
-//!
-//! Choices where the paper is vague or inconsistent, each in a comment at the code:
-//! the §3.3 pseudo-code's return values are inverted against §3.2's text (fixed: the hard edge
-//! is `meet`, lit side 1, umbra side 0); the inner search's Δz is by default the occluder's
-//! distance over P, not `depth(lit) − z` (selectable as `inner_depth = "paper"`, which
-//! produces the ring of the paper's Fig. 7); by default `r_max` and the hit rescale are
-//! derived from the light's size instead of the ad-hoc `r_scale`, `r_bias`, `r_shrink` (the
-//! paper's §6 future work), which remain as overrides.
+//! The design, and each choice where the paper is vague: docs/methods.md#brabec.
 
 use std::sync::Arc;
 

@@ -3,34 +3,7 @@
 //! (`light::tables`). Shaders: `shaders/methods/jfa/`. Both share one pass driver (`flood`): seed,
 //! `rounds` rounds of flooding between two record buffers, final pass.
 //!
-//! `jfa-l`: each shadow-map texel's world position (§4.1 "light space coordinates") is its
-//! ray from the light centre at the stored depth (`shadow_point`). `silhouette.wgsl` marks texels with a deeper
-//! neighbour as silhouette pixels, seeded with their own position. `flood_light.wgsl` runs
-//! `rounds` rounds with steps 2^(rounds−1) … 1 (§3), each texel keeping, among the occluders
-//! its 8 neighbours at ±step carry, the one that gives its own surface point the least light;
-//! with 6 rounds occluders travel up to 63 texels (the paper's 63-pixel penumbra). Standard
-//! flooding (`flooding: "standard"`, step 1 for 2^rounds − 1 rounds, the same reach) is there
-//! for the paper's flooding experiment. `final_light.wgsl` shades eye pixels: hard shadow →
-//! 0, a flooded texel → the intensity recomputed from the eye point and the stored occluder,
-//! else 1. The paper has only outer penumbrae, so its umbrae are too large where penumbrae
-//! are wide; with `inner` (the default; past the paper) silhouettes also flood into the
-//! occluders' footprints by distance, and a pixel in hard shadow takes the inner-penumbra
-//! intensity of the silhouette its texel holds.
-//!
-//! `jfa-e`: `boundary.wgsl` finds eye pixels in hard shadow next to a lit pixel close in 3D
-//! (§5.1) and seeds them with the occluding silhouette point the light centre sees there;
-//! `flood_eye.wgsl` floods over the screen, keeping the highest intensity inside hard shadow
-//! and the lowest outside (inner and outer penumbrae), with the two remedies of §5.2 against
-//! "jump too far" as switches (`same_object`, `midpoint`); `final_eye.wgsl` takes the stored
-//! intensity, else hard shadow → 0, else 1.
-//!
-//! Colour (contract §1): both final passes bound the visible part of the light by the line
-//! through q along the silhouette's own direction at the occluder point (read from the
-//! shadow map around it), and weigh each channel on its far side with the light's edge table.
-//! The paper's line orthogonal to c→q (`edge: "paper"`) is right only for the occluder point
-//! flooding would ideally keep; across edges parallel to a colour boundary of the light it
-//! tilts and paints a hue the light cannot cast there. Flooding still chooses its occluder
-//! by the paper's intensity.
+//! The design, and each choice where the paper is vague: docs/methods.md#jfa-l-and-jfa-e.
 
 use std::sync::Arc;
 

@@ -176,7 +176,7 @@ impl MethodContext<'_> {
 
     /// A storage buffer for this frame only, from the renderer's pool: a steady stream of jobs
     /// reuses the same memory instead of allocating it anew — on lavapipe every page of a new
-    /// buffer is a page fault the first time a pass touches it, ~80 ms for the 128 MB of
+    /// buffer is a page fault the first time a pass touches it, a large share of a frame for
     /// `jfa-l`'s records at 2048². It holds whatever an earlier frame left: a method clears,
     /// or writes in full, what must start empty.
     pub fn scratch_buffer(&mut self, label: &'static str, size: u64, usage: wgpu::BufferUsages) -> wgpu::Buffer {
@@ -197,8 +197,8 @@ impl MethodContext<'_> {
     /// The shadow map's depths copied into a pooled storage buffer, row after row, and the
     /// texels from one row to the next (rows padded to the copy alignment); the copy is timed
     /// as pass `pass` of the method. On lavapipe a storage-buffer load is a plain gather where
-    /// a texel fetch is not, and the copy is a memcpy (a compute pass reading every texel cost
-    /// ~25 ms at 2048²).
+    /// a texel fetch is not, and the copy is a memcpy (cheaper than a compute pass reading
+    /// every texel).
     pub fn shadow_depth_copy(&mut self, label: &'static str, pass: &'static str) -> (wgpu::Buffer, u32) {
         let texture = self.shadow_depth;
         let (buffer, pitch) = self.rows_buffer(label, texture, 4, wgpu::BufferUsages::STORAGE);
@@ -343,8 +343,7 @@ pub trait ShadowMethod: Send + Sync {
     /// Whether the method reads the shadow map from the light's centre at all (`shadow_depth`,
     /// `MethodContext::shadow_depth`). One that does not — `wedges` works on the triangles,
     /// `reference` draws a map per sample — says so, and the frame skips the pass (its phase
-    /// then takes no time): 7–8 ms of a 2048² map at 1080p on lavapipe, ~20 ms over
-    /// `terrain`'s 100k triangles.
+    /// then takes no time).
     fn reads_shadow_map(&self) -> bool {
         true
     }
@@ -356,8 +355,8 @@ pub trait ShadowMethod: Send + Sync {
         false
     }
     /// Whether the method reads the G-buffer's object ids (`gbuf_id`). A method that does says
-    /// so; for the others the G-buffer pass draws without that target: at 1080p it was a tenth
-    /// of the pass on lavapipe (6 of 57 ms over a 100k-triangle landscape).
+    /// so; for the others the G-buffer pass draws without that target, a tenth of the pass on
+    /// lavapipe.
     fn reads_object_ids(&self) -> bool {
         false
     }

@@ -4,8 +4,7 @@
 //! formats and layouts every pass agrees on.
 //!
 //! The screen-space images are buffers, not storage textures, because lavapipe pays several
-//! times a buffer store for a store to an `rgba32float` storage texture (1080p: ~27 ms against
-//! ~10), and every method's last pass, E0 and the composite store one; a buffer also reads
+//! times a buffer store for a store to an `rgba32float` storage texture, and every method's last pass, E0 and the composite store one; a buffer also reads
 //! back without row padding. Pixel (x, y) is element `y × width + x` (`pixel_index` in
 //! `shaders/common/frame_inputs.wgsl`).
 

@@ -2,34 +2,7 @@
 //! vertices welded by position, every undirected edge with the triangles that use it, the
 //! surfaces they make up, and the silhouette edges seen from a point.
 //!
-//! The paper's shadow volumes assume closed, consistently wound meshes; the ones users bring
-//! are often not (open CAD shells, a character's tail as a single sheet, flipped faces,
-//! duplicated faces, three faces on an edge). So, before any silhouette:
-//! - duplicate triangles (the same three vertices, either winding: a sheet modelled as two
-//!   faces back to back) are one sheet, and degenerate ones nothing;
-//! - each surface's winding is made consistent across its two-triangle edges (a flipped face
-//!   is turned back to its neighbours' way), and a closed surface is turned outward;
-//! - a *closed* surface — one component whose every edge its triangles run as often one way
-//!   as the other — casts from the side facing the point, as the paper does: a ray from the
-//!   light enters it through a face towards the light exactly as often as it leaves;
-//! - an *open* one (a border, an edge of three faces, a one-sided surface that will not
-//!   orient) casts from its front as a closed one does, and also from its back wherever
-//!   nothing of it closes the back off: a back face whose centre sees the point past no
-//!   front face of its own surface is the only layer there (a sheet seen from behind, a
-//!   box's floor under its missing lid), so it casts, turned over; one behind its own front
-//!   faces (a landscape's far slopes, a head's inside seen through its open neck) is the
-//!   second crossing of a layer already counted, so it does not. With this, an edge counts
-//!   with the multiplicity its casting triangles give it and a boundary edge is a silhouette
-//!   from every side where its triangle casts — the rule of robust shadow volumes for
-//!   arbitrary meshes (Aldridge & Woods 2004; McGuire 2004) — without counting a solid's
-//!   open shell twice, which the sum of layers (§2) would show as a penumbra twice as dark.
-//!
-//! The silhouette is then the oriented boundary of the casting triangles, each turned towards
-//! the point: an edge's multiplicity is the uses a→b minus the uses b→a. Between the front
-//! and back of a closed surface that is ±1; between two front faces 0; at the fold of an open
-//! sheet seen from the point 2 (two layers meet there); at its border 1. Being a boundary, the
-//! result is always closed — every vertex has as many silhouette edges in as out — whatever
-//! the mesh.
+//! The design, and each choice where the paper is vague: docs/methods.md#surfaces-and-silhouettes-in-the-code-sceneadjacencyrs.
 
 use std::collections::{HashMap, HashSet};
 

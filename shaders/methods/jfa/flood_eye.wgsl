@@ -93,8 +93,7 @@ fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_id) l
         // Only the offered neighbours are weighed, in neighbour order: lanes run in lockstep
         // and a loop runs as many times as its busiest lane needs, so a SIMD group of pixels
         // offered few records — most of the early rounds' tiles, far from a boundary — weighs
-        // few, where a loop over all eight weighed eight (the rounds took 18–28 % less,
-        // output identical).
+        // few, where a loop over all eight would weigh eight.
         let offers = offered(r);
         var after_key = -NO_KEY; // the (key, neighbour) order's lower bound, exclusive
         var after_k = -1;

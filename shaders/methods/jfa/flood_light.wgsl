@@ -29,16 +29,14 @@ fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_id) l
         // Each neighbour's occluder weighed as it comes, the one held skipped (its key is
         // the pixel's). Neighbours mostly hand on the same occluder, whose repeats have the
         // key of its first offer, which a strict `<` keeps. Gathering the distinct offers
-        // first in a private array and weighing each once (as this pass did before the rounds'
-        // keys came from a grid) cost more than the repeated keys once they were cheap: over
-        // the nine cases of `penumbra bench` the rounds took 7 % less without it (−15 % on
-        // `terrain` under `flame`, +14 % on `crowd` under `flame`), output identical.
+        // first in a private array and weighing each once costs more than the repeated keys,
+        // which come from a grid and are cheap.
         //
         // Only the neighbours holding a record are weighed, found first from each record's w
         // alone (one load, where weighing a record costs its whole vec4 and a key): lanes run
         // in lockstep and a loop runs as many times as its busiest lane needs, so a SIMD group
         // of texels offered few records — most of the early rounds' tiles — weighs few, where
-        // a loop over all eight weighed eight (the rounds took 9–32 % less, output identical).
+        // a loop over all eight would weigh eight.
         let held = best.xyz;
         var offers = 0u;
         for (var k = 0u; k < JUMP_NEIGHBOURS; k++) {

@@ -5,8 +5,7 @@
 
 // A cell's jump neighbours: p + (a, b)·step but p itself, whose record the cell holds already.
 // Left out of the loop rather than skipped in it: on lavapipe lanes run in lockstep, so an
-// iteration every lane skips still costs a full one — a ninth of a round (`jfa-l`'s rounds
-// took 6–22 % less, `jfa-e`'s 1–17 %, output identical).
+// iteration every lane skips still costs a full one — a ninth of a round.
 const JUMP_NEIGHBOURS: u32 = 8u;
 
 // The i-th jump neighbour at this step (i in 0..JUMP_NEIGHBOURS, row by row: (−1, −1),

@@ -2,9 +2,7 @@
 // of its 8 neighbours is deeper by more than a threshold (or empty); silhouette pixels seed
 // the flood with their own light-space (world) position. Only the seeds are stored, over
 // records a buffer fill has emptied (`methods::jfa`): on lavapipe a store runs lane by lane,
-// and storing an empty record for every other texel of the map cost more than the fill (the
-// pass on `terrain` 76 → 57 ms, on `crowd` 54 → 47 ms under `flame`, the method's whole
-// request 2–9 % faster with the fill).
+// and storing an empty record for every other texel of the map costs more than the fill.
 
 #import methods/jfa/common.wgsl
 

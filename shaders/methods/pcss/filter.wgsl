@@ -91,7 +91,7 @@ fn cone_half_extent(d: f32, z: f32) -> vec2<f32> {
 // dot(p − c, N) / dot(w, N). dot(w, N) is linear in t and |w|² = 1 + |t|² (the light frame is
 // orthonormal), so the pixel's part is done once here, a row's part once per row (`TapRow`),
 // and a tap costs a few multiply-adds and one division. On lavapipe, where the invariant parts
-// had stayed inside the loops, that halved the cost of the search and the filter (README).
+// had stayed inside the loops, that halved the cost of the search and the filter (docs/performance-log.md).
 struct ReceiverPlane {
     facing_n: f32, // dot(n, N), dot(r, N), dot(u, N)
     facing_r: f32,

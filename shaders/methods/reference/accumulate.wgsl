@@ -14,13 +14,13 @@
 // it can — its point, its weight and its map's scale (4 with one channel, 6 with three), its
 // crop's origin (both texels in one word) only where the maps are cropped (`CROPPED`) — and
 // what the batch shares (one near plane for every map, the map's size) is loaded once per
-// pixel into `Receiver`: 12–22 % off the pass against 10 floats a sample. Every sample's
+// pixel into `Receiver`. Every sample's
 // frustum looks along the light normal with the image's up, so they share one rotation: the
 // pixel is rotated into it once per batch and each sample costs a subtraction, not a matrix.
-// The batches run only over row segments that hold a receiver (`list_segments`): 15–30 % off
-// the pass on the bench's views, whose sky cost as much as their ground.
+// The batches run only over row segments that hold a receiver (`list_segments`): the sky
+// would cost as much as the ground.
 // And every sample lies on the light's plane, so a pixel's depth along the normal is the same
-// from each: its reciprocal, square and bias are taken once per pixel too (3–6 % of the pass).
+// from each: its reciprocal, square and bias are taken once per pixel too.
 
 #import common/frame_inputs.wgsl
 #import common/pixel_list.wgsl
@@ -140,7 +140,7 @@ fn add_sample(sums: ptr<function, Sums>, r: Receiver, last: vec2<f32>, layer: u3
 // Once per frame, before the batches, per row segment of `SEGMENT` pixels: lists the segment
 // if it holds a covered pixel, else writes its pixels' visibility (lit, as the last batch
 // writes an uncovered pixel's). On lavapipe an uncovered pixel's early return skips nothing —
-// every sample's test still runs (a 1080p frame all sky: 407 ms for 64 samples) — so the
+// every sample's test still runs — so the
 // batches run over the listed segments alone, and the sky costs a texel read a pixel.
 @compute @workgroup_size(8, 8)
 fn list_segments(@builtin(global_invocation_id) id: vec3<u32>) {

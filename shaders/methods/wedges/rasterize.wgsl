@@ -4,7 +4,7 @@
 // buffer (an "LI write") where the primitive touches it. The entry points
 // (`rasterize_umbra.wgsl`, `rasterize_penumbra.wgsl`, `rasterize_both.wgsl`) each hold only
 // the code their items need: on a CPU rasteriser (lavapipe) the wedge code alone, even never
-// taken, made the umbra loop 13× slower. The two contributions:
+// taken, makes the umbra loop many times slower. The two contributions:
 // - a shadow-volume polygon of the light centre's hard shadow (`rasterizeUmbra`): ∓full for a
 //   crossing of the eye ray in front of the point (z-pass) or, with the signs reversed, beyond
 //   it (z-fail, §5 — with the volume's caps, correct with the eye inside a shadow);
@@ -26,9 +26,8 @@ override COLOR_ANGLES: u32 = 8u;
 override TILE: u32 = 8u;
 // Invocations per work item, each taking every LANES-th pixel of the tile. lavapipe runs a
 // workgroup as a loop over SIMD groups of 8 lanes, each paying again for what every lane of
-// the item shares (its work item, its primitive): 8 lanes there, each with 8 of a 8×8
-// tile's pixels, took the umbra pass on `terrain` from 85 to 42 ms and the penumbra
-// listing from 251 to 130 ms. A GPU keeps 64, two warps.
+// the item shares (its work item, its primitive), so there 8 lanes each take 8 of an 8×8
+// tile's pixels (`methods::wedges` sets it). A GPU keeps 64, two warps.
 override LANES: u32 = 64u;
 
 fn cross2(a: vec2<f32>, b: vec2<f32>) -> f32 {
@@ -104,8 +103,7 @@ fn volume_crossing(poly: VolumePolygon, eye: vec3<f32>, p: vec3<f32>) -> i32 {
 // vertex is at an index fixed when the shader is built — the clip's loop unrolled, a vertex at
 // a lane-varying index picked by a chain of selects (`polygon_vertex`), one written by a
 // select per slot (`put_vertex`). Indexed by lane-varying counts they lived in function
-// memory, where on lavapipe each access is a gather or a scatter lane by lane: the shading of
-// `terrain` under `mosaic` ~235 → ~175 ms, its images byte-identical.
+// memory, where on lavapipe each access is a gather or a scatter lane by lane.
 
 // Vertex k of `poly`.
 fn polygon_vertex(poly: ptr<function, array<vec2<f32>, 8>>, k: u32) -> vec2<f32> {
@@ -338,9 +336,8 @@ fn colored_share(poly: ptr<function, array<vec2<f32>, 8>>, count: u32, a2: vec2<
     let start = fract((atan2(g.y, g.x) + lo) / TAU) * TAU;
     // `color_angles` steps across a region an eighth of a turn wide or wider; a narrower one
     // takes steps as wide as such a region's, but at least two. A short silhouette edge (a
-    // landscape's) cuts a narrow region, where the line hardly drifts within a step: on
-    // `terrain` under `stripes` this took the shading from ~260 to ~220 ms, every penumbra
-    // error within 2e-6 of the fixed count's and the `occluder` closed form's unchanged.
+    // landscape's) cuts a narrow region, where the line hardly drifts within a step (errors
+    // within 2e-6 of a fixed count's).
     let steps = clamp(u32(ceil(4.0 * f32(COLOR_ANGLES) * (hi - lo) / PI)), min(2u, COLOR_ANGLES), COLOR_ANGLES);
     let width = (hi - lo) / f32(steps);
     let line_normal = vec2<f32>(-d.y, d.x);

@@ -40,8 +40,7 @@ fn mark_inside(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups)
     let index = item_index(group, groups);
     let w = wedges[item.job.primitive - params.polygon_count];
     // A lane's pixels are collected in a mask and appended with one atomic for up to 32 of
-    // them (on lavapipe an atomic is a loop over the lanes: one per listed pair took this
-    // pass from ~48 to ~64 ms on `terrain` under `mosaic`). The pairs' order in the list
+    // them (on lavapipe an atomic is a loop over the lanes). The pairs' order in the list
     // changes; the shading adds fixed-point shares, whose sum does not depend on it.
     var mask = 0u;
     var bit = 0u;

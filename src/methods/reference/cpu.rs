@@ -1,10 +1,9 @@
 //! Engine `cpu` of method `reference`: the GPU engine's estimate — the same samples, the same
 //! maps (frusta, crops, and Vulkan's rules for which texels a triangle covers and at what
 //! depth) and the same test per receiver and sample (`accumulate.wgsl`) — computed by plain
-//! code on the CPU's cores. On a software adapter the GPU *is* those cores, and lavapipe
-//! pays ~0.28 µs of a core to set up, bin and rasterise each triangle of a map and ~6 ns for
-//! each test, where this code takes ~0.1 µs and ~2.5 ns (`docs/performance-log.md`, the
-//! stop based on 5c048a5). On a GPU the GPU engine is the fast one.
+//! code on the CPU's cores. On a software adapter the GPU *is* those cores, and this code
+//! pays less than lavapipe does per triangle of a map and per test (the figures:
+//! `docs/performance-log.md`). On a GPU the GPU engine is the fast one.
 //!
 //! The work goes in rounds of as many samples as there are threads: each thread draws one
 //! sample's map, then each takes a share of the receivers and tests them against the round's
@@ -34,8 +33,7 @@ const FIXED_RANGE: f32 = (1 << 20) as f32;
 
 /// Rows of a triangle at least this many texels wide find where they are covered by solving
 /// each edge for x (three divisions) instead of testing every texel: the same texels, fewer
-/// steps on the large triangles of a simple scene (`columns`' 64 maps at 2048²: 183–198 →
-/// 55–58 ms).
+/// steps on the large triangles of a simple scene.
 const SPAN_FROM: i64 = 8;
 
 /// Eight receivers, structure of arrays: what the test of `accumulate.wgsl` takes once per

@@ -2,30 +2,7 @@
 //! channel, estimated from many point samples on the light. The ground truth every other
 //! method is measured against.
 //!
-//! Samples are stratified over the light rectangle (a grid matching its aspect) and jittered
-//! within each stratum; a sample that lands on a black or transparent texel has no weight and
-//! costs nothing. For each sample the scene is drawn into a depth map from the sample point
-//! (`sample_depth.wgsl`: the rasteriser's reversed-Z depth alone, no fragment shader), a layer
-//! of an array; once per batch of up to 32 samples every pixel adds the batch's `L·G·V`
-//! and `L·G` to two sums (`accumulate.wgsl`: the first batch writes them, the last writes
-//! their ratio instead), over the row segments of eight pixels that hold a receiver, listed
-//! once per frame (`list_segments`): on lavapipe a pixel of sky cost its tests as a receiver
-//! does. The sums have one channel where every sample's weight is gray (a white or
-//! shaped white light, whose three channels' sums would be equal) and three otherwise.
-//! Batching changes only the order of the additions (the same samples, maps and tests).
-//! Numerator and denominator share the same samples, so lit and umbra pixels are exact and the
-//! noise lives only in the penumbra. At 1080p on lavapipe a sample with a 2048² map costs
-//! ~2 ms to clear it, ~2 ms to draw `crowd` into it and ~6–8 ms (one channel) to ~8–9 ms
-//! (three) to test and add it at every pixel. Only the part of each map where the frame's
-//! receivers can fall is drawn (`MapCrop`, from the camera's view of the scene's bounds:
-//! `render::convex`) where that is at most a quarter of the map, which takes about half off the
-//! maps of a scene the camera sees only a small part of.
-//!
-//! Bias controls: the visibility test forgives `bias_texels + slope_bias_texels·tanθ` texels
-//! of each sample's map (θ between the receiver's normal and the direction to the light's
-//! centre, the same for every sample), so the bias in metres shrinks as `resolution` grows; with samples
-//! and resolution both growing the estimate converges to the true visibility (the analytic
-//! test in `tests/render.rs` shows the error shrinking).
+//! The design, and each choice where the paper is vague: docs/methods.md#reference.
 
 use glam::{Mat4, UVec2, Vec2, Vec3, Vec4};
 
@@ -88,9 +65,8 @@ const BATCH: u64 = 16;
 
 /// Memory the depth maps of one accumulate batch may take: 32 maps at the default 1024² and at
 /// 2048², eight at 4096². Each batch but the last stores every pixel's sums and each but the
-/// first reads them, and on lavapipe a pixel's stores cost about as much as a sample's test:
-/// 64 samples of 2048² at 1080p in two batches of 32 rather than four of 16 took the whole
-/// request from 0.97 to 0.92 s under a coloured light (0.85 to 0.80 s under white).
+/// first reads them, and on lavapipe a pixel's stores cost about as much as a sample's test,
+/// so fewer, larger batches are cheaper.
 const BATCH_MAP_BYTES: u64 = 512 << 20;
 
 /// The most samples one accumulate pass reads; mirrors `MAX_SAMPLES` in `accumulate.wgsl`
@@ -142,9 +118,8 @@ const CROP_GRANULE: u32 = 64;
 /// The largest crop drawn, as a fraction of the whole map's area; a larger one draws the
 /// whole map. A crop changes the rounding of where texel centres fall in x and y, so a few
 /// receivers on an edge seen edge-on may see a sample the other way (0.02 % of a 1080p
-/// `terrain` frame); it must save enough to be worth that. 64 maps of 2048² at 1080p
-/// (`penumbra bench`, separate runs in turn): `columns`, a 23 % crop, 45 % less time drawing
-/// the maps; `terrain`, 44 %, 6 % less; `crowd`, 63 %, 10 % less.
+/// `terrain` frame); it must save enough to be worth that, and only a crop of at most a
+/// quarter of the map saved much of the maps' time (docs/methods.md, `reference`).
 const MAX_CROP_FRACTION: f32 = 0.25;
 
 /// Which part of each sample's map is drawn: a rectangle of `size` texels of the whole
@@ -535,9 +510,8 @@ impl DepthMaps {
     /// (`None`: no receiver of the frame falls in that map, cleared and left empty), into
     /// layers `0..`. Timed together where timestamps can be written between passes (a scope per
     /// map would take the timer's queries at 256 samples). A render pass each, though lavapipe
-    /// begins every pass by waiting until the one before is rasterised (~a quarter of
-    /// `terrain`'s maps): six maps a multiview pass took 2 % off and needs a guard against a
-    /// lavapipe bug, and a batch in one pass (an atlas) would round each map's vertices
+    /// begins every pass by waiting until the one before is rasterised: a multiview pass saved
+    /// little and needs a guard against a lavapipe bug, and a batch in one pass (an atlas) would round each map's vertices
     /// differently (`docs/performance-log.md`).
     fn draw(&self, ctx: &mut MethodContext<'_>, first: usize, origins: &[Option<UVec2>]) {
         let scene = ctx.scene;

@@ -2,43 +2,7 @@
 //! primitive's footprint in screen tiles, the tiles' NDC boxes from their zmin/zmax, the test
 //! of a (primitive, tile) pair, and the work items the rasteriser runs.
 //!
-//! §4 tests a tile's box against the wedge's planes ("the tests corresponding to the faces of
-//! A or B"); this module gives every primitive the planes of a convex region holding every
-//! receiver it can change, and tests them with the box's p-vertex (Fig. 7):
-//! - a penumbra wedge: the region from which the silhouette edge hides some point of the
-//!   light, `conv{a, b} + cone{a − y, b − y}` over the light's corners y (`wedge_region`);
-//! - a shadow-volume polygon (past the paper, which rasterises these in hardware with a depth
-//!   test): the receivers whose eye ray crosses it where the count looks — the polygon's cone
-//!   from the eye, beyond its plane for z-pass, before it for z-fail (`crossing_region`).
-//!
-//! Past the paper, each tile is also tested by the world-space box of its receivers' points:
-//! a tile's NDC box is its pixels' frustum slice between zmin and zmax, as deep as the range
-//! and as wide as the slice there, where the points of a surface patch seen at a grazing angle
-//! (a landscape) fill a thin box — on `terrain`, most tiles a wedge's region slices through
-//! between zmin and zmax hold no point inside it.
-//!
-//! Two more tests past the paper, both from what `tiles.wgsl` reads of each tile's pixels:
-//! - the slab its points span along the normal at its centre pixel, cut by the rays through
-//!   its corners (`slab_hull`): a slope seen at a grazing angle lies in a thin slab where
-//!   both boxes are thick (on `terrain`, 9 % fewer work items);
-//! - the object all its pixels ignore, where there is one: a pixel facing away from the light
-//!   centre ignores its own object's volume polygons and wedges (`rasterize.wgsl`), so a tile
-//!   of a landscape's far slopes needs none of the landscape's — on `terrain` under `stripes`
-//!   80 % of the work items that reached the rasteriser changed no pixel, most for this.
-//!
-//! A primitive's screen box (the tiles it is tested over) is its region's, cut where the
-//! region runs deeper below the light's plane than any receiver can lie — the scene's
-//! deepest point (and, for a z-pass volume polygon, the eye's depth: `crossing_part`). Wedges
-//! and side quads run out to `reach`, far below a landscape, and on `terrain` the cut took the
-//! culling from ~40 to ~25 ms of a frame's CPU time (while the device idles), and its tighter
-//! depth range 2 % of the work items.
-//!
-//! Each region holds every receiver the primitive changes, so culling changes no pixel (a test
-//! renders with and without it). The boxes are widened by half a pixel and a thousandth of
-//! their depth, so a receiver that the G-buffer places a rounding away from its pixel centre,
-//! or on the polygon itself, is never culled. Tiles are tested in blocks first, and blocks in
-//! blocks of blocks: a block whose box fails a plane culls all its tiles at once (a tile's box
-//! lies inside its block's), which gives the same survivors for a fraction of the tests.
+//! The design, and each choice where the paper is vague: docs/methods.md#wedges.
 
 use glam::{Mat4, Vec3, Vec4};
 use rayon::prelude::*;
@@ -176,7 +140,7 @@ pub(super) fn cull(
 ) -> Work {
     let to_ndc = view_proj.inverse().transpose();
     // Primitives are culled independently: on all cores (a frame's culling waits on the CPU
-    // while the device idles; on `terrain` it was 64 ms on one core).
+    // while the device idles).
     let deepest = deepest + 1e-5 * reach;
     let umbra: Vec<Footprint> = (volume.polygons.par_iter().zip(&volume.object))
         .map(|(p, &object)| match crossing_part(p, light, eye, deepest, zfail) {

@@ -5,46 +5,7 @@
 //! The one object-space method: its cost follows the silhouette, not only the resolution.
 //! Shaders: `shaders/methods/wedges/`.
 //!
-//! On the CPU, per job: the silhouette edges seen from the light centre (`scene::adjacency`,
-//! cached per scene); per edge a side quad of the light centre's shadow volume and a penumbra
-//! wedge; their screen bounding boxes; after the GPU has measured every tile's depth range
-//! (`tiles.wgsl`), the culling — each (primitive, tile) pair is tested and, if it survives,
-//! becomes one work item. `rasterize.wgsl` runs the items (one workgroup each, over the tile's
-//! pixels) into a light-intensity buffer of i32 atomics (fixed point, full light = 2¹⁶, so
-//! 32 767 overlapping volumes fit where the paper's 16-bit stencil held 127); `resolve.wgsl`
-//! turns it into visibility. WGSL has neither geometry shaders nor a stencil buffer that adds
-//! arbitrary values, so the rasteriser is a compute pass — which is also how the paper ran
-//! its penumbra pass (in software).
-//!
-//! Choices where the paper defers to its wedge papers [1, 2]:
-//! - The umbra volume is the light centre's hard shadow volume (side quads through the edge
-//!   and the centre), and a wedge's contribution is computed exactly for the rectangle: the
-//!   edge is projected from the pixel's point onto the light; every light point beyond it,
-//!   within its angular sector from the centre, is covered by one more layer than the centre
-//!   — so that share, clipped to the rectangle, is added where the centre is hidden and taken
-//!   away where it is seen. Summed over a closed silhouette this is the exact covered area of
-//!   the light (the winding number changes by one at each edge), with no side planes to match
-//!   between neighbouring wedges. This is the arrangement of [2]; the paper's restructuring,
-//!   culling and z-fail apply to it unchanged (§8).
-//! - A coloured (or shaped) light image (the paper's lights are uniform; contract §1 asks for
-//!   visibility per channel): the LI buffer holds three values per pixel, and a wedge takes
-//!   away from each channel the irradiance its region blocks — Lambert's exact share of the
-//!   region times the region's mean radiance, integrated from the light's sector table
-//!   (`light::tables`) in up to `color_angles` angular steps — over that channel's E0. The cost does
-//!   not grow with the image's texels; a uniform image keeps the one gray value and the exact
-//!   share.
-//! - Wedge culling uses the wedge's two tangent planes (through the edge, touching the light
-//!   rectangle: the wedge lies between them on the side away from the light) transformed to
-//!   screen space, tested with the n/p vertex of the tile's box (Fig. 7), after the quick
-//!   z-range rejection; the wedge's side extent is bounded by its screen bounding box.
-//! - Volumes are extruded to twice the distance of the scene's farthest corner and closed
-//!   there for z-fail; rays are intersected with the polygons analytically, so no far plane
-//!   clips them (the role of the paper's infinite far plane).
-//! - Surfaces on their own volume's cap (every lit caster) count as outside it.
-//! - Past the paper, a pixel inside a wedge is skipped where the wedge's silhouette edge,
-//!   projected from it onto the light, misses the octagon around the light's emitting texels
-//!   (`light::tables::emitting_octagon`): the light it hides lies beyond that edge, so it
-//!   hides only black. Under a flame-shaped light that was two in three wedge pixels.
+//! The design, and each choice where the paper is vague: docs/methods.md#wedges.
 
 use std::sync::Arc;
 
