@@ -11,7 +11,7 @@ use futures_util::StreamExt;
 use serde::Serialize;
 use serde_json::Value;
 
-use crate::uploads::content_id;
+use crate::upload_store::content_id;
 
 /// The header that carries a job's scene id (or built-in name), so that a balancer in front
 /// of several replicas can route every job of a scene to the replica that has it cached.

@@ -5,29 +5,29 @@
 //! shadow method) → `output` (PNG/EXR). `engine` holds the warm state behind both the CLI and
 //! `server`. See ARCHITECTURE.md for the map.
 
-pub mod bench;
 pub mod client;
 pub mod color;
 pub mod config;
+pub mod daemon_bench;
 pub mod engine;
 pub mod error;
 pub mod eval;
 pub mod gpu;
 pub mod image_input;
 pub mod job;
-pub mod jobs;
 pub mod light;
 pub mod methods;
 pub mod output;
 pub mod params;
 pub mod quality;
+pub mod queue;
 pub mod render;
 pub mod scene;
 pub mod server;
 pub mod store;
 pub mod supervise;
 pub mod timing;
-pub mod uploads;
+pub mod upload_store;
 
 #[cfg(test)]
 mod tidy;

@@ -45,7 +45,7 @@ enum Command {
     /// penumbra error and the interpolated E0's error beside it: `bench.md`, `bench.json`.
     Bench {
         #[command(flatten)]
-        bench: penumbra::eval::bench::BenchOptions,
+        bench: penumbra::eval::frame_bench::BenchOptions,
         #[command(flatten)]
         options: RenderOptions,
     },
@@ -53,7 +53,7 @@ enum Command {
     /// clients, memory under uploads of ten times the cache budget (a real loopback server).
     BenchDaemon {
         #[command(flatten)]
-        bench: penumbra::bench::BenchOptions,
+        bench: penumbra::daemon_bench::BenchOptions,
         #[command(flatten)]
         options: RenderOptions,
     },
@@ -159,13 +159,13 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Bench { bench, options } => {
             let gpu = open_gpu(&options)?;
             let engine = Engine::new(gpu, options.limits.limits(), PathPolicy::Any);
-            let report = penumbra::eval::bench::run(&engine, &bench)?;
+            let report = penumbra::eval::frame_bench::run(&engine, &bench)?;
             eprintln!("wrote {} rows to {}", report.rows.len(), bench.out.join("bench.md").display());
             Ok(())
         }
         Command::BenchDaemon { bench, options } => {
             let gpu = open_gpu(&options)?;
-            penumbra::bench::run(gpu, &bench)?;
+            penumbra::daemon_bench::run(gpu, &bench)?;
             Ok(())
         }
         Command::Submit(options) => submit(&options),

@@ -880,7 +880,7 @@ fn chromium(extra: &[&str], url: &str) -> String {
 #[test]
 fn the_daemon_benchmark_runs_and_reports() {
     let out = tempdir::Dir::new();
-    let options = penumbra::bench::BenchOptions {
+    let options = penumbra::daemon_bench::BenchOptions {
         out: out.path().to_path_buf(),
         repeat: 2,
         clients: vec![1, 3],
@@ -889,7 +889,7 @@ fn the_daemon_benchmark_runs_and_reports() {
         scene_side: 24,
         concurrency: vec![1, 2],
     };
-    let report = penumbra::bench::run(common::engine().gpu(), &options).expect("the benchmark runs");
+    let report = penumbra::daemon_bench::run(common::engine().gpu(), &options).expect("the benchmark runs");
     assert!(report.overhead.library_median_ms > 0.0 && report.overhead.http_median_ms > 0.0);
     assert_eq!(report.throughput.len(), 2);
     assert!(report.throughput.iter().all(|t| t.other_statuses.is_empty() && t.jobs_per_second > 0.0), "{:?}", report.throughput);

@@ -455,7 +455,7 @@ fn cluster_figures() {
             let path = cluster.work.join(format!("scene-{seed}.glb"));
             let bytes = penumbra::scene::gltf::height_field_glb(48, seed);
             std::fs::write(&path, &bytes).unwrap();
-            let id = penumbra::uploads::content_id(&bytes);
+            let id = penumbra::upload_store::content_id(&bytes);
             let url = format!("{}/v1/scenes/{id}", cluster.base);
             let put = Command::new("curl")
                 .args(["-s", "-o", "/dev/null", "-w", "%{http_code}", "-X", "PUT", "--data-binary"])

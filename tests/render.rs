@@ -715,7 +715,7 @@ fn reference_tests_only_the_row_segments_that_hold_a_receiver() {
 fn bench_writes_its_phase_table_and_the_e0_check() {
     let engine = common::own_engine();
     let out = std::env::temp_dir().join(format!("penumbra-bench-{}", std::process::id()));
-    let options = penumbra::eval::bench::BenchOptions {
+    let options = penumbra::eval::frame_bench::BenchOptions {
         scenes: vec!["crowd".into()],
         lights: vec!["white".into(), "flame".into()],
         methods: Vec::new(),
@@ -726,7 +726,7 @@ fn bench_writes_its_phase_table_and_the_e0_check() {
         reference_samples: 8,
         out: out.clone(),
     };
-    let report = penumbra::eval::bench::run(&engine, &options).unwrap();
+    let report = penumbra::eval::frame_bench::run(&engine, &options).unwrap();
     let methods = penumbra::methods::REGISTRY.len(); // every method but reference, and the timed reference
     assert_eq!(report.rows.len(), 2 * methods);
     for row in &report.rows {
@@ -777,7 +777,7 @@ fn bench_writes_its_phase_table_and_the_e0_check() {
     // timestamp when they get to it (once 0.02 against 0.36 ms in CI, with the other render
     // tests running beside it) — but not every row of a method.
     if engine.gpu().timestamps {
-        let composite = |r: &penumbra::eval::bench::BenchRow| r.phases.iter().find(|(p, _)| p == "composite").map(|(_, ms)| *ms).unwrap();
+        let composite = |r: &penumbra::eval::frame_bench::BenchRow| r.phases.iter().find(|(p, _)| p == "composite").map(|(_, ms)| *ms).unwrap();
         let mut composites: Vec<f64> = report.rows.iter().map(composite).collect();
         composites.sort_by(f64::total_cmp);
         let median = composites[composites.len() / 2];

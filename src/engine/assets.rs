@@ -13,7 +13,7 @@ use crate::job::{AssetRef, SceneRef};
 use crate::light::LightImage;
 use crate::scene::{self, builtin};
 use crate::timing::Timings;
-use crate::uploads::{Asset, Kind};
+use crate::upload_store::{Asset, Kind};
 
 /// Where `{"path": ...}` assets may be read from.
 #[derive(Debug, Clone, PartialEq, Eq)]

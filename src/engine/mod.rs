@@ -11,9 +11,9 @@
 mod assets;
 mod check;
 mod device;
+mod ingest;
 mod lru;
 mod stats;
-mod uploads;
 
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
@@ -21,7 +21,7 @@ use std::time::Instant;
 pub use assets::PathPolicy;
 pub use check::check_job;
 pub use stats::EngineStats;
-pub use uploads::UploadReceipt;
+pub use ingest::UploadReceipt;
 
 use crate::error::JobResult;
 use crate::gpu::scene::GpuScene;
@@ -33,7 +33,7 @@ use crate::quality::QualityReport;
 use crate::render::{FrameOutput, Renderer};
 use crate::supervise::Supervisor;
 use crate::timing::Timings;
-use crate::uploads::{Kind, UploadStore};
+use crate::upload_store::{Kind, UploadStore};
 use lru::Lru;
 
 /// A finished render: the encoded image and what it cost.

@@ -4,7 +4,7 @@
 use serde::Serialize;
 
 use super::{Engine, RenderState};
-use crate::uploads::UploadStats;
+use crate::upload_store::UploadStats;
 
 /// Counts for `/v1/stats` and logs.
 #[derive(Debug, Clone, Default, Serialize)]

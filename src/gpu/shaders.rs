@@ -37,11 +37,11 @@ pub const SOURCES: &[(&str, &str)] = &[
     ("methods/jfa/boundary.wgsl", include_str!("../../shaders/methods/jfa/boundary.wgsl")),
     ("methods/jfa/flood_eye.wgsl", include_str!("../../shaders/methods/jfa/flood_eye.wgsl")),
     ("methods/jfa/final_eye.wgsl", include_str!("../../shaders/methods/jfa/final_eye.wgsl")),
-    ("methods/pcss/filter.wgsl", include_str!("../../shaders/methods/pcss/filter.wgsl")),
-    ("methods/pcss/pcss.wgsl", include_str!("../../shaders/methods/pcss/pcss.wgsl")),
-    ("methods/pcss/quadtree.wgsl", include_str!("../../shaders/methods/pcss/quadtree.wgsl")),
-    ("methods/pcss/chun_oh.wgsl", include_str!("../../shaders/methods/pcss/chun_oh.wgsl")),
-    ("methods/pcss/quadtree_probe.wgsl", include_str!("../../shaders/methods/pcss/quadtree_probe.wgsl")),
+    ("methods/filter.wgsl", include_str!("../../shaders/methods/filter.wgsl")),
+    ("methods/pcss.wgsl", include_str!("../../shaders/methods/pcss.wgsl")),
+    ("methods/chun_oh/quadtree.wgsl", include_str!("../../shaders/methods/chun_oh/quadtree.wgsl")),
+    ("methods/chun_oh/chun_oh.wgsl", include_str!("../../shaders/methods/chun_oh/chun_oh.wgsl")),
+    ("methods/chun_oh/quadtree_probe.wgsl", include_str!("../../shaders/methods/chun_oh/quadtree_probe.wgsl")),
     ("methods/wedges/common.wgsl", include_str!("../../shaders/methods/wedges/common.wgsl")),
     ("methods/wedges/tiles.wgsl", include_str!("../../shaders/methods/wedges/tiles.wgsl")),
     ("methods/wedges/rasterize.wgsl", include_str!("../../shaders/methods/wedges/rasterize.wgsl")),
@@ -55,7 +55,7 @@ pub const SOURCES: &[(&str, &str)] = &[
 
 /// Shaders that are pipelines' entry files: those that declare an entry point and that no
 /// other shader imports (an imported file may hold entries that need what its importer
-/// defines, as `methods/pcss/filter.wgsl` needs `filtered_visibility`).
+/// defines, as `methods/filter.wgsl` needs `filtered_visibility`).
 pub fn entry_shaders() -> impl Iterator<Item = &'static str> {
     SOURCES
         .iter()

@@ -2,7 +2,7 @@
 //! Various Shapes and Colors"): the PCSS filter of `filter.rs`, adaptively subdivided like a
 //! quad tree where the shadow or the light is complex, each sub-region's visibility weighting
 //! the colour of the matching part of the light image (§3, Fig. 3). Shader:
-//! `shaders/methods/pcss/chun_oh.wgsl`.
+//! `shaders/methods/chun_oh/chun_oh.wgsl`.
 //!
 //! Choices where the paper is brief:
 //! - Sub-regions partition the filter's one lattice of shadow tests (kept as bit rows, so a
@@ -76,7 +76,7 @@ impl ShadowMethod for ChunOh {
         let mode = if params.get(&MODE) == "fixed" { MODE_FIXED } else { MODE_ADAPTIVE };
         let uniforms = Uniforms::new(ctx, params).subdividing(mode, params.get(&THRESHOLD), params.get(&LIGHT_THRESHOLD));
         let regions = light_regions_buffer(ctx);
-        let counts = filter::run(ctx, "chun-oh", "methods/pcss/chun_oh.wgsl", uniforms, &regions)?;
+        let counts = filter::run(ctx, "chun-oh", "methods/chun_oh/chun_oh.wgsl", uniforms, &regions)?;
         let mut counters = counts.counters(u64::from(ctx.width) * u64::from(ctx.height));
         for (level, &count) in counts.levels.iter().enumerate() {
             counters.insert(format!("pixels_subdivided_{level}"), f64::from(count));
@@ -131,7 +131,7 @@ pub fn quadtree_probe(
     let pipeline = crate::gpu::shaders::compute_pipeline(
         device,
         "Probe::pipeline",
-        ("methods/pcss/quadtree_probe.wgsl", "main"),
+        ("methods/chun_oh/quadtree_probe.wgsl", "main"),
         &[&bind_layout],
         &[],
     );

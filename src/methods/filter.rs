@@ -1,4 +1,4 @@
-//! The filter pass `pcss` and `chun-oh` share (`shaders/methods/pcss/filter.wgsl`): per
+//! The filter pass `pcss` and `chun-oh` share (`shaders/methods/filter.wgsl`): per
 //! pixel, a blocker search over the cone from the pixel to the light's four corners cut at
 //! the nearest possible occluder depth, a filter sized by the cone cut at the blockers'
 //! average depth (Chun & Oh 2016 §3, after Fernando 2005), and a lattice of shadow tests over
@@ -280,7 +280,7 @@ mod tests {
 
     #[test]
     fn the_classification_run_matches_the_shader() {
-        crate::gpu::shaders::assert_declares("methods/pcss/filter.wgsl", &format!("const ROW_PIXELS: u32 = {CLASSIFY_ROW}u;"));
+        crate::gpu::shaders::assert_declares("methods/filter.wgsl", &format!("const ROW_PIXELS: u32 = {CLASSIFY_ROW}u;"));
     }
 
     #[test]

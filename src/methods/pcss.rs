@@ -1,6 +1,6 @@
 //! Method `pcss` (Fernando 2005, "Percentage-closer soft shadows"): the shared filter pass
 //! (`filter.rs`) with the plain average of its shadow tests, gray — the baseline Chun & Oh
-//! 2016 compare with (`shaders/methods/pcss/pcss.wgsl`).
+//! 2016 compare with (`shaders/methods/pcss.wgsl`).
 
 use super::filter::{self, Uniforms, FILTER_PARAMS};
 use super::{Counters, MethodContext, ParamSpec, Params, ShadowMethod};
@@ -25,7 +25,7 @@ impl ShadowMethod for Pcss {
         let uniforms = Uniforms::new(ctx, params);
         // pcss reads no light colours; the binding still needs a table.
         let regions = filter::light_regions_buffer(ctx);
-        let counts = filter::run(ctx, "pcss", "methods/pcss/pcss.wgsl", uniforms, &regions)?;
+        let counts = filter::run(ctx, "pcss", "methods/pcss.wgsl", uniforms, &regions)?;
         Ok(counts.counters(u64::from(ctx.width) * u64::from(ctx.height)))
     }
 }

@@ -7,13 +7,13 @@ pub mod auth;
 pub mod connections;
 mod dashboard;
 pub mod error;
-mod jobs;
+mod job_routes;
 mod meta;
 pub mod metrics;
 mod render;
 mod serve;
 mod state;
-mod uploads;
+mod upload_routes;
 mod worker;
 
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -32,24 +32,24 @@ use crate::config::ServeConfig;
 use crate::engine::{Engine, Rendered};
 use crate::error::{ErrorCode, JobError};
 use crate::job::{Job, JobStatus};
-use crate::jobs::{JobEvent, JobQueue, JobSummary, LiveJobs, RecentJobs};
+use crate::queue::{JobEvent, JobQueue, JobSummary, LiveJobs, RecentJobs};
 use crate::light::BUILTIN_LIGHT_IMAGES;
 use crate::methods::REGISTRY;
 use crate::scene::builtin::BUILTIN_SCENES;
 use crate::store::{new_job_id, JobStore as DurableStore, Store, StoreError, StoredJob, MAX_ATTEMPTS};
 use crate::supervise::Supervise;
-use crate::uploads::{content_id, is_content_id, Kind};
+use crate::upload_store::{content_id, is_content_id, Kind};
 use error::{store_error, ApiError};
-use jobs::{cancel_job, job_events, job_image, job_record, job_thumbnail, submit_job};
+use job_routes::{cancel_job, job_events, job_image, job_record, job_thumbnail, submit_job};
 use meta::{limits, methods, metrics, readyz, stats};
 use render::{image_response, job_json, render, render_blocking};
 pub use serve::serve;
 use state::Admitted;
 pub use state::AppState;
-use uploads::{fetch_shared_uploads, upload_light, upload_routes, upload_scene};
+use upload_routes::{fetch_shared_uploads, upload_light, upload_routes, upload_scene};
 use worker::{abandoned, failure_detail, run_submitted, store_failure, work_shared_queue};
 
-pub use crate::jobs::QueueConfig;
+pub use crate::queue::QueueConfig;
 
 /// How long finished jobs stay readable unless configured (`--results-ttl-secs`).
 pub const DEFAULT_RESULTS_TTL: std::time::Duration = std::time::Duration::from_secs(3600);

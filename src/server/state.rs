@@ -67,7 +67,7 @@ impl AppState {
     }
 
     /// Retries storing a finished job's outcome for up to `retry` while the store cannot take
-    /// it (then gives up: see `jobs::persist`).
+    /// it (then gives up: see `worker::persist`).
     pub fn with_store_retry(self, retry: std::time::Duration) -> Self {
         Self { store_retry: retry, ..self }
     }

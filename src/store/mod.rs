@@ -19,7 +19,7 @@ pub use health::{Store, StoreHealth, StoreStatus};
 pub use redis::RedisStore;
 
 use crate::job::JobStatus;
-use crate::uploads::Kind;
+use crate::upload_store::Kind;
 
 /// Times a job may be started by a daemon that then died before finishing it; the next start
 /// fails it with a reason instead of taking a daemon down again and again.

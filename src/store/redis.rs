@@ -23,7 +23,7 @@ use serde_json::Value;
 
 use super::{unix_ms, JobStore, StoreError, StoreResult, StoredJob};
 use crate::job::JobStatus;
-use crate::uploads::Kind;
+use crate::upload_store::Kind;
 
 const QUEUE: &str = "penumbra:queue";
 const GROUP: &str = "workers";

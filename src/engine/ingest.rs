@@ -11,7 +11,7 @@ use super::{Engine, RenderState};
 use crate::error::JobResult;
 use crate::light::LightImage;
 use crate::scene;
-use crate::uploads::{content_id, Asset, Kind, UploadStats, UploadStore};
+use crate::upload_store::{content_id, Asset, Kind, UploadStats, UploadStore};
 
 /// What an upload answers: the asset's id, whether this upload stored it (false: the same
 /// bytes were already there), what it costs the cache, and a scene's warnings (what penumbra

@@ -2,8 +2,8 @@
 // are), then the adaptive quadtree over its tests (`quadtree.wgsl`): sub-region visibility ×
 // the colour of the matching part of the light image, for coloured penumbrae.
 
-#import methods/pcss/filter.wgsl
-#import methods/pcss/quadtree.wgsl
+#import methods/filter.wgsl
+#import methods/chun_oh/quadtree.wgsl
 
 fn light_region(i: u32) -> vec4<f32> {
     return light_regions[i];

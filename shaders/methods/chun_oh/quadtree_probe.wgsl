@@ -2,7 +2,7 @@
 // synthetic 4×4 tiles of lit-test counts, so the tests check the variance formula and the
 // split decisions on the GPU code itself (`chun_oh::quadtree_probe`).
 
-#import methods/pcss/quadtree.wgsl
+#import methods/chun_oh/quadtree.wgsl
 
 @group(0) @binding(0) var<storage, read> tiles: array<array<u32, 16>>;
 @group(0) @binding(1) var<storage, read> regions: array<vec4<f32>, 21>;

@@ -3,7 +3,7 @@
 // shadow tests, gray. The baseline Chun & Oh 2016 improve on (their Table 1's "average
 // visibility" method). The passes are `filter.wgsl`'s.
 
-#import methods/pcss/filter.wgsl
+#import methods/filter.wgsl
 
 // A pixel whose blocker search finds nothing: all of the filter's tests are lit.
 fn unblocked_visibility() -> vec3<f32> {

@@ -1,0 +1,200 @@
+//! Unit tests of `cpu`.
+
+use super::*;
+
+/// A map of `size`² texels with nothing drawn.
+fn blank(size: u32) -> Map {
+    Map { size: UVec2::splat(size), depths: vec![0.0; (size * size) as usize], empty: false }
+}
+
+/// Clip coordinates of the point at texel coordinates (x, y) (right and down from the
+/// map's top-left corner) and depth z, for a map of `size`² texels.
+fn at(x: f32, y: f32, z: f32, size: u32) -> Vec4 {
+    let s = size as f32;
+    Vec4::new(2.0 * x / s - 1.0, 1.0 - 2.0 * y / s, z, 1.0)
+}
+
+/// A repeatable stream of numbers in [0, 1] (xorshift32 from `seed`).
+fn xorshift(mut state: u32) -> impl FnMut() -> f32 {
+    move || {
+        state ^= state << 13;
+        state ^= state >> 17;
+        state ^= state << 5;
+        state as f32 / u32::MAX as f32
+    }
+}
+
+fn covered(map: &Map) -> Vec<(u32, u32)> {
+    (0..map.size.y)
+        .flat_map(|y| (0..map.size.x).map(move |x| (x, y)))
+        .filter(|&(x, y)| map.depths[(y * map.size.x + x) as usize] > 0.0)
+        .collect()
+}
+
+#[test]
+fn texels_on_an_edge_go_to_the_top_and_left_only_and_shared_edges_cover_once() {
+    // A square whose edges run through texel centres (x and y 2.5 … 6.5), split along
+    // its diagonal, which runs through centres too: Vulkan's top-left rule gives the left
+    // column and the top row to the square and the right column and bottom row to its
+    // neighbours, and every centre on the diagonal to one of the halves.
+    let size = 10;
+    let [a, b, c, d] = [(2.5, 2.5), (6.5, 2.5), (6.5, 6.5), (2.5, 6.5)].map(|(x, y)| at(x, y, 0.5, size));
+    let (mut upper, mut lower) = (blank(size), blank(size));
+    upper.triangle([a, b, c]);
+    lower.triangle([a, c, d]);
+    let (upper, lower) = (covered(&upper), covered(&lower));
+    let mut both: Vec<_> = upper.iter().chain(&lower).copied().collect();
+    both.sort();
+    let square: Vec<(u32, u32)> = (2..6).flat_map(|y| (2..6).map(move |x| (x, y))).collect();
+    let mut expected = square.clone();
+    expected.sort();
+    assert_eq!(both, expected, "upper {upper:?}, lower {lower:?}");
+    // Either winding draws the same texels: both faces cast shadows.
+    let mut reversed = blank(size);
+    reversed.triangle([a, c, b]);
+    assert_eq!(covered(&reversed), upper);
+}
+
+#[test]
+fn rows_solved_for_their_span_cover_what_testing_every_texel_covers() {
+    let size = 64;
+    let mut random = xorshift(0x9e37_79b9);
+    let mut drawn = 0;
+    for k in 0..400 {
+        // Large and small triangles, some reaching past the map, some with vertices on
+        // texel centres (ties for the top-left rule).
+        let reach = if k % 2 == 0 { 80.0 } else { 12.0 };
+        let corner = |r: &mut dyn FnMut() -> f32| {
+            let (x, y) = (r() * reach - 8.0, r() * reach - 8.0);
+            if k % 3 == 0 {
+                (x.floor() + 0.5, y.floor() + 0.5)
+            } else {
+                (x, y)
+            }
+        };
+        let [a, b, c] = [0; 3].map(|_| corner(&mut random));
+        let screen = [a, b, c].map(|(x, y)| Vec3::new(x, y, 0.1 + 0.8 * (x + y) / 200.0));
+        // One triangle a map: the nearest depth of another would hide a texel's difference.
+        let (mut spans, mut texels) = (blank(size), blank(size));
+        spans.fixed_spans_from(screen, 0);
+        texels.fixed_spans_from(screen, i64::MAX);
+        assert!(spans.depths == texels.depths, "triangle {k} {screen:?}: the two ways draw different texels");
+        drawn += covered(&spans).len();
+    }
+    assert!(drawn > 10_000, "{drawn} texels drawn");
+}
+
+#[test]
+fn depth_is_affine_across_the_map_and_the_nearest_surface_is_kept() {
+    let size = 16;
+    let mut map = blank(size);
+    // A plane tilted in x: depth 0.2 at x = 0 to 0.6 at x = 16, over the whole map.
+    let z = |x: f32| 0.2 + 0.4 * x / 16.0;
+    let corners = [(0.0, 0.0), (16.0, 0.0), (16.0, 16.0), (0.0, 16.0)].map(|(x, y)| at(x, y, z(x), size));
+    map.triangle([corners[0], corners[1], corners[2]]);
+    map.triangle([corners[0], corners[2], corners[3]]);
+    // A nearer square (larger reversed depth) over part of it; a farther one, hidden.
+    let near = [(4.0, 4.0), (8.0, 4.0), (8.0, 8.0), (4.0, 8.0)].map(|(x, y)| at(x, y, 0.9, size));
+    let far = [(10.0, 10.0), (14.0, 10.0), (14.0, 14.0), (10.0, 14.0)].map(|(x, y)| at(x, y, 0.1, size));
+    for quad in [near, far] {
+        map.triangle([quad[0], quad[1], quad[2]]);
+        map.triangle([quad[0], quad[2], quad[3]]);
+    }
+    for y in 0..size {
+        for x in 0..size {
+            let stored = map.depths[(y * size + x) as usize];
+            let expected = if (4..8).contains(&x) && (4..8).contains(&y) { 0.9 } else { z(x as f32 + 0.5) };
+            assert!((stored - expected).abs() < 1e-6, "texel ({x}, {y}): {stored} against {expected}");
+        }
+    }
+}
+
+#[test]
+fn a_triangle_through_the_near_plane_is_drawn_in_front_of_it_only() {
+    // Clip z is the near plane (0.1) and w the view depth: one vertex at depth 0.05 lies
+    // behind it. What is left is a quadrilateral whose vertices all lie in front of it.
+    let near = 0.1;
+    let vertices = [Vec4::new(-0.5, -0.5, near, 1.0), Vec4::new(0.5, -0.5, near, 1.0), Vec4::new(0.0, 0.02, near, 0.05)];
+    let polygon = clip_near(vertices);
+    assert_eq!(polygon.len(), 4);
+    assert!(polygon.iter().all(|v| v.w >= v.z - 1e-7), "{polygon:?}");
+    // Through a map's own projection: a triangle reaching behind the sample (view z > 0)
+    // is drawn where it lies in front of the near plane, every depth within (0, 1].
+    let view_proj = Mat4::perspective_infinite_reverse_rh(90f32.to_radians(), 1.0, near);
+    let sample = CpuSample { view_proj, origin: [0.0; 2], texels_per_tan: 1.0, crop_origin: Some(UVec2::ZERO), weight: Vec3::ONE };
+    let mut map = blank(32);
+    map.draw(&sample, &[Vec3::new(-1.0, -0.5, -1.0), Vec3::new(1.0, -0.5, -1.0), Vec3::new(0.0, -0.5, 0.5)], &[0, 1, 2]);
+    let drawn = covered(&map);
+    assert!(drawn.len() > 50, "{} texels", drawn.len());
+    assert!(map.depths.iter().all(|&d| (0.0..=1.0).contains(&d)), "depths within the clip volume");
+    // Entirely behind it: nothing.
+    let mut map = blank(32);
+    map.draw(&sample, &[Vec3::new(-1.0, -0.5, 1.0), Vec3::new(1.0, -0.5, 1.0), Vec3::new(0.0, 0.5, 0.5)], &[0, 1, 2]);
+    assert!(covered(&map).is_empty());
+}
+
+#[test]
+fn the_avx2_tests_match_the_scalar_ones_bit_for_bit() {
+    if !has_avx2() {
+        return;
+    }
+    let size = 64u32;
+    let mut map = blank(size);
+    let mut random = xorshift(0x1234_5678);
+    for texel in &mut map.depths {
+        *texel = if random() < 0.3 { 0.0 } else { random() };
+    }
+    let mut block = ReceiverBlock::default();
+    for l in 0..LANES {
+        block.x[l] = random() * 4.0 - 2.0;
+        block.y[l] = random() * 4.0 - 2.0;
+        block.nx[l] = random() - 0.5;
+        block.ny[l] = random() - 0.5;
+        let depth = if l == 7 { 0.0 } else { 0.5 + 3.0 * random() };
+        block.depth[l] = depth;
+        block.inv_depth[l] = if depth > 0.0 { 1.0 / depth } else { 0.0 };
+        block.depth2[l] = depth * depth;
+        block.n_dot_z[l] = -0.7 * depth;
+        block.g_depth[l] = depth;
+        block.bias_depth2[l] = depth * depth * (1.0 + random());
+    }
+    let constants = TestConstants {
+        rotation: Mat4::IDENTITY,
+        plane: 0.0,
+        near: 0.3,
+        resolution: size,
+        bias_texels: 1.0,
+        slope_bias_texels: 1.0,
+        light_center: Vec3::ZERO,
+    };
+    for (k, crop) in [(20.0, None), (35.0, Some(UVec2::new(3, 5))), (8.0, Some(UVec2::ZERO))] {
+        for empty in [false, true] {
+            map.empty = empty;
+            let sample = CpuSample {
+                view_proj: Mat4::IDENTITY,
+                origin: [random() - 0.5, random() - 0.5],
+                texels_per_tan: k,
+                crop_origin: crop.or(Some(UVec2::ZERO)),
+                weight: Vec3::new(0.3, 0.5, 0.9),
+            };
+            let test = SampleTest::new(&map, &sample, &constants);
+            let (mut scalar, mut vector) = (SumBlock::default(), SumBlock::default());
+            for _ in 0..3 {
+                scalar_add_sample(&block, &mut scalar, &test, 3);
+                // Safety: checked above.
+                #[cfg(target_arch = "x86_64")]
+                unsafe {
+                    avx2::add_sample(&block, &mut vector, &test, 3)
+                };
+            }
+            for c in 0..3 {
+                for l in 0..LANES {
+                    assert_eq!(scalar.shadowed[c][l].to_bits(), vector.shadowed[c][l].to_bits(), "shadowed, lane {l}");
+                    assert_eq!(scalar.unshadowed[c][l].to_bits(), vector.unshadowed[c][l].to_bits(), "unshadowed, lane {l}");
+                }
+            }
+            assert!(scalar.unshadowed[0][..7].iter().any(|&u| u > 0.0), "some lane faces the sample");
+            assert_eq!(scalar.unshadowed[0][7], 0.0, "a lane at depth 0 has no weight");
+        }
+    }
+}

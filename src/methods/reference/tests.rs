@@ -1,0 +1,73 @@
+//! Unit tests of `reference`.
+
+use super::*;
+use glam::Vec2;
+
+#[test]
+fn the_batch_matches_its_wgsl_mirror() {
+    let declaration = format!("const MAX_SAMPLES: u32 = {BATCH_SAMPLES}u;");
+    crate::gpu::shaders::assert_declares("methods/reference/accumulate.wgsl", &declaration);
+    // The pass spells its samples out by `#unroll`, whose bound is a literal: one per slot.
+    crate::gpu::shaders::assert_declares("methods/reference/accumulate.wgsl", &format!("#unroll k in 0..{BATCH_SAMPLES} {{"));
+    crate::gpu::shaders::assert_declares("methods/reference/accumulate.wgsl", &format!("const SEGMENT: u32 = {SEGMENT}u;"));
+}
+
+#[test]
+fn a_crop_holds_every_receiver_and_lands_its_texels_where_the_whole_map_has_them() {
+    let resolution = 2048;
+    let bounds = vec![
+        Some((Vec2::new(300.2, 1000.0), Vec2::new(900.7, 1500.5))),
+        None,
+        Some((Vec2::new(1700.0, -20.0), Vec2::new(2100.0, 380.0))),
+    ];
+    let crop = MapCrop::fit(bounds, resolution);
+    // The widest extents with their margins (900.7 + 2 → 903, 300.2 − 2 → 298: 605 texels
+    // across; 998 to 1503: 505 down), rounded up to whole granules.
+    assert_eq!(crop.size, UVec2::new(640, 512));
+    assert_eq!(crop.origins, vec![Some(UVec2::new(298, 998)), None, Some(UVec2::new(2048 - 640, 0))]);
+    // A point's texel in its crop is its texel in the whole map less the crop's origin.
+    let view_proj =
+        Mat4::perspective_infinite_reverse_rh(1.1, 1.0, 0.3) * Mat4::look_to_rh(Vec3::new(0.5, 8.0, 0.2), -Vec3::Y, -Vec3::Z);
+    let texel = |m: Mat4, p: Vec3, size: Vec2| {
+        let c = m * p.extend(1.0);
+        Vec2::new(c.x / c.w + 1.0, 1.0 - c.y / c.w) * 0.5 * size
+    };
+    for origin in [crop.origins[0], crop.origins[2]] {
+        let layer = crop.layer_view_proj(origin, resolution, view_proj);
+        for p in [Vec3::new(0.3, 0.0, -1.2), Vec3::new(-2.0, 1.0, 2.5), Vec3::new(1.7, 0.4, 0.9)] {
+            let whole = texel(view_proj, p, Vec2::splat(resolution as f32));
+            let cropped = texel(layer, p, crop.size.as_vec2());
+            assert!((cropped - (whole - origin.unwrap().as_vec2())).abs().max_element() < 1e-3, "{cropped} against {whole}");
+            // The depth is untouched: the same z and w.
+            let (a, b) = (view_proj * p.extend(1.0), layer * p.extend(1.0));
+            assert_eq!((a.z, a.w), (b.z, b.w));
+        }
+    }
+    // A crop more than a quarter of the map is the whole map, drawn as before.
+    for hi in [Vec2::new(2000.0, 2047.0), Vec2::new(1100.0, 1100.0)] {
+        let whole = MapCrop::fit(vec![Some((Vec2::new(-5.0, 10.0), hi)), None], resolution);
+        assert_eq!(whole, MapCrop::whole(2, resolution));
+    }
+    let whole = MapCrop::whole(1, resolution);
+    assert_eq!(whole.layer_view_proj(whole.origins[0], resolution, view_proj), view_proj);
+    // No receiver in any map: the smallest crop, nothing drawn.
+    assert_eq!(MapCrop::fit(vec![None, None], resolution), MapCrop { size: UVec2::splat(CROP_GRANULE), origins: vec![None, None] });
+}
+
+#[test]
+fn samples_are_stratified_and_skip_black() {
+    let light = AreaLight::new(Vec3::Y, -Vec3::Y, -Vec3::Z, Vec2::new(2.0, 1.0), 3.0).unwrap();
+    let white = LightImage::builtin("white", &Default::default(), "f").unwrap();
+    let (samples, strata) = light_samples(&light, &white, 200, 1);
+    assert_eq!(samples.len() as u32, strata);
+    assert!(strata >= 200);
+    // Weights sum to L × area for a uniform light.
+    let total: Vec3 = samples.iter().map(|s| s.weight).sum();
+    assert!((total - Vec3::splat(3.0 * 2.0)).abs().max_element() < 1e-3);
+    // The disk leaves out its corners: about 1 − π/4 of the strata.
+    let disk = LightImage::builtin("disk", &Default::default(), "f").unwrap();
+    let square = AreaLight { size_m: Vec2::ONE, ..light };
+    let (samples, strata) = light_samples(&square, &disk, 1024, 1);
+    let skipped = 1.0 - samples.len() as f32 / strata as f32;
+    assert!((skipped - (1.0 - std::f32::consts::FRAC_PI_4)).abs() < 0.03, "{skipped}");
+}
