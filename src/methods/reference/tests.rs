@@ -1,6 +1,11 @@
 //! Unit tests of `reference`.
 
+use glam::UVec2;
+
+use super::crop::{MapCrop, CROP_GRANULE};
+use super::gpu::BATCH_SAMPLES;
 use super::*;
+use crate::light::{AreaLight, LightImage};
 use glam::Vec2;
 
 #[test]

@@ -1,5 +1,8 @@
 //! Unit tests of `cpu`.
 
+use glam::Vec4;
+
+use super::raster::clip_near;
 use super::*;
 
 /// A map of `size`² texels with nothing drawn.

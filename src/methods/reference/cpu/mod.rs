@@ -1,0 +1,325 @@
+//! Engine `cpu` of method `reference`: the GPU engine's estimate — the same samples, the same
+//! maps (frusta, crops, and Vulkan's rules for which texels a triangle covers and at what
+//! depth) and the same test per receiver and sample (`accumulate.wgsl`) — computed by plain
+//! code on the CPU's cores. On a software adapter the GPU *is* those cores, and this code
+//! pays less than lavapipe does per triangle of a map and per test (the figures:
+//! `docs/performance-log.md`). On a GPU the GPU engine is the fast one.
+//!
+//! The work goes in rounds of as many samples as there are threads: each thread draws one
+//! sample's map, then each takes a share of the receivers and tests them against the round's
+//! maps in sample order. Every receiver's sums are so added in the same order whatever the
+//! number of threads, and the image is the same on every machine.
+
+use glam::{Mat4, UVec2, Vec3};
+use rayon::prelude::*;
+
+#[cfg(target_arch = "x86_64")]
+mod avx2;
+mod raster;
+
+use raster::Map;
+
+use crate::render::method::GBufferView;
+
+/// Receivers a block: one AVX2 vector of f32 (and the unit the threads share the frame by).
+const LANES: usize = 8;
+
+/// Blocks of receivers a thread takes at a time when the receivers are shared out.
+const BLOCKS_PER_TASK: usize = 256;
+
+/// Eight receivers, structure of arrays: what the test of `accumulate.wgsl` takes once per
+/// pixel, in every sample's view coordinates (`Receiver` there).
+#[derive(Clone, Copy, Default)]
+pub(super) struct ReceiverBlock {
+    x: [f32; LANES],
+    y: [f32; LANES],
+    nx: [f32; LANES],
+    ny: [f32; LANES],
+    /// Depth along the light normal from the light's plane, its reciprocal and its square.
+    depth: [f32; LANES],
+    inv_depth: [f32; LANES],
+    depth2: [f32; LANES],
+    /// n·v's part along the normal, the same from every sample: `n.z · (−depth)`.
+    n_dot_z: [f32; LANES],
+    /// `cosθy·|v|`, 0 behind the light's plane (and for the padding past the last receiver).
+    g_depth: [f32; LANES],
+    /// depth² × the test's bias in texels.
+    bias_depth2: [f32; LANES],
+}
+
+/// A block's sums per channel (one or three): Σ L·G·V, then Σ L·G.
+#[derive(Clone, Copy, Default)]
+pub(super) struct SumBlock {
+    shadowed: [[f32; LANES]; 3],
+    unshadowed: [[f32; LANES]; 3],
+}
+
+/// What the frame's covered pixels are, for the test: built from the G-buffer as the
+/// accumulate pass builds its `Receiver`.
+pub(super) struct Receivers {
+    blocks: Vec<ReceiverBlock>,
+    /// The pixel of each receiver, in block order.
+    pixels: Vec<u32>,
+    /// Row segments of `SEGMENT` pixels that hold one (the GPU engine's `segments_tested`).
+    pub segments: u32,
+}
+
+/// What every test of a frame shares (`Batch` in `accumulate.wgsl`).
+pub(super) struct TestConstants {
+    /// Rows of the rotation into the samples' view coordinates.
+    pub rotation: Mat4,
+    pub plane: f32,
+    pub near: f32,
+    pub resolution: u32,
+    pub bias_texels: f32,
+    pub slope_bias_texels: f32,
+    pub light_center: Vec3,
+}
+
+/// One sample as its map is drawn and read.
+pub(super) struct CpuSample {
+    /// Its crop's projection (`MapCrop::layer_view_proj`).
+    pub view_proj: Mat4,
+    /// The sample point in view coordinates (x, y; its z is the plane's).
+    pub origin: [f32; 2],
+    /// Texels per unit of tan from the map's centre.
+    pub texels_per_tan: f32,
+    /// Where its crop begins in the whole map; `None` where no receiver falls in its map (an
+    /// empty map: every test lit).
+    pub crop_origin: Option<UVec2>,
+    pub weight: Vec3,
+}
+
+impl Receivers {
+    /// The covered pixels of the frame's G-buffer, `segment` pixels a listed segment.
+    pub fn new(gbuffer: &GBufferView<'_>, segment: u32, c: &TestConstants) -> Self {
+        // Row by row on every core: the covered pixels, and the segments that hold one.
+        let rows: Vec<(Vec<u32>, u32)> = (0..gbuffer.height)
+            .into_par_iter()
+            .map(|y| {
+                let covered: Vec<u32> = (0..gbuffer.width).filter(|&x| gbuffer.normal(x, y).is_some()).collect();
+                let mut segments = 0;
+                let mut last = u32::MAX;
+                for &x in &covered {
+                    if x / segment != last {
+                        segments += 1;
+                        last = x / segment;
+                    }
+                }
+                (covered.into_iter().map(|x| y * gbuffer.width + x).collect(), segments)
+            })
+            .collect();
+        let segments = rows.iter().map(|(_, count)| count).sum();
+        let pixels: Vec<u32> = rows.into_iter().flat_map(|(pixels, _)| pixels).collect();
+        let width = gbuffer.width;
+        let rotation = [0, 1, 2].map(|i| c.rotation.row(i).truncate());
+        let mut blocks = vec![ReceiverBlock::default(); pixels.len().div_ceil(LANES)];
+        blocks.par_iter_mut().zip(pixels.par_chunks(LANES)).for_each(|(b, block_pixels)| {
+            for (l, &pixel) in block_pixels.iter().enumerate() {
+                let (px, py) = (pixel % width, pixel / width);
+                let (world, normal) = (gbuffer.position(px, py), gbuffer.normal(px, py).unwrap_or_default());
+                let x = Vec3::new(rotation[0].dot(world), rotation[1].dot(world), rotation[2].dot(world));
+                let n = Vec3::new(rotation[0].dot(normal), rotation[1].dot(normal), rotation[2].dot(normal));
+                // The bias in texels, constant plus slope-scaled by tanθ to the light's centre.
+                let cos_c = normal.dot((c.light_center - world).normalize()).clamp(0.0, 1.0);
+                let tan_c = ((1.0 - cos_c * cos_c).sqrt() / cos_c.max(0.05)).min(10.0);
+                let bias = c.bias_texels + c.slope_bias_texels * tan_c;
+                let depth = c.plane - x.z;
+                b.x[l] = x.x;
+                b.y[l] = x.y;
+                b.nx[l] = n.x;
+                b.ny[l] = n.y;
+                b.depth[l] = depth;
+                b.inv_depth[l] = 1.0 / depth;
+                b.depth2[l] = depth * depth;
+                b.n_dot_z[l] = -n.z * depth;
+                b.g_depth[l] = depth.max(0.0);
+                b.bias_depth2[l] = depth * depth * bias;
+            }
+        });
+        // The padding lanes keep depth 0: no weight (g_depth 0), whatever their test says.
+        Self { blocks, pixels, segments }
+    }
+}
+
+/// Wall time of the two kinds of work, summed over the rounds (ms), and the maps a round drew
+/// at once (the threads that drew them).
+#[derive(Debug, Default, Clone, Copy)]
+pub(super) struct Spent {
+    pub maps_ms: f64,
+    pub tests_ms: f64,
+    pub round: usize,
+}
+
+/// Estimates every receiver's sums over `samples` (drawn from the triangles `positions` /
+/// `indices`), `channels` of them (1: every weight gray, the red one stands for all). `after`
+/// hears how many samples are done after each round and says whether to go on.
+pub(super) fn estimate(
+    receivers: &Receivers,
+    samples: &[CpuSample],
+    constants: &TestConstants,
+    (positions, indices): (&[Vec3], &[u32]),
+    channels: usize,
+    crop_size: UVec2,
+    mut after: impl FnMut(usize) -> bool,
+) -> (Vec<SumBlock>, Spent) {
+    let mut sums = vec![SumBlock::default(); receivers.blocks.len()];
+    let mut spent = Spent::default();
+    let threads = rayon::current_num_threads().max(1);
+    // One map per thread in flight, within the GPU engine's budget for a batch's maps.
+    let map_bytes = crop_size.x as usize * crop_size.y as usize * 4;
+    let round = threads.min((super::BATCH_MAP_BYTES as usize / map_bytes.max(1)).max(1));
+    spent.round = round;
+    let mut maps: Vec<Map> = (0..round).map(|_| Map { size: crop_size, depths: Vec::new(), empty: true }).collect();
+    let avx2 = has_avx2();
+    let mut done = 0;
+    for chunk in samples.chunks(round) {
+        let start = std::time::Instant::now();
+        maps.par_iter_mut().zip(chunk).for_each(|(map, sample)| map.draw(sample, positions, indices));
+        let drawn = std::time::Instant::now();
+        let maps = &maps[..chunk.len()];
+        sums.par_chunks_mut(BLOCKS_PER_TASK).zip(receivers.blocks.par_chunks(BLOCKS_PER_TASK)).for_each(|(sums, blocks)| {
+            for (map, sample) in maps.iter().zip(chunk) {
+                test_blocks(blocks, sums, map, sample, constants, channels, avx2);
+            }
+        });
+        spent.maps_ms += (drawn - start).as_secs_f64() * 1e3;
+        spent.tests_ms += drawn.elapsed().as_secs_f64() * 1e3;
+        done += chunk.len();
+        if !after(done) {
+            break;
+        }
+    }
+    (sums, spent)
+}
+
+/// Writes every pixel's visibility into `out`, a `vec4<f32>` of bytes each (rgb; w 1), rows of
+/// `width` pixels: the ratio of its receiver's sums per channel (`ratio` in
+/// `accumulate.wgsl`), 1 where no receiver is. Row by row on every core.
+pub(super) fn write_visibility(receivers: &Receivers, sums: &[SumBlock], channels: usize, width: u32, out: &mut [u8]) {
+    let channel = |c: usize| if channels == 1 { 0 } else { c };
+    let ratio = |k: usize| {
+        let (b, l) = (&sums[k / LANES], k % LANES);
+        let shadowed = Vec3::from_array([0, 1, 2].map(|c| b.shadowed[channel(c)][l]));
+        let unshadowed = Vec3::from_array([0, 1, 2].map(|c| b.unshadowed[channel(c)][l]));
+        let total = unshadowed.element_sum();
+        let gray = if total > 0.0 { shadowed.element_sum() / total } else { 1.0 };
+        let v = Vec3::from_array([0, 1, 2].map(|c| if unshadowed[c] > 0.0 { shadowed[c] / unshadowed[c] } else { gray }));
+        v.clamp(Vec3::ZERO, Vec3::ONE).extend(1.0).to_array()
+    };
+    let row_bytes = width as usize * 16;
+    out.par_chunks_mut(row_bytes).enumerate().for_each(|(y, row)| {
+        for texel in row.chunks_exact_mut(16) {
+            texel.copy_from_slice(bytemuck::bytes_of(&[1.0f32; 4]));
+        }
+        // The receivers are listed row by row: this row's lie between these two.
+        let first = receivers.pixels.partition_point(|&p| p < y as u32 * width);
+        let end = receivers.pixels.partition_point(|&p| p < (y as u32 + 1) * width);
+        for k in first..end {
+            let x = (receivers.pixels[k] % width) as usize;
+            row[16 * x..16 * x + 16].copy_from_slice(bytemuck::bytes_of(&ratio(k)));
+        }
+    });
+}
+
+/// Tests `blocks` against one sample's map and adds to their sums (`add_sample` in
+/// `accumulate.wgsl`).
+fn test_blocks(
+    blocks: &[ReceiverBlock],
+    sums: &mut [SumBlock],
+    map: &Map,
+    sample: &CpuSample,
+    c: &TestConstants,
+    channels: usize,
+    avx2: bool,
+) {
+    let test = SampleTest::new(map, sample, c);
+    #[cfg(target_arch = "x86_64")]
+    if avx2 {
+        for (block, sum) in blocks.iter().zip(sums) {
+            // Safety: `has_avx2` found AVX2 and FMA on this CPU.
+            unsafe { avx2::add_sample(block, sum, &test, channels) };
+        }
+        return;
+    }
+    let _ = avx2;
+    for (block, sum) in blocks.iter().zip(sums) {
+        scalar_add_sample(block, sum, &test, channels);
+    }
+}
+
+/// What one sample's tests read, taken once per sample and map.
+struct SampleTest<'a> {
+    depths: &'a [f32],
+    /// Texels a row of the map.
+    width: u32,
+    /// The map's last texel (x, y), to clamp to.
+    last: [f32; 2],
+    origin: [f32; 2],
+    k: f32,
+    half: f32,
+    crop: [f32; 2],
+    near_k: f32,
+    weight: [f32; 3],
+    /// The map is empty: every test is lit.
+    empty: bool,
+}
+
+impl<'a> SampleTest<'a> {
+    fn new(map: &'a Map, sample: &CpuSample, c: &TestConstants) -> Self {
+        let crop = sample.crop_origin.unwrap_or(UVec2::ZERO).as_vec2();
+        Self {
+            depths: &map.depths,
+            width: map.size.x,
+            last: [map.size.x as f32 - 1.0, map.size.y as f32 - 1.0],
+            origin: sample.origin,
+            k: sample.texels_per_tan,
+            half: 0.5 * c.resolution as f32,
+            crop: crop.to_array(),
+            near_k: c.near * sample.texels_per_tan,
+            weight: sample.weight.to_array(),
+            empty: map.empty,
+        }
+    }
+}
+
+/// The test of eight receivers against one sample, one lane at a time: the reference for the
+/// AVX2 path (the same operations in the same order, fused where it fuses them: the same
+/// bits) and the path on CPUs without it.
+fn scalar_add_sample(b: &ReceiverBlock, sums: &mut SumBlock, t: &SampleTest<'_>, channels: usize) {
+    for l in 0..LANES {
+        let dx = b.x[l] - t.origin[0];
+        let dy = b.y[l] - t.origin[1];
+        let inv_dist = 1.0 / dx.mul_add(dx, dy.mul_add(dy, b.depth2[l])).sqrt();
+        let inv_dist2 = inv_dist * inv_dist;
+        let g = (-b.nx[l].mul_add(dx, b.ny[l].mul_add(dy, b.n_dot_z[l]))).max(0.0) * b.g_depth[l] * inv_dist2 * inv_dist2;
+        let ki = t.k * b.inv_depth[l];
+        let (fx, fy) = (dx * ki, dy * ki);
+        let visible = t.empty || {
+            let tx = (t.half + fx - t.crop[0]).clamp(0.0, t.last[0]);
+            let ty = (t.half - fy - t.crop[1]).clamp(0.0, t.last[1]);
+            let stored = t.depths[ty as usize * t.width as usize + tx as usize];
+            let inside = fx.abs() < t.half && fy.abs() < t.half;
+            !inside || (-b.bias_depth2[l]).mul_add(inv_dist, b.depth[l] * t.k) * stored <= t.near_k
+        };
+        for c in 0..channels {
+            let lit = if visible { g } else { 0.0 };
+            sums.shadowed[c][l] = t.weight[c].mul_add(lit, sums.shadowed[c][l]);
+            sums.unshadowed[c][l] = t.weight[c].mul_add(g, sums.unshadowed[c][l]);
+        }
+    }
+}
+
+fn has_avx2() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,257 @@
+//! The CPU engine's rasteriser: a sample's depth map drawn by Vulkan's rules (fixed-point
+//! vertices, the top-left rule, depth interpolated as lavapipe does), so that it holds the
+//! same texels and depths as the GPU engine's map.
+
+use glam::{UVec2, Vec3, Vec4};
+
+use super::CpuSample;
+
+/// Fixed-point steps per texel of a map's vertex coordinates: llvmpipe's 8 bits of sub-texel
+/// precision (`FIXED_ORDER`), so that a vertex lands where lavapipe puts it and a texel centre
+/// on a shared edge goes to the triangle Vulkan's top-left rule gives it.
+const SUBTEXEL: f32 = 256.0;
+
+/// Coordinates (texels) within which a triangle is rasterised in exact fixed point: products of
+/// two such coordinates in sub-texel steps stay far inside an `i64`. Beyond it (a vertex just
+/// past the near plane of a wide frustum) the edges are evaluated in `f64` instead.
+const FIXED_RANGE: f32 = (1 << 20) as f32;
+
+/// Rows of a triangle at least this many texels wide find where they are covered by solving
+/// each edge for x (three divisions) instead of testing every texel: the same texels, fewer
+/// steps on the large triangles of a simple scene.
+const SPAN_FROM: i64 = 8;
+
+/// A sample's map, drawn: `size` texels, near / view depth of the nearest surface, 0 where
+/// nothing was drawn.
+pub(super) struct Map {
+    pub(super) size: UVec2,
+    pub(super) depths: Vec<f32>,
+    /// Nothing drawn (no receiver falls in this sample's map): every test lit.
+    pub(super) empty: bool,
+}
+
+impl Map {
+    /// Draws `sample`'s map: every triangle, as lavapipe draws `sample_depth.wgsl` with depth
+    /// test `Greater` into a map cleared to 0.
+    pub(super) fn draw(&mut self, sample: &CpuSample, positions: &[Vec3], indices: &[u32]) {
+        self.empty = sample.crop_origin.is_none();
+        if self.empty {
+            return;
+        }
+        let texels = self.size.x as usize * self.size.y as usize;
+        self.depths.clear();
+        self.depths.resize(texels, 0.0);
+        let clip: Vec<Vec4> = positions.iter().map(|p| sample.view_proj * p.extend(1.0)).collect();
+        // Every map's projection is reversed-Z with the far plane at infinity: clip z is the
+        // near plane and w the view depth, so Vulkan's clip volume 0 ≤ z ≤ w leaves only the
+        // near plane to clip against (w ≥ z); x and y are clipped by the map's bounds below.
+        for triangle in indices.chunks_exact(3) {
+            let [a, b, c] = [0, 1, 2].map(|i| clip[triangle[i] as usize]);
+            let inside = [a, b, c].map(|v| v.w >= v.z);
+            if inside.iter().all(|&i| i) {
+                self.triangle([a, b, c]);
+            } else if inside.iter().any(|&i| i) {
+                let polygon = clip_near([a, b, c]);
+                for k in 1..polygon.len().saturating_sub(1) {
+                    self.triangle([polygon[0], polygon[k], polygon[k + 1]]);
+                }
+            }
+        }
+    }
+
+    /// Rasterises one triangle in clip coordinates (every vertex in front of the near plane).
+    pub(super) fn triangle(&mut self, vertices: [Vec4; 3]) {
+        let (w, h) = (self.size.x as f32, self.size.y as f32);
+        // Viewport transform: x right and y down from the top-left corner, in texels; depth
+        // z / w, as the rasteriser interpolates it (affine across the screen).
+        let screen = vertices.map(|v| {
+            let inv = 1.0 / v.w;
+            Vec3::new((v.x * inv + 1.0) * 0.5 * w, (1.0 - v.y * inv) * 0.5 * h, v.z * inv)
+        });
+        let fits = screen.iter().all(|s| s.x.abs() < FIXED_RANGE && s.y.abs() < FIXED_RANGE);
+        if fits {
+            self.fixed(screen);
+        } else {
+            self.wide(screen);
+        }
+    }
+
+    /// Vulkan's rules in exact fixed point: vertices snapped to 1/`SUBTEXEL`, a texel covered
+    /// when its centre is inside every edge, or on an edge that is a top or a left one.
+    fn fixed(&mut self, screen: [Vec3; 3]) {
+        self.fixed_spans_from(screen, SPAN_FROM);
+    }
+
+    /// `fixed`, finding the covered span of rows at least `span_from` texels wide by solving
+    /// the edges (`SPAN_FROM`) and testing every texel of narrower ones.
+    pub(super) fn fixed_spans_from(&mut self, screen: [Vec3; 3], span_from: i64) {
+        let fixed = screen.map(|s| [(s.x * SUBTEXEL).round() as i64, (s.y * SUBTEXEL).round() as i64]);
+        let area = cross(fixed[0], fixed[1], fixed[2]);
+        if area == 0 {
+            return;
+        }
+        // Both faces are drawn (contract §1: a back face casts a shadow too): order the
+        // vertices so that the inside of every edge is where its function is positive.
+        let order = if area > 0 { [0, 1, 2] } else { [0, 2, 1] };
+        let [p0, p1, p2] = order.map(|i| fixed[i]);
+        let sub = SUBTEXEL as i64;
+        let (lo_x, hi_x) = (p0[0].min(p1[0]).min(p2[0]), p0[0].max(p1[0]).max(p2[0]));
+        let (lo_y, hi_y) = (p0[1].min(p1[1]).min(p2[1]), p0[1].max(p1[1]).max(p2[1]));
+        // Texels whose centre, (i + ½)·SUBTEXEL, lies within the bounds.
+        let first = |lo: i64| (lo - sub / 2 + sub - 1).div_euclid(sub);
+        let last = |hi: i64| (hi - sub / 2).div_euclid(sub);
+        let x0 = first(lo_x).max(0);
+        let x1 = last(hi_x).min(i64::from(self.size.x) - 1);
+        let y0 = first(lo_y).max(0);
+        let y1 = last(hi_y).min(i64::from(self.size.y) - 1);
+        if x0 > x1 || y0 > y1 {
+            return;
+        }
+        let edges = [edge(p1, p2), edge(p2, p0), edge(p0, p1)];
+        let centre = |i: i64| i * sub + sub / 2;
+        let at = |e: &Edge| e.a * centre(x0) + e.b * centre(y0) + e.c;
+        let mut row = edges.each_ref().map(at);
+        let depth = DepthPlane::new(order.map(|i| screen[i]));
+        let width = self.size.x as usize;
+        for y in y0..=y1 {
+            let line = &mut self.depths[y as usize * width..][..width];
+            let py = y as f32 + 0.5;
+            if x1 - x0 >= span_from {
+                let (mut from, mut to) = (x0, x1);
+                for k in 0..3 {
+                    let step = edges[k].a * sub;
+                    match step.signum() {
+                        // w + step·(x − x0) ≥ 0 from x0 + ⌈−w / step⌉ on.
+                        1 => from = from.max(x0 + (-row[k] + step - 1).div_euclid(step)),
+                        // … up to x0 + ⌊w / −step⌋.
+                        -1 => to = to.min(x0 + row[k].div_euclid(-step)),
+                        _ if row[k] < 0 => to = from - 1,
+                        _ => {}
+                    }
+                }
+                for x in from..=to {
+                    let stored = &mut line[x as usize];
+                    *stored = stored.max(depth.at(x as f32 + 0.5, py));
+                }
+            } else {
+                let mut w = row;
+                for x in x0..=x1 {
+                    if (w[0] | w[1] | w[2]) >= 0 {
+                        let stored = &mut line[x as usize];
+                        *stored = stored.max(depth.at(x as f32 + 0.5, py));
+                    }
+                    for k in 0..3 {
+                        w[k] += edges[k].a * sub;
+                    }
+                }
+            }
+            for k in 0..3 {
+                row[k] += edges[k].b * sub;
+            }
+        }
+    }
+
+    /// A triangle too wide for the fixed-point path: its edges in `f64`, unsnapped, over the
+    /// texels of the map it covers (a rare case: a vertex just past the near plane).
+    fn wide(&mut self, screen: [Vec3; 3]) {
+        let p = screen.map(|s| [f64::from(s.x), f64::from(s.y)]);
+        let area = (p[1][0] - p[0][0]) * (p[2][1] - p[0][1]) - (p[2][0] - p[0][0]) * (p[1][1] - p[0][1]);
+        if area == 0.0 || !area.is_finite() {
+            return;
+        }
+        let order = if area > 0.0 { [0, 1, 2] } else { [0, 2, 1] };
+        let [p0, p1, p2] = order.map(|i| p[i]);
+        let line = |a: [f64; 2], b: [f64; 2]| (a[1] - b[1], b[0] - a[0], a[0] * b[1] - b[0] * a[1]);
+        let edges = [line(p1, p2), line(p2, p0), line(p0, p1)];
+        let lo = [p0[0].min(p1[0]).min(p2[0]), p0[1].min(p1[1]).min(p2[1])];
+        let hi = [p0[0].max(p1[0]).max(p2[0]), p0[1].max(p1[1]).max(p2[1])];
+        let x0 = (lo[0] - 0.5).ceil().max(0.0) as i64;
+        let y0 = (lo[1] - 0.5).ceil().max(0.0) as i64;
+        let x1 = ((hi[0] - 0.5).floor() as i64).min(i64::from(self.size.x) - 1);
+        let y1 = ((hi[1] - 0.5).floor() as i64).min(i64::from(self.size.y) - 1);
+        let depth = DepthPlane::new(order.map(|i| screen[i]));
+        let width = self.size.x as usize;
+        for y in y0..=y1 {
+            let py = y as f64 + 0.5;
+            for x in x0..=x1 {
+                let px = x as f64 + 0.5;
+                let covered = edges.iter().all(|&(a, b, c)| {
+                    let e = a * px + b * py + c;
+                    e > 0.0 || (e == 0.0 && top_left(a, b))
+                });
+                if covered {
+                    let stored = &mut self.depths[y as usize * width + x as usize];
+                    *stored = stored.max(depth.at(px as f32, py as f32));
+                }
+            }
+        }
+    }
+}
+
+/// An edge function `a·x + b·y + c` in sub-texel units, positive inside; `c` holds Vulkan's
+/// tie-break: a centre exactly on the edge is inside only for a top or a left edge.
+struct Edge {
+    a: i64,
+    b: i64,
+    c: i64,
+}
+
+/// The edge from `p` to `q` of a triangle whose inside lies to the left going round it (in
+/// y-down coordinates: the vertices ordered with a positive `cross`).
+fn edge(p: [i64; 2], q: [i64; 2]) -> Edge {
+    let (a, b) = (p[1] - q[1], q[0] - p[0]);
+    let c = p[0] * q[1] - q[0] * p[1];
+    // Integer values: "≥ 0" admits a tie, "≥ 0 after − 1" does not.
+    Edge { a, b, c: if top_left(a as f64, b as f64) { c } else { c - 1 } }
+}
+
+/// Whether an edge whose inside lies along (a, b) is a left edge (the inside to its right: a
+/// > 0) or a top edge (horizontal, the inside below it in y-down coordinates: a = 0, b > 0).
+fn top_left(a: f64, b: f64) -> bool {
+    a > 0.0 || (a == 0.0 && b > 0.0)
+}
+
+/// Twice the signed area of triangle (p, q, r), positive when the edges run with the inside to
+/// their left in y-down coordinates.
+fn cross(p: [i64; 2], q: [i64; 2], r: [i64; 2]) -> i64 {
+    (q[0] - p[0]) * (r[1] - p[1]) - (r[0] - p[0]) * (q[1] - p[1])
+}
+
+/// Depth across a triangle's screen: affine in x and y, from its first vertex.
+struct DepthPlane {
+    origin: Vec3,
+    dx: f32,
+    dy: f32,
+}
+
+impl DepthPlane {
+    /// From the vertices: x, y in texels, z the depth.
+    fn new([p0, p1, p2]: [Vec3; 3]) -> Self {
+        let (e1, e2) = (p1 - p0, p2 - p0);
+        let area = e1.x * e2.y - e2.x * e1.y;
+        let dx = (e1.z * e2.y - e2.z * e1.y) / area;
+        let dy = (e2.z * e1.x - e1.z * e2.x) / area;
+        Self { origin: p0, dx, dy }
+    }
+
+    fn at(&self, x: f32, y: f32) -> f32 {
+        self.origin.z + self.dx * (x - self.origin.x) + self.dy * (y - self.origin.y)
+    }
+}
+
+/// The part of a triangle in front of the near plane (w ≥ z: every map's clip z is its near
+/// plane), as a convex polygon of up to four vertices.
+pub(super) fn clip_near(vertices: [Vec4; 3]) -> Vec<Vec4> {
+    let mut out = Vec::with_capacity(4);
+    for k in 0..3 {
+        let (p, q) = (vertices[k], vertices[(k + 1) % 3]);
+        let (dp, dq) = (p.w - p.z, q.w - q.z);
+        if dp >= 0.0 {
+            out.push(p);
+        }
+        if (dp >= 0.0) != (dq >= 0.0) {
+            out.push(p + (q - p) * (dp / (dp - dq)));
+        }
+    }
+    out
+}

@@ -1,0 +1,189 @@
+//! The reference's light samples and their plan: stratified, jittered points on the light's
+//! emitting texels with their weights, each sample's frustum and map, in batches.
+
+use bytemuck::Zeroable as _;
+use glam::{Mat4, Vec3};
+
+use super::crop::MapCrop;
+use super::gpu::{BatchSample, BatchUniforms};
+use super::{Counters, MethodContext, Params, BIAS_TEXELS, CROP, RESOLUTION, SAMPLES, SEED, SLOPE_BIAS_TEXELS};
+use crate::light::{AreaLight, LightImage};
+use crate::render::convex::{map_bounds, ConvexSolid};
+use crate::render::LightProjection;
+
+/// The projection a sample's depth map is drawn with: the angle `fit` gives that sample and the
+/// near plane every map shares, reversed-Z with the far plane at infinity, so the stored depth
+/// is `near / view depth` (`sample_depth.wgsl`) and float depth keeps the same relative
+/// precision at every distance.
+pub(super) fn reversed_projection(tan_half: f32, near: f32) -> Mat4 {
+    Mat4::perspective_infinite_reverse_rh(2.0 * tan_half.atan(), 1.0, near)
+}
+
+/// The rotation into every sample's view coordinates: each frustum looks along the light
+/// normal with the image's up, from its own sample point.
+pub(super) fn sample_rotation(light: &AreaLight) -> Mat4 {
+    Mat4::look_to_rh(Vec3::ZERO, light.n, light.u)
+}
+
+/// A point on the light and its weight: `L(y)` times the area of its stratum.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LightSample {
+    pub position: Vec3,
+    pub weight: Vec3,
+}
+
+/// Stratified jittered samples over the light, skipping those that land on black texels.
+/// Returns the samples and how many strata there were.
+pub fn light_samples(light: &AreaLight, image: &LightImage, requested: u32, seed: u64) -> (Vec<LightSample>, u32) {
+    let aspect = light.size_m.x / light.size_m.y;
+    let gx = ((requested as f32 * aspect).sqrt().round() as u32).clamp(1, requested);
+    let gy = requested.div_ceil(gx).max(1);
+    let stratum_area = light.area_m2() / (gx * gy) as f32;
+    let mut rng = SplitMix64(seed.wrapping_mul(0x9e37_79b9_7f4a_7c15).wrapping_add(1));
+    let mut samples = Vec::with_capacity((gx * gy) as usize);
+    for j in 0..gy {
+        for i in 0..gx {
+            let s = (i as f32 + rng.next_f32()) / gx as f32;
+            let t = (j as f32 + rng.next_f32()) / gy as f32;
+            let (ti, tj) = image.texel_at(s, t);
+            let emission = image.emission(ti, tj);
+            if emission.max_element() <= 0.0 {
+                continue;
+            }
+            samples.push(LightSample { position: light.image_point(s, t), weight: emission * light.intensity * stratum_area });
+        }
+    }
+    (samples, gx * gy)
+}
+
+/// splitmix64: a tiny, well-mixed generator whose stream never changes between versions.
+pub(super) struct SplitMix64(u64);
+
+impl SplitMix64 {
+    pub(super) fn next_f32(&mut self) -> f32 {
+        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^= z >> 31;
+        (z >> 40) as f32 / (1u64 << 24) as f32
+    }
+}
+
+/// A frame's light samples and how each one's map is drawn and read.
+pub(super) struct SamplePlan {
+    pub(super) samples: Vec<LightSample>,
+    /// Strata of the light, black ones included (`samples_skipped_black`).
+    pub(super) strata: u32,
+    pub(super) resolution: u32,
+    /// Into every sample's view coordinates (`sample_rotation`).
+    pub(super) rotation: Mat4,
+    /// The near plane every map shares.
+    pub(super) near: f32,
+    /// Every sample point's z in view coordinates: they all lie on the light's plane.
+    pub(super) plane: f32,
+    /// Per sample, its whole map's view-projection and its texels per unit of tan from the
+    /// map's centre.
+    pub(super) frusta: Vec<(Mat4, f32)>,
+    pub(super) crop: MapCrop,
+}
+
+impl SamplePlan {
+    pub(super) fn new(ctx: &MethodContext<'_>, params: &Params) -> Self {
+        let spec = ctx.spec;
+        let resolution = params.get(&RESOLUTION);
+        let (samples, strata) = light_samples(&spec.light, &spec.light_image, params.get(&SAMPLES), u64::from(params.get(&SEED)));
+        let corners = ctx.scene.shadow_fit_points(&spec.light);
+        let rotation = sample_rotation(&spec.light);
+        // Each sample's frustum: its angle fitted to the scene from its point, and one near
+        // plane for every map (the nearest any fit allows), so that the accumulate pass reads
+        // it once per pixel, not per sample.
+        let fits: Vec<LightProjection> =
+            samples.iter().map(|sample| LightProjection::fit(&AreaLight { center: sample.position, ..spec.light }, &corners)).collect();
+        let near = fits.iter().map(|fit| fit.near).reduce(f32::min).unwrap_or(1.0);
+        let plane = rotation.transform_point3(spec.light.center).z;
+        let frusta: Vec<(Mat4, f32)> = samples
+            .iter()
+            .zip(&fits)
+            .map(|(sample, fit)| {
+                let view = rotation * Mat4::from_translation(-sample.position);
+                let proj = reversed_projection(fit.tan_half, near);
+                (proj * view, proj.y_axis.y * resolution as f32 * 0.5)
+            })
+            .collect();
+        let crop = if params.get(&CROP) {
+            // Every receiver of the frame (a G-buffer position) lies in what the camera sees of
+            // the scene's bounds.
+            let receivers = ConvexSolid::frustum(spec.camera.view_proj(ctx.width as f32 / ctx.height as f32))
+                .intersect(&ConvexSolid::cuboid(ctx.scene.bounds_min, ctx.scene.bounds_max));
+            MapCrop::fit(frusta.iter().map(|(view_proj, ..)| map_bounds(&receivers, *view_proj, resolution)).collect(), resolution)
+        } else {
+            MapCrop::whole(samples.len(), resolution)
+        };
+        Self { samples, strata, resolution, rotation, near, plane, frusta, crop }
+    }
+
+    /// Per sample: its map's projection (the depth pass) and what the accumulate pass needs.
+    pub(super) fn slots(&self) -> (Vec<[[f32; 4]; 4]>, Vec<BatchSample>) {
+        self.samples
+            .iter()
+            .zip(&self.frusta)
+            .zip(&self.crop.origins)
+            .map(|((sample, (view_proj, texels_per_tan)), origin)| {
+                // The crop's first texel, x and y in one word: indices under 2¹² leave the float
+                // exponent short of all ones, so the word is never a NaN to be canonicalised.
+                let crop_origin = origin.map_or(0, |o| o.x | o.y << 16);
+                let view = self.rotation.transform_point3(sample.position);
+                let slot = BatchSample {
+                    origin: [view.x, view.y, f32::from_bits(crop_origin), 0.0],
+                    radiance: sample.weight.extend(*texels_per_tan).to_array(),
+                };
+                (self.crop.layer_view_proj(*origin, self.resolution, *view_proj).to_cols_array_2d(), slot)
+            })
+            .unzip()
+    }
+
+    /// The accumulate passes' uniforms, `layers` samples a pass (the last may hold fewer),
+    /// each with its count of samples. No samples (a black light): one empty batch, whose
+    /// ratio is 1 everywhere.
+    pub(super) fn batches(&self, slots: &[BatchSample], layers: u32, params: &Params) -> Vec<(u32, BatchUniforms)> {
+        let chunks: Vec<&[BatchSample]> = if slots.is_empty() { vec![&[]] } else { slots.chunks(layers as usize).collect() };
+        chunks
+            .into_iter()
+            .map(|chunk| {
+                let mut batch = BatchUniforms::zeroed();
+                batch.rotation = [0, 1, 2].map(|i| self.rotation.row(i).to_array());
+                batch.resolution = self.resolution;
+                batch.bias_texels = params.get(&BIAS_TEXELS);
+                batch.slope_bias_texels = params.get(&SLOPE_BIAS_TEXELS);
+                batch.plane = self.plane;
+                batch.near = self.near;
+                batch.samples[..chunk.len()].copy_from_slice(chunk);
+                (chunk.len() as u32, batch)
+            })
+            .collect()
+    }
+
+    /// The counters either engine reports: samples taken and left out, the row segments
+    /// tested, the maps' resolution and the part of each map drawn.
+    pub(super) fn counters(&self, segments_tested: u32) -> Counters {
+        let total = self.samples.len() as f64;
+        Counters::from([
+            ("samples".to_owned(), total),
+            ("segments_tested".to_owned(), f64::from(segments_tested)),
+            ("samples_skipped_black".to_owned(), f64::from(self.strata) - total),
+            ("resolution".to_owned(), f64::from(self.resolution)),
+            ("map_crop_fraction".to_owned(), f64::from(self.crop.size.element_product()) / f64::from(self.resolution).powi(2)),
+        ])
+    }
+
+    /// Channels of the sums: one where every sample's weight is gray (its three sums would be
+    /// equal), else three.
+    pub(super) fn channels(&self) -> u32 {
+        if self.samples.iter().all(|s| s.weight.x == s.weight.y && s.weight.x == s.weight.z) {
+            1
+        } else {
+            3
+        }
+    }
+}
