@@ -6,7 +6,7 @@ mod common;
 use glam::{DVec3, Vec2, Vec3};
 use penumbra::job::{AssetRef, Job, Limits, OutputFormat};
 use penumbra::light::{edges_acute_from, light_cells, unshadowed_irradiance, AreaLight, LightImage};
-use penumbra::methods::chun_oh::quadtree_probe;
+use penumbra::methods::testing::quadtree_probe;
 use penumbra::methods::filter::light_regions;
 use serde_json::json;
 
@@ -1143,7 +1143,7 @@ fn jump_flooding_is_a_voronoi_flood() {
     for (size, count) in [(64u32, 12usize), (128, 40)] {
         let seeds: Vec<(u32, u32)> = (0..count).map(|_| (next(size), next(size))).collect();
         let rounds = size.trailing_zeros();
-        let flooded = penumbra::methods::jfa::voronoi(&gpu, size, &seeds, rounds, false).unwrap();
+        let flooded = penumbra::methods::testing::voronoi(&gpu, size, &seeds, rounds, false).unwrap();
         let d2 = |x: u32, y: u32, s: usize| {
             let (dx, dy) = (x as i64 - seeds[s].0 as i64, y as i64 - seeds[s].1 as i64);
             dx * dx + dy * dy
@@ -1164,7 +1164,7 @@ fn jump_flooding_is_a_voronoi_flood() {
         assert!(fraction > 0.99, "{fraction}");
     }
     // Standard flooding reaches only 2^rounds − 1 cells: with 3 rounds nothing beyond 7 cells.
-    let flooded = penumbra::methods::jfa::voronoi(&gpu, 32, &[(0, 0)], 3, true).unwrap();
+    let flooded = penumbra::methods::testing::voronoi(&gpu, 32, &[(0, 0)], 3, true).unwrap();
     assert_eq!(flooded[7 * 32 + 7], 0);
     assert_eq!(flooded[8 * 32 + 8], -1);
 }

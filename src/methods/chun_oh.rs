@@ -18,7 +18,6 @@
 //!   of the quadtree, with overlaps of fractional texels), kept for later jobs.
 //! - Orientation: as `filter.rs` says.
 
-use wgpu::util::DeviceExt;
 
 use super::filter::{self, light_regions_buffer, Uniforms, FILTER_PARAMS, MODE_ADAPTIVE, MODE_FIXED};
 use super::{Counters, MethodContext, Param, ParamSpec, Params, ShadowMethod};
@@ -84,81 +83,4 @@ impl ShadowMethod for ChunOh {
         counters.insert("splits_forced_by_light".to_owned(), f64::from(counts.forced_by_light));
         Ok(counters)
     }
-}
-
-/// One synthetic tile's outcome in `quadtree_probe`.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct ProbeResult {
-    pub visibility: [f32; 3],
-    /// Deepest split: 0, 1 (2×2) or 2 (4×4).
-    pub level: u32,
-    /// Splits only the light's colour asked for.
-    pub forced: u32,
-}
-
-/// Runs the shader's quadtree (`quadtree.wgsl`, through `quadtree_probe.wgsl`) on synthetic
-/// tiles: per tile, lit tests in each 4×4 cell (row-major, x along the shadow map's u), with
-/// `cell_taps`² tests per cell, against the light table `regions` (`light_regions`).
-pub fn quadtree_probe(
-    gpu: &crate::gpu::GpuContext,
-    tiles: &[[u32; 16]],
-    regions: &[[f32; 4]; 21],
-    fixed: bool,
-    threshold: f32,
-    light_threshold: f32,
-    cell_taps: u32,
-) -> Result<Vec<ProbeResult>, crate::gpu::GpuError> {
-    use crate::gpu::layout;
-    let device = &gpu.device;
-    let storage = |label, contents: &[u8], usage| {
-        device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents, usage })
-    };
-    let tiles_buffer = storage("Probe::tiles", bytemuck::cast_slice(tiles), wgpu::BufferUsages::STORAGE);
-    let regions_buffer = storage("Probe::regions", bytemuck::cast_slice(regions), wgpu::BufferUsages::STORAGE);
-    let mode = if fixed { MODE_FIXED } else { MODE_ADAPTIVE };
-    let params: [u32; 4] = [mode, threshold.to_bits(), light_threshold.to_bits(), cell_taps];
-    let params_buffer = storage("Probe::params", bytemuck::cast_slice(&params), wgpu::BufferUsages::UNIFORM);
-    let results = device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("Probe::results"),
-        size: (tiles.len() * 16) as u64,
-        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-        mapped_at_creation: false,
-    });
-    let bind_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-        label: Some("Probe::layout"),
-        entries: &[layout::storage_read(0), layout::storage_read(1), layout::uniform(2), layout::storage_read_write(3)],
-    });
-    let pipeline = crate::gpu::shaders::compute_pipeline(
-        device,
-        "Probe::pipeline",
-        ("methods/chun_oh/quadtree_probe.wgsl", "main"),
-        &[&bind_layout],
-        &[],
-    );
-    let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some("Probe::bind_group"),
-        layout: &bind_layout,
-        entries: &layout::entries(&[
-            tiles_buffer.as_entire_binding(),
-            regions_buffer.as_entire_binding(),
-            params_buffer.as_entire_binding(),
-            results.as_entire_binding(),
-        ]),
-    });
-    let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("Probe::encoder") });
-    {
-        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("Probe::pass"), timestamp_writes: None });
-        pass.set_pipeline(&pipeline);
-        pass.set_bind_group(0, &bind_group, &[]);
-        pass.dispatch_workgroups((tiles.len() as u32).div_ceil(64), 1, 1);
-    }
-    gpu.queue.submit([encoder.finish()]);
-    let values: Vec<[f32; 4]> = bytemuck::cast_slice(&crate::gpu::readback::read_buffer(gpu, &results)?).to_vec();
-    Ok(values
-        .iter()
-        .map(|v| {
-            let code = v[3] as u32;
-            ProbeResult { visibility: [v[0], v[1], v[2]], level: code % 4, forced: code / 4 }
-        })
-        .collect())
 }

@@ -8,6 +8,7 @@ pub mod chun_oh;
 pub mod filter;
 pub mod hard;
 pub mod jfa;
+pub mod testing;
 pub mod light_view;
 pub mod pcss;
 pub mod reference;
