@@ -10,7 +10,9 @@
 //! Scenes are built-ins or real models (`suite.rs`): files made by others, staged on a floor
 //! with the fitted camera and light; their rows are also summed up per method (`real.rs`).
 
+mod compare;
 pub mod frame_bench;
+mod options;
 mod pictures;
 mod plots;
 mod real;
@@ -21,100 +23,22 @@ use std::path::PathBuf;
 
 use anyhow::Context as _;
 use serde::Serialize;
-use serde_json::{Map, Value};
 
 use crate::engine::Engine;
 use crate::job::{AssetRef, Job, MethodSpec, OutputFormat};
-use crate::methods::{Counters, REGISTRY};
+use crate::methods::Counters;
 use crate::quality::{self, QualityReport};
 use crate::render::FrameOutput;
 use crate::timing::Timings;
+use compare::{colored_ratios, jump_twin, with_white_twins};
+pub use compare::{compare_flooding, ColoredRatio, FloodingComparison, SuiteLight};
+pub use options::EvalOptions;
+use options::{every_method_but_reference, parse_method, parse_methods, parse_named, parse_size, parse_sweep, Sweep};
 use pictures::{sanitize, write_pictures};
 use plots::{plot_scaling, plot_sweep};
 pub use real::RealSummary;
 pub use suite::SuiteScene;
 use tables::write_tables;
-
-/// What to run.
-#[derive(Debug, Clone, clap::Args)]
-pub struct EvalOptions {
-    /// Scenes, comma-separated: built-in ones (`name[:key=value…]`), scene files (`.glb`,
-    /// `.gltf`) and folders of them (the real-model suite: `deploy/real-models.sh`). A file is
-    /// staged on a floor with the fitted camera and light (contract §3).
-    #[arg(long, value_delimiter = ',', default_value = "torus,crowd,columns,terrain")]
-    pub scenes: Vec<String>,
-    /// Built-in light images, comma-separated, each optionally with parameters
-    /// (`flame:white=true`, its white twin).
-    #[arg(long, value_delimiter = ',', default_value = "white,stripes")]
-    pub lights: Vec<String>,
-    /// Also run each light's white twin (the same shape in white) where no listed light is
-    /// it, and report every method's penumbra error under the coloured light over its error
-    /// under the twin: what the colours cost each method.
-    #[arg(long)]
-    pub colored: bool,
-    /// Methods, comma-separated, each optionally with parameters: `name:key=value:key=value`
-    /// (values are JSON). Default: every registered method but `reference`.
-    #[arg(long, value_delimiter = ',')]
-    pub methods: Vec<String>,
-    /// Output sizes, comma-separated, as WIDTHxHEIGHT.
-    #[arg(long, value_delimiter = ',', default_value = "512x384")]
-    pub sizes: Vec<String>,
-    /// Light samples of the reference.
-    #[arg(long, default_value_t = 256)]
-    pub samples: u32,
-    /// Shadow-map resolutions, comma-separated (also the reference's sample maps). With
-    /// several, every case runs at each, and `scaling-*.svg` plots cost against resolution.
-    #[arg(long, value_delimiter = ',', default_value = "1024")]
-    pub shadow_map: Vec<u32>,
-    /// Folder for the results.
-    #[arg(long, default_value = "eval")]
-    pub out: PathBuf,
-    /// Sweep one numeric parameter of one method, e.g. `brabec:max_radius_texels=4,8,16,32`
-    /// (other `key=value` parts stay fixed): adds one row per value and writes a table and a
-    /// plot (`sweep-*.svg`) of cost and penumbra error against the value.
-    #[arg(long)]
-    pub sweep: Option<String>,
-    /// Render every method this many times, round-robin, and report each phase's median
-    /// time: these machines are noisy, and interleaving lets slow spells hit every method.
-    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=100))]
-    pub repeat: u32,
-}
-
-/// A parameter sweep: the method label of each value, in order.
-struct Sweep {
-    method: String,
-    param: String,
-    points: Vec<(f64, String)>,
-}
-
-fn parse_sweep(text: &str) -> anyhow::Result<Sweep> {
-    let mut parts = text.split(':');
-    let method = parts.next().unwrap_or_default().to_owned();
-    let (mut fixed, mut swept) = (Vec::new(), None);
-    for part in parts {
-        let (key, values) = part.split_once('=').with_context(|| format!("sweep part `{part}` must be key=value"))?;
-        if values.contains(',') {
-            anyhow::ensure!(swept.is_none(), "a sweep varies one parameter");
-            swept = Some((key.to_owned(), values.split(',').map(str::to_owned).collect::<Vec<_>>()));
-        } else {
-            fixed.push(part.to_owned());
-        }
-    }
-    let (param, values) = swept.context("a sweep needs one parameter with comma-separated values")?;
-    let points = values
-        .iter()
-        .map(|v| {
-            let x: f64 = v.trim().parse().with_context(|| format!("sweep value `{v}` is not a number"))?;
-            let label = std::iter::once(method.clone())
-                .chain(fixed.iter().cloned())
-                .chain([format!("{param}={}", v.trim())])
-                .collect::<Vec<_>>()
-                .join(":");
-            Ok((x, label))
-        })
-        .collect::<anyhow::Result<_>>()?;
-    Ok(Sweep { method, param, points })
-}
 
 /// One method in one case.
 #[derive(Debug, Clone, Serialize)]
@@ -152,199 +76,6 @@ pub struct EvalReport {
     /// Real models left out of the suite, and why (penumbra refused them, or a method failed).
     pub skipped: Vec<(String, String)>,
     pub files: Vec<PathBuf>,
-}
-
-/// The flooding experiment of Rong & Tan 2006 (Fig. 4, Fig. 7): over the pixels either
-/// variant puts in a penumbra, the fractions whose visibility differs by < 0.05, 0.05–0.1,
-/// 0.1–0.2 and ≥ 0.2 (largest channel), and the fraction in a penumbra in one only (parity).
-#[derive(Debug, Clone, Serialize)]
-pub struct FloodingComparison {
-    pub case: String,
-    pub method: String,
-    pub penumbra_pixels: usize,
-    pub below_005: f64,
-    pub below_010: f64,
-    pub below_020: f64,
-    pub at_least_020: f64,
-    pub parity: f64,
-}
-
-/// A light of the suite: its label (`name[:key=value…]`), what identifies its image, and the
-/// label of the light in the suite that is its white twin (itself when it is white).
-#[derive(Debug, Clone)]
-pub struct SuiteLight {
-    pub label: String,
-    identity: LightIdentity,
-    twin: String,
-}
-
-/// Images that light a scene the same way: a uniform image by its one emission, whatever its
-/// size (`white` and the white twin of `stripes`), any other by its fingerprint.
-#[derive(Debug, Clone, PartialEq)]
-enum LightIdentity {
-    Uniform([u32; 3]),
-    Image(u64),
-}
-
-impl LightIdentity {
-    fn of(image: &crate::light::LightImage) -> Self {
-        if image.is_uniform() {
-            LightIdentity::Uniform(image.emission(0, 0).to_array().map(f32::to_bits))
-        } else {
-            LightIdentity::Image(image.fingerprint())
-        }
-    }
-}
-
-/// The listed lights, plus (with `colored`) each one's white twin where no listed light has
-/// the twin's image.
-fn with_white_twins(labels: &[String], colored: bool) -> anyhow::Result<Vec<SuiteLight>> {
-    let image = |label: &str| -> anyhow::Result<crate::light::LightImage> {
-        let (name, params) = parse_named(label)?;
-        crate::light::LightImage::builtin(&name, &params, "light").map_err(|e| anyhow::anyhow!("light `{label}`: {}", e.message))
-    };
-    let mut lights: Vec<SuiteLight> = labels
-        .iter()
-        .map(|label| Ok(SuiteLight { label: label.clone(), identity: LightIdentity::of(&image(label)?), twin: String::new() }))
-        .collect::<anyhow::Result<_>>()?;
-    for k in 0..lights.len() {
-        let twin = LightIdentity::of(&image(&lights[k].label)?.white_twin());
-        let label = match lights.iter().find(|l| l.identity == twin) {
-            Some(found) => found.label.clone(),
-            None if colored => {
-                let (name, _) = parse_named(&lights[k].label)?;
-                let label = format!("{name}:white=true");
-                lights.push(SuiteLight { label: label.clone(), identity: twin, twin: label.clone() });
-                label
-            }
-            None => String::new(),
-        };
-        lights[k].twin = label;
-    }
-    Ok(lights)
-}
-
-/// A method's penumbra visibility error (mean |V − Vref|, and per channel) under a coloured
-/// light and under its white twin, in one scene, and their ratio.
-#[derive(Debug, Clone, Serialize)]
-pub struct ColoredRatio {
-    pub scene: String,
-    pub light: String,
-    pub twin: String,
-    pub method: String,
-    pub mae: f64,
-    pub mae_rgb: [f64; 3],
-    pub twin_mae: f64,
-    pub ratio: f64,
-}
-
-fn colored_ratios(rows: &[Row], lights: &[SuiteLight]) -> Vec<ColoredRatio> {
-    let mut out = Vec::new();
-    for row in rows.iter().filter(|r| r.method != "reference") {
-        let Some(light) = lights.iter().find(|l| l.label == row.light && l.twin != l.label && !l.twin.is_empty()) else { continue };
-        let twin = rows.iter().find(|t| {
-            t.scene == row.scene
-                && t.light == light.twin
-                && t.method == row.method
-                && (t.width, t.height, t.shadow_map) == (row.width, row.height, row.shadow_map)
-        });
-        if let Some(twin) = twin {
-            let (mae, twin_mae) = (row.quality.visibility.penumbra.mae, twin.quality.visibility.penumbra.mae);
-            out.push(ColoredRatio {
-                scene: row.scene.clone(),
-                light: row.light.clone(),
-                twin: twin.light.clone(),
-                method: row.method.clone(),
-                mae,
-                mae_rgb: row.quality.visibility.penumbra.mae_rgb,
-                twin_mae,
-                ratio: if twin_mae > 0.0 { mae / twin_mae } else { f64::NAN },
-            });
-        }
-    }
-    out
-}
-
-/// The label of the jump-flooding twin of a standard-flooding method label, if it is one.
-fn jump_twin(label: &str) -> Option<String> {
-    label.contains("flooding=\"standard\"").then(|| label.replace(":flooding=\"standard\"", ""))
-}
-
-pub fn compare_flooding(case: &str, method: &str, jump: &FrameOutput, standard: &FrameOutput) -> FloodingComparison {
-    let in_penumbra = |v: &[f32; 3]| v.iter().any(|&c| c > 0.0 && c < 1.0);
-    let (a, b) = (jump.visibility.as_ref().expect("visibility"), standard.visibility.as_ref().expect("visibility"));
-    let mut bins = [0usize; 4];
-    let (mut total, mut parity) = (0usize, 0usize);
-    for (x, y) in a.iter().zip(b) {
-        let (px, py) = (in_penumbra(x), in_penumbra(y));
-        if !(px || py) {
-            continue;
-        }
-        total += 1;
-        if px != py {
-            parity += 1;
-        }
-        let d = (0..3).map(|k| (x[k] - y[k]).abs()).fold(0.0, f32::max);
-        bins[if d < 0.05 {
-            0
-        } else if d < 0.1 {
-            1
-        } else if d < 0.2 {
-            2
-        } else {
-            3
-        }] += 1;
-    }
-    let f = |n: usize| if total > 0 { n as f64 / total as f64 } else { 0.0 };
-    FloodingComparison {
-        case: case.into(),
-        method: method.into(),
-        penumbra_pixels: total,
-        below_005: f(bins[0]),
-        below_010: f(bins[1]),
-        below_020: f(bins[2]),
-        at_least_020: f(bins[3]),
-        parity: f(parity),
-    }
-}
-
-/// A name with parameters as given on the command line, `name:key=value:key=value` (values
-/// in JSON, else strings).
-fn parse_named(text: &str) -> anyhow::Result<(String, Map<String, Value>)> {
-    let mut parts = text.split(':');
-    let name = parts.next().unwrap_or_default().trim().to_owned();
-    let mut params = Map::new();
-    for part in parts {
-        let (key, value) = part.split_once('=').with_context(|| format!("parameter `{part}` of `{name}` must be key=value"))?;
-        let value: Value = serde_json::from_str(value).unwrap_or_else(|_| Value::String(value.to_owned()));
-        params.insert(key.to_owned(), value);
-    }
-    Ok((name, params))
-}
-
-fn parse_method(text: &str) -> anyhow::Result<MethodSpec> {
-    let (name, params) = parse_named(text)?;
-    Ok(MethodSpec { name, params })
-}
-
-fn parse_size(text: &str) -> anyhow::Result<(u32, u32)> {
-    let (w, h) = text.split_once('x').with_context(|| format!("size `{text}` must be WIDTHxHEIGHT"))?;
-    Ok((w.trim().parse()?, h.trim().parse()?))
-}
-
-/// Every registered method but `reference` (which the others are measured against), each
-/// labelled by its name.
-fn every_method_but_reference() -> Vec<(String, MethodSpec)> {
-    REGISTRY
-        .iter()
-        .filter(|m| m.name() != "reference")
-        .map(|m| (m.name().to_owned(), MethodSpec { name: m.name().into(), params: Map::new() }))
-        .collect()
-}
-
-/// Methods as given on the command line (`name:key=value`), each labelled by its text.
-fn parse_methods(listed: &[String]) -> anyhow::Result<Vec<(String, MethodSpec)>> {
-    listed.iter().map(|text| Ok((text.clone(), parse_method(text)?))).collect()
 }
 
 /// A case's job: a suite's scene under a built-in light image (as given on the command line),
