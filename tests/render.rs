@@ -93,12 +93,12 @@ fn light_image_lands_the_documented_way_round() {
 fn e0_interpolation_stays_within_a_thousandth_of_the_exact_sum() {
     let engine = common::own_engine();
     // `terrain`: a bumpy receiver, whose pixels leave their block corners' blend along the
-    // view ray (the derivative's correction, `shaders/e0.wgsl`).
+    // view ray (the derivative's correction, `shaders/e0/`).
     let terrain = json!({"builtin": "terrain", "triangles": 100000});
     let image = |name: &str| json!({"image": {"builtin": name}});
     // Lights over the floor of `occluder` whose rectangles straddle the horizon of every floor
     // point they light, so that the floor's E0 is blended itself, a flat face's (every
-    // block's corners agree on the normal: `BENT` in shaders/e0.wgsl) — 27–39 % of the lit
+    // block's corners agree on the normal: `BENT` in shaders/e0/common.wgsl) — 27–39 % of the lit
     // pixels, none if that blend were refused: one leaning at 45° (under `stripes` and
     // `mosaic`), its lower edge 7 cm below the floor's plane; one 14° from upright, its lower
     // edge 30 cm below, whose blend departed from the exact sum by 1.04·10⁻³ when it was
@@ -153,7 +153,7 @@ fn e0_interpolation_stays_within_a_thousandth_of_the_exact_sum() {
             lit += usize::from(e[0] + e[1] + e[2] > 0.0);
             differ += usize::from(e != i);
             // Where every cell lies below a pixel's horizon the interpolation writes 0 without
-            // summing (`cells_horizon` in shaders/e0.wgsl): what the exact sum adds up to.
+            // summing (`cells_horizon` in shaders/e0/interpolate.wgsl): what the exact sum adds up to.
             if *e == [0.0; 3] {
                 unlit += 1;
                 lit_wrongly += usize::from(*i != [0.0; 3]);
@@ -181,7 +181,7 @@ fn e0_interpolation_stays_within_a_thousandth_of_the_exact_sum() {
 /// atan2) at floor points of `occluder`, under lights where a cross product of two nearly
 /// parallel unit directions lost
 /// up to ~2·10⁻³ of a small cell's sum before each edge term was taken along its edge
-/// (`edge_part` in shaders/common/light.wgsl, `line_term` in shaders/e0_grid.wgsl): a 0.5 m
+/// (`edge_part` in shaders/common/light.wgsl, `line_term` in shaders/e0/grid.wgsl): a 0.5 m
 /// light 2–7 m from the points; one 12 m away seen 1–4° above their horizon; one standing on
 /// the floor facing along it, the lower half of every cell clipped; and one sunk into it, a
 /// sliver of every cell above. Under `mosaic` (the 8 × 8 grid's walks) and `stripes` (cells
@@ -305,7 +305,7 @@ fn e0_on_the_gpu_matches_its_cpu_twin() {
     // the fourth's at a slant; the fifth's bottom edge lies on the floor, in the horizon's
     // plane; the last is far above the scene (`ACUTE_EDGES`). Under `stripes` (cells merged
     // into stripes) and under `mosaic` (the whole 8 × 8 grid, summed by the grid's shared
-    // corners and edges: shaders/e0_grid.wgsl). The pixel is a corner of E0's blocks, summed
+    // corners and edges: shaders/e0/grid.wgsl). The pixel is a corner of E0's blocks, summed
     // exactly. (centre, direction, up, acute, whether the cells straddle the horizon)
     let lights = [
         (Vec3::new(2.0, 1.5, 2.5), Vec3::new(0.3, -1.0, 0.2), Vec3::X, false, false),

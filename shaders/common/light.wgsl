@@ -27,7 +27,7 @@ fn edge_vector(a: vec3<f32>, b: vec3<f32>) -> vec3<f32> {
 
 // n · `edge_vector(a, b)` with n × a given as `turned`: n · (a × b) = (n × a) · b. The signed
 // angle about n from a to b where both lie in the plane normal to n (the horizon's circle,
-// `horizon_angle` in shaders/e0_grid.wgsl). a × b itself is left to `edge_scale`, which reads
+// `horizon_angle` in shaders/e0/grid.wgsl). a × b itself is left to `edge_scale`, which reads
 // it only where an edge may be obtuse.
 fn edge_term_turned(turned: vec3<f32>, a: vec3<f32>, b: vec3<f32>) -> f32 {
     return dot(turned, b) * edge_scale(cross(a, b), dot(a, b));

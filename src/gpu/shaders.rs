@@ -16,8 +16,13 @@ pub const SOURCES: &[(&str, &str)] = &[
     ("common/pixel_list.wgsl", include_str!("../../shaders/common/pixel_list.wgsl")),
     ("shadow_map.wgsl", include_str!("../../shaders/shadow_map.wgsl")),
     ("gbuffer.wgsl", include_str!("../../shaders/gbuffer.wgsl")),
-    ("e0.wgsl", include_str!("../../shaders/e0.wgsl")),
-    ("e0_grid.wgsl", include_str!("../../shaders/e0_grid.wgsl")),
+    ("e0/common.wgsl", include_str!("../../shaders/e0/common.wgsl")),
+    ("e0/grid.wgsl", include_str!("../../shaders/e0/grid.wgsl")),
+    ("e0/corners.wgsl", include_str!("../../shaders/e0/corners.wgsl")),
+    ("e0/blend.wgsl", include_str!("../../shaders/e0/blend.wgsl")),
+    ("e0/check.wgsl", include_str!("../../shaders/e0/check.wgsl")),
+    ("e0/interpolate.wgsl", include_str!("../../shaders/e0/interpolate.wgsl")),
+    ("e0/exact.wgsl", include_str!("../../shaders/e0/exact.wgsl")),
     ("composite.wgsl", include_str!("../../shaders/composite.wgsl")),
     ("methods/hard.wgsl", include_str!("../../shaders/methods/hard.wgsl")),
     ("methods/brabec/common.wgsl", include_str!("../../shaders/methods/brabec/common.wgsl")),
@@ -98,7 +103,7 @@ fn append(name: &str, out: &mut String, seen: &mut HashSet<String>) {
 /// lines up to the `}` that closes it) once per value of `i`. On lavapipe an array that a
 /// loop indexes by its counter lives in memory, a load and a store lane by lane per access,
 /// where one indexed by constants lives in registers: a loop over the columns of E0's grid
-/// (`shaders/e0_grid.wgsl`) whose carried state is arrays runs many times slower than the
+/// (`shaders/e0/grid.wgsl`) whose carried state is arrays runs many times slower than the
 /// same loop unrolled. Mesa unrolls only small loops itself; this unrolls the ones a
 /// shader marks. Each copy is a block that binds `i` as a `let` constant, so the body is the
 /// loop's body unchanged — copied as it stands: a directive inside it is not read.
@@ -207,7 +212,7 @@ mod tests {
         // checked beside their definitions: `render::passes`, `methods::brabec`,
         // `methods::reference`.)
         assert_declares("common/frame_inputs.wgsl", &format!("array<LightCell, {}>", E0_GRID * E0_GRID));
-        assert_declares("e0_grid.wgsl", &format!("const SIDE: u32 = {E0_GRID}u;"));
+        assert_declares("e0/grid.wgsl", &format!("const SIDE: u32 = {E0_GRID}u;"));
     }
 
     #[test]

@@ -1,6 +1,6 @@
 //! The exact unshadowed irradiance E0 every method shares (contract §1): the light cut into
 //! uniform cells, and Lambert's closed form for a polygon clipped to the receiver's
-//! hemisphere — the CPU twin of `shaders/common/light.wgsl` and `shaders/e0.wgsl`.
+//! hemisphere — the CPU twin of `shaders/common/light.wgsl` and `shaders/e0/`.
 
 use glam::{DVec3, Vec3};
 
@@ -80,7 +80,7 @@ pub fn light_cells(light: &AreaLight, image: &LightImage) -> Vec<LightCell> {
 /// and `u` from the light's centre and its half width and height, metres. A shaped light
 /// (`flame`, `disk`) drops its black texels from the cells, so its cells can all lie on one
 /// side of a receiver's horizon where the whole rectangle does not (`cells_horizon` in
-/// `shaders/e0.wgsl`). The whole rectangle where there are no cells.
+/// `shaders/e0/`). The whole rectangle where there are no cells.
 pub fn cells_bounds(light: &AreaLight, cells: &[LightCell]) -> [f32; 4] {
     let mut corners = cells.iter().flat_map(|c| c.corners).map(|p| light.plane_point(p));
     let Some(first) = corners.next() else {
@@ -268,7 +268,7 @@ mod tests {
         assert!((flux - image.mean_emission()).length() < 1e-4, "{flux} vs {}", image.mean_emission());
     }
 
-    /// What E0's grid sums read of a light of `E0_GRID`² cells (`shaders/e0_grid.wgsl`): the
+    /// What E0's grid sums read of a light of `E0_GRID`² cells (`shaders/e0/grid.wgsl`): the
     /// cells row by row from the image's top, left to right, each sharing its right edge with
     /// the next and its bottom edge with the one below.
     #[test]

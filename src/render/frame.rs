@@ -241,7 +241,7 @@ impl FrameSpec {
     /// The light's cells are its whole `E0_GRID` × `E0_GRID` grid, none merged and none black
     /// (so listed row by row from the image's top, left to right: `light_cells`), as under a
     /// photograph: E0 sums each of the grid's corners and edges once for the cells that share
-    /// it (`GRID` in `shaders/e0_grid.wgsl`).
+    /// it (`GRID` in `shaders/e0/grid.wgsl`).
     pub fn full_grid(&self) -> bool {
         self.cells.len() == (E0_GRID * E0_GRID) as usize
     }

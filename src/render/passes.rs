@@ -12,7 +12,7 @@ use crate::gpu::pool::PipelineKey;
 use crate::gpu::scene::GpuScene;
 use crate::gpu::shaders;
 
-/// Pixels per side of the blocks whose corners E0 is summed at exactly (`shaders/e0.wgsl`).
+/// Pixels per side of the blocks whose corners E0 is summed at exactly (`shaders/e0/`).
 pub const E0_BLOCK: u32 = 8;
 
 /// How the E0 pass evaluates the light's cells.
@@ -27,7 +27,7 @@ pub enum E0Mode {
 /// Lights of at most this many cells get the exact sum at every pixel: the corners and their
 /// check cost more than they save.
 pub const E0_EXACT_CELLS: usize = 2;
-/// Bytes of one block corner's record (`Corner` in `shaders/e0.wgsl`).
+/// Bytes of one block corner's record (`Corner` in `shaders/e0/common.wgsl`).
 const E0_CORNER_BYTES: u64 = 5 * 16;
 
 impl Renderer {
@@ -142,7 +142,7 @@ impl Renderer {
             .compute(PipelineKey::new(name), || screen_compute_pipeline(device, inputs_layout, name, (shader, "main"), io_layout, &[]))
     }
 
-    /// E0 (`shaders/e0.wgsl`). Under a light of more than `E0_EXACT_CELLS` cells: the exact
+    /// E0 (`shaders/e0/`). Under a light of more than `E0_EXACT_CELLS` cells: the exact
     /// sum at the corners of `E0_BLOCK`-pixel blocks; per block, the interpolation's error at
     /// its centre, and each of its pixels interpolated where the error estimate allows and
     /// listed otherwise (a pixel that sees every cell of the light below its horizon takes 0,
@@ -168,8 +168,14 @@ impl Renderer {
         let constants = [spec.acute_edges_constant(), ("GRID", f64::from(u8::from(grid)))];
         let variant = u32::from(spec.acute_edges) | u32::from(grid) << 1;
         let mut entry = |name: &'static str, entry: &'static str| {
+            // Each entry point's file (`shaders/e0/`).
+            let file = match entry {
+                "block_corners" => "e0/corners.wgsl",
+                "interpolate_blocks" => "e0/interpolate.wgsl",
+                _ => "e0/exact.wgsl",
+            };
             self.pipelines.compute(PipelineKey { name, variant }, || {
-                screen_compute_pipeline(device, inputs_layout, name, ("e0.wgsl", entry), &io_layout, &constants)
+                screen_compute_pipeline(device, inputs_layout, name, (file, entry), &io_layout, &constants)
             })
         };
         let interpolate = self.e0_mode == E0Mode::Interpolated && spec.cells.len() > E0_EXACT_CELLS;
@@ -315,6 +321,6 @@ pub fn screen_compute_pipeline(
 mod tests {
     #[test]
     fn the_e0_block_matches_its_wgsl_mirror() {
-        crate::gpu::shaders::assert_declares("e0.wgsl", &format!("const BLOCK: u32 = {}u;", super::E0_BLOCK));
+        crate::gpu::shaders::assert_declares("e0/common.wgsl", &format!("const BLOCK: u32 = {}u;", super::E0_BLOCK));
     }
 }
