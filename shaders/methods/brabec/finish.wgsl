@@ -3,6 +3,7 @@
 // by the direction of what the search found (`colored_visibility`).
 
 #import methods/brabec/common.wgsl
+#import methods/brabec/colour.wgsl
 
 @compute @workgroup_size(8, 8)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {

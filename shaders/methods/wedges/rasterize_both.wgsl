@@ -4,6 +4,7 @@
 // the same list.
 
 #import methods/wedges/rasterize.wgsl
+#import methods/wedges/share.wgsl
 
 @compute @workgroup_size(LANES)
 fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>, @builtin(local_invocation_index) local: u32) {

@@ -6,6 +6,7 @@
 // time. `main` shades every pixel of each item, as the paper's pass does.
 
 #import methods/wedges/rasterize.wgsl
+#import methods/wedges/share.wgsl
 #import common/pixel_list.wgsl
 
 @compute @workgroup_size(LANES)
