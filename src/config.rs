@@ -99,8 +99,8 @@ pub struct ServeConfig {
     /// Where submitted jobs and their results are kept: `embedded` (a file under --data-dir;
     /// accepted jobs survive a crash and finish after a restart), `memory`, or
     /// `redis://HOST:PORT/DB` (shared by several replicas acting as one service).
-    #[arg(long, env = "PENUMBRA_JOB_STORE", default_value = "embedded")]
-    pub job_store: String,
+    #[arg(long, env = "PENUMBRA_JOB_STORE", default_value = "embedded", value_parser = JobStoreKind::parse)]
+    pub job_store: JobStoreKind,
 
     /// With a Redis store: seconds a job taken by a replica may go without its heartbeat
     /// before another replica claims it (the first is presumed dead).
@@ -214,6 +214,28 @@ mod tests {
         assert_eq!(super::seconds("2.5"), Ok(2.5));
         for bad in ["inf", "NaN", "-1", "1e300", "soon"] {
             assert!(super::seconds(bad).is_err(), "{bad}");
+        }
+    }
+}
+
+/// Where submitted jobs are kept (`--job-store`).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum JobStoreKind {
+    /// `embedded`: a file under `--data-dir`; accepted jobs survive a crash.
+    Embedded,
+    /// `memory`: nothing survives the process.
+    Memory,
+    /// `redis://HOST:PORT/DB`: a queue and records shared by several replicas.
+    Redis(String),
+}
+
+impl JobStoreKind {
+    fn parse(text: &str) -> Result<Self, String> {
+        match text {
+            "embedded" => Ok(Self::Embedded),
+            "memory" => Ok(Self::Memory),
+            url if url.starts_with("redis://") => Ok(Self::Redis(url.to_owned())),
+            other => Err(format!("`{other}` is not embedded, memory or redis://HOST:PORT/DB")),
         }
     }
 }

@@ -1,7 +1,8 @@
 //! Method parameters (contract §2): what a method declares — type, default, range, the
 //! operator's cap that bounds it — and the checked values a job carries. A method reads a
 //! value through the typed handle it declared (`Param<f32>`, `Param<u32>`, `Param<bool>`,
-//! `Param<&str>`), so no read names a parameter by a string or asks for the wrong type.
+//! a `Choice` enum), so no read names a parameter by a string or asks for the wrong type, and
+//! every `match` on a choice is exhaustive.
 
 use std::collections::BTreeMap;
 use std::marker::PhantomData;
@@ -84,9 +85,37 @@ impl Param<bool> {
     }
 }
 
-impl Param<&'static str> {
-    pub const fn choice(name: &'static str, default: &'static str, options: &'static [&'static str], doc: &'static str) -> Self {
-        Self::new(name, ParamKind::Choice { default, options }, doc)
+/// A parameter whose value is one of a few named options, read as an enum: declare it with
+/// `choice!`. The default is the first option.
+pub trait Choice: Copy + 'static {
+    /// The options as a job spells them, the default first.
+    const NAMES: &'static [&'static str];
+    /// The options, in the order of `NAMES`.
+    const VALUES: &'static [Self];
+}
+
+/// Declares an enum whose variants are a parameter's options, each with its name in a job:
+/// `choice! { pub enum Falloff { Linear = "linear", Sine = "sine" } }`. The first is the
+/// default.
+macro_rules! choice {
+    ($(#[$meta:meta])* $vis:vis enum $name:ident { $($(#[$variant_meta:meta])* $variant:ident = $text:literal),+ $(,)? }) => {
+        $(#[$meta])*
+        #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+        $vis enum $name {
+            $($(#[$variant_meta])* $variant),+
+        }
+
+        impl $crate::params::Choice for $name {
+            const NAMES: &'static [&'static str] = &[$($text),+];
+            const VALUES: &'static [Self] = &[$(Self::$variant),+];
+        }
+    };
+}
+pub(crate) use choice;
+
+impl<T: Choice> Param<T> {
+    pub const fn choice(name: &'static str, doc: &'static str) -> Self {
+        Self::new(name, ParamKind::Choice { default: T::NAMES[0], options: T::NAMES }, doc)
     }
 }
 
@@ -154,19 +183,16 @@ impl ParamType for bool {
     }
 }
 
-impl ParamType for &'static str {
+impl<T: Choice> ParamType for T {
     fn read(value: &ParamValue) -> Option<Self> {
         match value {
-            ParamValue::Choice(c) => Some(c),
+            ParamValue::Choice(c) => T::NAMES.iter().position(|name| name == c).map(|i| T::VALUES[i]),
             _ => None,
         }
     }
 
-    fn default_of(kind: &ParamKind) -> Self {
-        match kind {
-            ParamKind::Choice { default, .. } => default,
-            _ => "",
-        }
+    fn default_of(_: &ParamKind) -> Self {
+        T::VALUES[0]
     }
 }
 
@@ -243,7 +269,10 @@ mod tests {
 
     const BIAS: Param<f32> = Param::float("bias", 1.0, 0.0, 10.0, "");
     const ROUNDS: Param<u32> = Param::integer("rounds", 6, 1, 12, "").capped(Cap::Rounds);
-    const MODE: Param<&str> = Param::choice("mode", "adaptive", &["adaptive", "fixed"], "");
+    choice! {
+        enum Mode { Adaptive = "adaptive", Fixed = "fixed" }
+    }
+    const MODE: Param<Mode> = Param::choice("mode", "");
     const SPECS: &[ParamSpec] = &[BIAS.spec, ROUNDS.spec, MODE.spec];
 
     fn given(json: &str) -> Map<String, Value> {
@@ -253,7 +282,10 @@ mod tests {
     #[test]
     fn defaults_and_ranges() {
         let p = Params::parse(SPECS, &given(r#"{"rounds": 3}"#)).unwrap();
-        assert_eq!((p.get(&BIAS), p.get(&ROUNDS), p.get(&MODE)), (1.0, 3, "adaptive"));
+        assert_eq!((p.get(&BIAS), p.get(&ROUNDS), p.get(&MODE)), (1.0, 3, Mode::Adaptive));
+        let p = Params::parse(SPECS, &given(r#"{"mode": "fixed"}"#)).unwrap();
+        assert_eq!(p.get(&MODE), Mode::Fixed);
+        assert!(matches!(MODE.spec.kind, ParamKind::Choice { default: "adaptive", options: &["adaptive", "fixed"] }));
         assert_eq!(ROUNDS.spec.cap, Some(Cap::Rounds));
         let err = Params::parse(SPECS, &given(r#"{"rounds": 13}"#)).unwrap_err();
         assert_eq!(err.field.as_deref(), Some("method.rounds"));

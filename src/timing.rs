@@ -7,9 +7,49 @@ use std::time::Instant;
 
 use serde::Serialize;
 
+/// The phases of a job, in the order they run; each is timed on its own (contract §3).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PhaseName {
+    Scene,
+    ShadowMap,
+    Gbuffer,
+    E0,
+    Method,
+    Composite,
+    Readback,
+    Reference,
+    Quality,
+    Encode,
+}
+
+impl PhaseName {
+    /// The name in JSON, `Server-Timing`, metrics and tables.
+    pub const fn as_str(self) -> &'static str {
+        match self {
+            Self::Scene => "scene",
+            Self::ShadowMap => "shadow_map",
+            Self::Gbuffer => "gbuffer",
+            Self::E0 => "e0",
+            Self::Method => "method",
+            Self::Composite => "composite",
+            Self::Readback => "readback",
+            Self::Reference => "reference",
+            Self::Quality => "quality",
+            Self::Encode => "encode",
+        }
+    }
+}
+
+impl std::fmt::Display for PhaseName {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct Phase {
-    pub name: &'static str,
+    pub name: PhaseName,
     /// Wall-clock milliseconds on the host, GPU work included (each phase waits for it).
     pub cpu_ms: f64,
     /// GPU milliseconds between the phase's first and last timestamp, where supported.
@@ -46,7 +86,7 @@ pub struct Timings {
 
 impl Timings {
     /// Records that phase `name` ran from `start` until now and returns now.
-    pub fn phase(&mut self, name: &'static str, start: Instant) -> Instant {
+    pub fn phase(&mut self, name: PhaseName, start: Instant) -> Instant {
         let now = Instant::now();
         self.phases.push(Phase { name, cpu_ms: (now - start).as_secs_f64() * 1e3, gpu_ms: None, passes: Vec::new() });
         now
@@ -54,7 +94,7 @@ impl Timings {
 
     /// Adds GPU time measured for pass `pass` of phase `name` to the phase's total and to
     /// the pass's own entry.
-    pub fn add_gpu(&mut self, name: &str, pass: &'static str, ms: f64) {
+    pub fn add_gpu(&mut self, name: PhaseName, pass: &'static str, ms: f64) {
         if let Some(phase) = self.phases.iter_mut().find(|p| p.name == name) {
             *phase.gpu_ms.get_or_insert(0.0) += ms;
             match phase.passes.iter_mut().find(|p| p.name == pass) {
@@ -64,7 +104,7 @@ impl Timings {
         }
     }
 
-    pub fn get(&self, name: &str) -> Option<&Phase> {
+    pub fn get(&self, name: PhaseName) -> Option<&Phase> {
         self.phases.iter().find(|p| p.name == name)
     }
 

@@ -132,14 +132,14 @@ fn e0_interpolation_stays_within_a_thousandth_of_the_exact_sum() {
         for mode in [penumbra::render::E0Mode::Exact, penumbra::render::E0Mode::Interpolated] {
             engine.set_e0_mode(mode);
             let frame = engine.render_frame(&job, &()).unwrap().0;
-            listed = frame.counters.get(penumbra::render::E0_SUMMED_EXACTLY).copied();
+            listed = penumbra::render::E0_SUMMED_EXACTLY.get(&frame.counters);
             // Counted only where the interpolation ran.
             assert_eq!(listed.is_some(), mode == penumbra::render::E0Mode::Interpolated, "{scene}/{light}: {mode:?}");
             frames.push(frame.e0.unwrap());
         }
         // Every frame reports it, a PNG's too (the counter of a user's job): the same count.
         let png = Job { output: penumbra::job::OutputSpec { format: OutputFormat::Png, ..job.output.clone() }, ..job.clone() };
-        let png_listed = engine.render_frame(&png, &()).unwrap().0.counters.get(penumbra::render::E0_SUMMED_EXACTLY).copied();
+        let png_listed = penumbra::render::E0_SUMMED_EXACTLY.get(&engine.render_frame(&png, &()).unwrap().0.counters);
         assert_eq!(png_listed, listed, "{scene}/{light}: the PNG's count");
         let (exact, interpolated) = (&frames[0], &frames[1]);
         let largest = exact.iter().flatten().fold(0.0f32, |m, &e| m.max(e));
@@ -368,9 +368,13 @@ fn second_identical_job_compiles_and_uploads_nothing() {
     assert_eq!(warm.timings.pipelines_compiled, 0, "{:?}", warm.timings);
     assert!(warm.timings.scene_cached);
     assert_eq!(warm.timings.scene_upload_bytes, 0);
-    for phase in ["scene", "shadow_map", "gbuffer", "e0", "method", "composite", "readback", "encode"] {
+    use penumbra::timing::PhaseName::*;
+    for phase in [Scene, ShadowMap, Gbuffer, E0, Method, Composite, Readback, Encode] {
         assert!(warm.timings.get(phase).is_some(), "missing phase {phase}");
     }
+    // The names a client reads, in the order the frame runs.
+    let names: Vec<&str> = warm.timings.phases.iter().map(|p| p.name.as_str()).collect();
+    assert_eq!(names, ["scene", "shadow_map", "gbuffer", "e0", "method", "composite", "readback", "encode"]);
 }
 
 #[test]

@@ -6,6 +6,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use super::{check_job, Engine, RenderState};
+use crate::timing::PhaseName;
 use crate::error::{JobError, JobResult};
 use crate::gpu::GpuContext;
 use crate::job::Job;
@@ -71,7 +72,7 @@ impl Engine {
         let image_ref = job.light.image.clone().unwrap_or_else(|| scene.defaults.light_image.clone());
         let light_image = self.light_image(state, &image_ref)?;
         let spec = FrameSpec { extra_images: images(job), ..FrameSpec::resolve(job, &scene, light_image, method)? };
-        timings.phase("scene", start);
+        timings.phase(PhaseName::Scene, start);
         // Validation errors inside wgpu are bugs in penumbra, never the client's fault; they
         // fail this job alone with a generic message and are logged in full. A failed map or
         // poll (a lost device, typically) comes back as this job's error.

@@ -23,6 +23,7 @@ pub use check::check_job;
 pub use stats::EngineStats;
 pub use ingest::UploadReceipt;
 
+use crate::timing::PhaseName;
 use crate::error::JobResult;
 use crate::gpu::scene::GpuScene;
 use crate::gpu::GpuContext;
@@ -188,16 +189,16 @@ impl Engine {
         let quality = if job.compare {
             let start = Instant::now();
             let reference = self.reference_for(job, supervisor)?;
-            let start = timings.phase("reference", start);
+            let start = timings.phase(PhaseName::Reference, start);
             let report = crate::quality::compare(&frame, &reference, job.output.exposure);
-            timings.phase("quality", start);
+            timings.phase(PhaseName::Quality, start);
             Some(report)
         } else {
             None
         };
         let start = Instant::now();
         let bytes = crate::output::encode(&frame, job.output.format, job.output.exposure)?;
-        timings.phase("encode", start);
+        timings.phase(PhaseName::Encode, start);
         timings.total_ms = started.elapsed().as_secs_f64() * 1e3;
         Ok(Rendered {
             method: job.method.name.clone(),

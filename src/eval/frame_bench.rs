@@ -18,7 +18,7 @@ use super::{case_job, every_method_but_reference, median_timings, parse_methods,
 use crate::engine::Engine;
 use crate::job::{Job, MethodSpec, OutputFormat};
 use crate::render::{E0Mode, FrameOutput};
-use crate::timing::Timings;
+use crate::timing::{PhaseName, Timings};
 
 /// What to run.
 #[derive(Debug, Clone, clap::Args)]
@@ -58,8 +58,16 @@ pub struct BenchOptions {
 
 /// The phases of a request, in order; `floor` is what every method shares after its own
 /// pass (E0, composite, readback, encode).
-const PHASES: [&str; 7] = ["shadow_map", "gbuffer", "e0", "method", "composite", "readback", "encode"];
-const FLOOR: [&str; 4] = ["e0", "composite", "readback", "encode"];
+const PHASES: [PhaseName; 7] = [
+    PhaseName::ShadowMap,
+    PhaseName::Gbuffer,
+    PhaseName::E0,
+    PhaseName::Method,
+    PhaseName::Composite,
+    PhaseName::Readback,
+    PhaseName::Encode,
+];
+const FLOOR: [PhaseName; 4] = [PhaseName::E0, PhaseName::Composite, PhaseName::Readback, PhaseName::Encode];
 
 /// One method in one case: median phase times of whole requests and its error.
 #[derive(Debug, Clone, Serialize)]
@@ -202,7 +210,7 @@ pub fn run(engine: &Engine, options: &BenchOptions) -> anyhow::Result<BenchRepor
 }
 
 /// A phase's time: GPU time where measured, else wall time.
-fn phase_ms(t: &Timings, name: &str) -> f64 {
+fn phase_ms(t: &Timings, name: PhaseName) -> f64 {
     t.get(name).map(|p| p.gpu_ms.unwrap_or(p.cpu_ms)).unwrap_or(0.0)
 }
 
@@ -216,13 +224,13 @@ fn bench_row(scene: &str, light: &str, method: &str, runs: Vec<(Timings, f64)>, 
     let whole_ms = middle(runs.iter().map(|(t, _)| t.total_ms).collect());
     let cpu_ms = middle(runs.iter().map(|(_, cpu)| *cpu).collect());
     let median = median_timings(runs.into_iter().map(|(t, _)| t).collect());
-    let phases: Vec<(String, f64)> = PHASES.iter().map(|p| (p.to_string(), phase_ms(&median, p))).collect();
-    let gbuffer = phase_ms(&median, "gbuffer");
+    let phases: Vec<(String, f64)> = PHASES.iter().map(|&p| (p.to_string(), phase_ms(&median, p))).collect();
+    let gbuffer = phase_ms(&median, PhaseName::Gbuffer);
     BenchRow {
         scene: scene.into(),
         light: light.into(),
         method: method.into(),
-        floor_ms: FLOOR.iter().map(|p| phase_ms(&median, p)).sum(),
+        floor_ms: FLOOR.iter().map(|&p| phase_ms(&median, p)).sum(),
         whole_over_gbuffer: if gbuffer > 0.0 { whole_ms / gbuffer } else { f64::NAN },
         phases,
         whole_ms,
@@ -230,7 +238,7 @@ fn bench_row(scene: &str, light: &str, method: &str, runs: Vec<(Timings, f64)>, 
         penumbra_error,
         frame_error,
         triangles: median.scene_triangles,
-        passes: median.phases.iter().flat_map(|p| p.passes.iter().map(|q| (p.name.to_owned(), q.name.to_owned(), q.gpu_ms))).collect(),
+        passes: median.phases.iter().flat_map(|p| p.passes.iter().map(|q| (p.name.to_string(), q.name.to_owned(), q.gpu_ms))).collect(),
     }
 }
 
@@ -258,8 +266,8 @@ fn e0_accuracy(engine: &Engine, scene: &str, light: &str, job: &Job) -> anyhow::
         let rendered = engine.render_frame(job, &());
         engine.set_e0_mode(E0Mode::default());
         let (frame, timings) = rendered.map_err(|e| anyhow::anyhow!("{scene}, {light}: E0: {e}"))?;
-        let summed_exactly = frame.counters.get(crate::render::E0_SUMMED_EXACTLY).copied();
-        frames.push((frame.e0.context("EXR frames carry E0")?, summed_exactly, phase_ms(&timings, "e0")));
+        let summed_exactly = crate::render::E0_SUMMED_EXACTLY.get(&frame.counters);
+        frames.push((frame.e0.context("EXR frames carry E0")?, summed_exactly, phase_ms(&timings, PhaseName::E0)));
     }
     let ((exact, _, exact_ms), (interpolated, summed_exactly, interpolated_ms)) = (&frames[0], &frames[1]);
     let largest = exact.iter().flatten().fold(0.0f32, |m, &e| m.max(e));

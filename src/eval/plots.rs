@@ -62,7 +62,7 @@ pub(super) fn plot_scaling(
     wall: bool,
 ) -> anyhow::Result<PathBuf> {
     use plotters::prelude::*;
-    let y_of = |r: &Row| if wall { r.timings.get("method").map_or(0.0, |p| p.cpu_ms) } else { method_ms(r) };
+    let y_of = |r: &Row| if wall { r.timings.get(crate::timing::PhaseName::Method).map_or(0.0, |p| p.cpu_ms) } else { method_ms(r) };
     let rows: Vec<&Row> = rows.iter().copied().filter(|r| r.method != "reference").collect();
     let mut methods: Vec<&str> = rows.iter().map(|r| r.method.as_str()).collect();
     methods.dedup();

@@ -5,18 +5,20 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use super::{EvalReport, Row, Sweep};
-use crate::methods::Counters;
-use crate::timing::Timings;
+use crate::methods::chun_oh::{PIXELS_SUBDIVIDED, SPLITS_FORCED_BY_LIGHT};
+use crate::methods::filter::BACKGROUND_PIXELS;
+use crate::methods::{CounterKey, Counters};
+use crate::timing::{PhaseName, Timings};
 
 /// The render phases the cost tables list, in pass order.
-const PHASE_COLUMNS: [&str; 5] = ["shadow_map", "gbuffer", "e0", "method", "composite"];
+const PHASE_COLUMNS: [PhaseName; 5] = [PhaseName::ShadowMap, PhaseName::Gbuffer, PhaseName::E0, PhaseName::Method, PhaseName::Composite];
 
 /// A row's time per phase in `PHASE_COLUMNS` order.
 fn phase_cells(t: &Timings) -> Vec<String> {
-    PHASE_COLUMNS.iter().map(|phase| gpu(t, phase)).collect()
+    PHASE_COLUMNS.iter().map(|&phase| gpu(t, phase)).collect()
 }
 
-fn gpu(t: &Timings, phase: &str) -> String {
+fn gpu(t: &Timings, phase: PhaseName) -> String {
     t.get(phase).and_then(|p| p.gpu_ms.or(Some(p.cpu_ms))).map(|ms| format!("{ms:.1}")).unwrap_or_else(|| "-".into())
 }
 
@@ -34,7 +36,7 @@ fn counters_text(counters: &Counters) -> String {
 
 /// The method phase's time of a row: GPU time where measured, else wall time.
 pub(super) fn method_ms(row: &Row) -> f64 {
-    row.timings.get("method").map(|p| p.gpu_ms.unwrap_or(p.cpu_ms)).unwrap_or(0.0)
+    row.timings.get(PhaseName::Method).map(|p| p.gpu_ms.unwrap_or(p.cpu_ms)).unwrap_or(0.0)
 }
 
 /// Writes `results.md`, `results.csv` and `results.json` into `out`.
@@ -78,7 +80,7 @@ fn write_preamble(md: &mut String, report: &EvalReport, methods: &[String]) -> s
 /// Time per phase and the ratio to `hard`, per row.
 fn write_cost(md: &mut String, report: &EvalReport) -> std::fmt::Result {
     writeln!(md, "## Cost\n")?;
-    writeln!(md, "| scene | light | size | map res | method | {} | total ms | × hard | counters |", PHASE_COLUMNS.join(" ms | ") + " ms")?;
+    writeln!(md, "| scene | light | size | map res | method | {} | total ms | × hard | counters |", PHASE_COLUMNS.map(PhaseName::as_str).join(" ms | ") + " ms")?;
     writeln!(md, "|---|---|---|---:|---|{}---:|---:|---|", "---:|".repeat(PHASE_COLUMNS.len()))?;
     for r in &report.rows {
         writeln!(
@@ -258,7 +260,7 @@ fn write_flooding(md: &mut String, report: &EvalReport) -> std::fmt::Result {
 
 /// `chun-oh`'s subdivision histogram (Chun & Oh 2016, Table 2), when the suite ran it.
 fn write_subdivision(md: &mut String, report: &EvalReport) -> std::fmt::Result {
-    let subdivided: Vec<&Row> = report.rows.iter().filter(|r| r.counters.contains_key("pixels_subdivided_0")).collect();
+    let subdivided: Vec<&Row> = report.rows.iter().filter(|r| PIXELS_SUBDIVIDED[0].get(&r.counters).is_some()).collect();
     if !subdivided.is_empty() {
         writeln!(md, "\n## Subdivision histogram\n")?;
         writeln!(md, "Pixels by how often `chun-oh` split their filter (Chun & Oh 2016, Table 2), with shares of the frame.\n")?;
@@ -269,8 +271,8 @@ fn write_subdivision(md: &mut String, report: &EvalReport) -> std::fmt::Result {
         writeln!(md, "|---|---|---|---|---:|---:|---:|---:|---:|")?;
         for r in subdivided {
             let total = f64::from(r.width) * f64::from(r.height);
-            let cell = |key: &str| {
-                let n = r.counters.get(key).copied().unwrap_or(0.0);
+            let cell = |key: CounterKey| {
+                let n = key.get(&r.counters).unwrap_or(0.0);
                 format!("{n:.0} ({:.2} %)", 100.0 * n / total)
             };
             writeln!(
@@ -281,11 +283,11 @@ fn write_subdivision(md: &mut String, report: &EvalReport) -> std::fmt::Result {
                 r.width,
                 r.height,
                 r.method,
-                cell("background_pixels"),
-                cell("pixels_subdivided_0"),
-                cell("pixels_subdivided_1"),
-                cell("pixels_subdivided_2"),
-                r.counters.get("splits_forced_by_light").copied().unwrap_or(0.0)
+                cell(BACKGROUND_PIXELS),
+                cell(PIXELS_SUBDIVIDED[0]),
+                cell(PIXELS_SUBDIVIDED[1]),
+                cell(PIXELS_SUBDIVIDED[2]),
+                SPLITS_FORCED_BY_LIGHT.get(&r.counters).unwrap_or(0.0)
             )?;
         }
     }

@@ -1,13 +1,13 @@
 //! Unit tests of `eval`.
 
 use super::*;
-use crate::timing::Phase;
+use crate::timing::{Phase, PhaseName};
 
 fn timings(method_ms: f64, gpu_ms: Option<f64>) -> Timings {
     Timings {
         phases: vec![
-            Phase { name: "gbuffer", cpu_ms: 1.0, gpu_ms: None, passes: Vec::new() },
-            Phase { name: "method", cpu_ms: method_ms, gpu_ms, passes: Vec::new() },
+            Phase { name: PhaseName::Gbuffer, cpu_ms: 1.0, gpu_ms: None, passes: Vec::new() },
+            Phase { name: PhaseName::Method, cpu_ms: method_ms, gpu_ms, passes: Vec::new() },
         ],
         ..Default::default()
     }

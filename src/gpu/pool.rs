@@ -6,16 +6,32 @@ use std::any::Any;
 use std::collections::{HashMap, VecDeque};
 use std::sync::Arc;
 
-/// Identifies a pipeline: the pass or method that owns it and a variant of it.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+/// Identifies a pipeline by what it is built from, so that two different pipelines can never
+/// share a key: the pass or method that owns it (its label), its shader file and entry point,
+/// its pipeline-overridable constants, and for a render pipeline the formats it writes.
+#[derive(Debug, Clone, PartialEq, Eq, Hash)]
 pub struct PipelineKey {
-    pub name: &'static str,
-    pub variant: u32,
+    pub label: &'static str,
+    pub shader: &'static str,
+    /// The compute entry point, or a render pipeline's fragment entry ("" for none).
+    pub entry: &'static str,
+    /// Each constant's name and the bits of its value, in the order given.
+    constants: Vec<(&'static str, u64)>,
+    /// A render pipeline's colour targets.
+    targets: Vec<wgpu::TextureFormat>,
 }
 
 impl PipelineKey {
-    pub const fn new(name: &'static str) -> Self {
-        Self { name, variant: 0 }
+    /// A compute pipeline: `entry` of `shader` with `constants`.
+    pub fn compute(label: &'static str, (shader, entry): (&'static str, &'static str), constants: &[(&'static str, f64)]) -> Self {
+        let constants = constants.iter().map(|&(name, value)| (name, value.to_bits())).collect();
+        Self { label, shader, entry, constants, targets: Vec::new() }
+    }
+
+    /// A render pipeline drawing with `shader`, through fragment entry `fragment` (if any)
+    /// into `targets`.
+    pub fn render(label: &'static str, shader: &'static str, fragment: Option<&'static str>, targets: &[wgpu::TextureFormat]) -> Self {
+        Self { label, shader, entry: fragment.unwrap_or(""), constants: Vec::new(), targets: targets.to_vec() }
     }
 }
 

@@ -5,6 +5,7 @@
 //! reports milliseconds per phase and per pass.
 
 use super::{GpuContext, GpuError};
+use crate::timing::PhaseName;
 
 /// Timestamps one frame may write (with their settling writes, below). A frame with more
 /// times its first passes only.
@@ -12,7 +13,7 @@ const MAX_QUERIES: u32 = 1024;
 
 /// One timed pass: where its begin and end timestamps are, and the marks written inside it.
 struct Scope {
-    phase: &'static str,
+    phase: PhaseName,
     pass: &'static str,
     begin: u32,
     /// (dispatch name, query index), in the order they were written.
@@ -22,7 +23,7 @@ struct Scope {
 /// GPU time of one pass (or one dispatch inside it) of a phase.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PassTime {
-    pub phase: &'static str,
+    pub phase: PhaseName,
     pub pass: &'static str,
     pub ms: f64,
 }
@@ -86,7 +87,7 @@ impl GpuTimer {
     /// Records a pass of a phase that ran on the CPU, by its wall time: a method's work done
     /// there rather than on the device (`reference`'s engine `cpu`) counts in its phase as a
     /// pass does.
-    pub fn cpu_pass(&mut self, phase: &'static str, pass: &'static str, ms: f64) {
+    pub fn cpu_pass(&mut self, phase: PhaseName, pass: &'static str, ms: f64) {
         self.cpu.push(PassTime { phase, pass, ms });
     }
 
@@ -99,14 +100,14 @@ impl GpuTimer {
         })
     }
 
-    fn open(&mut self, phase: &'static str, pass: &'static str) -> Option<(&wgpu::QuerySet, u32)> {
+    fn open(&mut self, phase: PhaseName, pass: &'static str) -> Option<(&wgpu::QuerySet, u32)> {
         let begin = self.take(2)?;
         self.scopes.push(Scope { phase, pass, begin, marks: Vec::new() });
         Some((self.queries.as_ref()?, begin))
     }
 
     /// Timestamps for a render pass of `phase` labelled `pass`.
-    pub fn render_scope(&mut self, phase: &'static str, pass: &'static str) -> Option<wgpu::RenderPassTimestampWrites<'_>> {
+    pub fn render_scope(&mut self, phase: PhaseName, pass: &'static str) -> Option<wgpu::RenderPassTimestampWrites<'_>> {
         self.open(phase, pass).map(|(query_set, i)| wgpu::RenderPassTimestampWrites {
             query_set,
             beginning_of_pass_write_index: Some(i),
@@ -118,7 +119,7 @@ impl GpuTimer {
     pub fn begin_compute_pass<'e>(
         &mut self,
         encoder: &'e mut wgpu::CommandEncoder,
-        phase: &'static str,
+        phase: PhaseName,
         pass: &'static str,
     ) -> wgpu::ComputePass<'e> {
         let timestamp_writes = self.open(phase, pass).map(|(query_set, i)| wgpu::ComputePassTimestampWrites {
@@ -154,7 +155,7 @@ impl GpuTimer {
     pub fn time_encoder(
         &mut self,
         encoder: &mut wgpu::CommandEncoder,
-        phase: &'static str,
+        phase: PhaseName,
         pass: &'static str,
         record: impl FnOnce(&mut wgpu::CommandEncoder),
     ) {

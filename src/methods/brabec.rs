@@ -7,9 +7,10 @@
 use std::sync::Arc;
 
 use super::{Counters, MethodContext, Param, ParamSpec, Params, ShadowMethod, BIAS_TEXELS, SLOPE_BIAS_TEXELS};
+use crate::timing::PhaseName;
 use crate::error::JobResult;
+use crate::params::choice;
 use crate::gpu::layout;
-use crate::gpu::pool::PipelineKey;
 use crate::light::tables::edge_table;
 use crate::render::PixelListBuffers;
 
@@ -28,12 +29,18 @@ const R_SHRINK: Param<f32> = Param::float(
     "paper's r_shrink: texels of r_max per metre of Δz on a hit; −1 derives it from the light size",
 );
 const MEET: Param<f32> = Param::float("meet", 0.5, 0.05, 0.95, "attenuation where inner and outer penumbra meet (§3.3)");
-const FALLOFF: Param<&str> =
-    Param::choice("falloff", "linear", &["linear", "sine"], "attenuation across the penumbra: linear (paper) or the sinusoid of its §6");
-const INNER_DEPTH: Param<&str> = Param::choice(
+choice! {
+    /// Attenuation across the penumbra.
+    enum Falloff { Linear = "linear", Sine = "sine" }
+}
+choice! {
+    /// The Δz of the inner search.
+    enum InnerDepth { Blocker = "blocker", Paper = "paper" }
+}
+const FALLOFF: Param<Falloff> =
+    Param::choice("falloff", "attenuation across the penumbra: linear (paper) or the sinusoid of its §6");
+const INNER_DEPTH: Param<InnerDepth> = Param::choice(
     "inner_depth",
-    "blocker",
-    &["blocker", "paper"],
     "Δz of the inner search: the occluder over P (no ring) or the paper's depth(lit) − z",
 );
 const ADAPTIVE: Param<bool> = Param::boolean("adaptive", true, "adaptive sampling with 4×4 blocks (§4.3); off searches every pixel");
@@ -161,8 +168,14 @@ impl Uniforms {
             bias_texels: params.get(&BIAS_TEXELS),
             slope_bias_texels: params.get(&SLOPE_BIAS_TEXELS),
             jitter: params.get(&JITTER_TEXELS),
-            falloff: u32::from(params.get(&FALLOFF) == "sine"),
-            inner_depth: u32::from(params.get(&INNER_DEPTH) == "paper"),
+            falloff: match params.get(&FALLOFF) {
+                Falloff::Linear => 0,
+                Falloff::Sine => 1,
+            },
+            inner_depth: match params.get(&INNER_DEPTH) {
+                InnerDepth::Blocker => 0,
+                InnerDepth::Paper => 1,
+            },
             derived: [u32::from(derived_search), u32::from(derived_hit)],
             lattice_stride: if params.get(&ADAPTIVE) { BLOCK } else { 1 },
             use_ids: u32::from(params.get(&OBJECT_IDS)),
@@ -204,7 +217,7 @@ struct Pipelines {
 
 impl Pipelines {
     fn new(ctx: &mut MethodContext<'_>, jittered: bool) -> Self {
-        let mut pipeline = |name, shader| ctx.screen_pipeline(PipelineKey::new(name), shader, &BINDINGS);
+        let mut pipeline = |name, shader| ctx.screen_pipeline(name, shader, &BINDINGS);
         let (summarize, classify, lattice) = (
             pipeline("brabec.summary", "methods/brabec/summary.wgsl"),
             pipeline("brabec.classify", "methods/brabec/classify.wgsl"),
@@ -215,12 +228,12 @@ impl Pipelines {
         // (`refine.wgsl`), each before the search (listing) and after it (interpolating).
         let mut refine = |name, entry, along_rows: bool| {
             let constants = [("ALONG_ROWS", f64::from(u8::from(along_rows)))];
-            ctx.screen_specialized(PipelineKey::new(name), ("methods/brabec/refine.wgsl", entry), &BINDINGS, &constants)
+            ctx.screen_specialized(name, ("methods/brabec/refine.wgsl", entry), &BINDINGS, &constants)
         };
         let (mark_columns, mark_rows) =
             (refine("brabec.columns.mark", "mark_searches", false), refine("brabec.rows.mark", "mark_searches", true));
         let (columns, rows) = (refine("brabec.columns", "main", false), refine("brabec.rows", "main", true));
-        let mut entry = |name, shader, entry| ctx.screen_entry(PipelineKey::new(name), shader, entry, &BINDINGS);
+        let mut entry = |name, shader, entry| ctx.screen_entry(name, shader, entry, &BINDINGS);
         // The jitter's hash is compiled out of the search unless asked for (`search.wgsl`).
         let (search_key, search_entry) =
             if jittered { ("brabec.search.jittered", "search_listed_jittered") } else { ("brabec.search", "search_listed") };
@@ -325,7 +338,7 @@ impl Buffers {
         }
         listing.push(("brabec_search_size", &pipelines.list_size, (1, 1)));
         interpolation.push(("brabec_finish", &pipelines.finish, (w.div_ceil(8), h.div_ceil(8))));
-        let mut pass = ctx.timer.begin_compute_pass(ctx.encoder, "method", "Brabec::passes");
+        let mut pass = ctx.timer.begin_compute_pass(ctx.encoder, PhaseName::Method, "Brabec::passes");
         pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
         pass.set_bind_group(1, &bind_group, &[]);
         for (name, pipeline, (x, y)) in listing {

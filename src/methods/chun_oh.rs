@@ -20,15 +20,24 @@
 
 
 use super::filter::{self, light_regions_buffer, Uniforms, FILTER_PARAMS, MODE_ADAPTIVE, MODE_FIXED};
-use super::{Counters, MethodContext, Param, ParamSpec, Params, ShadowMethod};
+use super::{CounterKey, Counters, MethodContext, Param, ParamSpec, Params, ShadowMethod};
 use crate::error::JobResult;
+use crate::params::choice;
 
 pub struct ChunOh;
 
-const MODE: Param<&str> = Param::choice(
+/// Pixels whose filter split 0, 1 and 2 times (the paper's Table 2).
+pub const PIXELS_SUBDIVIDED: [CounterKey; 3] =
+    [CounterKey("pixels_subdivided_0"), CounterKey("pixels_subdivided_1"), CounterKey("pixels_subdivided_2")];
+/// Splits only the light's colour asked for.
+pub const SPLITS_FORCED_BY_LIGHT: CounterKey = CounterKey("splits_forced_by_light");
+
+choice! {
+    /// Where the quadtree splits.
+    enum Mode { Adaptive = "adaptive", Fixed = "fixed" }
+}
+const MODE: Param<Mode> = Param::choice(
     "mode",
-    "adaptive",
-    &["adaptive", "fixed"],
     "adaptive: split where variance asks (0–2 times, the paper's default); fixed: always 4×4 (Table 1)",
 );
 const THRESHOLD: Param<f32> = Param::float(
@@ -72,15 +81,18 @@ impl ShadowMethod for ChunOh {
     }
 
     fn record(&self, ctx: &mut MethodContext<'_>, params: &Params) -> JobResult<Counters> {
-        let mode = if params.get(&MODE) == "fixed" { MODE_FIXED } else { MODE_ADAPTIVE };
+        let mode = match params.get(&MODE) {
+            Mode::Adaptive => MODE_ADAPTIVE,
+            Mode::Fixed => MODE_FIXED,
+        };
         let uniforms = Uniforms::new(ctx, params).subdividing(mode, params.get(&THRESHOLD), params.get(&LIGHT_THRESHOLD));
         let regions = light_regions_buffer(ctx);
         let counts = filter::run(ctx, "chun-oh", "methods/chun_oh/chun_oh.wgsl", uniforms, &regions)?;
         let mut counters = counts.counters(u64::from(ctx.width) * u64::from(ctx.height));
-        for (level, &count) in counts.levels.iter().enumerate() {
-            counters.insert(format!("pixels_subdivided_{level}"), f64::from(count));
+        for (key, &count) in PIXELS_SUBDIVIDED.iter().zip(&counts.levels) {
+            key.set(&mut counters, f64::from(count));
         }
-        counters.insert("splits_forced_by_light".to_owned(), f64::from(counts.forced_by_light));
+        SPLITS_FORCED_BY_LIGHT.set(&mut counters, f64::from(counts.forced_by_light));
         Ok(counters)
     }
 }

@@ -20,10 +20,11 @@ use std::sync::Arc;
 
 use wgpu::util::DeviceExt;
 
-use super::{Counters, MethodContext, Param, ParamSpec, Params, BIAS_TEXELS, SLOPE_BIAS_TEXELS};
+use super::{CounterKey, Counters, MethodContext, Param, ParamSpec, Params, BIAS_TEXELS, SLOPE_BIAS_TEXELS};
+use crate::timing::PhaseName;
 use crate::error::JobResult;
 use crate::gpu::layout;
-use crate::gpu::pool::{DerivedKey, PipelineKey};
+use crate::gpu::pool::DerivedKey;
 use crate::light::LightImage;
 use crate::render::PixelListBuffers;
 
@@ -80,11 +81,14 @@ pub(super) struct FilterCounts {
     pub covered: u32,
 }
 
+/// Pixels of the frame no receiver covers.
+pub const BACKGROUND_PIXELS: CounterKey = CounterKey("background_pixels");
+
 impl FilterCounts {
     pub fn counters(&self, pixels: u64) -> Counters {
         Counters::from([
             ("pixels_filtered".to_owned(), f64::from(self.filtered)),
-            ("background_pixels".to_owned(), (pixels - u64::from(self.covered)) as f64),
+            (BACKGROUND_PIXELS.name().to_owned(), (pixels - u64::from(self.covered)) as f64),
         ])
     }
 }
@@ -133,8 +137,8 @@ pub(super) fn run(
         layout::storage_read_write(5),
         layout::storage_read_write(6),
     ];
-    let mut entry = |variant: u32, entry: &'static str| ctx.screen_entry(PipelineKey { name, variant }, shader, entry, &io);
-    let (classify, size, filter) = (entry(1, "classify"), entry(2, "listed_size"), entry(3, "filter_listed"));
+    let mut entry = |entry: &'static str| ctx.screen_entry(name, shader, entry, &io);
+    let (classify, size, filter) = (entry("classify"), entry("listed_size"), entry("filter_listed"));
 
     let (map_depth, map_pitch) = ctx.shadow_depth_copy("Filter::map_depth", "filter_copy_map");
     let uniforms = Uniforms { map_pitch, ..uniforms };
@@ -162,7 +166,7 @@ pub(super) fn run(
         (bind(&classify, &listed.groups), bind(&size, &listed.groups), bind(&filter, &listed.stand_in));
     let (gx, gy) = ctx.dispatch_size();
     {
-        let mut pass = ctx.timer.begin_compute_pass(ctx.encoder, "method", name);
+        let mut pass = ctx.timer.begin_compute_pass(ctx.encoder, PhaseName::Method, name);
         pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
         // The classification takes `CLASSIFY_ROW` pixels of a row per invocation.
         pass.set_pipeline(&classify);

@@ -5,7 +5,6 @@
 use super::{Counters, MethodContext, ParamSpec, Params, ShadowMethod, BIAS_TEXELS, SLOPE_BIAS_TEXELS};
 use crate::error::JobResult;
 use crate::gpu::layout;
-use crate::gpu::pool::PipelineKey;
 
 pub struct Hard;
 
@@ -34,7 +33,7 @@ impl ShadowMethod for Hard {
 
     fn record(&self, ctx: &mut MethodContext<'_>, params: &Params) -> JobResult<Counters> {
         let pipeline =
-            ctx.screen_pipeline(PipelineKey::new("hard"), "methods/hard.wgsl", &[layout::storage_read_write(0), layout::uniform(1)]);
+            ctx.screen_pipeline("hard", "methods/hard.wgsl", &[layout::storage_read_write(0), layout::uniform(1)]);
         let uniforms = ctx.uniforms(
             "Hard::uniforms",
             &HardUniforms { bias_texels: params.get(&BIAS_TEXELS), slope_bias_texels: params.get(&SLOPE_BIAS_TEXELS), _pad: [0.0; 2] },

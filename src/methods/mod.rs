@@ -16,7 +16,7 @@ pub mod wedges;
 
 use crate::error::{ErrorCode, JobError, JobResult};
 pub use crate::params::{Cap, Param, ParamKind, ParamSpec, ParamValue, Params};
-pub use crate::render::method::{Counters, MethodContext, ShadowMethod};
+pub use crate::render::method::{CounterKey, Counters, MethodContext, ShadowMethod};
 
 /// Every method penumbra serves, in the order `GET /v1/methods` lists them.
 pub static REGISTRY: &[&dyn ShadowMethod] =

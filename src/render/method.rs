@@ -7,6 +7,7 @@
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
+use crate::timing::PhaseName;
 use crate::error::JobResult;
 use crate::gpu::pool::{
     BufferKey, BufferPool, DerivedResources, PipelineKey, PipelinePool, PooledBuffer, PooledTexture, TextureKey, TexturePool,
@@ -39,6 +40,26 @@ impl Scratch {
 
 /// Method-specific counters (JFA rounds, searches skipped …), reported with the timings.
 pub type Counters = BTreeMap<String, f64>;
+
+/// The key of a counter another module reads (a table, a test, the bench): declared once
+/// beside the code that writes it, so that writer and reader cannot drift apart.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct CounterKey(pub &'static str);
+
+impl CounterKey {
+    pub const fn name(self) -> &'static str {
+        self.0
+    }
+
+    /// The counter's value in `counters`, if it was written.
+    pub fn get(self, counters: &Counters) -> Option<f64> {
+        counters.get(self.0).copied()
+    }
+
+    pub fn set(self, counters: &mut Counters, value: f64) {
+        counters.insert(self.0.to_owned(), value);
+    }
+}
 
 /// Records the copy of the whole of `texture` into `buffer`, rows `pitch` bytes apart
 /// (`MethodContext::rows_buffer`).
@@ -135,42 +156,43 @@ impl MethodContext<'_> {
         Ok(self.gpu.submit_and_wait(done)?)
     }
 
-    /// A screen-space compute pipeline from the pool: group 0 the frame inputs, group 1 the
-    /// bindings listed in `io` (bind groups for it come from `get_bind_group_layout(1)`).
+    /// A screen-space compute pipeline from the pool, labelled `label`: group 0 the frame
+    /// inputs, group 1 the bindings listed in `io` (bind groups for it come from
+    /// `get_bind_group_layout(1)`).
     pub fn screen_pipeline(
         &mut self,
-        key: PipelineKey,
+        label: &'static str,
         shader: &'static str,
         io: &[wgpu::BindGroupLayoutEntry],
     ) -> Arc<wgpu::ComputePipeline> {
-        self.screen_entry(key, shader, "main", io)
+        self.screen_entry(label, shader, "main", io)
     }
 
     /// `screen_pipeline` with another entry point than `main`.
     pub fn screen_entry(
         &mut self,
-        key: PipelineKey,
+        label: &'static str,
         shader: &'static str,
         entry: &'static str,
         io: &[wgpu::BindGroupLayoutEntry],
     ) -> Arc<wgpu::ComputePipeline> {
-        self.screen_specialized(key, (shader, entry), io, &[])
+        self.screen_specialized(label, (shader, entry), io, &[])
     }
 
-    /// `screen_entry` with values for the shader's pipeline-overridable constants; `key`'s
-    /// variant must tell the values apart.
+    /// `screen_entry` with values for the shader's pipeline-overridable constants: a pipeline
+    /// per set of values (the key holds them).
     pub fn screen_specialized(
         &mut self,
-        key: PipelineKey,
+        label: &'static str,
         (shader, entry): (&'static str, &'static str),
         io: &[wgpu::BindGroupLayoutEntry],
-        constants: &[(&str, f64)],
+        constants: &[(&'static str, f64)],
     ) -> Arc<wgpu::ComputePipeline> {
         let device = &self.gpu.device;
         let inputs_layout = &self.inputs.layout;
-        self.pipelines.compute(key, || {
-            let io_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(key.name), entries: io });
-            crate::render::screen_compute_pipeline(device, inputs_layout, key.name, (shader, entry), &io_layout, constants)
+        self.pipelines.compute(PipelineKey::compute(label, (shader, entry), constants), || {
+            let io_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(label), entries: io });
+            crate::render::screen_compute_pipeline(device, inputs_layout, label, (shader, entry), &io_layout, constants)
         })
     }
 
@@ -202,7 +224,7 @@ impl MethodContext<'_> {
     pub fn shadow_depth_copy(&mut self, label: &'static str, pass: &'static str) -> (wgpu::Buffer, u32) {
         let texture = self.shadow_depth;
         let (buffer, pitch) = self.rows_buffer(label, texture, 4, wgpu::BufferUsages::STORAGE);
-        self.timer.time_encoder(self.encoder, "method", pass, |encoder| copy_rows(encoder, texture, &buffer, pitch));
+        self.timer.time_encoder(self.encoder, PhaseName::Method, pass, |encoder| copy_rows(encoder, texture, &buffer, pitch));
         (buffer, pitch / 4)
     }
 
@@ -291,7 +313,7 @@ impl MethodContext<'_> {
     /// frame inputs in group 0, `group` in group 1.
     pub fn dispatch_screen(&mut self, label: &'static str, pipeline: &wgpu::ComputePipeline, group: &wgpu::BindGroup) {
         let (gx, gy) = self.dispatch_size();
-        let mut pass = self.timer.begin_compute_pass(self.encoder, "method", label);
+        let mut pass = self.timer.begin_compute_pass(self.encoder, PhaseName::Method, label);
         pass.set_pipeline(pipeline);
         pass.set_bind_group(0, &self.inputs.bind_group, &[]);
         pass.set_bind_group(1, group, &[]);

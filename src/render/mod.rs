@@ -17,6 +17,7 @@ use std::time::Instant;
 
 use glam::Vec3;
 
+use crate::timing::PhaseName;
 use crate::error::JobResult;
 use crate::gpu::layout;
 use crate::gpu::pool::{BufferPool, DerivedResources, PipelinePool, ReadbackPool, TexturePool};
@@ -25,7 +26,7 @@ use crate::gpu::scene::GpuScene;
 use crate::gpu::timing::{GpuTimer, PassTime};
 use crate::gpu::GpuContext;
 use crate::light::{cells_bounds, AreaLight, LightCell, E0_GRID};
-use crate::render::method::{Counters, MethodContext, Scratch};
+use crate::render::method::{CounterKey, Counters, MethodContext, Scratch};
 use crate::supervise::{cancelled_error, Supervisor};
 use crate::timing::Timings;
 pub use draw::{vertex_layout, ScenePipeline, DEPTH_BUFFER_FORMAT};
@@ -36,7 +37,7 @@ use targets::FrameTargets;
 
 /// The frame's counter of the pixels E0 summed exactly because its interpolation refused
 /// them (present where the interpolation ran: lights of more than `E0_EXACT_CELLS` cells).
-pub const E0_SUMMED_EXACTLY: &str = "e0_pixels_summed_exactly";
+pub const E0_SUMMED_EXACTLY: CounterKey = CounterKey("e0_pixels_summed_exactly");
 
 /// The per-frame constants, laid out as `Frame` in `shaders/common/frame.wgsl`.
 #[repr(C)]
@@ -253,14 +254,14 @@ impl Renderer {
             self.record_shadow_map(&mut enc, scene, targets, spec.method.reads_light_surfaces());
             submit(enc)?;
         }
-        let start = timings.phase("shadow_map", start);
+        let start = timings.phase(PhaseName::ShadowMap, start);
         go_on()?;
 
         // Eye-space G-buffer.
         let mut enc = encoder();
         self.record_gbuffer(&mut enc, scene, targets, spec.method.reads_object_ids());
         submit(enc)?;
-        let start = timings.phase("gbuffer", start);
+        let start = timings.phase(PhaseName::Gbuffer, start);
         go_on()?;
 
         let inputs = self.frame_inputs(targets);
@@ -269,12 +270,12 @@ impl Renderer {
         let mut enc = encoder();
         let e0_listed = self.record_e0(&mut enc, &inputs, targets, spec);
         submit(enc)?;
-        let start = timings.phase("e0", start);
+        let start = timings.phase(PhaseName::E0, start);
         go_on()?;
 
         // The method's visibility.
         let (counters, method_warnings) = self.record_method(targets, scene, spec, &inputs, &projection, supervisor)?;
-        let start = timings.phase("method", start);
+        let start = timings.phase(PhaseName::Method, start);
         // A long method stops recording its batches once cancelled; what it left is discarded.
         go_on()?;
 
@@ -290,12 +291,12 @@ impl Renderer {
         let mut enc = encoder();
         self.record_composite(&mut enc, &inputs, targets, spec, srgb8_buffer.as_ref());
         submit(enc)?;
-        let start = timings.phase("composite", start);
+        let start = timings.phase(PhaseName::Composite, start);
 
         // Readback of what the output format needs, and of the GPU timestamps.
         let warnings = scene.warnings.iter().cloned().chain(method_warnings).collect();
         let (frame, gpu_times) = self.read_back(targets, spec, srgb8_buffer.as_ref(), e0_listed, (counters, warnings))?;
-        timings.phase("readback", start);
+        timings.phase(PhaseName::Readback, start);
         for time in gpu_times {
             timings.add_gpu(time.phase, time.pass, time.ms);
         }
@@ -394,7 +395,7 @@ impl Renderer {
         let depth = depth_index.map(|i| bytemuck::cast_slice::<u8, f32>(&images[i]).to_vec());
         if let Some(i) = listed_index {
             let listed: u32 = bytemuck::cast_slice::<u8, u32>(&images[i][..8]).iter().sum();
-            counters.insert(E0_SUMMED_EXACTLY.to_owned(), f64::from(listed));
+            E0_SUMMED_EXACTLY.set(&mut counters, f64::from(listed));
         }
         let staging = spec.staging.clone();
         let frame =

@@ -7,6 +7,7 @@ use std::sync::Arc;
 use super::draw::{begin_scene_pass, clear_attachment, ScenePipeline};
 use super::targets::{FrameTargets, ALBEDO_FORMAT, ID_FORMAT, NORMAL_FORMAT, POSITION_FORMAT, SHADOW_DEPTH_FORMAT};
 use super::{FrameInputs, FrameSpec, PixelListBuffers, Renderer};
+use crate::timing::PhaseName;
 use crate::gpu::layout;
 use crate::gpu::pool::PipelineKey;
 use crate::gpu::scene::GpuScene;
@@ -51,10 +52,11 @@ impl Renderer {
     ) {
         let device = &self.gpu.device;
         let draw_layout = &self.layouts.draw;
-        let key = PipelineKey { name: "shadow_map", variant: u32::from(surfaces) };
+        let (fragment, targets_written): (_, &[wgpu::TextureFormat]) =
+            if surfaces { ("fs_main", &[SHADOW_DEPTH_FORMAT, ID_FORMAT]) } else { ("fs_depth", &[SHADOW_DEPTH_FORMAT]) };
+        let key = PipelineKey::render("shadow_map", "shadow_map.wgsl", Some(fragment), targets_written);
         let pipeline = self.pipelines.render(key, || {
-            let (fragment, targets): (_, &[wgpu::TextureFormat]) =
-                if surfaces { ("fs_main", &[SHADOW_DEPTH_FORMAT, ID_FORMAT]) } else { ("fs_depth", &[SHADOW_DEPTH_FORMAT]) };
+            let targets = targets_written;
             let pipeline = ScenePipeline {
                 label: "ShadowMap::pipeline",
                 shader: "shadow_map.wgsl",
@@ -71,7 +73,7 @@ impl Renderer {
             Some(clear_attachment(&targets.shadow_id.view, f64::from(u32::MAX))),
         ];
         let colors = if surfaces { &all[..] } else { &all[..1] };
-        let timestamps = self.timer.render_scope("shadow_map", "ShadowMap::pass");
+        let timestamps = self.timer.render_scope(PhaseName::ShadowMap, "ShadowMap::pass");
         let mut pass = begin_scene_pass(
             encoder,
             "ShadowMap::pass",
@@ -96,7 +98,7 @@ impl Renderer {
             &[POSITION_FORMAT, NORMAL_FORMAT, ALBEDO_FORMAT, NORMAL_FORMAT]
         };
         let mut pipeline = |name: &'static str, fragment: &'static str| {
-            self.pipelines.render(PipelineKey { name, variant: u32::from(ids) }, || {
+            self.pipelines.render(PipelineKey::render(name, "gbuffer.wgsl", Some(fragment), formats), || {
                 let pipeline = ScenePipeline {
                     label: "GBuffer::pipeline",
                     shader: "gbuffer.wgsl",
@@ -119,7 +121,7 @@ impl Renderer {
             Some(clear_attachment(&targets.object_id.view, f64::from(u32::MAX))),
         ];
         let colors = &colors[..formats.len()];
-        let timestamps = self.timer.render_scope("gbuffer", "GBuffer::pass");
+        let timestamps = self.timer.render_scope(PhaseName::Gbuffer, "GBuffer::pass");
         let mut pass =
             begin_scene_pass(encoder, "GBuffer::pass", colors, &targets.depth_buffer.view, timestamps, (&textured, &bind_group), scene);
         for draw in &scene.draws {
@@ -138,8 +140,9 @@ impl Renderer {
     ) -> Arc<wgpu::ComputePipeline> {
         let device = &self.gpu.device;
         let inputs_layout = &self.layouts.inputs;
-        self.pipelines
-            .compute(PipelineKey::new(name), || screen_compute_pipeline(device, inputs_layout, name, (shader, "main"), io_layout, &[]))
+        self.pipelines.compute(PipelineKey::compute(name, (shader, "main"), &[]), || {
+            screen_compute_pipeline(device, inputs_layout, name, (shader, "main"), io_layout, &[])
+        })
     }
 
     /// E0 (`shaders/e0/`). Under a light of more than `E0_EXACT_CELLS` cells: the exact
@@ -166,7 +169,6 @@ impl Renderer {
         let inputs_layout = &self.layouts.inputs;
         let grid = spec.full_grid();
         let constants = [spec.acute_edges_constant(), ("GRID", f64::from(u8::from(grid)))];
-        let variant = u32::from(spec.acute_edges) | u32::from(grid) << 1;
         let mut entry = |name: &'static str, entry: &'static str| {
             // Each entry point's file (`shaders/e0/`).
             let file = match entry {
@@ -174,7 +176,7 @@ impl Renderer {
                 "interpolate_blocks" => "e0/interpolate.wgsl",
                 _ => "e0/exact.wgsl",
             };
-            self.pipelines.compute(PipelineKey { name, variant }, || {
+            self.pipelines.compute(PipelineKey::compute(name, (file, entry), &constants), || {
                 screen_compute_pipeline(device, inputs_layout, name, (file, entry), &io_layout, &constants)
             })
         };
@@ -210,7 +212,7 @@ impl Renderer {
             })
         };
         let (io, listed_io) = (bind(&above.groups, &clipped.groups), bind(&above.stand_in, &clipped.stand_in));
-        let mut pass = self.timer.begin_compute_pass(encoder, "e0", "e0");
+        let mut pass = self.timer.begin_compute_pass(encoder, PhaseName::E0, "e0");
         pass.set_bind_group(0, &inputs.bind_group, &[]);
         pass.set_bind_group(1, &io, &[]);
         if !interpolate {
@@ -259,7 +261,7 @@ impl Renderer {
             None => self.screen_pipeline("composite", "composite.wgsl", &io_layout),
             Some(_) => {
                 let (device, inputs_layout) = (&self.gpu.device, &self.layouts.inputs);
-                self.pipelines.compute(PipelineKey::new("composite_srgb8"), || {
+                self.pipelines.compute(PipelineKey::compute("composite_srgb8", ("composite.wgsl", "srgb8"), &[]), || {
                     screen_compute_pipeline(device, inputs_layout, "composite_srgb8", ("composite.wgsl", "srgb8"), &io_layout, &[])
                 })
             }
@@ -283,19 +285,19 @@ impl Renderer {
                 srgb8.or(unused.as_ref()).expect("one of the two").as_entire_binding(),
             ]),
         });
-        self.dispatch(encoder, "composite", &pipeline, inputs, &io, spec);
+        self.dispatch(encoder, PhaseName::Composite, &pipeline, inputs, &io, spec);
     }
 
     fn dispatch(
         &mut self,
         encoder: &mut wgpu::CommandEncoder,
-        label: &'static str,
+        phase: PhaseName,
         pipeline: &wgpu::ComputePipeline,
         inputs: &FrameInputs,
         io: &wgpu::BindGroup,
         spec: &FrameSpec,
     ) {
-        let mut pass = self.timer.begin_compute_pass(encoder, label, label);
+        let mut pass = self.timer.begin_compute_pass(encoder, phase, phase.as_str());
         pass.set_pipeline(pipeline);
         pass.set_bind_group(0, &inputs.bind_group, &[]);
         pass.set_bind_group(1, io, &[]);

@@ -122,7 +122,7 @@ impl Metrics {
         if let Some(timings) = timings {
             self.latency.with_label_values(&[method]).observe(seconds);
             for phase in &timings.phases {
-                self.phases.with_label_values(&[method, phase.name]).observe(phase.cpu_ms / 1e3);
+                self.phases.with_label_values(&[method, phase.name.as_str()]).observe(phase.cpu_ms / 1e3);
             }
         }
     }

@@ -2,6 +2,7 @@
 //! the engine up, serves until SIGINT or SIGTERM, then finishes the work it accepted.
 
 use super::*;
+use crate::config::JobStoreKind;
 
 /// Binds, warms up, serves until SIGINT or SIGTERM, then finishes requests in flight.
 pub async fn serve(config: ServeConfig, engine: Arc<Engine>) -> anyhow::Result<()> {
@@ -61,23 +62,22 @@ pub async fn serve(config: ServeConfig, engine: Arc<Engine>) -> anyhow::Result<(
 /// `state` with the job store `--job-store` names: none (in memory), the embedded one under
 /// `--data-dir`, or a Redis queue shared with other replicas.
 fn with_job_store(state: AppState, config: &ServeConfig, ttl: std::time::Duration) -> anyhow::Result<AppState> {
-    Ok(match config.job_store.as_str() {
-        "memory" => {
+    Ok(match &config.job_store {
+        JobStoreKind::Memory => {
             tracing::warn!("job store in memory: submitted jobs are lost when the daemon stops");
             state
         }
-        "embedded" => {
+        JobStoreKind::Embedded => {
             let store = crate::store::EmbeddedStore::open(&config.data_dir)?;
             tracing::info!(data_dir = %config.data_dir.display(), min_free_bytes = config.min_free_bytes, "job store: embedded");
             state.with_store(Store::new(Arc::new(store), "embedded", config.min_free_bytes))
         }
-        url if url.starts_with("redis://") => {
+        JobStoreKind::Redis(url) => {
             let claim_idle = std::time::Duration::from_secs_f64(config.claim_idle_secs.max(0.5));
             let store = crate::store::RedisStore::open(url, ttl, claim_idle)?;
             tracing::info!("job store: redis (shared queue; this replica takes jobs from it)");
             state.with_store(Store::new(Arc::new(store), "redis", 0))
         }
-        other => anyhow::bail!("unknown --job-store `{other}` (embedded, memory or redis://HOST:PORT/DB)"),
     })
 }
 

@@ -119,7 +119,7 @@ impl AppState {
             outcome: outcome.to_string(),
             finished_unix_ms,
             wall_ms: seconds * 1e3,
-            phases: rendered.map(|r| r.timings.phases.iter().map(|p| (p.name, p.cpu_ms)).collect()).unwrap_or_default(),
+            phases: rendered.map(|r| r.timings.phases.iter().map(|p| (p.name.as_str(), p.cpu_ms)).collect()).unwrap_or_default(),
             width: rendered.map_or(0, |r| r.width),
             height: rendered.map_or(0, |r| r.height),
         });

@@ -4,10 +4,10 @@
 
 use std::sync::Arc;
 
-use super::{steps, Flood, Uniforms, FINAL_ROW, SILHOUETTE_ROW, TILE, ROUNDS, FLOODING};
+use super::{steps, Flood, Flooding, Uniforms, FINAL_ROW, SILHOUETTE_ROW, TILE, ROUNDS, FLOODING};
+use crate::timing::PhaseName;
 use crate::error::JobResult;
 use crate::gpu::layout;
-use crate::gpu::pool::PipelineKey;
 use crate::light::tables::{edge_table, key_table};
 use crate::methods::{MethodContext, Params};
 use crate::render::PixelListBuffers;
@@ -16,7 +16,7 @@ use crate::render::PixelListBuffers;
 /// tiles the rounds flooded rather than skipped).
 pub(super) fn flood(ctx: &mut MethodContext<'_>, which: &Flood, params: &Params, base: Uniforms) -> JobResult<(u32, u32, Vec<i32>, f64)> {
     let grid = if which.light_space { (ctx.spec.shadow_resolution, ctx.spec.shadow_resolution) } else { (ctx.width, ctx.height) };
-    let steps = steps(params.get(&ROUNDS), params.get(&FLOODING) == "standard");
+    let steps = steps(params.get(&ROUNDS), params.get(&FLOODING) == Flooding::Standard);
     // The shadow map's depths, which the seeds, the rounds and the hard-shadow test read.
     let (map_depth, map_pitch) = ctx.shadow_depth_copy("Jfa::map_depth", "jfa_copy_map");
     let base = Uniforms { light_space: u32::from(which.light_space), map_pitch, ..base };
@@ -69,21 +69,19 @@ pub(super) struct FloodPipelines {
 
 impl FloodPipelines {
     pub(super) fn new(ctx: &mut MethodContext<'_>, which: &Flood) -> Self {
-        let seed = ctx.screen_pipeline(PipelineKey::new(which.seed.0), which.seed.1, &BINDINGS);
+        let seed = ctx.screen_pipeline(which.seed.0, which.seed.1, &BINDINGS);
         let boundary = (!which.light_space).then(|| {
-            let mut entry = |name, entry| ctx.screen_entry(PipelineKey::new(name), which.seed.1, entry, &BINDINGS);
+            let mut entry = |name, entry| ctx.screen_entry(name, which.seed.1, entry, &BINDINGS);
             [
                 entry("jfa-e.boundary.mark", "mark_boundary"),
                 entry("jfa-e.boundary.size", "boundary_size"),
                 entry("jfa-e.boundary.seed", "seed_listed"),
             ]
         });
-        let round = ctx.screen_pipeline(PipelineKey::new(which.round.0), which.round.1, &BINDINGS);
-        let tile_passes = [(1, "list_tiles"), (2, "tiles_size"), (3, "tiles_reset")]
-            .map(|(variant, entry)| ctx.screen_entry(PipelineKey { name: which.round.0, variant }, which.round.1, entry, &BINDINGS));
-        let finish = ctx.screen_pipeline(PipelineKey::new(which.finish.0), which.finish.1, &BINDINGS);
-        let shading = [(1, "shaded_size"), (2, "shade_listed")]
-            .map(|(variant, entry)| ctx.screen_entry(PipelineKey { name: which.finish.0, variant }, which.finish.1, entry, &BINDINGS));
+        let round = ctx.screen_pipeline(which.round.0, which.round.1, &BINDINGS);
+        let tile_passes = ["list_tiles", "tiles_size", "tiles_reset"].map(|entry| ctx.screen_entry(which.round.0, which.round.1, entry, &BINDINGS));
+        let finish = ctx.screen_pipeline(which.finish.0, which.finish.1, &BINDINGS);
+        let shading = ["shaded_size", "shade_listed"].map(|entry| ctx.screen_entry(which.finish.0, which.finish.1, entry, &BINDINGS));
         Self { seed, boundary, round, tile_passes, finish, shading }
     }
 }
@@ -197,7 +195,7 @@ impl FloodBuffers {
         ctx.encoder.clear_buffer(b, 0, None);
         ctx.encoder.clear_buffer(&self.tiles, 0, None);
         let groups = (grid.0.div_ceil(TILE), grid.1.div_ceil(TILE));
-        let mut pass = ctx.timer.begin_compute_pass(ctx.encoder, "method", "Jfa::passes");
+        let mut pass = ctx.timer.begin_compute_pass(ctx.encoder, PhaseName::Method, "Jfa::passes");
         pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
         // Seeds go to a. jfa-l's silhouette pass takes `SILHOUETTE_ROW` texels per invocation.
         pass.set_pipeline(&pipelines.seed);

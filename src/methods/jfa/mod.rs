@@ -11,6 +11,7 @@ use flood::flood;
 
 use super::{Cap, Counters, MethodContext, Param, ParamSpec, Params, ShadowMethod, BIAS_TEXELS, SLOPE_BIAS_TEXELS};
 use crate::error::JobResult;
+use crate::params::choice;
 
 pub struct JfaL;
 pub struct JfaE;
@@ -23,10 +24,16 @@ const ROUNDS: Param<u32> = Param::integer(
     "jump-flooding rounds: occluders travel up to 2^rounds − 1 pixels (log2 of the resolution floods fully)",
 )
 .capped(Cap::Rounds);
-const FLOODING: Param<&str> = Param::choice(
+choice! {
+    /// How records travel: by halving jumps (the paper's method) or one texel a round.
+    pub(super) enum Flooding { Jump = "jump", Standard = "standard" }
+}
+choice! {
+    /// The occluder edge that bounds the visible light.
+    enum EdgeModel { Silhouette = "silhouette", Paper = "paper" }
+}
+const FLOODING: Param<Flooding> = Param::choice(
     "flooding",
-    "jump",
-    &["jump", "standard"],
     "jump flooding, or standard flooding (step 1, 2^rounds − 1 rounds) for the paper's experiment",
 );
 
@@ -48,10 +55,8 @@ const SAME_OBJECT: Param<bool> = Param::boolean("same_object", true, "§5.2 reme
 const MIDPOINT: Param<bool> =
     Param::boolean("midpoint", true, "§5.2 remedy: the midpoint towards the boundary pixel must already be in a penumbra");
 
-const EDGE_MODEL: Param<&str> = Param::choice(
+const EDGE_MODEL: Param<EdgeModel> = Param::choice(
     "edge",
-    "silhouette",
-    &["silhouette", "paper"],
     "the occluder edge that bounds the visible light: the silhouette's own direction at the occluder point, or the paper's line orthogonal to c→q (§3)",
 );
 const INNER: Param<bool> = Param::boolean(
@@ -212,7 +217,10 @@ fn common_uniforms(params: &Params) -> Uniforms {
         same_object: 0,
         midpoint: 0,
         light_space: 0,
-        edge_model: u32::from(params.get(&EDGE_MODEL) == "silhouette"),
+        edge_model: match params.get(&EDGE_MODEL) {
+            EdgeModel::Paper => 0,
+            EdgeModel::Silhouette => 1,
+        },
         inner: 0,
         map_pitch: 0,
         _pad: 0,

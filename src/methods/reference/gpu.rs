@@ -5,6 +5,7 @@ use glam::UVec2;
 
 use super::samples::SamplePlan;
 use super::MethodContext;
+use crate::timing::PhaseName;
 use crate::gpu::layout;
 use crate::gpu::pool::{PipelineKey, TextureKey};
 use crate::render::{PixelListBuffers, ScenePipeline, DEPTH_BUFFER_FORMAT};
@@ -111,7 +112,7 @@ impl DepthMaps {
     /// differently (`docs/performance-log.md`).
     pub(super) fn draw(&self, ctx: &mut MethodContext<'_>, first: usize, origins: &[Option<UVec2>]) {
         let scene = ctx.scene;
-        ctx.timer.time_encoder(ctx.encoder, "method", "reference_maps", |encoder| {
+        ctx.timer.time_encoder(ctx.encoder, PhaseName::Method, "reference_maps", |encoder| {
             for (layer, origin) in origins.iter().enumerate() {
                 let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
                     label: Some("Reference::sample_depth"),
@@ -177,10 +178,7 @@ impl Accumulation {
         // maps are cropped.
         let first = b == 0;
         let pipeline = ctx.screen_specialized(
-            PipelineKey {
-                name: "reference.accumulate",
-                variant: count | self.channels << 8 | u32::from(first) << 16 | u32::from(last) << 17 | u32::from(self.cropped) << 18,
-            },
+            "reference.accumulate",
             ("methods/reference/accumulate.wgsl", "main"),
             &[
                 layout::uniform_dynamic(0),
@@ -217,7 +215,7 @@ impl Accumulation {
                 self.segments.list.as_entire_binding(),
             ],
         );
-        let mut pass = ctx.timer.begin_compute_pass(ctx.encoder, "method", "reference_accumulate");
+        let mut pass = ctx.timer.begin_compute_pass(ctx.encoder, PhaseName::Method, "reference_accumulate");
         pass.set_pipeline(&pipeline);
         pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
         pass.set_bind_group(1, &group, &[layout::slot_offset_of::<BatchUniforms>(b)]);
@@ -232,14 +230,12 @@ pub(super) fn list_segments(ctx: &mut MethodContext<'_>) -> (PixelListBuffers, w
     let segments = u64::from(ctx.width.div_ceil(SEGMENT)) * u64::from(ctx.height);
     let list = PixelListBuffers::new(&ctx.gpu.device, ctx.encoder, "Reference::segments", segments);
     let shader = "methods/reference/accumulate.wgsl";
-    let lister = ctx.screen_entry(
-        PipelineKey::new("reference.list_segments"),
+    let lister = ctx.screen_entry("reference.list_segments",
         shader,
         "list_segments",
         &[layout::storage_read_write(3), layout::storage_read_write(4)],
     );
-    let sizer = ctx.screen_entry(
-        PipelineKey::new("reference.segments_size"),
+    let sizer = ctx.screen_entry("reference.segments_size",
         shader,
         "segments_size",
         &[layout::storage_read_write(4), layout::storage_read_write(5)],
@@ -258,7 +254,7 @@ pub(super) fn list_segments(ctx: &mut MethodContext<'_>) -> (PixelListBuffers, w
     };
     let lister_group = bind("Reference::list_segments", &lister, &[(3, ctx.visibility), (4, &list.list)]);
     let sizer_group = bind("Reference::segments_size", &sizer, &[(4, &list.list), (5, &list.groups)]);
-    let mut pass = ctx.timer.begin_compute_pass(ctx.encoder, "method", "reference_list");
+    let mut pass = ctx.timer.begin_compute_pass(ctx.encoder, PhaseName::Method, "reference_list");
     pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
     pass.set_pipeline(&lister);
     pass.set_bind_group(1, &lister_group, &[]);
@@ -281,7 +277,7 @@ pub(super) fn list_segments(ctx: &mut MethodContext<'_>) -> (PixelListBuffers, w
 /// The depth-only pipeline that draws a sample's map.
 pub(super) fn depth_pipeline(ctx: &mut MethodContext<'_>) -> std::sync::Arc<wgpu::RenderPipeline> {
     let device = &ctx.gpu.device;
-    ctx.pipelines.render(PipelineKey::new("reference.sample_depth"), || {
+    ctx.pipelines.render(PipelineKey::render("reference.sample_depth", "methods/reference/sample_depth.wgsl", None, &[]), || {
         let sample_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("Reference::sample_layout"),
             entries: &[layout::uniform_dynamic(0)],

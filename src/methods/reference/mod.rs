@@ -16,7 +16,9 @@ pub use samples::{light_samples, LightSample};
 use samples::SamplePlan;
 
 use super::{Cap, Counters, MethodContext, Param, ParamSpec, Params, ShadowMethod};
+use crate::timing::PhaseName;
 use crate::error::JobResult;
+use crate::params::choice;
 
 pub struct Reference;
 
@@ -34,10 +36,12 @@ const CROP: Param<bool> = Param::boolean(
     "draw each sample's map only over the texels where the frame's receivers can fall (the same maps there: less to clear and draw)",
 );
 
-const ENGINE: Param<&str> = Param::choice(
+choice! {
+    /// Where the maps are drawn and tested.
+    enum Engine { Auto = "auto", Gpu = "gpu", Cpu = "cpu" }
+}
+const ENGINE: Param<Engine> = Param::choice(
     "engine",
-    "auto",
-    &["auto", "gpu", "cpu"],
     "where the maps are drawn and tested: the device (gpu), the CPU's cores (cpu: the same maps and tests, ~2.5× as fast on a software adapter), or cpu on a software adapter and gpu on a GPU (auto)",
 );
 
@@ -64,9 +68,9 @@ impl ShadowMethod for Reference {
     fn record(&self, ctx: &mut MethodContext<'_>, params: &Params) -> JobResult<Counters> {
         let plan = SamplePlan::new(ctx, params);
         let on_cpu = match params.get(&ENGINE) {
-            "cpu" => true,
-            "gpu" => false,
-            _ => ctx.gpu.software,
+            Engine::Cpu => true,
+            Engine::Gpu => false,
+            Engine::Auto => ctx.gpu.software,
         };
         if on_cpu {
             return record_on_cpu(ctx, params, &plan);
@@ -151,10 +155,10 @@ fn record_on_cpu(ctx: &mut MethodContext<'_>, params: &Params, plan: &SamplePlan
     cpu::write_visibility(&receivers, &sums, channels, ctx.width, &mut visibility);
     ctx.gpu.queue.write_buffer(ctx.visibility, 0, &visibility);
     let write_ms = written.elapsed().as_secs_f64() * 1e3;
-    ctx.timer.cpu_pass("method", "reference_cpu_receivers", read_ms);
-    ctx.timer.cpu_pass("method", "reference_cpu_maps", spent.maps_ms);
-    ctx.timer.cpu_pass("method", "reference_cpu_tests", spent.tests_ms);
-    ctx.timer.cpu_pass("method", "reference_cpu_visibility", write_ms);
+    ctx.timer.cpu_pass(PhaseName::Method, "reference_cpu_receivers", read_ms);
+    ctx.timer.cpu_pass(PhaseName::Method, "reference_cpu_maps", spent.maps_ms);
+    ctx.timer.cpu_pass(PhaseName::Method, "reference_cpu_tests", spent.tests_ms);
+    ctx.timer.cpu_pass(PhaseName::Method, "reference_cpu_visibility", write_ms);
     let mut counters = plan.counters(receivers.segments);
     counters.extend([("engine_cpu".to_owned(), 1.0), ("cpu_threads".to_owned(), spent.round as f64)]);
     Ok(counters)

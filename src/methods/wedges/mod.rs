@@ -10,6 +10,7 @@
 use super::light_view::{self, LightView};
 use super::{Counters, MethodContext, Param, ParamSpec, Params, ShadowMethod};
 use crate::error::JobResult;
+use crate::params::choice;
 use crate::gpu::readback::read_buffer;
 use crate::light::tables::{emitting_octagon, SECTOR_ANGLES, SECTOR_STATIONS};
 
@@ -33,17 +34,21 @@ const CULLING: Param<bool> = Param::boolean(
     true,
     "occlusion culling with the tiles' zmin and zmax (§4) and their receivers' world-space boxes; false rasterises every tile a primitive's bounding box covers",
 );
-const VOLUME: Param<&str> = Param::choice(
+choice! {
+    /// Where shadow-volume crossings are counted (§5).
+    enum VolumeCount { Auto = "auto", ZPass = "zpass", ZFail = "zfail" }
+}
+choice! {
+    /// The arrangement of the umbra and penumbra passes (§6).
+    enum Passes { Three = "three", Single = "single" }
+}
+const VOLUME: Param<VolumeCount> = Param::choice(
     "volume",
-    "auto",
-    &["auto", "zpass", "zfail"],
     "count shadow-volume crossings in front of the point (z-pass) or beyond it (z-fail, §5); auto picks z-fail when the eye is in shadow",
 );
 const OBJECT_IDS: Param<bool> = Param::boolean("object_ids", true, "a receiver facing away from the light centre takes no shadow from its own object's volume and wedges: the horizon already hides that part of the light (E0)");
-const PASSES: Param<&str> = Param::choice(
+const PASSES: Param<Passes> = Param::choice(
     "passes",
-    "three",
-    &["three", "single"],
     "three: umbra polygons, then wedges (§6.1); single: an edge's umbra and penumbra in one pass where both touch a tile (§6.2)",
 );
 
@@ -152,9 +157,9 @@ impl ShadowMethod for Wedges {
         let view_proj = camera.view_proj(spec.width as f32 / spec.height as f32);
         let reach = 2.0 * ctx.scene.corners().iter().map(|p| p.distance(c)).fold(0.0f32, f32::max).max(1e-3);
         let zfail = match params.get(&VOLUME) {
-            "zfail" => true,
-            "zpass" => false,
-            _ => eye_in_shadow(&mesh, &casting, c, camera.eye),
+            VolumeCount::ZFail => true,
+            VolumeCount::ZPass => false,
+            VolumeCount::Auto => eye_in_shadow(&mesh, &casting, c, camera.eye),
         };
         let volume = Volume::build(&mesh, &casting, &silhouette, light, reach, zfail);
         let uniforms = Uniforms::new(ctx, params, zfail, volume.polygons.len());
@@ -169,7 +174,10 @@ impl ShadowMethod for Wedges {
         // How far below the light's plane the scene reaches: no receiver lies deeper.
         let deepest = ctx.scene.corners().iter().map(|p| light.depth(*p)).fold(0.0f32, f32::max);
         let work = cull(&volume, &silhouette, light, reach, deepest, &grid, &view_proj, camera.eye, params.get(&CULLING), zfail);
-        let single = params.get(&PASSES) == "single";
+        let single = match params.get(&PASSES) {
+            Passes::Three => false,
+            Passes::Single => true,
+        };
         let passes = work.passes(single, [&*pipelines.umbra, &*pipelines.penumbra, &*pipelines.both]);
         let kept: usize = passes.iter().map(|(_, items)| items.len()).sum::<usize>();
         let (tested, rasterized) = (work.tested, work.rasterized());

@@ -8,9 +8,9 @@ use wgpu::util::DeviceExt;
 
 use super::geometry::Volume;
 use super::{Uniforms, WorkItem, INSIDE_PAIRS};
+use crate::timing::PhaseName;
 use crate::error::JobResult;
 use crate::gpu::layout;
-use crate::gpu::pool::PipelineKey;
 use crate::gpu::readback::read_buffer;
 use crate::light::tables::sector_table;
 use crate::methods::MethodContext;
@@ -51,8 +51,8 @@ pub(super) struct Pipelines {
 
 impl Pipelines {
     pub(super) fn new(ctx: &mut MethodContext<'_>, uniforms: &Uniforms) -> Self {
-        let tiles = ctx.screen_pipeline(PipelineKey::new("wedges.tiles"), "methods/wedges/tiles.wgsl", &BINDINGS);
-        let resolve = ctx.screen_pipeline(PipelineKey::new("wedges.resolve"), "methods/wedges/resolve.wgsl", &BINDINGS);
+        let tiles = ctx.screen_pipeline("wedges.tiles", "methods/wedges/tiles.wgsl", &BINDINGS);
+        let resolve = ctx.screen_pipeline("wedges.resolve", "methods/wedges/resolve.wgsl", &BINDINGS);
         // The rasteriser's pipelines are specialised by the LI buffer's channels and the colour
         // steps (pipeline constants in rasterize.wgsl): a uniform light's passes hold no colour
         // code, and the colour loop has a fixed count; by the tile's side (a pixel's place in
@@ -67,9 +67,8 @@ impl Pipelines {
             ("LANES", f64::from(lanes)),
             spec.acute_edges_constant(),
         ];
-        let variant = u32::from(spec.acute_edges) << 24 | uniforms.channels << 16 | uniforms.tile << 6 | uniforms.color_angles;
         let mut raster = |name: &'static str, shader: &'static str, entry: &'static str| {
-            ctx.screen_specialized(PipelineKey { name, variant }, (shader, entry), &BINDINGS, &constants)
+            ctx.screen_specialized(name, (shader, entry), &BINDINGS, &constants)
         };
         let penumbra = "methods/wedges/rasterize_penumbra.wgsl";
         Self {
@@ -194,7 +193,7 @@ impl Buffers {
     pub(super) fn measure_tiles(&self, ctx: &mut MethodContext<'_>, pipelines: &Pipelines) -> JobResult<Vec<[[f32; 4]; 4]>> {
         {
             let group = self.bind(ctx, pipelines, &self.no_work, &self.inside.groups);
-            let mut pass = ctx.timer.begin_compute_pass(ctx.encoder, "method", "Wedges::tiles");
+            let mut pass = ctx.timer.begin_compute_pass(ctx.encoder, PhaseName::Method, "Wedges::tiles");
             pass.set_pipeline(&pipelines.tiles);
             pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
             pass.set_bind_group(1, &group, &[]);
@@ -231,7 +230,7 @@ impl Buffers {
             .collect();
         let resolve_group = self.bind(ctx, pipelines, &self.no_work, &self.inside.groups);
         let screen = ctx.dispatch_size();
-        let mut pass = ctx.timer.begin_compute_pass(ctx.encoder, "method", "Wedges::rasterize");
+        let mut pass = ctx.timer.begin_compute_pass(ctx.encoder, PhaseName::Method, "Wedges::rasterize");
         pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
         for ((pipeline, items), (group, reading_group)) in chunks.iter().zip(&groups) {
             // One workgroup per item, in rows of at most 65 535.
