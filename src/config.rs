@@ -207,17 +207,6 @@ fn seconds(text: &str) -> Result<f64, String> {
     }
 }
 
-#[cfg(test)]
-mod tests {
-    #[test]
-    fn durations_are_finite_and_not_negative() {
-        assert_eq!(super::seconds("2.5"), Ok(2.5));
-        for bad in ["inf", "NaN", "-1", "1e300", "soon"] {
-            assert!(super::seconds(bad).is_err(), "{bad}");
-        }
-    }
-}
-
 /// Where submitted jobs are kept (`--job-store`).
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum JobStoreKind {
@@ -236,6 +225,17 @@ impl JobStoreKind {
             "memory" => Ok(Self::Memory),
             url if url.starts_with("redis://") => Ok(Self::Redis(url.to_owned())),
             other => Err(format!("`{other}` is not embedded, memory or redis://HOST:PORT/DB")),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn durations_are_finite_and_not_negative() {
+        assert_eq!(super::seconds("2.5"), Ok(2.5));
+        for bad in ["inf", "NaN", "-1", "1e300", "soon"] {
+            assert!(super::seconds(bad).is_err(), "{bad}");
         }
     }
 }

@@ -42,8 +42,74 @@ fn every_wgsl_file_is_listed_and_documented() {
     }
 }
 
-/// Modules import downward only, as the layer table in ARCHITECTURE.md says: every
-/// `crate::NAME` in a module names its own module or one of a lower layer.
+/// The top-level modules a file names: every `crate::NAME` path, the names of a grouped
+/// `crate::{a, b::c}` import, and `super::` paths that climb out of the file's own top-level
+/// module (`module_path` is the file's module path below the crate).
+fn modules_named(text: &str, module_path: &[String]) -> Vec<String> {
+    let ident = |rest: &str| -> String { rest.chars().take_while(|c| c.is_ascii_alphanumeric() || *c == '_').collect() };
+    let mut found = Vec::new();
+    for (i, _) in text.match_indices("crate::") {
+        // Not `$crate::` (macros) nor a longer word ending in `crate`.
+        if text[..i].ends_with(|c: char| c.is_ascii_alphanumeric() || c == '_' || c == '$') {
+            continue;
+        }
+        let rest = &text[i + "crate::".len()..];
+        if let Some(group) = rest.strip_prefix('{') {
+            // Top-level items of the group, split at the commas outside nested braces.
+            let (mut depth, mut item_start) = (0usize, true);
+            for (k, c) in group.char_indices() {
+                match c {
+                    '{' => depth += 1,
+                    '}' if depth == 0 => break,
+                    '}' => depth -= 1,
+                    ',' if depth == 0 => item_start = true,
+                    c if item_start && !c.is_whitespace() => {
+                        item_start = false;
+                        found.push(ident(&group[k..]));
+                    }
+                    _ => {}
+                }
+            }
+        } else {
+            found.push(ident(rest));
+        }
+    }
+    // `super::` chains: from a file whose module path has n components, k supers reach
+    // component n − k; k ≥ n names a top-level module (or the crate root, k > n). Read up to
+    // the first inline module (`mod tests {`), inside which a `super::` is one level deeper.
+    let outer = text.find("\nmod ").filter(|&at| text[at + 1..].lines().next().is_some_and(|l| l.trim_end().ends_with('{'))).map_or(text, |at| &text[..at]);
+    for (i, _) in outer.match_indices("super::") {
+        if outer[..i].ends_with("super::") || outer[..i].ends_with(|c: char| c.is_ascii_alphanumeric() || c == '_') {
+            continue;
+        }
+        let mut rest = &outer[i..];
+        let mut k = 0;
+        while let Some(r) = rest.strip_prefix("super::") {
+            rest = r;
+            k += 1;
+        }
+        if k >= module_path.len() {
+            found.push(ident(rest));
+        }
+    }
+    found.retain(|name| !name.is_empty());
+    found
+}
+
+/// The module path of a source file below `src/` (`render/mod.rs` → `[render]`,
+/// `scene/gltf/uris.rs` → `[scene, gltf, uris]`).
+fn module_path(relative: &Path) -> Vec<String> {
+    let mut parts: Vec<String> = relative.iter().map(|p| p.to_string_lossy().trim_end_matches(".rs").to_owned()).collect();
+    if parts.last().is_some_and(|p| p == "mod") {
+        parts.pop();
+    }
+    parts
+}
+
+/// Modules import downward only, as the layer table in ARCHITECTURE.md says: every module
+/// a file names (by `crate::` paths, grouped imports, or `super::` out of its own module) is
+/// its own or one of a lower layer — in every file, submodules' included — and `server`
+/// names nothing of `gpu` (it knows nothing of the device: ARCHITECTURE.md's invariants).
 #[test]
 fn imports_go_down_the_layers() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
@@ -61,27 +127,104 @@ fn imports_go_down_the_layers() {
     let mut violations = Vec::new();
     for path in files(&src, "rs") {
         let relative = path.strip_prefix(&src).unwrap();
-        let module = relative.iter().next().unwrap().to_string_lossy().trim_end_matches(".rs").to_owned();
-        if module == "lib" || module == "main" || module == "tidy" {
+        let modules = module_path(relative);
+        let module = modules[0].clone();
+        if ["lib", "main", "tidy"].contains(&module.as_str()) {
             continue;
         }
         let own = *layer_of.get(&module).unwrap_or_else(|| panic!("module `{module}` is missing from the layer table"));
         let text = std::fs::read_to_string(&path).unwrap();
-        for used in text.split("crate::").skip(1) {
-            let name: String = used.chars().take_while(|c| c.is_ascii_alphanumeric() || *c == '_').collect();
-            if name == module || name.is_empty() {
+        for name in modules_named(&text, &modules) {
+            if name == module {
                 continue;
             }
-            let layer =
-                *layer_of.get(&name).unwrap_or_else(|| panic!("{} uses `crate::{name}`, not in the layer table", relative.display()));
+            let layer = *layer_of.get(&name).unwrap_or_else(|| panic!("{} names `{name}`, not in the layer table", relative.display()));
             if layer >= own {
-                violations.push(format!("{} (layer {own}) uses crate::{name} (layer {layer})", relative.display()));
+                violations.push(format!("{} (layer {own}) uses {name} (layer {layer})", relative.display()));
+            }
+            if module == "server" && name == "gpu" {
+                violations.push(format!("{} uses gpu: the server knows nothing of the device", relative.display()));
             }
         }
     }
     violations.sort();
     violations.dedup();
     assert!(violations.is_empty(), "imports going up or across the layers:\n{}", violations.join("\n"));
+}
+
+#[test]
+fn the_layer_test_reads_grouped_imports_and_climbing_supers() {
+    let path = |p: &str| module_path(Path::new(p));
+    let text = "use crate::{engine::Engine, gpu::{self, pool}, job};\nuse super::super::queue::X;\nlet y = crate::render::thing;";
+    let mut named = modules_named(text, &path("server/connections/mod.rs"));
+    named.sort();
+    assert_eq!(named, ["engine", "gpu", "job", "queue", "render"]);
+    // One `super::` from a submodule stays inside its own module.
+    assert_eq!(modules_named("use super::Thing;", &path("scene/gltf/uris.rs")), Vec::<String>::new());
+    assert_eq!(modules_named("use super::scene::Scene;", &path("eval.rs")), ["scene"]);
+}
+
+/// Expands `{a,b}` groups in a path: `e0/{common,grid}.wgsl` → `e0/common.wgsl`, `e0/grid.wgsl`.
+fn expand_braces(token: &str) -> Vec<String> {
+    match (token.find('{'), token.find('}')) {
+        (Some(open), Some(close)) if open < close => token[open + 1..close]
+            .split(',')
+            .flat_map(|part| expand_braces(&format!("{}{}{}", &token[..open], part.trim(), &token[close + 1..])))
+            .collect(),
+        _ => vec![token.to_owned()],
+    }
+}
+
+/// ARCHITECTURE.md's code map names every source and shader file, and only files that exist:
+/// a row's "where" is a file or a folder, and a folder's row names its files relative to it.
+/// Every path `src/…` or `shaders/…` named anywhere in the document exists too.
+#[test]
+fn the_code_map_names_every_file() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let architecture = std::fs::read_to_string(root.join("ARCHITECTURE.md")).unwrap();
+    let map = architecture.split("## Code map").nth(1).expect("a Code map section").split("\n## ").next().unwrap();
+    let backticked = |text: &str| -> Vec<String> { text.split('`').skip(1).step_by(2).map(str::to_owned).collect() };
+    let is_source = |t: &str| t.ends_with(".rs") || t.ends_with(".wgsl");
+    let mut named = std::collections::BTreeSet::new();
+    let mut missing = Vec::new();
+    for row in map.lines().filter(|l| l.starts_with("| `")) {
+        let cells: Vec<&str> = row.splitn(3, '|').skip(1).collect();
+        let places = backticked(cells[0]);
+        let (Some(place), Some(what)) = (places.first(), cells.get(1)) else { continue };
+        let mut tokens: Vec<String> = backticked(what).iter().flat_map(|t| expand_braces(t)).filter(|t| is_source(t)).collect();
+        if is_source(place) {
+            tokens.push(place.to_owned());
+        }
+        for token in tokens {
+            let path = if token.starts_with("src/") || token.starts_with("shaders/") || !place.ends_with('/') {
+                if token.starts_with("src/") || token.starts_with("shaders/") { root.join(&token) } else { root.join(place).parent().unwrap().join(&token) }
+            } else {
+                root.join(place).join(&token)
+            };
+            if path.exists() {
+                named.insert(path.canonicalize().unwrap());
+            } else {
+                missing.push(format!("{place}: {token}"));
+            }
+        }
+    }
+    for token in backticked(&architecture).iter().flat_map(|t| expand_braces(t)) {
+        if (token.starts_with("src/") || token.starts_with("shaders/")) && !root.join(token.trim_end_matches(|c| c == ')')).exists() {
+            missing.push(token);
+        }
+    }
+    let mut left_out: Vec<String> = files(&root.join("src"), "rs")
+        .into_iter()
+        .chain(files(&root.join("shaders"), "wgsl"))
+        .filter(|p| p.file_name().is_some_and(|n| n != "tests.rs"))
+        .filter(|p| !named.contains(&p.canonicalize().unwrap()))
+        .map(|p| p.strip_prefix(root).unwrap().display().to_string())
+        .collect();
+    left_out.sort();
+    missing.sort();
+    missing.dedup();
+    assert!(missing.is_empty(), "ARCHITECTURE.md names files that do not exist:\n{}", missing.join("\n"));
+    assert!(left_out.is_empty(), "ARCHITECTURE.md's code map leaves out:\n{}", left_out.join("\n"));
 }
 
 /// The markdown files a reader follows links through: the README, `ARCHITECTURE.md`,

@@ -26,6 +26,7 @@ pub use ingest::UploadReceipt;
 use crate::timing::PhaseName;
 use crate::error::JobResult;
 use crate::gpu::scene::GpuScene;
+pub use crate::gpu::AdapterSummary;
 use crate::gpu::GpuContext;
 use crate::job::{AssetRef, Job, Limits, OutputFormat};
 use crate::light::LightImage;
@@ -128,6 +129,11 @@ impl Engine {
     pub fn with_pool_budget(self, bytes: u64) -> Self {
         self.state.lock().unwrap_or_else(|poisoned| poisoned.into_inner()).renderer.set_pool_budget(bytes);
         Self { pool_bytes: bytes, ..self }
+    }
+
+    /// What the engine renders on now: the adapter's name, backend, kind and driver.
+    pub fn adapter(&self) -> AdapterSummary {
+        self.gpu().adapter.clone()
     }
 
     /// The device in use now (another engine may share it: tests, several configurations).

@@ -52,7 +52,7 @@ pub(super) async fn readyz(State(state): State<Arc<AppState>>) -> Response {
         response.headers_mut().insert(header::RETRY_AFTER, HeaderValue::from_static("2"));
         response
     } else {
-        Json(json!({"status": "ready", "adapter": state.engine.gpu().adapter})).into_response()
+        Json(json!({"status": "ready", "adapter": state.engine.adapter()})).into_response()
     }
 }
 
@@ -80,7 +80,7 @@ const STATS_RECENT: usize = 40;
 pub(super) async fn stats(State(state): State<Arc<AppState>>) -> Json<Value> {
     let uptime_s = state.started.elapsed().map(|d| d.as_secs_f64()).unwrap_or(0.0);
     Json(json!({
-        "adapter": state.engine.gpu().adapter,
+        "adapter": state.engine.adapter(),
         "uptime_s": uptime_s,
         "jobs_in_flight": state.metrics.in_flight(),
         "jobs_queued": state.metrics.queued(),

@@ -8,7 +8,7 @@ use prometheus::{Encoder, HistogramOpts, HistogramVec, IntCounter, IntCounterVec
 
 use super::connections::ConnectionStats;
 use crate::engine::EngineStats;
-use crate::gpu::AdapterSummary;
+use crate::engine::AdapterSummary;
 use crate::methods::REGISTRY;
 use crate::store::StoreStatus;
 use crate::timing::Timings;

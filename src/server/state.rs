@@ -34,7 +34,7 @@ pub struct AppState {
 impl AppState {
     pub fn new(engine: Arc<Engine>, results_kept: usize) -> Self {
         Self {
-            metrics: metrics::Metrics::new(&engine.gpu().adapter),
+            metrics: metrics::Metrics::new(&engine.adapter()),
             queue: JobQueue::new(QueueConfig::default()),
             queue_config: QueueConfig::default(),
             jobs: LiveJobs::new(results_kept, DEFAULT_RESULTS_TTL),
