@@ -238,3 +238,13 @@ pub fn box_corners(a: Vec3, b: Vec3) -> [Vec3; 8] {
     [0, 1, 2, 3, 4, 5, 6, 7]
         .map(|k| Vec3::new(if k & 1 == 0 { a.x } else { b.x }, if k & 2 == 0 { a.y } else { b.y }, if k & 4 == 0 { a.z } else { b.z }))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_material_matches_its_wgsl() {
+        crate::gpu::shaders::assert_wgsl_layout!(MaterialGpu, "gbuffer.wgsl", "Material", [base_color]);
+    }
+}

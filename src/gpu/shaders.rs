@@ -187,6 +187,103 @@ pub(crate) fn assert_declares(name: &str, declaration: &str) {
     assert!(wgsl.contains(declaration), "{name} does not declare `{declaration}`");
 }
 
+/// The composed WGSL of `name`, parsed by naga. For tests.
+#[cfg(test)]
+fn parsed(name: &str) -> naga::Module {
+    let source = compose(name);
+    naga::front::wgsl::parse_str(&source).unwrap_or_else(|e| panic!("{name}:\n{}", e.emit_to_string(&source)))
+}
+
+/// The members of a WGSL struct with their byte offsets, a nested struct's members flattened
+/// into its own (at their offsets within the outer one), padding (`pad…`, `_…`) left out.
+#[cfg(test)]
+fn wgsl_members(module: &naga::Module, members: &[naga::StructMember], base: u32, out: &mut Vec<(String, u32)>) {
+    for member in members {
+        let name = member.name.clone().unwrap_or_default();
+        match &module.types[member.ty].inner {
+            naga::TypeInner::Struct { members: inner, .. } => wgsl_members(module, inner, base + member.offset, out),
+            _ if name.starts_with("pad") || name.starts_with('_') => {}
+            _ => out.push((name, base + member.offset)),
+        }
+    }
+}
+
+/// Asserts that a Rust struct of `size` bytes with `fields` (name, offset) is laid out as the
+/// WGSL struct `wgsl` in `shader` (with its imports): every WGSL member (a nested struct's
+/// flattened) at the same offset as the Rust field of its name, every Rust field but padding
+/// (`_…`) a WGSL member, and the Rust size the WGSL span (or that span rounded up to the 16
+/// bytes of a uniform slot). For tests: `assert_wgsl_layout!` gives the size and offsets.
+#[cfg(test)]
+pub(crate) fn assert_layout(shader: &str, wgsl: &str, size: usize, fields: &[(&str, usize)]) {
+    let module = parsed(shader);
+    let (_, ty) = module.types.iter().find(|(_, t)| t.name.as_deref() == Some(wgsl)).unwrap_or_else(|| panic!("{shader} has no struct {wgsl}"));
+    let naga::TypeInner::Struct { members, span } = &ty.inner else { panic!("{wgsl} in {shader} is not a struct") };
+    let mut flat = Vec::new();
+    wgsl_members(&module, members, 0, &mut flat);
+    for (name, offset) in &flat {
+        let rust = fields.iter().find(|(f, _)| f == name).map(|(_, o)| *o);
+        assert_eq!(rust, Some(*offset as usize), "{wgsl}.{name} in {shader}: WGSL offset {offset}, Rust {rust:?}");
+    }
+    for (field, _) in fields.iter().filter(|(f, _)| !f.starts_with('_')) {
+        assert!(flat.iter().any(|(m, _)| m == field), "{wgsl} in {shader} has no member `{field}`");
+    }
+    let span = *span as usize;
+    assert!(size == span || size == span.next_multiple_of(16), "{wgsl} in {shader}: {span} bytes in WGSL, {size} in Rust");
+}
+
+/// `assert_layout` for Rust type `$ty` and its fields, by name: size and offsets from the
+/// compiler (`size_of`, `offset_of!`).
+#[cfg(test)]
+macro_rules! assert_wgsl_layout {
+    ($ty:ty, $shader:expr, $wgsl:expr, [$($field:ident),* $(,)?]) => {
+        $crate::gpu::shaders::assert_layout(
+            $shader,
+            $wgsl,
+            ::std::mem::size_of::<$ty>(),
+            &[$((stringify!($field), ::std::mem::offset_of!($ty, $field))),*],
+        )
+    };
+}
+#[cfg(test)]
+pub(crate) use assert_wgsl_layout;
+
+/// Asserts that `entries`, a bind-group layout made in Rust, holds every resource the WGSL of
+/// `shaders` (each with its imports) declares in `group`, as the same kind — a uniform buffer,
+/// a read-only or a read-write storage buffer, or a texture — and nothing they all leave out.
+/// For tests.
+#[cfg(test)]
+pub(crate) fn assert_bindings(shaders: &[&str], group: u32, entries: &[wgpu::BindGroupLayoutEntry]) {
+    use wgpu::{BindingType, BufferBindingType};
+    let mut declared = std::collections::BTreeSet::new();
+    for shader in shaders {
+        let module = parsed(shader);
+        for (_, global) in module.global_variables.iter() {
+            let Some(binding) = &global.binding else { continue };
+            if binding.group != group {
+                continue;
+            }
+            declared.insert(binding.binding);
+            let name = global.name.as_deref().unwrap_or_default();
+            let entry = entries
+                .iter()
+                .find(|e| e.binding == binding.binding)
+                .unwrap_or_else(|| panic!("{shader}: `{name}` at binding {} of group {group} has no entry in the Rust layout", binding.binding));
+            let agrees = match (global.space, entry.ty) {
+                (naga::AddressSpace::Uniform, BindingType::Buffer { ty: BufferBindingType::Uniform, .. }) => true,
+                (naga::AddressSpace::Storage { access }, BindingType::Buffer { ty: BufferBindingType::Storage { read_only }, .. }) => {
+                    read_only == !access.contains(naga::StorageAccess::STORE)
+                }
+                (naga::AddressSpace::Handle, BindingType::Texture { .. } | BindingType::StorageTexture { .. } | BindingType::Sampler(_)) => true,
+                _ => false,
+            };
+            assert!(agrees, "{shader}: `{name}` at binding {} is {:?} in WGSL and {:?} in Rust", binding.binding, global.space, entry.ty);
+        }
+    }
+    for entry in entries {
+        assert!(declared.contains(&entry.binding), "binding {} of group {group} is declared by none of {shaders:?}", entry.binding);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

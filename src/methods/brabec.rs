@@ -361,6 +361,38 @@ impl Buffers {
 
 #[cfg(test)]
 mod tests {
+    use super::*;
+
+    #[test]
+    fn the_uniforms_and_bindings_match_the_shaders() {
+        crate::gpu::shaders::assert_wgsl_layout!(
+            Uniforms,
+            "methods/brabec/common.wgsl",
+            "BrabecParams",
+            [
+                r_scale,
+                r_bias,
+                r_shrink,
+                k,
+                d_near,
+                max_radius,
+                meet,
+                bias_texels,
+                slope_bias_texels,
+                jitter,
+                falloff,
+                inner_depth,
+                derived,
+                lattice_stride,
+                use_ids,
+                colored,
+                _pad
+            ]
+        );
+        let shaders = ["summary", "classify", "lattice", "refine", "search", "finish"].map(|s| format!("methods/brabec/{s}.wgsl"));
+        crate::gpu::shaders::assert_bindings(&shaders.each_ref().map(String::as_str), 1, &BINDINGS);
+    }
+
     #[test]
     fn the_summary_block_matches_its_wgsl_mirror() {
         let declaration = format!("const SUMMARY_BLOCK: i32 = {};", super::SUMMARY_BLOCK);

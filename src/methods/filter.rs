@@ -81,6 +81,17 @@ pub(super) struct FilterCounts {
     pub covered: u32,
 }
 
+/// Group 1 of the filter's passes (`filter.wgsl`).
+const BINDINGS: [wgpu::BindGroupLayoutEntry; 7] = [
+    layout::storage_read_write(0),
+    layout::uniform(1),
+    layout::storage_read(2),
+    layout::storage_read_write(3),
+    layout::storage_read_write(4),
+    layout::storage_read_write(5),
+    layout::storage_read_write(6),
+];
+
 /// Pixels of the frame no receiver covers.
 pub const BACKGROUND_PIXELS: CounterKey = CounterKey("background_pixels");
 
@@ -128,16 +139,7 @@ pub(super) fn run(
     uniforms: Uniforms,
     light_regions: &wgpu::Buffer,
 ) -> JobResult<FilterCounts> {
-    let io = [
-        layout::storage_read_write(0),
-        layout::uniform(1),
-        layout::storage_read(2),
-        layout::storage_read_write(3),
-        layout::storage_read_write(4),
-        layout::storage_read_write(5),
-        layout::storage_read_write(6),
-    ];
-    let mut entry = |entry: &'static str| ctx.screen_entry(name, shader, entry, &io);
+    let mut entry = |entry: &'static str| ctx.screen_entry(name, shader, entry, &BINDINGS);
     let (classify, size, filter) = (entry("classify"), entry("listed_size"), entry("filter_listed"));
 
     let (map_depth, map_pitch) = ctx.shadow_depth_copy("Filter::map_depth", "filter_copy_map");
@@ -280,6 +282,17 @@ mod tests {
 
     fn builtin(name: &str) -> LightImage {
         LightImage::builtin(name, &Default::default(), "f").unwrap()
+    }
+
+    #[test]
+    fn the_uniforms_and_bindings_match_the_shader() {
+        crate::gpu::shaders::assert_wgsl_layout!(
+            Uniforms,
+            "methods/pcss.wgsl",
+            "FilterParams",
+            [search_taps, lattice, max_search_texels, max_filter_texels, bias_texels, slope_bias_texels, nearest, mode, threshold, light_threshold, map_pitch, _pad]
+        );
+        crate::gpu::shaders::assert_bindings(&["methods/pcss.wgsl", "methods/chun_oh/chun_oh.wgsl"], 1, &BINDINGS);
     }
 
     #[test]

@@ -123,3 +123,25 @@ pub fn depth_attachment(view: &wgpu::TextureView) -> wgpu::RenderPassDepthStenci
         stencil_ops: None,
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The vertex buffer's attributes lie where `Vertex` puts its fields, in the order of the
+    /// shaders' `@location`s.
+    #[test]
+    fn the_vertex_layout_matches_the_vertex() {
+        use std::mem::offset_of;
+        let offsets: Vec<u64> = vertex_layout().attributes.iter().map(|a| a.offset).collect();
+        let fields = [
+            offset_of!(Vertex, position),
+            offset_of!(Vertex, normal),
+            offset_of!(Vertex, uv),
+            offset_of!(Vertex, object_id),
+            offset_of!(Vertex, material),
+        ];
+        assert_eq!(offsets, fields.map(|o| o as u64));
+        assert_eq!(vertex_layout().array_stride, std::mem::size_of::<Vertex>() as u64);
+    }
+}

@@ -460,3 +460,19 @@ fn cell_to_gpu(light: &AreaLight, cell: &LightCell) -> LightCellGpu {
     let [lo, _, hi, _] = cell.corners.map(|c| light.plane_point(c));
     LightCellGpu { rect: [lo.x, hi.x, lo.y, hi.y], radiance: [cell.radiance.x, cell.radiance.y, cell.radiance.z, 0.0] }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_frame_constants_match_their_wgsl() {
+        crate::gpu::shaders::assert_wgsl_layout!(
+            FrameUniforms,
+            "common/frame.wgsl",
+            "Frame",
+            [view_proj, light_view_proj, eye, view_dir, light_center, light_n, light_u, light_r, light_proj, ambient, sizes, cells_bounds]
+        );
+        crate::gpu::shaders::assert_wgsl_layout!(LightCellGpu, "common/light.wgsl", "LightCell", [rect, radiance]);
+    }
+}

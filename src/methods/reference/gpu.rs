@@ -42,7 +42,7 @@ pub(super) struct BatchUniforms {
     pub(super) slope_bias_texels: f32,
     pub(super) plane: f32,
     pub(super) near: f32,
-    pub(super) pad: [u32; 3],
+    pub(super) _pad: [u32; 3],
     pub(super) samples: [BatchSample; BATCH_SAMPLES],
 }
 
@@ -292,4 +292,21 @@ pub(super) fn depth_pipeline(ctx: &mut MethodContext<'_>) -> std::sync::Arc<wgpu
         };
         pipeline.build(device)
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_batch_matches_its_wgsl() {
+        let shader = "methods/reference/accumulate.wgsl";
+        crate::gpu::shaders::assert_wgsl_layout!(BatchSample, shader, "BatchSample", [origin, radiance]);
+        crate::gpu::shaders::assert_wgsl_layout!(
+            BatchUniforms,
+            shader,
+            "Batch",
+            [rotation, resolution, bias_texels, slope_bias_texels, plane, near, _pad, samples]
+        );
+    }
 }

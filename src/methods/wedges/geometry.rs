@@ -56,7 +56,8 @@ impl Volume {
             .map(|(e, planes)| WedgeGpu {
                 a: e.a.extend(e.multiplicity as f32).to_array(),
                 b: e.b.extend(e.object as f32).to_array(),
-                planes: [0, 1].map(|k| planes.get(k).copied().unwrap_or(Vec4::W).to_array()),
+                front: planes.first().copied().unwrap_or(Vec4::W).to_array(),
+                back: planes.get(1).copied().unwrap_or(Vec4::W).to_array(),
             })
             .collect();
 
@@ -69,12 +70,10 @@ impl Volume {
             .iter()
             .zip(self.multiplicity.iter().zip(&self.object))
             .map(|(p, (&m, &o))| PolygonGpu {
-                v: [
-                    p[0].extend(m as f32).to_array(),
-                    p[1].extend(o as f32).to_array(),
-                    p[2].extend(0.0).to_array(),
-                    p[3].extend(0.0).to_array(),
-                ],
+                v0: p[0].extend(m as f32).to_array(),
+                v1: p[1].extend(o as f32).to_array(),
+                v2: p[2].extend(0.0).to_array(),
+                v3: p[3].extend(0.0).to_array(),
             })
             .collect()
     }

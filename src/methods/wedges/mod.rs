@@ -69,7 +69,10 @@ const FULL: i32 = 1 << 16;
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 struct PolygonGpu {
-    v: [[f32; 4]; 4],
+    v0: [f32; 4],
+    v1: [f32; 4],
+    v2: [f32; 4],
+    v3: [f32; 4],
 }
 
 /// `Wedge` in `common.wgsl` (a and b its `edge`): a.w is the multiplicity, b.w the object id;
@@ -79,7 +82,8 @@ struct PolygonGpu {
 struct WedgeGpu {
     a: [f32; 4],
     b: [f32; 4],
-    planes: [[f32; 4]; 2],
+    front: [f32; 4],
+    back: [f32; 4],
 }
 
 /// `WorkItem` in `common.wgsl`.
@@ -231,6 +235,24 @@ impl Uniforms {
 #[cfg(test)]
 mod tests {
     use super::passes::item_grid;
+    use super::*;
+
+    #[test]
+    fn the_gpu_structs_and_bindings_match_the_shaders() {
+        use crate::gpu::shaders::assert_wgsl_layout;
+        let common = "methods/wedges/common.wgsl";
+        assert_wgsl_layout!(PolygonGpu, common, "VolumePolygon", [v0, v1, v2, v3]);
+        assert_wgsl_layout!(WedgeGpu, common, "Wedge", [a, b, front, back]);
+        assert_wgsl_layout!(WorkItem, common, "WorkItem", [primitive, tile, both, origin]);
+        assert_wgsl_layout!(
+            Uniforms,
+            common,
+            "WedgeParams",
+            [tile, zfail, full, polygon_count, object_ids, channels, color_angles, sector_angles, sector_stations, _pad, emitting_lo, emitting_hi]
+        );
+        let shaders = ["tiles", "rasterize_umbra", "rasterize_penumbra", "rasterize_both", "resolve"].map(|s| format!("methods/wedges/{s}.wgsl"));
+        crate::gpu::shaders::assert_bindings(&shaders.each_ref().map(String::as_str), 1, &passes::BINDINGS);
+    }
 
     #[test]
     fn the_item_grid_covers_every_item_with_less_than_a_row_to_spare() {
