@@ -66,7 +66,7 @@ fn append_rows(to_above: bool, origin: vec2<u32>, first_row: u32, mask: u32) {
     }
     var rest = mask;
     while rest != 0u {
-        let bit = firstTrailingBit(rest);
+        let bit = next_in_run(&rest);
         let entry = pixel_index(origin + vec2<u32>(bit % BLOCK, first_row + bit / BLOCK));
         if to_above {
             above.pixels[at] = entry;
@@ -74,7 +74,6 @@ fn append_rows(to_above: bool, origin: vec2<u32>, first_row: u32, mask: u32) {
             clipped.pixels[at] = entry;
         }
         at++;
-        rest &= rest - 1u;
     }
 }
 

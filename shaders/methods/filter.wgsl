@@ -300,9 +300,8 @@ fn classify(@builtin(global_invocation_id) id: vec3<u32>) {
     var at = atomicAdd(&listed.count, countOneBits(listing));
     var rest = listing;
     while rest != 0u {
-        listed.pixels[at] = pixel_index(first + vec2<u32>(firstTrailingBit(rest), 0u));
+        listed.pixels[at] = pixel_index(first + vec2<u32>(next_in_run(&rest), 0u));
         at++;
-        rest &= rest - 1u;
     }
 }
 

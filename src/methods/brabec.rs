@@ -272,7 +272,6 @@ struct Buffers {
 
 impl Buffers {
     fn new(ctx: &mut MethodContext<'_>, uniforms: &Uniforms) -> Self {
-        let device = ctx.gpu.device.clone();
         let resolution = ctx.spec.shadow_resolution;
         let pixels = u64::from(ctx.width) * u64::from(ctx.height);
         let uniforms_buffer = ctx.uniforms("Brabec::uniforms", uniforms);
@@ -284,7 +283,7 @@ impl Buffers {
         let map_texels = ctx.scratch_buffer("Brabec::map_texels", u64::from(resolution).pow(2) * 8, wgpu::BufferUsages::STORAGE);
         let edges =
             if uniforms.colored == 1 { ctx.light_table("edge_table", edge_table) } else { Arc::new(ctx.counters("Brabec::no_table", 4)) };
-        let to_search = PixelListBuffers::new(&device, ctx.encoder, "Brabec", pixels);
+        let to_search = ctx.pixel_list("Brabec", pixels);
         Self { uniforms: uniforms_buffer, state, counters, edges, summary, map_texels, summary_side, to_search }
     }
 
@@ -348,8 +347,7 @@ impl Buffers {
         }
         pass.set_pipeline(&pipelines.search);
         pass.set_bind_group(1, &search_group, &[]);
-        pass.dispatch_workgroups_indirect(&self.to_search.groups, 0);
-        ctx.timer.mark(&mut pass, "brabec_search");
+        self.to_search.walk(&mut pass, ctx.timer, "brabec_search");
         pass.set_bind_group(1, &bind_group, &[]);
         for (name, pipeline, (x, y)) in interpolation {
             pass.set_pipeline(pipeline);

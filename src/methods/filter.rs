@@ -26,7 +26,6 @@ use crate::error::JobResult;
 use crate::gpu::layout;
 use crate::gpu::pool::DerivedKey;
 use crate::light::LightImage;
-use crate::render::PixelListBuffers;
 
 /// Pixels of a row per invocation of the classification (`ROW_PIXELS` in filter.wgsl).
 const CLASSIFY_ROW: u32 = 8;
@@ -144,9 +143,8 @@ pub(super) fn run(
 
     let (map_depth, map_pitch) = ctx.shadow_depth_copy("Filter::map_depth", "filter_copy_map");
     let uniforms = Uniforms { map_pitch, ..uniforms };
-    let device = &ctx.gpu.device;
     let pixels = u64::from(ctx.width) * u64::from(ctx.height);
-    let listed = PixelListBuffers::new(device, ctx.encoder, "Filter", pixels);
+    let listed = ctx.pixel_list("Filter", pixels);
     let uniform_buffer = ctx.uniforms("Filter::uniforms", &uniforms);
     let counters = ctx.counters("Filter::counters", 8);
     let bind = |pipeline: &wgpu::ComputePipeline, groups: &wgpu::Buffer| {
@@ -175,14 +173,13 @@ pub(super) fn run(
         pass.set_bind_group(1, &classify_group, &[]);
         pass.dispatch_workgroups(gx.div_ceil(CLASSIFY_ROW), gy, 1);
         ctx.timer.mark(&mut pass, "filter_classify");
-        pass.set_pipeline(&size);
-        pass.set_bind_group(1, &size_group, &[]);
-        pass.dispatch_workgroups(1, 1, 1);
-        ctx.timer.mark(&mut pass, "filter_listed_size");
-        pass.set_pipeline(&filter);
-        pass.set_bind_group(1, &filter_group, &[]);
-        pass.dispatch_workgroups_indirect(&listed.groups, 0);
-        ctx.timer.mark(&mut pass, "filter_search_and_filter");
+        listed.size_and_walk(
+            &mut pass,
+            ctx.timer,
+            (&size, &size_group),
+            (&filter, &filter_group),
+            ("filter_listed_size", "filter_search_and_filter"),
+        );
     }
     let c = ctx.read_counters(&counters)?;
     Ok(FilterCounts { levels: [c[0], c[1], c[2]], forced_by_light: c[3], filtered: c[4], covered: c[5] })

@@ -27,6 +27,11 @@ pub struct Scratch {
 }
 
 impl Scratch {
+    /// Holds `buffer` for the frame: it goes back to its pool with the rest.
+    pub fn hold(&mut self, buffer: PooledBuffer) {
+        self.buffers.push(buffer);
+    }
+
     /// Gives everything back to the pools; only once the passes using it have run.
     pub fn release(self, buffers: &mut BufferPool, textures: &mut TexturePool) {
         for buffer in self.buffers {
@@ -206,6 +211,17 @@ impl MethodContext<'_> {
         let buffer = pooled.buffer.clone();
         self.scratch.buffers.push(pooled);
         buffer
+    }
+
+    /// A pixel list of at most `capacity` pixels from the pools, for this frame only
+    /// (`PixelListBuffers`); labelled `owner`.
+    pub fn pixel_list(&mut self, owner: &'static str, capacity: u64) -> crate::render::PixelListBuffers {
+        self.pixel_list_of(owner, capacity, 4)
+    }
+
+    /// `pixel_list` of `entry_bytes`-sized entries.
+    pub fn pixel_list_of(&mut self, owner: &'static str, capacity: u64, entry_bytes: u64) -> crate::render::PixelListBuffers {
+        crate::render::PixelListBuffers::new(self.buffers, &mut self.scratch, &self.gpu.device, self.encoder, (owner, capacity, entry_bytes))
     }
 
     /// `scratch_buffer` for a texture (`key.layers` layers), with what an earlier frame left in it.

@@ -268,8 +268,10 @@ impl Renderer {
 
         // Unshadowed irradiance E0.
         let mut enc = encoder();
-        let e0_listed = self.record_e0(&mut enc, &inputs, targets, spec);
+        let mut scratch = Scratch::default();
+        let e0_listed = self.record_e0(&mut enc, &inputs, targets, spec, &mut scratch);
         submit(enc)?;
+        scratch.release(&mut self.buffers, &mut self.textures);
         let start = timings.phase(PhaseName::E0, start);
         go_on()?;
 

@@ -9,7 +9,8 @@ use super::targets::{FrameTargets, ALBEDO_FORMAT, ID_FORMAT, NORMAL_FORMAT, POSI
 use super::{FrameInputs, FrameSpec, PixelListBuffers, Renderer};
 use crate::timing::PhaseName;
 use crate::gpu::layout;
-use crate::gpu::pool::PipelineKey;
+use crate::gpu::pool::{BufferKey, PipelineKey};
+use crate::render::method::Scratch;
 use crate::gpu::scene::GpuScene;
 use crate::gpu::shaders;
 
@@ -163,6 +164,7 @@ impl Renderer {
         inputs: &FrameInputs,
         targets: &FrameTargets,
         spec: &FrameSpec,
+        scratch: &mut Scratch,
     ) -> Option<wgpu::Buffer> {
         let io_layout = self.layouts.e0_output.clone();
         let device = &self.gpu.device;
@@ -192,11 +194,15 @@ impl Renderer {
                 mapped_at_creation: false,
             })
         };
-        let records = buffer("E0::corners", u64::from(corners * rows) * E0_CORNER_BYTES, wgpu::BufferUsages::empty());
+        // From the pool: every corner the interpolation reads is written first.
+        let corner_bytes = u64::from(corners * rows) * E0_CORNER_BYTES;
+        let pooled = self.buffers.alloc(device, BufferKey { label: "E0::corners", size: corner_bytes, usage: wgpu::BufferUsages::STORAGE });
+        let records = pooled.buffer.clone();
+        scratch.hold(pooled);
         // The pixels summed exactly, by whether they see every cell above their horizon (at
         // most every pixel).
-        let above = PixelListBuffers::new(device, encoder, "E0::above", pixels);
-        let clipped = PixelListBuffers::new(device, encoder, "E0::clipped", pixels);
+        let above = PixelListBuffers::new(&mut self.buffers, scratch, device, encoder, ("E0::above", pixels, 4));
+        let clipped = PixelListBuffers::new(&mut self.buffers, scratch, device, encoder, ("E0::clipped", pixels, 4));
         let bind = |above_groups: &wgpu::Buffer, clipped_groups: &wgpu::Buffer| {
             device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("E0::outputs"),
@@ -235,8 +241,7 @@ impl Renderer {
         pass.set_bind_group(1, &listed_io, &[]);
         for (name, entry_point, list) in [("e0_exact_above", "exact_above", &above), ("e0_exact_clipped", "exact_clipped", &clipped)] {
             pass.set_pipeline(&entry(name, entry_point));
-            pass.dispatch_workgroups_indirect(&list.groups, 0);
-            self.timer.mark(&mut pass, name);
+            list.walk(&mut pass, &mut self.timer, name);
         }
         drop(pass);
         // Each list's count is its first word.

@@ -1,9 +1,14 @@
-//! The buffers of a compacted pass (`shaders/common/pixel_list.wgsl`): the list of pixels a
-//! per-pixel pass appends to, and the grid of the indirect dispatch that walks it.
+//! A listed pass (`shaders/common/pixel_list.wgsl`): the list of pixels a per-pixel pass
+//! appends to, the grid of the indirect dispatch that walks it, both from the renderer's
+//! pools, and the recording of the size pass and the indirect dispatch over the list.
 
-/// A `PixelList` and its dispatch, made for one frame.
+use crate::gpu::pool::{BufferKey, BufferPool};
+use crate::gpu::timing::GpuTimer;
+use crate::render::method::Scratch;
+
+/// A `PixelList` and its dispatch, lent by the pools for one frame.
 pub struct PixelListBuffers {
-    /// The count (cleared here), then at most `capacity` pixel indices.
+    /// The count (cleared here), then at most `capacity` entries.
     pub list: wgpu::Buffer,
     /// The indirect dispatch's workgroup grid, written on the GPU (`list_dispatch`).
     pub groups: wgpu::Buffer,
@@ -13,28 +18,62 @@ pub struct PixelListBuffers {
 }
 
 impl PixelListBuffers {
-    /// Buffers for at most `capacity` pixels, labelled `{owner}::list…`; the count is cleared
-    /// on `encoder` before anything appends.
-    pub fn new(device: &wgpu::Device, encoder: &mut wgpu::CommandEncoder, owner: &str, capacity: u64) -> Self {
-        Self::new_of(device, encoder, owner, capacity, 4)
-    }
-
-    /// `new` for a list of `entry_bytes`-sized entries (a multiple of 4).
-    pub fn new_of(device: &wgpu::Device, encoder: &mut wgpu::CommandEncoder, owner: &str, capacity: u64, entry_bytes: u64) -> Self {
-        let buffer = |field: &str, size: u64, usage: wgpu::BufferUsages| {
-            device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some(&format!("{owner}::{field}")),
-                size,
-                usage: wgpu::BufferUsages::STORAGE | usage,
-                mapped_at_creation: false,
-            })
+    /// Buffers for at most `capacity` entries of `entry_bytes` (a multiple of 4; a pixel
+    /// index is 4), from `pool`, held in `scratch` until the frame's passes have run; the
+    /// count is cleared on `encoder` before anything appends. A pooled buffer holds what an
+    /// earlier frame left: the count is cleared, the grid is written by the size pass before
+    /// the dispatch reads it, and only the entries below the count are read.
+    pub fn new(
+        pool: &mut BufferPool,
+        scratch: &mut Scratch,
+        device: &wgpu::Device,
+        encoder: &mut wgpu::CommandEncoder,
+        (owner, capacity, entry_bytes): (&'static str, u64, u64),
+    ) -> Self {
+        let mut buffer = |label, size: u64, usage: wgpu::BufferUsages| {
+            let pooled = pool.alloc(device, BufferKey { label, size, usage: wgpu::BufferUsages::STORAGE | usage });
+            let buffer = pooled.buffer.clone();
+            scratch.hold(pooled);
+            buffer
         };
         // The count, padded to the entries' alignment, then the entries; the count may be
         // copied out (E0's, the frame's counter `e0_pixels_summed_exactly`).
-        let list = buffer("list", entry_bytes.max(4) * (1 + capacity.max(1)), wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC);
+        let list = buffer(owner, entry_bytes.max(4) * (1 + capacity.max(1)), wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC);
         encoder.clear_buffer(&list, 0, Some(4));
-        let groups = buffer("list_groups", 12, wgpu::BufferUsages::INDIRECT);
-        let stand_in = buffer("list_groups_stand_in", 12, wgpu::BufferUsages::empty());
+        let groups = buffer("PixelList::groups", 12, wgpu::BufferUsages::INDIRECT);
+        let stand_in = buffer("PixelList::stand_in", 12, wgpu::BufferUsages::empty());
         PixelListBuffers { list, groups, stand_in }
+    }
+
+    /// The indirect dispatch over the list, of the pipeline and bind groups set on `pass`.
+    pub fn dispatch(&self, pass: &mut wgpu::ComputePass<'_>) {
+        pass.dispatch_workgroups_indirect(&self.groups, 0);
+    }
+
+    /// `dispatch`, timed as the dispatch `name`.
+    pub fn walk(&self, pass: &mut wgpu::ComputePass<'_>, timer: &mut GpuTimer, name: &'static str) {
+        self.dispatch(pass);
+        timer.mark(pass, name);
+    }
+
+    /// Records, in `pass`, the size pass (`size`: one invocation turning the count into the
+    /// grid, `list_dispatch`) and the indirect dispatch of `walk` over the list, each with its
+    /// group-1 bind group, and times them as the dispatches `names`. `walk`'s bind group
+    /// binds `stand_in` where `size`'s binds `groups`.
+    pub fn size_and_walk(
+        &self,
+        pass: &mut wgpu::ComputePass<'_>,
+        timer: &mut GpuTimer,
+        size: (&wgpu::ComputePipeline, &wgpu::BindGroup),
+        walk: (&wgpu::ComputePipeline, &wgpu::BindGroup),
+        names: (&'static str, &'static str),
+    ) {
+        pass.set_pipeline(size.0);
+        pass.set_bind_group(1, size.1, &[]);
+        pass.dispatch_workgroups(1, 1, 1);
+        timer.mark(pass, names.0);
+        pass.set_pipeline(walk.0);
+        pass.set_bind_group(1, walk.1, &[]);
+        self.walk(pass, timer, names.1);
     }
 }

@@ -27,10 +27,9 @@ fn list_run_for_shading(first: vec2<u32>, listing: u32, hard: u32) {
     var at = atomicAdd(&shaded.count, countOneBits(listing));
     var rest = listing;
     while rest != 0u {
-        let k = firstTrailingBit(rest);
+        let k = next_in_run(&rest);
         shaded.pixels[at] = pixel_index(first + vec2<u32>(k, 0u)) << 1u | ((hard >> k) & 1u);
         at++;
-        rest &= rest - 1u;
     }
 }
 

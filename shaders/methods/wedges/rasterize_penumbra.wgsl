@@ -72,10 +72,8 @@ fn append_pairs(index: u32, first: u32, mask: u32) {
     var at = atomicAdd(&inside.count, countOneBits(mask));
     var rest = mask;
     while rest != 0u {
-        let b = firstTrailingBit(rest);
-        inside.pairs[at] = vec2<u32>(index, first + LANES * b);
+        inside.pairs[at] = vec2<u32>(index, first + LANES * next_in_run(&rest));
         at++;
-        rest &= rest - 1u;
     }
 }
 

@@ -131,9 +131,9 @@ impl FloodBuffers {
         let tile_count = grid.0.div_ceil(TILE) * grid.1.div_ceil(TILE);
         let tiles = ctx.scratch_buffer("Jfa::tiles", u64::from(tile_count) * 4, storage);
         let counters = ctx.counters("Jfa::counters", 4);
-        let listed = PixelListBuffers::new(&device, ctx.encoder, "Jfa::boundary", if which.light_space { 0 } else { cells });
-        let tile_list = PixelListBuffers::new(&device, ctx.encoder, "Jfa::tile_list", u64::from(tile_count));
-        let shaded = PixelListBuffers::new(&device, ctx.encoder, "Jfa::shaded", u64::from(ctx.width) * u64::from(ctx.height));
+        let listed = ctx.pixel_list("Jfa::boundary", if which.light_space { 0 } else { cells });
+        let tile_list = ctx.pixel_list("Jfa::tile_list", u64::from(tile_count));
+        let shaded = ctx.pixel_list("Jfa::shaded", u64::from(ctx.width) * u64::from(ctx.height));
         Self { uniforms, lut, keys, a, b, flags, tiles, tile_count, counters, listed, tile_list, shaded, map_depth }
     }
 
@@ -211,8 +211,7 @@ impl FloodBuffers {
             }
             pass.set_pipeline(seed_listed);
             pass.set_bind_group(1, &seeding, &[0]);
-            pass.dispatch_workgroups_indirect(&listed.groups, 0);
-            ctx.timer.mark(&mut pass, "jfa_seed_boundary");
+            listed.walk(&mut pass, ctx.timer, "jfa_seed_boundary");
         }
         let [list_tiles, tiles_size, tiles_reset] = &pipelines.tile_passes;
         for k in 0..rounds {
@@ -226,8 +225,7 @@ impl FloodBuffers {
             ctx.timer.mark(&mut pass, "jfa_list_tiles");
             pass.set_pipeline(&pipelines.round);
             pass.set_bind_group(1, flooding, &[offset]);
-            pass.dispatch_workgroups_indirect(&tile_list.groups, 0);
-            ctx.timer.mark(&mut pass, "jfa_rounds");
+            tile_list.walk(&mut pass, ctx.timer, "jfa_rounds");
             pass.set_pipeline(tiles_reset);
             pass.set_bind_group(1, listing, &[offset]);
             pass.dispatch_workgroups(1, 1, 1);
@@ -243,7 +241,6 @@ impl FloodBuffers {
         ctx.timer.mark(&mut pass, "jfa_shaded_size");
         pass.set_pipeline(shade);
         pass.set_bind_group(1, &final_shading, &[0]);
-        pass.dispatch_workgroups_indirect(&shaded.groups, 0);
-        ctx.timer.mark(&mut pass, "jfa_shade");
+        shaded.walk(&mut pass, ctx.timer, "jfa_shade");
     }
 }

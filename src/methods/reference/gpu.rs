@@ -219,7 +219,7 @@ impl Accumulation {
         pass.set_pipeline(&pipeline);
         pass.set_bind_group(0, &ctx.inputs.bind_group, &[]);
         pass.set_bind_group(1, &group, &[layout::slot_offset_of::<BatchUniforms>(b)]);
-        pass.dispatch_workgroups_indirect(&self.segments.groups, 0);
+        self.segments.dispatch(&mut pass);
     }
 }
 
@@ -228,7 +228,7 @@ impl Accumulation {
 /// them: recorded once, before the first batch.
 pub(super) fn list_segments(ctx: &mut MethodContext<'_>) -> (PixelListBuffers, wgpu::Buffer) {
     let segments = u64::from(ctx.width.div_ceil(SEGMENT)) * u64::from(ctx.height);
-    let list = PixelListBuffers::new(&ctx.gpu.device, ctx.encoder, "Reference::segments", segments);
+    let list = ctx.pixel_list("Reference::segments", segments);
     let shader = "methods/reference/accumulate.wgsl";
     let lister = ctx.screen_entry("reference.list_segments",
         shader,

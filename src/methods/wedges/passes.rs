@@ -145,7 +145,7 @@ impl Buffers {
         let tile_pixels = u64::from(uniforms.tile) * u64::from(uniforms.tile);
         // The penumbra pass lists the pixels inside each wedge, a chunk of items at a time.
         let inside_items = (INSIDE_PAIRS / tile_pixels).max(1) as usize;
-        let inside = crate::render::PixelListBuffers::new_of(&device, ctx.encoder, "Wedges::inside", inside_items as u64 * tile_pixels, 8);
+        let inside = ctx.pixel_list_of("Wedges::inside", inside_items as u64 * tile_pixels, 8);
         Self {
             grid_size,
             uniforms: ctx.uniforms("Wedges::uniforms", uniforms),
@@ -244,8 +244,7 @@ impl Buffers {
                 pass.dispatch_workgroups(1, 1, 1);
                 pass.set_bind_group(1, reading_group, &[]);
                 pass.set_pipeline(&pipelines.shade_listed);
-                pass.dispatch_workgroups_indirect(&self.inside.groups, 0);
-                ctx.timer.mark(&mut pass, "wedges_penumbra_shade");
+                self.inside.walk(&mut pass, ctx.timer, "wedges_penumbra_shade");
                 pass.set_bind_group(1, group, &[]);
                 pass.set_pipeline(&pipelines.inside_reset);
                 pass.dispatch_workgroups(1, 1, 1);
