@@ -77,7 +77,10 @@ fn modules_named(text: &str, module_path: &[String]) -> Vec<String> {
     // `super::` chains: from a file whose module path has n components, k supers reach
     // component n − k; k ≥ n names a top-level module (or the crate root, k > n). Read up to
     // the first inline module (`mod tests {`), inside which a `super::` is one level deeper.
-    let outer = text.find("\nmod ").filter(|&at| text[at + 1..].lines().next().is_some_and(|l| l.trim_end().ends_with('{'))).map_or(text, |at| &text[..at]);
+    let outer = text
+        .find("\nmod ")
+        .filter(|&at| text[at + 1..].lines().next().is_some_and(|l| l.trim_end().ends_with('{')))
+        .map_or(text, |at| &text[..at]);
     for (i, _) in outer.match_indices("super::") {
         if outer[..i].ends_with("super::") || outer[..i].ends_with(|c: char| c.is_ascii_alphanumeric() || c == '_') {
             continue;
@@ -197,7 +200,11 @@ fn the_code_map_names_every_file() {
         }
         for token in tokens {
             let path = if token.starts_with("src/") || token.starts_with("shaders/") || !place.ends_with('/') {
-                if token.starts_with("src/") || token.starts_with("shaders/") { root.join(&token) } else { root.join(place).parent().unwrap().join(&token) }
+                if token.starts_with("src/") || token.starts_with("shaders/") {
+                    root.join(&token)
+                } else {
+                    root.join(place).parent().unwrap().join(&token)
+                }
             } else {
                 root.join(place).join(&token)
             };

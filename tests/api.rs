@@ -245,7 +245,21 @@ fn cli_renders_the_embedded_default_and_example_jobs() {
         .unwrap();
     assert!(output.status.success());
     let stderr = String::from_utf8_lossy(&output.stderr);
-    let table = ["adapter ", "phase ", "scene ", "shadow_map ", "gbuffer ", "e0 ", "method ", "composite ", "readback ", "encode ", "total ", "cpu ", "wrote "];
+    let table = [
+        "adapter ",
+        "phase ",
+        "scene ",
+        "shadow_map ",
+        "gbuffer ",
+        "e0 ",
+        "method ",
+        "composite ",
+        "readback ",
+        "encode ",
+        "total ",
+        "cpu ",
+        "wrote ",
+    ];
     for line in stderr.lines() {
         assert!(table.iter().any(|start| line.starts_with(start)), "stderr holds more than the phase table: {line:?}\n{stderr}");
     }
@@ -260,8 +274,11 @@ fn cli_renders_the_embedded_default_and_example_jobs() {
     let example = concat!(env!("CARGO_MANIFEST_DIR"), "/api/examples/torus-stripes.json");
     let exr = dir.path().join("example.exr");
     // Logs as JSON objects for collectors.
-    let output =
-        std::process::Command::new(exe).args(["--log-format", "json", "render", example, "-o", exr.to_str().unwrap()]).env("PENUMBRA_LOG", "info").output().unwrap();
+    let output = std::process::Command::new(exe)
+        .args(["--log-format", "json", "render", example, "-o", exr.to_str().unwrap()])
+        .env("PENUMBRA_LOG", "info")
+        .output()
+        .unwrap();
     assert!(output.status.success());
     let stderr = String::from_utf8_lossy(&output.stderr);
     let adapter_line = stderr.lines().find(|l| l.contains("GPU adapter")).expect("the adapter is logged");

@@ -6,8 +6,8 @@ mod common;
 use glam::{DVec3, Vec2, Vec3};
 use penumbra::job::{AssetRef, Job, Limits, OutputFormat};
 use penumbra::light::{edges_acute_from, light_cells, unshadowed_irradiance, AreaLight, LightImage};
-use penumbra::methods::testing::quadtree_probe;
 use penumbra::methods::filter::light_regions;
+use penumbra::methods::testing::quadtree_probe;
 use serde_json::json;
 
 fn job(value: serde_json::Value) -> Job {
@@ -781,7 +781,8 @@ fn bench_writes_its_phase_table_and_the_e0_check() {
     // timestamp when they get to it (once 0.02 against 0.36 ms in CI, with the other render
     // tests running beside it) — but not every row of a method.
     if engine.gpu().timestamps {
-        let composite = |r: &penumbra::eval::frame_bench::BenchRow| r.phases.iter().find(|(p, _)| p == "composite").map(|(_, ms)| *ms).unwrap();
+        let composite =
+            |r: &penumbra::eval::frame_bench::BenchRow| r.phases.iter().find(|(p, _)| p == "composite").map(|(_, ms)| *ms).unwrap();
         let mut composites: Vec<f64> = report.rows.iter().map(composite).collect();
         composites.sort_by(f64::total_cmp);
         let median = composites[composites.len() / 2];

@@ -6,7 +6,6 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use super::{check_job, Engine, RenderState};
-use crate::timing::PhaseName;
 use crate::error::{JobError, JobResult};
 use crate::gpu::GpuContext;
 use crate::job::Job;
@@ -14,6 +13,7 @@ use crate::methods::ShadowMethod;
 use crate::params::Params;
 use crate::render::{ExtraImages, FrameOutput, FrameSpec, Renderer};
 use crate::supervise::{cancelled_error, Supervisor};
+use crate::timing::PhaseName;
 use crate::timing::Timings;
 
 impl Engine {

@@ -20,10 +20,9 @@ use std::time::Instant;
 
 pub use assets::PathPolicy;
 pub use check::check_job;
-pub use stats::EngineStats;
 pub use ingest::UploadReceipt;
+pub use stats::EngineStats;
 
-use crate::timing::PhaseName;
 use crate::error::JobResult;
 use crate::gpu::scene::GpuScene;
 pub use crate::gpu::AdapterSummary;
@@ -34,6 +33,7 @@ use crate::methods::Counters;
 use crate::quality::QualityReport;
 use crate::render::{FrameOutput, Renderer};
 use crate::supervise::Supervisor;
+use crate::timing::PhaseName;
 use crate::timing::Timings;
 use crate::upload_store::{Kind, UploadStore};
 use lru::Lru;

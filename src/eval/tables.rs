@@ -80,7 +80,11 @@ fn write_preamble(md: &mut String, report: &EvalReport, methods: &[String]) -> s
 /// Time per phase and the ratio to `hard`, per row.
 fn write_cost(md: &mut String, report: &EvalReport) -> std::fmt::Result {
     writeln!(md, "## Cost\n")?;
-    writeln!(md, "| scene | light | size | map res | method | {} | total ms | × hard | counters |", PHASE_COLUMNS.map(PhaseName::as_str).join(" ms | ") + " ms")?;
+    writeln!(
+        md,
+        "| scene | light | size | map res | method | {} | total ms | × hard | counters |",
+        PHASE_COLUMNS.map(PhaseName::as_str).join(" ms | ") + " ms"
+    )?;
     writeln!(md, "|---|---|---|---:|---|{}---:|---:|---|", "---:|".repeat(PHASE_COLUMNS.len()))?;
     for r in &report.rows {
         writeln!(

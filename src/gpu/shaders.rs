@@ -216,7 +216,8 @@ fn wgsl_members(module: &naga::Module, members: &[naga::StructMember], base: u32
 #[cfg(test)]
 pub(crate) fn assert_layout(shader: &str, wgsl: &str, size: usize, fields: &[(&str, usize)]) {
     let module = parsed(shader);
-    let (_, ty) = module.types.iter().find(|(_, t)| t.name.as_deref() == Some(wgsl)).unwrap_or_else(|| panic!("{shader} has no struct {wgsl}"));
+    let (_, ty) =
+        module.types.iter().find(|(_, t)| t.name.as_deref() == Some(wgsl)).unwrap_or_else(|| panic!("{shader} has no struct {wgsl}"));
     let naga::TypeInner::Struct { members, span } = &ty.inner else { panic!("{wgsl} in {shader} is not a struct") };
     let mut flat = Vec::new();
     wgsl_members(&module, members, 0, &mut flat);
@@ -264,16 +265,18 @@ pub(crate) fn assert_bindings(shaders: &[&str], group: u32, entries: &[wgpu::Bin
             }
             declared.insert(binding.binding);
             let name = global.name.as_deref().unwrap_or_default();
-            let entry = entries
-                .iter()
-                .find(|e| e.binding == binding.binding)
-                .unwrap_or_else(|| panic!("{shader}: `{name}` at binding {} of group {group} has no entry in the Rust layout", binding.binding));
+            let entry = entries.iter().find(|e| e.binding == binding.binding).unwrap_or_else(|| {
+                panic!("{shader}: `{name}` at binding {} of group {group} has no entry in the Rust layout", binding.binding)
+            });
             let agrees = match (global.space, entry.ty) {
                 (naga::AddressSpace::Uniform, BindingType::Buffer { ty: BufferBindingType::Uniform, .. }) => true,
                 (naga::AddressSpace::Storage { access }, BindingType::Buffer { ty: BufferBindingType::Storage { read_only }, .. }) => {
                     read_only == !access.contains(naga::StorageAccess::STORE)
                 }
-                (naga::AddressSpace::Handle, BindingType::Texture { .. } | BindingType::StorageTexture { .. } | BindingType::Sampler(_)) => true,
+                (
+                    naga::AddressSpace::Handle,
+                    BindingType::Texture { .. } | BindingType::StorageTexture { .. } | BindingType::Sampler(_),
+                ) => true,
                 _ => false,
             };
             assert!(agrees, "{shader}: `{name}` at binding {} is {:?} in WGSL and {:?} in Rust", binding.binding, global.space, entry.ty);

@@ -14,10 +14,7 @@ fn deep_nesting_is_refused_before_parsing_and_strings_do_not_count() {
     let error = Job::from_json(deep.as_bytes()).unwrap_err();
     assert_eq!(error.code, ErrorCode::InvalidJson);
     assert!(error.message.contains("nests deeper"), "{}", error.message);
-    assert!(!nesting_exceeds(
-        br#"{"a": "[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[", "b": "\\\"{{{{{{{{{{{{{{{{{{{{{{{{{{{{{{{{{{{{"}"#,
-        3
-    ));
+    assert!(!nesting_exceeds(br#"{"a": "[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[", "b": "\\\"{{{{{{{{{{{{{{{{{{{{{{{{{{{{{{{{{{{{"}"#, 3));
     assert!(nesting_exceeds(b"[[[[", 3) && !nesting_exceeds(b"[[[]]]", 3));
 }
 
@@ -54,10 +51,8 @@ fn errors_name_the_field() {
     let err = Job::from_json(br#"{"scene": {"builtin": "torus", "id": "x"}}"#).unwrap_err();
     assert_eq!(err.field.as_deref(), Some("scene"));
 
-    let err = Job::from_json(br#"{"scene": {"builtin": "torus"}, "output": {"width": 0}}"#)
-        .unwrap()
-        .validate(&Limits::default())
-        .unwrap_err();
+    let err =
+        Job::from_json(br#"{"scene": {"builtin": "torus"}, "output": {"width": 0}}"#).unwrap().validate(&Limits::default()).unwrap_err();
     assert_eq!(err.field.as_deref(), Some("output.width"));
 
     let err = Job::from_json(b"{not json").unwrap_err();

@@ -7,12 +7,12 @@
 use std::sync::Arc;
 
 use super::{Counters, MethodContext, Param, ParamSpec, Params, ShadowMethod, BIAS_TEXELS, SLOPE_BIAS_TEXELS};
-use crate::timing::PhaseName;
 use crate::error::JobResult;
-use crate::params::choice;
 use crate::gpu::layout;
 use crate::light::tables::edge_table;
+use crate::params::choice;
 use crate::render::PixelListBuffers;
+use crate::timing::PhaseName;
 
 pub struct Brabec;
 
@@ -37,12 +37,9 @@ choice! {
     /// The Δz of the inner search.
     enum InnerDepth { Blocker = "blocker", Paper = "paper" }
 }
-const FALLOFF: Param<Falloff> =
-    Param::choice("falloff", "attenuation across the penumbra: linear (paper) or the sinusoid of its §6");
-const INNER_DEPTH: Param<InnerDepth> = Param::choice(
-    "inner_depth",
-    "Δz of the inner search: the occluder over P (no ring) or the paper's depth(lit) − z",
-);
+const FALLOFF: Param<Falloff> = Param::choice("falloff", "attenuation across the penumbra: linear (paper) or the sinusoid of its §6");
+const INNER_DEPTH: Param<InnerDepth> =
+    Param::choice("inner_depth", "Δz of the inner search: the occluder over P (no ring) or the paper's depth(lit) − z");
 const ADAPTIVE: Param<bool> = Param::boolean("adaptive", true, "adaptive sampling with 4×4 blocks (§4.3); off searches every pixel");
 const OBJECT_IDS: Param<bool> = Param::boolean("object_ids", true, "object-id test (§3.2); off shows the self-shadowing it prevents");
 const JITTER_TEXELS: Param<f32> =

@@ -18,7 +18,6 @@
 //!   of the quadtree, with overlaps of fractional texels), kept for later jobs.
 //! - Orientation: as `filter.rs` says.
 
-
 use super::filter::{self, light_regions_buffer, Uniforms, FILTER_PARAMS, MODE_ADAPTIVE, MODE_FIXED};
 use super::{CounterKey, Counters, MethodContext, Param, ParamSpec, Params, ShadowMethod};
 use crate::error::JobResult;
@@ -36,10 +35,8 @@ choice! {
     /// Where the quadtree splits.
     enum Mode { Adaptive = "adaptive", Fixed = "fixed" }
 }
-const MODE: Param<Mode> = Param::choice(
-    "mode",
-    "adaptive: split where variance asks (0–2 times, the paper's default); fixed: always 4×4 (Table 1)",
-);
+const MODE: Param<Mode> =
+    Param::choice("mode", "adaptive: split where variance asks (0–2 times, the paper's default); fixed: always 4×4 (Table 1)");
 const THRESHOLD: Param<f32> = Param::float(
     "threshold",
     0.2244,

@@ -21,11 +21,11 @@ use std::sync::Arc;
 use wgpu::util::DeviceExt;
 
 use super::{CounterKey, Counters, MethodContext, Param, ParamSpec, Params, BIAS_TEXELS, SLOPE_BIAS_TEXELS};
-use crate::timing::PhaseName;
 use crate::error::JobResult;
 use crate::gpu::layout;
 use crate::gpu::pool::DerivedKey;
 use crate::light::LightImage;
+use crate::timing::PhaseName;
 
 /// Pixels of a row per invocation of the classification (`ROW_PIXELS` in filter.wgsl).
 const CLASSIFY_ROW: u32 = 8;
@@ -287,7 +287,20 @@ mod tests {
             Uniforms,
             "methods/pcss.wgsl",
             "FilterParams",
-            [search_taps, lattice, max_search_texels, max_filter_texels, bias_texels, slope_bias_texels, nearest, mode, threshold, light_threshold, map_pitch, _pad]
+            [
+                search_taps,
+                lattice,
+                max_search_texels,
+                max_filter_texels,
+                bias_texels,
+                slope_bias_texels,
+                nearest,
+                mode,
+                threshold,
+                light_threshold,
+                map_pitch,
+                _pad
+            ]
         );
         crate::gpu::shaders::assert_bindings(&["methods/pcss.wgsl", "methods/chun_oh/chun_oh.wgsl"], 1, &BINDINGS);
     }

@@ -36,8 +36,7 @@ impl ShadowMethod for Hard {
     }
 
     fn record(&self, ctx: &mut MethodContext<'_>, params: &Params) -> JobResult<Counters> {
-        let pipeline =
-            ctx.screen_pipeline("hard", "methods/hard.wgsl", &BINDINGS);
+        let pipeline = ctx.screen_pipeline("hard", "methods/hard.wgsl", &BINDINGS);
         let uniforms = ctx.uniforms(
             "Hard::uniforms",
             &HardUniforms { bias_texels: params.get(&BIAS_TEXELS), slope_bias_texels: params.get(&SLOPE_BIAS_TEXELS), _pad: [0.0; 2] },

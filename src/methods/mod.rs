@@ -8,10 +8,10 @@ pub mod chun_oh;
 pub mod filter;
 pub mod hard;
 pub mod jfa;
-pub mod testing;
 pub mod light_view;
 pub mod pcss;
 pub mod reference;
+pub mod testing;
 pub mod wedges;
 
 use crate::error::{ErrorCode, JobError, JobResult};

@@ -7,7 +7,6 @@
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
-use crate::timing::PhaseName;
 use crate::error::JobResult;
 use crate::gpu::pool::{
     BufferKey, BufferPool, DerivedResources, PipelineKey, PipelinePool, PooledBuffer, PooledTexture, TextureKey, TexturePool,
@@ -18,6 +17,7 @@ use crate::gpu::GpuContext;
 use crate::params::{ParamSpec, Params};
 use crate::render::{FrameInputs, FrameSpec, LightProjection};
 use crate::supervise::Supervisor;
+use crate::timing::PhaseName;
 
 /// A method's pooled buffers and textures for one frame (`MethodContext::scratch_buffer`).
 #[derive(Default)]
@@ -221,7 +221,13 @@ impl MethodContext<'_> {
 
     /// `pixel_list` of `entry_bytes`-sized entries.
     pub fn pixel_list_of(&mut self, owner: &'static str, capacity: u64, entry_bytes: u64) -> crate::render::PixelListBuffers {
-        crate::render::PixelListBuffers::new(self.buffers, &mut self.scratch, &self.gpu.device, self.encoder, (owner, capacity, entry_bytes))
+        crate::render::PixelListBuffers::new(
+            self.buffers,
+            &mut self.scratch,
+            &self.gpu.device,
+            self.encoder,
+            (owner, capacity, entry_bytes),
+        )
     }
 
     /// `scratch_buffer` for a texture (`key.layers` layers), with what an earlier frame left in it.

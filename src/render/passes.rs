@@ -7,12 +7,12 @@ use std::sync::Arc;
 use super::draw::{begin_scene_pass, clear_attachment, ScenePipeline};
 use super::targets::{FrameTargets, ALBEDO_FORMAT, ID_FORMAT, NORMAL_FORMAT, POSITION_FORMAT, SHADOW_DEPTH_FORMAT};
 use super::{FrameInputs, FrameSpec, PixelListBuffers, Renderer};
-use crate::timing::PhaseName;
 use crate::gpu::layout;
 use crate::gpu::pool::{BufferKey, PipelineKey};
-use crate::render::method::Scratch;
 use crate::gpu::scene::GpuScene;
 use crate::gpu::shaders;
+use crate::render::method::Scratch;
+use crate::timing::PhaseName;
 
 /// Pixels per side of the blocks whose corners E0 is summed at exactly (`shaders/e0/`).
 pub const E0_BLOCK: u32 = 8;

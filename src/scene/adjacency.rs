@@ -10,8 +10,8 @@ use glam::Vec3;
 
 mod casting;
 
-pub use casting::{crosses, Casting};
 use casting::FrontFaces;
+pub use casting::{crosses, Casting};
 
 /// One undirected edge, `a < b`, used by `faces` (a range of `EdgeMesh::uses`).
 #[derive(Debug, Clone, Copy)]

@@ -7,8 +7,8 @@
 use prometheus::{Encoder, HistogramOpts, HistogramVec, IntCounter, IntCounterVec, IntGauge, IntGaugeVec, Opts, Registry, TextEncoder};
 
 use super::connections::ConnectionStats;
-use crate::engine::EngineStats;
 use crate::engine::AdapterSummary;
+use crate::engine::EngineStats;
 use crate::methods::REGISTRY;
 use crate::store::StoreStatus;
 use crate::timing::Timings;

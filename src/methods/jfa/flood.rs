@@ -4,13 +4,13 @@
 
 use std::sync::Arc;
 
-use super::{steps, Flood, Flooding, Uniforms, FINAL_ROW, SILHOUETTE_ROW, TILE, ROUNDS, FLOODING};
-use crate::timing::PhaseName;
+use super::{steps, Flood, Flooding, Uniforms, FINAL_ROW, FLOODING, ROUNDS, SILHOUETTE_ROW, TILE};
 use crate::error::JobResult;
 use crate::gpu::layout;
 use crate::light::tables::{edge_table, key_table};
 use crate::methods::{MethodContext, Params};
 use crate::render::PixelListBuffers;
+use crate::timing::PhaseName;
 
 /// Seeds, floods and shades; returns (seeds, penumbra pixels, step lengths, the fraction of
 /// tiles the rounds flooded rather than skipped).
@@ -79,7 +79,8 @@ impl FloodPipelines {
             ]
         });
         let round = ctx.screen_pipeline(which.round.0, which.round.1, &BINDINGS);
-        let tile_passes = ["list_tiles", "tiles_size", "tiles_reset"].map(|entry| ctx.screen_entry(which.round.0, which.round.1, entry, &BINDINGS));
+        let tile_passes =
+            ["list_tiles", "tiles_size", "tiles_reset"].map(|entry| ctx.screen_entry(which.round.0, which.round.1, entry, &BINDINGS));
         let finish = ctx.screen_pipeline(which.finish.0, which.finish.1, &BINDINGS);
         let shading = ["shaded_size", "shade_listed"].map(|entry| ctx.screen_entry(which.finish.0, which.finish.1, entry, &BINDINGS));
         Self { seed, boundary, round, tile_passes, finish, shading }

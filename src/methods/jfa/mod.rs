@@ -32,10 +32,8 @@ choice! {
     /// The occluder edge that bounds the visible light.
     enum EdgeModel { Silhouette = "silhouette", Paper = "paper" }
 }
-const FLOODING: Param<Flooding> = Param::choice(
-    "flooding",
-    "jump flooding, or standard flooding (step 1, 2^rounds − 1 rounds) for the paper's experiment",
-);
+const FLOODING: Param<Flooding> =
+    Param::choice("flooding", "jump flooding, or standard flooding (step 1, 2^rounds − 1 rounds) for the paper's experiment");
 
 const SILHOUETTE_RELATIVE: Param<f32> = Param::float(
     "silhouette_relative",

@@ -36,6 +36,7 @@ fn the_uniforms_and_bindings_match_the_shaders() {
             _pad
         ]
     );
-    let shaders = ["silhouette", "flood_light", "final_light", "boundary", "flood_eye", "final_eye"].map(|s| format!("methods/jfa/{s}.wgsl"));
+    let shaders =
+        ["silhouette", "flood_light", "final_light", "boundary", "flood_eye", "final_eye"].map(|s| format!("methods/jfa/{s}.wgsl"));
     crate::gpu::shaders::assert_bindings(&shaders.each_ref().map(String::as_str), 1, &super::flood::BINDINGS);
 }

@@ -5,10 +5,10 @@ use glam::UVec2;
 
 use super::samples::SamplePlan;
 use super::MethodContext;
-use crate::timing::PhaseName;
 use crate::gpu::layout;
 use crate::gpu::pool::{PipelineKey, TextureKey};
 use crate::render::{PixelListBuffers, ScenePipeline, DEPTH_BUFFER_FORMAT};
+use crate::timing::PhaseName;
 
 /// Samples recorded between submissions at least: the frame is submitted, progress reported
 /// and cancellation checked after each batch that completes another 16 (every batch where
@@ -230,12 +230,14 @@ pub(super) fn list_segments(ctx: &mut MethodContext<'_>) -> (PixelListBuffers, w
     let segments = u64::from(ctx.width.div_ceil(SEGMENT)) * u64::from(ctx.height);
     let list = ctx.pixel_list("Reference::segments", segments);
     let shader = "methods/reference/accumulate.wgsl";
-    let lister = ctx.screen_entry("reference.list_segments",
+    let lister = ctx.screen_entry(
+        "reference.list_segments",
         shader,
         "list_segments",
         &[layout::storage_read_write(3), layout::storage_read_write(4)],
     );
-    let sizer = ctx.screen_entry("reference.segments_size",
+    let sizer = ctx.screen_entry(
+        "reference.segments_size",
         shader,
         "segments_size",
         &[layout::storage_read_write(4), layout::storage_read_write(5)],

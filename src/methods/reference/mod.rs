@@ -12,13 +12,13 @@ mod gpu;
 mod samples;
 
 use gpu::{batch_layers, Accumulation, DepthMaps, BATCH, BATCH_MAP_BYTES, SEGMENT};
-pub use samples::{light_samples, LightSample};
 use samples::SamplePlan;
+pub use samples::{light_samples, LightSample};
 
 use super::{Cap, Counters, MethodContext, Param, ParamSpec, Params, ShadowMethod};
-use crate::timing::PhaseName;
 use crate::error::JobResult;
 use crate::params::choice;
+use crate::timing::PhaseName;
 
 pub struct Reference;
 

@@ -20,19 +20,15 @@ fn the_batch_matches_its_wgsl_mirror() {
 #[test]
 fn a_crop_holds_every_receiver_and_lands_its_texels_where_the_whole_map_has_them() {
     let resolution = 2048;
-    let bounds = vec![
-        Some((Vec2::new(300.2, 1000.0), Vec2::new(900.7, 1500.5))),
-        None,
-        Some((Vec2::new(1700.0, -20.0), Vec2::new(2100.0, 380.0))),
-    ];
+    let bounds =
+        vec![Some((Vec2::new(300.2, 1000.0), Vec2::new(900.7, 1500.5))), None, Some((Vec2::new(1700.0, -20.0), Vec2::new(2100.0, 380.0)))];
     let crop = MapCrop::fit(bounds, resolution);
     // The widest extents with their margins (900.7 + 2 → 903, 300.2 − 2 → 298: 605 texels
     // across; 998 to 1503: 505 down), rounded up to whole granules.
     assert_eq!(crop.size, UVec2::new(640, 512));
     assert_eq!(crop.origins, vec![Some(UVec2::new(298, 998)), None, Some(UVec2::new(2048 - 640, 0))]);
     // A point's texel in its crop is its texel in the whole map less the crop's origin.
-    let view_proj =
-        Mat4::perspective_infinite_reverse_rh(1.1, 1.0, 0.3) * Mat4::look_to_rh(Vec3::new(0.5, 8.0, 0.2), -Vec3::Y, -Vec3::Z);
+    let view_proj = Mat4::perspective_infinite_reverse_rh(1.1, 1.0, 0.3) * Mat4::look_to_rh(Vec3::new(0.5, 8.0, 0.2), -Vec3::Y, -Vec3::Z);
     let texel = |m: Mat4, p: Vec3, size: Vec2| {
         let c = m * p.extend(1.0);
         Vec2::new(c.x / c.w + 1.0, 1.0 - c.y / c.w) * 0.5 * size

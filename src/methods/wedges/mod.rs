@@ -10,9 +10,9 @@
 use super::light_view::{self, LightView};
 use super::{Counters, MethodContext, Param, ParamSpec, Params, ShadowMethod};
 use crate::error::JobResult;
-use crate::params::choice;
 use crate::gpu::readback::read_buffer;
 use crate::light::tables::{emitting_octagon, SECTOR_ANGLES, SECTOR_STATIONS};
+use crate::params::choice;
 
 mod culling;
 mod geometry;
@@ -248,9 +248,23 @@ mod tests {
             Uniforms,
             common,
             "WedgeParams",
-            [tile, zfail, full, polygon_count, object_ids, channels, color_angles, sector_angles, sector_stations, _pad, emitting_lo, emitting_hi]
+            [
+                tile,
+                zfail,
+                full,
+                polygon_count,
+                object_ids,
+                channels,
+                color_angles,
+                sector_angles,
+                sector_stations,
+                _pad,
+                emitting_lo,
+                emitting_hi
+            ]
         );
-        let shaders = ["tiles", "rasterize_umbra", "rasterize_penumbra", "rasterize_both", "resolve"].map(|s| format!("methods/wedges/{s}.wgsl"));
+        let shaders =
+            ["tiles", "rasterize_umbra", "rasterize_penumbra", "rasterize_both", "resolve"].map(|s| format!("methods/wedges/{s}.wgsl"));
         crate::gpu::shaders::assert_bindings(&shaders.each_ref().map(String::as_str), 1, &passes::BINDINGS);
     }
 

@@ -8,12 +8,12 @@ use wgpu::util::DeviceExt;
 
 use super::geometry::Volume;
 use super::{Uniforms, WorkItem, INSIDE_PAIRS};
-use crate::timing::PhaseName;
 use crate::error::JobResult;
 use crate::gpu::layout;
 use crate::gpu::readback::read_buffer;
 use crate::light::tables::sector_table;
 use crate::methods::MethodContext;
+use crate::timing::PhaseName;
 
 /// Group 1 of every pass (`common.wgsl`): one layout for all of them.
 pub(super) const BINDINGS: [wgpu::BindGroupLayoutEntry; 13] = [
@@ -166,7 +166,13 @@ impl Buffers {
 
     /// Group 1 with `work` as the work list and `inside_groups` where the inside list's
     /// dispatch arguments are written (a stand-in while a dispatch reads them).
-    pub(super) fn bind(&self, ctx: &MethodContext<'_>, pipelines: &Pipelines, work: &wgpu::Buffer, inside_groups: &wgpu::Buffer) -> wgpu::BindGroup {
+    pub(super) fn bind(
+        &self,
+        ctx: &MethodContext<'_>,
+        pipelines: &Pipelines,
+        work: &wgpu::Buffer,
+        inside_groups: &wgpu::Buffer,
+    ) -> wgpu::BindGroup {
         ctx.bind(
             "Wedges::bind_group",
             &pipelines.tiles,

@@ -52,10 +52,7 @@ fn a_closed_cube_welds_and_shows_a_hexagon_from_a_corner() {
     let (positions, indices) = cube();
     let mesh = EdgeMesh::build(&positions, &indices, &[]);
     assert_eq!(mesh.stats.vertices, 8);
-    assert_eq!(
-        (mesh.stats.edges, mesh.stats.boundary_edges, mesh.stats.non_manifold_edges, mesh.stats.inconsistent_edges),
-        (18, 0, 0, 0)
-    );
+    assert_eq!((mesh.stats.edges, mesh.stats.boundary_edges, mesh.stats.non_manifold_edges, mesh.stats.inconsistent_edges), (18, 0, 0, 0));
     assert_eq!((mesh.stats.surfaces, mesh.stats.open_surfaces, mesh.stats.reoriented_triangles), (1, 0, 0));
     let corner = silhouette(&mesh, Vec3::new(5.0, 6.0, 7.0));
     assert_eq!(corner.len(), 6, "{corner:?}");

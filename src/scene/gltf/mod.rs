@@ -25,8 +25,8 @@ mod uris;
 use checks::parse_document;
 pub use pack::{glb, pack};
 pub use synthetic::{height_field_glb, textured_height_field_glb};
-use uris::{read_buffers, UriReader};
 pub use uris::files_named;
+use uris::{read_buffers, UriReader};
 
 /// Where the files a document names by URI may be read from (contract §3).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

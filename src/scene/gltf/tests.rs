@@ -89,9 +89,7 @@ fn textures_are_decoded_within_the_scenes_texture_budget() {
     let fits = |max_texture_bytes: u64| load(&bytes, &Limits { max_texture_bytes, ..Limits::default() }, "scene");
     let scene = fits(3 * texture).expect("three textures within the budget");
     assert_eq!(scene.textures.len(), 3);
-    for (max, refused_image) in
-        [(texture + texture / 2, "image 1"), (2 * texture + 3 * 64 * 64, "image 2"), (3 * texture - 1, "image 2")]
-    {
+    for (max, refused_image) in [(texture + texture / 2, "image 1"), (2 * texture + 3 * 64 * 64, "image 2"), (3 * texture - 1, "image 2")] {
         let error = fits(max).unwrap_err();
         assert_eq!((error.code, error.field.as_deref()), (ErrorCode::LimitExceeded, Some("scene")), "{}", error.message);
         assert!(error.message.contains(refused_image) && error.message.contains("max_texture_bytes"), "{max}: {}", error.message);
@@ -220,7 +218,9 @@ fn textures_that_cannot_be_read_are_skipped_by_name_and_exporters_spellings_are_
     document["images"] = uris.iter().map(|uri| serde_json::json!({"uri": uri})).collect();
     document["textures"] = (0..uris.len()).map(|k| serde_json::json!({"source": k})).collect();
     document["materials"] = (0..uris.len())
-        .map(|k| serde_json::json!({"pbrMetallicRoughness": {"baseColorTexture": {"index": k}, "baseColorFactor": [0.5, 0.25, 0.125, 1.0]}}))
+        .map(
+            |k| serde_json::json!({"pbrMetallicRoughness": {"baseColorTexture": {"index": k}, "baseColorFactor": [0.5, 0.25, 0.125, 1.0]}}),
+        )
         .collect();
     let primitive = document["meshes"][0]["primitives"][0].clone();
     document["meshes"][0]["primitives"] = (0..uris.len())
@@ -237,11 +237,7 @@ fn textures_that_cannot_be_read_are_skipped_by_name_and_exporters_spellings_are_
     assert!(scene.materials.iter().all(|m| m.base_color == [0.5, 0.25, 0.125, 1.0]));
     assert_eq!(scene.materials.iter().filter(|m| m.texture.is_none()).count(), 4);
     let said = |uri: &str, what: &str| {
-        assert!(
-            scene.warnings.iter().any(|w| w.contains(&format!("(`{uri}`)")) && w.contains(what)),
-            "{uri}: {what}: {:?}",
-            scene.warnings
-        )
+        assert!(scene.warnings.iter().any(|w| w.contains(&format!("(`{uri}`)")) && w.contains(what)), "{uri}: {what}: {:?}", scene.warnings)
     };
     said("D:\\models\\sub\\wood.png", "read from `wood.png`");
     said(".\\sub\\wood.png", "read from `./sub/wood.png`");

@@ -22,8 +22,7 @@ fn jobs_survive_reopening_and_move_through_their_states() {
     }
     // As after a crash: a new process opens the same directory.
     let store = EmbeddedStore::open(&dir).unwrap();
-    let unfinished: Vec<(String, JobStatus, u32)> =
-        store.unfinished().unwrap().into_iter().map(|j| (j.id, j.status, j.attempts)).collect();
+    let unfinished: Vec<(String, JobStatus, u32)> = store.unfinished().unwrap().into_iter().map(|j| (j.id, j.status, j.attempts)).collect();
     assert_eq!(unfinished, vec![("a".into(), JobStatus::Running, 1), ("b".into(), JobStatus::Queued, 0)]);
     let c = store.get("c").unwrap().unwrap();
     assert_eq!((c.status, c.image_bytes, c.result.unwrap()["width"].as_u64()), (JobStatus::Succeeded, 9, Some(4)));

@@ -4,8 +4,8 @@
 
 use glam::{Vec3, Vec4};
 
-use crate::methods::wedges::geometry::light_corners;
 use crate::light::AreaLight;
+use crate::methods::wedges::geometry::light_corners;
 use crate::scene::adjacency::SilhouetteEdge;
 
 /// The planes (world space, inside ≥ 0) of the receivers whose eye ray crosses the volume
