@@ -19,10 +19,11 @@ pub struct PixelListBuffers {
 
 impl PixelListBuffers {
     /// Buffers for at most `capacity` entries of `entry_bytes` (a multiple of 4; a pixel
-    /// index is 4), from `pool`, held in `scratch` until the frame's passes have run; the
-    /// count is cleared on `encoder` before anything appends. A pooled buffer holds what an
-    /// earlier frame left: the count is cleared, the grid is written by the size pass before
-    /// the dispatch reads it, and only the entries below the count are read.
+    /// index is 4): the list from `pool`, held in `scratch` until the frame's passes have run,
+    /// its count cleared on `encoder` before anything appends. A pooled list holds what an
+    /// earlier frame left, and only the entries below the count are read. The grid and its
+    /// stand-in are 12 bytes each, made for the frame: the pool keeps two idle buffers of a
+    /// key, and a frame may hold three lists.
     pub fn new(
         pool: &mut BufferPool,
         scratch: &mut Scratch,
@@ -30,18 +31,24 @@ impl PixelListBuffers {
         encoder: &mut wgpu::CommandEncoder,
         (owner, capacity, entry_bytes): (&'static str, u64, u64),
     ) -> Self {
-        let mut buffer = |label, size: u64, usage: wgpu::BufferUsages| {
-            let pooled = pool.alloc(device, BufferKey { label, size, usage: wgpu::BufferUsages::STORAGE | usage });
-            let buffer = pooled.buffer.clone();
-            scratch.hold(pooled);
-            buffer
-        };
         // The count, padded to the entries' alignment, then the entries; the count may be
         // copied out (E0's, the frame's counter `e0_pixels_summed_exactly`).
-        let list = buffer(owner, entry_bytes.max(4) * (1 + capacity.max(1)), wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC);
+        let size = entry_bytes.max(4) * (1 + capacity.max(1));
+        let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC;
+        let pooled = pool.alloc(device, BufferKey { label: owner, size, usage });
+        let list = pooled.buffer.clone();
+        scratch.hold(pooled);
         encoder.clear_buffer(&list, 0, Some(4));
-        let groups = buffer("PixelList::groups", 12, wgpu::BufferUsages::INDIRECT);
-        let stand_in = buffer("PixelList::stand_in", 12, wgpu::BufferUsages::empty());
+        let small = |label, usage: wgpu::BufferUsages| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: 12,
+                usage: wgpu::BufferUsages::STORAGE | usage,
+                mapped_at_creation: false,
+            })
+        };
+        let groups = small("PixelList::groups", wgpu::BufferUsages::INDIRECT);
+        let stand_in = small("PixelList::stand_in", wgpu::BufferUsages::empty());
         PixelListBuffers { list, groups, stand_in }
     }
 
