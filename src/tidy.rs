@@ -20,6 +20,13 @@ fn files(root: &Path, ext: &str) -> Vec<PathBuf> {
     found
 }
 
+/// The Rust sources under `src/` and the shaders under `shaders/`.
+fn sources(root: &Path) -> Vec<PathBuf> {
+    let mut found = files(&root.join("src"), "rs");
+    found.extend(files(&root.join("shaders"), "wgsl"));
+    found
+}
+
 /// Every Rust module opens with a `//!` doc saying what it is for (rust-analyzer's tidy).
 #[test]
 fn every_module_has_a_doc_comment() {
@@ -188,6 +195,7 @@ fn the_code_map_names_every_file() {
     let map = architecture.split("## Code map").nth(1).expect("a Code map section").split("\n## ").next().unwrap();
     let backticked = |text: &str| -> Vec<String> { text.split('`').skip(1).step_by(2).map(str::to_owned).collect() };
     let is_source = |t: &str| t.ends_with(".rs") || t.ends_with(".wgsl");
+    let from_root = |t: &str| t.starts_with("src/") || t.starts_with("shaders/");
     let mut named = std::collections::BTreeSet::new();
     let mut missing = Vec::new();
     for row in map.lines().filter(|l| l.starts_with("| `")) {
@@ -199,14 +207,13 @@ fn the_code_map_names_every_file() {
             tokens.push(place.to_owned());
         }
         for token in tokens {
-            let path = if token.starts_with("src/") || token.starts_with("shaders/") || !place.ends_with('/') {
-                if token.starts_with("src/") || token.starts_with("shaders/") {
-                    root.join(&token)
-                } else {
-                    root.join(place).parent().unwrap().join(&token)
-                }
-            } else {
+            // A token is named from the root, from its row's folder, or beside its row's file.
+            let path = if from_root(&token) {
+                root.join(&token)
+            } else if place.ends_with('/') {
                 root.join(place).join(&token)
+            } else {
+                root.join(place).parent().unwrap().join(&token)
             };
             if path.exists() {
                 named.insert(path.canonicalize().unwrap());
@@ -216,13 +223,12 @@ fn the_code_map_names_every_file() {
         }
     }
     for token in backticked(&architecture).iter().flat_map(|t| expand_braces(t)) {
-        if (token.starts_with("src/") || token.starts_with("shaders/")) && !root.join(token.trim_end_matches(|c| c == ')')).exists() {
+        if from_root(&token) && !root.join(token.trim_end_matches(|c| c == ')')).exists() {
             missing.push(token);
         }
     }
-    let mut left_out: Vec<String> = files(&root.join("src"), "rs")
+    let mut left_out: Vec<String> = sources(root)
         .into_iter()
-        .chain(files(&root.join("shaders"), "wgsl"))
         .filter(|p| p.file_name().is_some_and(|n| n != "tests.rs"))
         .filter(|p| !named.contains(&p.canonicalize().unwrap()))
         .map(|p| p.strip_prefix(root).unwrap().display().to_string())
@@ -257,39 +263,29 @@ fn anchor(heading: &str) -> String {
         .collect()
 }
 
-/// The anchors of a markdown file's headings (outside code blocks).
-fn anchors(text: &str) -> Vec<String> {
+/// The lines of a markdown file outside its fenced code blocks (and not their fences).
+fn prose_lines(text: &str) -> impl Iterator<Item = &str> {
     let mut in_code = false;
-    let mut found = Vec::new();
-    for line in text.lines() {
+    text.lines().filter(move |line| {
         if line.starts_with("```") {
             in_code = !in_code;
-        } else if !in_code && line.starts_with('#') {
-            found.push(anchor(line.trim_start_matches('#')));
+            return false;
         }
-    }
-    found
+        !in_code
+    })
+}
+
+/// The anchors of a markdown file's headings (outside code blocks).
+fn anchors(text: &str) -> Vec<String> {
+    prose_lines(text).filter(|line| line.starts_with('#')).map(|line| anchor(line.trim_start_matches('#'))).collect()
 }
 
 /// The targets of a markdown file's inline links and images, `](target)`, outside code blocks.
 fn link_targets(text: &str) -> Vec<String> {
-    let mut in_code = false;
-    let mut found = Vec::new();
-    for line in text.lines() {
-        if line.starts_with("```") {
-            in_code = !in_code;
-            continue;
-        }
-        if in_code {
-            continue;
-        }
-        for part in line.split("](").skip(1) {
-            if let Some(end) = part.find(')') {
-                found.push(part[..end].to_owned());
-            }
-        }
-    }
-    found
+    prose_lines(text)
+        .flat_map(|line| line.split("](").skip(1))
+        .filter_map(|part| part.find(')').map(|end| part[..end].to_owned()))
+        .collect()
 }
 
 /// Every relative link in the README and the docs names a file that exists, and a `#part`
@@ -346,7 +342,7 @@ fn looks_like_a_commit(word: &str) -> bool {
 fn no_commit_hash_in_the_code() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let mut found = Vec::new();
-    for path in files(&root.join("src"), "rs").into_iter().chain(files(&root.join("shaders"), "wgsl")) {
+    for path in sources(root) {
         let text = std::fs::read_to_string(&path).unwrap();
         for (number, line) in text.lines().enumerate() {
             let Some(comment) = line.split_once("//").map(|(_, c)| c) else { continue };

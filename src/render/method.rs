@@ -27,9 +27,13 @@ pub struct Scratch {
 }
 
 impl Scratch {
-    /// Holds `buffer` for the frame: it goes back to its pool with the rest.
-    pub fn hold(&mut self, buffer: PooledBuffer) {
-        self.buffers.push(buffer);
+    /// A buffer of `key` from `pool`, held for the frame: it goes back to the pool with the
+    /// rest. It holds whatever an earlier frame left in it.
+    pub fn buffer(&mut self, pool: &mut BufferPool, device: &wgpu::Device, key: BufferKey) -> wgpu::Buffer {
+        let pooled = pool.alloc(device, key);
+        let buffer = pooled.buffer.clone();
+        self.buffers.push(pooled);
+        buffer
     }
 
     /// Gives everything back to the pools; only once the passes using it have run.
@@ -207,10 +211,7 @@ impl MethodContext<'_> {
     /// `jfa-l`'s records at 2048². It holds whatever an earlier frame left: a method clears,
     /// or writes in full, what must start empty.
     pub fn scratch_buffer(&mut self, label: &'static str, size: u64, usage: wgpu::BufferUsages) -> wgpu::Buffer {
-        let pooled = self.buffers.alloc(&self.gpu.device, BufferKey { label, size, usage });
-        let buffer = pooled.buffer.clone();
-        self.scratch.buffers.push(pooled);
-        buffer
+        self.scratch.buffer(self.buffers, &self.gpu.device, BufferKey { label, size, usage })
     }
 
     /// A pixel list of at most `capacity` pixels from the pools, for this frame only

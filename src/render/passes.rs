@@ -196,9 +196,11 @@ impl Renderer {
         };
         // From the pool: every corner the interpolation reads is written first.
         let corner_bytes = u64::from(corners * rows) * E0_CORNER_BYTES;
-        let pooled = self.buffers.alloc(device, BufferKey { label: "E0::corners", size: corner_bytes, usage: wgpu::BufferUsages::STORAGE });
-        let records = pooled.buffer.clone();
-        scratch.hold(pooled);
+        let records = scratch.buffer(
+            &mut self.buffers,
+            device,
+            BufferKey { label: "E0::corners", size: corner_bytes, usage: wgpu::BufferUsages::STORAGE },
+        );
         // The pixels summed exactly, by whether they see every cell above their horizon (at
         // most every pixel).
         let above = PixelListBuffers::new(&mut self.buffers, scratch, device, encoder, ("E0::above", pixels, 4));

@@ -35,9 +35,7 @@ impl PixelListBuffers {
         // copied out (E0's, the frame's counter `e0_pixels_summed_exactly`).
         let size = entry_bytes.max(4) * (1 + capacity.max(1));
         let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC;
-        let pooled = pool.alloc(device, BufferKey { label: owner, size, usage });
-        let list = pooled.buffer.clone();
-        scratch.hold(pooled);
+        let list = scratch.buffer(pool, device, BufferKey { label: owner, size, usage });
         encoder.clear_buffer(&list, 0, Some(4));
         let small = |label, usage: wgpu::BufferUsages| {
             device.create_buffer(&wgpu::BufferDescriptor {
