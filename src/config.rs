@@ -127,6 +127,16 @@ pub struct ServeConfig {
     #[arg(long, env = "PENUMBRA_STORE_RETRY_SECS", default_value_t = 600.0, value_parser = seconds)]
     pub store_retry_secs: f64,
 
+    /// Seconds an `Idempotency-Key` names the job it created: the same key and body within
+    /// it answers that job and creates nothing.
+    #[arg(long, env = "PENUMBRA_IDEMPOTENCY_TTL_SECS", default_value_t = 86400.0, value_parser = seconds)]
+    pub idempotency_ttl_secs: f64,
+
+    /// Most idempotency keys kept by the embedded store or in memory (past it, the expired
+    /// go, then the oldest); on Redis they are bounded by their TTL.
+    #[arg(long, env = "PENUMBRA_IDEMPOTENCY_KEYS", default_value_t = crate::job::submission::DEFAULT_MAX_KEYS)]
+    pub idempotency_keys: usize,
+
     /// Seconds a finished job's record, events and image stay readable.
     #[arg(long, env = "PENUMBRA_RESULTS_TTL_SECS", default_value_t = 3600.0, value_parser = seconds)]
     pub results_ttl_secs: f64,

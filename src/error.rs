@@ -29,6 +29,11 @@ pub enum ErrorCode {
     LimitExceeded,
     /// The request body exceeds the configured size limit.
     PayloadTooLarge,
+    /// A request header or query parameter (`Idempotency-Key`, a listing's `cursor`) is
+    /// malformed or too long; the `field` names it.
+    InvalidParameter,
+    /// An `Idempotency-Key` already names a job submitted with another body.
+    IdempotencyKeyReused,
     /// No such job, result or route.
     NotFound,
     /// The job queue is full: retry after the `Retry-After` seconds.
@@ -65,6 +70,8 @@ impl ErrorCode {
             ErrorCode::InvalidAsset => "invalid_asset",
             ErrorCode::LimitExceeded => "limit_exceeded",
             ErrorCode::PayloadTooLarge => "payload_too_large",
+            ErrorCode::InvalidParameter => "invalid_parameter",
+            ErrorCode::IdempotencyKeyReused => "idempotency_key_reused",
             ErrorCode::NotFound => "not_found",
             ErrorCode::QueueFull => "queue_full",
             ErrorCode::DeadlineExceeded => "deadline_exceeded",

@@ -1,8 +1,9 @@
 //! Jobs between the HTTP layer and the engine: the bounded queue (admission, device slots, a
 //! deadline — the documented semaphores that bound GPU work), and the store of finished
-//! renders and submitted jobs' events. Nothing here speaks HTTP; `server/` maps the errors.
+//! renders and submitted jobs' events (and, without a job store, their listing and
+//! idempotency keys). Nothing here speaks HTTP; `server/` maps the errors.
 
-use std::collections::VecDeque;
+use std::collections::{HashMap, VecDeque};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
@@ -11,6 +12,7 @@ use tokio::sync::{watch, OwnedSemaphorePermit, Semaphore};
 
 use crate::engine::Rendered;
 use crate::error::{ErrorCode, JobError};
+use crate::job::submission::{self, Cursor, JobFilter, KeyedJob, ListedJob};
 use crate::job::JobStatus;
 
 /// The queue's shape: jobs admitted at once (waiting or running), jobs on the device at once,
@@ -158,8 +160,9 @@ impl LiveJobs {
         self.results().iter().find(|(k, _, _)| k == id).map(|(_, r, _)| r.clone())
     }
 
-    /// Registers a submitted job's events; the answer says (once true) that it was cancelled.
-    pub fn submit(&self, id: String, events: watch::Sender<JobEvent>) -> watch::Receiver<bool> {
+    /// Registers a submitted job's events, and how it is listed; the answer says (once true)
+    /// that it was cancelled.
+    pub fn submit(&self, listed: ListedJob, events: watch::Sender<JobEvent>) -> watch::Receiver<bool> {
         let mut submitted = self.submitted_jobs();
         while submitted.len() >= self.capacity {
             match submitted.iter().position(|s| s.events.borrow().finished()) {
@@ -170,8 +173,26 @@ impl LiveJobs {
             }
         }
         let (cancel, cancelled) = watch::channel(false);
-        submitted.push_back(Submitted { id, events, cancel });
+        submitted.push_back(Submitted { id: listed.id.clone(), listed, events, cancel });
         cancelled
+    }
+
+    /// The submitted jobs held here, as `GET /v1/jobs` lists them without a job store: newest
+    /// first, filtered, a page of `limit` and the cursor of the next.
+    pub fn list(&self, filter: &JobFilter, after: Option<&Cursor>, limit: usize) -> (Vec<ListedJob>, Option<Cursor>) {
+        let now_ms = crate::job::submission::unix_ms();
+        let jobs = self
+            .submitted_jobs()
+            .iter()
+            .map(|s| {
+                let event = s.events.borrow();
+                let mut listed = s.listed.clone();
+                listed.status = event.status;
+                listed.finished_unix_ms = event.finished_at.map(|at| now_ms.saturating_sub(at.elapsed().as_millis() as u64));
+                listed
+            })
+            .collect();
+        submission::page(jobs, filter, after, limit)
     }
 
     /// The event channel of a submitted job.
@@ -217,8 +238,61 @@ impl LiveJobs {
 /// A submitted job held by this process: its events, and the flag that cancels it.
 struct Submitted {
     id: String,
+    listed: ListedJob,
     events: watch::Sender<JobEvent>,
     cancel: watch::Sender<bool>,
+}
+
+/// The idempotency keys of a daemon without a job store (`--job-store memory`): what a store
+/// keeps for every replica, kept here for this process, bounded in count (past it, expired
+/// keys go, then those that expire soonest).
+pub struct IdempotencyKeys {
+    keys: Mutex<HashMap<String, KeyedJob>>,
+    capacity: usize,
+}
+
+impl IdempotencyKeys {
+    pub fn new(capacity: usize) -> Self {
+        Self { keys: Mutex::new(HashMap::new()), capacity: capacity.max(1) }
+    }
+
+    fn keys(&self) -> std::sync::MutexGuard<'_, HashMap<String, KeyedJob>> {
+        self.keys.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// The job `key` names, unless it expired.
+    pub fn find(&self, key: &str) -> Option<KeyedJob> {
+        self.keys().get(key).filter(|k| k.expires_unix_ms > submission::unix_ms()).cloned()
+    }
+
+    /// Claims `key` for `claim` unless it names a job already (answered: a twin's).
+    pub fn claim(&self, key: &str, claim: KeyedJob) -> Option<KeyedJob> {
+        let now = submission::unix_ms();
+        let mut keys = self.keys();
+        if let Some(held) = keys.get(key).filter(|k| k.expires_unix_ms > now) {
+            return Some(held.clone());
+        }
+        if keys.len() >= self.capacity {
+            keys.retain(|_, k| k.expires_unix_ms > now);
+        }
+        if keys.len() >= self.capacity {
+            let soonest = keys.iter().min_by_key(|(_, k)| k.expires_unix_ms).map(|(key, _)| key.clone());
+            if let Some(soonest) = soonest {
+                tracing::warn!(capacity = self.capacity, "the idempotency key store is full: the oldest key goes before it expires");
+                keys.remove(&soonest);
+            }
+        }
+        keys.insert(key.to_owned(), claim);
+        None
+    }
+
+    /// Frees a key claimed for a job that was then not admitted.
+    pub fn release(&self, key: &str, id: &str) {
+        let mut keys = self.keys();
+        if keys.get(key).is_some_and(|k| k.id == id) {
+            keys.remove(key);
+        }
+    }
 }
 
 /// What the dashboard shows of one finished job.

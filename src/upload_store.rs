@@ -47,6 +47,8 @@ impl Asset {
 struct Entry {
     asset: Asset,
     cost: u64,
+    /// Bytes of the upload as it came (`HEAD`'s `Content-Length`).
+    size: u64,
     last_used: u64,
 }
 
@@ -100,7 +102,7 @@ impl UploadStore {
     /// Stores `asset` under `id`, evicting the least recently used until it fits. Returns the
     /// entries evicted (their GPU copies must go too). An asset larger than the whole budget is
     /// refused.
-    pub fn insert(&mut self, id: String, asset: Asset) -> JobResult<Vec<(Kind, String)>> {
+    pub fn insert(&mut self, id: String, asset: Asset, size: u64) -> JobResult<Vec<(Kind, String)>> {
         let cost = asset.cost();
         if cost > self.budget {
             return Err(JobError::field(
@@ -120,7 +122,7 @@ impl UploadStore {
         }
         self.clock += 1;
         self.used += cost;
-        self.entries.insert((asset.kind(), id), Entry { asset, cost, last_used: self.clock });
+        self.entries.insert((asset.kind(), id), Entry { asset, cost, size, last_used: self.clock });
         Ok(evicted)
     }
 
@@ -142,6 +144,11 @@ impl UploadStore {
 
     pub fn contains(&self, kind: Kind, id: &str) -> bool {
         self.entries.contains_key(&(kind, id.to_owned()))
+    }
+
+    /// The bytes of the upload under `id` as it came, when held.
+    pub fn size(&self, kind: Kind, id: &str) -> Option<u64> {
+        self.entries.get(&(kind, id.to_owned())).map(|e| e.size)
     }
 
     pub fn remove(&mut self, kind: Kind, id: &str) -> bool {
@@ -181,19 +188,19 @@ mod tests {
         // Each 8×8 light costs 1 KiB; the budget holds three.
         let mut store = UploadStore::new(3 * 1024);
         for id in ["a", "b", "c"] {
-            assert!(store.insert(id.into(), light(8)).unwrap().is_empty());
+            assert!(store.insert(id.into(), light(8), 0).unwrap().is_empty());
         }
         assert!(store.get(Kind::Light, "a").is_some());
         assert!(store.get(Kind::Scene, "a").is_none(), "ids are per kind");
         // "b" is now the least recently used.
-        assert_eq!(store.insert("d".into(), light(8)).unwrap(), vec![(Kind::Light, "b".to_owned())]);
+        assert_eq!(store.insert("d".into(), light(8), 0).unwrap(), vec![(Kind::Light, "b".to_owned())]);
         assert!(store.get(Kind::Light, "b").is_none() && store.contains(Kind::Light, "a") && store.contains(Kind::Light, "d"));
         let stats = store.stats();
         assert_eq!((stats.entries, stats.bytes, stats.evictions, stats.hits, stats.misses), (3, 3 * 1024, 1, 1, 2));
         assert!(store.remove(Kind::Light, "a") && !store.remove(Kind::Light, "a"));
         assert_eq!(store.stats().bytes, 2 * 1024);
         // Larger than the whole budget: refused, nothing evicted.
-        assert_eq!(store.insert("huge".into(), light(64)).unwrap_err().code, ErrorCode::LimitExceeded);
+        assert_eq!(store.insert("huge".into(), light(64), 0).unwrap_err().code, ErrorCode::LimitExceeded);
         assert_eq!(store.stats().entries, 2);
     }
 }

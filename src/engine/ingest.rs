@@ -59,7 +59,7 @@ impl Engine {
             return Ok(UploadReceipt { id, created: false, cache_bytes: 0, warnings });
         }
         let cache_bytes = asset.cost();
-        self.lock_uploads().insert(id.clone(), asset)?;
+        self.lock_uploads().insert(id.clone(), asset, bytes.len() as u64)?;
         self.prune_if_free();
         Ok(UploadReceipt { id, created: true, cache_bytes, warnings })
     }
@@ -67,6 +67,11 @@ impl Engine {
     /// Whether the server holds the upload `id` of this kind (`HEAD /v1/scenes/{id}`).
     pub fn holds_upload(&self, kind: Kind, id: &str) -> bool {
         self.lock_uploads().contains(kind, id)
+    }
+
+    /// The bytes of the upload `id` as it came, when held (`HEAD`'s `Content-Length`).
+    pub fn upload_size(&self, kind: Kind, id: &str) -> Option<u64> {
+        self.lock_uploads().size(kind, id)
     }
 
     /// Removes an upload; false when there was none under `id`.

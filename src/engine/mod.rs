@@ -55,6 +55,16 @@ pub struct Rendered {
     pub warnings: Vec<String>,
     /// The camera, light and floor it was rendered with (contract §3).
     pub staging: crate::render::Staging,
+    /// The SHA-256 of `bytes`, computed when first asked for (records and `ETag`s).
+    pub digest: std::sync::OnceLock<String>,
+}
+
+impl Rendered {
+    /// The lowercase hex SHA-256 of the encoded image: what a job's record names and its
+    /// image's `ETag` is.
+    pub fn image_sha256(&self) -> &str {
+        self.digest.get_or_init(|| crate::upload_store::content_id(&self.bytes))
+    }
 }
 
 /// Reference frames kept for `compare` (each is a few MB of floats).
@@ -217,6 +227,7 @@ impl Engine {
             quality,
             warnings: frame.warnings,
             staging: frame.staging,
+            digest: std::sync::OnceLock::new(),
         })
     }
 

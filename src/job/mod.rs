@@ -12,6 +12,7 @@ use crate::error::{ErrorCode, JobError, JobResult};
 
 mod assets;
 mod limits;
+pub mod submission;
 
 pub use assets::{AssetRef, FloorSpec, SceneRef};
 use limits::nesting_exceeds;

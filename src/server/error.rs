@@ -18,7 +18,7 @@ impl From<JobError> for ApiError {
 
 pub fn status_of(code: ErrorCode) -> StatusCode {
     match code {
-        ErrorCode::InvalidJson => StatusCode::BAD_REQUEST,
+        ErrorCode::InvalidJson | ErrorCode::InvalidParameter => StatusCode::BAD_REQUEST,
         ErrorCode::PayloadTooLarge => StatusCode::PAYLOAD_TOO_LARGE,
         ErrorCode::NotUploaded | ErrorCode::NotFound => StatusCode::NOT_FOUND,
         ErrorCode::PathNotAllowed => StatusCode::FORBIDDEN,
@@ -27,7 +27,8 @@ pub fn status_of(code: ErrorCode) -> StatusCode {
         | ErrorCode::UnknownMethod
         | ErrorCode::UnknownBuiltin
         | ErrorCode::InvalidAsset
-        | ErrorCode::LimitExceeded => StatusCode::UNPROCESSABLE_ENTITY,
+        | ErrorCode::LimitExceeded
+        | ErrorCode::IdempotencyKeyReused => StatusCode::UNPROCESSABLE_ENTITY,
         ErrorCode::QueueFull => StatusCode::TOO_MANY_REQUESTS,
         ErrorCode::DeadlineExceeded | ErrorCode::ShuttingDown | ErrorCode::StoreUnavailable => StatusCode::SERVICE_UNAVAILABLE,
         ErrorCode::InsufficientStorage => StatusCode::INSUFFICIENT_STORAGE,
@@ -79,6 +80,11 @@ impl IntoResponse for ApiError {
             ErrorCode::QueueFull => Some("1"),
             // The store is probed every second; a blink is over in a few.
             ErrorCode::StoreUnavailable => Some("2"),
+            // Another replica takes the request at once; this one is gone in a few seconds. A
+            // job that waited past the deadline met a backlog that drains in seconds too.
+            ErrorCode::ShuttingDown | ErrorCode::DeadlineExceeded => Some("5"),
+            // The oldest results expire or are dropped within a minute or so.
+            ErrorCode::InsufficientStorage => Some("30"),
             _ => None,
         };
         if let Some(seconds) = retry_after {

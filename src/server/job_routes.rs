@@ -31,28 +31,101 @@ pub(super) async fn stored_job(state: &AppState, id: &str) -> Result<Option<Stor
 /// `POST /v1/jobs`: validates and admits the job (4xx; 429 when the queue is full; 503 while
 /// the store does not answer; 507 when its disk has no room for the result), answers 202 with
 /// its id at once, and renders it in the background: `GET /v1/jobs/{id}` for its state,
-/// `/events` for server-sent progress, `/image` once it succeeded.
-pub(super) async fn submit_job(State(state): State<Arc<AppState>>, body: Result<Bytes, BytesRejection>) -> Result<Response, ApiError> {
+/// `/events` for server-sent progress, `/image` once it succeeded. With an `Idempotency-Key`,
+/// a key that names a job already answers that job (202, `Idempotent-Replayed: true`) and
+/// creates nothing, or 422 `idempotency_key_reused` when its body differed.
+pub(super) async fn submit_job(
+    State(state): State<Arc<AppState>>,
+    headers: HeaderMap,
+    body: Result<Bytes, BytesRejection>,
+) -> Result<Response, ApiError> {
+    let key = headers.get(IDEMPOTENCY_KEY).map(|v| idempotency_key(v.as_bytes())).transpose();
     let body = body.map_err(|rejection| body_error(&state, rejection, ErrorCode::InvalidJson));
-    let parsed = body.and_then(|body| {
+    let parsed = key.and_then(|key| {
+        let body = body?;
         let job = Job::from_json_limited(&body, state.engine.limits())?;
         let uploads_here = !state.store.as_ref().is_some_and(|s| s.shared());
         state.engine.check(&job, uploads_here)?;
         // The job as sent (it parsed, so it is JSON): what the store keeps and resumes.
         let sent: Value = serde_json::from_slice(&body).map_err(|e| JobError::new(ErrorCode::InvalidJson, e.to_string()))?;
-        Ok((job, sent))
+        Ok((key, job, sent))
     });
-    let (job, sent) = parsed.inspect_err(|error| state.job_finished("", "", error.code.as_str(), 0.0, None))?;
+    let (key, job, sent) = parsed.inspect_err(|error| state.job_finished("", "", error.code.as_str(), 0.0, None))?;
+    let keyed = key.map(|key| {
+        let claim = KeyedJob { id: new_job_id(), fingerprint: fingerprint(&sent), expires_unix_ms: unix_ms() + state.idempotency.ttl_ms() };
+        (key, claim)
+    });
+    if let Some((key, claim)) = &keyed {
+        if let Some(held) = find_keyed(&state, key).await? {
+            return replay(&state, key, &claim.fingerprint, held).await;
+        }
+    }
     let method = job.method.name.clone();
-    let id = accept_job(&state, job, sent).await.inspect_err(|error| state.job_finished("", &method, error.code.as_str(), 0.0, None))?;
-    let links = json!({"id": id, "status": "queued", "record": format!("/v1/jobs/{id}"), "events": format!("/v1/jobs/{id}/events")});
-    Ok((StatusCode::ACCEPTED, [(header::LOCATION, format!("/v1/jobs/{id}"))], Json(links)).into_response())
+    let request_id = headers.get(REQUEST_ID).and_then(|v| v.to_str().ok()).map(str::to_owned);
+    let accepted = accept_job(&state, job, sent, request_id, keyed.as_ref()).await;
+    let id = match accepted.inspect_err(|error| state.job_finished("", &method, error.code.as_str(), 0.0, None))? {
+        Accepted::New(id) => id,
+        Accepted::Twin(held) => {
+            let (key, claim) = keyed.as_ref().expect("a twin has a key");
+            return replay(&state, key, &claim.fingerprint, held).await;
+        }
+    };
+    Ok(accepted_response(&id, JobStatus::Queued, false))
+}
+
+/// The 202 of a submission: the job's id, state and links, its record in `Location`.
+fn accepted_response(id: &str, status: JobStatus, replayed: bool) -> Response {
+    let links = json!({"id": id, "status": status, "record": format!("/v1/jobs/{id}"), "events": format!("/v1/jobs/{id}/events")});
+    let mut response = (StatusCode::ACCEPTED, [(header::LOCATION, format!("/v1/jobs/{id}"))], Json(links)).into_response();
+    if replayed {
+        response.headers_mut().insert("idempotent-replayed", HeaderValue::from_static("true"));
+    }
+    response
+}
+
+/// The job an idempotency key names: in the store (every replica's), or here without one.
+async fn find_keyed(state: &AppState, key: &str) -> Result<Option<KeyedJob>, ApiError> {
+    match state.store.clone() {
+        Some(store) => {
+            let key = key.to_owned();
+            Ok(store.call(move |s| s.keyed(&key)).await.map_err(store_error)?)
+        }
+        None => Ok(state.idempotency.keys.find(key)),
+    }
+}
+
+/// The answer to a submission whose key names a job already: that job's 202 when the body is
+/// the same, 422 naming the key when it is not.
+async fn replay(state: &AppState, key: &str, fingerprint: &str, held: KeyedJob) -> Result<Response, ApiError> {
+    if held.fingerprint != fingerprint {
+        let message = format!("the Idempotency-Key `{key}` names job `{}`, submitted with another body", held.id);
+        return Err(ApiError(JobError::field(ErrorCode::IdempotencyKeyReused, "Idempotency-Key", message)));
+    }
+    let status = match state.jobs.submitted(&held.id) {
+        Some(events) => events.borrow().status,
+        None => stored_job(state, &held.id).await?.map_or(JobStatus::Queued, |stored| stored.status),
+    };
+    tracing::info!(id = %held.id, "idempotent submission: the job its key names is answered");
+    Ok(accepted_response(&held.id, status, true))
+}
+
+/// What admission made of a submission: a new job, or (under an idempotency key) the job a
+/// twin sent at the same time created.
+enum Accepted {
+    New(String),
+    Twin(KeyedJob),
 }
 
 /// Admits a valid job and records it in the store before its 202: the store must answer
 /// (503) and, on a local disk, have room for the result (507); the queue must have a place
-/// (429). Returns the new job's id.
-async fn accept_job(state: &Arc<AppState>, job: Job, sent: Value) -> Result<String, JobError> {
+/// (429). Under an idempotency key the key is claimed in the same step as the record.
+async fn accept_job(
+    state: &Arc<AppState>,
+    job: Job,
+    sent: Value,
+    request_id: Option<String>,
+    keyed: Option<&(String, KeyedJob)>,
+) -> Result<Accepted, JobError> {
     let store = state.store.clone();
     if store.as_ref().is_some_and(|s| !s.health().available()) {
         // Known down: answered at once; the probe notices when it is back.
@@ -66,6 +139,19 @@ async fn accept_job(state: &Arc<AppState>, job: Job, sent: Value) -> Result<Stri
             return Err(JobError::new(ErrorCode::QueueFull, "the shared job queue is full; retry after the Retry-After seconds"));
         }
     }
+    // Without a store the key is claimed here before admission, and freed if it fails.
+    let mut id = keyed.map_or_else(new_job_id, |(_, claim)| claim.id.clone());
+    if let (None, Some((key, claim))) = (&store, keyed) {
+        if let Some(held) = state.idempotency.keys.claim(key, claim.clone()) {
+            return Ok(Accepted::Twin(held));
+        }
+    }
+    let release = |error: JobError| {
+        if let (None, Some((key, claim))) = (&store, keyed) {
+            state.idempotency.keys.release(key, &claim.id);
+        }
+        error
+    };
     // Room for the result on a local store's disk, promised until it is stored.
     let reservation = match store.as_ref().filter(|s| !s.shared()) {
         Some(store) => {
@@ -76,17 +162,27 @@ async fn accept_job(state: &Arc<AppState>, job: Job, sent: Value) -> Result<Stri
     };
     // A local place in the queue, unless the shared queue holds the job (its workers take one
     // when they take the job).
-    let admitted = if shared.is_some() { None } else { Some(state.admit()?) };
-    let mut id = new_job_id();
+    let admitted = if shared.is_some() { None } else { Some(state.admit().map_err(release)?) };
+    let mut listed = ListedJob::new(&id, JobStatus::Queued, &job.method.name, unix_ms());
+    listed.request_id = request_id;
     // Durable before the 202: an accepted job survives a crash from here on. Ids are random, so
     // one the store already holds is a once-in-2^122 event; a fresh one is drawn, never an
     // existing record overwritten.
     if let Some(store) = &store {
         let sent = Arc::new(sent);
         for attempt in 1.. {
-            let (stored_id, sent) = (id.clone(), sent.clone());
-            match store.call(move |s| s.accept(&stored_id, &sent)).await {
-                Ok(()) => break,
+            let mut record = StoredJob::queued(&id, &sent);
+            (record.submitted_unix_ms, record.request_id) = (listed.submitted_unix_ms, listed.request_id.clone());
+            let keyed = keyed.map(|(key, claim)| (key.clone(), KeyedJob { id: id.clone(), ..claim.clone() }));
+            let outcome = store
+                .call(move |s| match &keyed {
+                    Some((key, claim)) => s.accept_keyed(&record, key, claim),
+                    None => s.accept_record(&record).map(|()| None),
+                })
+                .await;
+            match outcome {
+                Ok(None) => break,
+                Ok(Some(held)) => return Ok(Accepted::Twin(held)),
                 Err(StoreError::Exists(_)) if attempt < 3 => id = new_job_id(),
                 Err(error) => {
                     tracing::warn!(%error, "cannot record a submitted job");
@@ -95,10 +191,62 @@ async fn accept_job(state: &Arc<AppState>, job: Job, sent: Value) -> Result<Stri
             }
         }
     }
+    listed.id.clone_from(&id);
+    listed.record = format!("/v1/jobs/{id}");
     if let Some(admitted) = admitted {
-        state.spawn_submitted(id.clone(), job, (admitted, reservation));
+        state.spawn_submitted(listed, job, (admitted, reservation));
     }
-    Ok(id)
+    Ok(Accepted::New(id))
+}
+
+/// `GET /v1/jobs`: submitted jobs newest first, filtered by `status` and `method`, `limit` a
+/// page (default 50, at most 500), `cursor` the `next_cursor` of the page before. With a
+/// store, every replica lists the same jobs; without one, the jobs this process holds.
+pub(super) async fn list_jobs(
+    State(state): State<Arc<AppState>>,
+    query: Result<axum::extract::Query<Vec<(String, String)>>, axum::extract::rejection::QueryRejection>,
+) -> Result<Json<Value>, ApiError> {
+    let invalid = |field: &str, message: String| ApiError(JobError::field(ErrorCode::InvalidParameter, field, message));
+    let axum::extract::Query(pairs) = query.map_err(|e| invalid("query", format!("cannot read the query string: {e}")))?;
+    let (mut filter, mut after, mut limit) = (JobFilter::default(), None, DEFAULT_PAGE);
+    let mut seen = std::collections::HashSet::new();
+    for (name, value) in pairs {
+        if !seen.insert(name.clone()) {
+            return Err(invalid(&name, format!("`{name}` is given more than once")));
+        }
+        match name.as_str() {
+            "status" => {
+                let status = serde_json::from_value(json!(value)).map_err(|_| {
+                    invalid("status", "status is one of queued, running, succeeded, failed, cancelled".to_owned())
+                })?;
+                filter.status = Some(status);
+            }
+            "method" => {
+                if !REGISTRY.iter().any(|m| m.name() == value) {
+                    let names: Vec<&str> = REGISTRY.iter().map(|m| m.name()).collect();
+                    return Err(invalid("method", format!("method is one of {}", names.join(", "))));
+                }
+                filter.method = Some(value);
+            }
+            "limit" => {
+                limit = value
+                    .parse()
+                    .ok()
+                    .filter(|n| (1..=MAX_PAGE).contains(n))
+                    .ok_or_else(|| invalid("limit", format!("limit is a whole number from 1 to {MAX_PAGE}")))?;
+            }
+            "cursor" => after = Some(Cursor::decode(&value)?),
+            _ => {
+                let shown: String = name.chars().take(32).collect();
+                return Err(invalid(&shown, format!("unknown parameter `{shown}`: status, method, limit and cursor are")));
+            }
+        }
+    }
+    let (jobs, next) = match state.store.clone() {
+        Some(store) => store.call(move |s| s.list(&filter, after.as_ref(), limit)).await.map_err(store_error)?,
+        None => state.jobs.list(&filter, after.as_ref(), limit),
+    };
+    Ok(Json(json!({"jobs": jobs, "next_cursor": next.map(|c| c.encode())})))
 }
 
 /// `GET /v1/jobs/{id}/events`: server-sent events — `progress` with the job's state at once and
@@ -213,9 +361,15 @@ pub(super) async fn cancel_job(State(state): State<Arc<AppState>>, Path(id): Pat
     Ok((StatusCode::ACCEPTED, record).into_response())
 }
 
-pub(super) async fn job_image(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Result<Response, ApiError> {
+/// `GET /v1/jobs/{id}/image`: the result, with its digest as a strong `ETag` (304 for an
+/// `If-None-Match` that names it) and cacheable for good: a result never changes under its id.
+pub(super) async fn job_image(State(state): State<Arc<AppState>>, Path(id): Path<String>, headers: HeaderMap) -> Result<Response, ApiError> {
     if let Some(rendered) = state.jobs.find(&id) {
-        return Ok(image_response(&id, &rendered));
+        let etag = format!("\"{}\"", rendered.image_sha256());
+        if not_modified(&headers, &etag) {
+            return Ok(unchanged(&etag));
+        }
+        return Ok(immutable(image_response(&id, &rendered), &etag));
     }
     unless_unfinished_here(&state, &id)?;
     // A result from the durable store: the bytes and the format its record names.
@@ -227,21 +381,68 @@ pub(super) async fn job_image(State(state): State<Arc<AppState>>, Path(id): Path
         return Err(unknown_job(&id)); // Dropped under --results-bytes.
     }
     let Some(store) = state.store.clone() else { return Err(unknown_job(&id)) };
+    // The record names the digest (results stored before it did get one from the bytes).
+    let recorded = stored.result.as_ref().and_then(|r| r["image_sha256"].as_str()).map(|d| format!("\"{d}\""));
+    if recorded.as_ref().is_some_and(|etag| not_modified(&headers, etag)) {
+        return Ok(unchanged(recorded.as_deref().unwrap_or_default()));
+    }
     let image_id = id.clone();
     let bytes = store.call(move |s| s.image(&image_id)).await.map_err(store_error)?.ok_or_else(|| unknown_job(&id))?;
+    let etag = recorded.unwrap_or_else(|| format!("\"{}\"", content_id(&bytes)));
+    if not_modified(&headers, &etag) {
+        return Ok(unchanged(&etag));
+    }
     let mime = if stored.result.as_ref().is_some_and(|r| r["format"] == "exr") { "image/x-exr" } else { "image/png" };
-    Ok(([(header::CONTENT_TYPE, mime)], bytes).into_response())
+    Ok(immutable(([(header::CONTENT_TYPE, mime)], bytes).into_response(), &etag))
+}
+
+/// Whether `If-None-Match` names `etag` (or is `*`): weak comparison, as RFC 9110 §13.1.2
+/// asks for this header.
+pub(super) fn not_modified(headers: &HeaderMap, etag: &str) -> bool {
+    let opaque = |tag: &str| tag.trim().trim_start_matches("W/").to_owned();
+    headers
+        .get_all(header::IF_NONE_MATCH)
+        .iter()
+        .filter_map(|v| v.to_str().ok())
+        .flat_map(|v| v.split(','))
+        .any(|tag| tag.trim() == "*" || opaque(tag) == opaque(etag))
+}
+
+/// 304 Not Modified for `etag`.
+pub(super) fn unchanged(etag: &str) -> Response {
+    let mut response = StatusCode::NOT_MODIFIED.into_response();
+    if let Ok(value) = HeaderValue::from_str(etag) {
+        response.headers_mut().insert(header::ETAG, value);
+    }
+    response.headers_mut().insert(header::CACHE_CONTROL, HeaderValue::from_static(IMMUTABLE));
+    response
+}
+
+/// Bytes that never change under their URL: private (the API may need a token), kept a year.
+pub(super) const IMMUTABLE: &str = "private, max-age=31536000, immutable";
+
+fn immutable(mut response: Response, etag: &str) -> Response {
+    if let Ok(value) = HeaderValue::from_str(etag) {
+        response.headers_mut().insert(header::ETAG, value);
+    }
+    response.headers_mut().insert(header::CACHE_CONTROL, HeaderValue::from_static(IMMUTABLE));
+    response
 }
 
 /// `GET /v1/jobs/{id}/thumbnail`: a small PNG of a kept result (the dashboard's previews).
-/// Results never change under their id, so browsers may cache it for good.
-pub(super) async fn job_thumbnail(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Result<Response, ApiError> {
+/// Results never change under their id, so browsers may cache it for good; its `ETag` is the
+/// result's digest and the thumbnail's size.
+pub(super) async fn job_thumbnail(State(state): State<Arc<AppState>>, Path(id): Path<String>, headers: HeaderMap) -> Result<Response, ApiError> {
     unless_unfinished_here(&state, &id)?;
     let rendered = state.jobs.find(&id).ok_or_else(|| unknown_job(&id))?;
+    let etag = format!("\"{}-thumbnail-{THUMBNAIL_SIZE}\"", rendered.image_sha256());
+    if not_modified(&headers, &etag) {
+        return Ok(unchanged(&etag));
+    }
     let png = tokio::task::spawn_blocking(move || crate::output::thumbnail(&rendered.bytes, THUMBNAIL_SIZE))
         .await
         .map_err(|e| JobError::internal(format!("thumbnail task failed: {e}")))??;
-    Ok(([(header::CONTENT_TYPE, "image/png"), (header::CACHE_CONTROL, "private, max-age=86400, immutable")], png).into_response())
+    Ok(immutable(([(header::CONTENT_TYPE, "image/png")], png).into_response(), &etag))
 }
 
 /// Longest side of a thumbnail, pixels.

@@ -11,6 +11,7 @@ mod job_routes;
 mod meta;
 pub mod metrics;
 mod render;
+pub mod requests;
 mod serve;
 mod state;
 mod upload_routes;
@@ -31,21 +32,23 @@ use serde_json::{json, Value};
 use crate::config::ServeConfig;
 use crate::engine::{Engine, Rendered};
 use crate::error::{ErrorCode, JobError};
+use crate::job::submission::{fingerprint, idempotency_key, unix_ms, Cursor, JobFilter, KeyedJob, ListedJob, DEFAULT_PAGE, IDEMPOTENCY_KEY, MAX_PAGE};
 use crate::job::{Job, JobStatus};
 use crate::light::BUILTIN_LIGHT_IMAGES;
 use crate::methods::REGISTRY;
-use crate::queue::{JobEvent, JobQueue, JobSummary, LiveJobs, RecentJobs};
+use crate::queue::{IdempotencyKeys, JobEvent, JobQueue, JobSummary, LiveJobs, RecentJobs};
 use crate::scene::builtin::BUILTIN_SCENES;
 use crate::store::{new_job_id, JobStore as DurableStore, Store, StoreError, StoredJob, MAX_ATTEMPTS};
 use crate::supervise::Supervise;
 use crate::upload_store::{content_id, is_content_id, Kind};
 use error::{store_error, ApiError};
-use job_routes::{cancel_job, job_events, job_image, job_record, job_thumbnail, submit_job};
+use job_routes::{cancel_job, job_events, job_image, job_record, job_thumbnail, list_jobs, not_modified, submit_job, unchanged};
 use meta::{limits, methods, metrics, readyz, stats};
 use render::{image_response, job_json, render, render_blocking};
 pub use serve::serve;
 use state::Admitted;
-pub use state::AppState;
+pub use state::{AppState, Idempotency};
+use requests::REQUEST_ID;
 use upload_routes::{fetch_shared_uploads, upload_light, upload_routes, upload_scene};
 use worker::{abandoned, failure_detail, run_submitted, store_failure, work_shared_queue};
 
@@ -62,6 +65,9 @@ const SHARED_QUEUE_POLL: std::time::Duration = std::time::Duration::from_millis(
 /// configured (`--store-retry-secs`).
 pub const DEFAULT_STORE_RETRY: std::time::Duration = std::time::Duration::from_secs(600);
 
+/// How long an idempotency key names its job unless configured (`--idempotency-ttl-secs`).
+pub const DEFAULT_IDEMPOTENCY_TTL: std::time::Duration = std::time::Duration::from_secs(24 * 3600);
+
 /// Finished jobs remembered for the dashboard's charts.
 const RECENT_JOBS: usize = 200;
 
@@ -77,7 +83,7 @@ pub fn app(state: Arc<AppState>) -> Router {
         .route("/v1/lights", post(upload_light))
         .route("/v1/scenes/{id}", upload_routes(Kind::Scene))
         .route("/v1/lights/{id}", upload_routes(Kind::Light))
-        .route("/v1/jobs", post(submit_job))
+        .route("/v1/jobs", post(submit_job).get(list_jobs))
         .route("/v1/jobs/{id}", get(job_record).delete(cancel_job))
         .route("/v1/jobs/{id}/events", get(job_events))
         .route("/v1/jobs/{id}/image", get(job_image))
@@ -96,6 +102,7 @@ pub fn app(state: Arc<AppState>) -> Router {
         .route("/dashboard/{asset}", get(dashboard::asset))
         .route("/healthz", get(|| async { Json(json!({"status": "ok"})) }))
         .route("/readyz", get(readyz))
+        .route_layer(axum::middleware::from_fn(requests::note_route))
         .fallback(|| async { ApiError(JobError::new(ErrorCode::NotFound, "no such route")) })
         .layer(DefaultBodyLimit::max(body_limit));
     // CORS is closed unless origins are configured; the layer answers preflights before auth.
@@ -103,7 +110,8 @@ pub fn app(state: Arc<AppState>) -> Router {
         Some(cors) => router.layer(cors.clone()),
         None => router,
     };
-    router.with_state(state)
+    // Outermost: every answer, a 401 or a preflight's included, carries the request's id.
+    router.layer(axum::middleware::from_fn(requests::track)).with_state(state)
 }
 
 /// A body that could not be read: too large (413), or unreadable, as `unreadable`.

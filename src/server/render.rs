@@ -150,6 +150,7 @@ pub(super) fn job_json(id: &str, rendered: &Rendered) -> Value {
         "height": rendered.height,
         "format": rendered.format,
         "bytes": rendered.bytes.len(),
+        "image_sha256": rendered.image_sha256(),
         "timings": rendered.timings,
         "counters": rendered.counters,
         "quality": rendered.quality,

@@ -15,6 +15,7 @@ pub async fn serve(config: ServeConfig, engine: Arc<Engine>) -> anyhow::Result<(
     let mut state = AppState::new(engine.clone(), config.results_kept)
         .with_queue(queue)
         .with_results_ttl(ttl)
+        .with_idempotency(Idempotency::new(std::time::Duration::from_secs_f64(config.idempotency_ttl_secs.max(1.0)), config.idempotency_keys))
         .with_cors_origins(&config.cors_origins)?;
     if let Some(path) = &config.auth_token_file {
         let auth = auth::Auth::from_file(path, config.metrics_open)?;
@@ -68,7 +69,7 @@ fn with_job_store(state: AppState, config: &ServeConfig, ttl: std::time::Duratio
             state
         }
         JobStoreKind::Embedded => {
-            let store = crate::store::EmbeddedStore::open(&config.data_dir)?;
+            let store = crate::store::EmbeddedStore::open(&config.data_dir)?.with_max_keys(config.idempotency_keys);
             tracing::info!(data_dir = %config.data_dir.display(), min_free_bytes = config.min_free_bytes, "job store: embedded");
             state.with_store(Store::new(Arc::new(store), "embedded", config.min_free_bytes))
         }

@@ -29,6 +29,26 @@ pub struct AppState {
     pub(super) started: std::time::SystemTime,
     /// The client connections of `serve` (None: the router is driven directly).
     pub(super) connections: Option<Arc<connections::Tracker>>,
+    /// How long idempotency keys last, and the keys themselves when there is no store.
+    pub(super) idempotency: Idempotency,
+}
+
+/// Idempotent submission's settings: how long a key names its job, and, for a daemon without
+/// a job store, the keys (a store keeps them for every replica and across restarts).
+pub struct Idempotency {
+    pub(super) ttl: std::time::Duration,
+    pub(super) keys: IdempotencyKeys,
+}
+
+impl Idempotency {
+    /// Keys that last `ttl`; at most `max_keys` held at once.
+    pub fn new(ttl: std::time::Duration, max_keys: usize) -> Self {
+        Self { ttl, keys: IdempotencyKeys::new(max_keys) }
+    }
+
+    pub(super) fn ttl_ms(&self) -> u64 {
+        self.ttl.as_millis() as u64
+    }
 }
 
 impl AppState {
@@ -49,7 +69,13 @@ impl AppState {
             ready: AtomicBool::new(false),
             connections: None,
             started: std::time::SystemTime::now(),
+            idempotency: Idempotency::new(DEFAULT_IDEMPOTENCY_TTL, crate::job::submission::DEFAULT_MAX_KEYS),
         }
+    }
+
+    /// Idempotency keys that last `idempotency.ttl`.
+    pub fn with_idempotency(self, idempotency: Idempotency) -> Self {
+        Self { idempotency, ..self }
     }
 
     pub fn with_queue(self, queue: QueueConfig) -> Self {
@@ -169,7 +195,7 @@ impl AppState {
                     let admitted = self.queue.admit_waiting().await?;
                     let reservation =
                         store.reserve_accepted(crate::output::max_result_bytes(job.output.width, job.output.height, job.output.format));
-                    self.spawn_submitted(stored.id.clone(), job, (admitted, Some(reservation)));
+                    self.spawn_submitted(stored.listed(), job, (admitted, Some(reservation)));
                     resumed += 1;
                     None
                 }
@@ -186,11 +212,15 @@ impl AppState {
     /// Registers a submitted job's event channel and starts its life in the background; it
     /// holds its place in the queue and the room promised to its result until its outcome is
     /// stored.
-    pub(super) fn spawn_submitted(self: &Arc<Self>, id: String, job: Job, admitted: Admitted) {
+    /// Its life runs in a span that names the request that submitted it.
+    pub(super) fn spawn_submitted(self: &Arc<Self>, listed: ListedJob, job: Job, admitted: Admitted) {
+        use tracing::Instrument as _;
         let (events, _) = tokio::sync::watch::channel(JobEvent::status(JobStatus::Queued));
-        let cancel = self.jobs.submit(id.clone(), events.clone());
+        let span = submitted_span(listed.request_id.as_deref());
+        let id = listed.id.clone();
+        let cancel = self.jobs.submit(listed, events.clone());
         let state = self.clone();
-        tokio::spawn(async move { run_submitted(state, id, job, admitted, events, cancel).await });
+        tokio::spawn(async move { run_submitted(state, id, job, admitted, events, cancel).await }.instrument(span));
     }
 
     /// With a shared store, one worker per device slot takes jobs from the shared queue, as
@@ -245,3 +275,9 @@ impl AppState {
 /// What a submitted job holds until its outcome is stored: its place in the queue, and the
 /// room promised to its result on a local store's disk.
 pub(super) type Admitted = (tokio::sync::OwnedSemaphorePermit, Option<crate::store::health::Reservation>);
+
+/// The span of a submitted job's life: the request that submitted it (the job's own span,
+/// with its id, opens inside when it renders).
+pub(super) fn submitted_span(request_id: Option<&str>) -> tracing::Span {
+    tracing::info_span!("request", request_id = request_id.unwrap_or("-"))
+}

@@ -46,18 +46,36 @@ pub(super) fn upload_routes(kind: Kind) -> axum::routing::MethodRouter<Arc<AppSt
     axum::routing::put(move |state: State<Arc<AppState>>, id: Path<String>, body: Result<Bytes, BytesRejection>| {
         put_upload(kind, state, id, body)
     })
-    .head(move |state: State<Arc<AppState>>, Path(id): Path<String>| async move {
-        if state.engine.holds_upload(kind, &id) {
-            return StatusCode::OK;
-        }
-        let Some(store) = state.store.clone().filter(|s| s.shared()) else { return StatusCode::NOT_FOUND };
-        match store.call(move |s| s.has_upload(kind, &id)).await {
-            Ok(true) => StatusCode::OK,
-            Ok(false) => StatusCode::NOT_FOUND,
-            Err(_) => StatusCode::SERVICE_UNAVAILABLE,
-        }
-    })
+    .head(move |state: State<Arc<AppState>>, id: Path<String>, headers: HeaderMap| head_upload(kind, state, id, headers))
     .delete(move |state: State<Arc<AppState>>, id: Path<String>| delete_upload(kind, state, id))
+}
+
+/// `HEAD /v1/scenes/{id}`, `HEAD /v1/lights/{id}`: 200 when held here or in a shared store,
+/// with the upload's SHA-256 (its id) as `ETag` and its length; 304 for an `If-None-Match`
+/// that names it; 404 when not held.
+pub(super) async fn head_upload(kind: Kind, State(state): State<Arc<AppState>>, Path(id): Path<String>, headers: HeaderMap) -> Response {
+    let size = match state.engine.upload_size(kind, &id) {
+        Some(size) => Some(size),
+        None => match state.store.clone().filter(|s| s.shared()) {
+            Some(store) => {
+                let shared_id = id.clone();
+                match store.call(move |s| s.upload_size(kind, &shared_id)).await {
+                    Ok(size) => size,
+                    Err(_) => return StatusCode::SERVICE_UNAVAILABLE.into_response(),
+                }
+            }
+            None => None,
+        },
+    };
+    let Some(size) = size else { return StatusCode::NOT_FOUND.into_response() };
+    let etag = format!("\"{id}\"");
+    if not_modified(&headers, &etag) {
+        return unchanged(&etag);
+    }
+    let mut response = unchanged(&etag);
+    *response.status_mut() = StatusCode::OK;
+    response.headers_mut().insert(header::CONTENT_LENGTH, HeaderValue::from(size));
+    response
 }
 
 /// `PUT /v1/scenes/{id}`, `PUT /v1/lights/{id}`: an idempotent upload under the id the client

@@ -70,7 +70,8 @@ pub(super) async fn work_shared_queue(state: Arc<AppState>, consumer: String) {
         let Ok(admitted) = state.queue.admit_waiting().await else { return };
         let started = std::time::Instant::now();
         let (events, _) = tokio::sync::watch::channel(JobEvent::status(JobStatus::Queued));
-        let cancel = state.jobs.submit(stored.id.clone(), events.clone());
+        let cancel = state.jobs.submit(stored.listed(), events.clone());
+        let span = state::submitted_span(stored.request_id.as_deref());
         let method = stored.job["method"]["name"].as_str().unwrap_or("hard").to_owned();
         let job = match Job::from_json_limited(stored.job.to_string().as_bytes(), state.engine.limits()) {
             Ok(_) if stored.attempts >= MAX_ATTEMPTS => {
@@ -100,7 +101,8 @@ pub(super) async fn work_shared_queue(state: Arc<AppState>, consumer: String) {
                 }
             }
         });
-        render_and_store(&state, stored.id.clone(), job, ((admitted, None), device), events, cancel, started).await;
+        use tracing::Instrument as _;
+        render_and_store(&state, stored.id.clone(), job, ((admitted, None), device), events, cancel, started).instrument(span).await;
         heartbeat.abort();
     }
 }

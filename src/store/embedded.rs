@@ -23,10 +23,11 @@ use std::path::{Path, PathBuf};
 use std::sync::RwLock;
 use std::time::Duration;
 
-use redb::{Database, ReadableDatabase, ReadableTable, TableDefinition};
+use redb::{Database, ReadableDatabase, ReadableTable, ReadableTableMetadata, TableDefinition};
 use serde_json::Value;
 
 use super::{unix_ms, JobStore, StoreError, StoreResult, StoredJob};
+use crate::job::submission::{self, key_digest, Cursor, JobFilter, KeyedJob, ListedJob, DEFAULT_MAX_KEYS};
 use crate::job::JobStatus;
 
 /// Job records by id: `StoredJob` as JSON.
@@ -34,12 +35,16 @@ const JOBS: TableDefinition<&str, &[u8]> = TableDefinition::new("jobs");
 /// Result images by job id, as stores written before images became files kept them: read and
 /// expired, never written.
 const IMAGES: TableDefinition<&str, &[u8]> = TableDefinition::new("images");
+/// Idempotency keys by their SHA-256 (`key_digest`): `KeyedJob` as JSON.
+const KEYS: TableDefinition<&str, &[u8]> = TableDefinition::new("idempotency_keys");
 
 /// The one-machine store: `jobs.redb` and `images/` under the data directory.
 pub struct EmbeddedStore {
     dir: PathBuf,
     /// None after an I/O error: opened again on the next call.
     db: RwLock<Option<Database>>,
+    /// Most idempotency keys held: past it, expired keys go, then those expiring soonest.
+    max_keys: usize,
 }
 
 /// A redb error as a store error: I/O errors (and redb's refusal after one) are transient —
@@ -76,18 +81,37 @@ impl EmbeddedStore {
     pub fn open(dir: &Path) -> anyhow::Result<Self> {
         std::fs::create_dir_all(dir.join("images"))
             .map_err(|e| anyhow::anyhow!("cannot create the data directory {}: {e}", dir.display()))?;
-        let store = Self { dir: dir.to_owned(), db: RwLock::new(None) };
+        let store = Self { dir: dir.to_owned(), db: RwLock::new(None), max_keys: DEFAULT_MAX_KEYS };
         store.with_db(|_| Ok(())).map_err(|e| anyhow::anyhow!("cannot open the job store {}: {e}", dir.display()))?;
         store.remove_orphan_images()?;
         Ok(store)
     }
 
+    /// Holds at most `max_keys` idempotency keys.
+    pub fn with_max_keys(self, max_keys: usize) -> Self {
+        Self { max_keys: max_keys.max(1), ..self }
+    }
+
+    /// Drops the idempotency keys past their time.
+    fn expire_keys(&self) -> StoreResult<()> {
+        self.with_db(|db| {
+            let now = unix_ms();
+            let txn = db.begin_write().map_err(classify)?;
+            {
+                let mut keys = txn.open_table(KEYS).map_err(classify)?;
+                keys.retain(|_, value| serde_json::from_slice::<KeyedJob>(value).is_ok_and(|k| k.expires_unix_ms > now)).map_err(classify)?;
+            }
+            txn.commit().map_err(classify)
+        })
+    }
+
     fn open_db(&self) -> StoreResult<Database> {
         let db = Database::create(self.dir.join("jobs.redb")).map_err(classify)?;
-        // Create both tables so that readers never meet a missing one.
+        // Create every table so that readers never meet a missing one.
         let txn = db.begin_write().map_err(classify)?;
         txn.open_table(JOBS).map_err(classify)?;
         txn.open_table(IMAGES).map_err(classify)?;
+        txn.open_table(KEYS).map_err(classify)?;
         txn.commit().map_err(classify)?;
         Ok(db)
     }
@@ -219,19 +243,49 @@ impl EmbeddedStore {
 }
 
 impl JobStore for EmbeddedStore {
-    fn accept(&self, id: &str, job: &Value) -> StoreResult<()> {
-        let record = StoredJob::queued(id, job);
+    fn accept_record(&self, record: &StoredJob) -> StoreResult<()> {
+        self.with_db(|db| {
+            let txn = db.begin_write().map_err(classify)?;
+            insert_new(&txn, record)?;
+            txn.commit().map_err(classify)
+        })
+    }
+
+    fn keyed(&self, key: &str) -> StoreResult<Option<KeyedJob>> {
+        self.with_db(|db| {
+            let txn = db.begin_read().map_err(classify)?;
+            let keys = txn.open_table(KEYS).map_err(classify)?;
+            let held = keys.get(key_digest(key).as_str()).map_err(classify)?;
+            Ok(held.map(|bytes| serde_json::from_slice::<KeyedJob>(bytes.value())).transpose()?.filter(|k| k.expires_unix_ms > unix_ms()))
+        })
+    }
+
+    /// One write transaction holds the key's check, its claim and the record: redb runs one
+    /// writer at a time, so of two twins the second sees the first's key.
+    fn accept_keyed(&self, record: &StoredJob, key: &str, claim: &KeyedJob) -> StoreResult<Option<KeyedJob>> {
+        let digest = key_digest(key);
         self.with_db(|db| {
             let txn = db.begin_write().map_err(classify)?;
             {
-                let mut jobs = txn.open_table(JOBS).map_err(classify)?;
-                if jobs.get(id).map_err(classify)?.is_some() {
-                    return Err(StoreError::Exists(id.to_owned()));
+                let mut keys = txn.open_table(KEYS).map_err(classify)?;
+                let held = keys.get(digest.as_str()).map_err(classify)?.map(|b| serde_json::from_slice::<KeyedJob>(b.value()));
+                if let Some(held) = held.transpose()?.filter(|k| k.expires_unix_ms > unix_ms()) {
+                    return Ok(Some(held));
                 }
-                jobs.insert(id, serde_json::to_vec(&record)?.as_slice()).map_err(classify)?;
+                if keys.len().map_err(classify)? as usize >= self.max_keys {
+                    evict_keys(&mut keys, self.max_keys)?;
+                }
+                keys.insert(digest.as_str(), serde_json::to_vec(claim)?.as_slice()).map_err(classify)?;
             }
-            txn.commit().map_err(classify)
+            insert_new(&txn, record)?;
+            txn.commit().map_err(classify)?;
+            Ok(None)
         })
+    }
+
+    fn list(&self, filter: &JobFilter, after: Option<&Cursor>, limit: usize) -> StoreResult<(Vec<ListedJob>, Option<Cursor>)> {
+        let jobs = self.all()?.iter().map(StoredJob::listed).collect();
+        Ok(submission::page(jobs, filter, after, limit))
     }
 
     fn start(&self, id: &str) -> StoreResult<()> {
@@ -319,6 +373,7 @@ impl JobStore for EmbeddedStore {
             image_total -= job.image_bytes;
             dropped_images.push(job.clone());
         }
+        self.expire_keys()?;
         if expired.is_empty() && dropped_images.is_empty() {
             return Ok((0, 0));
         }
@@ -351,6 +406,39 @@ impl JobStore for EmbeddedStore {
         }
         Ok(dropped)
     }
+}
+
+/// Writes a new job record in `txn`; an id held already is refused, never overwritten.
+fn insert_new(txn: &redb::WriteTransaction, record: &StoredJob) -> StoreResult<()> {
+    let mut jobs = txn.open_table(JOBS).map_err(classify)?;
+    if jobs.get(record.id.as_str()).map_err(classify)?.is_some() {
+        return Err(StoreError::Exists(record.id.clone()));
+    }
+    jobs.insert(record.id.as_str(), serde_json::to_vec(record)?.as_slice()).map_err(classify)?;
+    Ok(())
+}
+
+/// Makes room for one key in a full key table: the expired keys go, and if none had, a tenth
+/// of the keys that expire soonest (the oldest: the least likely to be retried). Logged, since
+/// a key dropped early no longer protects its job from a late retry.
+fn evict_keys(keys: &mut redb::Table<&str, &[u8]>, max_keys: usize) -> StoreResult<()> {
+    let now = unix_ms();
+    let mut held = Vec::new();
+    for entry in keys.iter().map_err(classify)? {
+        let (digest, value) = entry.map_err(classify)?;
+        let expires = serde_json::from_slice::<KeyedJob>(value.value()).map(|k| k.expires_unix_ms).unwrap_or(0);
+        held.push((expires, digest.value().to_owned()));
+    }
+    held.sort();
+    let expired = held.iter().take_while(|(expires, _)| *expires <= now).count();
+    let dropped = if expired > 0 { expired } else { (max_keys / 10).max(1) };
+    if expired == 0 {
+        tracing::warn!(max_keys, dropped, "the idempotency key store is full: the oldest keys go before they expire");
+    }
+    for (_, digest) in &held[..dropped.min(held.len())] {
+        keys.remove(digest.as_str()).map_err(classify)?;
+    }
+    Ok(())
 }
 
 /// Bytes an unprivileged process may still write on the file system that holds `dir`.

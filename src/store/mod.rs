@@ -9,7 +9,7 @@ pub mod embedded;
 pub mod health;
 pub mod redis;
 
-use std::time::{Duration, SystemTime, UNIX_EPOCH};
+use std::time::Duration;
 
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
@@ -18,6 +18,7 @@ pub use embedded::EmbeddedStore;
 pub use health::{Store, StoreHealth, StoreStatus};
 pub use redis::RedisStore;
 
+use crate::job::submission::{Cursor, JobFilter, KeyedJob, ListedJob};
 use crate::job::JobStatus;
 use crate::upload_store::Kind;
 
@@ -56,6 +57,9 @@ pub struct StoredJob {
     /// The worker (replica and slot) that took it last (shared stores).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub worker: Option<String>,
+    /// The id of the request that submitted it (`x-request-id`), for the logs of its life.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub request_id: Option<String>,
 }
 
 impl StoredJob {
@@ -66,6 +70,19 @@ impl StoredJob {
 
     pub fn finished(&self) -> bool {
         self.status.finished()
+    }
+
+    /// The method the job asked for, as `GET /v1/jobs` lists and filters it.
+    pub fn method(&self) -> &str {
+        self.job["method"]["name"].as_str().unwrap_or("")
+    }
+
+    /// The job as `GET /v1/jobs` lists it.
+    pub fn listed(&self) -> ListedJob {
+        let mut listed = ListedJob::new(&self.id, self.status, self.method(), self.submitted_unix_ms);
+        listed.finished_unix_ms = self.finished_unix_ms;
+        listed.request_id = self.request_id.clone();
+        listed
     }
 
     /// The status a job ends in with `error`: `cancelled` for a cancellation, else `failed`.
@@ -121,18 +138,31 @@ pub fn new_job_id() -> String {
     uuid::Uuid::new_v4().simple().to_string()
 }
 
-/// Milliseconds since the Unix epoch, now.
-pub fn unix_ms() -> u64 {
-    SystemTime::now().duration_since(UNIX_EPOCH).map(|d| d.as_millis() as u64).unwrap_or(0)
-}
+pub use crate::job::submission::unix_ms;
 
 /// Where accepted jobs and finished results live. Every method is a short blocking call (a
 /// local commit or a round trip): call it off the async workers.
 pub trait JobStore: Send + Sync {
-    /// Records an accepted job as `queued` (and, in a shared store, queues it); durable when
-    /// it returns. An id the store holds already is refused (`StoreError::Exists`), never
-    /// overwritten.
-    fn accept(&self, id: &str, job: &Value) -> StoreResult<()>;
+    /// Records an accepted job (`StoredJob::queued`, and, in a shared store, queues it);
+    /// durable when it returns. An id the store holds already is refused
+    /// (`StoreError::Exists`), never overwritten.
+    fn accept_record(&self, record: &StoredJob) -> StoreResult<()>;
+    /// `accept_record` of a job just sent.
+    fn accept(&self, id: &str, job: &Value) -> StoreResult<()> {
+        self.accept_record(&StoredJob::queued(id, job))
+    }
+    /// The job an idempotency key names, unless it expired (`key` as the client sent it).
+    fn keyed(&self, key: &str) -> StoreResult<Option<KeyedJob>>;
+    /// Accepts `record` under an idempotency key: when the key names a job already (a twin
+    /// sent at the same time), nothing is written and that job is answered; else the key is
+    /// claimed for the record (until `claim.expires_unix_ms`) and the record accepted. The
+    /// key outlives the job's record only as a pointer: a client that retries after the
+    /// record expired learns its id and gets 404 for it.
+    fn accept_keyed(&self, record: &StoredJob, key: &str, claim: &KeyedJob) -> StoreResult<Option<KeyedJob>>;
+    /// Submitted jobs newest first (ties by id), those after `after` that `filter` admits, at
+    /// most `limit`; with the cursor of the next page when more may remain. Every replica of a
+    /// shared store lists the same jobs.
+    fn list(&self, filter: &JobFilter, after: Option<&Cursor>, limit: usize) -> StoreResult<(Vec<ListedJob>, Option<Cursor>)>;
     /// Marks a job `running` and counts the attempt.
     fn start(&self, id: &str) -> StoreResult<()>;
     /// Stores a success: its record and its image (and takes it off a shared queue). A job
@@ -203,8 +233,9 @@ pub trait JobStore: Send + Sync {
     fn get_upload(&self, _kind: Kind, _id: &str) -> StoreResult<Option<Vec<u8>>> {
         Ok(None)
     }
-    fn has_upload(&self, _kind: Kind, _id: &str) -> StoreResult<bool> {
-        Ok(false)
+    /// The bytes of a shared upload, when the store holds it.
+    fn upload_size(&self, _kind: Kind, _id: &str) -> StoreResult<Option<u64>> {
+        Ok(None)
     }
     fn delete_upload(&self, _kind: Kind, _id: &str) -> StoreResult<bool> {
         Ok(false)

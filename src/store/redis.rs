@@ -6,7 +6,10 @@
 //! `CLAIM_IDLE` belongs to a replica that died: `XAUTOCLAIM` hands it to the next worker that
 //! asks. Job records (`penumbra:job:ID`, JSON) and result images (`penumbra:image:ID`) get a
 //! TTL once finished; uploads (`penumbra:upload:KIND:SHA256`) are stored once for every
-//! replica, each of which keeps its own LRU cache in front. A cancellation is a key of its
+//! replica, each of which keeps its own LRU cache in front. Every accepted job's id is in a
+//! sorted set by submission time (`penumbra:jobs`), which `GET /v1/jobs` reads on any replica
+//! (ids whose record expired are dropped from it as they are met); an idempotency key is
+//! `penumbra:key:SHA256` with its own TTL. A cancellation is a key of its
 //! own (`penumbra:cancel:ID`), written once and only read after: record updates are
 //! read-modify-write, so a progress report could otherwise overwrite a `cancelled` status.
 //!
@@ -22,11 +25,17 @@ use redis::{Commands, Connection};
 use serde_json::Value;
 
 use super::{unix_ms, JobStore, StoreError, StoreResult, StoredJob};
+use crate::job::submission::{key_digest, Cursor, JobFilter, KeyedJob, ListedJob};
 use crate::job::JobStatus;
 use crate::upload_store::Kind;
 
 const QUEUE: &str = "penumbra:queue";
 const GROUP: &str = "workers";
+/// Accepted jobs' ids scored by submission time (ms): the listing's index.
+const INDEX: &str = "penumbra:jobs";
+/// Most index entries one listing reads before it answers with what it found and a cursor:
+/// a filter that admits few jobs pages through the index instead of reading all of it.
+const MAX_LIST_SCAN: usize = 2000;
 
 /// How long a taken job may go without a heartbeat before another replica claims it, unless
 /// configured (`--claim-idle-secs`); workers renew their claim five times as often.
@@ -56,6 +65,10 @@ fn image_key(id: &str) -> String {
     format!("penumbra:image:{id}")
 }
 
+fn idempotency_key(key: &str) -> String {
+    format!("penumbra:key:{}", key_digest(key))
+}
+
 fn upload_key(kind: Kind, id: &str) -> String {
     let kind = match kind {
         Kind::Scene => "scene",
@@ -64,11 +77,30 @@ fn upload_key(kind: Kind, id: &str) -> String {
     format!("penumbra:upload:{kind}:{id}")
 }
 
-/// Records a job and queues it, unless a record with its id exists: one atomic step, so that
-/// neither a record without a queue entry nor an overwritten record can result.
+/// Records a job, queues it and indexes it, unless a record with its id exists: one atomic
+/// step, so that neither a record without a queue entry nor an overwritten record can result.
+/// KEYS: record, queue, index; ARGV: record JSON, id, submission ms.
 const ACCEPT: &str = r#"
 if redis.call('SET', KEYS[1], ARGV[1], 'NX') then
   redis.call('XADD', KEYS[2], '*', 'id', ARGV[2])
+  redis.call('ZADD', KEYS[3], ARGV[3], ARGV[2])
+  return 1
+end
+return 0
+"#;
+
+/// `ACCEPT` under an idempotency key, in the same atomic step: a key held already is answered
+/// (its JSON) and nothing is written, so of two twins on two replicas one job results.
+/// KEYS: record, queue, index, key; ARGV: as `ACCEPT`, then the key's JSON and its TTL (ms).
+const ACCEPT_KEYED: &str = r#"
+local held = redis.call('GET', KEYS[4])
+if held then
+  return held
+end
+if redis.call('SET', KEYS[1], ARGV[1], 'NX') then
+  redis.call('SET', KEYS[4], ARGV[4], 'PX', ARGV[5])
+  redis.call('XADD', KEYS[2], '*', 'id', ARGV[2])
+  redis.call('ZADD', KEYS[3], ARGV[3], ARGV[2])
   return 1
 end
 return 0
@@ -191,15 +223,87 @@ impl RedisStore {
 }
 
 impl JobStore for RedisStore {
-    fn accept(&self, id: &str, job: &Value) -> StoreResult<()> {
-        let record = StoredJob::queued(id, job);
-        let json = serde_json::to_vec(&record)?;
+    fn accept_record(&self, record: &StoredJob) -> StoreResult<()> {
+        let (id, json) = (&record.id, serde_json::to_vec(record)?);
         // The record first: a worker that takes the entry always finds it.
-        let created: i64 = self.with(|c| redis::cmd("EVAL").arg(ACCEPT).arg(2).arg(job_key(id)).arg(QUEUE).arg(json).arg(id).query(c))?;
+        let mut script = redis::cmd("EVAL");
+        script.arg(ACCEPT).arg(3).arg(job_key(id)).arg(QUEUE).arg(INDEX).arg(json).arg(id).arg(record.submitted_unix_ms);
+        let created: i64 = self.with(|c| script.query(c))?;
         if created == 0 {
             return Err(StoreError::Exists(id.to_owned()));
         }
         Ok(())
+    }
+
+    fn keyed(&self, key: &str) -> StoreResult<Option<KeyedJob>> {
+        let held: Option<Vec<u8>> = self.with(|c| c.get(idempotency_key(key)))?;
+        Ok(held.map(|bytes| serde_json::from_slice(&bytes)).transpose()?)
+    }
+
+    fn accept_keyed(&self, record: &StoredJob, key: &str, claim: &KeyedJob) -> StoreResult<Option<KeyedJob>> {
+        let (id, json) = (&record.id, serde_json::to_vec(record)?);
+        let ttl_ms = claim.expires_unix_ms.saturating_sub(unix_ms()).max(1);
+        let mut script = redis::cmd("EVAL");
+        script.arg(ACCEPT_KEYED).arg(4).arg(job_key(id)).arg(QUEUE).arg(INDEX).arg(idempotency_key(key));
+        script.arg(json).arg(id).arg(record.submitted_unix_ms).arg(serde_json::to_vec(claim)?).arg(ttl_ms);
+        let answer: redis::Value = self.with(|c| script.query(c))?;
+        match answer {
+            redis::Value::Int(1) => Ok(None),
+            redis::Value::Int(_) => Err(StoreError::Exists(id.to_owned())),
+            redis::Value::BulkString(held) => Ok(Some(serde_json::from_slice(&held)?)),
+            other => Err(anyhow::anyhow!("unexpected answer to an idempotent accept: {other:?}").into()),
+        }
+    }
+
+    /// Reads the index newest first from a fixed top score (so jobs accepted meanwhile do not
+    /// shift the offsets), the records of each batch in one `MGET`.
+    fn list(&self, filter: &JobFilter, after: Option<&Cursor>, limit: usize) -> StoreResult<(Vec<ListedJob>, Option<Cursor>)> {
+        let top = after.map_or(unix_ms() + 1, |c| c.submitted_unix_ms);
+        let batch = (limit * 2).clamp(64, 1000);
+        let (mut page, mut offset) = (Vec::new(), 0);
+        while offset < MAX_LIST_SCAN {
+            let entries: Vec<(String, f64)> = self.with(|c| {
+                redis::cmd("ZREVRANGEBYSCORE").arg(INDEX).arg(top).arg("-inf").arg("WITHSCORES").arg("LIMIT").arg(offset).arg(batch).query(c)
+            })?;
+            if entries.is_empty() {
+                return Ok((page, None));
+            }
+            offset += entries.len();
+            let last = entries.last().map(|(id, score)| Cursor { submitted_unix_ms: *score as u64, id: id.clone() });
+            let fresh: Vec<&String> =
+                entries.iter().filter(|(id, score)| after.is_none_or(|c| c.precedes(*score as u64, id))).map(|(id, _)| id).collect();
+            if !fresh.is_empty() {
+                let keys: Vec<String> = fresh.iter().map(|id| job_key(id)).collect();
+                let records: Vec<Option<Vec<u8>>> = self.with(|c| redis::cmd("MGET").arg(&keys).query(c))?;
+                let mut gone = Vec::new();
+                for (id, record) in fresh.iter().zip(records) {
+                    let Some(record) = record else {
+                        gone.push((*id).clone());
+                        continue;
+                    };
+                    let listed = serde_json::from_slice::<StoredJob>(&record)?.listed();
+                    if filter.admits(listed.status, &listed.method) {
+                        page.push(listed);
+                        if page.len() == limit {
+                            return Ok((page.clone(), page.last().map(ListedJob::cursor)));
+                        }
+                    }
+                }
+                if !gone.is_empty() {
+                    // Records expired by their TTL: their ids leave the index.
+                    self.with(|c| c.zrem::<_, _, ()>(INDEX, &gone))?;
+                    offset -= gone.len();
+                }
+            }
+            if entries.len() < batch {
+                return Ok((page, None));
+            }
+            // Scanned as far as one call may: the next page starts after the last id read.
+            if offset >= MAX_LIST_SCAN {
+                return Ok((page, last));
+            }
+        }
+        Ok((page, None))
     }
 
     fn start(&self, id: &str) -> StoreResult<()> {
@@ -262,7 +366,17 @@ impl JobStore for RedisStore {
     }
 
     fn expire(&self, _max_age: Duration, _max_image_bytes: u64) -> StoreResult<(usize, usize)> {
-        // Finished records and images carry their TTL; Redis drops them itself.
+        // Finished records and images carry their TTL; Redis drops them itself. The index's
+        // oldest ids are checked here, so that it does not grow with jobs nobody lists.
+        let oldest: Vec<String> = self.with(|c| c.zrange(INDEX, 0, 99))?;
+        if !oldest.is_empty() {
+            let keys: Vec<String> = oldest.iter().map(|id| job_key(id)).collect();
+            let records: Vec<Option<Vec<u8>>> = self.with(|c| redis::cmd("MGET").arg(&keys).query(c))?;
+            let gone: Vec<&String> = oldest.iter().zip(&records).filter(|(_, r)| r.is_none()).map(|(id, _)| id).collect();
+            if !gone.is_empty() {
+                self.with(|c| c.zrem::<_, _, ()>(INDEX, &gone))?;
+            }
+        }
         Ok((0, 0))
     }
 
@@ -344,8 +458,9 @@ impl JobStore for RedisStore {
         self.with(|c| redis::cmd("GETEX").arg(upload_key(kind, id)).arg("EX").arg(UPLOAD_TTL.as_secs()).query(c))
     }
 
-    fn has_upload(&self, kind: Kind, id: &str) -> StoreResult<bool> {
-        self.with(|c| c.exists(upload_key(kind, id)))
+    fn upload_size(&self, kind: Kind, id: &str) -> StoreResult<Option<u64>> {
+        let length: u64 = self.with(|c| c.strlen(upload_key(kind, id)))?;
+        Ok((length > 0).then_some(length))
     }
 
     fn delete_upload(&self, kind: Kind, id: &str) -> StoreResult<bool> {
