@@ -60,6 +60,8 @@ enum Command {
     /// Render a job on a remote penumbra: upload what it lacks, submit, follow the progress,
     /// download the image. Prints what it did as JSON.
     Submit(penumbra::client::SubmitOptions),
+    /// The jobs of a remote penumbra: list, show, cancel, wait (a table, or `--json`).
+    Jobs(penumbra::client::JobsCommand),
     /// Ask a local daemon one path (`/healthz` by default) and exit 0 on a 2xx answer: the
     /// container's health check, with no curl in the image.
     Probe {
@@ -107,7 +109,9 @@ fn main() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         Err(error) => {
             eprintln!("penumbra: {error:#}");
-            ExitCode::from(2)
+            // Interrupted by Ctrl-C: the shell's code for SIGINT.
+            let interrupted = matches!(error.downcast_ref(), Some(penumbra::client::ClientError::Interrupted { .. }));
+            ExitCode::from(if interrupted { 130 } else { 2 })
         }
     }
 }
@@ -169,6 +173,11 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             Ok(())
         }
         Command::Submit(options) => submit(&options),
+        Command::Jobs(command) => {
+            let runtime = tokio::runtime::Runtime::new()?;
+            println!("{}", runtime.block_on(penumbra::client::run_jobs(&command))?);
+            Ok(())
+        }
         Command::Probe { path, listen } => probe(&path, listen),
         Command::Render { job, output, timings_json, options } => render(job.as_deref(), &output, timings_json.as_deref(), &options),
     }
@@ -190,7 +199,10 @@ fn submit(options: &penumbra::client::SubmitOptions) -> anyhow::Result<()> {
     bar.set_position(bar.length().unwrap_or(1));
     bar.finish();
     println!("{}", serde_json::to_string(&report)?);
-    eprintln!("wrote {} ({} bytes)", options.output.display(), report.output_bytes);
+    match &options.output {
+        Some(output) if !options.detach => eprintln!("wrote {} ({} bytes)", output.display(), report.output_bytes),
+        _ => eprintln!("accepted as job {}: penumbra jobs wait {}", report.id, report.id),
+    }
     Ok(())
 }
 

@@ -1,0 +1,203 @@
+//! `penumbra submit`: a job rendered on a remote penumbra. It uploads the job's local scenes
+//! and light images only when the server lacks them (`HEAD`, then `PUT` under the SHA-256 it
+//! computed), submits the job under a fresh `Idempotency-Key` (so that its own retries never
+//! make a second job), follows its server-sent events with a progress bar, and downloads the
+//! result. Ctrl-C cancels the remote job (`DELETE`) unless `--detach`.
+
+use std::path::{Path, PathBuf};
+
+use futures_util::StreamExt;
+use serde::Serialize;
+use serde_json::Value;
+
+use super::{Client, ClientError, ConnectOptions};
+use crate::upload_store::content_id;
+
+/// The header that carries a job's scene id (or built-in name), so that a balancer in front
+/// of several replicas can route every job of a scene to the replica that has it cached.
+pub const SCENE_HEADER: &str = "x-penumbra-scene";
+
+#[derive(Debug, Clone, clap::Args)]
+pub struct SubmitOptions {
+    /// The job (JSON, see api/examples/). `{"path": ...}` scenes and light images are read
+    /// here, relative to the job file, and uploaded; the server never sees the path.
+    pub job: PathBuf,
+    #[command(flatten)]
+    pub connect: ConnectOptions,
+    /// Where to write the image; `.exr` asks for EXR, anything else PNG.
+    #[arg(short, long, required_unless_present = "detach")]
+    pub output: Option<PathBuf>,
+    /// Return once the job is accepted (its id on stdout; `penumbra jobs wait ID` later), and
+    /// never cancel it.
+    #[arg(long)]
+    pub detach: bool,
+    /// No progress bar (for scripts and logs).
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// What a submission did.
+#[derive(Debug, Clone, Serialize)]
+pub struct SubmitReport {
+    pub id: String,
+    /// Content ids uploaded by this submission (empty when the server had everything).
+    pub uploaded: Vec<String>,
+    /// Content ids the server already held.
+    pub reused: Vec<String>,
+    /// The last progress event: steps done of all.
+    pub done: u64,
+    pub total: u64,
+    pub output_bytes: u64,
+    /// Requests repeated after a 429, 503 or 507 or a connection error.
+    pub retries: u32,
+}
+
+/// Submits the job and waits for its image (or, with `--detach`, for its acceptance).
+/// `progress(done, total)` is called on every event. Ctrl-C after the job was accepted cancels
+/// it on the server unless `--detach`.
+pub async fn submit(options: &SubmitOptions, progress: &(dyn Fn(u64, u64) + Sync)) -> Result<SubmitReport, ClientError> {
+    let text = std::fs::read(&options.job).map_err(|source| ClientError::Read { path: options.job.clone(), source })?;
+    let mut job: Value = serde_json::from_slice(&text)?;
+    let base_dir = options.job.parent().map(Path::to_path_buf).unwrap_or_default();
+    let mut client = Client::new(&options.connect)?;
+    let mut report = SubmitReport { id: String::new(), uploaded: vec![], reused: vec![], done: 0, total: 0, output_bytes: 0, retries: 0 };
+
+    // Local assets become content ids, uploaded only when the server lacks them.
+    let assets = [("/scene", "scenes"), ("/light/image", "lights")];
+    for (pointer, collection) in assets {
+        let Some(path) = job.pointer(pointer).and_then(|a| a.get("path")).and_then(Value::as_str).map(str::to_owned) else { continue };
+        let path = base_dir.join(path);
+        let mut bytes = std::fs::read(&path).map_err(|source| ClientError::Read { path: path.clone(), source })?;
+        if collection == "scenes" {
+            // An upload is self-contained (contract §3): a .gltf and its files go as one GLB.
+            let folder = path.parent().unwrap_or(Path::new("."));
+            bytes = crate::scene::gltf::pack(&bytes, folder, &crate::job::Limits::default(), "scene.path")
+                .map_err(|e| ClientError::Job(format!("cannot pack {} into a GLB: {}", path.display(), e.message)))?;
+        }
+        let id = content_id(&bytes);
+        let url = format!("/v1/{collection}/{id}");
+        if client.send(|http, base| http.head(format!("{base}{url}"))).await?.status() == reqwest::StatusCode::OK {
+            report.reused.push(id.clone());
+        } else {
+            let response = client.send(|http, base| http.put(format!("{base}{url}")).body(bytes.clone())).await?;
+            expect_success(response).await?;
+            report.uploaded.push(id.clone());
+        }
+        // The path becomes the id; the rest of the reference (a scene's `floor`) stays.
+        let reference = job.pointer_mut(pointer).and_then(Value::as_object_mut).expect("an object with a path: read above");
+        reference.remove("path");
+        reference.insert("id".into(), id.into());
+    }
+    if options.output.as_ref().and_then(|o| o.extension()).is_some_and(|e| e.eq_ignore_ascii_case("exr")) {
+        let output = job.as_object_mut().ok_or_else(|| ClientError::Job("the job is not a JSON object".into()))?.entry("output");
+        output.or_insert_with(|| serde_json::json!({}))["format"] = "exr".into();
+    }
+    let scene = routing_key(&job);
+
+    // One key for every attempt of this submission: a retry after a lost answer gets the job
+    // the first attempt created.
+    let key = uuid::Uuid::new_v4().to_string();
+    let submitted = |http: &reqwest::Client, base: &str| {
+        http.post(format!("{base}/v1/jobs")).header(SCENE_HEADER, &scene).header("idempotency-key", &key).json(&job)
+    };
+    let accepted = client.json(submitted).await?;
+    report.id = accepted["id"].as_str().ok_or_else(|| ClientError::Job(format!("no id in the answer: {accepted}")))?.to_owned();
+    if options.detach {
+        report.retries = client.retries;
+        return Ok(report);
+    }
+    let output = options.output.clone().expect("clap requires -o without --detach");
+    let finished = tokio::select! {
+        finished = follow_and_fetch(&mut client, &mut report, &scene, &output, progress) => finished,
+        _ = tokio::signal::ctrl_c() => {
+            let outcome = super::jobs::cancel_quietly(&options.connect, &report.id).await;
+            return Err(ClientError::Interrupted { id: report.id.clone(), outcome });
+        }
+    };
+    finished?;
+    report.retries = client.retries;
+    Ok(report)
+}
+
+/// Follows the job's events to the end (reopening a dropped stream: a replica going away),
+/// then downloads the image to `output`.
+async fn follow_and_fetch(
+    client: &mut Client,
+    report: &mut SubmitReport,
+    scene: &str,
+    output: &Path,
+    progress: &(dyn Fn(u64, u64) + Sync),
+) -> Result<(), ClientError> {
+    let events = format!("/v1/jobs/{}/events", report.id);
+    let final_event = loop {
+        let response = client.send(|http, base| http.get(format!("{base}{events}")).header(SCENE_HEADER, scene)).await?;
+        let response = expect_success(response).await?;
+        match follow_events(response, report, progress).await {
+            Some(event) => break event,
+            None => client.backoff().await?,
+        }
+    };
+    if final_event["status"] != "succeeded" {
+        let status = final_event["status"].as_str().unwrap_or("failed").to_owned();
+        return Err(ClientError::Failed { status, error: final_event["error"].clone() });
+    }
+    let image = format!("/v1/jobs/{}/image", report.id);
+    let response = client.send(|http, base| http.get(format!("{base}{image}")).header(SCENE_HEADER, scene)).await?;
+    let bytes = expect_success(response).await?.bytes().await.map_err(|e| ClientError::Job(e.to_string()))?;
+    std::fs::write(output, &bytes).map_err(|source| ClientError::Write { path: output.to_owned(), source })?;
+    report.output_bytes = bytes.len() as u64;
+    Ok(())
+}
+
+/// The scene a job renders, as the routing header carries it: an id, or `builtin:NAME`.
+fn routing_key(job: &Value) -> String {
+    let scene = &job["scene"];
+    match (scene["id"].as_str(), scene["builtin"].as_str()) {
+        (Some(id), _) => id.to_owned(),
+        (None, Some(name)) => format!("builtin:{name}"),
+        _ => String::new(),
+    }
+}
+
+/// Reads server-sent events, reporting progress, until a final one (returned) or the end of
+/// the stream without one (None).
+pub(super) async fn follow_events(response: reqwest::Response, report: &mut SubmitReport, progress: &(dyn Fn(u64, u64) + Sync)) -> Option<Value> {
+    let mut stream = response.bytes_stream();
+    let mut buffer = String::new();
+    while let Some(Ok(chunk)) = stream.next().await {
+        buffer.push_str(&String::from_utf8_lossy(&chunk));
+        while let Some(end) = buffer.find("\n\n") {
+            let block: String = buffer.drain(..end + 2).collect();
+            let Some(data) = block.lines().find_map(|line| line.strip_prefix("data:")) else { continue };
+            let Ok(event) = serde_json::from_str::<Value>(data.trim()) else { continue };
+            report.done = event["done"].as_u64().unwrap_or(report.done);
+            report.total = event["total"].as_u64().unwrap_or(report.total);
+            progress(report.done, report.total);
+            if matches!(event["status"].as_str(), Some("succeeded" | "failed" | "cancelled")) {
+                return Some(event);
+            }
+        }
+    }
+    None
+}
+
+pub(super) async fn expect_success(response: reqwest::Response) -> Result<reqwest::Response, ClientError> {
+    if response.status().is_success() {
+        return Ok(response);
+    }
+    let status = response.status().as_u16();
+    let body = response.text().await.unwrap_or_default();
+    Err(ClientError::Server { status, body })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn routing_keys_name_the_scene() {
+        assert_eq!(routing_key(&serde_json::json!({"scene": {"id": "ab12"}})), "ab12");
+        assert_eq!(routing_key(&serde_json::json!({"scene": {"builtin": "torus"}})), "builtin:torus");
+        assert_eq!(routing_key(&serde_json::json!({})), "");
+    }
+}
