@@ -3,6 +3,8 @@
 //! errors for bad input while other jobs keep being served; and the CLI binary.
 
 mod common;
+#[path = "api/tools.rs"]
+mod tools;
 
 use std::sync::Arc;
 

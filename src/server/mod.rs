@@ -9,6 +9,7 @@ mod dashboard;
 pub mod error;
 mod job_routes;
 mod meta;
+pub mod openapi;
 pub mod metrics;
 mod render;
 pub mod requests;

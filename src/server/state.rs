@@ -279,5 +279,5 @@ pub(super) type Admitted = (tokio::sync::OwnedSemaphorePermit, Option<crate::sto
 /// The span of a submitted job's life: the request that submitted it (the job's own span,
 /// with its id, opens inside when it renders).
 pub(super) fn submitted_span(request_id: Option<&str>) -> tracing::Span {
-    tracing::info_span!("request", request_id = request_id.unwrap_or("-"))
+    tracing::info_span!(parent: None, "request", request_id = request_id.unwrap_or("-"))
 }

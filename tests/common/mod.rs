@@ -155,3 +155,12 @@ pub fn as_glb() -> Vec<u8> {
     let (gltf, bin) = test_gltf();
     penumbra::scene::gltf::glb(&gltf, &bin)
 }
+
+/// A small PNG light image, `size` texels square, in warm colours.
+pub fn png_light(size: u32) -> Vec<u8> {
+    let mut png = Cursor::new(Vec::new());
+    image::RgbaImage::from_fn(size, size, |x, y| image::Rgba([255, (x * 255 / size) as u8, (y * 255 / size) as u8, 255]))
+        .write_to(&mut png, image::ImageFormat::Png)
+        .unwrap();
+    png.into_inner()
+}
