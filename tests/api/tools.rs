@@ -348,3 +348,128 @@ async fn openapi_document_is_generated_from_the_code() {
         assert!(builtins.as_array().unwrap().contains(name), "{name}");
     }
 }
+
+/// `penumbra` run with `args` (and environment), off the async workers: its output.
+async fn cli(args: Vec<String>, env: Vec<(&'static str, String)>) -> std::process::Output {
+    tokio::task::spawn_blocking(move || {
+        std::process::Command::new(env!("CARGO_BIN_EXE_penumbra"))
+            .args(&args)
+            .env_remove("PENUMBRA_TOKEN")
+            .env_remove("PENUMBRA_SERVER")
+            .envs(env)
+            .output()
+            .unwrap()
+    })
+    .await
+    .unwrap()
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+/// The client against a daemon that needs a token: `submit` with the token from a file or
+/// the environment (a wrong one: one line, a non-zero exit), `--detach`, retries through a
+/// full queue (429 and its `Retry-After`) without a second job, `jobs list | show | wait |
+/// cancel` as tables and JSON, and Ctrl-C cancelling the remote job.
+#[tokio::test(flavor = "multi_thread")]
+async fn the_client_submits_lists_waits_and_cancels_with_a_token() {
+    let work = tempdir::Dir::new();
+    let token = "client-token-0123456789abcdef";
+    let tokens = work.path().join("tokens");
+    std::fs::write(&tokens, format!("# a token\n{token}\n")).unwrap();
+    let data = work.path().join("data");
+    let (daemon, base) = serve(
+        &["--auth-token-file", tokens.to_str().unwrap(), "--data-dir", data.to_str().unwrap(), "--queue", "1", "--concurrency", "1"],
+        &[],
+    )
+    .await;
+    let job_file = work.path().join("job.json");
+    std::fs::write(&job_file, small_job("png").to_string()).unwrap();
+    let path = |name: &str| work.path().join(name).display().to_string();
+    let args = |extra: &[&str]| -> Vec<String> {
+        let mut args: Vec<String> = extra.iter().map(|a| a.to_string()).collect();
+        args.extend(["--server".to_owned(), base.clone()]);
+        args
+    };
+    let with_file = vec![("PENUMBRA_TOKEN_FILE", tokens.display().to_string())];
+
+    // The token from a file, then from the environment.
+    let output = cli(args(&["submit", &job_file.display().to_string(), "--quiet", "-o", &path("a.png")]), with_file.clone()).await;
+    assert!(output.status.success(), "{}", text(&output.stderr));
+    let first: Value = serde_json::from_slice(&output.stdout).unwrap();
+    let output = cli(args(&["submit", &job_file.display().to_string(), "--quiet", "-o", &path("b.png")]), vec![("PENUMBRA_TOKEN", token.to_owned())]).await;
+    assert!(output.status.success(), "{}", text(&output.stderr));
+    assert_eq!(std::fs::read(path("a.png")).unwrap(), std::fs::read(path("b.png")).unwrap());
+
+    // A wrong token, or none: one line, a non-zero exit, and the token never printed.
+    for env in [vec![("PENUMBRA_TOKEN", "wrong-token-0123456789abcdef".to_owned())], vec![]] {
+        let output = cli(args(&["submit", &job_file.display().to_string(), "--quiet", "-o", &path("c.png")]), env).await;
+        let stderr = text(&output.stderr);
+        assert_eq!(output.status.code(), Some(2), "{stderr}");
+        assert_eq!(stderr.trim().lines().count(), 1, "{stderr}");
+        assert!(stderr.contains("401") && !stderr.contains("panicked") && !stderr.contains("wrong-token"), "{stderr}");
+    }
+
+    // A full queue: a slow job holds the one place; the client waits out the 429s it gets
+    // (Retry-After) and its retries make no second job.
+    let slow = json!({"scene": {"builtin": "occluder"}, "method": {"name": "reference", "samples": 1024, "resolution": 512}, "output": {"width": 160, "height": 120}});
+    let client = reqwest::Client::new();
+    let blocker = client.post(format!("{base}/v1/jobs")).bearer_auth(token).json(&slow).send().await.unwrap();
+    assert_eq!(blocker.status(), StatusCode::ACCEPTED);
+    let blocker: Value = blocker.json().await.unwrap();
+    let output = cli(args(&["submit", &job_file.display().to_string(), "--quiet", "--retries", "60", "-o", &path("d.png")]), with_file.clone()).await;
+    assert!(output.status.success(), "{}", text(&output.stderr));
+    let retried: Value = serde_json::from_slice(&output.stdout).unwrap();
+    assert!(retried["retries"].as_u64().unwrap() >= 1, "the queue was full at first: {retried}");
+    let listed = cli(args(&["jobs", "list", "--json", "--limit", "500"]), with_file.clone()).await;
+    assert!(listed.status.success(), "{}", text(&listed.stderr));
+    let jobs: Vec<Value> = serde_json::from_slice(&listed.stdout).unwrap();
+    assert_eq!(jobs.len(), 4, "two submits, the blocker and the retried one: {jobs:?}");
+    assert_eq!(jobs[0]["id"], retried["id"], "newest first");
+    assert!(jobs.iter().any(|j| j["id"] == first["id"]));
+
+    // People get a table; show, wait (downloading) and cancel by id.
+    let table = cli(args(&["jobs", "list", "--status", "succeeded"]), with_file.clone()).await;
+    let table = text(&table.stdout);
+    assert!(table.starts_with("ID") && table.contains(first["id"].as_str().unwrap()) && table.contains("succeeded"), "{table}");
+    let id = first["id"].as_str().unwrap();
+    let show = cli(args(&["jobs", "show", id]), with_file.clone()).await;
+    assert!(text(&show.stdout).contains("succeeded"), "{}", text(&show.stdout));
+    let wait = cli(args(&["jobs", "wait", id, "-o", &path("e.png")]), with_file.clone()).await;
+    assert!(wait.status.success(), "{}", text(&wait.stderr));
+    assert_eq!(std::fs::read(path("e.png")).unwrap(), std::fs::read(path("a.png")).unwrap());
+    let cancel = cli(args(&["jobs", "cancel", id]), with_file.clone()).await;
+    assert_eq!(cancel.status.code(), Some(2), "a finished job cannot be cancelled");
+    assert!(text(&cancel.stderr).contains("409"), "{}", text(&cancel.stderr));
+
+    // --detach returns at acceptance; Ctrl-C on a following submit cancels its job.
+    let slow_file = work.path().join("slow.json");
+    std::fs::write(&slow_file, slow.to_string()).unwrap();
+    let detached = cli(args(&["submit", &slow_file.display().to_string(), "--detach", "--quiet", "--retries", "60"]), with_file.clone()).await;
+    assert!(detached.status.success(), "{}", text(&detached.stderr));
+    let detached: Value = serde_json::from_slice(&detached.stdout).unwrap();
+    let mut command = std::process::Command::new(env!("CARGO_BIN_EXE_penumbra"));
+    command.args(args(&["submit", &slow_file.display().to_string(), "--quiet", "--retries", "120", "-o", &path("f.png")])).envs(with_file.clone());
+    let child = command.stdout(std::process::Stdio::piped()).stderr(std::process::Stdio::piped()).spawn().unwrap();
+    let known = [blocker["id"].clone(), detached["id"].clone()];
+    let interrupted = loop {
+        let page: Value = client.get(format!("{base}/v1/jobs")).bearer_auth(token).send().await.unwrap().json().await.unwrap();
+        if let Some(job) = page["jobs"].as_array().unwrap().iter().find(|j| !known.contains(&j["id"]) && !jobs.iter().any(|k| k["id"] == j["id"])) {
+            break job["id"].as_str().unwrap().to_owned();
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(100)).await;
+    };
+    // SAFETY: kill(2) on our own child's pid with SIGINT; no memory is touched.
+    unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGINT) };
+    let output = tokio::task::spawn_blocking(move || child.wait_with_output().unwrap()).await.unwrap();
+    assert_eq!(output.status.code(), Some(130), "{}", text(&output.stderr));
+    assert!(text(&output.stderr).contains("cancelled on the server"), "{}", text(&output.stderr));
+    // A running job stops at its next batch: its events end with `cancelled`.
+    let events = client.get(format!("{base}/v1/jobs/{interrupted}/events")).bearer_auth(token).send().await.unwrap().text().await.unwrap();
+    assert!(events.contains("event: cancelled"), "{events}");
+    for id in known {
+        client.delete(format!("{base}/v1/jobs/{}", id.as_str().unwrap())).bearer_auth(token).send().await.unwrap();
+    }
+    drop(daemon);
+}
