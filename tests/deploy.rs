@@ -943,3 +943,137 @@ fn stalled_uploads_cannot_take_the_daemon_down() {
     assert!(gauge("max").is_some_and(|max| max <= 1024 - 128), "the cap is below the file-descriptor limit: {:?}", gauge("max"));
     assert!(gauge("shed").unwrap_or(0) + gauge("body_timeouts").unwrap_or(0) >= 1100);
 }
+
+/// A CA and a certificate for 127.0.0.1 signed by it, made with `openssl` in `dir`:
+/// (`ca.pem`, `server.pem`, `server.key`); `other-ca.pem` is a CA that signed nothing here.
+fn make_certificates(dir: &Path) {
+    let openssl = |args: &[&str]| run(Command::new("openssl").current_dir(dir).args(args));
+    for ca in ["ca", "other-ca"] {
+        let (key, pem, subject) = (format!("{ca}.key"), format!("{ca}.pem"), format!("/CN=penumbra test {ca}"));
+        openssl(&["req", "-x509", "-newkey", "rsa:2048", "-nodes", "-keyout", &key, "-out", &pem, "-days", "2", "-subj", &subject]);
+    }
+    openssl(&["req", "-newkey", "rsa:2048", "-nodes", "-keyout", "server.key", "-out", "server.csr", "-subj", "/CN=127.0.0.1"]);
+    let extensions = "subjectAltName=IP:127.0.0.1\nbasicConstraints=CA:FALSE\nkeyUsage=digitalSignature,keyEncipherment\nextendedKeyUsage=serverAuth\n";
+    std::fs::write(dir.join("server.ext"), extensions).unwrap();
+    openssl(&[
+        "x509", "-req", "-in", "server.csr", "-CA", "ca.pem", "-CAkey", "ca.key", "-CAcreateserial", "-out", "server.pem", "-days", "2",
+        "-extfile", "server.ext",
+    ]);
+}
+
+/// nginx terminating TLS on `port` with `dir`'s certificate, round robin to `replicas`.
+fn tls_nginx(dir: &Path, port: u16, replicas: &[u16]) -> Nginx {
+    std::fs::create_dir_all(dir.join("tmp")).unwrap();
+    let servers: String = replicas.iter().map(|p| format!("        server 127.0.0.1:{p};\n")).collect();
+    let conf = format!(
+        "worker_processes 1;\npid nginx.pid;\nerror_log error.log warn;\nevents {{ worker_connections 256; }}\nhttp {{\n    access_log off;\n    \
+         client_body_temp_path tmp/body;\n    proxy_temp_path tmp/proxy;\n    fastcgi_temp_path tmp/fastcgi;\n    uwsgi_temp_path tmp/uwsgi;\n    \
+         scgi_temp_path tmp/scgi;\n    upstream penumbra {{\n{servers}    }}\n    server {{\n        listen 127.0.0.1:{port} ssl;\n        \
+         ssl_certificate server.pem;\n        ssl_certificate_key server.key;\n        proxy_http_version 1.1;\n        proxy_buffering off;\n        \
+         location / {{ proxy_pass http://penumbra; }}\n    }}\n}}\n"
+    );
+    std::fs::write(dir.join("nginx.conf"), conf).unwrap();
+    let binary = if Path::new("/usr/sbin/nginx").exists() { "/usr/sbin/nginx" } else { "nginx" };
+    let nginx = Nginx(
+        Command::new(binary)
+            .arg("-p")
+            .arg(dir)
+            .arg("-c")
+            .arg(dir.join("nginx.conf"))
+            .args(["-g", "daemon off;"])
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .expect("nginx (apt-get install nginx)"),
+    );
+    let up = || std::net::TcpStream::connect(("127.0.0.1", port)).is_ok();
+    assert!(wait_until(Duration::from_secs(20), up).is_some(), "nginx did not listen");
+    nginx
+}
+
+/// A tool's path to a secured cluster: two replicas on Redis that need a token, behind nginx
+/// terminating TLS with a certificate from a private CA made here. `penumbra submit` and
+/// `penumbra jobs` reach it over https with `--ca-cert` and a token; without the CA, or with
+/// another one, they fail in one line. Twins of one submission sent to both replicas at once
+/// make one job, and both replicas list the same jobs.
+#[test]
+fn tools_reach_a_tls_cluster_with_a_token_and_twins_make_one_job() {
+    let work = std::env::temp_dir().join(format!("penumbra-tls-{}-{}", std::process::id(), free_port()));
+    std::fs::create_dir_all(&work).unwrap();
+    make_certificates(&work);
+    let token = "cluster-token-0123456789abcdef";
+    std::fs::write(work.join("tokens"), format!("{token}\n")).unwrap();
+    let (redis_port, _redis) = start_redis();
+    let store = format!("redis://127.0.0.1:{redis_port}/0");
+    let ports = [free_port(), free_port()];
+    let tokens = work.join("tokens").display().to_string();
+    let _replicas: Vec<Child> =
+        ports.iter().map(|&port| daemon(port, &["--no-warm-up", "--job-store", &store, "--auth-token-file", &tokens])).collect();
+    for &port in &ports {
+        wait_ready(port);
+    }
+    let tls_port = free_port();
+    std::fs::create_dir_all(work.join("nginx")).unwrap();
+    std::fs::copy(work.join("server.pem"), work.join("nginx/server.pem")).unwrap();
+    std::fs::copy(work.join("server.key"), work.join("nginx/server.key")).unwrap();
+    let _nginx = tls_nginx(&work.join("nginx"), tls_port, &ports);
+    let server = format!("https://127.0.0.1:{tls_port}");
+    std::fs::write(work.join("job.json"), r#"{"scene": {"builtin": "torus"}, "method": {"name": "pcss"}, "output": {"width": 96, "height": 64}}"#).unwrap();
+    let penumbra = |args: &[&str], ca: Option<&str>| {
+        let mut command = Command::new(env!("CARGO_BIN_EXE_penumbra"));
+        command.args(args).args(["--server", &server, "--token-file", &tokens, "--retries", "3"]).env_remove("PENUMBRA_TOKEN");
+        if let Some(ca) = ca {
+            command.arg("--ca-cert").arg(work.join(ca));
+        }
+        command.output().unwrap()
+    };
+    let out = work.join("out.png").display().to_string();
+    let job = work.join("job.json").display().to_string();
+    let submitted = penumbra(&["submit", &job, "--quiet", "-o", &out], Some("ca.pem"));
+    assert!(submitted.status.success(), "{}", String::from_utf8_lossy(&submitted.stderr));
+    assert_eq!(png_width(&std::fs::read(&out).unwrap()), 96);
+    for ca in [None, Some("other-ca.pem")] {
+        let refused = penumbra(&["submit", &job, "--quiet", "-o", &out], ca);
+        let stderr = String::from_utf8_lossy(&refused.stderr);
+        assert_eq!(refused.status.code(), Some(2), "{stderr}");
+        assert!(stderr.trim().lines().count() == 1 && stderr.contains("certificate") && !stderr.contains("panicked"), "{ca:?}: {stderr}");
+    }
+
+    // Twins of one submission, four to each replica at once: one job.
+    let body = r#"{"scene": {"builtin": "torus"}, "method": {"name": "hard"}, "output": {"width": 64, "height": 48}}"#;
+    let bearer = format!("authorization: Bearer {token}");
+    let ids: std::collections::HashSet<String> = std::thread::scope(|scope| {
+        let twins: Vec<_> = (0..8)
+            .map(|k| {
+                let (port, bearer) = (ports[k % 2], &bearer);
+                scope.spawn(move || {
+                    let (status, answer) =
+                        http_with("POST", &format!("http://127.0.0.1:{port}/v1/jobs"), Some(body), &[bearer, "idempotency-key: twin-of-a-lost-answer"]).unwrap();
+                    assert_eq!(status, 202, "{}", String::from_utf8_lossy(&answer));
+                    json(&answer)["id"].as_str().unwrap().to_owned()
+                })
+            })
+            .collect();
+        twins.into_iter().map(|t| t.join().unwrap()).collect()
+    });
+    assert_eq!(ids.len(), 1, "twins on two replicas made {ids:?}");
+    let twin = ids.into_iter().next().unwrap();
+    let (status, answer) = http_with("POST", &format!("http://127.0.0.1:{}/v1/jobs", ports[0]), Some(&body.replace("64", "80")), &[&bearer, "idempotency-key: twin-of-a-lost-answer"]).unwrap();
+    assert_eq!((status, json(&answer)["error"]["code"].as_str()), (422, Some("idempotency_key_reused")));
+
+    // Every replica lists the same jobs, newest first; so does the client through TLS.
+    let listing = |port: u16| {
+        let (status, page) = http_with("GET", &format!("http://127.0.0.1:{port}/v1/jobs?limit=10"), None, &[&bearer]).unwrap();
+        assert_eq!(status, 200);
+        json(&page)["jobs"].as_array().unwrap().iter().map(|j| j["id"].as_str().unwrap().to_owned()).collect::<Vec<_>>()
+    };
+    assert_eq!(listing(ports[0]), listing(ports[1]));
+    assert_eq!(listing(ports[0]).first(), Some(&twin));
+    let listed = penumbra(&["jobs", "list", "--json"], Some("ca.pem"));
+    assert!(listed.status.success(), "{}", String::from_utf8_lossy(&listed.stderr));
+    let jobs = json(&listed.stdout);
+    assert_eq!(jobs.as_array().unwrap().len(), 2, "the submit and the twin: {jobs}");
+    let waited = penumbra(&["jobs", "wait", &twin], Some("ca.pem"));
+    assert!(waited.status.success(), "{}", String::from_utf8_lossy(&waited.stderr));
+    std::fs::remove_dir_all(&work).ok();
+}
