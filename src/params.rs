@@ -237,6 +237,12 @@ impl Params {
     }
 }
 
+/// A JSON whole number, written `8` or `8.0`: JSON Schema counts both as an integer, and so
+/// does the contract. None for a fraction, or a float too large to hold every integer.
+pub fn whole_number(value: &Value) -> Option<i64> {
+    value.as_i64().or_else(|| value.as_f64().filter(|x| x.fract() == 0.0 && x.abs() <= 2f64.powi(53)).map(|x| x as i64))
+}
+
 fn parse_one(spec: &ParamSpec, value: Option<&Value>) -> JobResult<ParamValue> {
     let field = || format!("method.{}", spec.name);
     Ok(match (spec.kind, value) {
@@ -246,7 +252,7 @@ fn parse_one(spec: &ParamSpec, value: Option<&Value>) -> JobResult<ParamValue> {
             _ => return Err(JobError::invalid(field(), format!("must be a number in [{min}, {max}]"))),
         },
         (ParamKind::Integer { default, .. }, None) => ParamValue::Integer(default),
-        (ParamKind::Integer { min, max, .. }, Some(v)) => match v.as_i64() {
+        (ParamKind::Integer { min, max, .. }, Some(v)) => match whole_number(v) {
             Some(x) if (min..=max).contains(&x) => ParamValue::Integer(x),
             _ => return Err(JobError::invalid(field(), format!("must be an integer in [{min}, {max}]"))),
         },

@@ -60,6 +60,7 @@ impl Default for MethodSpec {
 #[serde(deny_unknown_fields, default)]
 pub struct ShadowMapSpec {
     /// Side of the square light-space shadow map in texels.
+    #[serde(deserialize_with = "whole_number")]
     pub resolution: u32,
 }
 
@@ -99,7 +100,9 @@ impl OutputFormat {
 #[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct OutputSpec {
+    #[serde(deserialize_with = "whole_number")]
     pub width: u32,
+    #[serde(deserialize_with = "whole_number")]
     pub height: u32,
     pub format: OutputFormat,
     /// Exposure in stops applied before the sRGB encoding of PNG output (EXR stays linear).
@@ -249,9 +252,12 @@ impl Job {
     }
 
     /// Range checks that need neither a scene nor the methods' registry: output and
-    /// shadow-map sizes, exposure, ambient. The method, its parameters and built-in names are
-    /// checked by `engine::check_job`; camera and light once merged with the scene's defaults.
+    /// shadow-map sizes, exposure, ambient, the light's size and intensity. The method, its
+    /// parameters and built-in names are checked by `engine::check_job`; camera and light
+    /// directions once merged with the scene's defaults.
     pub fn validate(&self, limits: &Limits) -> JobResult<()> {
+        self.light.check_given()?;
+        self.camera.check_given()?;
         let out = &self.output;
         check_dim("output.width", out.width, limits.max_output_dim)?;
         check_dim("output.height", out.height, limits.max_output_dim)?;
@@ -275,13 +281,87 @@ impl Job {
         }
         if let Some(ambient) = self.ambient {
             for (i, a) in ambient.iter().enumerate() {
-                if !a.is_finite() || *a < 0.0 {
-                    return Err(JobError::invalid(format!("ambient[{i}]"), "must be a finite number ≥ 0"));
+                if !a.is_finite() || !(0.0..=MAX_LIGHT_INTENSITY).contains(a) {
+                    return Err(JobError::invalid(format!("ambient[{i}]"), format!("must be a number in [0, {MAX_LIGHT_INTENSITY}]")));
                 }
             }
         }
         Ok(())
     }
+}
+
+/// A whole number, written `161` or `161.0` (`params::whole_number`); `161.5`, a negative
+/// number or one past `u32` is refused.
+fn whole_number<'de, D: serde::Deserializer<'de>>(deserializer: D) -> Result<u32, D::Error> {
+    let number = serde_json::Number::deserialize(deserializer)?;
+    crate::params::whole_number(&Value::Number(number.clone()))
+        .and_then(|n| u32::try_from(n).ok())
+        .ok_or_else(|| serde::de::Error::custom(format!("expected a whole number from 0 to {}, found {number}", u32::MAX)))
+}
+
+/// Largest coordinate of a camera's points and vectors, metres.
+pub const MAX_COORDINATE: f32 = 1e7;
+
+impl CameraSpec {
+    /// The ranges of the fields given, alone: points and vectors finite within ±10⁷, the
+    /// field of view in (0, 180)°, near and far finite and > 0, far beyond near. Checked at
+    /// submission (a 202 never fails later for these), and by the renderer on the camera
+    /// merged with a scene's defaults, with what needs the scene (target ≠ eye, up not along
+    /// the view).
+    pub fn check_given(&self) -> JobResult<()> {
+        for (name, v) in [("camera.eye", self.eye), ("camera.target", self.target), ("camera.up", self.up)] {
+            if v.is_some_and(|v| v.iter().any(|c| !c.is_finite() || c.abs() > MAX_COORDINATE)) {
+                return Err(JobError::invalid(name, format!("must be finite, within ±{MAX_COORDINATE}")));
+            }
+        }
+        if self.fov_y_deg.is_some_and(|f| !(f.is_finite() && f > 0.0 && f < 180.0)) {
+            return Err(JobError::invalid("camera.fov_y_deg", "must be in (0, 180) degrees"));
+        }
+        if self.near.is_some_and(|n| !(n.is_finite() && n > 0.0)) {
+            return Err(JobError::invalid("camera.near", "must be a finite number > 0"));
+        }
+        if self.far.is_some_and(|f| !(f.is_finite() && f > 0.0 && self.near.is_none_or(|n| f > n))) {
+            return Err(JobError::invalid("camera.far", "must be finite and greater than camera.near"));
+        }
+        Ok(())
+    }
+}
+
+impl LightSpec {
+    /// The ranges of the fields given, alone: points and vectors finite within ±10⁷, size
+    /// and intensity (`check_light_size_and_intensity`). Checked at submission; the renderer
+    /// checks the light merged with a scene's defaults, with what needs the whole light (a
+    /// non-zero direction, `up` not along it).
+    pub fn check_given(&self) -> JobResult<()> {
+        for (name, v) in [("light.center", self.center), ("light.direction", self.direction), ("light.up", self.up)] {
+            if v.is_some_and(|v| v.iter().any(|c| !c.is_finite() || c.abs() > MAX_COORDINATE)) {
+                return Err(JobError::invalid(name, format!("must be finite, within ±{MAX_COORDINATE}")));
+            }
+        }
+        check_light_size_and_intensity(self.size, self.intensity)
+    }
+}
+
+/// Largest light side, metres.
+pub const MAX_LIGHT_SIZE_M: f32 = 1e4;
+/// Largest light intensity. Values are read as 32-bit floats: every integer up to 2²⁴ is
+/// exact, so one past either bound is refused as sent, not rounded onto the bound.
+pub const MAX_LIGHT_INTENSITY: f32 = 1e6;
+
+/// The light's size (each side in (0, 10⁴] m) and intensity ([0, 10⁶]), where given: checked
+/// at submission, and again by `AreaLight::new` on the values merged with a scene's defaults.
+pub fn check_light_size_and_intensity(size: Option<[f32; 2]>, intensity: Option<f32>) -> JobResult<()> {
+    for (i, s) in size.into_iter().flatten().enumerate() {
+        if !s.is_finite() || s <= 0.0 || s > MAX_LIGHT_SIZE_M {
+            return Err(JobError::invalid(format!("light.size[{i}]"), format!("must be in (0, {MAX_LIGHT_SIZE_M}] metres")));
+        }
+    }
+    if let Some(intensity) = intensity {
+        if !intensity.is_finite() || !(0.0..=MAX_LIGHT_INTENSITY).contains(&intensity) {
+            return Err(JobError::invalid("light.intensity", format!("must be a finite number in [0, {MAX_LIGHT_INTENSITY}]")));
+        }
+    }
+    Ok(())
 }
 
 fn check_dim(field: &str, value: u32, max: u32) -> JobResult<()> {

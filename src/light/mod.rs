@@ -49,14 +49,7 @@ impl AreaLight {
         }
         let u = up_in_plane.normalize();
         let r = u.cross(n).normalize();
-        for (i, s) in size_m.to_array().into_iter().enumerate() {
-            if !s.is_finite() || s <= 0.0 || s > 1e4 {
-                return Err(JobError::invalid(format!("light.size[{i}]"), "must be in (0, 10000] metres"));
-            }
-        }
-        if !intensity.is_finite() || !(0.0..=1e9).contains(&intensity) {
-            return Err(JobError::invalid("light.intensity", "must be a finite number in [0, 1e9]"));
-        }
+        crate::job::check_light_size_and_intensity(Some(size_m.to_array()), Some(intensity))?;
         Ok(Self { center, n, u, r, size_m, intensity })
     }
 

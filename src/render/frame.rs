@@ -303,16 +303,17 @@ fn resolve_camera(
     far: Option<f32>,
     corners: &[Vec3; 8],
 ) -> JobResult<Camera> {
-    for (name, v) in [("camera.eye", eye), ("camera.target", target), ("camera.up", up)] {
-        if !v.is_finite() || v.abs().max_element() > 1e7 {
-            return Err(JobError::invalid(name, "must be finite, within ±1e7"));
-        }
-    }
+    let given = crate::job::CameraSpec {
+        eye: Some(eye.to_array()),
+        target: Some(target.to_array()),
+        up: Some(up.to_array()),
+        fov_y_deg: Some(fov_y_deg),
+        near,
+        far,
+    };
+    given.check_given()?;
     if (target - eye).length() < 1e-6 {
         return Err(JobError::invalid("camera.target", "must differ from camera.eye"));
-    }
-    if !(fov_y_deg.is_finite() && fov_y_deg > 0.0 && fov_y_deg < 180.0) {
-        return Err(JobError::invalid("camera.fov_y_deg", "must be in (0, 180) degrees"));
     }
     let forward = (target - eye).normalize();
     if up.length() < 1e-6 || up.normalize().cross(forward).length() < 1e-4 {

@@ -90,7 +90,7 @@ pub fn build(name: &str, params: &Map<String, Value>, field: &str, limits: &Limi
 
 fn integer_param(params: &Map<String, Value>, key: &str, field: &str, default: u64, min: u64, max: u64) -> JobResult<u64> {
     let Some(value) = params.get(key) else { return Ok(default) };
-    match value.as_u64() {
+    match crate::params::whole_number(value).and_then(|v| u64::try_from(v).ok()) {
         Some(v) if (min..=max).contains(&v) => Ok(v),
         Some(v) if v > max => {
             Err(JobError::field(ErrorCode::LimitExceeded, format!("{field}.{key}"), format!("{v} exceeds the limit of {max}")))

@@ -1,13 +1,14 @@
 //! The parts of `api/openapi.json` made from the code, so that the document cannot drift from
 //! it: `Method` as a `oneOf` over the registry with `name` as its discriminator (each method's
 //! parameters typed with their ranges, defaults and choices, as `GET /v1/methods` lists them),
-//! the built-in scenes and light images, the listing's `method` filter, and the example jobs
+//! the built-in scenes (`SceneRef`) and light images (`LightImageRef`), the listing's `method` filter, and the example jobs
 //! of `api/examples/` on the operations that take a job. The test
 //! `openapi_document_is_generated_from_the_code` (tests/api.rs) holds the file to this, and
 //! rewrites it with `PENUMBRA_BLESS=1`.
 
 use serde_json::{json, Map, Value};
 
+use crate::job::Limits;
 use crate::light::BUILTIN_LIGHT_IMAGES;
 use crate::methods::{ParamSpec, REGISTRY};
 use crate::params::ParamKind;
@@ -21,7 +22,7 @@ pub fn generate(doc: &mut Value, examples: &[(String, Value)]) {
     for method in REGISTRY.iter() {
         let schema_name = format!("Method{}", pascal_case(method.name()));
         let reference = format!("#/components/schemas/{schema_name}");
-        schemas[&schema_name] = method_schema(method.name(), method.summary(), method.params());
+        schemas[&schema_name] = method_schema(&schema_name, method.name(), method.summary(), method.params(), &Limits::default());
         mapping.insert(method.name().to_owned(), json!(reference));
         one_of.push(json!({"$ref": reference}));
     }
@@ -31,8 +32,8 @@ pub fn generate(doc: &mut Value, examples: &[(String, Value)]) {
         "oneOf": one_of,
         "discriminator": {"propertyName": "name", "mapping": mapping},
     });
-    let builtins: Vec<&str> = BUILTIN_SCENES.iter().chain(BUILTIN_LIGHT_IMAGES.iter()).copied().collect();
-    schemas["AssetRef"]["properties"]["builtin"]["enum"] = json!(builtins);
+    schemas["SceneRef"]["properties"]["builtin"]["enum"] = json!(BUILTIN_SCENES);
+    schemas["LightImageRef"]["properties"]["builtin"]["enum"] = json!(BUILTIN_LIGHT_IMAGES);
 
     let names: Vec<&str> = REGISTRY.iter().map(|m| m.name()).collect();
     if let Some(parameters) = doc["paths"]["/v1/jobs"]["get"]["parameters"].as_array_mut() {
@@ -49,14 +50,19 @@ pub fn generate(doc: &mut Value, examples: &[(String, Value)]) {
 }
 
 /// One method's schema: `name` its constant, each parameter typed and bounded by the
-/// method's own range (an operator's cap may lower a maximum: `GET /v1/limits`).
-fn method_schema(name: &str, summary: &str, params: &[ParamSpec]) -> Value {
+/// method's own range under the operator's default caps (`--max-samples`, `--max-rounds`: a
+/// server's own are in `GET /v1/limits`).
+/// Its title is the schema's name, which generated clients name the type after.
+fn method_schema(title: &str, name: &str, summary: &str, params: &[ParamSpec], limits: &Limits) -> Value {
     let mut properties = Map::new();
     properties.insert("name".into(), json!({"type": "string", "const": name}));
     for param in params {
         let mut schema = match param.kind {
             ParamKind::Float { default, min, max } => json!({"type": "number", "minimum": min, "maximum": max, "default": default}),
-            ParamKind::Integer { default, min, max } => json!({"type": "integer", "minimum": min, "maximum": max, "default": default}),
+            ParamKind::Integer { default, min, max } => {
+                let max = param.cap.map_or(max, |cap| max.min(limits.cap(cap).0));
+                json!({"type": "integer", "minimum": min, "maximum": max, "default": default})
+            }
             ParamKind::Boolean { default } => json!({"type": "boolean", "default": default}),
             ParamKind::Choice { default, options } => json!({"type": "string", "enum": options, "default": default}),
         };
@@ -65,7 +71,7 @@ fn method_schema(name: &str, summary: &str, params: &[ParamSpec]) -> Value {
     }
     json!({
         "type": "object",
-        "title": name,
+        "title": title,
         "description": summary,
         "required": ["name"],
         "properties": properties,
@@ -89,7 +95,8 @@ mod tests {
 
     #[test]
     fn every_method_is_one_typed_branch_of_method() {
-        let mut doc = json!({"components": {"schemas": {"AssetRef": {"properties": {"builtin": {}}}}}, "paths": {}});
+        let builtin = json!({"properties": {"builtin": {}}});
+        let mut doc = json!({"components": {"schemas": {"SceneRef": builtin, "LightImageRef": builtin}}, "paths": {}});
         generate(&mut doc, &[("torus".into(), json!({"scene": {"builtin": "torus"}}))]);
         let method = &doc["components"]["schemas"]["Method"];
         assert_eq!(method["oneOf"].as_array().unwrap().len(), REGISTRY.len());
@@ -98,7 +105,8 @@ mod tests {
         assert_eq!(reference["properties"]["name"]["const"], "reference");
         assert_eq!(reference["properties"]["samples"]["type"], "integer");
         assert_eq!(reference["additionalProperties"], false);
-        assert!(doc["components"]["schemas"]["AssetRef"]["properties"]["builtin"]["enum"].as_array().unwrap().contains(&json!("mosaic")));
+        assert!(doc["components"]["schemas"]["LightImageRef"]["properties"]["builtin"]["enum"].as_array().unwrap().contains(&json!("mosaic")));
+        assert!(!doc["components"]["schemas"]["SceneRef"]["properties"]["builtin"]["enum"].as_array().unwrap().contains(&json!("mosaic")));
         assert_eq!(pascal_case("chun-oh"), "ChunOh");
     }
 }

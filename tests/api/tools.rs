@@ -295,7 +295,8 @@ async fn request_ids_reach_the_access_log_and_the_jobs_log_lines() {
 }
 
 /// The document is what the code generates (methods, built-ins, examples), every operation
-/// has a unique `operationId` and a tag, and `/v1/methods` agrees with the document's
+/// has a unique `operationId` and a tag, and `/v1/methods` (names, parameters, defaults,
+/// choices) and `/v1/limits` (ranges under the default caps) agree with the document's
 /// methods. `PENUMBRA_BLESS=1` rewrites the generated parts.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn openapi_document_is_generated_from_the_code() {
@@ -325,6 +326,7 @@ async fn openapi_document_is_generated_from_the_code() {
     }
     let (base, _dir) = start().await;
     let catalogue: Value = reqwest::get(format!("{base}/v1/methods")).await.unwrap().json().await.unwrap();
+    let limits: Value = reqwest::get(format!("{base}/v1/limits")).await.unwrap().json().await.unwrap();
     let schemas = &generated["components"]["schemas"];
     let branches = schemas["Method"]["oneOf"].as_array().unwrap();
     assert_eq!(branches.len(), catalogue["methods"].as_array().unwrap().len());
@@ -334,19 +336,19 @@ async fn openapi_document_is_generated_from_the_code() {
         assert_eq!(schema["properties"]["name"]["const"], method["name"]);
         let params = method["params"].as_array().unwrap();
         assert_eq!(schema["properties"].as_object().unwrap().len(), params.len() + 1, "{}", method["name"]);
-        for param in params {
+        let capped = limits["method_params"][method["name"].as_str().unwrap()].as_array().unwrap();
+        for (param, capped) in params.iter().zip(capped) {
             let typed = &schema["properties"][param["name"].as_str().unwrap()];
             assert_eq!(typed["default"], param["default"], "{}.{}", method["name"], param["name"]);
-            assert_eq!((&typed["minimum"], &typed["maximum"]), (param.get("min").unwrap_or(&Value::Null), param.get("max").unwrap_or(&Value::Null)));
+            let range = (capped.get("min").unwrap_or(&Value::Null), capped.get("max").unwrap_or(&Value::Null));
+            assert_eq!((&typed["minimum"], &typed["maximum"]), range, "{}.{}", method["name"], param["name"]);
             if let Some(options) = param.get("options") {
                 assert_eq!(&typed["enum"], options);
             }
         }
     }
-    let builtins = &schemas["AssetRef"]["properties"]["builtin"]["enum"];
-    for name in catalogue["scenes"].as_array().unwrap().iter().chain(catalogue["light_images"].as_array().unwrap()) {
-        assert!(builtins.as_array().unwrap().contains(name), "{name}");
-    }
+    assert_eq!(schemas["SceneRef"]["properties"]["builtin"]["enum"], catalogue["scenes"]);
+    assert_eq!(schemas["LightImageRef"]["properties"]["builtin"]["enum"], catalogue["light_images"]);
 }
 
 /// `penumbra` run with `args` (and environment), off the async workers: its output.
