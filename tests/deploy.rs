@@ -953,11 +953,25 @@ fn make_certificates(dir: &Path) {
         openssl(&["req", "-x509", "-newkey", "rsa:2048", "-nodes", "-keyout", &key, "-out", &pem, "-days", "2", "-subj", &subject]);
     }
     openssl(&["req", "-newkey", "rsa:2048", "-nodes", "-keyout", "server.key", "-out", "server.csr", "-subj", "/CN=127.0.0.1"]);
-    let extensions = "subjectAltName=IP:127.0.0.1\nbasicConstraints=CA:FALSE\nkeyUsage=digitalSignature,keyEncipherment\nextendedKeyUsage=serverAuth\n";
+    let extensions =
+        "subjectAltName=IP:127.0.0.1\nbasicConstraints=CA:FALSE\nkeyUsage=digitalSignature,keyEncipherment\nextendedKeyUsage=serverAuth\n";
     std::fs::write(dir.join("server.ext"), extensions).unwrap();
     openssl(&[
-        "x509", "-req", "-in", "server.csr", "-CA", "ca.pem", "-CAkey", "ca.key", "-CAcreateserial", "-out", "server.pem", "-days", "2",
-        "-extfile", "server.ext",
+        "x509",
+        "-req",
+        "-in",
+        "server.csr",
+        "-CA",
+        "ca.pem",
+        "-CAkey",
+        "ca.key",
+        "-CAcreateserial",
+        "-out",
+        "server.pem",
+        "-days",
+        "2",
+        "-extfile",
+        "server.ext",
     ]);
 }
 
@@ -1018,7 +1032,11 @@ fn tools_reach_a_tls_cluster_with_a_token_and_twins_make_one_job() {
     std::fs::copy(work.join("server.key"), work.join("nginx/server.key")).unwrap();
     let _nginx = tls_nginx(&work.join("nginx"), tls_port, &ports);
     let server = format!("https://127.0.0.1:{tls_port}");
-    std::fs::write(work.join("job.json"), r#"{"scene": {"builtin": "torus"}, "method": {"name": "pcss"}, "output": {"width": 96, "height": 64}}"#).unwrap();
+    std::fs::write(
+        work.join("job.json"),
+        r#"{"scene": {"builtin": "torus"}, "method": {"name": "pcss"}, "output": {"width": 96, "height": 64}}"#,
+    )
+    .unwrap();
     let penumbra = |args: &[&str], ca: Option<&str>| {
         let mut command = Command::new(env!("CARGO_BIN_EXE_penumbra"));
         command.args(args).args(["--server", &server, "--token-file", &tokens, "--retries", "3"]).env_remove("PENUMBRA_TOKEN");
@@ -1047,8 +1065,13 @@ fn tools_reach_a_tls_cluster_with_a_token_and_twins_make_one_job() {
             .map(|k| {
                 let (port, bearer) = (ports[k % 2], &bearer);
                 scope.spawn(move || {
-                    let (status, answer) =
-                        http_with("POST", &format!("http://127.0.0.1:{port}/v1/jobs"), Some(body), &[bearer, "idempotency-key: twin-of-a-lost-answer"]).unwrap();
+                    let (status, answer) = http_with(
+                        "POST",
+                        &format!("http://127.0.0.1:{port}/v1/jobs"),
+                        Some(body),
+                        &[bearer, "idempotency-key: twin-of-a-lost-answer"],
+                    )
+                    .unwrap();
                     assert_eq!(status, 202, "{}", String::from_utf8_lossy(&answer));
                     json(&answer)["id"].as_str().unwrap().to_owned()
                 })
@@ -1058,7 +1081,13 @@ fn tools_reach_a_tls_cluster_with_a_token_and_twins_make_one_job() {
     });
     assert_eq!(ids.len(), 1, "twins on two replicas made {ids:?}");
     let twin = ids.into_iter().next().unwrap();
-    let (status, answer) = http_with("POST", &format!("http://127.0.0.1:{}/v1/jobs", ports[0]), Some(&body.replace("64", "80")), &[&bearer, "idempotency-key: twin-of-a-lost-answer"]).unwrap();
+    let (status, answer) = http_with(
+        "POST",
+        &format!("http://127.0.0.1:{}/v1/jobs", ports[0]),
+        Some(&body.replace("64", "80")),
+        &[&bearer, "idempotency-key: twin-of-a-lost-answer"],
+    )
+    .unwrap();
     assert_eq!((status, json(&answer)["error"]["code"].as_str()), (422, Some("idempotency_key_reused")));
 
     // Every replica lists the same jobs, newest first; so does the client through TLS.

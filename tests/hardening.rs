@@ -113,7 +113,9 @@ fn the_api_conforms_to_its_openapi_document_under_schemathesis() {
     let access = std::fs::read_to_string(&log).unwrap();
     std::fs::remove_file(&log).ok();
     let answered = |route: &str, status: &str| {
-        access.lines().any(|l| l.contains("penumbra::access") && l.contains(&format!("route=\"{route}\"")) && l.contains(&format!("status={status}")))
+        access
+            .lines()
+            .any(|l| l.contains("penumbra::access") && l.contains(&format!("route=\"{route}\"")) && l.contains(&format!("status={status}")))
     };
     assert!(answered("/v1/jobs/{id}", "200"), "the stateful phase never read a submitted job's record");
     assert!(answered("/v1/jobs/{id}", "202"), "the stateful phase never cancelled a submitted job");
@@ -166,10 +168,16 @@ image = get_job_image.sync_detailed(client=raw, id=accepted.id)
 assert image.status_code == 200 and image.content[1:4] == b"PNG", image.status_code
 print("generated client:", accepted.id, len(image.content), "bytes")
 "#;
-    let run = Command::new(tools_dir().join("bin/python")).arg("-c").arg(script).arg(&daemon.base).env("PYTHONPATH", &work).output().unwrap();
+    let run =
+        Command::new(tools_dir().join("bin/python")).arg("-c").arg(script).arg(&daemon.base).env("PYTHONPATH", &work).output().unwrap();
     drop(daemon);
     std::fs::remove_dir_all(&work).ok();
-    assert!(run.status.success(), "the generated client failed:\n{}\n{}", String::from_utf8_lossy(&run.stdout), String::from_utf8_lossy(&run.stderr));
+    assert!(
+        run.status.success(),
+        "the generated client failed:\n{}\n{}",
+        String::from_utf8_lossy(&run.stdout),
+        String::from_utf8_lossy(&run.stderr)
+    );
 }
 
 /// Load, bounded: `deploy/load.py` drives the real daemon on loopback with 16

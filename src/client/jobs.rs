@@ -64,7 +64,11 @@ pub async fn run_jobs(command: &JobsCommand) -> Result<String, ClientError> {
         JobsAction::Cancel { id } => {
             let url = record(id);
             let job = client.json(|http, base| http.delete(format!("{base}{url}"))).await?;
-            Ok(if command.json { serde_json::to_string_pretty(&job)? } else { format!("cancelling {id}: {}", job["status"].as_str().unwrap_or("?")) })
+            Ok(if command.json {
+                serde_json::to_string_pretty(&job)?
+            } else {
+                format!("cancelling {id}: {}", job["status"].as_str().unwrap_or("?"))
+            })
         }
         JobsAction::Wait { id, output } => {
             let job = wait(&mut client, id).await?;
@@ -107,7 +111,8 @@ async fn wait(client: &mut Client, id: &str) -> Result<Value, ClientError> {
     let events = format!("/v1/jobs/{}/events", urlencode(id));
     loop {
         let response = expect_success(client.send(|http, base| http.get(format!("{base}{events}"))).await?).await?;
-        let mut report = super::SubmitReport { id: id.to_owned(), uploaded: vec![], reused: vec![], done: 0, total: 0, output_bytes: 0, retries: 0 };
+        let mut report =
+            super::SubmitReport { id: id.to_owned(), uploaded: vec![], reused: vec![], done: 0, total: 0, output_bytes: 0, retries: 0 };
         if super::submit::follow_events(response, &mut report, &|_, _| {}).await.is_some() {
             break;
         }
@@ -166,7 +171,8 @@ fn human_age(seconds: u64) -> String {
 
 /// One job's record in a few lines.
 fn summary(job: &Value) -> String {
-    let mut lines = vec![format!("id      {}", job["id"].as_str().unwrap_or("?")), format!("status  {}", job["status"].as_str().unwrap_or("?"))];
+    let mut lines =
+        vec![format!("id      {}", job["id"].as_str().unwrap_or("?")), format!("status  {}", job["status"].as_str().unwrap_or("?"))];
     if let Some(method) = job["method"].as_str() {
         lines.push(format!("method  {method}"));
     }

@@ -104,7 +104,10 @@ impl Client {
     /// Sends the request `build` makes (again on each attempt) until an answer that is not
     /// worth retrying: a connection error, 429, 503 or 507 waits and tries again, up to the
     /// attempts; 401 is `Unauthorized`.
-    pub async fn send(&mut self, build: impl Fn(&reqwest::Client, &str) -> reqwest::RequestBuilder) -> Result<reqwest::Response, ClientError> {
+    pub async fn send(
+        &mut self,
+        build: impl Fn(&reqwest::Client, &str) -> reqwest::RequestBuilder,
+    ) -> Result<reqwest::Response, ClientError> {
         let mut last = String::new();
         for attempt in 0..self.attempts {
             if attempt > 0 {
@@ -134,7 +137,10 @@ impl Client {
     }
 
     /// `send`, then the answer as JSON when it is a success; the server's error otherwise.
-    pub async fn json(&mut self, build: impl Fn(&reqwest::Client, &str) -> reqwest::RequestBuilder) -> Result<serde_json::Value, ClientError> {
+    pub async fn json(
+        &mut self,
+        build: impl Fn(&reqwest::Client, &str) -> reqwest::RequestBuilder,
+    ) -> Result<serde_json::Value, ClientError> {
         let response = expect_success(self.send(build).await?).await?;
         response.json().await.map_err(|e| ClientError::Job(format!("the answer is not JSON: {}", chain(&e))))
     }

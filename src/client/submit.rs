@@ -161,7 +161,11 @@ fn routing_key(job: &Value) -> String {
 
 /// Reads server-sent events, reporting progress, until a final one (returned) or the end of
 /// the stream without one (None).
-pub(super) async fn follow_events(response: reqwest::Response, report: &mut SubmitReport, progress: &(dyn Fn(u64, u64) + Sync)) -> Option<Value> {
+pub(super) async fn follow_events(
+    response: reqwest::Response,
+    report: &mut SubmitReport,
+    progress: &(dyn Fn(u64, u64) + Sync),
+) -> Option<Value> {
     let mut stream = response.bytes_stream();
     let mut buffer = String::new();
     while let Some(Ok(chunk)) = stream.next().await {

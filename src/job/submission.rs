@@ -98,7 +98,8 @@ impl Cursor {
     /// A cursor a client sent back; anything this server did not make is refused, naming
     /// `cursor`.
     pub fn decode(text: &str) -> JobResult<Self> {
-        let invalid = || JobError::field(ErrorCode::InvalidParameter, "cursor", "not a cursor this server gave (use next_cursor as it came)");
+        let invalid =
+            || JobError::field(ErrorCode::InvalidParameter, "cursor", "not a cursor this server gave (use next_cursor as it came)");
         if text.len() > 128 {
             return Err(invalid());
         }
@@ -187,7 +188,9 @@ mod tests {
     fn pages_are_newest_first_and_continue_where_they_ended() {
         let id = |n: u8| format!("{n:032x}");
         let jobs: Vec<ListedJob> = (0..7u8)
-            .map(|n| ListedJob::new(&id(n), if n % 2 == 0 { JobStatus::Succeeded } else { JobStatus::Failed }, "hard", 1000 + u64::from(n / 2)))
+            .map(|n| {
+                ListedJob::new(&id(n), if n % 2 == 0 { JobStatus::Succeeded } else { JobStatus::Failed }, "hard", 1000 + u64::from(n / 2))
+            })
             .collect();
         let all = JobFilter::default();
         let (first, next) = page(jobs.clone(), &all, None, 3);

@@ -216,9 +216,8 @@ pub(super) async fn list_jobs(
         }
         match name.as_str() {
             "status" => {
-                let status = serde_json::from_value(json!(value)).map_err(|_| {
-                    invalid("status", "status is one of queued, running, succeeded, failed, cancelled".to_owned())
-                })?;
+                let status = serde_json::from_value(json!(value))
+                    .map_err(|_| invalid("status", "status is one of queued, running, succeeded, failed, cancelled".to_owned()))?;
                 filter.status = Some(status);
             }
             "method" => {
@@ -363,7 +362,11 @@ pub(super) async fn cancel_job(State(state): State<Arc<AppState>>, Path(id): Pat
 
 /// `GET /v1/jobs/{id}/image`: the result, with its digest as a strong `ETag` (304 for an
 /// `If-None-Match` that names it) and cacheable for good: a result never changes under its id.
-pub(super) async fn job_image(State(state): State<Arc<AppState>>, Path(id): Path<String>, headers: HeaderMap) -> Result<Response, ApiError> {
+pub(super) async fn job_image(
+    State(state): State<Arc<AppState>>,
+    Path(id): Path<String>,
+    headers: HeaderMap,
+) -> Result<Response, ApiError> {
     if let Some(rendered) = state.jobs.find(&id) {
         let etag = format!("\"{}\"", rendered.image_sha256());
         if not_modified(&headers, &etag) {
@@ -432,7 +435,11 @@ fn immutable(mut response: Response, etag: &str) -> Response {
 /// `GET /v1/jobs/{id}/thumbnail`: a small PNG of a kept result (the dashboard's previews).
 /// Results never change under their id, so browsers may cache it for good; its `ETag` is the
 /// result's digest and the thumbnail's size.
-pub(super) async fn job_thumbnail(State(state): State<Arc<AppState>>, Path(id): Path<String>, headers: HeaderMap) -> Result<Response, ApiError> {
+pub(super) async fn job_thumbnail(
+    State(state): State<Arc<AppState>>,
+    Path(id): Path<String>,
+    headers: HeaderMap,
+) -> Result<Response, ApiError> {
     unless_unfinished_here(&state, &id)?;
     let rendered = state.jobs.find(&id).ok_or_else(|| unknown_job(&id))?;
     let etag = format!("\"{}-thumbnail-{THUMBNAIL_SIZE}\"", rendered.image_sha256());

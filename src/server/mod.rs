@@ -9,8 +9,8 @@ mod dashboard;
 pub mod error;
 mod job_routes;
 mod meta;
-pub mod openapi;
 pub mod metrics;
+pub mod openapi;
 mod render;
 pub mod requests;
 mod serve;
@@ -33,7 +33,9 @@ use serde_json::{json, Value};
 use crate::config::ServeConfig;
 use crate::engine::{Engine, Rendered};
 use crate::error::{ErrorCode, JobError};
-use crate::job::submission::{fingerprint, idempotency_key, unix_ms, Cursor, JobFilter, KeyedJob, ListedJob, DEFAULT_PAGE, IDEMPOTENCY_KEY, MAX_PAGE};
+use crate::job::submission::{
+    fingerprint, idempotency_key, unix_ms, Cursor, JobFilter, KeyedJob, ListedJob, DEFAULT_PAGE, IDEMPOTENCY_KEY, MAX_PAGE,
+};
 use crate::job::{Job, JobStatus};
 use crate::light::BUILTIN_LIGHT_IMAGES;
 use crate::methods::REGISTRY;
@@ -46,10 +48,10 @@ use error::{store_error, ApiError};
 use job_routes::{cancel_job, job_events, job_image, job_record, job_thumbnail, list_jobs, not_modified, submit_job, unchanged};
 use meta::{limits, methods, metrics, readyz, stats};
 use render::{image_response, job_json, render, render_blocking};
+use requests::REQUEST_ID;
 pub use serve::serve;
 use state::Admitted;
 pub use state::{AppState, Idempotency};
-use requests::REQUEST_ID;
 use upload_routes::{fetch_shared_uploads, upload_light, upload_routes, upload_scene};
 use worker::{abandoned, failure_detail, run_submitted, store_failure, work_shared_queue};
 

@@ -42,8 +42,7 @@ pub fn generate(doc: &mut Value, examples: &[(String, Value)]) {
         }
     }
 
-    let examples: Map<String, Value> =
-        examples.iter().map(|(name, job)| (name.clone(), json!({"summary": name, "value": job}))).collect();
+    let examples: Map<String, Value> = examples.iter().map(|(name, job)| (name.clone(), json!({"summary": name, "value": job}))).collect();
     for path in ["/v1/render", "/v1/jobs"] {
         doc["paths"][path]["post"]["requestBody"]["content"]["application/json"]["examples"] = Value::Object(examples.clone());
     }
@@ -105,7 +104,10 @@ mod tests {
         assert_eq!(reference["properties"]["name"]["const"], "reference");
         assert_eq!(reference["properties"]["samples"]["type"], "integer");
         assert_eq!(reference["additionalProperties"], false);
-        assert!(doc["components"]["schemas"]["LightImageRef"]["properties"]["builtin"]["enum"].as_array().unwrap().contains(&json!("mosaic")));
+        assert!(doc["components"]["schemas"]["LightImageRef"]["properties"]["builtin"]["enum"]
+            .as_array()
+            .unwrap()
+            .contains(&json!("mosaic")));
         assert!(!doc["components"]["schemas"]["SceneRef"]["properties"]["builtin"]["enum"].as_array().unwrap().contains(&json!("mosaic")));
         assert_eq!(pascal_case("chun-oh"), "ChunOh");
     }

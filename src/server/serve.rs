@@ -15,7 +15,10 @@ pub async fn serve(config: ServeConfig, engine: Arc<Engine>) -> anyhow::Result<(
     let mut state = AppState::new(engine.clone(), config.results_kept)
         .with_queue(queue)
         .with_results_ttl(ttl)
-        .with_idempotency(Idempotency::new(std::time::Duration::from_secs_f64(config.idempotency_ttl_secs.max(1.0)), config.idempotency_keys))
+        .with_idempotency(Idempotency::new(
+            std::time::Duration::from_secs_f64(config.idempotency_ttl_secs.max(1.0)),
+            config.idempotency_keys,
+        ))
         .with_cors_origins(&config.cors_origins)?;
     if let Some(path) = &config.auth_token_file {
         let auth = auth::Auth::from_file(path, config.metrics_open)?;

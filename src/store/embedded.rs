@@ -99,7 +99,8 @@ impl EmbeddedStore {
             let txn = db.begin_write().map_err(classify)?;
             {
                 let mut keys = txn.open_table(KEYS).map_err(classify)?;
-                keys.retain(|_, value| serde_json::from_slice::<KeyedJob>(value).is_ok_and(|k| k.expires_unix_ms > now)).map_err(classify)?;
+                keys.retain(|_, value| serde_json::from_slice::<KeyedJob>(value).is_ok_and(|k| k.expires_unix_ms > now))
+                    .map_err(classify)?;
             }
             txn.commit().map_err(classify)
         })

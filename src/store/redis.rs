@@ -263,7 +263,15 @@ impl JobStore for RedisStore {
         let (mut page, mut offset) = (Vec::new(), 0);
         while offset < MAX_LIST_SCAN {
             let entries: Vec<(String, f64)> = self.with(|c| {
-                redis::cmd("ZREVRANGEBYSCORE").arg(INDEX).arg(top).arg("-inf").arg("WITHSCORES").arg("LIMIT").arg(offset).arg(batch).query(c)
+                redis::cmd("ZREVRANGEBYSCORE")
+                    .arg(INDEX)
+                    .arg(top)
+                    .arg("-inf")
+                    .arg("WITHSCORES")
+                    .arg("LIMIT")
+                    .arg(offset)
+                    .arg(batch)
+                    .query(c)
             })?;
             if entries.is_empty() {
                 return Ok((page, None));

@@ -18,7 +18,12 @@ async fn start_on(store: Option<Arc<dyn JobStore>>) -> (String, tempdir::Dir, Ar
 }
 
 /// `POST /v1/jobs` with headers: status, headers and JSON body.
-async fn post_job(client: &reqwest::Client, base: &str, job: &Value, headers: &[(&str, &str)]) -> (StatusCode, reqwest::header::HeaderMap, Value) {
+async fn post_job(
+    client: &reqwest::Client,
+    base: &str,
+    job: &Value,
+    headers: &[(&str, &str)],
+) -> (StatusCode, reqwest::header::HeaderMap, Value) {
     let mut request = client.post(format!("{base}/v1/jobs")).body(job.to_string()).header("content-type", "application/json");
     for (name, value) in headers {
         request = request.header(*name, *value);
@@ -55,7 +60,11 @@ async fn an_idempotency_key_makes_one_job_in_memory_and_in_the_embedded_store() 
         assert!(headers.get("idempotent-replayed").is_none());
         let id = first["id"].as_str().unwrap().to_owned();
         // The same job, spaced and ordered otherwise: the first job, nothing new.
-        let reordered: Value = serde_json::from_str(&format!(" {{ \"output\": {}, \"light\": {}, \"scene\": {} }}", job["output"], job["light"], job["scene"])).unwrap();
+        let reordered: Value = serde_json::from_str(&format!(
+            " {{ \"output\": {}, \"light\": {}, \"scene\": {} }}",
+            job["output"], job["light"], job["scene"]
+        ))
+        .unwrap();
         let (status, headers, again) = post_job(&client, &base, &reordered, &[("idempotency-key", "retry-safe-1")]).await;
         assert_eq!((status, again["id"].as_str()), (StatusCode::ACCEPTED, Some(id.as_str())));
         assert_eq!(headers["idempotent-replayed"], "true");
@@ -80,14 +89,20 @@ async fn an_idempotency_key_makes_one_job_in_memory_and_in_the_embedded_store() 
         other["output"]["width"] = json!(80);
         let (status, _, refused) = post_job(&client, &base, &other, &[("idempotency-key", "retry-safe-1")]).await;
         assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY);
-        assert_eq!((refused["error"]["code"].as_str(), refused["error"]["field"].as_str()), (Some("idempotency_key_reused"), Some("Idempotency-Key")));
+        assert_eq!(
+            (refused["error"]["code"].as_str(), refused["error"]["field"].as_str()),
+            (Some("idempotency_key_reused"), Some("Idempotency-Key"))
+        );
         assert!(refused["error"]["message"].as_str().unwrap().contains("retry-safe-1"), "{refused}");
         // Malformed keys: refused, never stored.
         let long = "k".repeat(256);
         for bad in ["", long.as_str(), "two words"] {
             let (status, _, body) = post_job(&client, &base, &job, &[("idempotency-key", bad)]).await;
             assert_eq!(status, StatusCode::BAD_REQUEST, "{bad:?}: {body}");
-            assert_eq!((body["error"]["code"].as_str(), body["error"]["field"].as_str()), (Some("invalid_parameter"), Some("Idempotency-Key")));
+            assert_eq!(
+                (body["error"]["code"].as_str(), body["error"]["field"].as_str()),
+                (Some("invalid_parameter"), Some("Idempotency-Key"))
+            );
         }
         finished(&client, &base, &id).await;
         finished(&client, &base, twin).await;
@@ -138,7 +153,9 @@ async fn jobs_are_listed_newest_first_filtered_and_paged() {
         let (_, pcss) = listed(&client, &base, "?method=pcss&status=succeeded").await;
         let pcss: Vec<&Value> = pcss["jobs"].as_array().unwrap().iter().collect();
         assert_eq!(pcss.len(), 2);
-        assert!(pcss.iter().all(|j| j["method"] == "pcss" && j["status"] == "succeeded" && j["record"] == format!("/v1/jobs/{}", j["id"].as_str().unwrap())));
+        assert!(pcss.iter().all(|j| j["method"] == "pcss"
+            && j["status"] == "succeeded"
+            && j["record"] == format!("/v1/jobs/{}", j["id"].as_str().unwrap())));
         assert_eq!(pcss[0]["request_id"], "list-3");
         let (_, none) = listed(&client, &base, "?status=failed").await;
         assert_eq!(none["jobs"], json!([]));
@@ -154,7 +171,11 @@ async fn jobs_are_listed_newest_first_filtered_and_paged() {
         ] {
             let (status, body) = listed(&client, &base, query).await;
             assert_eq!(status, StatusCode::BAD_REQUEST, "{query}: {body}");
-            assert_eq!((body["error"]["code"].as_str(), body["error"]["field"].as_str()), (Some("invalid_parameter"), Some(field)), "{query}");
+            assert_eq!(
+                (body["error"]["code"].as_str(), body["error"]["field"].as_str()),
+                (Some("invalid_parameter"), Some(field)),
+                "{query}"
+            );
         }
     }
 }
@@ -202,7 +223,8 @@ async fn results_and_uploads_answer_304_to_their_etag() {
     assert_eq!(head.status(), StatusCode::OK);
     assert_eq!(head.headers()["etag"].to_str().unwrap(), format!("\"{upload_id}\""));
     assert_eq!(head.headers()["content-length"].to_str().unwrap(), light.len().to_string());
-    let cached = client.head(format!("{base}/v1/lights/{upload_id}")).header("if-none-match", format!("\"{upload_id}\"")).send().await.unwrap();
+    let cached =
+        client.head(format!("{base}/v1/lights/{upload_id}")).header("if-none-match", format!("\"{upload_id}\"")).send().await.unwrap();
     assert_eq!(cached.status(), StatusCode::NOT_MODIFIED);
 
     // After a restart the image comes from the store, with the same ETag.
@@ -223,7 +245,12 @@ async fn every_answer_names_its_request_and_errors_come_as_problem_details_when_
     let id_of = |response: &reqwest::Response| response.headers()["x-request-id"].to_str().unwrap().to_owned();
     let ok = client.get(format!("{base}/v1/methods")).header("x-request-id", "tool-7.run:3").send().await.unwrap();
     assert_eq!(id_of(&ok), "tool-7.run:3");
-    let traced = client.get(format!("{base}/healthz")).header("traceparent", "00-4bf92f3577b34da6a3ce929d0e0e4736-00f067aa0ba902b7-01").send().await.unwrap();
+    let traced = client
+        .get(format!("{base}/healthz"))
+        .header("traceparent", "00-4bf92f3577b34da6a3ce929d0e0e4736-00f067aa0ba902b7-01")
+        .send()
+        .await
+        .unwrap();
     assert_eq!(id_of(&traced), "4bf92f3577b34da6a3ce929d0e0e4736");
     let replaced = client.get(format!("{base}/healthz")).header("x-request-id", "x".repeat(200)).send().await.unwrap();
     assert!(id_of(&replaced).len() == 32 && !id_of(&replaced).contains("xxx"), "an over-long id is replaced");
@@ -250,7 +277,10 @@ async fn every_answer_names_its_request_and_errors_come_as_problem_details_when_
     let problem: Value = problem.json().await.unwrap();
     assert_eq!(problem["type"], "urn:penumbra:error:invalid_field");
     assert_eq!((problem["status"].as_u64(), problem["title"].as_str()), (Some(422), Some("Unprocessable Entity")));
-    assert_eq!((problem["code"].as_str(), problem["field"].as_str(), problem["request_id"].as_str()), (Some("invalid_field"), Some("camera.fov_y_deg"), Some("problem-1")));
+    assert_eq!(
+        (problem["code"].as_str(), problem["field"].as_str(), problem["request_id"].as_str()),
+        (Some("invalid_field"), Some("camera.fov_y_deg"), Some("problem-1"))
+    );
     assert_eq!(problem["detail"], plain["error"]["message"]);
 
     // Stopping: 503 with Retry-After.
@@ -267,7 +297,10 @@ async fn every_answer_names_its_request_and_errors_come_as_problem_details_when_
 async fn request_ids_reach_the_access_log_and_the_jobs_log_lines() {
     let address = free_address();
     let mut command = common::daemon::serve_command(&address);
-    command.args(["--no-warm-up", "--job-store", "memory", "--log-format", "json"]).env("PENUMBRA_LOG", "info").stderr(std::process::Stdio::piped());
+    command
+        .args(["--no-warm-up", "--job-store", "memory", "--log-format", "json"])
+        .env("PENUMBRA_LOG", "info")
+        .stderr(std::process::Stdio::piped());
     let daemon = tokio::task::spawn_blocking(move || Daemon::start(command, &address)).await.unwrap();
     let base = daemon.base.clone();
     let client = reqwest::Client::new();
@@ -286,12 +319,18 @@ async fn request_ids_reach_the_access_log_and_the_jobs_log_lines() {
     let access: Vec<&Value> = lines.iter().filter(|l| l["target"] == "penumbra::access").collect();
     let submitted = access.iter().find(|l| l["span"]["request_id"] == "trace-me-42").expect("the submission's access line");
     let fields = &submitted["fields"];
-    assert_eq!((fields["method"].as_str(), fields["route"].as_str(), fields["status"].as_u64()), (Some("POST"), Some("/v1/jobs"), Some(202)));
+    assert_eq!(
+        (fields["method"].as_str(), fields["route"].as_str(), fields["status"].as_u64()),
+        (Some("POST"), Some("/v1/jobs"), Some(202))
+    );
     assert!(fields["duration_ms"].as_f64().is_some() && fields["bytes"].as_str().is_some(), "{submitted}");
     let unrouted = access.iter().find(|l| l["fields"]["status"] == 404).expect("the 404's access line");
     assert_eq!(unrouted["fields"]["route"], "(no route)", "an unmatched path is not logged as sent");
     let job_lines: Vec<&Value> = lines.iter().filter(|l| l.to_string().contains(&id) && l["target"] != "penumbra::access").collect();
-    assert!(!job_lines.is_empty() && job_lines.iter().all(|l| l.to_string().contains("trace-me-42")), "the job's lines name its request: {job_lines:?}");
+    assert!(
+        !job_lines.is_empty() && job_lines.iter().all(|l| l.to_string().contains("trace-me-42")),
+        "the job's lines name its request: {job_lines:?}"
+    );
 }
 
 /// The document is what the code generates (methods, built-ins, examples), every operation
@@ -400,7 +439,11 @@ async fn the_client_submits_lists_waits_and_cancels_with_a_token() {
     let output = cli(args(&["submit", &job_file.display().to_string(), "--quiet", "-o", &path("a.png")]), with_file.clone()).await;
     assert!(output.status.success(), "{}", text(&output.stderr));
     let first: Value = serde_json::from_slice(&output.stdout).unwrap();
-    let output = cli(args(&["submit", &job_file.display().to_string(), "--quiet", "-o", &path("b.png")]), vec![("PENUMBRA_TOKEN", token.to_owned())]).await;
+    let output = cli(
+        args(&["submit", &job_file.display().to_string(), "--quiet", "-o", &path("b.png")]),
+        vec![("PENUMBRA_TOKEN", token.to_owned())],
+    )
+    .await;
     assert!(output.status.success(), "{}", text(&output.stderr));
     assert_eq!(std::fs::read(path("a.png")).unwrap(), std::fs::read(path("b.png")).unwrap());
 
@@ -420,7 +463,9 @@ async fn the_client_submits_lists_waits_and_cancels_with_a_token() {
     let blocker = client.post(format!("{base}/v1/jobs")).bearer_auth(token).json(&slow).send().await.unwrap();
     assert_eq!(blocker.status(), StatusCode::ACCEPTED);
     let blocker: Value = blocker.json().await.unwrap();
-    let output = cli(args(&["submit", &job_file.display().to_string(), "--quiet", "--retries", "60", "-o", &path("d.png")]), with_file.clone()).await;
+    let output =
+        cli(args(&["submit", &job_file.display().to_string(), "--quiet", "--retries", "60", "-o", &path("d.png")]), with_file.clone())
+            .await;
     assert!(output.status.success(), "{}", text(&output.stderr));
     let retried: Value = serde_json::from_slice(&output.stdout).unwrap();
     assert!(retried["retries"].as_u64().unwrap() >= 1, "the queue was full at first: {retried}");
@@ -448,16 +493,21 @@ async fn the_client_submits_lists_waits_and_cancels_with_a_token() {
     // --detach returns at acceptance; Ctrl-C on a following submit cancels its job.
     let slow_file = work.path().join("slow.json");
     std::fs::write(&slow_file, slow.to_string()).unwrap();
-    let detached = cli(args(&["submit", &slow_file.display().to_string(), "--detach", "--quiet", "--retries", "60"]), with_file.clone()).await;
+    let detached =
+        cli(args(&["submit", &slow_file.display().to_string(), "--detach", "--quiet", "--retries", "60"]), with_file.clone()).await;
     assert!(detached.status.success(), "{}", text(&detached.stderr));
     let detached: Value = serde_json::from_slice(&detached.stdout).unwrap();
     let mut command = std::process::Command::new(env!("CARGO_BIN_EXE_penumbra"));
-    command.args(args(&["submit", &slow_file.display().to_string(), "--quiet", "--retries", "120", "-o", &path("f.png")])).envs(with_file.clone());
+    command
+        .args(args(&["submit", &slow_file.display().to_string(), "--quiet", "--retries", "120", "-o", &path("f.png")]))
+        .envs(with_file.clone());
     let child = command.stdout(std::process::Stdio::piped()).stderr(std::process::Stdio::piped()).spawn().unwrap();
     let known = [blocker["id"].clone(), detached["id"].clone()];
     let interrupted = loop {
         let page: Value = client.get(format!("{base}/v1/jobs")).bearer_auth(token).send().await.unwrap().json().await.unwrap();
-        if let Some(job) = page["jobs"].as_array().unwrap().iter().find(|j| !known.contains(&j["id"]) && !jobs.iter().any(|k| k["id"] == j["id"])) {
+        if let Some(job) =
+            page["jobs"].as_array().unwrap().iter().find(|j| !known.contains(&j["id"]) && !jobs.iter().any(|k| k["id"] == j["id"]))
+        {
             break job["id"].as_str().unwrap().to_owned();
         }
         tokio::time::sleep(std::time::Duration::from_millis(100)).await;
