@@ -195,6 +195,11 @@ impl LiveJobs {
         submission::page(jobs, filter, after, limit)
     }
 
+    /// How a submitted job held here is listed (its submission time, method, request id).
+    pub fn listed(&self, id: &str) -> Option<ListedJob> {
+        self.submitted_jobs().iter().find(|s| s.id == id).map(|s| s.listed.clone())
+    }
+
     /// The event channel of a submitted job.
     pub fn submitted(&self, id: &str) -> Option<watch::Sender<JobEvent>> {
         self.submitted_jobs().iter().find(|s| s.id == id).map(|s| s.events.clone())

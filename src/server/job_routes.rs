@@ -4,21 +4,32 @@
 
 use super::*;
 
+/// `GET /v1/jobs/{id}`: a finished render's record, or a submitted job's state; a submitted
+/// job's record names the request that submitted it (`request_id`).
 pub(super) async fn job_record(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Result<Json<Value>, ApiError> {
-    if let Some(rendered) = state.jobs.find(&id) {
-        return Ok(Json(job_json(&id, &rendered)));
-    }
-    if let Some(events) = state.jobs.submitted(&id) {
+    let held_request = state.jobs.listed(&id).and_then(|listed| listed.request_id);
+    let mut record = if let Some(rendered) = state.jobs.find(&id) {
+        job_json(&id, &rendered)
+    } else if let Some(events) = state.jobs.submitted(&id) {
         let event = events.borrow().clone();
-        return Ok(Json(
-            json!({"id": id, "status": event.status, "progress": {"done": event.done, "total": event.total}, "error": event.error}),
-        ));
+        json!({"id": id, "status": event.status, "progress": {"done": event.done, "total": event.total}, "error": event.error})
+    } else {
+        let stored = stored_job(&state, &id).await?.ok_or_else(|| unknown_job(&id))?;
+        let mut record = match stored.result {
+            Some(result) if stored.status == JobStatus::Succeeded => result,
+            _ => {
+                json!({"id": id, "status": stored.status, "progress": {"done": stored.done, "total": stored.total}, "error": stored.error})
+            }
+        };
+        if let Some(request_id) = stored.request_id {
+            record["request_id"] = json!(request_id);
+        }
+        return Ok(Json(record));
+    };
+    if let Some(request_id) = held_request {
+        record["request_id"] = json!(request_id);
     }
-    let stored = stored_job(&state, &id).await?.ok_or_else(|| unknown_job(&id))?;
-    Ok(Json(match stored.result {
-        Some(result) if stored.status == JobStatus::Succeeded => result,
-        _ => json!({"id": id, "status": stored.status, "progress": {"done": stored.done, "total": stored.total}, "error": stored.error}),
-    }))
+    Ok(Json(record))
 }
 
 /// A job from the durable store (one this process did not run, or no longer holds).

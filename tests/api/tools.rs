@@ -309,6 +309,8 @@ async fn request_ids_reach_the_access_log_and_the_jobs_log_lines() {
     finished(&client, &base, &id).await;
     let (_, page) = listed(&client, &base, "").await;
     assert_eq!(page["jobs"][0]["request_id"], "trace-me-42");
+    let record: Value = client.get(format!("{base}/v1/jobs/{id}")).send().await.unwrap().json().await.unwrap();
+    assert_eq!((record["status"].as_str(), record["request_id"].as_str()), (Some("succeeded"), Some("trace-me-42")));
     client.get(format!("{base}/v1/jobs/{id}/nothing-here")).send().await.unwrap();
     let mut daemon = daemon;
     daemon.child.kill().unwrap();
