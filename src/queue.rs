@@ -265,16 +265,16 @@ impl IdempotencyKeys {
         self.keys.lock().unwrap_or_else(|p| p.into_inner())
     }
 
-    /// The job `key` names, unless it expired.
-    pub fn find(&self, key: &str) -> Option<KeyedJob> {
-        self.keys().get(key).filter(|k| k.expires_unix_ms > submission::unix_ms()).cloned()
+    /// The job `key` names, unless the key expired or `held(id)` says the job is gone.
+    pub fn find(&self, key: &str, held: impl Fn(&str) -> bool) -> Option<KeyedJob> {
+        self.keys().get(key).filter(|k| k.expires_unix_ms > submission::unix_ms() && held(&k.id)).cloned()
     }
 
-    /// Claims `key` for `claim` unless it names a job already (answered: a twin's).
-    pub fn claim(&self, key: &str, claim: KeyedJob) -> Option<KeyedJob> {
+    /// Claims `key` for `claim` unless it names a job still held (answered: a twin's).
+    pub fn claim(&self, key: &str, claim: KeyedJob, held: impl Fn(&str) -> bool) -> Option<KeyedJob> {
         let now = submission::unix_ms();
         let mut keys = self.keys();
-        if let Some(held) = keys.get(key).filter(|k| k.expires_unix_ms > now) {
+        if let Some(held) = keys.get(key).filter(|k| k.expires_unix_ms > now && held(&k.id)) {
             return Some(held.clone());
         }
         if keys.len() >= self.capacity {

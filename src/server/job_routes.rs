@@ -101,7 +101,7 @@ async fn find_keyed(state: &AppState, key: &str) -> Result<Option<KeyedJob>, Api
             let key = key.to_owned();
             Ok(store.call(move |s| s.keyed(&key)).await.map_err(store_error)?)
         }
-        None => Ok(state.idempotency.keys.find(key)),
+        None => Ok(state.idempotency.keys.find(key, |id| state.jobs.submitted(id).is_some())),
     }
 }
 
@@ -112,6 +112,7 @@ async fn replay(state: &AppState, key: &str, fingerprint: &str, held: KeyedJob) 
         let message = format!("the Idempotency-Key `{key}` names job `{}`, submitted with another body", held.id);
         return Err(ApiError(JobError::field(ErrorCode::IdempotencyKeyReused, "Idempotency-Key", message)));
     }
+    // A held key's job exists (`keyed`): its status now; queued if it went in between.
     let status = match state.jobs.submitted(&held.id) {
         Some(events) => events.borrow().status,
         None => stored_job(state, &held.id).await?.map_or(JobStatus::Queued, |stored| stored.status),
@@ -153,7 +154,7 @@ async fn accept_job(
     // Without a store the key is claimed here before admission, and freed if it fails.
     let mut id = keyed.map_or_else(new_job_id, |(_, claim)| claim.id.clone());
     if let (None, Some((key, claim))) = (&store, keyed) {
-        if let Some(held) = state.idempotency.keys.claim(key, claim.clone()) {
+        if let Some(held) = state.idempotency.keys.claim(key, claim.clone(), |id| state.jobs.submitted(id).is_some()) {
             return Ok(Accepted::Twin(held));
         }
     }

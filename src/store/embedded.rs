@@ -255,9 +255,13 @@ impl JobStore for EmbeddedStore {
     fn keyed(&self, key: &str) -> StoreResult<Option<KeyedJob>> {
         self.with_db(|db| {
             let txn = db.begin_read().map_err(classify)?;
-            let keys = txn.open_table(KEYS).map_err(classify)?;
+            let (keys, jobs) = (txn.open_table(KEYS).map_err(classify)?, txn.open_table(JOBS).map_err(classify)?);
             let held = keys.get(key_digest(key).as_str()).map_err(classify)?;
-            Ok(held.map(|bytes| serde_json::from_slice::<KeyedJob>(bytes.value())).transpose()?.filter(|k| k.expires_unix_ms > unix_ms()))
+            let held = held.map(|bytes| serde_json::from_slice::<KeyedJob>(bytes.value())).transpose()?;
+            match held {
+                Some(held) if held.expires_unix_ms > unix_ms() && jobs.get(held.id.as_str()).map_err(classify)?.is_some() => Ok(Some(held)),
+                _ => Ok(None),
+            }
         })
     }
 
@@ -269,9 +273,12 @@ impl JobStore for EmbeddedStore {
             let txn = db.begin_write().map_err(classify)?;
             {
                 let mut keys = txn.open_table(KEYS).map_err(classify)?;
+                let jobs = txn.open_table(JOBS).map_err(classify)?;
                 let held = keys.get(digest.as_str()).map_err(classify)?.map(|b| serde_json::from_slice::<KeyedJob>(b.value()));
                 if let Some(held) = held.transpose()?.filter(|k| k.expires_unix_ms > unix_ms()) {
-                    return Ok(Some(held));
+                    if jobs.get(held.id.as_str()).map_err(classify)?.is_some() {
+                        return Ok(Some(held));
+                    }
                 }
                 if keys.len().map_err(classify)? as usize >= self.max_keys {
                     evict_keys(&mut keys, self.max_keys)?;

@@ -151,13 +151,14 @@ pub trait JobStore: Send + Sync {
     fn accept(&self, id: &str, job: &Value) -> StoreResult<()> {
         self.accept_record(&StoredJob::queued(id, job))
     }
-    /// The job an idempotency key names, unless it expired (`key` as the client sent it).
+    /// The job an idempotency key names (`key` as the client sent it), unless the key expired
+    /// or the job's record did: a key names its job while both last.
     fn keyed(&self, key: &str) -> StoreResult<Option<KeyedJob>>;
     /// Accepts `record` under an idempotency key: when the key names a job already (a twin
     /// sent at the same time), nothing is written and that job is answered; else the key is
-    /// claimed for the record (until `claim.expires_unix_ms`) and the record accepted. The
-    /// key outlives the job's record only as a pointer: a client that retries after the
-    /// record expired learns its id and gets 404 for it.
+    /// claimed for the record (until `claim.expires_unix_ms`) and the record accepted. A key
+    /// whose job's record expired is claimed anew: the first job's result is gone, and a
+    /// retry gets a job that renders it again rather than an id that answers 404.
     fn accept_keyed(&self, record: &StoredJob, key: &str, claim: &KeyedJob) -> StoreResult<Option<KeyedJob>>;
     /// Submitted jobs newest first (ties by id), those after `after` that `filter` admits, at
     /// most `limit`; with the cursor of the next page when more may remain. Every replica of a

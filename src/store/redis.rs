@@ -89,12 +89,13 @@ end
 return 0
 "#;
 
-/// `ACCEPT` under an idempotency key, in the same atomic step: a key held already is answered
-/// (its JSON) and nothing is written, so of two twins on two replicas one job results.
-/// KEYS: record, queue, index, key; ARGV: as `ACCEPT`, then the key's JSON and its TTL (ms).
+/// `ACCEPT` under an idempotency key, in the same atomic step: a key that names a job whose
+/// record is still there is answered (its JSON) and nothing is written, so of two twins on two
+/// replicas one job results. KEYS: record, queue, index, key; ARGV: as `ACCEPT`, then the
+/// key's JSON and its TTL (ms).
 const ACCEPT_KEYED: &str = r#"
 local held = redis.call('GET', KEYS[4])
-if held then
+if held and redis.call('EXISTS', 'penumbra:job:' .. cjson.decode(held)['id']) == 1 then
   return held
 end
 if redis.call('SET', KEYS[1], ARGV[1], 'NX') then
@@ -237,7 +238,9 @@ impl JobStore for RedisStore {
 
     fn keyed(&self, key: &str) -> StoreResult<Option<KeyedJob>> {
         let held: Option<Vec<u8>> = self.with(|c| c.get(idempotency_key(key)))?;
-        Ok(held.map(|bytes| serde_json::from_slice(&bytes)).transpose()?)
+        let Some(held) = held.map(|bytes| serde_json::from_slice::<KeyedJob>(&bytes)).transpose()? else { return Ok(None) };
+        let exists: bool = self.with(|c| c.exists(job_key(&held.id)))?;
+        Ok(exists.then_some(held))
     }
 
     fn accept_keyed(&self, record: &StoredJob, key: &str, claim: &KeyedJob) -> StoreResult<Option<KeyedJob>> {

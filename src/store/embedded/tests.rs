@@ -103,3 +103,31 @@ fn make_room_drops_the_oldest_images_first() {
     assert_eq!(store.make_room(0).unwrap(), 0);
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn an_idempotency_key_names_its_job_while_both_last() {
+    use crate::job::submission::KeyedJob;
+    let dir = temp_dir("keys");
+    let store = EmbeddedStore::open(&dir).unwrap().with_max_keys(2);
+    let claim = |id: &str, fingerprint: &str| KeyedJob { id: id.into(), fingerprint: fingerprint.into(), expires_unix_ms: unix_ms() + 60_000 };
+    let job = serde_json::json!({"scene": {"builtin": "torus"}});
+    assert_eq!(store.accept_keyed(&StoredJob::queued("first", &job), "key", &claim("first", "f1")).unwrap(), None);
+    assert_eq!(store.keyed("key").unwrap().map(|k| k.id), Some("first".into()));
+    // A twin: the first job is answered, nothing written.
+    let twin = store.accept_keyed(&StoredJob::queued("twin", &job), "key", &claim("twin", "f1")).unwrap();
+    assert_eq!(twin.map(|k| k.id), Some("first".into()));
+    assert!(store.get("twin").unwrap().is_none());
+    // Once its record expired, the key is claimed anew.
+    store.fail("first", &serde_json::json!({"code": "internal"})).unwrap();
+    std::thread::sleep(Duration::from_millis(5));
+    assert_eq!(store.expire(Duration::ZERO, u64::MAX).unwrap().0, 1);
+    assert!(store.keyed("key").unwrap().is_none());
+    assert_eq!(store.accept_keyed(&StoredJob::queued("second", &job), "key", &claim("second", "f2")).unwrap(), None);
+    // Past the cap, the oldest key goes.
+    for (n, key) in ["k1", "k2", "k3"].iter().enumerate() {
+        let id = format!("job-{n}");
+        store.accept_keyed(&StoredJob::queued(&id, &job), key, &claim(&id, "f")).unwrap();
+    }
+    assert!(store.keyed("k3").unwrap().is_some());
+    std::fs::remove_dir_all(&dir).ok();
+}
