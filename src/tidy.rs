@@ -223,7 +223,7 @@ fn the_code_map_names_every_file() {
         }
     }
     for token in backticked(&architecture).iter().flat_map(|t| expand_braces(t)) {
-        if from_root(&token) && !root.join(token.trim_end_matches(|c| c == ')')).exists() {
+        if from_root(&token) && !root.join(token.trim_end_matches(')')).exists() {
             missing.push(token);
         }
     }

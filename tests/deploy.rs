@@ -178,6 +178,25 @@ impl Drop for Child {
 /// nginx, stopped with SIGQUIT (a SIGKILLed master would orphan its workers) when the test ends.
 struct Nginx(std::process::Child);
 
+impl Nginx {
+    /// Debian's nginx in the foreground, run from `dir` with `dir/nginx.conf`.
+    fn start(dir: &Path) -> Self {
+        let binary = if Path::new("/usr/sbin/nginx").exists() { "/usr/sbin/nginx" } else { "nginx" };
+        Self(
+            Command::new(binary)
+                .arg("-p")
+                .arg(dir)
+                .arg("-c")
+                .arg(dir.join("nginx.conf"))
+                .args(["-g", "daemon off;"])
+                .stdout(std::process::Stdio::null())
+                .stderr(std::process::Stdio::null())
+                .spawn()
+                .expect("nginx (apt-get install nginx)"),
+        )
+    }
+}
+
 impl Drop for Nginx {
     fn drop(&mut self) {
         let _ = Command::new("kill").args(["-QUIT", &self.0.id().to_string()]).status();
@@ -266,19 +285,7 @@ impl Cluster {
         }
         assert!(conf.contains(&servers), "deploy/nginx.conf lists 127.0.0.1:8081-8083");
         std::fs::write(work.join("nginx/nginx.conf"), conf).unwrap();
-        let binary = if Path::new("/usr/sbin/nginx").exists() { "/usr/sbin/nginx" } else { "nginx" };
-        let nginx = Nginx(
-            Command::new(binary)
-                .arg("-p")
-                .arg(work.join("nginx"))
-                .arg("-c")
-                .arg(work.join("nginx/nginx.conf"))
-                .args(["-g", "daemon off;"])
-                .stdout(std::process::Stdio::null())
-                .stderr(std::process::Stdio::null())
-                .spawn()
-                .expect("nginx (apt-get install nginx)"),
-        );
+        let nginx = Nginx::start(&work.join("nginx"));
         let base = format!("http://127.0.0.1:{nginx_port}");
         assert!(
             wait_until(Duration::from_secs(20), || http("GET", &format!("{base}/healthz"), None).is_some_and(|(s, _)| s == 200)).is_some()
@@ -987,19 +994,7 @@ fn tls_nginx(dir: &Path, port: u16, replicas: &[u16]) -> Nginx {
          location / {{ proxy_pass http://penumbra; }}\n    }}\n}}\n"
     );
     std::fs::write(dir.join("nginx.conf"), conf).unwrap();
-    let binary = if Path::new("/usr/sbin/nginx").exists() { "/usr/sbin/nginx" } else { "nginx" };
-    let nginx = Nginx(
-        Command::new(binary)
-            .arg("-p")
-            .arg(dir)
-            .arg("-c")
-            .arg(dir.join("nginx.conf"))
-            .args(["-g", "daemon off;"])
-            .stdout(std::process::Stdio::null())
-            .stderr(std::process::Stdio::null())
-            .spawn()
-            .expect("nginx (apt-get install nginx)"),
-    );
+    let nginx = Nginx::start(dir);
     let up = || std::net::TcpStream::connect(("127.0.0.1", port)).is_ok();
     assert!(wait_until(Duration::from_secs(20), up).is_some(), "nginx did not listen");
     nginx

@@ -52,6 +52,13 @@ pub struct SubmitReport {
     pub retries: u32,
 }
 
+impl SubmitReport {
+    /// Nothing done yet for job `id` (empty before it is accepted).
+    pub(super) fn new(id: &str) -> Self {
+        Self { id: id.to_owned(), uploaded: vec![], reused: vec![], done: 0, total: 0, output_bytes: 0, retries: 0 }
+    }
+}
+
 /// Submits the job and waits for its image (or, with `--detach`, for its acceptance).
 /// `progress(done, total)` is called on every event. Ctrl-C after the job was accepted cancels
 /// it on the server unless `--detach`.
@@ -60,7 +67,7 @@ pub async fn submit(options: &SubmitOptions, progress: &(dyn Fn(u64, u64) + Sync
     let mut job: Value = serde_json::from_slice(&text)?;
     let base_dir = options.job.parent().map(Path::to_path_buf).unwrap_or_default();
     let mut client = Client::new(&options.connect)?;
-    let mut report = SubmitReport { id: String::new(), uploaded: vec![], reused: vec![], done: 0, total: 0, output_bytes: 0, retries: 0 };
+    let mut report = SubmitReport::new("");
 
     // Local assets become content ids, uploaded only when the server lacks them.
     let assets = [("/scene", "scenes"), ("/light/image", "lights")];

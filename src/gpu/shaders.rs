@@ -271,7 +271,7 @@ pub(crate) fn assert_bindings(shaders: &[&str], group: u32, entries: &[wgpu::Bin
             let agrees = match (global.space, entry.ty) {
                 (naga::AddressSpace::Uniform, BindingType::Buffer { ty: BufferBindingType::Uniform, .. }) => true,
                 (naga::AddressSpace::Storage { access }, BindingType::Buffer { ty: BufferBindingType::Storage { read_only }, .. }) => {
-                    read_only == !access.contains(naga::StorageAccess::STORE)
+                    read_only != access.contains(naga::StorageAccess::STORE)
                 }
                 (
                     naga::AddressSpace::Handle,

@@ -109,7 +109,8 @@ fn an_idempotency_key_names_its_job_while_both_last() {
     use crate::job::submission::KeyedJob;
     let dir = temp_dir("keys");
     let store = EmbeddedStore::open(&dir).unwrap().with_max_keys(2);
-    let claim = |id: &str, fingerprint: &str| KeyedJob { id: id.into(), fingerprint: fingerprint.into(), expires_unix_ms: unix_ms() + 60_000 };
+    let claim =
+        |id: &str, fingerprint: &str| KeyedJob { id: id.into(), fingerprint: fingerprint.into(), expires_unix_ms: unix_ms() + 60_000 };
     let job = serde_json::json!({"scene": {"builtin": "torus"}});
     assert_eq!(store.accept_keyed(&StoredJob::queued("first", &job), "key", &claim("first", "f1")).unwrap(), None);
     assert_eq!(store.keyed("key").unwrap().map(|k| k.id), Some("first".into()));
