@@ -195,6 +195,16 @@ impl LiveJobs {
         submission::page(jobs, filter, after, limit)
     }
 
+    /// Submitted jobs held here that wait for the device: how many, and when the oldest was
+    /// submitted (the backlog of a daemon that is its own queue).
+    pub fn waiting(&self) -> (u64, Option<u64>) {
+        let submitted = self.submitted_jobs();
+        let waiting = submitted.iter().filter(|s| s.events.borrow().status == JobStatus::Queued);
+        waiting.fold((0, None), |(count, oldest), s| {
+            (count + 1, Some(oldest.map_or(s.listed.submitted_unix_ms, |o: u64| o.min(s.listed.submitted_unix_ms))))
+        })
+    }
+
     /// How a submitted job held here is listed (its submission time, method, request id).
     pub fn listed(&self, id: &str) -> Option<ListedJob> {
         self.submitted_jobs().iter().find(|s| s.id == id).map(|s| s.listed.clone())

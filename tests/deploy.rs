@@ -1101,3 +1101,59 @@ fn tools_reach_a_tls_cluster_with_a_token_and_twins_make_one_job() {
     assert!(waited.status.success(), "{}", String::from_utf8_lossy(&waited.stderr));
     std::fs::remove_dir_all(&work).ok();
 }
+
+/// The backlog an autoscaler scales on: two replicas on one Redis, one device slot each, a
+/// batch of slow jobs. While they wait, both replicas' `/metrics` read the same
+/// `penumbra_backlog_jobs` — the jobs no replica has started — with the oldest one's age, and
+/// the prometheus-adapter rule of `deploy/k8s/` selects a series `/metrics` serves.
+#[test]
+fn every_replica_reads_the_same_backlog_and_the_autoscaler_rule_selects_it() {
+    let (redis_port, _redis) = start_redis();
+    let store = format!("redis://127.0.0.1:{redis_port}/0");
+    let ports = [free_port(), free_port()];
+    let _replicas: Vec<Child> =
+        ports.iter().map(|&port| daemon(port, &["--no-warm-up", "--job-store", &store, "--concurrency", "1"])).collect();
+    for &port in &ports {
+        wait_ready(port);
+    }
+    let slow = r#"{"scene": {"builtin": "crowd"}, "method": {"name": "reference", "samples": 4096, "resolution": 1024}, "output": {"width": 480, "height": 360}}"#;
+    let ids: Vec<String> = (0..8)
+        .map(|k| {
+            let (status, body) = http("POST", &format!("http://127.0.0.1:{}/v1/jobs", ports[k % 2]), Some(slow)).unwrap();
+            assert_eq!(status, 202, "{}", String::from_utf8_lossy(&body));
+            json(&body)["id"].as_str().unwrap().to_owned()
+        })
+        .collect();
+    let gauge = |port: u16, name: &str| -> Option<f64> {
+        let (_, text) = http("GET", &format!("http://127.0.0.1:{port}/metrics"), None)?;
+        String::from_utf8_lossy(&text).lines().find_map(|l| l.strip_prefix(&format!("{name} "))?.trim().parse().ok())
+    };
+    // Both replicas read the queue at most once a second: wait until their readings meet.
+    let mut readings = None;
+    let met = wait_until(Duration::from_secs(60), || {
+        let backlog: Vec<Option<f64>> = ports.iter().map(|&p| gauge(p, "penumbra_backlog_jobs")).collect();
+        let ages: Vec<Option<f64>> = ports.iter().map(|&p| gauge(p, "penumbra_backlog_oldest_age_seconds")).collect();
+        readings = Some((backlog.clone(), ages.clone()));
+        backlog[0].is_some_and(|b| b >= 1.0) && backlog[0] == backlog[1] && ages.iter().all(|a| a.is_some_and(|a| a > 0.0))
+    });
+    eprintln!("backlog on the two replicas (jobs, oldest age in s): {readings:?}");
+    assert!(met.is_some(), "the replicas never read the same backlog: {readings:?}");
+    let (backlog, _) = readings.unwrap();
+    assert!(backlog[0].unwrap() <= 6.0, "at most the 8 jobs less the two started: {backlog:?}");
+
+    // The adapter's rules select series that /metrics serves.
+    let (_, text) = http("GET", &format!("http://127.0.0.1:{}/metrics", ports[0]), None).unwrap();
+    let served = String::from_utf8_lossy(&text).into_owned();
+    let adapter = std::fs::read_to_string(repo().join("deploy/k8s/prometheus-adapter.yaml")).unwrap();
+    let queries: Vec<&str> = adapter.lines().filter_map(|l| l.trim().strip_prefix("- seriesQuery: '")).collect();
+    assert!(!queries.is_empty(), "the adapter has rules");
+    for query in queries {
+        let name = query.split(['{', '\'']).next().unwrap();
+        assert!(served.contains(&format!("# TYPE {name} gauge")), "the adapter selects {name}, which /metrics does not serve");
+    }
+    let hpa = std::fs::read_to_string(repo().join("deploy/k8s/hpa.yaml")).unwrap();
+    assert!(hpa.contains("type: External") && hpa.contains("name: penumbra_backlog_jobs"), "the autoscaler scales on the backlog");
+    for id in &ids {
+        http("DELETE", &format!("http://127.0.0.1:{}/v1/jobs/{id}", ports[0]), None);
+    }
+}

@@ -68,6 +68,7 @@ pub(super) async fn methods() -> Json<Value> {
 /// `GET /metrics`: Prometheus text format.
 pub(super) async fn metrics(State(state): State<Arc<AppState>>) -> Response {
     state.metrics.observe_service(state.store.as_ref().map(|s| s.health().status()), state.connections.as_ref().map(|c| c.stats()));
+    state.metrics.observe_backlog(state.backlog().await, unix_ms());
     let text = state.metrics.encode(&state.engine.stats());
     ([(header::CONTENT_TYPE, HeaderValue::from_static("text/plain; version=0.0.4; charset=utf-8"))], text).into_response()
 }
@@ -84,6 +85,10 @@ pub(super) async fn stats(State(state): State<Arc<AppState>>) -> Json<Value> {
         "uptime_s": uptime_s,
         "jobs_in_flight": state.metrics.in_flight(),
         "jobs_queued": state.metrics.queued(),
+        "backlog": state.backlog().await.map(|b| json!({
+            "jobs": b.jobs,
+            "oldest_age_seconds": b.oldest_unix_ms.map(|oldest| unix_ms().saturating_sub(oldest) as f64 / 1e3),
+        })),
         "queue": {"capacity": state.queue_config.capacity, "concurrency": state.queue_config.concurrency},
         "store": state.store.as_ref().map(|s| s.health().status()),
         "connections": state.connections.as_ref().map(|c| c.stats()),

@@ -1,7 +1,7 @@
 //! The daemon's Prometheus metrics (`GET /metrics`, text format 0.0.4) through the
 //! `prometheus` crate: jobs by method and outcome, latency by method and by render phase, jobs
-//! in flight, and — read from the engine at each scrape — the upload cache, the GPU pools and
-//! the device. Method labels are registered method names only (a client's typo is `unknown`),
+//! in flight, the service's backlog (what an autoscaler scales on), and — read from the engine
+//! at each scrape — the upload cache, the GPU pools and the device. Method labels are registered method names only (a client's typo is `unknown`),
 //! so label sets stay bounded.
 
 use prometheus::{Encoder, HistogramOpts, HistogramVec, IntCounter, IntCounterVec, IntGauge, IntGaugeVec, Opts, Registry, TextEncoder};
@@ -10,7 +10,7 @@ use super::connections::ConnectionStats;
 use crate::engine::AdapterSummary;
 use crate::engine::EngineStats;
 use crate::methods::REGISTRY;
-use crate::store::StoreStatus;
+use crate::store::{Backlog, StoreStatus};
 use crate::timing::Timings;
 
 /// Latency buckets in seconds: 1 ms to 2 min, for a `hard` preview through a long `reference`.
@@ -31,6 +31,9 @@ pub struct Metrics {
     store: IntGaugeVec,
     /// Set from the connection tracker at each scrape.
     connections: IntGaugeVec,
+    /// The service's backlog (no labels; absent while unknown).
+    backlog_jobs: IntGaugeVec,
+    backlog_oldest_age: prometheus::GaugeVec,
 }
 
 /// Counts a job in a gauge (queued, or in flight) until dropped.
@@ -86,8 +89,23 @@ impl Metrics {
             &["what"],
         )
         .expect("valid metric");
+        let backlog_jobs = IntGaugeVec::new(
+            Opts::new("backlog_jobs", "Jobs accepted and not yet started across the whole service (the same on every replica of a shared store); absent while the store cannot be read"),
+            &[],
+        )
+        .expect("valid metric");
+        let backlog_oldest_age = prometheus::GaugeVec::new(
+            Opts::new(
+                "backlog_oldest_age_seconds",
+                "Seconds the oldest job of the backlog has waited; absent when there is none or it is unknown",
+            ),
+            &[],
+        )
+        .expect("valid metric");
         for collector in [
             Box::new(device_resets.clone()) as Box<dyn prometheus::core::Collector>,
+            Box::new(backlog_jobs.clone()),
+            Box::new(backlog_oldest_age.clone()),
             Box::new(jobs.clone()),
             Box::new(latency.clone()),
             Box::new(phases.clone()),
@@ -100,7 +118,20 @@ impl Metrics {
         ] {
             registry.register(collector).expect("metric names are unique");
         }
-        Self { registry, jobs, latency, phases, in_flight, queued, engine, device_resets, store, connections }
+        Self {
+            registry,
+            jobs,
+            latency,
+            phases,
+            in_flight,
+            queued,
+            engine,
+            device_resets,
+            store,
+            connections,
+            backlog_jobs,
+            backlog_oldest_age,
+        }
     }
 
     /// Counts a job as waiting for the device until the guard drops.
@@ -124,6 +155,17 @@ impl Metrics {
             for phase in &timings.phases {
                 self.phases.with_label_values(&[method, phase.name.as_str()]).observe(phase.cpu_ms / 1e3);
             }
+        }
+    }
+
+    /// Sets the backlog gauges: absent while unknown, the age absent without a waiting job.
+    pub fn observe_backlog(&self, backlog: Option<Backlog>, now_unix_ms: u64) {
+        self.backlog_jobs.reset();
+        self.backlog_oldest_age.reset();
+        let Some(backlog) = backlog else { return };
+        self.backlog_jobs.with_label_values(&[] as &[&str]).set(i64::try_from(backlog.jobs).unwrap_or(i64::MAX));
+        if let Some(oldest) = backlog.oldest_unix_ms {
+            self.backlog_oldest_age.with_label_values(&[] as &[&str]).set(now_unix_ms.saturating_sub(oldest) as f64 / 1e3);
         }
     }
 

@@ -31,7 +31,12 @@ pub struct AppState {
     pub(super) connections: Option<Arc<connections::Tracker>>,
     /// How long idempotency keys last, and the keys themselves when there is no store.
     pub(super) idempotency: Idempotency,
+    /// The shared store's backlog as last read, and when (read at most once a second).
+    backlog: tokio::sync::Mutex<Option<(std::time::Instant, Option<crate::store::Backlog>)>>,
 }
+
+/// The least time between two reads of a shared store's backlog.
+const BACKLOG_READ_EVERY: std::time::Duration = std::time::Duration::from_secs(1);
 
 /// Idempotent submission's settings: how long a key names its job, and, for a daemon without
 /// a job store, the keys (a store keeps them for every replica and across restarts).
@@ -70,7 +75,28 @@ impl AppState {
             connections: None,
             started: std::time::SystemTime::now(),
             idempotency: Idempotency::new(DEFAULT_IDEMPOTENCY_TTL, crate::job::submission::DEFAULT_MAX_KEYS),
+            backlog: tokio::sync::Mutex::new(None),
         }
+    }
+
+    /// Jobs accepted and not yet started across the service: with a shared store, its queue
+    /// (the same on every replica; read at most once a second, however often it is scraped),
+    /// else the submitted jobs waiting here. None while the store cannot be read: unknown,
+    /// not zero.
+    pub(super) async fn backlog(&self) -> Option<crate::store::Backlog> {
+        let Some(store) = self.store.clone().filter(|s| s.shared()) else {
+            let (jobs, oldest_unix_ms) = self.jobs.waiting();
+            return Some(crate::store::Backlog { jobs, oldest_unix_ms });
+        };
+        let mut cached = self.backlog.lock().await;
+        if let Some((read, backlog)) = *cached {
+            if read.elapsed() < BACKLOG_READ_EVERY {
+                return backlog;
+            }
+        }
+        let backlog = store.call(|s| s.backlog()).await.ok().flatten();
+        *cached = Some((std::time::Instant::now(), backlog));
+        backlog
     }
 
     /// Idempotency keys that last `idempotency.ttl`.

@@ -95,6 +95,14 @@ impl StoredJob {
     }
 }
 
+/// Jobs accepted and not yet started across the whole service, and when the oldest of them
+/// was accepted: what an autoscaler scales on.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
+pub struct Backlog {
+    pub jobs: u64,
+    pub oldest_unix_ms: Option<u64>,
+}
+
 /// Why a store operation failed. The server answers each kind differently: an unavailable
 /// store is retried (503 `store_unavailable` at admission, results kept and stored later), a
 /// full one refuses new work (507 `insufficient_storage`), an existing id is never
@@ -204,6 +212,11 @@ pub trait JobStore: Send + Sync {
     /// Jobs accepted and not yet taken, across all replicas (shared stores).
     fn queued(&self) -> StoreResult<u64> {
         Ok(0)
+    }
+    /// The service's backlog, the same on every replica (shared stores); None where the
+    /// store is not the queue and the server counts its own.
+    fn backlog(&self) -> StoreResult<Option<Backlog>> {
+        Ok(None)
     }
     /// The next job for `consumer`: one that a consumer which stopped answering left
     /// unfinished first, else a new one, waiting up to `wait` (shared stores).

@@ -24,7 +24,7 @@ use std::time::Duration;
 use redis::{Commands, Connection};
 use serde_json::Value;
 
-use super::{unix_ms, JobStore, StoreError, StoreResult, StoredJob};
+use super::{unix_ms, Backlog, JobStore, StoreError, StoreResult, StoredJob};
 use crate::job::submission::{key_digest, Cursor, JobFilter, KeyedJob, ListedJob};
 use crate::job::JobStatus;
 use crate::upload_store::Kind;
@@ -405,6 +405,24 @@ impl JobStore for RedisStore {
             let length: u64 = c.xlen(QUEUE)?;
             let pending: redis::streams::StreamPendingReply = c.xpending(QUEUE, GROUP)?;
             Ok(length.saturating_sub(pending.count() as u64))
+        })
+    }
+
+    /// The entries no worker has taken, and the oldest of them: the first entry after the
+    /// group's last delivered one (an entry's id is the millisecond it was added).
+    fn backlog(&self) -> StoreResult<Option<Backlog>> {
+        self.with(|c| {
+            let length: u64 = c.xlen(QUEUE)?;
+            let pending: redis::streams::StreamPendingReply = c.xpending(QUEUE, GROUP)?;
+            let jobs = length.saturating_sub(pending.count() as u64);
+            if jobs == 0 {
+                return Ok(Some(Backlog { jobs, oldest_unix_ms: None }));
+            }
+            let groups: redis::streams::StreamInfoGroupsReply = c.xinfo_groups(QUEUE)?;
+            let last = groups.groups.iter().find(|g| g.name == GROUP).map_or("0-0".to_owned(), |g| g.last_delivered_id.clone());
+            let next: redis::streams::StreamRangeReply = c.xrange_count(QUEUE, format!("({last}"), "+", 1)?;
+            let oldest_unix_ms = next.ids.first().and_then(|entry| entry.id.split('-').next()?.parse().ok());
+            Ok(Some(Backlog { jobs, oldest_unix_ms }))
         })
     }
 
