@@ -518,9 +518,34 @@ async fn metrics_parse_as_prometheus_text_and_move_with_jobs() {
     assert!(!after.samples.iter().any(|s| s.labels.values().any(|v| v == "made-up")), "client text never becomes a label");
     assert!(value(&after, "penumbra_phase_duration_seconds_count", &[("phase", "shadow_map")]) >= 1.0);
     assert_eq!(value(&after, "penumbra_jobs_in_flight", &[]), 0.0);
-    assert!(value(&after, "penumbra_engine", &[("what", "pipelines")]) > 0.0);
+    assert!(value(&after, "penumbra_pipelines", &[]) > 0.0);
+    assert!(value(&after, "penumbra_pool_allocations_total", &[("pool", "targets"), ("result", "reused")]) > 0.0);
     assert_eq!(value(&after, "penumbra_device_info", &[]), 1.0);
     assert_eq!(value(&after, "penumbra_device_resets_total", &[]), 0.0);
+    // HTTP requests by route template and status; the process.
+    assert!(value(&after, "penumbra_http_requests_total", &[("route", "/v1/render"), ("status", "200")]) >= 1.0);
+    assert!(value(&after, "penumbra_http_requests_total", &[("route", "/v1/render"), ("status", "400")]) >= 1.0);
+    assert!(value(&after, "penumbra_http_request_duration_seconds_count", &[("route", "/v1/render")]) >= 3.0);
+    assert!(value(&after, "process_resident_memory_bytes", &[]) > 0.0 && value(&after, "process_cpu_seconds_total", &[]) > 0.0);
+    // Prometheus's naming rules: counters end in `_total`, one quantity per metric (no `what`
+    // label), units in names, bounded labels (routes are templates, statuses numbers).
+    for sample in &after.samples {
+        let name = sample.metric.as_str();
+        if matches!(sample.value, prometheus_parse::Value::Counter(_)) {
+            assert!(name.ends_with("_total"), "counter {name} does not end in _total");
+        }
+        assert!(!sample.labels.contains_key("what"), "{name} mixes quantities behind a `what` label");
+        assert!(!name.contains("_ms") && !name.ends_with("_s"), "{name}: seconds, in full");
+        if let Some(route) = sample.labels.get("route") {
+            assert!(route.starts_with('/') || route == "(no route)", "{name}: route {route} is not a template");
+        }
+        if let Some(status) = sample.labels.get("status") {
+            assert!(status.parse::<u16>().is_ok(), "{name}: status {status}");
+        }
+    }
+    for name in after.docs.keys().filter(|name| name.contains("bytes")) {
+        assert!(name.ends_with("_bytes") || name.ends_with("_bytes_total"), "{name}: the unit ends the name");
+    }
     // The same state as JSON for the dashboard.
     let stats: Value = client.get(format!("{base}/v1/stats")).send().await.unwrap().json().await.unwrap();
     assert!(

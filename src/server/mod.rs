@@ -114,7 +114,7 @@ pub fn app(state: Arc<AppState>) -> Router {
         None => router,
     };
     // Outermost: every answer, a 401 or a preflight's included, carries the request's id.
-    router.layer(axum::middleware::from_fn(requests::track)).with_state(state)
+    router.layer(axum::middleware::from_fn_with_state(state.clone(), requests::track)).with_state(state)
 }
 
 /// A body that could not be read: too large (413), or unreadable, as `unreadable`.

@@ -8,7 +8,7 @@
 use std::sync::{Arc, OnceLock};
 use std::time::Instant;
 
-use axum::extract::{MatchedPath, Request};
+use axum::extract::{MatchedPath, Request, State};
 use axum::http::{header, HeaderMap, HeaderValue};
 use axum::middleware::Next;
 use axum::response::Response;
@@ -71,8 +71,9 @@ fn wants_problem(headers: &HeaderMap) -> bool {
 }
 
 /// Middleware, outermost: names the request, runs it in its span, echoes the id, rewrites an
-/// error as problem details when asked, and writes the access-log line.
-pub async fn track(mut request: Request, next: Next) -> Response {
+/// error as problem details when asked, counts it by route and status, and writes the
+/// access-log line.
+pub async fn track(State(state): State<Arc<super::AppState>>, mut request: Request, next: Next) -> Response {
     let started = Instant::now();
     let id = request_id_of(request.headers());
     let problem = wants_problem(request.headers());
@@ -94,6 +95,7 @@ pub async fn track(mut request: Request, next: Next) -> Response {
     }
     let bytes = response.body().size_hint().exact();
     let route = route.0.get().map_or("(no route)", String::as_str);
+    state.metrics.request_answered(route, response.status().as_u16(), started.elapsed().as_secs_f64());
     span.in_scope(|| {
         tracing::info!(
             target: "penumbra::access",
