@@ -59,6 +59,9 @@ fn the_kubernetes_manifests_validate_strictly() {
         "service/penumbra",
         "horizontalpodautoscaler/penumbra",
         "poddisruptionbudget/penumbra",
+        "statefulset/redis",
+        "networkpolicy/redis-from-penumbra-only",
+        "secret/penumbra-tokens",
     ] {
         assert!(report.contains(&format!("passed for resource {kind} ")), "{kind} not validated:\n{report}");
     }

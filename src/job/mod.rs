@@ -42,6 +42,9 @@ pub struct LightSpec {
     pub image: Option<AssetRef>,
 }
 
+/// The method of a job that names none.
+pub const DEFAULT_METHOD: &str = "hard";
+
 /// A shadow method by name, with its own parameters next to the name.
 #[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
 pub struct MethodSpec {
@@ -52,7 +55,7 @@ pub struct MethodSpec {
 
 impl Default for MethodSpec {
     fn default() -> Self {
-        Self { name: "hard".into(), params: Map::new() }
+        Self { name: DEFAULT_METHOD.into(), params: Map::new() }
     }
 }
 

@@ -19,7 +19,7 @@ pub use health::{Store, StoreHealth, StoreStatus};
 pub use redis::RedisStore;
 
 use crate::job::submission::{Cursor, JobFilter, KeyedJob, ListedJob};
-use crate::job::JobStatus;
+use crate::job::{JobStatus, DEFAULT_METHOD};
 use crate::upload_store::Kind;
 
 /// Times a job may be started by a daemon that then died before finishing it; the next start
@@ -72,9 +72,10 @@ impl StoredJob {
         self.status.finished()
     }
 
-    /// The method the job asked for, as `GET /v1/jobs` lists and filters it.
+    /// The method the job asked for (`hard` when it named none), as `GET /v1/jobs` lists and
+    /// filters it.
     pub fn method(&self) -> &str {
-        self.job["method"]["name"].as_str().unwrap_or("")
+        self.job["method"]["name"].as_str().unwrap_or(DEFAULT_METHOD)
     }
 
     /// The job as `GET /v1/jobs` lists it.
