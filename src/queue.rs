@@ -277,15 +277,17 @@ impl IdempotencyKeys {
 
     /// The job `key` names, unless the key expired or `held(id)` says the job is gone.
     pub fn find(&self, key: &str, held: impl Fn(&str) -> bool) -> Option<KeyedJob> {
-        self.keys().get(key).filter(|k| k.expires_unix_ms > submission::unix_ms() && held(&k.id)).cloned()
+        let now = submission::unix_ms();
+        self.keys().get(key).filter(|k| names_job(k, now, &held)).cloned()
     }
 
     /// Claims `key` for `claim` unless it names a job still held (answered: a twin's).
+    /// Under one lock, so that of two twins the second sees the first's claim.
     pub fn claim(&self, key: &str, claim: KeyedJob, held: impl Fn(&str) -> bool) -> Option<KeyedJob> {
         let now = submission::unix_ms();
         let mut keys = self.keys();
-        if let Some(held) = keys.get(key).filter(|k| k.expires_unix_ms > now && held(&k.id)) {
-            return Some(held.clone());
+        if let Some(twin) = keys.get(key).filter(|k| names_job(k, now, &held)) {
+            return Some(twin.clone());
         }
         if keys.len() >= self.capacity {
             keys.retain(|_, k| k.expires_unix_ms > now);
@@ -308,6 +310,11 @@ impl IdempotencyKeys {
             keys.remove(key);
         }
     }
+}
+
+/// Whether a held key still names its job at `now`: not expired, and the job still `held`.
+fn names_job(key: &KeyedJob, now: u64, held: &impl Fn(&str) -> bool) -> bool {
+    key.expires_unix_ms > now && held(&key.id)
 }
 
 /// What the dashboard shows of one finished job.

@@ -6,8 +6,8 @@ use std::path::PathBuf;
 
 use serde_json::{json, Value};
 
-use super::submit::expect_success;
-use super::{Client, ClientError, ConnectOptions};
+use super::submit::{download, follow, job_path, succeeded};
+use super::{Client, ClientError, ConnectOptions, SubmitReport};
 
 #[derive(Debug, Clone, clap::Args)]
 pub struct JobsCommand {
@@ -50,19 +50,18 @@ pub enum JobsAction {
 /// Runs a `penumbra jobs` action; what it prints goes to stdout.
 pub async fn run_jobs(command: &JobsCommand) -> Result<String, ClientError> {
     let mut client = Client::new(&command.connect)?;
-    let record = |id: &str| format!("/v1/jobs/{}", urlencode(id));
     match &command.action {
         JobsAction::List { status, method, limit } => {
             let jobs = list(&mut client, status.as_deref(), method.as_deref(), *limit).await?;
             Ok(if command.json { serde_json::to_string_pretty(&jobs)? } else { table(&jobs, crate::job::submission::unix_ms()) })
         }
         JobsAction::Show { id } => {
-            let url = record(id);
+            let url = job_path(id);
             let job = client.json(|http, base| http.get(format!("{base}{url}"))).await?;
             Ok(if command.json { serde_json::to_string_pretty(&job)? } else { summary(&job) })
         }
         JobsAction::Cancel { id } => {
-            let url = record(id);
+            let url = job_path(id);
             let job = client.json(|http, base| http.delete(format!("{base}{url}"))).await?;
             Ok(if command.json {
                 serde_json::to_string_pretty(&job)?
@@ -71,16 +70,11 @@ pub async fn run_jobs(command: &JobsCommand) -> Result<String, ClientError> {
             })
         }
         JobsAction::Wait { id, output } => {
-            let job = wait(&mut client, id).await?;
-            if job["status"] != "succeeded" {
-                let status = job["status"].as_str().unwrap_or("failed").to_owned();
-                return Err(ClientError::Failed { status, error: job["error"].clone() });
-            }
+            follow(&mut client, &mut SubmitReport::new(id), None, &|_, _| {}).await?;
+            let url = job_path(id);
+            let job = succeeded(client.json(|http, base| http.get(format!("{base}{url}"))).await?)?;
             if let Some(path) = output {
-                let url = format!("{}/image", record(id));
-                let response = expect_success(client.send(|http, base| http.get(format!("{base}{url}"))).await?).await?;
-                let bytes = response.bytes().await.map_err(|e| ClientError::Job(e.to_string()))?;
-                std::fs::write(path, &bytes).map_err(|source| ClientError::Write { path: path.clone(), source })?;
+                download(&mut client, id, None, path).await?;
             }
             Ok(if command.json { serde_json::to_string_pretty(&job)? } else { summary(&job) })
         }
@@ -106,38 +100,17 @@ async fn list(client: &mut Client, status: Option<&str>, method: Option<&str>, l
     Ok(jobs)
 }
 
-/// Follows a job's events until it finishes, then returns its record.
-async fn wait(client: &mut Client, id: &str) -> Result<Value, ClientError> {
-    let events = format!("/v1/jobs/{}/events", urlencode(id));
-    loop {
-        let response = expect_success(client.send(|http, base| http.get(format!("{base}{events}"))).await?).await?;
-        let mut report =
-            super::SubmitReport { id: id.to_owned(), uploaded: vec![], reused: vec![], done: 0, total: 0, output_bytes: 0, retries: 0 };
-        if super::submit::follow_events(response, &mut report, &|_, _| {}).await.is_some() {
-            break;
-        }
-        client.backoff().await?;
-    }
-    let url = format!("/v1/jobs/{}", urlencode(id));
-    client.json(|http, base| http.get(format!("{base}{url}"))).await
-}
-
 /// Asks the server to cancel a job (Ctrl-C during `submit`): what became of it, in words.
 pub(super) async fn cancel_quietly(connect: &ConnectOptions, id: &str) -> String {
     let mut connect = connect.clone();
     connect.retries = connect.retries.min(3);
     let Ok(mut client) = Client::new(&connect) else { return "was left running (no connection to cancel it)".into() };
-    let url = format!("/v1/jobs/{}", urlencode(id));
+    let url = job_path(id);
     match client.json(|http, base| http.delete(format!("{base}{url}"))).await {
         Ok(_) => "was cancelled on the server".into(),
         Err(ClientError::Server { status: 409, .. }) => "had already finished".into(),
         Err(error) => format!("may still run on the server (cancelling failed: {error})"),
     }
-}
-
-/// A job id in a path: ids are hex, but a typed one is escaped rather than trusted.
-fn urlencode(id: &str) -> String {
-    percent_encoding::utf8_percent_encode(id, percent_encoding::NON_ALPHANUMERIC).to_string()
 }
 
 /// Listed jobs as a table: id, status, method, age.
@@ -200,6 +173,6 @@ mod tests {
         assert!(text.contains("0123456789abcdef0123456789abcdef  succeeded  pcss") && text.trim_end().ends_with("1h"), "{text}");
         assert_eq!(table(&[], 0).lines().nth(1), Some("(no jobs)"));
         assert_eq!((human_age(59), human_age(60), human_age(86400 * 3)), ("59s".into(), "1m".into(), "3d".into()));
-        assert_eq!(urlencode("../x"), "%2E%2E%2Fx");
+        assert_eq!(super::super::submit::job_path("../x"), "/v1/jobs/%2E%2E%2Fx");
     }
 }

@@ -126,8 +126,7 @@ pub async fn submit(options: &SubmitOptions, progress: &(dyn Fn(u64, u64) + Sync
     Ok(report)
 }
 
-/// Follows the job's events to the end (reopening a dropped stream: a replica going away),
-/// then downloads the image to `output`.
+/// Follows the job's events to the end, then downloads the image to `output`.
 async fn follow_and_fetch(
     client: &mut Client,
     report: &mut SubmitReport,
@@ -135,25 +134,59 @@ async fn follow_and_fetch(
     output: &Path,
     progress: &(dyn Fn(u64, u64) + Sync),
 ) -> Result<(), ClientError> {
-    let events = format!("/v1/jobs/{}/events", report.id);
-    let final_event = loop {
-        let response = client.send(|http, base| http.get(format!("{base}{events}")).header(SCENE_HEADER, scene)).await?;
-        let response = expect_success(response).await?;
+    let id = report.id.clone();
+    succeeded(follow(client, report, Some(scene), progress).await?)?;
+    report.output_bytes = download(client, &id, Some(scene), output).await?;
+    Ok(())
+}
+
+/// Follows job `report.id`'s events to its final one, reporting progress; a dropped stream (a
+/// replica going away) is reopened. `scene` routes the requests (`SCENE_HEADER`).
+pub(super) async fn follow(
+    client: &mut Client,
+    report: &mut SubmitReport,
+    scene: Option<&str>,
+    progress: &(dyn Fn(u64, u64) + Sync),
+) -> Result<Value, ClientError> {
+    let events = format!("{}/events", job_path(&report.id));
+    loop {
+        let response = expect_success(client.send(|http, base| routed(http.get(format!("{base}{events}")), scene)).await?).await?;
         match follow_events(response, report, progress).await {
-            Some(event) => break event,
+            Some(event) => return Ok(event),
             None => client.backoff().await?,
         }
-    };
-    if final_event["status"] != "succeeded" {
-        let status = final_event["status"].as_str().unwrap_or("failed").to_owned();
-        return Err(ClientError::Failed { status, error: final_event["error"].clone() });
     }
-    let image = format!("/v1/jobs/{}/image", report.id);
-    let response = client.send(|http, base| http.get(format!("{base}{image}")).header(SCENE_HEADER, scene)).await?;
+}
+
+/// A final event or record that says `succeeded`, else the job's failure.
+pub(super) fn succeeded(job: Value) -> Result<Value, ClientError> {
+    if job["status"] == "succeeded" {
+        return Ok(job);
+    }
+    let status = job["status"].as_str().unwrap_or("failed").to_owned();
+    Err(ClientError::Failed { status, error: job["error"].clone() })
+}
+
+/// Downloads job `id`'s image to `output`: its length.
+pub(super) async fn download(client: &mut Client, id: &str, scene: Option<&str>, output: &Path) -> Result<u64, ClientError> {
+    let image = format!("{}/image", job_path(id));
+    let response = client.send(|http, base| routed(http.get(format!("{base}{image}")), scene)).await?;
     let bytes = expect_success(response).await?.bytes().await.map_err(|e| ClientError::Job(e.to_string()))?;
     std::fs::write(output, &bytes).map_err(|source| ClientError::Write { path: output.to_owned(), source })?;
-    report.output_bytes = bytes.len() as u64;
-    Ok(())
+    Ok(bytes.len() as u64)
+}
+
+/// A job's record, `/v1/jobs/ID`: ids are hex, but a typed one is escaped rather than trusted.
+pub(super) fn job_path(id: &str) -> String {
+    format!("/v1/jobs/{}", percent_encoding::utf8_percent_encode(id, percent_encoding::NON_ALPHANUMERIC))
+}
+
+/// `request` with the routing header, when there is a scene to route by.
+fn routed(request: reqwest::RequestBuilder, scene: Option<&str>) -> reqwest::RequestBuilder {
+    match scene {
+        Some(scene) => request.header(SCENE_HEADER, scene),
+        None => request,
+    }
 }
 
 /// The scene a job renders, as the routing header carries it: an id, or `builtin:NAME`.

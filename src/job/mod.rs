@@ -312,11 +312,7 @@ impl CameraSpec {
     /// merged with a scene's defaults, with what needs the scene (target ≠ eye, up not along
     /// the view).
     pub fn check_given(&self) -> JobResult<()> {
-        for (name, v) in [("camera.eye", self.eye), ("camera.target", self.target), ("camera.up", self.up)] {
-            if v.is_some_and(|v| v.iter().any(|c| !c.is_finite() || c.abs() > MAX_COORDINATE)) {
-                return Err(JobError::invalid(name, format!("must be finite, within ±{MAX_COORDINATE}")));
-            }
-        }
+        check_coordinates([("camera.eye", self.eye), ("camera.target", self.target), ("camera.up", self.up)])?;
         if self.fov_y_deg.is_some_and(|f| !(f.is_finite() && f > 0.0 && f < 180.0)) {
             return Err(JobError::invalid("camera.fov_y_deg", "must be in (0, 180) degrees"));
         }
@@ -336,13 +332,19 @@ impl LightSpec {
     /// checks the light merged with a scene's defaults, with what needs the whole light (a
     /// non-zero direction, `up` not along it).
     pub fn check_given(&self) -> JobResult<()> {
-        for (name, v) in [("light.center", self.center), ("light.direction", self.direction), ("light.up", self.up)] {
-            if v.is_some_and(|v| v.iter().any(|c| !c.is_finite() || c.abs() > MAX_COORDINATE)) {
-                return Err(JobError::invalid(name, format!("must be finite, within ±{MAX_COORDINATE}")));
-            }
-        }
+        check_coordinates([("light.center", self.center), ("light.direction", self.direction), ("light.up", self.up)])?;
         check_light_size_and_intensity(self.size, self.intensity)
     }
+}
+
+/// Points and vectors, where given: every coordinate finite and within ±10⁷.
+fn check_coordinates(fields: [(&str, Option<[f32; 3]>); 3]) -> JobResult<()> {
+    for (name, v) in fields {
+        if v.is_some_and(|v| v.iter().any(|c| !c.is_finite() || c.abs() > MAX_COORDINATE)) {
+            return Err(JobError::invalid(name, format!("must be finite, within ±{MAX_COORDINATE}")));
+        }
+    }
+    Ok(())
 }
 
 /// Largest light side, metres.

@@ -7,29 +7,29 @@ use super::*;
 /// `GET /v1/jobs/{id}`: a finished render's record, or a submitted job's state; a submitted
 /// job's record names the request that submitted it (`request_id`).
 pub(super) async fn job_record(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Result<Json<Value>, ApiError> {
-    let held_request = state.jobs.listed(&id).and_then(|listed| listed.request_id);
-    let mut record = if let Some(rendered) = state.jobs.find(&id) {
-        job_json(&id, &rendered)
+    let held_request = || state.jobs.listed(&id).and_then(|listed| listed.request_id);
+    let (mut record, request_id) = if let Some(rendered) = state.jobs.find(&id) {
+        (job_json(&id, &rendered), held_request())
     } else if let Some(events) = state.jobs.submitted(&id) {
         let event = events.borrow().clone();
-        json!({"id": id, "status": event.status, "progress": {"done": event.done, "total": event.total}, "error": event.error})
+        (state_record(&id, event.status, (event.done, event.total), event.error), held_request())
     } else {
         let stored = stored_job(&state, &id).await?.ok_or_else(|| unknown_job(&id))?;
-        let mut record = match stored.result {
+        let record = match stored.result {
             Some(result) if stored.status == JobStatus::Succeeded => result,
-            _ => {
-                json!({"id": id, "status": stored.status, "progress": {"done": stored.done, "total": stored.total}, "error": stored.error})
-            }
+            _ => state_record(&id, stored.status, (stored.done, stored.total), stored.error),
         };
-        if let Some(request_id) = stored.request_id {
-            record["request_id"] = json!(request_id);
-        }
-        return Ok(Json(record));
+        (record, stored.request_id)
     };
-    if let Some(request_id) = held_request {
+    if let Some(request_id) = request_id {
         record["request_id"] = json!(request_id);
     }
     Ok(Json(record))
+}
+
+/// The record of a submitted job without a result: its state, progress and error.
+fn state_record(id: &str, status: JobStatus, (done, total): (u64, u64), error: Option<Value>) -> Value {
+    json!({"id": id, "status": status, "progress": {"done": done, "total": total}, "error": error})
 }
 
 /// A job from the durable store (one this process did not run, or no longer holds).
@@ -175,8 +175,7 @@ async fn accept_job(
     // A local place in the queue, unless the shared queue holds the job (its workers take one
     // when they take the job).
     let admitted = if shared.is_some() { None } else { Some(state.admit().map_err(release)?) };
-    let mut listed = ListedJob::new(&id, JobStatus::Queued, &job.method.name, unix_ms());
-    listed.request_id = request_id;
+    let submitted_unix_ms = unix_ms();
     // Durable before the 202: an accepted job survives a crash from here on. Ids are random, so
     // one the store already holds is a once-in-2^122 event; a fresh one is drawn, never an
     // existing record overwritten.
@@ -184,7 +183,7 @@ async fn accept_job(
         let sent = Arc::new(sent);
         for attempt in 1.. {
             let mut record = StoredJob::queued(&id, &sent);
-            (record.submitted_unix_ms, record.request_id) = (listed.submitted_unix_ms, listed.request_id.clone());
+            (record.submitted_unix_ms, record.request_id) = (submitted_unix_ms, request_id.clone());
             let keyed = keyed.map(|(key, claim)| (key.clone(), KeyedJob { id: id.clone(), ..claim.clone() }));
             let outcome = store
                 .call(move |s| match &keyed {
@@ -203,9 +202,9 @@ async fn accept_job(
             }
         }
     }
-    listed.id.clone_from(&id);
-    listed.record = format!("/v1/jobs/{id}");
     if let Some(admitted) = admitted {
+        let mut listed = ListedJob::new(&id, JobStatus::Queued, &job.method.name, submitted_unix_ms);
+        listed.request_id = request_id;
         state.spawn_submitted(listed, job, (admitted, reservation));
     }
     Ok(Accepted::New(id))
@@ -233,10 +232,7 @@ pub(super) async fn list_jobs(
                 filter.status = Some(status);
             }
             "method" => {
-                if !REGISTRY.iter().any(|m| m.name() == value) {
-                    let names: Vec<&str> = REGISTRY.iter().map(|m| m.name()).collect();
-                    return Err(invalid("method", format!("method is one of {}", names.join(", "))));
-                }
+                crate::methods::find(&value).map_err(|error| invalid("method", error.message))?;
                 filter.method = Some(value);
             }
             "limit" => {
@@ -425,18 +421,15 @@ pub(super) fn not_modified(headers: &HeaderMap, etag: &str) -> bool {
 
 /// 304 Not Modified for `etag`.
 pub(super) fn unchanged(etag: &str) -> Response {
-    let mut response = StatusCode::NOT_MODIFIED.into_response();
-    if let Ok(value) = HeaderValue::from_str(etag) {
-        response.headers_mut().insert(header::ETAG, value);
-    }
-    response.headers_mut().insert(header::CACHE_CONTROL, HeaderValue::from_static(IMMUTABLE));
-    response
+    immutable(StatusCode::NOT_MODIFIED.into_response(), etag)
 }
 
 /// Bytes that never change under their URL: private (the API may need a token), kept a year.
-pub(super) const IMMUTABLE: &str = "private, max-age=31536000, immutable";
+const IMMUTABLE: &str = "private, max-age=31536000, immutable";
 
-fn immutable(mut response: Response, etag: &str) -> Response {
+/// `response` as bytes that never change under their URL: `etag`, and `Cache-Control:
+/// immutable`.
+pub(super) fn immutable(mut response: Response, etag: &str) -> Response {
     if let Ok(value) = HeaderValue::from_str(etag) {
         response.headers_mut().insert(header::ETAG, value);
     }

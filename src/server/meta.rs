@@ -87,7 +87,7 @@ pub(super) async fn stats(State(state): State<Arc<AppState>>) -> Json<Value> {
         "jobs_queued": state.metrics.queued(),
         "backlog": state.backlog().await.map(|b| json!({
             "jobs": b.jobs,
-            "oldest_age_seconds": b.oldest_unix_ms.map(|oldest| unix_ms().saturating_sub(oldest) as f64 / 1e3),
+            "oldest_age_seconds": b.oldest_age_seconds(unix_ms()),
         })),
         "queue": {"capacity": state.queue_config.capacity, "concurrency": state.queue_config.concurrency},
         "store": state.store.as_ref().map(|s| s.health().status()),

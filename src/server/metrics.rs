@@ -265,8 +265,8 @@ impl Metrics {
         self.backlog_oldest_age.reset();
         let Some(backlog) = backlog else { return };
         set_optional(&self.backlog_jobs, backlog.jobs);
-        if let Some(oldest) = backlog.oldest_unix_ms {
-            self.backlog_oldest_age.with_label_values(&[] as &[&str]).set(now_unix_ms.saturating_sub(oldest) as f64 / 1e3);
+        if let Some(age) = backlog.oldest_age_seconds(now_unix_ms) {
+            self.backlog_oldest_age.with_label_values(&[] as &[&str]).set(age);
         }
     }
 

@@ -45,7 +45,7 @@ use crate::store::{new_job_id, JobStore as DurableStore, Store, StoreError, Stor
 use crate::supervise::Supervise;
 use crate::upload_store::{content_id, is_content_id, Kind};
 use error::{store_error, ApiError};
-use job_routes::{cancel_job, job_events, job_image, job_record, job_thumbnail, list_jobs, not_modified, submit_job, unchanged};
+use job_routes::{cancel_job, immutable, job_events, job_image, job_record, job_thumbnail, list_jobs, not_modified, submit_job, unchanged};
 use meta::{limits, methods, metrics, readyz, stats};
 use render::{image_response, job_json, render, render_blocking};
 use requests::REQUEST_ID;

@@ -72,10 +72,7 @@ pub(super) async fn head_upload(kind: Kind, State(state): State<Arc<AppState>>, 
     if not_modified(&headers, &etag) {
         return unchanged(&etag);
     }
-    let mut response = unchanged(&etag);
-    *response.status_mut() = StatusCode::OK;
-    response.headers_mut().insert(header::CONTENT_LENGTH, HeaderValue::from(size));
-    response
+    immutable(([(header::CONTENT_LENGTH, HeaderValue::from(size))]).into_response(), &etag)
 }
 
 /// `PUT /v1/scenes/{id}`, `PUT /v1/lights/{id}`: an idempotent upload under the id the client

@@ -92,15 +92,24 @@ impl EmbeddedStore {
         Self { max_keys: max_keys.max(1), ..self }
     }
 
-    /// Drops the idempotency keys past their time.
+    /// Drops the idempotency keys past their time; writes (a durable commit) only when there
+    /// are some, since this runs with every expiry round.
     fn expire_keys(&self) -> StoreResult<()> {
         self.with_db(|db| {
             let now = unix_ms();
+            let live = |value: &[u8]| serde_json::from_slice::<KeyedJob>(value).is_ok_and(|k| k.expires_unix_ms > now);
+            {
+                let txn = db.begin_read().map_err(classify)?;
+                let keys = txn.open_table(KEYS).map_err(classify)?;
+                let mut entries = keys.iter().map_err(classify)?;
+                if !entries.try_fold(false, |any, entry| entry.map(|(_, value)| any || !live(value.value()))).map_err(classify)? {
+                    return Ok(());
+                }
+            }
             let txn = db.begin_write().map_err(classify)?;
             {
                 let mut keys = txn.open_table(KEYS).map_err(classify)?;
-                keys.retain(|_, value| serde_json::from_slice::<KeyedJob>(value).is_ok_and(|k| k.expires_unix_ms > now))
-                    .map_err(classify)?;
+                keys.retain(|_, value| live(value)).map_err(classify)?;
             }
             txn.commit().map_err(classify)
         })
@@ -256,12 +265,7 @@ impl JobStore for EmbeddedStore {
         self.with_db(|db| {
             let txn = db.begin_read().map_err(classify)?;
             let (keys, jobs) = (txn.open_table(KEYS).map_err(classify)?, txn.open_table(JOBS).map_err(classify)?);
-            let held = keys.get(key_digest(key).as_str()).map_err(classify)?;
-            let held = held.map(|bytes| serde_json::from_slice::<KeyedJob>(bytes.value())).transpose()?;
-            match held {
-                Some(held) if held.expires_unix_ms > unix_ms() && jobs.get(held.id.as_str()).map_err(classify)?.is_some() => Ok(Some(held)),
-                _ => Ok(None),
-            }
+            live_key(&keys, &jobs, &key_digest(key))
         })
     }
 
@@ -273,12 +277,8 @@ impl JobStore for EmbeddedStore {
             let txn = db.begin_write().map_err(classify)?;
             {
                 let mut keys = txn.open_table(KEYS).map_err(classify)?;
-                let jobs = txn.open_table(JOBS).map_err(classify)?;
-                let held = keys.get(digest.as_str()).map_err(classify)?.map(|b| serde_json::from_slice::<KeyedJob>(b.value()));
-                if let Some(held) = held.transpose()?.filter(|k| k.expires_unix_ms > unix_ms()) {
-                    if jobs.get(held.id.as_str()).map_err(classify)?.is_some() {
-                        return Ok(Some(held));
-                    }
+                if let Some(held) = live_key(&keys, &txn.open_table(JOBS).map_err(classify)?, &digest)? {
+                    return Ok(Some(held));
                 }
                 if keys.len().map_err(classify)? as usize >= self.max_keys {
                     evict_keys(&mut keys, self.max_keys)?;
@@ -381,11 +381,11 @@ impl JobStore for EmbeddedStore {
             image_total -= job.image_bytes;
             dropped_images.push(job.clone());
         }
-        self.expire_keys()?;
-        if expired.is_empty() && dropped_images.is_empty() {
-            return Ok((0, 0));
+        // Results first: on a full disk they are what frees it, whatever the keys' write does.
+        if !expired.is_empty() || !dropped_images.is_empty() {
+            self.remove(&expired, &dropped_images)?;
         }
-        self.remove(&expired, &dropped_images)?;
+        self.expire_keys()?;
         Ok((expired.len(), dropped_images.len()))
     }
 
@@ -414,6 +414,18 @@ impl JobStore for EmbeddedStore {
         }
         Ok(dropped)
     }
+}
+
+/// The job the key under `digest` names, while the key lasts and the job's record does.
+fn live_key(
+    keys: &impl ReadableTable<&'static str, &'static [u8]>,
+    jobs: &impl ReadableTable<&'static str, &'static [u8]>,
+    digest: &str,
+) -> StoreResult<Option<KeyedJob>> {
+    let Some(bytes) = keys.get(digest).map_err(classify)? else { return Ok(None) };
+    let held: KeyedJob = serde_json::from_slice(bytes.value())?;
+    let live = held.expires_unix_ms > unix_ms() && jobs.get(held.id.as_str()).map_err(classify)?.is_some();
+    Ok(live.then_some(held))
 }
 
 /// Writes a new job record in `txn`; an id held already is refused, never overwritten.

@@ -104,6 +104,13 @@ pub struct Backlog {
     pub oldest_unix_ms: Option<u64>,
 }
 
+impl Backlog {
+    /// Seconds the oldest waiting job has waited at `now_unix_ms` (None without one).
+    pub fn oldest_age_seconds(&self, now_unix_ms: u64) -> Option<f64> {
+        self.oldest_unix_ms.map(|oldest| now_unix_ms.saturating_sub(oldest) as f64 / 1e3)
+    }
+}
+
 /// Why a store operation failed. The server answers each kind differently: an unavailable
 /// store is retried (503 `store_unavailable` at admission, results kept and stored later), a
 /// full one refuses new work (507 `insufficient_storage`), an existing id is never

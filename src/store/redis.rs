@@ -263,8 +263,10 @@ impl JobStore for RedisStore {
     fn list(&self, filter: &JobFilter, after: Option<&Cursor>, limit: usize) -> StoreResult<(Vec<ListedJob>, Option<Cursor>)> {
         let top = after.map_or(unix_ms() + 1, |c| c.submitted_unix_ms);
         let batch = (limit * 2).clamp(64, 1000);
-        let (mut page, mut offset) = (Vec::new(), 0);
-        while offset < MAX_LIST_SCAN {
+        // `offset` is the position in the index (less the ids dropped on the way), `scanned`
+        // what this call has read, the bound.
+        let (mut page, mut offset, mut scanned) = (Vec::new(), 0, 0);
+        loop {
             let entries: Vec<(String, f64)> = self.with(|c| {
                 redis::cmd("ZREVRANGEBYSCORE")
                     .arg(INDEX)
@@ -280,6 +282,7 @@ impl JobStore for RedisStore {
                 return Ok((page, None));
             }
             offset += entries.len();
+            scanned += entries.len();
             let last = entries.last().map(|(id, score)| Cursor { submitted_unix_ms: *score as u64, id: id.clone() });
             let fresh: Vec<&String> =
                 entries.iter().filter(|(id, score)| after.is_none_or(|c| c.precedes(*score as u64, id))).map(|(id, _)| id).collect();
@@ -296,7 +299,8 @@ impl JobStore for RedisStore {
                     if filter.admits(listed.status, &listed.method) {
                         page.push(listed);
                         if page.len() == limit {
-                            return Ok((page.clone(), page.last().map(ListedJob::cursor)));
+                            let next = page.last().map(ListedJob::cursor);
+                            return Ok((page, next));
                         }
                     }
                 }
@@ -310,11 +314,10 @@ impl JobStore for RedisStore {
                 return Ok((page, None));
             }
             // Scanned as far as one call may: the next page starts after the last id read.
-            if offset >= MAX_LIST_SCAN {
+            if scanned >= MAX_LIST_SCAN {
                 return Ok((page, last));
             }
         }
-        Ok((page, None))
     }
 
     fn start(&self, id: &str) -> StoreResult<()> {
