@@ -1,6 +1,9 @@
 // The dashboard's logic: polls /v1/stats every couple of seconds and redraws the tiles, four
-// Chart.js charts and the thumbnails of recent renders. History (throughput and queue depth
-// over time) lives in the page: the server keeps only the recent jobs.
+// Chart.js charts, the replicas and recent jobs of the service, and the thumbnails of recent
+// renders. History (throughput and backlog over time) lives in the page: the server keeps only
+// the recent jobs. Behind a load balancer each poll may reach another replica: everything
+// drawn is the service's, but the engine's tiles (cache, pools, resets) and the header name the
+// replica that answered.
 "use strict";
 
 const POLL_MS = 2000;
@@ -54,7 +57,7 @@ const loadChart = chart("chart-load", {
     labels: history.labels,
     datasets: [
       { label: "jobs / min", data: history.throughput, borderColor: "#f0b429", yAxisID: "y", pointRadius: 0, tension: 0.2 },
-      { label: "queued", data: history.queued, borderColor: "#58a6ff", yAxisID: "q", pointRadius: 0, stepped: true },
+      { label: "backlog", data: history.queued, borderColor: "#58a6ff", yAxisID: "q", pointRadius: 0, stepped: true },
       { label: "rendering", data: history.running, borderColor: "#3fb950", yAxisID: "q", pointRadius: 0, stepped: true },
     ],
   },
@@ -119,13 +122,24 @@ function ratio(reused, created) {
   return all === 0 ? "–" : `${Math.round((100 * reused) / all)} %`;
 }
 
+// Sums a count over the live replicas.
+function total(stats, key) {
+  return stats.cluster.replicas.reduce((sum, r) => sum + r[key], 0);
+}
+
 function drawTiles(stats) {
   const uploads = stats.engine.uploads;
+  setText("replica", `answered by ${stats.replica}`);
   setText("adapter", `${stats.adapter.name} (${stats.adapter.backend})`);
   setText("uptime", duration(stats.uptime_s));
   setText("throughput", stats.jobs.per_minute.toFixed(1));
-  setText("queue", `${stats.jobs_queued} · ${stats.jobs_in_flight}`);
-  setText("queue-unit", `waiting · rendering (of ${stats.queue.capacity}, ${stats.queue.concurrency} on the device)`);
+  const backlog = stats.backlog;
+  setText("backlog", backlog ? String(backlog.jobs) : "unknown");
+  const oldest = backlog && backlog.oldest_age_seconds !== null ? `oldest ${backlog.oldest_age_seconds.toFixed(0)} s` : "none waiting";
+  setText("backlog-unit", backlog ? `jobs waiting in the service · ${oldest}` : "the store cannot be read");
+  const scope = stats.cluster.scope === "cluster" ? "" : " (this replica only)";
+  setText("replicas", String(stats.cluster.replicas.length));
+  setText("replicas-unit", `${total(stats, "jobs_in_flight")} rendering · ${total(stats, "jobs_queued")} waiting${scope}`);
   setText("cache", bytes(uploads.bytes));
   setText("cache-unit", `of ${bytes(uploads.budget_bytes)} · ${uploads.entries} assets`);
   const e = stats.engine;
@@ -156,8 +170,8 @@ function drawStore(store, connections) {
 function drawHistory(stats) {
   history.labels.push(new Date().toLocaleTimeString());
   history.throughput.push(stats.jobs.per_minute);
-  history.queued.push(stats.jobs_queued);
-  history.running.push(stats.jobs_in_flight);
+  history.queued.push(stats.backlog ? stats.backlog.jobs : null);
+  history.running.push(total(stats, "jobs_in_flight"));
   if (history.labels.length > HISTORY_POINTS) {
     for (const series of Object.values(history)) series.shift();
   }
@@ -197,6 +211,54 @@ function drawCache(stats) {
   cacheChart.update();
 }
 
+// Replaces a table's rows: one per item, each cell's text from `cells(item)`.
+function fillTable(id, items, cells, decorate) {
+  const body = document.querySelector(`#${id} tbody`);
+  body.replaceChildren(
+    ...items.map((item) => {
+      const row = document.createElement("tr");
+      for (const text of cells(item)) {
+        const cell = document.createElement("td");
+        cell.textContent = text;
+        row.append(cell);
+      }
+      decorate(row, item);
+      return row;
+    }),
+  );
+}
+
+// A row per live replica (the one that answered marked), and the counts summed over them.
+function drawReplicas(stats) {
+  const now = Date.now();
+  fillTable(
+    "replica-table",
+    stats.cluster.replicas,
+    (r) => [r.replica, r.adapter, r.jobs_in_flight, r.jobs_queued, r.jobs_succeeded, r.jobs_failed, duration((now - r.started_unix_ms) / 1000).slice(3), `${Math.max(0, (now - r.heartbeat_unix_ms) / 1000).toFixed(0)} s ago`],
+    (row, r) => {
+      row.dataset.replica = r.replica;
+      row.classList.toggle("self", r.replica === stats.replica);
+    },
+  );
+  document.body.dataset.replicas = String(stats.cluster.replicas.length);
+  document.body.dataset.replicaNames = stats.cluster.replicas.map((r) => r.replica).join(",");
+  document.body.dataset.jobsSucceeded = String(total(stats, "jobs_succeeded"));
+  document.body.dataset.answeredBy = stats.replica;
+}
+
+// The newest finished jobs of the service, each naming the replica that rendered it.
+function drawJobs(stats) {
+  fillTable(
+    "job-table",
+    stats.jobs.recent,
+    (j) => [new Date(j.finished_unix_ms).toLocaleTimeString(), j.method, `${j.width}×${j.height}`, j.replica, j.outcome, j.wall_ms.toFixed(0)],
+    (row, j) => {
+      row.dataset.replica = j.replica;
+      row.children[4].classList.toggle("failed", j.outcome !== "ok");
+    },
+  );
+}
+
 // Thumbnails of the newest successful jobs; ids are unique, so existing images are kept.
 function drawThumbnails(stats) {
   const box = document.getElementById("thumbnails");
@@ -224,7 +286,7 @@ function drawThumbnails(stats) {
         .then((blob) => (img.src = URL.createObjectURL(blob)))
         .catch(() => item.remove());
       const caption = document.createElement("figcaption");
-      caption.textContent = `${job.method} · ${job.wall_ms.toFixed(0)} ms`;
+      caption.textContent = `${job.method} · ${job.wall_ms.toFixed(0)} ms · ${job.replica}`;
       item.append(img, caption);
     }
     if (box.children[k] !== item) box.insertBefore(item, box.children[k] || null);
@@ -243,6 +305,8 @@ async function poll() {
     drawLatency(stats);
     drawPhases(stats);
     drawCache(stats);
+    drawReplicas(stats);
+    drawJobs(stats);
     drawThumbnails(stats);
     status.textContent = "live";
     status.className = "status ok";

@@ -98,7 +98,8 @@ pub struct ServeConfig {
 
     /// Where submitted jobs and their results are kept: `embedded` (a file under --data-dir;
     /// accepted jobs survive a crash and finish after a restart), `memory`, or
-    /// `redis://HOST:PORT/DB` (shared by several replicas acting as one service).
+    /// `redis://[:PASSWORD@]HOST:PORT/DB` (shared by several replicas acting as one service;
+    /// `rediss://` for TLS).
     #[arg(long, env = "PENUMBRA_JOB_STORE", default_value = "embedded", value_parser = JobStoreKind::parse)]
     pub job_store: JobStoreKind,
 
@@ -106,6 +107,22 @@ pub struct ServeConfig {
     /// before another replica claims it (the first is presumed dead).
     #[arg(long, env = "PENUMBRA_CLAIM_IDLE_SECS", default_value_t = 15.0, value_parser = seconds)]
     pub claim_idle_secs: f64,
+
+    /// With a Redis store: seconds between this replica's heartbeats, which tell the others
+    /// (and the cluster's dashboard) that it is alive and what it is doing; a replica missing
+    /// three in a row leaves the cluster view.
+    #[arg(long, env = "PENUMBRA_HEARTBEAT_SECS", default_value_t = 5.0, value_parser = seconds)]
+    pub heartbeat_secs: f64,
+
+    /// With a `rediss://` store: a PEM file of the certificate authorities that signed Redis's
+    /// certificate, trusted beside the system's roots.
+    #[arg(long, env = "PENUMBRA_REDIS_CA_CERT")]
+    pub redis_ca_cert: Option<PathBuf>,
+
+    /// This replica's name in job records, the cluster view and `/v1/stats`. Default:
+    /// `$HOSTNAME` (the pod's name under Kubernetes), else the listen address.
+    #[arg(long, env = "PENUMBRA_REPLICA_NAME")]
+    pub replica_name: Option<String>,
 
     /// Directory of the embedded job store.
     #[arg(long, env = "PENUMBRA_DATA_DIR", default_value = "penumbra-data")]
@@ -224,7 +241,8 @@ pub enum JobStoreKind {
     Embedded,
     /// `memory`: nothing survives the process.
     Memory,
-    /// `redis://HOST:PORT/DB`: a queue and records shared by several replicas.
+    /// `redis://HOST:PORT/DB` (or `rediss://` over TLS): a queue and records shared by
+    /// several replicas.
     Redis(String),
 }
 
@@ -233,8 +251,8 @@ impl JobStoreKind {
         match text {
             "embedded" => Ok(Self::Embedded),
             "memory" => Ok(Self::Memory),
-            url if url.starts_with("redis://") => Ok(Self::Redis(url.to_owned())),
-            other => Err(format!("`{other}` is not embedded, memory or redis://HOST:PORT/DB")),
+            url if url.starts_with("redis://") || url.starts_with("rediss://") => Ok(Self::Redis(url.to_owned())),
+            other => Err(format!("`{other}` is not embedded, memory, redis://HOST:PORT/DB or rediss://HOST:PORT/DB")),
         }
     }
 }

@@ -13,6 +13,7 @@ use tokio::sync::{watch, OwnedSemaphorePermit, Semaphore};
 use crate::engine::Rendered;
 use crate::error::{ErrorCode, JobError};
 use crate::job::submission::{self, Cursor, JobFilter, KeyedJob, ListedJob};
+use crate::job::summary::JobSummary;
 use crate::job::JobStatus;
 
 /// The queue's shape: jobs admitted at once (waiting or running), jobs on the device at once,
@@ -317,37 +318,10 @@ fn names_job(key: &KeyedJob, now: u64, held: &impl Fn(&str) -> bool) -> bool {
     key.expires_unix_ms > now && held(&key.id)
 }
 
-/// What the dashboard shows of one finished job.
-#[derive(Debug, Clone, serde::Serialize)]
-pub struct JobSummary {
-    pub id: String,
-    pub method: String,
-    /// `ok`, or the error code.
-    pub outcome: String,
-    /// Milliseconds since the Unix epoch when it finished.
-    pub finished_unix_ms: u64,
-    /// Wall time from the request (or submission) to the result, queueing included.
-    pub wall_ms: f64,
-    /// Render phases of a successful job, in order: (name, wall milliseconds).
-    pub phases: Vec<(&'static str, f64)>,
-    pub width: u32,
-    pub height: u32,
-}
-
-/// Per-method latency over the recent window.
-#[derive(Debug, Clone, Default, serde::Serialize)]
-pub struct MethodLatency {
-    pub jobs: usize,
-    pub failed: usize,
-    pub p50_ms: f64,
-    pub p95_ms: f64,
-    pub max_ms: f64,
-}
-
-/// The last finished jobs (newest last), for `/v1/stats` and the dashboard: throughput,
-/// latency per method and the phase breakdown are computed from them.
+/// The last finished jobs of this daemon (newest last), for `/v1/stats` and the dashboard
+/// when no shared store holds the whole service's.
 pub struct RecentJobs {
-    jobs: Mutex<VecDeque<(Instant, JobSummary)>>,
+    jobs: Mutex<VecDeque<JobSummary>>,
     capacity: usize,
 }
 
@@ -361,42 +335,12 @@ impl RecentJobs {
         if jobs.len() >= self.capacity {
             jobs.pop_front();
         }
-        jobs.push_back((Instant::now(), summary));
+        jobs.push_back(summary);
     }
 
     /// The newest `n` jobs, newest first.
     pub fn newest(&self, n: usize) -> Vec<JobSummary> {
         let jobs = self.jobs.lock().unwrap_or_else(|p| p.into_inner());
-        jobs.iter().rev().take(n).map(|(_, s)| s.clone()).collect()
-    }
-
-    /// Jobs finished in the last `window`, per minute.
-    pub fn per_minute(&self, window: Duration) -> f64 {
-        let jobs = self.jobs.lock().unwrap_or_else(|p| p.into_inner());
-        let count = jobs.iter().rev().take_while(|(at, _)| at.elapsed() <= window).count();
-        count as f64 * 60.0 / window.as_secs_f64()
-    }
-
-    /// Latency percentiles per method (successful jobs) over the recent jobs.
-    pub fn latency_by_method(&self) -> std::collections::BTreeMap<String, MethodLatency> {
-        let jobs = self.jobs.lock().unwrap_or_else(|p| p.into_inner());
-        let mut walls: std::collections::BTreeMap<String, (Vec<f64>, usize)> = Default::default();
-        for (_, job) in jobs.iter() {
-            let entry = walls.entry(job.method.clone()).or_default();
-            if job.outcome == "ok" {
-                entry.0.push(job.wall_ms);
-            } else {
-                entry.1 += 1;
-            }
-        }
-        walls
-            .into_iter()
-            .map(|(method, (mut ms, failed))| {
-                ms.sort_by(f64::total_cmp);
-                let at = |q: f64| if ms.is_empty() { 0.0 } else { ms[((ms.len() - 1) as f64 * q).round() as usize] };
-                let latency = MethodLatency { jobs: ms.len() + failed, failed, p50_ms: at(0.5), p95_ms: at(0.95), max_ms: at(1.0) };
-                (method, latency)
-            })
-            .collect()
+        jobs.iter().rev().take(n).cloned().collect()
     }
 }

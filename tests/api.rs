@@ -875,12 +875,12 @@ async fn the_dashboard_draws_live_data_in_headless_chromium() {
     std::fs::remove_file(&screenshot).ok();
     let url = format!("{base}/");
     let (dom, shot) = tokio::task::spawn_blocking(move || {
-        (chromium(&["--dump-dom"], &url), chromium(&[&format!("--screenshot={}", screenshot.display())], &url))
+        (common::chromium(&["--dump-dom"], &url), common::chromium(&[&format!("--screenshot={}", screenshot.display())], &url))
     })
     .await
     .unwrap();
-    let body = dom.split("<body").nth(1).and_then(|b| b.split('>').next()).expect("a body element");
-    let attribute = |name: &str| body.split(&format!("{name}=\"")).nth(1).and_then(|v| v.split('"').next()).unwrap_or("").to_owned();
+    let body = common::body_tag(&dom);
+    let attribute = |name: &str| common::attribute(&body, name);
     assert!(attribute("data-polls").parse::<u32>().unwrap_or(0) >= 1, "the page polled /v1/stats: {body}");
     assert_eq!(attribute("data-phase-bars"), "4", "one stacked bar per successful job: {body}");
     assert!(attribute("data-phases").contains("shadow_map"), "{body}");
@@ -891,31 +891,6 @@ async fn the_dashboard_draws_live_data_in_headless_chromium() {
     let shot = image::open(&shot).expect("chromium wrote a PNG screenshot").to_rgb8();
     let accent = shot.pixels().filter(|p| p.0[0].abs_diff(0xf0) < 12 && p.0[1].abs_diff(0xb4) < 12 && p.0[2].abs_diff(0x29) < 12).count();
     assert!(accent > 500, "charts drawn in the screenshot ({accent} accent pixels)");
-}
-
-/// Runs headless Chromium on `url` with `extra` flags; returns its standard output (the DOM for
-/// `--dump-dom`) or, for `--screenshot=PATH`, the path. `PENUMBRA_CHROMIUM` names the binary.
-fn chromium(extra: &[&str], url: &str) -> String {
-    let binary = std::env::var("PENUMBRA_CHROMIUM").unwrap_or_else(|_| "chromium".into());
-    // One profile per run: tests open Chromium concurrently, and a profile is single-instance.
-    static RUNS: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
-    let run = RUNS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-    let profile = std::env::temp_dir().join(format!("penumbra-chromium-{}-{run}", std::process::id()));
-    let output = std::process::Command::new(&binary)
-        .args(["--headless", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage", "--hide-scrollbars", "--window-size=1280,1300"])
-        // Virtual time runs the page's timers without waiting for them: three polls or so.
-        .arg("--virtual-time-budget=5000")
-        .arg(format!("--user-data-dir={}", profile.display()))
-        .args(extra)
-        .arg(url)
-        .output()
-        .unwrap_or_else(|e| panic!("cannot run `{binary}` ({e}); install Debian's chromium: apt-get install -y chromium"));
-    std::fs::remove_dir_all(&profile).ok();
-    assert!(output.status.success(), "chromium failed: {}", String::from_utf8_lossy(&output.stderr));
-    match extra.iter().find_map(|f| f.strip_prefix("--screenshot=")) {
-        Some(path) => path.to_owned(),
-        None => String::from_utf8(output.stdout).expect("UTF-8 DOM"),
-    }
 }
 
 /// `penumbra bench-daemon` in miniature: its report is complete, no job failed, and the
@@ -1187,7 +1162,7 @@ async fn bearer_tokens_guard_the_api_and_cors_is_closed_unless_configured() {
     let render = client.post(format!("{base}/v1/render")).bearer_auth(tokens[1]).json(&small_job("png")).send().await.unwrap();
     assert_eq!(render.status(), StatusCode::OK);
     let url = format!("{base}/#token={}", tokens[1]);
-    let dom = tokio::task::spawn_blocking(move || chromium(&["--dump-dom"], &url)).await.unwrap();
+    let dom = tokio::task::spawn_blocking(move || common::chromium(&["--dump-dom"], &url)).await.unwrap();
     assert!(dom.contains("class=\"status ok\""), "the dashboard got its stats with the token");
     assert!(!dom.contains("token-form"), "no token was asked for");
 }

@@ -271,8 +271,10 @@ impl Cluster {
         let (redis_port, redis) = start_redis();
         let ports: Vec<u16> = (0..replicas).map(|_| free_port()).collect();
         let store = format!("redis://127.0.0.1:{redis_port}/0");
-        let children =
-            ports.iter().map(|&port| Some(daemon(port, &["--no-warm-up", "--claim-idle-secs", "2", "--job-store", &store]))).collect();
+        let children = ports
+            .iter()
+            .map(|&port| Some(daemon(port, &["--no-warm-up", "--claim-idle-secs", "2", "--heartbeat-secs", "1", "--job-store", &store])))
+            .collect();
         for &port in &ports {
             wait_ready(port);
         }
@@ -388,6 +390,121 @@ fn three_replicas_behind_nginx_share_redis_and_survive_a_sigkill() {
 /// small job costs through nginx and Redis against one replica on the embedded store, how
 /// many jobs per second each store sustains on its own, and the scene-cache hit rate across
 /// three replicas with consistent hashing against round robin (30 scenes × 10 jobs).
+/// The service's dashboard in headless Chromium through nginx, three replicas on one Redis:
+/// whichever replica answers, the page names it, lists the three, shows every job of the batch
+/// with the replica that rendered it, and succeeded counts that add up to the jobs submitted.
+/// A replica killed with SIGKILL leaves the list when its heartbeat expires (3 s here); one
+/// whose heartbeat cannot be written stays ready, says so in `/readyz`, and renders on. The
+/// Grafana dashboard in `deploy/` queries only series that `/metrics` serves.
+#[test]
+fn the_cluster_dashboard_shows_every_replica_through_nginx() {
+    let mut cluster = Cluster::start(3, true);
+    let names: Vec<String> = cluster.ports.iter().map(|p| format!("127.0.0.1:{p}")).collect();
+    let jobs = ["hard", "pcss", "jfa-e"]
+        .map(|m| format!(r#"{{"scene": {{"builtin": "torus"}}, "method": {{"name": "{m}"}}, "output": {{"width": 96, "height": 64}}}}"#));
+    let ids: Vec<String> = (0..9).map(|k| cluster.submit(&jobs[k % 3], "builtin:torus")).collect();
+    assert!(cluster.wait_finished(&ids, Duration::from_secs(180)), "the batch finished");
+    let stats = || http("GET", &format!("{}/v1/stats", cluster.base), None).map(|(_, body)| json(&body));
+    let succeeded = |s: &serde_json::Value| {
+        s["cluster"]["replicas"].as_array().map_or(0, |r| r.iter().map(|r| r["jobs_succeeded"].as_u64().unwrap()).sum::<u64>())
+    };
+    // Heartbeats come every second: wait until the last counts are reported.
+    let settled = wait_until(Duration::from_secs(20), || {
+        stats().is_some_and(|s| succeeded(&s) == 9 && s["jobs"]["recent"].as_array().unwrap().len() == 9)
+    });
+    assert!(settled.is_some(), "the cluster view never counted the batch: {:?}", stats());
+
+    let page = format!("{}/", cluster.base);
+    let dom = common::chromium(&["--dump-dom"], &page);
+    let body = common::body_tag(&dom);
+    let attribute = |name: &str| common::attribute(&body, name);
+    assert_eq!(attribute("data-replicas"), "3", "{body}");
+    assert_eq!(attribute("data-jobs-succeeded"), "9", "the counts add up to the jobs submitted: {body}");
+    let mut listed: Vec<String> = attribute("data-replica-names").split(',').map(str::to_owned).collect();
+    listed.sort();
+    let mut expected = names.clone();
+    expected.sort();
+    assert_eq!(listed, expected, "a row per replica");
+    assert!(names.contains(&attribute("data-answered-by")), "the page names the replica that answered: {body}");
+    let job_rows = dom.split("id=\"job-table\"").nth(1).unwrap().split("</table>").next().unwrap();
+    let renderers: Vec<&str> = job_rows.split("<tr data-replica=\"").skip(1).map(|r| r.split('"').next().unwrap()).collect();
+    assert_eq!(renderers.len(), 9, "every job of the batch is listed: {job_rows}");
+    assert!(renderers.iter().all(|r| names.iter().any(|n| n == r)), "each row names the replica that rendered it: {renderers:?}");
+    let by_replica: Vec<usize> = names.iter().map(|n| renderers.iter().filter(|r| *r == n).count()).collect();
+    eprintln!(
+        "cluster dashboard: 9 jobs submitted, 9 listed, rendered per replica {by_replica:?}, answered by {}",
+        attribute("data-answered-by")
+    );
+
+    // The Grafana dashboard's queries name served series (histograms by their _bucket, _sum, _count).
+    let (_, text) = http("GET", &format!("http://127.0.0.1:{}/metrics", cluster.ports[0]), None).unwrap();
+    let served = String::from_utf8_lossy(&text).into_owned();
+    for name in grafana_series() {
+        let family = ["_bucket", "_sum", "_count"].iter().find_map(|s| name.strip_suffix(s)).unwrap_or(&name);
+        assert!(served.contains(&format!("# TYPE {family} ")), "the Grafana dashboard queries {name}, which /metrics does not serve");
+    }
+
+    // A replica killed with SIGKILL leaves the list once its last heartbeat expires.
+    drop(cluster.replicas[0].take());
+    let killed = Instant::now();
+    let gone = wait_until(Duration::from_secs(15), || {
+        stats().is_some_and(|s| {
+            s["cluster"]["replicas"].as_array().is_some_and(|r| r.len() == 2 && r.iter().all(|r| r["replica"] != names[0]))
+        })
+    });
+    assert!(gone.is_some(), "the killed replica stayed in the list: {:?}", stats());
+    eprintln!(
+        "cluster dashboard: the killed replica left the list {:.1} s after the SIGKILL (heartbeat expiry 3 s)",
+        killed.elapsed().as_secs_f64()
+    );
+    let body = common::body_tag(&common::chromium(&["--dump-dom"], &page));
+    assert_eq!(common::attribute(&body, "data-replicas"), "2", "{body}");
+    assert!(!common::attribute(&body, "data-replica-names").contains(&names[0]), "{body}");
+
+    // A heartbeat that cannot be written (its key holds the wrong type) leaves the replica ready
+    // and rendering, and /readyz says so; it recovers when the key is writable again.
+    let redis = |args: &[&str]| run(Command::new("redis-cli").args(["-p", &cluster.redis_port.to_string()]).args(args));
+    redis(&["SET", "penumbra:replicas", "not a sorted set"]);
+    let readyz = || http("GET", &format!("http://127.0.0.1:{}/readyz", cluster.ports[1]), None).map(|(status, body)| (status, json(&body)));
+    let failing =
+        wait_until(Duration::from_secs(10), || readyz().is_some_and(|(status, r)| status == 200 && r["heartbeat"]["ok"] == false));
+    assert!(failing.is_some(), "/readyz says the heartbeat fails: {:?}", readyz());
+    eprintln!("cluster dashboard: /readyz with a failing heartbeat: {:?}", readyz());
+    let id = cluster.submit(&jobs[0], "builtin:torus");
+    assert!(cluster.wait_finished(std::slice::from_ref(&id), Duration::from_secs(60)));
+    assert_eq!(cluster.record(&id)["status"], "succeeded", "rendering goes on");
+    redis(&["DEL", "penumbra:replicas"]);
+    let recovered = wait_until(Duration::from_secs(10), || readyz().is_some_and(|(_, r)| r["heartbeat"]["ok"] == true));
+    assert!(recovered.is_some(), "the heartbeat recovers: {:?}", readyz());
+}
+
+/// The series the Grafana dashboard in `deploy/grafana/` queries: every metric name in its
+/// panels' PromQL expressions.
+fn grafana_series() -> Vec<String> {
+    let dashboard: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(repo().join("deploy/grafana/penumbra.json")).unwrap())
+        .expect("the Grafana dashboard parses");
+    let mut expressions = Vec::new();
+    for panel in dashboard["panels"].as_array().expect("panels") {
+        for target in panel["targets"].as_array().into_iter().flatten() {
+            expressions.push(target["expr"].as_str().expect("a PromQL expression").to_owned());
+        }
+    }
+    assert!(expressions.len() >= 8, "{expressions:?}");
+    let mut names: Vec<String> = expressions
+        .iter()
+        .flat_map(|e| {
+            e.split(|c: char| !(c.is_ascii_alphanumeric() || c == '_' || c == ':'))
+                .filter(|w| w.starts_with("penumbra_") || w.starts_with("process_"))
+                .map(str::to_owned)
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    names.sort();
+    names.dedup();
+    assert!(names.len() >= 8, "{names:?}");
+    names
+}
+
 #[test]
 #[ignore = "a benchmark: run by hand for the figures"]
 fn cluster_figures() {
@@ -430,6 +547,7 @@ fn cluster_figures() {
     let image = vec![7u8; 20_000];
     let redis = penumbra::store::RedisStore::open(
         &format!("redis://127.0.0.1:{}/1", cluster.redis_port),
+        None,
         Duration::from_secs(60),
         Duration::from_secs(15),
     )
@@ -509,7 +627,7 @@ fn a_shared_job_that_keeps_killing_replicas_is_failed_with_a_reason() {
     let (redis_port, _redis) = start_redis();
     let url = format!("redis://127.0.0.1:{redis_port}/0");
     let connect = || {
-        let store = penumbra::store::RedisStore::open(&url, Duration::from_secs(60), Duration::from_millis(500)).ok()?;
+        let store = penumbra::store::RedisStore::open(&url, None, Duration::from_secs(60), Duration::from_millis(500)).ok()?;
         store.ping().is_ok().then_some(store)
     };
     assert!(wait_until(Duration::from_secs(20), || connect().is_some()).is_some(), "redis-server did not start");
@@ -985,6 +1103,61 @@ fn make_certificates(dir: &Path) {
         "-extfile",
         "server.ext",
     ]);
+}
+
+/// The job store over TLS with a password: Debian's `redis-server` on a TLS port only, a
+/// replica given `rediss://:PASSWORD@…` and the CA (`--redis-ca-cert`) renders a submitted job
+/// through it; a replica that trusts another CA cannot reach the store and is not ready (503
+/// `store unavailable`), nor is one with a wrong password.
+#[test]
+fn a_replica_uses_redis_over_tls_with_a_password() {
+    let dir = std::env::temp_dir().join(format!("penumbra-rediss-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    make_certificates(&dir);
+    let port = free_port();
+    let file = |name: &str| dir.join(name).display().to_string();
+    let _redis = Child(
+        Command::new("redis-server")
+            .args(["--port", "0", "--tls-port", &port.to_string(), "--bind", "127.0.0.1", "--save", "", "--appendonly", "no"])
+            .args(["--tls-cert-file", &file("server.pem"), "--tls-key-file", &file("server.key"), "--tls-ca-cert-file", &file("ca.pem")])
+            .args(["--tls-auth-clients", "no", "--requirepass", "a redis password"])
+            .stdout(std::process::Stdio::null())
+            .spawn()
+            .expect("redis-server (apt-get install redis-server)"),
+    );
+    let cli = |args: &[&str]| {
+        Command::new("redis-cli")
+            .args(["--tls", "--cacert", &file("ca.pem"), "-p", &port.to_string(), "-a", "a redis password", "--no-auth-warning"])
+            .args(args)
+            .output()
+            .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_owned())
+            .unwrap_or_default()
+    };
+    assert!(wait_until(Duration::from_secs(20), || cli(&["PING"]) == "PONG").is_some(), "redis-server with TLS did not start");
+
+    let store = format!("rediss://:a%20redis%20password@127.0.0.1:{port}/0");
+    let ports = [free_port(), free_port(), free_port()];
+    let _good = daemon(ports[0], &["--no-warm-up", "--job-store", &store, "--redis-ca-cert", &file("ca.pem")]);
+    let _other_ca = daemon(ports[1], &["--no-warm-up", "--job-store", &store, "--redis-ca-cert", &file("other-ca.pem")]);
+    let wrong_password = format!("rediss://:wrong@127.0.0.1:{port}/0");
+    let _wrong = daemon(ports[2], &["--no-warm-up", "--job-store", &wrong_password, "--redis-ca-cert", &file("ca.pem")]);
+    wait_ready(ports[0]);
+    let base = format!("http://127.0.0.1:{}", ports[0]);
+    let job = r#"{"scene": {"builtin": "occluder"}, "method": {"name": "pcss"}, "output": {"width": 64, "height": 48}}"#;
+    let (status, body) = http("POST", &format!("{base}/v1/jobs"), Some(job)).unwrap();
+    assert_eq!(status, 202, "{}", String::from_utf8_lossy(&body));
+    let id = json(&body)["id"].as_str().unwrap().to_owned();
+    assert_eq!(finished_record(&base, &id, Duration::from_secs(60))["status"], "succeeded");
+    let stored: serde_json::Value = serde_json::from_str(&cli(&["GET", &format!("penumbra:job:{id}")])).expect("the record is in Redis");
+    assert_eq!(stored["status"], "succeeded");
+    for refused in &ports[1..] {
+        let readiness = || http("GET", &format!("http://127.0.0.1:{refused}/readyz"), None);
+        let unavailable = wait_until(Duration::from_secs(30), || {
+            readiness().is_some_and(|(s, body)| s == 503 && json(&body)["status"] == "store unavailable")
+        });
+        assert!(unavailable.is_some(), "a replica that cannot reach the store is not ready: {:?}", readiness().map(|(s, b)| (s, json(&b))));
+    }
+    std::fs::remove_dir_all(&dir).ok();
 }
 
 /// nginx terminating TLS on `port` with `dir`'s certificate, round robin to `replicas`.

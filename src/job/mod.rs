@@ -13,6 +13,7 @@ use crate::error::{ErrorCode, JobError, JobResult};
 mod assets;
 mod limits;
 pub mod submission;
+pub mod summary;
 
 pub use assets::{AssetRef, FloorSpec, SceneRef};
 use limits::nesting_exceeds;

@@ -52,7 +52,11 @@ pub(super) async fn readyz(State(state): State<Arc<AppState>>) -> Response {
         response.headers_mut().insert(header::RETRY_AFTER, HeaderValue::from_static("2"));
         response
     } else {
-        Json(json!({"status": "ready", "adapter": state.engine.adapter()})).into_response()
+        let mut ready = json!({"status": "ready", "adapter": state.engine.adapter(), "replica": state.replica.name});
+        if state.store.as_ref().is_some_and(|s| s.shared()) {
+            ready["heartbeat"] = state.replica.heartbeat_detail();
+        }
+        Json(ready).into_response()
     }
 }
 
@@ -76,11 +80,16 @@ pub(super) async fn metrics(State(state): State<Arc<AppState>>) -> Response {
 /// Jobs listed in `/v1/stats` (newest first).
 const STATS_RECENT: usize = 40;
 
-/// `GET /v1/stats`: what the dashboard draws — the engine's caches, pools and uploads, the
-/// queue, and the recent jobs with throughput, latency per method and phase breakdowns.
+/// `GET /v1/stats`: what the dashboard draws — the replica that answered (its engine's
+/// caches, pools and uploads, its queue), and the service: the backlog, the live replicas and
+/// the recent jobs of all of them with throughput, latency per method and phase breakdowns.
 pub(super) async fn stats(State(state): State<Arc<AppState>>) -> Json<Value> {
     let uptime_s = state.started.elapsed().map(|d| d.as_secs_f64()).unwrap_or(0.0);
+    let mut cluster = state.cluster_view(STATS_RECENT).await;
+    let jobs = cluster["jobs"].take();
     Json(json!({
+        "replica": state.replica.name,
+        "cluster": {"scope": cluster["scope"], "error": cluster["error"], "replicas": cluster["replicas"]},
         "adapter": state.engine.adapter(),
         "uptime_s": uptime_s,
         "jobs_in_flight": state.metrics.in_flight(),
@@ -93,10 +102,6 @@ pub(super) async fn stats(State(state): State<Arc<AppState>>) -> Json<Value> {
         "store": state.store.as_ref().map(|s| s.health().status()),
         "connections": state.connections.as_ref().map(|c| c.stats()),
         "engine": state.engine.stats(),
-        "jobs": {
-            "per_minute": state.recent.per_minute(std::time::Duration::from_secs(60)),
-            "by_method": state.recent.latency_by_method(),
-            "recent": state.recent.newest(STATS_RECENT),
-        },
+        "jobs": jobs,
     }))
 }

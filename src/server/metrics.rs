@@ -162,7 +162,7 @@ impl Metrics {
                 "Jobs accepted and not yet started across the whole service (the same on every replica of a shared store); absent while the store cannot be read",
             ),
             backlog_oldest_age: GaugeVec::new(
-                Opts::new("backlog_oldest_age_seconds", "Seconds the oldest job of the backlog has waited; absent when there is none or it is unknown"),
+                Opts::new("backlog_oldest_age_seconds", "Seconds the oldest job of the backlog has waited (0 when none waits); absent while the store cannot be read"),
                 &[],
             )
             .expect("valid metric"),
@@ -259,15 +259,14 @@ impl Metrics {
         self.http_duration.with_label_values(&[route]).observe(seconds);
     }
 
-    /// Sets the backlog gauges: absent while unknown, the age absent without a waiting job.
+    /// Sets the backlog gauges: absent while unknown; the age 0 without a waiting job, so
+    /// that an alert on it (`> 60`) and a panel of it read the same whether or not jobs wait.
     pub fn observe_backlog(&self, backlog: Option<Backlog>, now_unix_ms: u64) {
         self.backlog_jobs.reset();
         self.backlog_oldest_age.reset();
         let Some(backlog) = backlog else { return };
         set_optional(&self.backlog_jobs, backlog.jobs);
-        if let Some(age) = backlog.oldest_age_seconds(now_unix_ms) {
-            self.backlog_oldest_age.with_label_values(&[] as &[&str]).set(age);
-        }
+        self.backlog_oldest_age.with_label_values(&[] as &[&str]).set(backlog.oldest_age_seconds(now_unix_ms).unwrap_or(0.0));
     }
 
     /// Sets the store and connection metrics from their state now (absent: not shown).

@@ -4,6 +4,7 @@
 //! pool so the async workers keep answering health checks while the device is busy.
 
 pub mod auth;
+mod cluster;
 pub mod connections;
 mod dashboard;
 pub mod error;
@@ -36,14 +37,16 @@ use crate::error::{ErrorCode, JobError};
 use crate::job::submission::{
     fingerprint, idempotency_key, unix_ms, Cursor, JobFilter, KeyedJob, ListedJob, DEFAULT_PAGE, IDEMPOTENCY_KEY, MAX_PAGE,
 };
+use crate::job::summary::JobSummary;
 use crate::job::{Job, JobStatus};
 use crate::light::BUILTIN_LIGHT_IMAGES;
 use crate::methods::REGISTRY;
-use crate::queue::{IdempotencyKeys, JobEvent, JobQueue, JobSummary, LiveJobs, RecentJobs};
+use crate::queue::{IdempotencyKeys, JobEvent, JobQueue, LiveJobs, RecentJobs};
 use crate::scene::builtin::BUILTIN_SCENES;
 use crate::store::{new_job_id, JobStore as DurableStore, Store, StoreError, StoredJob, MAX_ATTEMPTS};
 use crate::supervise::Supervise;
 use crate::upload_store::{content_id, is_content_id, Kind};
+pub use cluster::Replica;
 use error::{store_error, ApiError};
 use job_routes::{cancel_job, immutable, job_events, job_image, job_record, job_thumbnail, list_jobs, not_modified, submit_job, unchanged};
 use meta::{limits, methods, metrics, readyz, stats};
@@ -70,6 +73,9 @@ pub const DEFAULT_STORE_RETRY: std::time::Duration = std::time::Duration::from_s
 
 /// How long an idempotency key names its job unless configured (`--idempotency-ttl-secs`).
 pub const DEFAULT_IDEMPOTENCY_TTL: std::time::Duration = std::time::Duration::from_secs(24 * 3600);
+
+/// How often a replica of a shared store reports itself unless configured (`--heartbeat-secs`).
+pub const DEFAULT_HEARTBEAT: std::time::Duration = std::time::Duration::from_secs(5);
 
 /// Finished jobs remembered for the dashboard's charts.
 const RECENT_JOBS: usize = 200;

@@ -19,7 +19,8 @@ pub async fn serve(config: ServeConfig, engine: Arc<Engine>) -> anyhow::Result<(
             std::time::Duration::from_secs_f64(config.idempotency_ttl_secs.max(1.0)),
             config.idempotency_keys,
         ))
-        .with_cors_origins(&config.cors_origins)?;
+        .with_cors_origins(&config.cors_origins)?
+        .with_replica(Replica::new(replica_name(&config), std::time::Duration::from_secs_f64(config.heartbeat_secs)));
     if let Some(path) = &config.auth_token_file {
         let auth = auth::Auth::from_file(path, config.metrics_open)?;
         tracing::info!(metrics_open = auth.metrics_open, "bearer tokens required on /v1");
@@ -44,8 +45,7 @@ pub async fn serve(config: ServeConfig, engine: Arc<Engine>) -> anyhow::Result<(
     tracing::info!(address = %listener.local_addr()?, lavapipe_threads, max_connections = tracker.stats().max, "listening");
     tracker.spawn_sweeper();
     let listener = connections::TrackedListener::new(listener, tracker);
-    let replica = std::env::var("HOSTNAME").ok().filter(|h| !h.is_empty()).unwrap_or_else(|| config.listen.to_string());
-    spawn_warm_up(state.clone(), !config.no_warm_up, replica);
+    spawn_warm_up(state.clone(), !config.no_warm_up);
     let stopping = state.clone();
     let signal = async move {
         shutdown_signal().await;
@@ -78,16 +78,26 @@ fn with_job_store(state: AppState, config: &ServeConfig, ttl: std::time::Duratio
         }
         JobStoreKind::Redis(url) => {
             let claim_idle = std::time::Duration::from_secs_f64(config.claim_idle_secs.max(0.5));
-            let store = crate::store::RedisStore::open(url, ttl, claim_idle)?;
+            let store = crate::store::RedisStore::open(url, config.redis_ca_cert.as_deref(), ttl, claim_idle)?;
             tracing::info!("job store: redis (shared queue; this replica takes jobs from it)");
             state.with_store(Store::new(Arc::new(store), "redis", 0))
         }
     })
 }
 
+/// This replica's name: `--replica-name`, else `$HOSTNAME` (the pod's name under Kubernetes),
+/// else the listen address.
+fn replica_name(config: &ServeConfig) -> String {
+    [config.replica_name.clone(), std::env::var("HOSTNAME").ok()]
+        .into_iter()
+        .flatten()
+        .find(|name| !name.trim().is_empty())
+        .unwrap_or_else(|| config.listen.to_string())
+}
+
 /// Compiles the pipelines and uploads the default scene (unless `warm_up` is false) in the
-/// background, then marks the daemon ready and starts its workers as `replica`.
-fn spawn_warm_up(state: Arc<AppState>, warm_up: bool, replica: String) {
+/// background, then marks the daemon ready, starts its workers and its heartbeat.
+fn spawn_warm_up(state: Arc<AppState>, warm_up: bool) {
     tokio::spawn(async move {
         let started = std::time::Instant::now();
         if warm_up {
@@ -101,8 +111,9 @@ fn spawn_warm_up(state: Arc<AppState>, warm_up: bool, replica: String) {
         }
         state.set_ready();
         tracing::info!(duration_ms = started.elapsed().as_millis() as u64, "ready: pipelines compiled, default scene uploaded");
-        // A replica of a shared store takes jobs only once it is warm.
-        state.spawn_workers(&replica);
+        // A replica of a shared store takes jobs, and joins the cluster view, once it is warm.
+        state.spawn_workers();
+        state.spawn_heartbeat();
     });
 }
 

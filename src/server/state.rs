@@ -31,6 +31,8 @@ pub struct AppState {
     pub(super) connections: Option<Arc<connections::Tracker>>,
     /// How long idempotency keys last, and the keys themselves when there is no store.
     pub(super) idempotency: Idempotency,
+    /// This replica: its name, its finished jobs and its heartbeat in a shared store.
+    pub(super) replica: Replica,
     /// The shared store's backlog as last read, and when (read at most once a second).
     backlog: tokio::sync::Mutex<Option<(std::time::Instant, Option<crate::store::Backlog>)>>,
 }
@@ -76,6 +78,7 @@ impl AppState {
             started: std::time::SystemTime::now(),
             idempotency: Idempotency::new(DEFAULT_IDEMPOTENCY_TTL, crate::job::submission::DEFAULT_MAX_KEYS),
             backlog: tokio::sync::Mutex::new(None),
+            replica: Replica::new("penumbra", DEFAULT_HEARTBEAT),
         }
     }
 
@@ -97,6 +100,11 @@ impl AppState {
         let backlog = store.call(|s| s.backlog()).await.ok().flatten();
         *cached = Some((std::time::Instant::now(), backlog));
         backlog
+    }
+
+    /// Names this replica, and sets how often it reports itself to a shared store.
+    pub fn with_replica(self, replica: Replica) -> Self {
+        Self { replica, ..self }
     }
 
     /// Idempotency keys that last `idempotency.ttl`.
@@ -163,18 +171,20 @@ impl AppState {
         if method.is_empty() {
             return; // Not a job yet (unparseable body): the metrics count it, the dashboard does not.
         }
-        let finished_unix_ms =
-            std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_millis() as u64).unwrap_or(0);
-        self.recent.record(JobSummary {
+        self.replica.count(outcome);
+        let summary = JobSummary {
             id: id.to_string(),
             method: method.to_string(),
             outcome: outcome.to_string(),
-            finished_unix_ms,
+            replica: self.replica.name.clone(),
+            finished_unix_ms: unix_ms(),
             wall_ms: seconds * 1e3,
-            phases: rendered.map(|r| r.timings.phases.iter().map(|p| (p.name.as_str(), p.cpu_ms)).collect()).unwrap_or_default(),
+            phases: rendered.map(|r| r.timings.phases.iter().map(|p| (p.name.to_string(), p.cpu_ms)).collect()).unwrap_or_default(),
             width: rendered.map_or(0, |r| r.width),
             height: rendered.map_or(0, |r| r.height),
-        });
+        };
+        self.share_finished(&summary);
+        self.recent.record(summary);
     }
 
     /// See `JobQueue::try_hold_device`.
@@ -250,14 +260,14 @@ impl AppState {
     }
 
     /// With a shared store, one worker per device slot takes jobs from the shared queue, as
-    /// consumer `REPLICA/SLOT` (REPLICA: `$HOSTNAME` — the pod name under Kubernetes — else
-    /// the listen address), so a job's record says where it ran.
-    pub fn spawn_workers(self: &Arc<Self>, replica: &str) {
+    /// consumer `REPLICA/SLOT` (REPLICA: this replica's name), so a job's record says where
+    /// it ran.
+    pub fn spawn_workers(self: &Arc<Self>) {
         if !self.store.as_ref().is_some_and(|s| s.shared()) {
             return;
         }
         for worker in 0..self.queue_config.concurrency {
-            let consumer = format!("{replica}/{worker}");
+            let consumer = format!("{}/{worker}", self.replica.name);
             tokio::spawn(work_shared_queue(self.clone(), consumer));
         }
     }

@@ -19,6 +19,7 @@ pub use health::{Store, StoreHealth, StoreStatus};
 pub use redis::RedisStore;
 
 use crate::job::submission::{Cursor, JobFilter, KeyedJob, ListedJob};
+use crate::job::summary::JobSummary;
 use crate::job::{JobStatus, DEFAULT_METHOD};
 use crate::upload_store::Kind;
 
@@ -109,6 +110,27 @@ impl Backlog {
     pub fn oldest_age_seconds(&self, now_unix_ms: u64) -> Option<f64> {
         self.oldest_unix_ms.map(|oldest| now_unix_ms.saturating_sub(oldest) as f64 / 1e3)
     }
+}
+
+/// What a replica says of itself in its heartbeat: its row in the cluster view.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct ReplicaReport {
+    /// Its name (`--replica-name`: the pod's name under Kubernetes).
+    pub replica: String,
+    /// The adapter it renders on, e.g. `llvmpipe (LLVM 15.0.6, 256 bits) (Vulkan)`.
+    pub adapter: String,
+    pub version: String,
+    pub started_unix_ms: u64,
+    /// When this report was written.
+    pub heartbeat_unix_ms: u64,
+    /// Jobs rendering there now, and waiting there for its device.
+    pub jobs_in_flight: u64,
+    pub jobs_queued: u64,
+    /// Jobs it finished since it started, by outcome.
+    pub jobs_succeeded: u64,
+    pub jobs_failed: u64,
+    /// Its device slots (`--concurrency`).
+    pub concurrency: u32,
 }
 
 /// Why a store operation failed. The server answers each kind differently: an unavailable
@@ -247,6 +269,27 @@ pub trait JobStore: Send + Sync {
     /// Records progress for readers on other replicas (shared stores).
     fn progress(&self, _id: &str, _done: u64, _total: u64) -> StoreResult<()> {
         Ok(())
+    }
+    /// Tells the other replicas that `report.replica` is alive, until `ttl` passes without
+    /// another report (shared stores).
+    fn announce(&self, _report: &ReplicaReport, _ttl: Duration) -> StoreResult<()> {
+        Ok(())
+    }
+    /// Takes a replica that is stopping out of the cluster view at once (shared stores).
+    fn withdraw(&self, _replica: &str) -> StoreResult<()> {
+        Ok(())
+    }
+    /// The replicas whose last report has not expired, by name (shared stores).
+    fn replicas(&self) -> StoreResult<Vec<ReplicaReport>> {
+        Ok(Vec::new())
+    }
+    /// Keeps a finished job among the service's last `keep` (shared stores).
+    fn record_finished(&self, _summary: &JobSummary, _keep: usize) -> StoreResult<()> {
+        Ok(())
+    }
+    /// The service's last `n` finished jobs, newest first (shared stores).
+    fn recent_finished(&self, _n: usize) -> StoreResult<Vec<JobSummary>> {
+        Ok(Vec::new())
     }
     /// Uploaded bytes stored once for every replica (shared stores; the others keep none).
     fn put_upload(&self, _kind: Kind, _id: &str, _bytes: &[u8]) -> StoreResult<()> {

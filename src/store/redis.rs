@@ -9,7 +9,9 @@
 //! replica, each of which keeps its own LRU cache in front. Every accepted job's id is in a
 //! sorted set by submission time (`penumbra:jobs`), which `GET /v1/jobs` reads on any replica
 //! (ids whose record expired are dropped from it as they are met); an idempotency key is
-//! `penumbra:key:SHA256` with its own TTL. A cancellation is a key of its
+//! `penumbra:key:SHA256` with its own TTL. Each replica reports itself every few seconds
+//! (`penumbra:replica:NAME`, expiring, named in `penumbra:replicas`) and pushes every job it
+//! finishes onto a capped list (`penumbra:recent`): the cluster view of `/v1/stats`. A cancellation is a key of its
 //! own (`penumbra:cancel:ID`), written once and only read after: record updates are
 //! read-modify-write, so a progress report could otherwise overwrite a `cancelled` status.
 //!
@@ -24,8 +26,9 @@ use std::time::Duration;
 use redis::{Commands, Connection};
 use serde_json::Value;
 
-use super::{unix_ms, Backlog, JobStore, StoreError, StoreResult, StoredJob};
+use super::{unix_ms, Backlog, JobStore, ReplicaReport, StoreError, StoreResult, StoredJob};
 use crate::job::submission::{key_digest, Cursor, JobFilter, KeyedJob, ListedJob};
+use crate::job::summary::JobSummary;
 use crate::job::JobStatus;
 use crate::upload_store::Kind;
 
@@ -33,6 +36,12 @@ const QUEUE: &str = "penumbra:queue";
 const GROUP: &str = "workers";
 /// Accepted jobs' ids scored by submission time (ms): the listing's index.
 const INDEX: &str = "penumbra:jobs";
+/// Live replicas' names scored by when their last report expires (ms); each report is
+/// `penumbra:replica:NAME` with the same expiry.
+const REPLICAS: &str = "penumbra:replicas";
+/// The service's last finished jobs (JSON summaries, newest first), for every replica's
+/// `/v1/stats`.
+const RECENT: &str = "penumbra:recent";
 /// Most index entries one listing reads before it answers with what it found and a cursor:
 /// a filter that admits few jobs pages through the index instead of reading all of it.
 const MAX_LIST_SCAN: usize = 2000;
@@ -67,6 +76,10 @@ fn image_key(id: &str) -> String {
 
 fn idempotency_key(key: &str) -> String {
     format!("penumbra:key:{}", key_digest(key))
+}
+
+fn replica_key(replica: &str) -> String {
+    format!("penumbra:replica:{replica}")
 }
 
 fn upload_key(kind: Kind, id: &str) -> String {
@@ -107,14 +120,24 @@ end
 return 0
 "#;
 
-/// A Redis error as a store error: not reaching Redis, or Redis not ready to serve (loading
-/// its data after a restart, unable to persist, a lost consumer group), is transient;
-/// Redis out of memory is `Full`.
+/// `url` with its password (if any) hidden, for messages.
+fn redacted(url: &str) -> String {
+    match (url.find("://"), url.rfind('@')) {
+        (Some(scheme), Some(at)) if at > scheme => format!("{}://***{}", &url[..scheme], &url[at..]),
+        _ => url.to_owned(),
+    }
+}
+
+/// A Redis error as a store error: not reaching Redis, Redis refusing this replica's password
+/// (a Secret rotated on one side only), or Redis not ready to serve (loading its data after a
+/// restart, unable to persist, a lost consumer group), is transient; Redis out of memory is
+/// `Full`.
 fn classify(error: redis::RedisError) -> StoreError {
-    let transient_codes = ["LOADING", "MASTERDOWN", "TRYAGAIN", "BUSY", "MISCONF", "NOGROUP", "READONLY"];
+    let transient_codes = ["LOADING", "MASTERDOWN", "TRYAGAIN", "BUSY", "MISCONF", "NOGROUP", "READONLY", "NOAUTH", "WRONGPASS"];
     if error.code() == Some("OOM") {
         StoreError::Full(error.to_string())
-    } else if error.is_io_error()
+    } else if error.kind() == redis::ErrorKind::AuthenticationFailed
+        || error.is_io_error()
         || error.is_connection_refusal()
         || error.is_connection_dropped()
         || error.is_timeout()
@@ -130,8 +153,19 @@ impl RedisStore {
     /// A store on the Redis at `url`. Redis need not be up yet: the queue's consumer group is
     /// created on each new connection, so a replica that starts first, or outlives a Redis
     /// restart, finds it once Redis answers.
-    pub fn open(url: &str, ttl: Duration, claim_idle: Duration) -> anyhow::Result<Self> {
-        let client = redis::Client::open(url).map_err(|e| anyhow::anyhow!("bad Redis URL `{url}`: {e}"))?;
+    /// `ca_cert`: for a `rediss://` URL, a PEM file of the authorities that signed Redis's
+    /// certificate, trusted instead of the system's roots (a private CA is the usual case).
+    pub fn open(url: &str, ca_cert: Option<&std::path::Path>, ttl: Duration, claim_idle: Duration) -> anyhow::Result<Self> {
+        let bad_url = |e: redis::RedisError| anyhow::anyhow!("bad Redis URL `{}`: {e}", redacted(url));
+        let client = match ca_cert {
+            Some(path) => {
+                anyhow::ensure!(url.starts_with("rediss://"), "--redis-ca-cert needs a rediss:// job store");
+                let root_cert = std::fs::read(path).map_err(|e| anyhow::anyhow!("cannot read {}: {e}", path.display()))?;
+                redis::Client::build_with_tls(url, redis::TlsCertificates { client_tls: None, root_cert: Some(root_cert) })
+                    .map_err(bad_url)?
+            }
+            None => redis::Client::open(url).map_err(bad_url)?,
+        };
         let claim_idle = claim_idle.max(Duration::from_millis(500));
         let store = Self { client, pool: Mutex::new(Vec::new()), ttl: ttl.max(Duration::from_secs(1)), claim_idle };
         if let Err(error) = store.ping() {
@@ -479,6 +513,56 @@ impl JobStore for RedisStore {
             job.total = total;
         })?;
         self.put_record(&job, false)
+    }
+
+    /// The report with its expiry, its name in the set of live replicas, and the names
+    /// whose reports expired dropped from the set: one atomic step.
+    fn announce(&self, report: &ReplicaReport, ttl: Duration) -> StoreResult<()> {
+        let json = serde_json::to_vec(report)?;
+        let now = unix_ms();
+        let ttl_ms = ttl.as_millis().max(1) as u64;
+        self.with(|c| {
+            redis::pipe()
+                .atomic()
+                .pset_ex(replica_key(&report.replica), json, ttl_ms)
+                .ignore()
+                .zadd(REPLICAS, &report.replica, now + ttl_ms)
+                .ignore()
+                .zrembyscore(REPLICAS, "-inf", now)
+                .ignore()
+                .query::<()>(c)
+        })
+    }
+
+    fn withdraw(&self, replica: &str) -> StoreResult<()> {
+        self.with(|c| redis::pipe().atomic().del(replica_key(replica)).ignore().zrem(REPLICAS, replica).ignore().query::<()>(c))
+    }
+
+    fn replicas(&self) -> StoreResult<Vec<ReplicaReport>> {
+        let names: Vec<String> = self.with(|c| c.zrangebyscore(REPLICAS, unix_ms(), "+inf"))?;
+        if names.is_empty() {
+            return Ok(Vec::new());
+        }
+        let keys: Vec<String> = names.iter().map(|name| replica_key(name)).collect();
+        let reports: Vec<Option<Vec<u8>>> = self.with(|c| redis::cmd("MGET").arg(&keys).query(c))?;
+        // A report that expired between the two reads is a replica that just left.
+        let mut reports: Vec<ReplicaReport> = reports.into_iter().flatten().filter_map(|json| serde_json::from_slice(&json).ok()).collect();
+        reports.sort_by(|a, b| a.replica.cmp(&b.replica));
+        Ok(reports)
+    }
+
+    fn record_finished(&self, summary: &JobSummary, keep: usize) -> StoreResult<()> {
+        let json = serde_json::to_vec(summary)?;
+        let last = keep.max(1) as isize - 1;
+        self.with(|c| redis::pipe().atomic().lpush(RECENT, json).ignore().ltrim(RECENT, 0, last).ignore().query::<()>(c))
+    }
+
+    fn recent_finished(&self, n: usize) -> StoreResult<Vec<JobSummary>> {
+        if n == 0 {
+            return Ok(Vec::new());
+        }
+        let listed: Vec<Vec<u8>> = self.with(|c| c.lrange(RECENT, 0, n as isize - 1))?;
+        Ok(listed.iter().filter_map(|json| serde_json::from_slice(json).ok()).collect())
     }
 
     fn put_upload(&self, kind: Kind, id: &str, bytes: &[u8]) -> StoreResult<()> {

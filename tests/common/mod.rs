@@ -164,3 +164,38 @@ pub fn png_light(size: u32) -> Vec<u8> {
         .unwrap();
     png.into_inner()
 }
+
+/// Runs headless Chromium on `url` with `extra` flags; returns its standard output (the DOM for
+/// `--dump-dom`) or, for `--screenshot=PATH`, the path. `PENUMBRA_CHROMIUM` names the binary.
+pub fn chromium(extra: &[&str], url: &str) -> String {
+    let binary = std::env::var("PENUMBRA_CHROMIUM").unwrap_or_else(|_| "chromium".into());
+    // One profile per run: tests open Chromium concurrently, and a profile is single-instance.
+    static RUNS: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
+    let run = RUNS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let profile = std::env::temp_dir().join(format!("penumbra-chromium-{}-{run}", std::process::id()));
+    let output = std::process::Command::new(&binary)
+        .args(["--headless", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage", "--hide-scrollbars", "--window-size=1280,1300"])
+        // Virtual time runs the page's timers without waiting for them: three polls or so.
+        .arg("--virtual-time-budget=5000")
+        .arg(format!("--user-data-dir={}", profile.display()))
+        .args(extra)
+        .arg(url)
+        .output()
+        .unwrap_or_else(|e| panic!("cannot run `{binary}` ({e}); install Debian's chromium: apt-get install -y chromium"));
+    std::fs::remove_dir_all(&profile).ok();
+    assert!(output.status.success(), "chromium failed: {}", String::from_utf8_lossy(&output.stderr));
+    match extra.iter().find_map(|f| f.strip_prefix("--screenshot=")) {
+        Some(path) => path.to_owned(),
+        None => String::from_utf8(output.stdout).expect("UTF-8 DOM"),
+    }
+}
+
+/// The `<body …>` tag of a dumped DOM, where the dashboard writes what it drew.
+pub fn body_tag(dom: &str) -> String {
+    dom.split("<body").nth(1).and_then(|b| b.split('>').next()).expect("a body element").to_owned()
+}
+
+/// An attribute's value in a tag ("" when it is absent).
+pub fn attribute(tag: &str, name: &str) -> String {
+    tag.split(&format!(" {name}=\"")).nth(1).and_then(|v| v.split('"').next()).unwrap_or("").to_owned()
+}
