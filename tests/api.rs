@@ -865,6 +865,13 @@ async fn the_dashboard_draws_live_data_in_headless_chromium() {
     assert_eq!(recent.iter().filter(|j| j["outcome"] == "not_uploaded").count(), 1);
     assert!(stats["jobs"]["by_method"]["jfa-e"]["p50_ms"].as_f64().unwrap() > 0.0);
     assert!(succeeded[0]["phases"].as_array().unwrap().iter().any(|p| p[0] == "shadow_map"));
+    // Without a shared store the service is this daemon: one replica, which answered.
+    assert_eq!(stats["cluster"]["scope"], "replica");
+    let replicas = stats["cluster"]["replicas"].as_array().unwrap();
+    assert_eq!(replicas.len(), 1, "{stats}");
+    assert_eq!((replicas[0]["jobs_succeeded"].as_u64(), replicas[0]["jobs_failed"].as_u64()), (Some(4), Some(1)));
+    assert_eq!(replicas[0]["replica"], stats["replica"]);
+    assert!(recent.iter().all(|j| j["replica"] == stats["replica"]));
     let thumbnail = client.get(format!("{base}/v1/jobs/{}/thumbnail", succeeded[0]["id"].as_str().unwrap())).send().await.unwrap();
     let thumbnail = image::load_from_memory(&thumbnail.bytes().await.unwrap()).expect("a PNG thumbnail");
     assert_eq!(thumbnail.width().max(thumbnail.height()), 160);
@@ -887,6 +894,9 @@ async fn the_dashboard_draws_live_data_in_headless_chromium() {
     assert_eq!(dom.matches("/thumbnail\"").count(), 4, "a thumbnail per successful job");
     assert!(dom.contains("class=\"status ok\""), "the page reports the daemon live");
     assert!(dom.contains("id=\"store\">memory<"), "the job-store tile says the router has no durable store");
+    assert_eq!(attribute("data-replicas"), "1", "{body}");
+    assert_eq!(attribute("data-jobs-succeeded"), "4", "{body}");
+    assert!(dom.contains("answered by "), "the header names the replica");
     // The screenshot shows drawn charts: the accent colour of the bars and lines is there.
     let shot = image::open(&shot).expect("chromium wrote a PNG screenshot").to_rgb8();
     let accent = shot.pixels().filter(|p| p.0[0].abs_diff(0xf0) < 12 && p.0[1].abs_diff(0xb4) < 12 && p.0[2].abs_diff(0x29) < 12).count();

@@ -494,6 +494,7 @@ fn the_cluster_dashboard_shows_every_replica_through_nginx() {
     let renderers: Vec<&str> = job_rows.split("<tr data-replica=\"").skip(1).map(|r| r.split('"').next().unwrap()).collect();
     assert_eq!(renderers.len(), 9, "every job of the batch is listed: {job_rows}");
     assert!(renderers.iter().all(|r| names.iter().any(|n| n == r)), "each row names the replica that rendered it: {renderers:?}");
+    assert_eq!(dom.matches("/thumbnail\"").count(), 9, "a thumbnail of every job, whichever replica rendered it");
     let by_replica: Vec<usize> = names.iter().map(|n| renderers.iter().filter(|r| *r == n).count()).collect();
     eprintln!(
         "cluster dashboard: 9 jobs submitted, 9 listed, rendered per replica {by_replica:?}, answered by {}",

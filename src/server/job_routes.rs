@@ -375,36 +375,62 @@ pub(super) async fn job_image(
     Path(id): Path<String>,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
-    if let Some(rendered) = state.jobs.find(&id) {
-        let etag = format!("\"{}\"", rendered.image_sha256());
-        if not_modified(&headers, &etag) {
-            return Ok(unchanged(&etag));
+    match image_at(&state, &id).await? {
+        ImageAt::Here(rendered) => {
+            let etag = format!("\"{}\"", rendered.image_sha256());
+            if not_modified(&headers, &etag) {
+                return Ok(unchanged(&etag));
+            }
+            Ok(immutable(image_response(&id, &rendered), &etag))
         }
-        return Ok(immutable(image_response(&id, &rendered), &etag));
+        ImageAt::Stored { digest, exr } => {
+            // The record names the digest (results stored before it did get one from the bytes).
+            let recorded = digest.map(|d| format!("\"{d}\""));
+            if recorded.as_ref().is_some_and(|etag| not_modified(&headers, etag)) {
+                return Ok(unchanged(recorded.as_deref().unwrap_or_default()));
+            }
+            let bytes = stored_image(&state, &id).await?;
+            let etag = recorded.unwrap_or_else(|| format!("\"{}\"", content_id(&bytes)));
+            if not_modified(&headers, &etag) {
+                return Ok(unchanged(&etag));
+            }
+            let mime = if exr { "image/x-exr" } else { "image/png" };
+            Ok(immutable(([(header::CONTENT_TYPE, mime)], bytes).into_response(), &etag))
+        }
     }
-    unless_unfinished_here(&state, &id)?;
-    // A result from the durable store: the bytes and the format its record names.
-    let stored = stored_job(&state, &id).await?.ok_or_else(|| unknown_job(&id))?;
+}
+
+/// Where a succeeded job's image is: in this replica's memory, or in the durable store (the
+/// record naming its digest and format) — where any replica of a shared store finds it.
+enum ImageAt {
+    Here(Arc<Rendered>),
+    Stored { digest: Option<String>, exr: bool },
+}
+
+/// Finds a succeeded job's image: 409 for a job that has not succeeded, 404 for one unknown
+/// here and in the store, or whose image was dropped under `--results-bytes`.
+async fn image_at(state: &AppState, id: &str) -> Result<ImageAt, ApiError> {
+    if let Some(rendered) = state.jobs.find(id) {
+        return Ok(ImageAt::Here(rendered));
+    }
+    unless_unfinished_here(state, id)?;
+    let stored = stored_job(state, id).await?.ok_or_else(|| unknown_job(id))?;
     if stored.status != JobStatus::Succeeded {
-        return Err(no_image(&id, stored.status));
+        return Err(no_image(id, stored.status));
     }
     if stored.image_bytes == 0 {
-        return Err(unknown_job(&id)); // Dropped under --results-bytes.
+        return Err(unknown_job(id));
     }
-    let Some(store) = state.store.clone() else { return Err(unknown_job(&id)) };
-    // The record names the digest (results stored before it did get one from the bytes).
-    let recorded = stored.result.as_ref().and_then(|r| r["image_sha256"].as_str()).map(|d| format!("\"{d}\""));
-    if recorded.as_ref().is_some_and(|etag| not_modified(&headers, etag)) {
-        return Ok(unchanged(recorded.as_deref().unwrap_or_default()));
-    }
-    let image_id = id.clone();
-    let bytes = store.call(move |s| s.image(&image_id)).await.map_err(store_error)?.ok_or_else(|| unknown_job(&id))?;
-    let etag = recorded.unwrap_or_else(|| format!("\"{}\"", content_id(&bytes)));
-    if not_modified(&headers, &etag) {
-        return Ok(unchanged(&etag));
-    }
-    let mime = if stored.result.as_ref().is_some_and(|r| r["format"] == "exr") { "image/x-exr" } else { "image/png" };
-    Ok(immutable(([(header::CONTENT_TYPE, mime)], bytes).into_response(), &etag))
+    let result = stored.result.as_ref();
+    let digest = result.and_then(|r| r["image_sha256"].as_str()).map(str::to_owned);
+    Ok(ImageAt::Stored { digest, exr: result.is_some_and(|r| r["format"] == "exr") })
+}
+
+/// A stored image's bytes.
+async fn stored_image(state: &AppState, id: &str) -> Result<Vec<u8>, ApiError> {
+    let Some(store) = state.store.clone() else { return Err(unknown_job(id)) };
+    let image_id = id.to_owned();
+    store.call(move |s| s.image(&image_id)).await.map_err(store_error)?.ok_or_else(|| unknown_job(id))
 }
 
 /// Whether `If-None-Match` names `etag` (or is `*`): weak comparison, as RFC 9110 §13.1.2
@@ -437,7 +463,8 @@ pub(super) fn immutable(mut response: Response, etag: &str) -> Response {
     response
 }
 
-/// `GET /v1/jobs/{id}/thumbnail`: a small PNG of a kept result (the dashboard's previews).
+/// `GET /v1/jobs/{id}/thumbnail`: a small PNG of a result kept here or in the store, so any
+/// replica of a shared store has every replica's (the dashboard's previews).
 /// Results never change under their id, so browsers may cache it for good; its `ETag` is the
 /// result's digest and the thumbnail's size.
 pub(super) async fn job_thumbnail(
@@ -445,16 +472,40 @@ pub(super) async fn job_thumbnail(
     Path(id): Path<String>,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
-    unless_unfinished_here(&state, &id)?;
-    let rendered = state.jobs.find(&id).ok_or_else(|| unknown_job(&id))?;
-    let etag = format!("\"{}-thumbnail-{THUMBNAIL_SIZE}\"", rendered.image_sha256());
+    let tag = |digest: &str| format!("\"{digest}-thumbnail-{THUMBNAIL_SIZE}\"");
+    let (etag, encoded) = match image_at(&state, &id).await? {
+        ImageAt::Here(rendered) => (tag(rendered.image_sha256()), Encoded::Here(rendered)),
+        ImageAt::Stored { digest, .. } => {
+            // Answered from the recorded digest before the image is read, when it can be.
+            if let Some(etag) = digest.as_deref().map(tag).filter(|etag| not_modified(&headers, etag)) {
+                return Ok(unchanged(&etag));
+            }
+            let bytes = stored_image(&state, &id).await?;
+            (tag(&digest.unwrap_or_else(|| content_id(&bytes))), Encoded::Stored(bytes))
+        }
+    };
     if not_modified(&headers, &etag) {
         return Ok(unchanged(&etag));
     }
-    let png = tokio::task::spawn_blocking(move || crate::output::thumbnail(&rendered.bytes, THUMBNAIL_SIZE))
+    let png = tokio::task::spawn_blocking(move || crate::output::thumbnail(encoded.bytes(), THUMBNAIL_SIZE))
         .await
         .map_err(|e| JobError::internal(format!("thumbnail task failed: {e}")))??;
     Ok(immutable(([(header::CONTENT_TYPE, "image/png")], png).into_response(), &etag))
+}
+
+/// An encoded image, held in memory or read from the store.
+enum Encoded {
+    Here(Arc<Rendered>),
+    Stored(Vec<u8>),
+}
+
+impl Encoded {
+    fn bytes(&self) -> &[u8] {
+        match self {
+            Encoded::Here(rendered) => &rendered.bytes,
+            Encoded::Stored(bytes) => bytes,
+        }
+    }
 }
 
 /// Longest side of a thumbnail, pixels.
