@@ -1377,6 +1377,67 @@ fn every_soft_method_colours_each_side_of_an_edge_with_the_hidden_half_missing()
     }
 }
 
+/// A light of three colours with a dark gap — red, green, black, blue from column 0 — and its
+/// white twin, as PNG files: a colour boundary next to an emission gap, where a method that
+/// takes its hue from the wrong part of the light pays most.
+fn gapped_light() -> [serde_json::Value; 2] {
+    static PATHS: std::sync::OnceLock<[std::path::PathBuf; 2]> = std::sync::OnceLock::new();
+    let paths = PATHS.get_or_init(|| {
+        let colours = [[255, 0, 0], [0, 255, 0], [0, 0, 0], [0, 0, 255]];
+        ["coloured", "white"].map(|kind| {
+            let image = image::RgbaImage::from_fn(4, 1, |x, _| {
+                let [r, g, b] = colours[x as usize];
+                match (kind, r + g + b) {
+                    (_, 0) => image::Rgba([0, 0, 0, 255]),
+                    ("white", _) => image::Rgba([255, 255, 255, 255]),
+                    _ => image::Rgba([r as u8, g as u8, b as u8, 255]),
+                }
+            });
+            let path = std::env::temp_dir().join(format!("penumbra-gapped-{kind}-{}.png", std::process::id()));
+            image.save(&path).unwrap();
+            path
+        })
+    });
+    paths.clone().map(|path| json!({"path": path}))
+}
+
+/// The colours of a light cost each soft method little: under a light of three colours with a
+/// dark gap, its mean penumbra error is at most 1.3× its error under the light's white twin, on
+/// `crowd` and `torus` (`pcss`, gray by design, is the baseline that pays).
+#[test]
+fn the_colours_of_a_gapped_light_cost_each_soft_method_at_most_a_third_more() {
+    let [coloured, white] = gapped_light();
+    let frame = |scene: &str, light: &serde_json::Value, method: serde_json::Value| {
+        let job = job(json!({
+            "scene": {"builtin": scene},
+            "light": {"image": light},
+            "method": method,
+            "output": {"width": 192, "height": 144, "format": "exr"}
+        }));
+        common::engine().render_frame(&job, &()).unwrap().0
+    };
+    let cases: Vec<(&str, &serde_json::Value, bool)> =
+        ["crowd", "torus"].into_iter().flat_map(|scene| [(scene, &coloured, true), (scene, &white, false)]).collect();
+    let references: Vec<_> =
+        cases.iter().map(|(scene, light, _)| frame(scene, light, json!({"name": "reference", "samples": 256}))).collect();
+    let mut pcss_ratio = f64::MAX;
+    for method in ["pcss", "brabec", "jfa-l", "jfa-e", "chun-oh", "wedges"] {
+        let (mut errors, mut twins) = (0.0, 0.0);
+        for ((scene, light, is_coloured), reference) in cases.iter().zip(&references) {
+            let quality = penumbra::quality::compare(&frame(scene, light, json!({"name": method})), reference, 0.0);
+            *(if *is_coloured { &mut errors } else { &mut twins }) += quality.visibility.penumbra.mae;
+        }
+        let ratio = errors / twins;
+        eprintln!("{method}: penumbra error under the gapped light {:.4}, under its white twin {:.4}: {ratio:.2}×", errors / 2.0, twins / 2.0);
+        if method == "pcss" {
+            pcss_ratio = ratio;
+        } else {
+            assert!(ratio <= 1.3, "{method}: the colours cost {ratio:.2}× its white error");
+        }
+    }
+    assert!(pcss_ratio > 1.5, "the gray baseline pays for the colours ({pcss_ratio:.2}×): the light is a test of colour");
+}
+
 // --- wedges ------------------------------------------------------------------------------
 
 #[test]
