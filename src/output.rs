@@ -93,6 +93,9 @@ fn encode_exr(frame: &FrameOutput) -> JobResult<Vec<u8>> {
             channels.push(AnyChannel::new(*name, FlatSamples::F32(visibility.iter().map(|v| v[k]).collect())));
         }
     }
+    if let Some(error) = &frame.error_estimate {
+        channels.push(AnyChannel::new("error", FlatSamples::F32(error.clone())));
+    }
     if let Some(depth) = &frame.depth {
         channels.push(AnyChannel::new("depth", FlatSamples::F32(depth.clone())));
     }

@@ -172,6 +172,7 @@ mod tests {
             color,
             srgb8: None,
             visibility: Some(visibility),
+            error_estimate: None,
             depth: None,
             e0: None,
             counters: Default::default(),

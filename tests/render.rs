@@ -26,6 +26,7 @@ const GOLDEN: &[(&str, &str, Option<&str>, &str)] = &[
     ("crowd-pcss", "crowd", None, "pcss"),
     ("crowd-chun-oh", "crowd", Some("flame"), "chun-oh"),
     ("crowd-wedges", "crowd", None, "wedges"),
+    ("crowd-filtered", "crowd", Some("stripes"), "filtered"),
 ];
 
 #[test]
@@ -581,6 +582,74 @@ fn reference_converges_to_the_closed_form() {
     }
 }
 
+// --- filtered ----------------------------------------------------------------------------
+
+/// `filtered` without refinement or filter is the CPU engine of `reference` with its probes
+/// for samples: the same strata, maps and tests, pixel for pixel; and the same as `reference`
+/// with `samples × refine²` samples where every pixel is refined (a light whose penumbra covers
+/// the view).
+#[test]
+fn filtered_is_the_reference_where_it_refines_and_its_probes_elsewhere() {
+    let render = |method: serde_json::Value| {
+        let value = json!({
+            "scene": {"builtin": "crowd"},
+            "light": {"image": {"builtin": "stripes"}},
+            "method": method,
+            "output": {"width": 160, "height": 120, "format": "exr"}
+        });
+        let (frame, _) = common::engine().render_frame(&job(value), &()).unwrap();
+        (frame.visibility.unwrap(), frame.error_estimate, frame.counters)
+    };
+    let (probes, _, counters) = render(json!({"name": "filtered", "samples": 16, "refine": 1, "filter": false}));
+    let (reference, none, _) = render(json!({"name": "reference", "samples": 16, "engine": "cpu"}));
+    assert_eq!(probes, reference, "one set of probes is the reference with those samples");
+    assert!(none.is_none(), "reference makes no error estimate");
+    assert_eq!(counters["pixels_refined"], 0.0, "nothing to refine with one set");
+
+    let (refined, errors, counters) = render(json!({"name": "filtered", "samples": 4, "refine": 2, "filter": false}));
+    let (full, _, _) = render(json!({"name": "reference", "samples": 16, "engine": "cpu"}));
+    let refined_pixels = counters["pixels_refined"];
+    let differences: Vec<f32> = refined.iter().zip(&full).map(|(a, b)| (0..3).map(|c| (a[c] - b[c]).abs()).fold(0.0, f32::max)).collect();
+    let (worst, off) = (differences.iter().copied().fold(0.0, f32::max), differences.iter().filter(|&&d| d > 1e-4).count());
+    eprintln!("filtered, 4 probes refined ×2²: {refined_pixels} pixels refined; against the 16-sample reference: worst {worst:.2e}, {off} pixels off by more than 1e-4");
+    // Refined pixels sum the same samples in another order (probes first); a pixel not refined
+    // keeps its probes' verdict, which every other sample confirms there, else its tile would
+    // have varied: the whole frame is the 16-sample reference's, to rounding.
+    assert!(worst < 1e-4, "refined to the reference with every sample, the rest agreeing: worst {worst}, {off} pixels off");
+    assert!(refined_pixels > 500.0, "the penumbrae are refined ({refined_pixels} pixels)");
+    let errors = errors.expect("filtered estimates its error");
+    assert!(errors.iter().all(|e| e.is_finite() && *e >= 0.0));
+    let penumbra = full.iter().zip(&errors).filter(|(v, _)| v.iter().any(|&c| c > 0.05 && c < 0.95));
+    assert!(penumbra.clone().all(|(_, e)| *e > 0.0), "every penumbra pixel has an estimate");
+    assert!(counters["error_estimate_penumbra"] > 0.0);
+}
+
+/// Against the closed form of one square occluder: `filtered` at its defaults is as close as
+/// the 256-sample reference it refines to (its filter smooths the strata's steps, and nothing
+/// bleeds past the penumbra), and closer than its 16 probes alone.
+#[test]
+fn filtered_matches_the_closed_form_as_the_reference_it_refines_to() {
+    let (filtered, worst, _) = closed_form_error(json!({"name": "filtered"}), "white");
+    let (reference, _, _) = closed_form_error(json!({"name": "reference", "samples": 256, "engine": "cpu"}), "white");
+    let (probes, _, _) = closed_form_error(json!({"name": "filtered", "refine": 1, "filter": false}), "white");
+    eprintln!("filtered vs closed form: {filtered:.4} (worst {worst:.4}); reference 256: {reference:.4}; the probes alone: {probes:.4}");
+    assert!(filtered <= reference * 1.1, "filtered {filtered} against the 256-sample reference's {reference}");
+    assert!(filtered < 0.6 * probes, "filtered {filtered} against its probes' {probes}");
+}
+
+/// An EXR of `filtered` carries its error estimate as a layer of its own.
+#[test]
+fn a_filtered_exr_carries_its_error_estimate() {
+    let value =
+        json!({"scene": {"builtin": "torus"}, "method": {"name": "filtered"}, "output": {"width": 96, "height": 72, "format": "exr"}});
+    let rendered = common::engine().render(&job(value), &()).unwrap();
+    let names: Vec<String> = common::decode_exr(&rendered.bytes).2.into_keys().collect();
+    assert!(names.iter().any(|n| n == "error"), "{names:?}");
+    let value = json!({"scene": {"builtin": "torus"}, "method": {"name": "hard"}, "output": {"width": 96, "height": 72, "format": "exr"}});
+    let names: Vec<String> = common::decode_exr(&common::engine().render(&job(value), &()).unwrap().bytes).2.into_keys().collect();
+    assert!(!names.iter().any(|n| n == "error"), "only a method that estimates its error writes the layer: {names:?}");
+}
+
 /// The CPU engine draws the GPU engine's maps and makes its tests: the same estimate, but for
 /// a texel centre on a triangle's edge rounded the other way, or a sum added in another order.
 #[test]
@@ -752,8 +821,9 @@ fn bench_writes_its_phase_table_and_the_e0_check() {
                 if row.light == "flame" { &["e0_corners", "e0_interpolate", "e0_exact_above", "e0_exact_clipped"] } else { &["e0"] };
             assert!(e0_passes.iter().all(|p| names.contains(p)) || !engine.gpu().timestamps_inside_passes, "{names:?}");
             // The shadow map from the light's centre is drawn only for the methods that read
-            // it: not for `wedges` (shadow volumes) nor `reference` (a map per sample).
-            let reads_shadow_map = !(row.method.starts_with("reference") || row.method == "wedges");
+            // it: not for `wedges` (shadow volumes) nor `reference` and `filtered` (a map per
+            // sample).
+            let reads_shadow_map = !(row.method.starts_with("reference") || row.method == "wedges" || row.method == "filtered");
             assert_eq!(names.contains(&"ShadowMap::pass"), reads_shadow_map, "{}: {names:?}", row.method);
             // The reference says what its samples cost: the maps' raster and the tests.
             // On a software adapter (engine `auto`: the CPU's) as passes timed on the CPU.
@@ -1428,7 +1498,11 @@ fn the_colours_of_a_gapped_light_cost_each_soft_method_at_most_a_third_more() {
             *(if *is_coloured { &mut errors } else { &mut twins }) += quality.visibility.penumbra.mae;
         }
         let ratio = errors / twins;
-        eprintln!("{method}: penumbra error under the gapped light {:.4}, under its white twin {:.4}: {ratio:.2}×", errors / 2.0, twins / 2.0);
+        eprintln!(
+            "{method}: penumbra error under the gapped light {:.4}, under its white twin {:.4}: {ratio:.2}×",
+            errors / 2.0,
+            twins / 2.0
+        );
         if method == "pcss" {
             pcss_ratio = ratio;
         } else {

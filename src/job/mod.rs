@@ -79,7 +79,8 @@ impl Default for ShadowMapSpec {
 pub enum OutputFormat {
     /// 8-bit sRGB with alpha, after exposure.
     Png,
-    /// Linear float: R,G,B,A, visibility.R/G/B and depth.
+    /// Linear float: R,G,B,A, visibility.R/G/B, the error estimate of a method that makes one,
+    /// and depth.
     Exr,
 }
 

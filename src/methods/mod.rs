@@ -19,8 +19,17 @@ pub use crate::params::{Cap, Param, ParamKind, ParamSpec, ParamValue, Params};
 pub use crate::render::method::{CounterKey, Counters, MethodContext, ShadowMethod};
 
 /// Every method penumbra serves, in the order `GET /v1/methods` lists them.
-pub static REGISTRY: &[&dyn ShadowMethod] =
-    &[&hard::Hard, &pcss::Pcss, &brabec::Brabec, &jfa::JfaL, &jfa::JfaE, &chun_oh::ChunOh, &wedges::Wedges, &reference::Reference];
+pub static REGISTRY: &[&dyn ShadowMethod] = &[
+    &hard::Hard,
+    &pcss::Pcss,
+    &brabec::Brabec,
+    &jfa::JfaL,
+    &jfa::JfaE,
+    &chun_oh::ChunOh,
+    &wedges::Wedges,
+    &reference::Filtered,
+    &reference::Reference,
+];
 
 /// Looks a method up by its job name.
 pub fn find(name: &str) -> JobResult<&'static dyn ShadowMethod> {

@@ -405,4 +405,10 @@ pub trait ShadowMethod: Send + Sync {
     fn reads_object_ids(&self) -> bool {
         false
     }
+    /// Whether the method writes an estimate of its error per pixel — the expected |V − Vref|
+    /// of its gray visibility — in the visibility target's fourth component (the others leave
+    /// 1 there). Outputs that carry the visibility then carry it too (EXR layer `error`).
+    fn writes_error_estimate(&self) -> bool {
+        false
+    }
 }

@@ -51,6 +51,9 @@ pub struct FrameOutput {
     pub srgb8: Option<Vec<u8>>,
     /// Per-channel visibility V (EXR and comparisons), 1 wherever E0 = 0.
     pub visibility: Option<Vec<[f32; 3]>>,
+    /// The method's estimate of its error per pixel, with the visibility, where it makes one
+    /// (`ShadowMethod::writes_error_estimate`); 0 wherever E0 = 0.
+    pub error_estimate: Option<Vec<f32>>,
     /// View depth in metres, +∞ for background (EXR only).
     pub depth: Option<Vec<f32>>,
     /// The unshadowed irradiance E0, whenever the visibility is read back.
@@ -363,14 +366,29 @@ impl Renderer {
             let v: &[[f32; 4]] = bytemuck::cast_slice(&images[v]);
             v.iter().zip(e).map(|(v, e)| if *e == [0.0; 3] { [1.0; 3] } else { [v[0], v[1], v[2]] }).collect()
         });
+        let error_estimate = visibility_index.zip(e0.as_ref()).filter(|_| spec.method.writes_error_estimate()).map(|(v, e)| {
+            let v: &[[f32; 4]] = bytemuck::cast_slice(&images[v]);
+            v.iter().zip(e).map(|(v, e)| if *e == [0.0; 3] { 0.0 } else { v[3] }).collect()
+        });
         let depth = depth_index.map(|i| bytemuck::cast_slice::<u8, f32>(&images[i]).to_vec());
         if let Some(i) = listed_index {
             let listed: u32 = bytemuck::cast_slice::<u8, u32>(&images[i][..8]).iter().sum();
             E0_SUMMED_EXACTLY.set(&mut counters, f64::from(listed));
         }
         let staging = spec.staging.clone();
-        let frame =
-            FrameOutput { width: spec.width, height: spec.height, color, srgb8, visibility, depth, e0, counters, warnings, staging };
+        let frame = FrameOutput {
+            width: spec.width,
+            height: spec.height,
+            color,
+            srgb8,
+            visibility,
+            error_estimate,
+            depth,
+            e0,
+            counters,
+            warnings,
+            staging,
+        };
         Ok((frame, gpu_times))
     }
 }

@@ -8,12 +8,14 @@ use glam::{Mat4, Vec3};
 
 mod cpu;
 mod crop;
+mod filtered;
 mod gpu;
 mod samples;
 
+pub use filtered::{Filtered, ERROR_ESTIMATE};
 use gpu::{batch_layers, Accumulation, DepthMaps, BATCH, BATCH_MAP_BYTES, SEGMENT};
 use samples::SamplePlan;
-pub use samples::{light_samples, LightSample};
+pub use samples::{interleaved_light_samples, light_samples, LightSample};
 
 use super::{Cap, Counters, MethodContext, Param, ParamSpec, Params, ShadowMethod};
 use crate::error::JobResult;

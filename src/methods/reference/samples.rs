@@ -35,12 +35,33 @@ pub struct LightSample {
 /// Stratified jittered samples over the light, skipping those that land on black texels.
 /// Returns the samples and how many strata there were.
 pub fn light_samples(light: &AreaLight, image: &LightImage, requested: u32, seed: u64) -> (Vec<LightSample>, u32) {
+    let (samples, _, strata) = interleaved_light_samples(light, image, requested, 1, seed);
+    (samples, strata)
+}
+
+/// `side`² interleaved sets of stratified jittered samples, `per_class` strata each, skipping
+/// those that land on black texels: the light is cut into a grid of `side × side` blocks of
+/// strata, and set (class) `a + side·b` takes the stratum at (a, b) of every block — so each
+/// set is stratified over the whole light on its own, and all of them together are a finer
+/// stratification (method `filtered`, which gives neighbouring pixels different sets). With
+/// `side` 1 these are `light_samples`. Returns the samples in grid order, each one's set, and
+/// how many strata there were.
+pub fn interleaved_light_samples(
+    light: &AreaLight,
+    image: &LightImage,
+    per_class: u32,
+    side: u32,
+    seed: u64,
+) -> (Vec<LightSample>, Vec<u32>, u32) {
     let aspect = light.size_m.x / light.size_m.y;
-    let gx = ((requested as f32 * aspect).sqrt().round() as u32).clamp(1, requested);
-    let gy = requested.div_ceil(gx).max(1);
+    let cx = ((per_class as f32 * aspect).sqrt().round() as u32).clamp(1, per_class.max(1));
+    let cy = per_class.div_ceil(cx).max(1);
+    let side = side.max(1);
+    let (gx, gy) = (cx * side, cy * side);
     let stratum_area = light.area_m2() / (gx * gy) as f32;
     let mut rng = SplitMix64(seed.wrapping_mul(0x9e37_79b9_7f4a_7c15).wrapping_add(1));
     let mut samples = Vec::with_capacity((gx * gy) as usize);
+    let mut classes = Vec::with_capacity((gx * gy) as usize);
     for j in 0..gy {
         for i in 0..gx {
             let s = (i as f32 + rng.next_f32()) / gx as f32;
@@ -51,9 +72,10 @@ pub fn light_samples(light: &AreaLight, image: &LightImage, requested: u32, seed
                 continue;
             }
             samples.push(LightSample { position: light.image_point(s, t), weight: emission * light.intensity * stratum_area });
+            classes.push(i % side + side * (j % side));
         }
     }
-    (samples, gx * gy)
+    (samples, classes, gx * gy)
 }
 
 /// splitmix64: a tiny, well-mixed generator whose stream never changes between versions.
@@ -91,8 +113,15 @@ pub(super) struct SamplePlan {
 impl SamplePlan {
     pub(super) fn new(ctx: &MethodContext<'_>, params: &Params) -> Self {
         let spec = ctx.spec;
-        let resolution = params.get(&RESOLUTION);
         let (samples, strata) = light_samples(&spec.light, &spec.light_image, params.get(&SAMPLES), u64::from(params.get(&SEED)));
+        Self::for_samples(ctx, params, samples, strata)
+    }
+
+    /// The plan of these samples (of `strata`, black ones included), with the maps'
+    /// resolution, crop and bias of `params`.
+    pub(super) fn for_samples(ctx: &MethodContext<'_>, params: &Params, samples: Vec<LightSample>, strata: u32) -> Self {
+        let spec = ctx.spec;
+        let resolution = params.get(&RESOLUTION);
         let corners = ctx.scene.shadow_fit_points(&spec.light);
         let rotation = sample_rotation(&spec.light);
         // Each sample's frustum: its angle fitted to the scene from its point, and one near

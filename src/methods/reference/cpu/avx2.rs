@@ -1,15 +1,22 @@
 //! The receiver tests of `SampleTest` eight receivers at a time with AVX2 and FMA: the same
 //! arithmetic as the scalar twin (`scalar_add_sample`), lane by lane.
 
-use super::{ReceiverBlock, SampleTest, SumBlock};
+use super::{BlockerBlock, ReceiverBlock, SampleTest, SumBlock};
 use std::arch::x86_64::*;
 
-/// `scalar_add_sample` for the eight lanes at once (the texels by one gather).
+/// `scalar_add_sample` for the eight lanes at once (the texels by one gather); with
+/// `BLOCKERS`, the blockers met too.
 ///
 /// # Safety
 /// The CPU must have AVX2 and FMA.
 #[target_feature(enable = "avx2,fma")]
-pub(super) unsafe fn add_sample(b: &ReceiverBlock, sums: &mut SumBlock, t: &SampleTest<'_>, channels: usize) {
+pub(super) unsafe fn add_sample<const BLOCKERS: bool>(
+    b: &ReceiverBlock,
+    sums: &mut SumBlock,
+    blockers: &mut BlockerBlock,
+    t: &SampleTest<'_>,
+    channels: usize,
+) {
     let load = |a: &[f32; 8]| unsafe { _mm256_loadu_ps(a.as_ptr()) };
     let dx = _mm256_sub_ps(load(&b.x), _mm256_set1_ps(t.origin[0]));
     let dy = _mm256_sub_ps(load(&b.y), _mm256_set1_ps(t.origin[1]));
@@ -46,6 +53,19 @@ pub(super) unsafe fn add_sample(b: &ReceiverBlock, sums: &mut SumBlock, t: &Samp
             stored,
         );
         let lit = _mm256_cmp_ps::<_CMP_LE_OQ>(lhs, _mm256_set1_ps(t.near_k));
+        if BLOCKERS {
+            // A blocked test of a receiver that faces the sample met a blocker at depth
+            // near / stored from the light's plane.
+            let blocked = _mm256_andnot_ps(lit, _mm256_and_ps(inside, _mm256_cmp_ps::<_CMP_GT_OQ>(g, _mm256_setzero_ps())));
+            let depth = _mm256_div_ps(_mm256_set1_ps(t.near_k / t.k), stored);
+            let add = |sum: &mut [f32; 8], v: __m256| unsafe {
+                _mm256_storeu_ps(sum.as_mut_ptr(), _mm256_add_ps(_mm256_loadu_ps(sum.as_ptr()), _mm256_and_ps(blocked, v)))
+            };
+            add(&mut blockers.count, _mm256_set1_ps(1.0));
+            add(&mut blockers.depth_sum, depth);
+            let min = _mm256_loadu_ps(blockers.depth_min.as_ptr());
+            unsafe { _mm256_storeu_ps(blockers.depth_min.as_mut_ptr(), _mm256_blendv_ps(min, _mm256_min_ps(min, depth), blocked)) };
+        }
         _mm256_or_ps(_mm256_andnot_ps(inside, _mm256_castsi256_ps(_mm256_set1_epi32(-1))), lit)
     };
     let lit = _mm256_and_ps(visible, g);

@@ -22,7 +22,7 @@ use raster::Map;
 use crate::render::method::GBufferView;
 
 /// Receivers a block: one AVX2 vector of f32 (and the unit the threads share the frame by).
-const LANES: usize = 8;
+pub(super) const LANES: usize = 8;
 
 /// Blocks of receivers a thread takes at a time when the receivers are shared out.
 const BLOCKS_PER_TASK: usize = 256;
@@ -54,6 +54,54 @@ pub(super) struct SumBlock {
     unshadowed: [[f32; LANES]; 3],
 }
 
+impl SumBlock {
+    /// One lane's sums, three channels (the first standing for all where `channels` is 1).
+    pub(super) fn lane(&self, lane: usize, channels: usize) -> ([f32; 3], [f32; 3]) {
+        let channel = |c: usize| if channels == 1 { 0 } else { c };
+        ([0, 1, 2].map(|c| self.shadowed[channel(c)][lane]), [0, 1, 2].map(|c| self.unshadowed[channel(c)][lane]))
+    }
+}
+
+/// Where the receivers come from: a frame's surfaces, pixel by pixel — the G-buffer, or a
+/// copy of it.
+pub(super) trait Surfaces: Sync {
+    /// Width and height in pixels.
+    fn size(&self) -> (u32, u32);
+    fn position(&self, x: u32, y: u32) -> Vec3;
+    /// The unit normal facing the eye, `None` where no surface covers the pixel.
+    fn normal(&self, x: u32, y: u32) -> Option<Vec3>;
+}
+
+impl Surfaces for GBufferView<'_> {
+    fn size(&self) -> (u32, u32) {
+        (self.width, self.height)
+    }
+
+    fn position(&self, x: u32, y: u32) -> Vec3 {
+        GBufferView::position(self, x, y)
+    }
+
+    fn normal(&self, x: u32, y: u32) -> Option<Vec3> {
+        GBufferView::normal(self, x, y)
+    }
+}
+
+/// The blockers eight receivers' tests met (method `filtered`, which sizes its filter by
+/// them): how many tests were blocked, the sum and the least of the blockers' depths from the
+/// light's plane.
+#[derive(Clone, Copy)]
+pub(super) struct BlockerBlock {
+    pub(super) count: [f32; LANES],
+    pub(super) depth_sum: [f32; LANES],
+    pub(super) depth_min: [f32; LANES],
+}
+
+impl Default for BlockerBlock {
+    fn default() -> Self {
+        Self { count: [0.0; LANES], depth_sum: [0.0; LANES], depth_min: [f32::INFINITY; LANES] }
+    }
+}
+
 /// What the frame's covered pixels are, for the test: built from the G-buffer as the
 /// accumulate pass builds its `Receiver`.
 pub(super) struct Receivers {
@@ -77,6 +125,7 @@ pub(super) struct TestConstants {
 }
 
 /// One sample as its map is drawn and read.
+#[derive(Clone)]
 pub(super) struct CpuSample {
     /// Its crop's projection (`MapCrop::layer_view_proj`).
     pub view_proj: Mat4,
@@ -93,11 +142,17 @@ pub(super) struct CpuSample {
 impl Receivers {
     /// The covered pixels of the frame's G-buffer, `segment` pixels a listed segment.
     pub fn new(gbuffer: &GBufferView<'_>, segment: u32, c: &TestConstants) -> Self {
+        Self::of_pixels(gbuffer, segment, c, |_, _| true)
+    }
+
+    /// The covered pixels (x, y) of the frame's G-buffer that `keep` keeps.
+    pub fn of_pixels(gbuffer: &impl Surfaces, segment: u32, c: &TestConstants, keep: impl Fn(u32, u32) -> bool + Sync) -> Self {
+        let (width, height) = gbuffer.size();
         // Row by row on every core: the covered pixels, and the segments that hold one.
-        let rows: Vec<(Vec<u32>, u32)> = (0..gbuffer.height)
+        let rows: Vec<(Vec<u32>, u32)> = (0..height)
             .into_par_iter()
             .map(|y| {
-                let covered: Vec<u32> = (0..gbuffer.width).filter(|&x| gbuffer.normal(x, y).is_some()).collect();
+                let covered: Vec<u32> = (0..width).filter(|&x| keep(x, y) && gbuffer.normal(x, y).is_some()).collect();
                 let mut segments = 0;
                 let mut last = u32::MAX;
                 for &x in &covered {
@@ -106,12 +161,11 @@ impl Receivers {
                         last = x / segment;
                     }
                 }
-                (covered.into_iter().map(|x| y * gbuffer.width + x).collect(), segments)
+                (covered.into_iter().map(|x| y * width + x).collect(), segments)
             })
             .collect();
         let segments = rows.iter().map(|(_, count)| count).sum();
         let pixels: Vec<u32> = rows.into_iter().flat_map(|(pixels, _)| pixels).collect();
-        let width = gbuffer.width;
         let rotation = [0, 1, 2].map(|i| c.rotation.row(i).truncate());
         let mut blocks = vec![ReceiverBlock::default(); pixels.len().div_ceil(LANES)];
         blocks.par_iter_mut().zip(pixels.par_chunks(LANES)).for_each(|(b, block_pixels)| {
@@ -140,6 +194,16 @@ impl Receivers {
         // The padding lanes keep depth 0: no weight (g_depth 0), whatever their test says.
         Self { blocks, pixels, segments }
     }
+
+    /// The pixel (index into the frame's rows) of each receiver, in block order.
+    pub(super) fn pixels(&self) -> &[u32] {
+        &self.pixels
+    }
+
+    /// Receiver `k`'s depth from the light's plane.
+    pub(super) fn depth(&self, k: usize) -> f32 {
+        self.blocks[k / LANES].depth[k % LANES]
+    }
 }
 
 /// Wall time of the two kinds of work, summed over the rounds (ms), and the maps a round drew
@@ -161,9 +225,24 @@ pub(super) fn estimate(
     (positions, indices): (&[Vec3], &[u32]),
     channels: usize,
     crop_size: UVec2,
-    mut after: impl FnMut(usize) -> bool,
+    after: impl FnMut(usize) -> bool,
 ) -> (Vec<SumBlock>, Spent) {
+    let (sums, _, spent) = estimate_with::<false>(receivers, samples, constants, (positions, indices), channels, crop_size, after);
+    (sums, spent)
+}
+
+/// `estimate`, and with `BLOCKERS` the blockers every receiver's tests met.
+pub(super) fn estimate_with<const BLOCKERS: bool>(
+    receivers: &Receivers,
+    samples: &[CpuSample],
+    constants: &TestConstants,
+    (positions, indices): (&[Vec3], &[u32]),
+    channels: usize,
+    crop_size: UVec2,
+    mut after: impl FnMut(usize) -> bool,
+) -> (Vec<SumBlock>, Vec<BlockerBlock>, Spent) {
     let mut sums = vec![SumBlock::default(); receivers.blocks.len()];
+    let mut blockers = vec![BlockerBlock::default(); if BLOCKERS { receivers.blocks.len() } else { 0 }];
     let mut spent = Spent::default();
     let threads = rayon::current_num_threads().max(1);
     // One map per thread in flight, within the GPU engine's budget for a batch's maps.
@@ -178,11 +257,20 @@ pub(super) fn estimate(
         maps.par_iter_mut().zip(chunk).for_each(|(map, sample)| map.draw(sample, positions, indices));
         let drawn = std::time::Instant::now();
         let maps = &maps[..chunk.len()];
-        sums.par_chunks_mut(BLOCKS_PER_TASK).zip(receivers.blocks.par_chunks(BLOCKS_PER_TASK)).for_each(|(sums, blocks)| {
-            for (map, sample) in maps.iter().zip(chunk) {
-                test_blocks(blocks, sums, map, sample, constants, channels, avx2);
-            }
-        });
+        if BLOCKERS {
+            let tasks = sums.par_chunks_mut(BLOCKS_PER_TASK).zip(blockers.par_chunks_mut(BLOCKS_PER_TASK));
+            tasks.zip(receivers.blocks.par_chunks(BLOCKS_PER_TASK)).for_each(|((sums, blockers), blocks)| {
+                for (map, sample) in maps.iter().zip(chunk) {
+                    test_blocks::<true>(blocks, sums, Some(&mut *blockers), map, sample, constants, channels, avx2);
+                }
+            });
+        } else {
+            sums.par_chunks_mut(BLOCKS_PER_TASK).zip(receivers.blocks.par_chunks(BLOCKS_PER_TASK)).for_each(|(sums, blocks)| {
+                for (map, sample) in maps.iter().zip(chunk) {
+                    test_blocks::<false>(blocks, sums, None, map, sample, constants, channels, avx2);
+                }
+            });
+        }
         spent.maps_ms += (drawn - start).as_secs_f64() * 1e3;
         spent.tests_ms += drawn.elapsed().as_secs_f64() * 1e3;
         done += chunk.len();
@@ -190,7 +278,7 @@ pub(super) fn estimate(
             break;
         }
     }
-    (sums, spent)
+    (sums, blockers, spent)
 }
 
 /// Writes every pixel's visibility into `out`, a `vec4<f32>` of bytes each (rgb; w 1), rows of
@@ -224,9 +312,12 @@ pub(super) fn write_visibility(receivers: &Receivers, sums: &[SumBlock], channel
 
 /// Tests `blocks` against one sample's map and adds to their sums (`add_sample` in
 /// `accumulate.wgsl`).
-fn test_blocks(
+/// With `BLOCKERS`, `blockers` (one per block) hears the blockers met.
+#[allow(clippy::too_many_arguments)]
+fn test_blocks<const BLOCKERS: bool>(
     blocks: &[ReceiverBlock],
     sums: &mut [SumBlock],
+    mut blockers: Option<&mut [BlockerBlock]>,
     map: &Map,
     sample: &CpuSample,
     c: &TestConstants,
@@ -234,17 +325,20 @@ fn test_blocks(
     avx2: bool,
 ) {
     let test = SampleTest::new(map, sample, c);
-    #[cfg(target_arch = "x86_64")]
-    if avx2 {
-        for (block, sum) in blocks.iter().zip(sums) {
+    let mut spare = BlockerBlock::default();
+    for (k, (block, sum)) in blocks.iter().zip(sums.iter_mut()).enumerate() {
+        let met = match blockers.as_deref_mut() {
+            Some(blockers) if BLOCKERS => &mut blockers[k],
+            _ => &mut spare,
+        };
+        #[cfg(target_arch = "x86_64")]
+        if avx2 {
             // Safety: `has_avx2` found AVX2 and FMA on this CPU.
-            unsafe { avx2::add_sample(block, sum, &test, channels) };
+            unsafe { avx2::add_sample::<BLOCKERS>(block, sum, met, &test, channels) };
+            continue;
         }
-        return;
-    }
-    let _ = avx2;
-    for (block, sum) in blocks.iter().zip(sums) {
-        scalar_add_sample(block, sum, &test, channels);
+        let _ = avx2;
+        scalar_add_sample::<BLOCKERS>(block, sum, met, &test, channels);
     }
 }
 
@@ -286,7 +380,13 @@ impl<'a> SampleTest<'a> {
 /// The test of eight receivers against one sample, one lane at a time: the reference for the
 /// AVX2 path (the same operations in the same order, fused where it fuses them: the same
 /// bits) and the path on CPUs without it.
-fn scalar_add_sample(b: &ReceiverBlock, sums: &mut SumBlock, t: &SampleTest<'_>, channels: usize) {
+fn scalar_add_sample<const BLOCKERS: bool>(
+    b: &ReceiverBlock,
+    sums: &mut SumBlock,
+    blockers: &mut BlockerBlock,
+    t: &SampleTest<'_>,
+    channels: usize,
+) {
     for l in 0..LANES {
         let dx = b.x[l] - t.origin[0];
         let dy = b.y[l] - t.origin[1];
@@ -300,7 +400,14 @@ fn scalar_add_sample(b: &ReceiverBlock, sums: &mut SumBlock, t: &SampleTest<'_>,
             let ty = (t.half - fy - t.crop[1]).clamp(0.0, t.last[1]);
             let stored = t.depths[ty as usize * t.width as usize + tx as usize];
             let inside = fx.abs() < t.half && fy.abs() < t.half;
-            !inside || (-b.bias_depth2[l]).mul_add(inv_dist, b.depth[l] * t.k) * stored <= t.near_k
+            let lit = (-b.bias_depth2[l]).mul_add(inv_dist, b.depth[l] * t.k) * stored <= t.near_k;
+            if BLOCKERS && inside && !lit && g > 0.0 {
+                let depth = (t.near_k / t.k) / stored;
+                blockers.count[l] += 1.0;
+                blockers.depth_sum[l] += depth;
+                blockers.depth_min[l] = blockers.depth_min[l].min(depth);
+            }
+            !inside || lit
         };
         for c in 0..channels {
             let lit = if visible { g } else { 0.0 };

@@ -182,12 +182,13 @@ fn the_avx2_tests_match_the_scalar_ones_bit_for_bit() {
             };
             let test = SampleTest::new(&map, &sample, &constants);
             let (mut scalar, mut vector) = (SumBlock::default(), SumBlock::default());
+            let (mut scalar_met, mut vector_met) = (BlockerBlock::default(), BlockerBlock::default());
             for _ in 0..3 {
-                scalar_add_sample(&block, &mut scalar, &test, 3);
+                scalar_add_sample::<true>(&block, &mut scalar, &mut scalar_met, &test, 3);
                 // Safety: checked above.
                 #[cfg(target_arch = "x86_64")]
                 unsafe {
-                    avx2::add_sample(&block, &mut vector, &test, 3)
+                    avx2::add_sample::<true>(&block, &mut vector, &mut vector_met, &test, 3)
                 };
             }
             for c in 0..3 {
@@ -195,6 +196,15 @@ fn the_avx2_tests_match_the_scalar_ones_bit_for_bit() {
                     assert_eq!(scalar.shadowed[c][l].to_bits(), vector.shadowed[c][l].to_bits(), "shadowed, lane {l}");
                     assert_eq!(scalar.unshadowed[c][l].to_bits(), vector.unshadowed[c][l].to_bits(), "unshadowed, lane {l}");
                 }
+            }
+            // The blockers met (method `filtered`), alike to the bit.
+            for l in 0..LANES {
+                assert_eq!(scalar_met.count[l], vector_met.count[l], "blockers, lane {l}");
+                assert_eq!(scalar_met.depth_sum[l].to_bits(), vector_met.depth_sum[l].to_bits(), "blocker depths, lane {l}");
+                assert_eq!(scalar_met.depth_min[l].to_bits(), vector_met.depth_min[l].to_bits(), "nearest blocker, lane {l}");
+            }
+            if !empty {
+                assert!(scalar_met.count.iter().any(|&c| c > 0.0), "some lane meets a blocker");
             }
             assert!(scalar.unshadowed[0][..7].iter().any(|&u| u > 0.0), "some lane faces the sample");
             assert_eq!(scalar.unshadowed[0][7], 0.0, "a lane at depth 0 has no weight");

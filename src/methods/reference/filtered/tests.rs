@@ -1,0 +1,89 @@
+//! Unit tests of `filtered`'s filter and refinement, on surfaces made by hand: a floor seen
+//! from straight above, one world unit a pixel.
+
+use glam::Vec3;
+
+use super::filter::{self, FilterInputs, Surfaces, Texel};
+use crate::render::Camera;
+
+const SIZE: u32 = 64;
+
+/// A camera 100 units above the floor's centre whose pixel footprint there is about 1 unit.
+fn camera() -> Camera {
+    let fov = 2.0 * (0.5 * SIZE as f32 / 100.0).atan().to_degrees();
+    Camera { eye: Vec3::new(32.0, 100.0, 32.0), target: Vec3::new(32.0, 0.0, 32.0), up: -Vec3::Z, fov_y_deg: fov, near: 1.0, far: 200.0 }
+}
+
+/// The floor y = `height(x)` under pixel (x, y), facing up.
+fn floor(height: impl Fn(u32) -> f32) -> Surfaces {
+    Surfaces::from_fn(SIZE, SIZE, |x, y| (Vec3::new(x as f32, height(x), y as f32), Vec3::Y))
+}
+
+/// Gray texels of visibility `v(x)`, each holding `samples` samples.
+fn texels(samples: u32, v: impl Fn(u32) -> f32) -> Vec<Texel> {
+    (0..SIZE * SIZE)
+        .map(|i| {
+            let v = v(i % SIZE);
+            Texel { shadowed: [v; 3], unshadowed: [1.0; 3], variance: 0.0, samples }
+        })
+        .collect()
+}
+
+fn inputs(camera: &Camera, scale: f32) -> FilterInputs<'_> {
+    FilterInputs { width: SIZE, height: SIZE, light_extent: 1.0, samples_across: 1.0, scale, channel_share: [1.0; 3], camera }
+}
+
+/// Blockers that make σ = `sigma` world units with `inputs` (light 1, one stratum across):
+/// (d_r − d_b) / d_b = σ with d_b = 1.
+fn blockers(sigma: f32) -> Vec<[f32; 3]> {
+    vec![[1.0 + sigma, 1.0, 1.0]; (SIZE * SIZE) as usize]
+}
+
+#[test]
+fn a_straight_ramp_stays_where_it_was_and_steps_are_smoothed() {
+    let camera = camera();
+    // A penumbra from x = 16 to 48, cut into steps of 4 pixels as coarse strata would (each
+    // step at the ramp's mean over it).
+    let ramp = |x: u32| ((x as f32 + 0.5 - 16.0) / 32.0).clamp(0.0, 1.0);
+    let stepped = |x: u32| ((((x as f32 - 16.0) / 4.0).floor() * 4.0 + 2.0) / 32.0).clamp(0.0, 1.0);
+    let surfaces = floor(|_| 0.0);
+    let refined = filter::refined(&surfaces, &texels(16, stepped));
+    assert!(refined[(32 * SIZE + 32) as usize] && !refined[(32 * SIZE + 2) as usize], "the penumbra is refined, the lit floor not");
+    let out = filter::filter(&inputs(&camera, 1.0), &surfaces, texels(16, stepped), &blockers(2.0), &refined);
+    let error = |v: &dyn Fn(u32) -> f32| (20..44).map(|x| (v(x) - ramp(x)).abs()).sum::<f32>() / 24.0;
+    let filtered = |x: u32| out.visibility[(32 * SIZE + x) as usize][0];
+    let (before, after) = (error(&stepped), error(&filtered));
+    assert!(after < 0.3 * before, "the steps are smoothed: mean error {before} → {after}");
+    // Far from the penumbra nothing changes.
+    assert_eq!(filtered(2), 0.0);
+    assert_eq!(filtered(60), 1.0);
+    assert!(out.pixels_filtered > 0 && out.penumbra_error > 0.0);
+}
+
+#[test]
+fn nothing_is_filtered_across_another_surface() {
+    let camera = camera();
+    // Two floors meeting at x = 32, one 5 units above the other: shadowed left, lit right.
+    let surfaces = floor(|x| if x < 32 { 0.0 } else { 5.0 });
+    let values = texels(16, |x| if x < 32 { 0.0 } else { 1.0 });
+    let refined = vec![true; (SIZE * SIZE) as usize];
+    let out = filter::filter(&inputs(&camera, 1.0), &surfaces, values, &blockers(3.0), &refined);
+    for x in [30, 31, 32, 33] {
+        let v = out.visibility[(10 * SIZE + x) as usize][0];
+        assert_eq!(v, if x < 32 { 0.0 } else { 1.0 }, "pixel {x}: the other surface is out of the average");
+    }
+}
+
+#[test]
+fn without_the_filter_each_pixel_keeps_its_samples_and_more_samples_estimate_less_error() {
+    let camera = camera();
+    let surfaces = floor(|_| 0.0);
+    let half = |_| 0.5;
+    let refined = vec![true; (SIZE * SIZE) as usize];
+    let few = filter::filter(&inputs(&camera, 0.0), &surfaces, texels(16, half), &blockers(1.0), &refined);
+    let many = filter::filter(&inputs(&camera, 0.0), &surfaces, texels(256, half), &blockers(1.0), &refined);
+    assert!(few.visibility.iter().all(|v| v[0] == 0.5), "unfiltered");
+    // n^(−3/4): sixteen times the samples, an eighth of the error.
+    let ratio = many.penumbra_error / few.penumbra_error;
+    assert!((ratio - 0.125).abs() < 1e-3, "{ratio}");
+}
