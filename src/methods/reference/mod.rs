@@ -141,8 +141,14 @@ fn record_on_cpu(ctx: &mut MethodContext<'_>, params: &Params, plan: &SamplePlan
     let total = samples.len() as u64;
     let supervisor = ctx.supervisor;
     let mut before = 0;
-    let (sums, spent) =
-        cpu::estimate(&receivers, &samples, &constants, (ctx.scene.positions(), ctx.scene.indices()), channels, plan.crop.size, |done| {
+    let (sums, _, spent) = cpu::estimate_with::<false>(
+        &receivers,
+        &samples,
+        &constants,
+        (ctx.scene.positions(), ctx.scene.indices()),
+        channels,
+        plan.crop.size,
+        |done| {
             // Progress as often as the GPU engine reports it: each time another `BATCH` are done.
             let done = done as u64;
             if done / BATCH > before / BATCH || done == total {
@@ -151,7 +157,8 @@ fn record_on_cpu(ctx: &mut MethodContext<'_>, params: &Params, plan: &SamplePlan
             before = done;
             // Cancelled: the renderer discards this frame.
             !supervisor.cancelled()
-        });
+        },
+    );
     let written = std::time::Instant::now();
     let mut visibility = vec![0u8; ctx.width as usize * ctx.height as usize * 16];
     cpu::write_visibility(&receivers, &sums, channels, ctx.width, &mut visibility);

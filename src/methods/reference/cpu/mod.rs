@@ -216,22 +216,9 @@ pub(super) struct Spent {
 }
 
 /// Estimates every receiver's sums over `samples` (drawn from the triangles `positions` /
-/// `indices`), `channels` of them (1: every weight gray, the red one stands for all). `after`
-/// hears how many samples are done after each round and says whether to go on.
-pub(super) fn estimate(
-    receivers: &Receivers,
-    samples: &[CpuSample],
-    constants: &TestConstants,
-    (positions, indices): (&[Vec3], &[u32]),
-    channels: usize,
-    crop_size: UVec2,
-    after: impl FnMut(usize) -> bool,
-) -> (Vec<SumBlock>, Spent) {
-    let (sums, _, spent) = estimate_with::<false>(receivers, samples, constants, (positions, indices), channels, crop_size, after);
-    (sums, spent)
-}
-
-/// `estimate`, and with `BLOCKERS` the blockers every receiver's tests met.
+/// `indices`), `channels` of them (1: every weight gray, the red one stands for all), and with
+/// `BLOCKERS` the blockers its tests met (else none are kept). `after` hears how many samples
+/// are done after each round and says whether to go on.
 pub(super) fn estimate_with<const BLOCKERS: bool>(
     receivers: &Receivers,
     samples: &[CpuSample],
@@ -257,20 +244,19 @@ pub(super) fn estimate_with<const BLOCKERS: bool>(
         maps.par_iter_mut().zip(chunk).for_each(|(map, sample)| map.draw(sample, positions, indices));
         let drawn = std::time::Instant::now();
         let maps = &maps[..chunk.len()];
-        if BLOCKERS {
-            let tasks = sums.par_chunks_mut(BLOCKS_PER_TASK).zip(blockers.par_chunks_mut(BLOCKS_PER_TASK));
-            tasks.zip(receivers.blocks.par_chunks(BLOCKS_PER_TASK)).for_each(|((sums, blockers), blocks)| {
-                for (map, sample) in maps.iter().zip(chunk) {
-                    test_blocks::<true>(blocks, sums, Some(&mut *blockers), map, sample, constants, channels, avx2);
-                }
-            });
+        // Each task's share of the blockers: none kept without `BLOCKERS`.
+        let tasks = sums.len().div_ceil(BLOCKS_PER_TASK);
+        let mut shares: Vec<&mut [BlockerBlock]> = if BLOCKERS {
+            blockers.chunks_mut(BLOCKS_PER_TASK).collect()
         } else {
-            sums.par_chunks_mut(BLOCKS_PER_TASK).zip(receivers.blocks.par_chunks(BLOCKS_PER_TASK)).for_each(|(sums, blocks)| {
-                for (map, sample) in maps.iter().zip(chunk) {
-                    test_blocks::<false>(blocks, sums, None, map, sample, constants, channels, avx2);
-                }
-            });
-        }
+            std::iter::repeat_with(|| &mut [][..]).take(tasks).collect()
+        };
+        let work = sums.par_chunks_mut(BLOCKS_PER_TASK).zip(receivers.blocks.par_chunks(BLOCKS_PER_TASK));
+        work.zip(shares.par_iter_mut()).for_each(|((sums, blocks), share)| {
+            for (map, sample) in maps.iter().zip(chunk) {
+                test_blocks::<BLOCKERS>(blocks, sums, BLOCKERS.then_some(&mut **share), map, sample, constants, channels, avx2);
+            }
+        });
         spent.maps_ms += (drawn - start).as_secs_f64() * 1e3;
         spent.tests_ms += drawn.elapsed().as_secs_f64() * 1e3;
         done += chunk.len();

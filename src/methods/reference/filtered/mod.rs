@@ -85,7 +85,7 @@ impl ShadowMethod for Filtered {
         PARAMS
     }
 
-    /// A depth map of its own from every sample, none from the light's centre.
+    /// As `reference`: maps of the samples' own.
     fn reads_shadow_map(&self) -> bool {
         false
     }
@@ -154,7 +154,7 @@ impl ShadowMethod for Filtered {
             cpu::estimate_with::<true>(&probed, &probe_samples, &constants, geometry, channels, plan.crop.size, |done| {
                 progress(done as u64)
             });
-        scatter(&probed, &sums, &met, (channels, probes), &mut texels, &mut blockers);
+        gather(&probed, &sums, &met, (channels, probes), &mut texels, &mut blockers);
         let mut spent = (probe_spent.maps_ms, probe_spent.tests_ms);
         // With one set there is nothing more to test; its varying pixels are still filtered.
         let refined = filter::refined(&surfaces, &texels);
@@ -168,7 +168,7 @@ impl ShadowMethod for Filtered {
                 cpu::estimate_with::<true>(&receivers, &other_samples, &constants, geometry, channels, plan.crop.size, |done| {
                     progress(first + done as u64)
                 });
-            add(&receivers, &sums, &met, (channels, total as u32), &mut texels, &mut blockers);
+            gather(&receivers, &sums, &met, (channels, total as u32), &mut texels, &mut blockers);
             spent = (spent.0 + more.maps_ms, spent.1 + more.tests_ms);
             segments += receivers.segments;
         }
@@ -219,28 +219,10 @@ fn channel_share(samples: &[super::LightSample]) -> [f32; 3] {
     })
 }
 
-/// Copies the probes' sums and blockers to the frame's pixels: per pixel its sums (the gray
-/// one standing for all three where `channels` is 1) and how many samples they hold, and its
-/// depth from the light's plane with the count and summed depth of the blockers its tests met.
-fn scatter(
-    receivers: &Receivers,
-    sums: &[SumBlock],
-    met: &[BlockerBlock],
-    (channels, samples): (usize, u32),
-    texels: &mut [Texel],
-    blockers: &mut [[f32; 3]],
-) {
-    for (k, &pixel) in receivers.pixels().iter().enumerate() {
-        let (block, lane) = (k / cpu::LANES, k % cpu::LANES);
-        let (shadowed, unshadowed) = sums[block].lane(lane, channels);
-        texels[pixel as usize] = Texel { shadowed, unshadowed, variance: 0.0, samples };
-        blockers[pixel as usize] = [receivers.depth(k), met[block].count[lane], met[block].depth_sum[lane]];
-    }
-}
-
-/// Adds the other strata's sums and blockers to the refined pixels' probes: they then hold
-/// `samples` in all.
-fn add(
+/// Adds a round of tests to the frame's pixels: per pixel its sums (the gray one standing for
+/// all three where `channels` is 1), then holding `samples` in all, and its depth from the
+/// light's plane with the count and summed depth of the blockers its tests met.
+fn gather(
     receivers: &Receivers,
     sums: &[SumBlock],
     met: &[BlockerBlock],
@@ -258,8 +240,7 @@ fn add(
         }
         texel.samples = samples;
         let blocker = &mut blockers[pixel as usize];
-        blocker[1] += met[block].count[lane];
-        blocker[2] += met[block].depth_sum[lane];
+        *blocker = [receivers.depth(k), blocker[1] + met[block].count[lane], blocker[2] + met[block].depth_sum[lane]];
     }
 }
 
