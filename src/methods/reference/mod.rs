@@ -4,8 +4,6 @@
 //!
 //! The design, and each choice where the paper is vague: docs/methods.md#reference.
 
-use glam::{Mat4, Vec3};
-
 mod cpu;
 mod crop;
 mod filtered;
@@ -112,30 +110,9 @@ impl ShadowMethod for Reference {
 /// cores, and the visibility written to the frame's buffer.
 fn record_on_cpu(ctx: &mut MethodContext<'_>, params: &Params, plan: &SamplePlan) -> JobResult<Counters> {
     let started = std::time::Instant::now();
-    let constants = cpu::TestConstants {
-        rotation: plan.rotation,
-        plane: plan.plane,
-        near: plan.near,
-        resolution: plan.resolution,
-        bias_texels: params.get(&BIAS_TEXELS),
-        slope_bias_texels: params.get(&SLOPE_BIAS_TEXELS),
-        light_center: ctx.spec.light.center,
-    };
+    let constants = plan.test_constants(params, ctx.spec.light.center);
     let receivers = ctx.read_gbuffer(|gbuffer| cpu::Receivers::new(gbuffer, SEGMENT, &constants))?;
-    // Each sample as the GPU engine's accumulate pass reads it, with its crop's projection.
-    let (view_projs, slots) = plan.slots();
-    let samples: Vec<cpu::CpuSample> = slots
-        .iter()
-        .zip(&view_projs)
-        .zip(&plan.crop.origins)
-        .map(|((slot, view_proj), origin)| cpu::CpuSample {
-            view_proj: Mat4::from_cols_array_2d(view_proj),
-            origin: [slot.origin[0], slot.origin[1]],
-            texels_per_tan: slot.radiance[3],
-            crop_origin: *origin,
-            weight: Vec3::from_slice(&slot.radiance[..3]),
-        })
-        .collect();
+    let samples = plan.cpu_samples();
     let channels = plan.channels() as usize;
     let read_ms = started.elapsed().as_secs_f64() * 1e3;
     let total = samples.len() as u64;

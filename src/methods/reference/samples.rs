@@ -172,6 +172,37 @@ impl SamplePlan {
             .unzip()
     }
 
+    /// What every test of the CPU engine shares, with the bias of `params`.
+    pub(super) fn test_constants(&self, params: &Params, light_center: Vec3) -> super::cpu::TestConstants {
+        super::cpu::TestConstants {
+            rotation: self.rotation,
+            plane: self.plane,
+            near: self.near,
+            resolution: self.resolution,
+            bias_texels: params.get(&BIAS_TEXELS),
+            slope_bias_texels: params.get(&SLOPE_BIAS_TEXELS),
+            light_center,
+        }
+    }
+
+    /// Each sample as the CPU engine draws and reads it: as the GPU engine's accumulate pass
+    /// reads it, with its crop's projection.
+    pub(super) fn cpu_samples(&self) -> Vec<super::cpu::CpuSample> {
+        let (view_projs, slots) = self.slots();
+        slots
+            .iter()
+            .zip(&view_projs)
+            .zip(&self.crop.origins)
+            .map(|((slot, view_proj), origin)| super::cpu::CpuSample {
+                view_proj: Mat4::from_cols_array_2d(view_proj),
+                origin: [slot.origin[0], slot.origin[1]],
+                texels_per_tan: slot.radiance[3],
+                crop_origin: *origin,
+                weight: Vec3::from_slice(&slot.radiance[..3]),
+            })
+            .collect()
+    }
+
     /// The accumulate passes' uniforms, `layers` samples a pass (the last may hold fewer),
     /// each with its count of samples. No samples (a black light): one empty batch, whose
     /// ratio is 1 everywhere.

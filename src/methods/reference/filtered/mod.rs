@@ -22,8 +22,6 @@
 
 mod filter;
 
-use glam::{Mat4, Vec3};
-
 use super::cpu::{self, BlockerBlock, CpuSample, Receivers, SumBlock};
 use super::gpu::SEGMENT;
 use super::samples::{interleaved_light_samples, SamplePlan};
@@ -101,36 +99,13 @@ impl ShadowMethod for Filtered {
         let (samples, sets, strata) =
             interleaved_light_samples(&spec.light, &spec.light_image, probes, refine, u64::from(params.get(&SEED)));
         let plan = SamplePlan::for_samples(ctx, params, samples, strata);
-        let constants = cpu::TestConstants {
-            rotation: plan.rotation,
-            plane: plan.plane,
-            near: plan.near,
-            resolution: plan.resolution,
-            bias_texels: params.get(&BIAS_TEXELS),
-            slope_bias_texels: params.get(&SLOPE_BIAS_TEXELS),
-            light_center: spec.light.center,
-        };
+        let constants = plan.test_constants(params, spec.light.center);
         let (width, height) = (ctx.width, ctx.height);
         let surfaces = ctx.read_gbuffer(filter::Surfaces::new)?;
         let probed = Receivers::of_pixels(&surfaces, SEGMENT, &constants, |_, _| true);
-        let (view_projs, slots) = plan.slots();
-        let to_cpu = |(slot, view_proj, origin): (&super::gpu::BatchSample, &[[f32; 4]; 4], &Option<glam::UVec2>)| CpuSample {
-            view_proj: Mat4::from_cols_array_2d(view_proj),
-            origin: [slot.origin[0], slot.origin[1]],
-            texels_per_tan: slot.radiance[3],
-            crop_origin: *origin,
-            weight: Vec3::from_slice(&slot.radiance[..3]),
-        };
-        let all: Vec<(bool, CpuSample)> = slots
-            .iter()
-            .zip(&view_projs)
-            .zip(&plan.crop.origins)
-            .zip(&sets)
-            .map(|(((slot, view_proj), origin), &set)| (set == 0, to_cpu((slot, view_proj, origin))))
-            .collect();
         let (probe_samples, other_samples): (Vec<CpuSample>, Vec<CpuSample>) = {
-            let (probes, others): (Vec<_>, Vec<_>) = all.into_iter().partition(|(probe, _)| *probe);
-            (probes.into_iter().map(|(_, s)| s).collect(), others.into_iter().map(|(_, s)| s).collect())
+            let (probes, others): (Vec<_>, Vec<_>) = plan.cpu_samples().into_iter().zip(&sets).partition(|(_, set)| **set == 0);
+            (probes.into_iter().map(|(s, _)| s).collect(), others.into_iter().map(|(s, _)| s).collect())
         };
         let read_ms = started.elapsed().as_secs_f64() * 1e3;
 
