@@ -1,12 +1,11 @@
 //! Unit tests of `reference`.
 
-use glam::UVec2;
+use glam::{Mat4, UVec2, Vec2, Vec3};
 
 use super::crop::{MapCrop, CROP_GRANULE};
 use super::gpu::BATCH_SAMPLES;
 use super::*;
 use crate::light::{AreaLight, LightImage};
-use glam::Vec2;
 
 #[test]
 fn the_batch_matches_its_wgsl_mirror() {
