@@ -43,6 +43,12 @@ const TILE: u32 = 8;
 /// than its width asks (its samples' banding then shows).
 const MAX_RADIUS: u32 = 24;
 
+/// The least σ filtered, in pixels: where the strata's steps are finer than half a pixel, the
+/// pixel grid has averaged them already, and a kernel on the grid would only blur the ramp
+/// (measured: `terrain` under `stripes` at 256×192, 0.0175 → 0.0147 with this floor; the rest
+/// within 0.0001, 1080p unchanged).
+const MIN_SIGMA_PIXELS: f32 = 0.5;
+
 /// How far the kernel reaches, in its σ.
 const REACH_SIGMAS: f32 = 2.5;
 
@@ -229,7 +235,8 @@ pub(super) fn filter(
         .map(|(&i, &own)| {
             let (x, y) = ((i % width) as u32, (i / width) as u32);
             let sigma = if own > 0.0 { own } else { tiles.sigma_around(x, y) };
-            let radius = (REACH_SIGMAS * sigma / footprint(i).max(1e-9)).ceil().min(MAX_RADIUS as f32) as u32;
+            let sigma_px = sigma / footprint(i).max(1e-9);
+            let radius = if sigma_px < MIN_SIGMA_PIXELS { 0 } else { (REACH_SIGMAS * sigma_px).ceil().min(MAX_RADIUS as f32) as u32 };
             (sigma, radius)
         })
         .collect();
