@@ -63,8 +63,6 @@ pub(super) unsafe fn add_sample<const BLOCKERS: bool>(
             };
             add(&mut blockers.count, _mm256_set1_ps(1.0));
             add(&mut blockers.depth_sum, depth);
-            let min = _mm256_loadu_ps(blockers.depth_min.as_ptr());
-            unsafe { _mm256_storeu_ps(blockers.depth_min.as_mut_ptr(), _mm256_blendv_ps(min, _mm256_min_ps(min, depth), blocked)) };
         }
         _mm256_or_ps(_mm256_andnot_ps(inside, _mm256_castsi256_ps(_mm256_set1_epi32(-1))), lit)
     };

@@ -87,19 +87,12 @@ impl Surfaces for GBufferView<'_> {
 }
 
 /// The blockers eight receivers' tests met (method `filtered`, which sizes its filter by
-/// them): how many tests were blocked, the sum and the least of the blockers' depths from the
-/// light's plane.
-#[derive(Clone, Copy)]
+/// them): how many tests were blocked, and the sum of the blockers' depths from the light's
+/// plane.
+#[derive(Clone, Copy, Default)]
 pub(super) struct BlockerBlock {
     pub(super) count: [f32; LANES],
     pub(super) depth_sum: [f32; LANES],
-    pub(super) depth_min: [f32; LANES],
-}
-
-impl Default for BlockerBlock {
-    fn default() -> Self {
-        Self { count: [0.0; LANES], depth_sum: [0.0; LANES], depth_min: [f32::INFINITY; LANES] }
-    }
 }
 
 /// What the frame's covered pixels are, for the test: built from the G-buffer as the
@@ -244,7 +237,7 @@ pub(super) fn estimate_with<const BLOCKERS: bool>(
         maps.par_iter_mut().zip(chunk).for_each(|(map, sample)| map.draw(sample, positions, indices));
         let drawn = std::time::Instant::now();
         let maps = &maps[..chunk.len()];
-        // Each task's share of the blockers: none kept without `BLOCKERS`.
+        // Each task's share of the blockers: empty without `BLOCKERS`.
         let tasks = sums.len().div_ceil(BLOCKS_PER_TASK);
         let mut shares: Vec<&mut [BlockerBlock]> = if BLOCKERS {
             blockers.chunks_mut(BLOCKS_PER_TASK).collect()
@@ -254,7 +247,7 @@ pub(super) fn estimate_with<const BLOCKERS: bool>(
         let work = sums.par_chunks_mut(BLOCKS_PER_TASK).zip(receivers.blocks.par_chunks(BLOCKS_PER_TASK));
         work.zip(shares.par_iter_mut()).for_each(|((sums, blocks), share)| {
             for (map, sample) in maps.iter().zip(chunk) {
-                test_blocks::<BLOCKERS>(blocks, sums, BLOCKERS.then_some(&mut **share), map, sample, constants, channels, avx2);
+                test_blocks::<BLOCKERS>(blocks, sums, share, map, sample, constants, channels, avx2);
             }
         });
         spent.maps_ms += (drawn - start).as_secs_f64() * 1e3;
@@ -298,12 +291,12 @@ pub(super) fn write_visibility(receivers: &Receivers, sums: &[SumBlock], channel
 
 /// Tests `blocks` against one sample's map and adds to their sums (`add_sample` in
 /// `accumulate.wgsl`).
-/// With `BLOCKERS`, `blockers` (one per block) hears the blockers met.
+/// With `BLOCKERS`, `blockers` (one per block; empty without) hears the blockers met.
 #[allow(clippy::too_many_arguments)]
 fn test_blocks<const BLOCKERS: bool>(
     blocks: &[ReceiverBlock],
     sums: &mut [SumBlock],
-    mut blockers: Option<&mut [BlockerBlock]>,
+    blockers: &mut [BlockerBlock],
     map: &Map,
     sample: &CpuSample,
     c: &TestConstants,
@@ -313,10 +306,7 @@ fn test_blocks<const BLOCKERS: bool>(
     let test = SampleTest::new(map, sample, c);
     let mut spare = BlockerBlock::default();
     for (k, (block, sum)) in blocks.iter().zip(sums.iter_mut()).enumerate() {
-        let met = match blockers.as_deref_mut() {
-            Some(blockers) if BLOCKERS => &mut blockers[k],
-            _ => &mut spare,
-        };
+        let met = if BLOCKERS { &mut blockers[k] } else { &mut spare };
         #[cfg(target_arch = "x86_64")]
         if avx2 {
             // Safety: `has_avx2` found AVX2 and FMA on this CPU.
@@ -391,7 +381,6 @@ fn scalar_add_sample<const BLOCKERS: bool>(
                 let depth = (t.near_k / t.k) / stored;
                 blockers.count[l] += 1.0;
                 blockers.depth_sum[l] += depth;
-                blockers.depth_min[l] = blockers.depth_min[l].min(depth);
             }
             !inside || lit
         };

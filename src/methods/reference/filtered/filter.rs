@@ -110,7 +110,7 @@ impl Texel {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum State {
     /// No sample lights it (it faces away, or no surface): left out of every average.
-    Dark = 0,
+    Dark,
     Lit,
     Umbra,
     Mixed,
@@ -185,11 +185,24 @@ pub(super) struct FilterOutput {
 
 /// The pixels to test against every sample: the surfaces in the tiles that vary, by their
 /// probes.
+///
+/// A surface that no probe lights (`Dark`) counts as a state of its own: next to lit or
+/// shadowed pixels it is a terminator, where the probes may all lie below a horizon the other
+/// samples clear. A pixel without a surface counts for nothing.
 pub(super) fn refined(surfaces: &Surfaces, texels: &[Texel]) -> Vec<bool> {
-    let (width, height) = (surfaces.width, surfaces.height);
+    let tiles = Tiles::new(surfaces.width, surfaces.height);
     let covered = |i: usize| surfaces.normals[i] != Vec3::ZERO;
-    let tiles = Tiles::classify_covered(width, height, texels, Some(&covered));
-    (0..(width * height) as usize).map(|i| covered(i) && tiles.varies(i as u32 % width, i as u32 / width)).collect()
+    // Per tile: the states its pixels' probes are in, a bit per `State`.
+    let mut states = vec![0u8; tiles.count()];
+    for (i, texel) in texels.iter().enumerate().filter(|&(i, _)| covered(i)) {
+        states[tiles.of(i)] |= 1 << texel.state() as u8;
+    }
+    // A tile varies with a mixed pixel around it, or two of the states.
+    let varies = |i: usize| {
+        let seen = tiles.around(i).fold(0u8, |seen, t| seen | states[t]);
+        seen & (1 << State::Mixed as u8) != 0 || seen.count_ones() > 1
+    };
+    (0..texels.len()).map(|i| covered(i) && varies(i)).collect()
 }
 
 /// Filters the `refined` pixels' `texels` over `surfaces`, sized by `blockers` ([receiver
@@ -227,14 +240,28 @@ pub(super) fn filter(
             }
         })
         .collect();
-    let tiles = Tiles::classify(inputs.width, inputs.height, &texels)
-        .with_sigma(inputs.width, listed.iter().copied().zip(own_sigma.iter().copied()));
+    // Per tile, the mean σ of its pixels that have their own (0: none has).
+    let tiles = Tiles::new(inputs.width, inputs.height);
+    let mut sums = vec![(0.0f32, 0u32); tiles.count()];
+    for (&i, &sigma) in listed.iter().zip(&own_sigma).filter(|(_, s)| **s > 0.0) {
+        let tile = &mut sums[tiles.of(i)];
+        *tile = (tile.0 + sigma, tile.1 + 1);
+    }
+    let tile_sigma: Vec<f32> = sums.iter().map(|&(sum, n)| if n > 0 { sum / n as f32 } else { 0.0 }).collect();
+    // The mean σ of the tiles around pixel i that have one (0: none).
+    let sigma_around = |i: usize| {
+        let (sum, n) = tiles.around(i).map(|t| tile_sigma[t]).filter(|&s| s > 0.0).fold((0.0, 0), |(sum, n), s| (sum + s, n + 1));
+        if n > 0 {
+            sum / n as f32
+        } else {
+            0.0
+        }
+    };
     let kernels: Vec<(f32, u32)> = listed
         .par_iter()
         .zip(&own_sigma)
         .map(|(&i, &own)| {
-            let (x, y) = ((i % width) as u32, (i / width) as u32);
-            let sigma = if own > 0.0 { own } else { tiles.sigma_around(x, y) };
+            let sigma = if own > 0.0 { own } else { sigma_around(i) };
             let sigma_px = sigma / footprint(i).max(1e-9);
             let radius = if sigma_px < MIN_SIGMA_PIXELS { 0 } else { (REACH_SIGMAS * sigma_px).ceil().min(MAX_RADIUS as f32) as u32 };
             (sigma, radius)
@@ -341,77 +368,34 @@ fn output(texels: &[Texel], pixels_filtered: usize) -> FilterOutput {
     FilterOutput { visibility, pixels_filtered, penumbra_error: if count > 0 { sum / count as f64 } else { 0.0 }, penumbra_pixels: count }
 }
 
-/// The frame in tiles of `TILE`²: whether anything varies in and around each, and the mean σ
-/// of the pixels in it that have their own.
+/// The frame in tiles of `TILE`², for the refinement's classes and the fallback σ.
 struct Tiles {
+    width: u32,
     columns: u32,
     rows: u32,
-    /// Per tile: the states its pixels' own samples are in (a bit per `State`).
-    states: Vec<u8>,
-    /// Per tile: the mean σ of its pixels that met blockers (0: none did).
-    sigma: Vec<f32>,
 }
 
 impl Tiles {
-    fn classify(width: u32, height: u32, texels: &[Texel]) -> Self {
-        Self::classify_covered(width, height, texels, None)
+    fn new(width: u32, height: u32) -> Self {
+        Self { width, columns: width.div_ceil(TILE), rows: height.div_ceil(TILE) }
     }
 
-    /// With `covered`, a surface that no probe lights (`Dark`) counts as a state of its own —
-    /// next to lit or shadowed pixels it is a terminator, where the probes may all lie below
-    /// a horizon the other samples clear; without, no surface counts.
-    fn classify_covered(width: u32, height: u32, texels: &[Texel], covered: Option<&dyn Fn(usize) -> bool>) -> Self {
-        let (columns, rows) = (width.div_ceil(TILE), height.div_ceil(TILE));
-        let mut states = vec![0u8; (columns * rows) as usize];
-        for (i, texel) in texels.iter().enumerate() {
-            let state = texel.state();
-            if state == State::Dark && !covered.is_some_and(|covered| covered(i)) {
-                continue;
-            }
-            let (x, y) = (i as u32 % width, i as u32 / width);
-            states[((y / TILE) * columns + x / TILE) as usize] |= 1 << state as u8;
-        }
-        Self { columns, rows, states, sigma: Vec::new() }
+    fn count(&self) -> usize {
+        (self.columns * self.rows) as usize
     }
 
-    /// With each tile's mean σ over the `(pixel, σ)` given that have one.
-    fn with_sigma(self, width: u32, own_sigma: impl Iterator<Item = (usize, f32)>) -> Self {
-        let mut sums = vec![(0.0f32, 0u32); self.states.len()];
-        for (i, sigma) in own_sigma.filter(|(_, s)| *s > 0.0) {
-            let (x, y) = (i as u32 % width, i as u32 / width);
-            let tile = &mut sums[((y / TILE) * self.columns + x / TILE) as usize];
-            *tile = (tile.0 + sigma, tile.1 + 1);
-        }
-        let sigma = sums.iter().map(|&(sum, n)| if n > 0 { sum / n as f32 } else { 0.0 }).collect();
-        Self { sigma, ..self }
+    /// The tile of pixel `i`.
+    fn of(&self, i: usize) -> usize {
+        let (x, y) = (i as u32 % self.width, i as u32 / self.width);
+        ((y / TILE) * self.columns + x / TILE) as usize
     }
 
-    /// The tiles around pixel (x, y)'s, its own included.
-    fn around(&self, x: u32, y: u32) -> impl Iterator<Item = usize> + '_ {
-        let (tx, ty) = ((x / TILE) as i64, (y / TILE) as i64);
+    /// The tiles around pixel `i`'s, its own included.
+    fn around(&self, i: usize) -> impl Iterator<Item = usize> + '_ {
+        let (tx, ty) = ((i as u32 % self.width / TILE) as i64, (i as u32 / self.width / TILE) as i64);
         (ty - 1..=ty + 1)
             .flat_map(move |j| (tx - 1..=tx + 1).map(move |i| (i, j)))
             .filter(|&(i, j)| i >= 0 && j >= 0 && i < self.columns as i64 && j < self.rows as i64)
             .map(|(i, j)| (j * self.columns as i64 + i) as usize)
-    }
-
-    /// Whether anything around pixel (x, y) varies: a mixed pixel, or two of the states.
-    fn varies(&self, x: u32, y: u32) -> bool {
-        let seen = self.around(x, y).fold(0u8, |seen, t| seen | self.states[t]);
-        seen & (1 << State::Mixed as u8) != 0 || seen.count_ones() > 1
-    }
-
-    /// The mean σ of the tiles around pixel (x, y) that have one (0: none).
-    fn sigma_around(&self, x: u32, y: u32) -> f32 {
-        let (sum, n) = self
-            .around(x, y)
-            .filter_map(|t| self.sigma.get(t).copied())
-            .filter(|&s| s > 0.0)
-            .fold((0.0, 0), |(sum, n), s| (sum + s, n + 1));
-        if n > 0 {
-            sum / n as f32
-        } else {
-            0.0
-        }
     }
 }

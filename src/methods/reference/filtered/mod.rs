@@ -137,7 +137,7 @@ impl ShadowMethod for Filtered {
         let refined_count = if other_samples.is_empty() { 0 } else { refined.iter().filter(|&&r| r).count() };
         // The other strata, where a penumbra is.
         let mut segments = probed.segments;
-        if !supervisor.cancelled() && refined_count > 0 && !other_samples.is_empty() {
+        if !supervisor.cancelled() && refined_count > 0 {
             let receivers = Receivers::of_pixels(&surfaces, SEGMENT, &constants, |x, y| refined[(y * width + x) as usize]);
             let first = probe_samples.len() as u64;
             let (sums, met, more) =
