@@ -94,7 +94,7 @@ impl AppState {
     /// stops, then withdraws it so that it leaves the cluster view at once (a replica that
     /// dies leaves it when its last report expires).
     pub(super) fn spawn_heartbeat(self: &Arc<Self>) {
-        let Some(store) = self.store.clone().filter(|s| s.shared()) else { return };
+        let Some(store) = self.shared_store().cloned() else { return };
         let state = self.clone();
         tokio::spawn(async move {
             let mut tick = tokio::time::interval(state.replica.heartbeat_every);
@@ -124,7 +124,7 @@ impl AppState {
     /// Keeps a finished job among the service's recent jobs in a shared store, in the
     /// background: the job's record is what clients read, this only feeds the dashboard.
     pub(super) fn share_finished(&self, summary: &JobSummary) {
-        let Some(store) = self.store.clone().filter(|s| s.shared()) else { return };
+        let Some(store) = self.shared_store().cloned() else { return };
         let Ok(runtime) = tokio::runtime::Handle::try_current() else { return };
         let summary = summary.clone();
         runtime.spawn(async move {
@@ -134,11 +134,12 @@ impl AppState {
         });
     }
 
-    /// The cluster view of `/v1/stats`: the live replicas, and the recent jobs of all of them
-    /// (of this daemon alone without a shared store, or while it cannot be read).
-    pub(super) async fn cluster_view(&self, recent: usize) -> Value {
+    /// The cluster view of `/v1/stats`: the live replicas (`cluster`), and the recent jobs of
+    /// all of them (`jobs`) — of this daemon alone without a shared store, or while it cannot
+    /// be read.
+    pub(super) async fn cluster_view(&self, recent: usize) -> (Value, Value) {
         let local = || (vec![self.report()], self.recent.newest(CLUSTER_RECENT));
-        let (scope, error, (replicas, jobs)) = match self.store.clone().filter(|s| s.shared()) {
+        let (scope, error, (replicas, jobs)) = match self.shared_store().cloned() {
             None => ("replica", None, local()),
             Some(store) => {
                 let read = store.call(|s| Ok((s.replicas()?, s.recent_finished(CLUSTER_RECENT)?))).await;
@@ -155,15 +156,12 @@ impl AppState {
                 }
             }
         };
-        json!({
-            "scope": scope,
-            "error": error,
-            "replicas": replicas,
-            "jobs": {
-                "per_minute": per_minute(&jobs, unix_ms(), Duration::from_secs(60)),
-                "by_method": latency_by_method(&jobs),
-                "recent": &jobs[..jobs.len().min(recent)],
-            },
-        })
+        let cluster = json!({"scope": scope, "error": error, "replicas": replicas});
+        let jobs = json!({
+            "per_minute": per_minute(&jobs, unix_ms(), Duration::from_secs(60)),
+            "by_method": latency_by_method(&jobs),
+            "recent": &jobs[..jobs.len().min(recent)],
+        });
+        (cluster, jobs)
     }
 }

@@ -55,7 +55,7 @@ pub(super) async fn submit_job(
     let parsed = key.and_then(|key| {
         let body = body?;
         let job = Job::from_json_limited(&body, state.engine.limits())?;
-        let uploads_here = !state.store.as_ref().is_some_and(|s| s.shared());
+        let uploads_here = state.shared_store().is_none();
         state.engine.check(&job, uploads_here)?;
         // The job as sent (it parsed, so it is JSON): what the store keeps and resumes.
         let sent: Value = serde_json::from_slice(&body).map_err(|e| JobError::new(ErrorCode::InvalidJson, e.to_string()))?;
@@ -143,7 +143,7 @@ async fn accept_job(
         // Known down: answered at once; the probe notices when it is back.
         return Err(store_error(StoreError::Unavailable("the last call and probe failed".into())));
     }
-    let shared = store.clone().filter(|s| s.shared());
+    let shared = state.shared_store().cloned();
     if let Some(store) = &shared {
         // The shared queue is bounded as a whole, by the same --queue.
         let queued = store.call(|s| s.queued()).await.map_err(store_error)?;

@@ -53,7 +53,7 @@ pub(super) async fn readyz(State(state): State<Arc<AppState>>) -> Response {
         response
     } else {
         let mut ready = json!({"status": "ready", "adapter": state.engine.adapter(), "replica": state.replica.name});
-        if state.store.as_ref().is_some_and(|s| s.shared()) {
+        if state.shared_store().is_some() {
             ready["heartbeat"] = state.replica.heartbeat_detail();
         }
         Json(ready).into_response()
@@ -85,11 +85,10 @@ const STATS_RECENT: usize = 40;
 /// the recent jobs of all of them with throughput, latency per method and phase breakdowns.
 pub(super) async fn stats(State(state): State<Arc<AppState>>) -> Json<Value> {
     let uptime_s = state.started.elapsed().map(|d| d.as_secs_f64()).unwrap_or(0.0);
-    let mut cluster = state.cluster_view(STATS_RECENT).await;
-    let jobs = cluster["jobs"].take();
+    let (cluster, jobs) = state.cluster_view(STATS_RECENT).await;
     Json(json!({
         "replica": state.replica.name,
-        "cluster": {"scope": cluster["scope"], "error": cluster["error"], "replicas": cluster["replicas"]},
+        "cluster": cluster,
         "adapter": state.engine.adapter(),
         "uptime_s": uptime_s,
         "jobs_in_flight": state.metrics.in_flight(),

@@ -82,12 +82,17 @@ impl AppState {
         }
     }
 
+    /// The store, where it is the queue shared by several replicas.
+    pub(super) fn shared_store(&self) -> Option<&Store> {
+        self.store.as_ref().filter(|s| s.shared())
+    }
+
     /// Jobs accepted and not yet started across the service: with a shared store, its queue
     /// (the same on every replica; read at most once a second, however often it is scraped),
     /// else the submitted jobs waiting here. None while the store cannot be read: unknown,
     /// not zero.
     pub(super) async fn backlog(&self) -> Option<crate::store::Backlog> {
-        let Some(store) = self.store.clone().filter(|s| s.shared()) else {
+        let Some(store) = self.shared_store().cloned() else {
             let (jobs, oldest_unix_ms) = self.jobs.waiting();
             return Some(crate::store::Backlog { jobs, oldest_unix_ms });
         };
@@ -263,7 +268,7 @@ impl AppState {
     /// consumer `REPLICA/SLOT` (REPLICA: this replica's name), so a job's record says where
     /// it ran.
     pub fn spawn_workers(self: &Arc<Self>) {
-        if !self.store.as_ref().is_some_and(|s| s.shared()) {
+        if self.shared_store().is_none() {
             return;
         }
         for worker in 0..self.queue_config.concurrency {

@@ -21,7 +21,7 @@ pub(super) async fn upload(state: Arc<AppState>, body: Result<Bytes, BytesReject
         Err(rejection) => return ApiError(body_error(&state, rejection, ErrorCode::InvalidAsset)).into_response(),
     };
     let engine = state.engine.clone();
-    let shared = state.store.clone().filter(|s| s.shared());
+    let shared = state.shared_store().cloned();
     // Decoding a large scene takes a while: off the async workers. A shared store keeps the
     // bytes once for every replica (after they decoded: a bad file is refused, not shared).
     let stored = move || {
@@ -56,7 +56,7 @@ pub(super) fn upload_routes(kind: Kind) -> axum::routing::MethodRouter<Arc<AppSt
 pub(super) async fn head_upload(kind: Kind, State(state): State<Arc<AppState>>, Path(id): Path<String>, headers: HeaderMap) -> Response {
     let size = match state.engine.upload_size(kind, &id) {
         Some(size) => Some(size),
-        None => match state.store.clone().filter(|s| s.shared()) {
+        None => match state.shared_store().cloned() {
             Some(store) => {
                 let shared_id = id.clone();
                 match store.call(move |s| s.upload_size(kind, &shared_id)).await {
@@ -102,7 +102,7 @@ pub(super) async fn put_upload(
 /// `DELETE /v1/scenes/{id}`, `DELETE /v1/lights/{id}`: 204, or 404 when there was none.
 pub(super) async fn delete_upload(kind: Kind, State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Response {
     let mut deleted = state.engine.delete_upload(kind, &id);
-    if let Some(store) = state.store.clone().filter(|s| s.shared()) {
+    if let Some(store) = state.shared_store().cloned() {
         let shared_id = id.clone();
         deleted |= matches!(store.call(move |s| s.delete_upload(kind, &shared_id)).await, Ok(true));
     }

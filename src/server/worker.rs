@@ -177,7 +177,7 @@ pub(super) async fn render_and_store(
                 drop(admitted);
                 return;
             }
-            Err(error) if state.store.as_ref().is_some_and(|s| s.shared()) => {
+            Err(error) if state.shared_store().is_some() => {
                 // Left pending on the shared queue: another replica (or this one) claims it
                 // once the store is back, and renders it again.
                 tracing::error!(%id, %error, "gave up storing a finished result; the job stays claimable on the shared queue");
