@@ -7,6 +7,11 @@ operations would be tested only on their refusals. Every positive upload case he
 a valid asset (with its id for a PUT); negative cases (a missing body, a malformed id) stay as
 generated, so both the acceptance and the refusal paths run. The bytes themselves are fuzzed by
 `cargo fuzz` (targets `scene` and `light_image`).
+
+The stateful phase follows `submitJob` to `cancelJob`, but the jobs a schema generates are
+small and finish in milliseconds, before the link is followed: the first few positive submits
+of that phase become a job that renders for seconds (a 1,024-sample `reference`), so that a
+cancellation meets a job still queued or rendering, as a client's would.
 """
 
 import base64
@@ -58,14 +63,25 @@ UPLOADS = {
 }
 
 
+# A job that renders for seconds on two cores, and how many of them the stateful phase sends.
+SLOW_JOB = {
+    "scene": {"builtin": "torus"},
+    "method": {"name": "reference", "samples": 1024},
+    "output": {"width": 512, "height": 384},
+}
+SLOW_JOBS = 4
+_slow_sent = 0
+
+
 @schemathesis.hook
 def before_call(context, case, kwargs):
     operation = (case.operation.method.upper(), case.operation.path)
+    if operation == ("POST", "/v1/jobs"):
+        _slow_down(case)
+        return
     kind = UPLOADS.get(operation) or HEADS.get(operation)
     # Only cases meant to be valid: a negative case (a missing body, a bad id) stays as it is.
-    meta = case.meta
-    negative = meta is not None and (meta.generation.mode.is_negative or any(c.mode.is_negative for c in meta.components.values()))
-    if kind is None or negative:
+    if kind is None or _negative(case):
         return
     body, media_type = ASSETS[kind]
     if operation in HEADS:
@@ -88,3 +104,20 @@ def _stay_positive(case):
         meta.generation.mode = GenerationMode.POSITIVE
         for component in meta.components.values():
             component.mode = GenerationMode.POSITIVE
+
+
+def _slow_down(case):
+    """The first `SLOW_JOBS` positive submits of the stateful phase ask for `SLOW_JOB`."""
+    global _slow_sent
+    meta = case.meta
+    if meta is None or meta.phase.name != "stateful" or _slow_sent >= SLOW_JOBS or _negative(case):
+        return
+    _slow_sent += 1
+    case.body = dict(SLOW_JOB)
+    _stay_positive(case)
+
+
+def _negative(case):
+    """Whether the case is meant to be refused (a missing body, a bad id): left as it is."""
+    meta = case.meta
+    return meta is not None and (meta.generation.mode.is_negative or any(c.mode.is_negative for c in meta.components.values()))

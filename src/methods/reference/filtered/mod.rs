@@ -34,14 +34,15 @@ use filter::{FilterInputs, Texel};
 
 pub struct Filtered;
 
+// At most 64 × 4² = 1,024 samples in a penumbra, a quarter of what `reference` may take.
 const SAMPLES: Param<u32> =
-    Param::integer("samples", 16, 1, 256, "light samples that probe every pixel: one stratified set over the whole light")
+    Param::integer("samples", 16, 1, 64, "light samples that probe every pixel: one stratified set over the whole light")
         .capped(Cap::Samples);
 const REFINE: Param<u32> = Param::integer(
     "refine",
     4,
     1,
-    8,
+    4,
     "a pixel in or near a penumbra is tested against samples × refine² samples (each probe's stratum cut refine × refine)",
 );
 const FILTER: Param<bool> = Param::boolean("filter", true, "filter the visibility over the penumbra (off: each pixel's own samples)");
