@@ -14,7 +14,7 @@ use anyhow::Context as _;
 use serde::Serialize;
 use serde_json::Map;
 
-use super::{case_job, every_method_but_reference, median_timings, parse_methods, parse_named, parse_size, reference_of};
+use super::{case_job, every_method_but_reference, median_timings, method_job, parse_methods, parse_named, parse_size, reference_of};
 use crate::engine::Engine;
 use crate::job::{Job, MethodSpec, OutputFormat};
 use crate::render::{E0Mode, FrameOutput};
@@ -170,7 +170,7 @@ pub fn run(engine: &Engine, options: &BenchOptions) -> anyhow::Result<BenchRepor
             let mut errors = Vec::new();
             for (label, method) in &methods {
                 progress.set_message(format!("{case}: {label}, error"));
-                let (test, _) = frame(&Job { method: method.clone(), ..base.clone() }, label)?;
+                let (test, _) = frame(&method_job(&base, method), label)?;
                 errors.push(visibility_errors(&test, &truth));
                 progress.inc(1);
             }
@@ -181,7 +181,7 @@ pub fn run(engine: &Engine, options: &BenchOptions) -> anyhow::Result<BenchRepor
                     progress.set_message(format!("{case}: {label} ({}/{})", repetition + 1, options.repeat));
                     let cpu_before = crate::timing::process_cpu_ms();
                     let rendered = engine
-                        .render(&Job { method: method.clone(), ..base.clone() }, &())
+                        .render(&method_job(&base, method), &())
                         .map_err(|e| anyhow::anyhow!("{case}: {label}: {e}"))?;
                     runs.push((rendered.timings, crate::timing::process_cpu_ms() - cpu_before));
                     progress.inc(1);

@@ -100,6 +100,19 @@ fn reference_of(job: &Job, samples: u32, resolution: u32) -> Job {
     reference
 }
 
+/// `base` rendered by `method`. A method that draws maps of its own light samples
+/// (`reference`'s `resolution`) and leaves their resolution unset draws them at the case's
+/// shadow-map resolution, as the reference it is measured against does: otherwise its error
+/// would measure the maps' resolution rather than the method.
+fn method_job(base: &Job, method: &MethodSpec) -> Job {
+    let mut method = method.clone();
+    let draws_sample_maps = crate::methods::find(&method.name).is_ok_and(|m| m.params().iter().any(|p| p.name == "resolution"));
+    if draws_sample_maps && !method.params.contains_key("resolution") {
+        method.params.insert("resolution".into(), base.shadow_map.resolution.into());
+    }
+    Job { method, ..base.clone() }
+}
+
 /// Runs the suite and writes the results under `options.out`.
 pub fn run(engine: &Engine, options: &EvalOptions) -> anyhow::Result<EvalReport> {
     let sweep = options.sweep.as_deref().map(parse_sweep).transpose()?;
@@ -199,7 +212,7 @@ impl Suite<'_> {
         for repetition in 0..options.repeat {
             for ((label, method), runs) in self.methods.iter().zip(&mut runs) {
                 progress.set_message(format!("{case}: {label} ({}/{})", repetition + 1, options.repeat));
-                let job = Job { method: method.clone(), ..base.clone() };
+                let job = method_job(&base, method);
                 let (frame, timings) = engine.render_frame(&job, &()).map_err(|e| anyhow::anyhow!("{case}: {label}: {e}"))?;
                 runs.push(timings);
                 if repetition == 0 {
