@@ -59,6 +59,11 @@ pub struct LimitArgs {
     /// Most rounds an iterative method may run (JFA's `rounds`).
     #[arg(long, env = "PENUMBRA_MAX_ROUNDS", default_value_t = Limits::default().max_rounds)]
     pub max_rounds: u32,
+    /// Most bytes `reference`'s CPU engine and `filtered` hold for their per-pixel work at
+    /// once: a larger frame is worked on in bands of rows (the same pixels; each band draws the
+    /// samples' maps again).
+    #[arg(long, env = "PENUMBRA_MAX_CPU_WORKING_BYTES", default_value_t = Limits::default().max_cpu_working_bytes, value_parser = clap::value_parser!(u64).range(1 << 20..))]
+    pub max_cpu_working_bytes: u64,
 }
 
 impl LimitArgs {
@@ -76,6 +81,7 @@ impl LimitArgs {
             max_vertices: self.max_vertices,
             max_samples: self.max_samples,
             max_rounds: self.max_rounds,
+            max_cpu_working_bytes: self.max_cpu_working_bytes,
         }
     }
 }

@@ -650,6 +650,32 @@ fn a_filtered_exr_carries_its_error_estimate() {
     assert!(!names.iter().any(|n| n == "error"), "only a method that estimates its error writes the layer: {names:?}");
 }
 
+/// A frame whose per-pixel work would not fit `max_cpu_working_bytes` is worked on in bands of
+/// rows (`filtered` reading a halo of rows beyond each): the same pixels, byte for byte, as the
+/// frame worked on whole, for the reference's CPU engine and for `filtered`.
+#[test]
+fn the_cpu_methods_render_the_same_pixels_in_bands() {
+    let banded = penumbra::engine::Engine::new(
+        common::engine().gpu(),
+        Limits { max_cpu_working_bytes: 2 << 20, ..Limits::default() },
+        penumbra::engine::PathPolicy::Deny,
+    );
+    for method in [json!({"name": "reference", "samples": 16, "engine": "cpu"}), json!({"name": "filtered", "samples": 4})] {
+        let value = json!({"scene": {"builtin": "crowd"}, "light": {"image": {"builtin": "stripes"}}, "method": method,
+                           "output": {"width": 320, "height": 240, "format": "exr"}});
+        let whole = common::engine().render_frame(&job(value.clone()), &()).unwrap().0;
+        let bands = banded.render_frame(&job(value), &()).unwrap().0;
+        assert_eq!(whole.counters.get("cpu_bands"), Some(&1.0), "{method}");
+        let count = bands.counters["cpu_bands"];
+        assert!(count >= 3.0, "{method}: {count} bands");
+        assert!(whole.visibility.is_some() && whole.visibility == bands.visibility, "{method}: the same visibility in {count} bands");
+        assert_eq!(whole.error_estimate, bands.error_estimate, "{method}");
+        for key in ["pixels_refined", "pixels_filtered", "error_estimate_penumbra"] {
+            assert_eq!(whole.counters.get(key), bands.counters.get(key), "{method}: {key}");
+        }
+    }
+}
+
 /// The CPU engine draws the GPU engine's maps and makes its tests: the same estimate, but for
 /// a texel centre on a triangle's edge rounded the other way, or a sum added in another order.
 #[test]

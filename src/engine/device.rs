@@ -97,6 +97,7 @@ impl Engine {
         let gpu = Arc::new(gpu);
         state.renderer = Renderer::new(gpu.clone());
         state.renderer.set_pool_budget(self.pool_bytes);
+        state.renderer.cpu_working_bytes = self.limits.max_cpu_working_bytes;
         state.scenes.clear();
         *self.gpu.write().unwrap_or_else(|p| p.into_inner()) = gpu.clone();
         let resets = self.device_resets.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;

@@ -104,15 +104,26 @@ pub struct Engine {
 }
 
 impl Engine {
-    pub fn new(gpu: Arc<GpuContext>, limits: Limits, paths: PathPolicy) -> Self {
+    pub fn new(gpu: Arc<GpuContext>, mut limits: Limits, paths: PathPolicy) -> Self {
+        // A frame's per-pixel buffers (visibility, E0: a `vec4<f32>` a pixel) are bound whole,
+        // so the device's largest storage binding caps a frame's pixels (lavapipe's 128 MiB:
+        // 8,388,608). Beyond it every job would fail on the device; lowered, they are refused
+        // up front with the field named, and `/v1/meta` says the limit that holds.
+        let device_pixels = u64::from(gpu.limits.max_storage_buffer_binding_size) / 16;
+        if limits.max_output_pixels > device_pixels {
+            tracing::warn!(max_output_pixels = limits.max_output_pixels, device_pixels, "output pixels lowered to what the device binds");
+            limits.max_output_pixels = device_pixels;
+        }
         // Honoured as configured (a scene over the device's limit then fails its own job at
         // upload), but said once, since it is almost certainly not what the operator meant.
         let device_max = gpu.limits.max_texture_dimension_2d;
         if limits.max_texture_dim > device_max {
             tracing::warn!(max_texture_dim = limits.max_texture_dim, device_max, "textures above the device's limit will fail their jobs");
         }
+        let mut renderer = Renderer::new(gpu.clone());
+        renderer.cpu_working_bytes = limits.max_cpu_working_bytes;
         let state = RenderState {
-            renderer: Renderer::new(gpu.clone()),
+            renderer,
             scenes: Lru::new(SCENE_CACHE_ENTRIES),
             lights: Lru::new(LIGHT_CACHE_ENTRIES),
         };

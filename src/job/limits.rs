@@ -70,6 +70,10 @@ pub struct Limits {
     pub max_samples: u32,
     /// Most rounds an iterative method may run (JFA's `rounds`).
     pub max_rounds: u32,
+    /// Most bytes the methods that work on the CPU (`reference`'s CPU engine, `filtered`) hold
+    /// for their per-pixel work at once; a frame that needs more is worked on in bands of rows
+    /// (the same pixels, each band drawing the samples' maps again).
+    pub max_cpu_working_bytes: u64,
 }
 
 impl Limits {
@@ -97,6 +101,7 @@ impl Default for Limits {
             max_vertices: 8_000_000,
             max_samples: 4096,
             max_rounds: 13,
+            max_cpu_working_bytes: 512 * 1024 * 1024,
         }
     }
 }

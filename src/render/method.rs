@@ -5,6 +5,7 @@
 //! registry lives above it, with the methods.
 
 use std::collections::BTreeMap;
+use std::ops::Range;
 use std::sync::Arc;
 
 use crate::error::JobResult;
@@ -34,6 +35,15 @@ impl Scratch {
         let buffer = pooled.buffer.clone();
         self.buffers.push(pooled);
         buffer
+    }
+
+    /// Gives the last `count` buffers handed out back to `pool` now: only once nothing recorded
+    /// uses them any more (read back and unmapped), so that a frame worked on in bands holds
+    /// one band's copies at a time.
+    fn release_last_buffers(&mut self, count: usize, pool: &mut BufferPool) {
+        for buffer in self.buffers.drain(self.buffers.len().saturating_sub(count)..) {
+            pool.release(buffer);
+        }
     }
 
     /// Gives everything back to the pools; only once the passes using it have run.
@@ -70,16 +80,16 @@ impl CounterKey {
     }
 }
 
-/// Records the copy of the whole of `texture` into `buffer`, rows `pitch` bytes apart
-/// (`MethodContext::rows_buffer`).
-fn copy_rows(encoder: &mut wgpu::CommandEncoder, texture: &wgpu::Texture, buffer: &wgpu::Buffer, pitch: u32) {
+/// Records the copy of `rows` of `texture` into `buffer`, rows `pitch` bytes apart from its
+/// start (`MethodContext::rows_buffer`).
+fn copy_rows(encoder: &mut wgpu::CommandEncoder, texture: &wgpu::Texture, buffer: &wgpu::Buffer, pitch: u32, rows: &Range<u32>) {
     encoder.copy_texture_to_buffer(
-        texture.as_image_copy(),
+        wgpu::TexelCopyTextureInfo { origin: wgpu::Origin3d { x: 0, y: rows.start, z: 0 }, ..texture.as_image_copy() },
         wgpu::TexelCopyBufferInfo {
             buffer,
             layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(pitch), rows_per_image: None },
         },
-        texture.size(),
+        wgpu::Extent3d { width: texture.width(), height: rows.len() as u32, depth_or_array_layers: 1 },
     );
 }
 
@@ -154,6 +164,9 @@ pub struct MethodContext<'a> {
     /// What the method found in this scene that it cannot render faithfully, for the job's
     /// `warnings` (contract §2: detect it and say so, never fail silently).
     pub warnings: Vec<String>,
+    /// The most bytes a method working on the CPU may hold for its per-pixel work at once
+    /// (`--max-cpu-working-bytes`): a frame that needs more is worked on in bands of rows.
+    pub cpu_working_bytes: u64,
 }
 
 impl MethodContext<'_> {
@@ -246,8 +259,9 @@ impl MethodContext<'_> {
     /// every texel).
     pub fn shadow_depth_copy(&mut self, label: &'static str, pass: &'static str) -> (wgpu::Buffer, u32) {
         let texture = self.shadow_depth;
-        let (buffer, pitch) = self.rows_buffer(label, texture, 4, wgpu::BufferUsages::STORAGE);
-        self.timer.time_encoder(self.encoder, PhaseName::Method, pass, |encoder| copy_rows(encoder, texture, &buffer, pitch));
+        let rows = 0..texture.height();
+        let (buffer, pitch) = self.rows_buffer(label, texture, 4, rows.len() as u32, wgpu::BufferUsages::STORAGE);
+        self.timer.time_encoder(self.encoder, PhaseName::Method, pass, |encoder| copy_rows(encoder, texture, &buffer, pitch, &rows));
         (buffer, pitch / 4)
     }
 
@@ -259,10 +273,11 @@ impl MethodContext<'_> {
         label: &'static str,
         texture: &wgpu::Texture,
         bytes_per_texel: u32,
+        rows: u32,
         usage: wgpu::BufferUsages,
     ) -> (wgpu::Buffer, u32) {
         let pitch = (bytes_per_texel * texture.width()).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
-        let buffer = self.scratch_buffer(label, u64::from(pitch) * u64::from(texture.height()), usage | wgpu::BufferUsages::COPY_DST);
+        let buffer = self.scratch_buffer(label, u64::from(pitch) * u64::from(rows), usage | wgpu::BufferUsages::COPY_DST);
         (buffer, pitch)
     }
 
@@ -270,12 +285,20 @@ impl MethodContext<'_> {
     /// far has run: for work done on the CPU. Copied into pooled buffers (on lavapipe a fresh
     /// one costs a page fault a page the first time it is written) and read where they lie.
     pub fn read_gbuffer<R>(&mut self, read: impl FnOnce(&GBufferView<'_>) -> R) -> JobResult<R> {
+        self.read_gbuffer_rows(0..self.height, read)
+    }
+
+    /// `read_gbuffer` for the frame's `rows` alone (a band of a frame worked on in bands): the
+    /// view's row 0 is the frame's row `rows.start`.
+    pub fn read_gbuffer_rows<R>(&mut self, rows: Range<u32>, read: impl FnOnce(&GBufferView<'_>) -> R) -> JobResult<R> {
         let (position_texture, normal_texture) = (self.gbuffer_position, self.gbuffer_normal);
+        let count = rows.len() as u32;
         let (positions, position_pitch) =
-            self.rows_buffer("MethodContext::gbuffer_positions", position_texture, 16, wgpu::BufferUsages::MAP_READ);
-        let (normals, normal_pitch) = self.rows_buffer("MethodContext::gbuffer_normals", normal_texture, 8, wgpu::BufferUsages::MAP_READ);
-        copy_rows(self.encoder, position_texture, &positions, position_pitch);
-        copy_rows(self.encoder, normal_texture, &normals, normal_pitch);
+            self.rows_buffer("MethodContext::gbuffer_positions", position_texture, 16, count, wgpu::BufferUsages::MAP_READ);
+        let (normals, normal_pitch) =
+            self.rows_buffer("MethodContext::gbuffer_normals", normal_texture, 8, count, wgpu::BufferUsages::MAP_READ);
+        copy_rows(self.encoder, position_texture, &positions, position_pitch, &rows);
+        copy_rows(self.encoder, normal_texture, &normals, normal_pitch, &rows);
         self.flush()?;
         self.gpu.map_for_reading(&[positions.slice(..), normals.slice(..)])?;
         let map_error = |e: wgpu::MapRangeError| crate::gpu::GpuError::Map(e.to_string());
@@ -288,11 +311,13 @@ impl MethodContext<'_> {
                 position_pitch: position_pitch as usize,
                 normal_pitch: normal_pitch as usize,
                 width: self.width,
-                height: self.height,
+                height: count,
             })
         };
         positions.unmap();
         normals.unmap();
+        // Both were read and let go: the next band may have them.
+        self.scratch.release_last_buffers(2, self.buffers);
         Ok(result)
     }
 

@@ -90,6 +90,8 @@ pub struct Renderer {
     cells: wgpu::Buffer,
     /// How E0 is evaluated (interpolated unless a measurement asks for the exact sum).
     pub e0_mode: E0Mode,
+    /// `Limits::max_cpu_working_bytes`, for the methods that work on the CPU.
+    pub cpu_working_bytes: u64,
 }
 
 impl Renderer {
@@ -162,6 +164,7 @@ impl Renderer {
             uniforms,
             cells,
             e0_mode: E0Mode::default(),
+            cpu_working_bytes: crate::job::Limits::default().max_cpu_working_bytes,
         }
     }
 
@@ -314,6 +317,7 @@ impl Renderer {
                 projection,
                 supervisor,
                 warnings: Vec::new(),
+                cpu_working_bytes: self.cpu_working_bytes,
             };
             let counters = spec.method.record(&mut ctx, &spec.params);
             (counters.map(|counters| (counters, std::mem::take(&mut ctx.warnings))), std::mem::take(&mut ctx.scratch))

@@ -4,6 +4,7 @@
 //!
 //! The design, and each choice where the paper is vague: docs/methods.md#reference.
 
+mod bands;
 mod cpu;
 mod crop;
 mod filtered;
@@ -107,48 +108,70 @@ impl ShadowMethod for Reference {
 }
 
 /// Engine `cpu` (`cpu.rs`): the G-buffer read back, the same maps and tests on the CPU's
-/// cores, and the visibility written to the frame's buffer.
+/// cores, and the visibility written to the frame's buffer — in bands of rows where the frame
+/// needs more than `cpu_working_bytes` (`bands.rs`; the same pixels).
 fn record_on_cpu(ctx: &mut MethodContext<'_>, params: &Params, plan: &SamplePlan) -> JobResult<Counters> {
-    let started = std::time::Instant::now();
     let constants = plan.test_constants(params, ctx.spec.light.center);
-    let receivers = ctx.read_gbuffer(|gbuffer| cpu::Receivers::new(gbuffer, SEGMENT, &constants))?;
     let samples = plan.cpu_samples();
     let channels = plan.channels() as usize;
-    let read_ms = started.elapsed().as_secs_f64() * 1e3;
-    let total = samples.len() as u64;
+    let width = ctx.width;
+    let bands = bands::bands(width, ctx.height, CPU_BYTES_PER_PIXEL, ctx.cpu_working_bytes, 0, 1);
+    let total = samples.len() as u64 * bands.len() as u64;
     let supervisor = ctx.supervisor;
-    let mut before = 0;
-    let (sums, _, spent) = cpu::estimate_with::<false>(
-        &receivers,
-        &samples,
-        &constants,
-        (ctx.scene.positions(), ctx.scene.indices()),
-        channels,
-        plan.crop.size,
-        |done| {
-            // Progress as often as the GPU engine reports it: each time another `BATCH` are done.
-            let done = done as u64;
-            if done / BATCH > before / BATCH || done == total {
-                supervisor.progress(done, total);
-            }
-            before = done;
-            // Cancelled: the renderer discards this frame.
-            !supervisor.cancelled()
-        },
-    );
-    let written = std::time::Instant::now();
-    let mut visibility = vec![0u8; ctx.width as usize * ctx.height as usize * 16];
-    cpu::write_visibility(&receivers, &sums, channels, ctx.width, &mut visibility);
-    ctx.gpu.queue.write_buffer(ctx.visibility, 0, &visibility);
-    let write_ms = written.elapsed().as_secs_f64() * 1e3;
+    let (mut read_ms, mut write_ms, mut spent, mut segments) = (0.0, 0.0, cpu::Spent::default(), 0);
+    for (b, band) in bands.iter().enumerate() {
+        let started = std::time::Instant::now();
+        let receivers = ctx.read_gbuffer_rows(band.rows.clone(), |gbuffer| cpu::Receivers::new(gbuffer, SEGMENT, &constants))?;
+        read_ms += started.elapsed().as_secs_f64() * 1e3;
+        let first = b as u64 * samples.len() as u64;
+        let mut before = first;
+        let (sums, _, band_spent) = cpu::estimate_with::<false>(
+            &receivers,
+            &samples,
+            &constants,
+            (ctx.scene.positions(), ctx.scene.indices()),
+            channels,
+            plan.crop.size,
+            |done| {
+                // Progress as often as the GPU engine reports it: each time another `BATCH` are done.
+                let done = first + done as u64;
+                if done / BATCH > before / BATCH || done == total {
+                    supervisor.progress(done, total);
+                }
+                before = done;
+                // Cancelled: the renderer discards this frame.
+                !supervisor.cancelled()
+            },
+        );
+        let written = std::time::Instant::now();
+        let mut visibility = vec![0u8; width as usize * band.rows.len() * 16];
+        cpu::write_visibility(&receivers, &sums, channels, width, &mut visibility);
+        ctx.gpu.queue.write_buffer(ctx.visibility, u64::from(band.rows.start) * u64::from(width) * 16, &visibility);
+        write_ms += written.elapsed().as_secs_f64() * 1e3;
+        (spent.maps_ms, spent.tests_ms, spent.round) =
+            (spent.maps_ms + band_spent.maps_ms, spent.tests_ms + band_spent.tests_ms, band_spent.round);
+        segments += receivers.segments;
+        if supervisor.cancelled() {
+            break;
+        }
+    }
     ctx.timer.cpu_pass(PhaseName::Method, "reference_cpu_receivers", read_ms);
     ctx.timer.cpu_pass(PhaseName::Method, "reference_cpu_maps", spent.maps_ms);
     ctx.timer.cpu_pass(PhaseName::Method, "reference_cpu_tests", spent.tests_ms);
     ctx.timer.cpu_pass(PhaseName::Method, "reference_cpu_visibility", write_ms);
-    let mut counters = plan.counters(receivers.segments);
-    counters.extend([("engine_cpu".to_owned(), 1.0), ("cpu_threads".to_owned(), spent.round as f64)]);
+    let mut counters = plan.counters(segments);
+    counters.extend([
+        ("engine_cpu".to_owned(), 1.0),
+        ("cpu_threads".to_owned(), spent.round as f64),
+        ("cpu_bands".to_owned(), bands.len() as f64),
+    ]);
     Ok(counters)
 }
+
+/// What the CPU engine holds a pixel at most, in bytes: its receiver (40) and listing (4),
+/// its sums (24), and its visibility as written and as queued for the device (16 + 16) — the
+/// G-buffer's copy (24) is let go before the sums are made.
+const CPU_BYTES_PER_PIXEL: u64 = 100;
 
 #[cfg(test)]
 mod tests;

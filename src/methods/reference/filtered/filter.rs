@@ -30,6 +30,8 @@
 //! fitted to the built-in suite against the 1,024-sample reference. The passes carry its square
 //! as Σ w² e² / (Σ w)².
 
+use std::ops::Range;
+
 use glam::Vec3;
 use rayon::prelude::*;
 
@@ -37,7 +39,7 @@ use crate::render::method::GBufferView;
 use crate::render::Camera;
 
 /// Pixels a tile side, for the classification and the fallback width.
-const TILE: u32 = 8;
+pub(super) const TILE: u32 = 8;
 
 /// The widest a pass reaches on each side of a pixel: past it a penumbra is filtered less
 /// than its width asks (its samples' banding then shows).
@@ -160,8 +162,13 @@ impl super::cpu::Surfaces for Surfaces {
 
 /// What the filter needs of the frame and the samples.
 pub(super) struct FilterInputs<'a> {
+    /// The surfaces' size: the frame's, or a band's rows with their halo.
     pub width: u32,
     pub height: u32,
+    /// The rows of these surfaces whose visibility is written (a band's, without its halo).
+    pub written: Range<u32>,
+    /// The frame's height in pixels, for a pixel's footprint.
+    pub frame_height: u32,
     /// The light's size, one length (the geometric mean of its sides).
     pub light_extent: f32,
     /// Strata across the light: the steps a penumbra is cut into.
@@ -174,7 +181,8 @@ pub(super) struct FilterInputs<'a> {
     pub camera: &'a Camera,
 }
 
-/// The visibility to write (rgb, and w the estimated error), with what the filter did.
+/// The visibility of the `written` rows (rgb, and w the estimated error), with what the filter
+/// did there.
 pub(super) struct FilterOutput {
     pub visibility: Vec<[f32; 4]>,
     pub pixels_filtered: usize,
@@ -221,11 +229,12 @@ pub(super) fn filter(
     for (&i, variance) in listed.iter().zip(errors) {
         texels[i].variance = variance;
     }
+    let written = inputs.written.start as usize * width..inputs.written.end as usize * width;
     if inputs.scale <= 0.0 || listed.is_empty() {
-        return output(&texels, 0);
+        return output(&texels[written], 0);
     }
     // A pixel's footprint in the world at its distance (the slant of its surface aside).
-    let per_distance = 2.0 * (0.5 * inputs.camera.fov_y_deg.to_radians()).tan() / inputs.height as f32;
+    let per_distance = 2.0 * (0.5 * inputs.camera.fov_y_deg.to_radians()).tan() / inputs.frame_height as f32;
     let footprint = |i: usize| (surfaces.positions[i] - inputs.camera.eye).length() * per_distance;
     // σ from the pixel's own blockers, where it met any; else the mean of the tiles around.
     let own_sigma: Vec<f32> = listed
@@ -267,7 +276,7 @@ pub(super) fn filter(
             (sigma, radius)
         })
         .collect();
-    let pixels_filtered = kernels.iter().filter(|(_, r)| *r > 0).count();
+    let pixels_filtered = listed.iter().zip(&kernels).filter(|(i, (_, r))| *r > 0 && written.contains(i)).count();
     // Where each listed pixel is in `listed` (u32::MAX: not listed), for the second pass to
     // read the first pass's result of a listed neighbour.
     let mut slot = vec![u32::MAX; width * height];
@@ -333,7 +342,7 @@ pub(super) fn filter(
     for (&i, texel) in listed.iter().zip(both) {
         texels[i] = texel;
     }
-    output(&texels, pixels_filtered)
+    output(&texels[written], pixels_filtered)
 }
 
 /// The constant of the error model, fitted to the built-in suite (module docs).

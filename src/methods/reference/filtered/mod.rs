@@ -22,6 +22,7 @@
 
 mod filter;
 
+use super::bands::{self, Band};
 use super::cpu::{self, BlockerBlock, CpuSample, Receivers, SumBlock};
 use super::gpu::SEGMENT;
 use super::samples::{interleaved_light_samples, SamplePlan};
@@ -101,85 +102,180 @@ impl ShadowMethod for Filtered {
             interleaved_light_samples(&spec.light, &spec.light_image, probes, refine, u64::from(params.get(&SEED)));
         let plan = SamplePlan::for_samples(ctx, params, samples, strata);
         let constants = plan.test_constants(params, spec.light.center);
-        let (width, height) = (ctx.width, ctx.height);
-        let surfaces = ctx.read_gbuffer(filter::Surfaces::new)?;
-        let probed = Receivers::of_pixels(&surfaces, SEGMENT, &constants, |_, _| true);
-        let (probe_samples, other_samples): (Vec<CpuSample>, Vec<CpuSample>) = {
-            let (probes, others): (Vec<_>, Vec<_>) = plan.cpu_samples().into_iter().zip(&sets).partition(|(_, set)| **set == 0);
-            (probes.into_iter().map(|(s, _)| s).collect(), others.into_iter().map(|(s, _)| s).collect())
+        let (probes_samples, others): (Vec<_>, Vec<_>) = plan.cpu_samples().into_iter().zip(&sets).partition(|(_, set)| **set == 0);
+        let shared = Shared {
+            probes,
+            probe_samples: probes_samples.into_iter().map(|(s, _)| s).collect(),
+            other_samples: others.into_iter().map(|(s, _)| s).collect(),
+            strata,
+            constants,
+            channels: plan.channels() as usize,
+            crop_size: plan.crop.size,
+            filter: FilterShape {
+                light_extent: spec.light.size_m.x.max(1e-6).sqrt() * spec.light.size_m.y.max(1e-6).sqrt(),
+                samples_across: (strata as f32).sqrt(),
+                scale: if params.get(&FILTER) { params.get(&FILTER_SCALE) } else { 0.0 },
+                channel_share: channel_share(&plan.samples),
+            },
         };
-        let read_ms = started.elapsed().as_secs_f64() * 1e3;
-
-        let channels = plan.channels() as usize;
-        let total = (probe_samples.len() + other_samples.len()) as u64;
-        let supervisor = ctx.supervisor;
-        let mut reported = 0u64;
-        let mut progress = |done: u64| {
-            if done / super::BATCH > reported / super::BATCH || done == total {
-                supervisor.progress(done, total);
+        let mut done = Done { read_ms: started.elapsed().as_secs_f64() * 1e3, ..Done::default() };
+        let bands = bands::bands(ctx.width, ctx.height, BYTES_PER_PIXEL, ctx.cpu_working_bytes, HALO_ROWS, filter::TILE);
+        for (b, band) in bands.iter().enumerate() {
+            render_band(ctx, &shared, band, (b, bands.len()), &mut done)?;
+            if ctx.supervisor.cancelled() {
+                break;
             }
-            reported = done;
-            !supervisor.cancelled()
-        };
-        let geometry = (ctx.scene.positions(), ctx.scene.indices());
-        let mut texels = vec![Texel::UNCOVERED; (width * height) as usize];
-        let mut blockers = vec![[0.0f32; 3]; (width * height) as usize];
-
-        // The probes, everywhere.
-        let (sums, met, probe_spent) =
-            cpu::estimate_with::<true>(&probed, &probe_samples, &constants, geometry, channels, plan.crop.size, |done| {
-                progress(done as u64)
-            });
-        gather(&probed, &sums, &met, (channels, probes), &mut texels, &mut blockers);
-        let mut spent = (probe_spent.maps_ms, probe_spent.tests_ms);
-        // With one set there is nothing more to test; its varying pixels are still filtered.
-        let refined = filter::refined(&surfaces, &texels);
-        let refined_count = if other_samples.is_empty() { 0 } else { refined.iter().filter(|&&r| r).count() };
-        // The other strata, where a penumbra is.
-        let mut segments = probed.segments;
-        if !supervisor.cancelled() && refined_count > 0 {
-            let receivers = Receivers::of_pixels(&surfaces, SEGMENT, &constants, |x, y| refined[(y * width + x) as usize]);
-            let first = probe_samples.len() as u64;
-            let (sums, met, more) =
-                cpu::estimate_with::<true>(&receivers, &other_samples, &constants, geometry, channels, plan.crop.size, |done| {
-                    progress(first + done as u64)
-                });
-            gather(&receivers, &sums, &met, (channels, total as u32), &mut texels, &mut blockers);
-            spent = (spent.0 + more.maps_ms, spent.1 + more.tests_ms);
-            segments += receivers.segments;
         }
+        ctx.timer.cpu_pass(PhaseName::Method, "filtered_receivers", done.read_ms);
+        ctx.timer.cpu_pass(PhaseName::Method, "filtered_maps", done.maps_ms);
+        ctx.timer.cpu_pass(PhaseName::Method, "filtered_tests", done.tests_ms);
+        ctx.timer.cpu_pass(PhaseName::Method, "filtered_filter", done.filter_ms);
 
-        // The filter, and the visibility with its error estimate written to the frame.
-        let filtering = std::time::Instant::now();
-        let inputs = FilterInputs {
-            width,
-            height,
-            light_extent: spec.light.size_m.x.max(1e-6).sqrt() * spec.light.size_m.y.max(1e-6).sqrt(),
-            samples_across: (strata as f32).sqrt(),
-            scale: if params.get(&FILTER) { params.get(&FILTER_SCALE) } else { 0.0 },
-            channel_share: channel_share(&plan.samples),
-            camera: &spec.camera,
-        };
-        let filtered = filter::filter(&inputs, &surfaces, texels, &blockers, &refined);
-        ctx.gpu.queue.write_buffer(ctx.visibility, 0, bytemuck::cast_slice(&filtered.visibility));
-        let filter_ms = filtering.elapsed().as_secs_f64() * 1e3;
-        ctx.timer.cpu_pass(PhaseName::Method, "filtered_receivers", read_ms);
-        ctx.timer.cpu_pass(PhaseName::Method, "filtered_maps", spent.0);
-        ctx.timer.cpu_pass(PhaseName::Method, "filtered_tests", spent.1);
-        ctx.timer.cpu_pass(PhaseName::Method, "filtered_filter", filter_ms);
-
-        let mut counters = plan.counters(segments);
+        let mut counters = plan.counters(done.segments);
         counters.extend([
             ("probes".to_owned(), f64::from(probes)),
             ("refine".to_owned(), f64::from(refine)),
-            ("cpu_threads".to_owned(), probe_spent.round as f64),
-            ("pixels_filtered".to_owned(), filtered.pixels_filtered as f64),
-            ("penumbra_pixels_estimated".to_owned(), filtered.penumbra_pixels as f64),
+            ("cpu_threads".to_owned(), done.threads as f64),
+            ("cpu_bands".to_owned(), bands.len() as f64),
+            ("pixels_filtered".to_owned(), done.pixels_filtered as f64),
+            ("penumbra_pixels_estimated".to_owned(), done.penumbra_pixels as f64),
         ]);
-        PIXELS_REFINED.set(&mut counters, refined_count as f64);
-        ERROR_ESTIMATE.set(&mut counters, filtered.penumbra_error);
+        PIXELS_REFINED.set(&mut counters, done.pixels_refined as f64);
+        let error = if done.penumbra_pixels > 0 { done.penumbra_error_sum / done.penumbra_pixels as f64 } else { 0.0 };
+        ERROR_ESTIMATE.set(&mut counters, error);
         Ok(counters)
     }
+}
+
+/// The rows a band reads beyond those it writes, either side: what a written pixel depends on —
+/// the column pass's reach (`MAX_RADIUS`, 24), the fallback σ of the tiles around the pixels it
+/// reads (up to 15 rows further) and the refinement of those pixels, decided by the tiles
+/// around theirs (15 more) — rounded to whole tiles, so that the band's tiles are the frame's.
+const HALO_ROWS: u32 = 56;
+
+/// What `filtered` holds a pixel of a band at most, in bytes: its surface (24), texel (32) and
+/// blockers (12), the probes' receiver (44), sums (24) and blockers met (8), and its refined flag
+/// and filter index (5) — the filter's copies of the refined pixels and the visibility written
+/// come after the receivers are let go.
+const BYTES_PER_PIXEL: u64 = 150;
+
+/// What every band shares: the samples, split into the probes and the rest, and the filter's
+/// shape.
+struct Shared {
+    probes: u32,
+    probe_samples: Vec<CpuSample>,
+    other_samples: Vec<CpuSample>,
+    strata: u32,
+    constants: cpu::TestConstants,
+    channels: usize,
+    crop_size: glam::UVec2,
+    filter: FilterShape,
+}
+
+/// The filter's parameters from the light and the samples (`FilterInputs`).
+struct FilterShape {
+    light_extent: f32,
+    samples_across: f32,
+    scale: f32,
+    channel_share: [f32; 3],
+}
+
+/// What the bands did, summed.
+#[derive(Default)]
+struct Done {
+    read_ms: f64,
+    maps_ms: f64,
+    tests_ms: f64,
+    filter_ms: f64,
+    threads: usize,
+    segments: u32,
+    pixels_refined: usize,
+    pixels_filtered: usize,
+    penumbra_pixels: usize,
+    penumbra_error_sum: f64,
+}
+
+/// Band `index` of `count`: the probes over its reach, every sample where they vary, the
+/// filter, and the visibility of its rows written to the frame.
+fn render_band(ctx: &mut MethodContext<'_>, shared: &Shared, band: &Band, (index, count): (usize, usize), done: &mut Done) -> JobResult<()> {
+    let started = std::time::Instant::now();
+    let width = ctx.width;
+    let height = band.reach.len() as u32;
+    let surfaces = ctx.read_gbuffer_rows(band.reach.clone(), filter::Surfaces::new)?;
+    let constants = &shared.constants;
+    let probed = Receivers::of_pixels(&surfaces, SEGMENT, constants, |_, _| true);
+    done.read_ms += started.elapsed().as_secs_f64() * 1e3;
+
+    let per_band = (shared.probe_samples.len() + shared.other_samples.len()) as u64;
+    let total = per_band * count as u64;
+    let supervisor = ctx.supervisor;
+    let mut reported = index as u64 * per_band;
+    let mut progress = |done: u64| {
+        let done = index as u64 * per_band + done;
+        if done / super::BATCH > reported / super::BATCH || done == total {
+            supervisor.progress(done, total);
+        }
+        reported = done;
+        !supervisor.cancelled()
+    };
+    let geometry = (ctx.scene.positions(), ctx.scene.indices());
+    let mut texels = vec![Texel::UNCOVERED; (width * height) as usize];
+    let mut blockers = vec![[0.0f32; 3]; (width * height) as usize];
+
+    // The probes, everywhere.
+    let (sums, met, spent) =
+        cpu::estimate_with::<true>(&probed, &shared.probe_samples, constants, geometry, shared.channels, shared.crop_size, |n| {
+            progress(n as u64)
+        });
+    gather(&probed, &sums, &met, (shared.channels, shared.probes), &mut texels, &mut blockers);
+    done.maps_ms += spent.maps_ms;
+    done.tests_ms += spent.tests_ms;
+    done.threads = spent.round;
+    done.segments += probed.segments;
+    // Let go before the refinement's own (working memory: `BYTES_PER_PIXEL`).
+    drop((probed, sums, met));
+    // With one set there is nothing more to test; its varying pixels are still filtered.
+    let refined = filter::refined(&surfaces, &texels);
+    let written = band.first_row() as usize * width as usize..(band.first_row() as usize + band.rows.len()) * width as usize;
+    if !shared.other_samples.is_empty() {
+        done.pixels_refined += refined[written].iter().filter(|&&r| r).count();
+    }
+    // The other strata, where a penumbra is.
+    if !supervisor.cancelled() && !shared.other_samples.is_empty() && refined.contains(&true) {
+        let receivers = Receivers::of_pixels(&surfaces, SEGMENT, constants, |x, y| refined[(y * width + x) as usize]);
+        let first = shared.probe_samples.len() as u64;
+        let (sums, met, more) =
+            cpu::estimate_with::<true>(&receivers, &shared.other_samples, constants, geometry, shared.channels, shared.crop_size, |n| {
+                progress(first + n as u64)
+            });
+        gather(&receivers, &sums, &met, (shared.channels, shared.strata), &mut texels, &mut blockers);
+        done.maps_ms += more.maps_ms;
+        done.tests_ms += more.tests_ms;
+        done.segments += receivers.segments;
+    }
+
+    // The filter, and the visibility of the band's rows with its error estimate written to the frame.
+    let filtering = std::time::Instant::now();
+    let shape = &shared.filter;
+    let inputs = FilterInputs {
+        width,
+        height,
+        written: band.first_row()..band.first_row() + band.rows.len() as u32,
+        frame_height: ctx.height,
+        light_extent: shape.light_extent,
+        samples_across: shape.samples_across,
+        scale: shape.scale,
+        channel_share: shape.channel_share,
+        camera: &ctx.spec.camera,
+    };
+    let filtered = filter::filter(&inputs, &surfaces, texels, &blockers, &refined);
+    let offset = u64::from(band.rows.start) * u64::from(width) * 16;
+    ctx.gpu.queue.write_buffer(ctx.visibility, offset, bytemuck::cast_slice(&filtered.visibility));
+    done.filter_ms += filtering.elapsed().as_secs_f64() * 1e3;
+    done.pixels_filtered += filtered.pixels_filtered;
+    done.penumbra_pixels += filtered.penumbra_pixels;
+    done.penumbra_error_sum += filtered.penumbra_error * filtered.penumbra_pixels as f64;
+    Ok(())
 }
 
 /// Per channel, the effective share of the samples that carry it: Kish's (Σ w)² / (n Σ w²).

@@ -30,7 +30,7 @@ fn texels(samples: u32, v: impl Fn(u32) -> f32) -> Vec<Texel> {
 }
 
 fn inputs(camera: &Camera, scale: f32) -> FilterInputs<'_> {
-    FilterInputs { width: SIZE, height: SIZE, light_extent: 1.0, samples_across: 1.0, scale, channel_share: [1.0; 3], camera }
+    FilterInputs { width: SIZE, height: SIZE, written: 0..SIZE, frame_height: SIZE, light_extent: 1.0, samples_across: 1.0, scale, channel_share: [1.0; 3], camera }
 }
 
 /// Blockers that make σ = `sigma` world units with `inputs` (light 1, one stratum across):
