@@ -1220,13 +1220,14 @@ async fn limits_are_flags_listed_and_enforced_with_the_field_named() {
         ["--max-vertices", "100"],
         ["--max-output-dim", "512"],
         ["--max-texture-bytes", "40000"],
+        ["--max-cpu-working-bytes", "2097152"],
     ]
     .concat();
     let (_daemon, base) = serve(&[&["--job-store", "memory"], &flags[..]].concat(), &[("PENUMBRA_MAX_TRIANGLES", "5000")]).await;
     let client = reqwest::Client::new();
     let limits: Value = client.get(format!("{base}/v1/limits")).send().await.unwrap().json().await.unwrap();
     let listed = [("max_samples", 64), ("max_rounds", 4), ("max_json_depth", 6), ("max_vertices", 100), ("max_triangles", 5000)];
-    for (name, value) in listed.into_iter().chain([("max_texture_bytes", 40000)]) {
+    for (name, value) in listed.into_iter().chain([("max_texture_bytes", 40000), ("max_cpu_working_bytes", 2097152)]) {
         assert_eq!(limits[name], value, "{name} in {limits}");
     }
     let max_of = |method: &str, param: &str| {

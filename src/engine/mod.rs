@@ -111,7 +111,12 @@ impl Engine {
         // up front with the field named, and `/v1/meta` says the limit that holds.
         let device_pixels = u64::from(gpu.limits.max_storage_buffer_binding_size) / 16;
         if limits.max_output_pixels > device_pixels {
-            tracing::warn!(max_output_pixels = limits.max_output_pixels, device_pixels, "output pixels lowered to what the device binds");
+            // Said as a warning only when the operator asked for more than the default.
+            if limits.max_output_pixels > Limits::default().max_output_pixels {
+                tracing::warn!(max_output_pixels = limits.max_output_pixels, device_pixels, "output pixels lowered to what the device binds");
+            } else {
+                tracing::info!(max_output_pixels = limits.max_output_pixels, device_pixels, "output pixels lowered to what the device binds");
+            }
             limits.max_output_pixels = device_pixels;
         }
         // Honoured as configured (a scene over the device's limit then fails its own job at

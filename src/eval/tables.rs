@@ -7,6 +7,7 @@ use std::path::Path;
 use super::{EvalReport, Row, Sweep};
 use crate::methods::chun_oh::{PIXELS_SUBDIVIDED, SPLITS_FORCED_BY_LIGHT};
 use crate::methods::filter::BACKGROUND_PIXELS;
+use crate::methods::reference::ERROR_ESTIMATE;
 use crate::methods::{CounterKey, Counters};
 use crate::timing::{PhaseName, Timings};
 
@@ -49,6 +50,7 @@ pub(super) fn write_tables(out: &Path, report: &EvalReport, methods: &[String], 
     write_colored(&mut md, report)?;
     write_flooding(&mut md, report)?;
     write_subdivision(&mut md, report)?;
+    write_error_estimates(&mut md, report)?;
     if let Some(sweep) = sweep {
         write_sweep(&mut md, report, sweep)?;
     }
@@ -260,6 +262,28 @@ fn write_flooding(md: &mut String, report: &EvalReport) -> std::fmt::Result {
         }
     }
     Ok(())
+}
+
+/// The error a method estimated for itself (`filtered`'s mean over the pixels it finds in
+/// penumbra) against the one measured over the reference's penumbra, with their ratio.
+fn write_error_estimates(md: &mut String, report: &EvalReport) -> std::fmt::Result {
+    let estimated: Vec<(&Row, f64)> =
+        report.rows.iter().filter_map(|r| ERROR_ESTIMATE.get(&r.counters).map(|e| (r, e))).collect();
+    if estimated.is_empty() {
+        return Ok(());
+    }
+    writeln!(md, "\n## Error estimates\n")?;
+    writeln!(md, "The mean |V − Vref| a method estimated for its penumbra, against the V MAE measured over the reference's penumbra.\n")?;
+    writeln!(md, "| scene | light | size | method | estimated | measured | estimated ÷ measured |")?;
+    writeln!(md, "|---|---|---|---|---:|---:|---:|")?;
+    let mut within = 0;
+    for &(r, estimate) in &estimated {
+        let measured = r.quality.visibility.penumbra.mae;
+        let ratio = estimate / measured;
+        within += usize::from((0.7..=1.3).contains(&ratio));
+        writeln!(md, "| {} | {} | {}×{} | {} | {estimate:.4} | {measured:.4} | {ratio:.2} |", r.scene, r.light, r.width, r.height, r.method)?;
+    }
+    writeln!(md, "\nWithin ±30 %: {within} of {} rows.", estimated.len())
 }
 
 /// `chun-oh`'s subdivision histogram (Chun & Oh 2016, Table 2), when the suite ran it.

@@ -19,6 +19,7 @@ pub(super) async fn limits(State(state): State<Arc<AppState>>) -> Json<Value> {
         "max_vertices": limits.max_vertices,
         "max_samples": limits.max_samples,
         "max_rounds": limits.max_rounds,
+        "max_cpu_working_bytes": limits.max_cpu_working_bytes,
         "queue": state.queue_config.capacity,
         "concurrency": state.queue_config.concurrency,
         "deadline_secs": state.queue_config.deadline.as_secs_f64(),
