@@ -43,16 +43,17 @@ pub fn light_samples(light: &AreaLight, image: &LightImage, requested: u32, seed
 /// those that land on black texels: the light is cut into a grid of `side × side` blocks of
 /// strata, and set (class) `a + side·b` takes the stratum at (a, b) of every block — so each
 /// set is stratified over the whole light on its own, and all of them together are a finer
-/// stratification (method `filtered`, which gives neighbouring pixels different sets). With
-/// `side` 1 these are `light_samples`. Returns the samples in grid order, each one's set, and
-/// how many strata there were.
+/// stratification (method `filtered`, which probes with one set and refines with the rest).
+/// With `side` 1 these are `light_samples`. Returns the samples in grid order, each one's set
+/// and its half (`half_of`: two halves that each cover the whole light, and that cut every set
+/// in two as well; `filtered`'s error estimate compares them), and how many strata there were.
 pub fn interleaved_light_samples(
     light: &AreaLight,
     image: &LightImage,
     per_class: u32,
     side: u32,
     seed: u64,
-) -> (Vec<LightSample>, Vec<u32>, u32) {
+) -> (Vec<LightSample>, Vec<(u32, bool)>, u32) {
     let aspect = light.size_m.x / light.size_m.y;
     let cx = ((per_class as f32 * aspect).sqrt().round() as u32).clamp(1, per_class.max(1));
     let cy = per_class.div_ceil(cx).max(1);
@@ -72,10 +73,19 @@ pub fn interleaved_light_samples(
                 continue;
             }
             samples.push(LightSample { position: light.image_point(s, t), weight: emission * light.intensity * stratum_area });
-            classes.push(i % side + side * (j % side));
+            classes.push((i % side + side * (j % side), half_of(i, j, side)));
         }
     }
     (samples, classes, gx * gy)
+}
+
+/// Which half of the light's strata stratum (i, j) is in (blocks of `side`² strata): the
+/// strata's own checkerboard — flipped on every other block where `side` is even, else a set
+/// (one stratum a block, the same in each) would lie in one half — so that each half takes
+/// every other stratum and every set is split over a checkerboard of the blocks.
+fn half_of(i: u32, j: u32, side: u32) -> bool {
+    let blocks = if side % 2 == 0 { i / side + j / side } else { 0 };
+    (i + j + blocks) % 2 == 1
 }
 
 /// splitmix64: a tiny, well-mixed generator whose stream never changes between versions.

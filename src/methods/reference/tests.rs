@@ -71,3 +71,25 @@ fn samples_are_stratified_and_skip_black() {
     let skipped = 1.0 - samples.len() as f32 / strata as f32;
     assert!((skipped - (1.0 - std::f32::consts::FRAC_PI_4)).abs() < 0.03, "{skipped}");
 }
+
+#[test]
+fn interleaved_sets_and_halves_each_cover_the_light() {
+    let light = AreaLight::new(Vec3::Y, -Vec3::Y, -Vec3::Z, Vec2::new(1.0, 1.0), 3.0).unwrap();
+    let white = LightImage::builtin("white", &Default::default(), "f").unwrap();
+    for side in [1, 2, 3, 4] {
+        let (samples, classes, strata) = interleaved_light_samples(&light, &white, 16, side, 7);
+        assert_eq!((samples.len() as u32, strata), (16 * side * side, 16 * side * side));
+        for set in 0..side * side {
+            let members: Vec<bool> = classes.iter().filter(|(s, _)| *s == set).map(|&(_, half)| half).collect();
+            assert_eq!(members.len(), 16, "side {side}: set {set}");
+            // Every set is split in two (a checkerboard of the blocks), as the whole is.
+            assert_eq!(members.iter().filter(|&&h| h).count(), 8, "side {side}: set {set}");
+        }
+        // Each half spans the light: its samples' mean is the light's centre, to a stratum.
+        for half in [false, true] {
+            let points: Vec<Vec3> = samples.iter().zip(&classes).filter(|(_, c)| c.1 == half).map(|(s, _)| s.position).collect();
+            let mean = points.iter().sum::<Vec3>() / points.len() as f32;
+            assert!((mean - Vec3::Y).length() < 0.5 / (4 * side) as f32 + 0.02, "side {side}, half {half}: {mean}");
+        }
+    }
+}

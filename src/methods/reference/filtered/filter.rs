@@ -24,11 +24,20 @@
 //! footprint it is another surface, even one close on screen, and gets none), and the
 //! agreement of their normals.
 //!
-//! The error estimate. Stratified samples of an edge err as n^(−3/4) (n samples; a jittered
-//! grid's error on a step), times √(V(1 − V)) for the level, per channel with the samples that
-//! carry the channel (a colour emitted by half the light has half the samples); the constant is
-//! fitted to the built-in suite against the 1,024-sample reference. The passes carry its square
-//! as Σ w² e² / (Σ w)².
+//! The error estimate: the two halves of the samples, told apart. A checkerboard over the
+//! light's blocks of strata cuts the samples into two halves that each cover the whole light
+//! (`interleaved_light_samples`); every pixel keeps the second half's sums beside the whole's,
+//! and the filter averages both with the same weights. The two halves' estimates err
+//! independently (their strata are disjoint, each jittered on its own), and the whole's is
+//! their mean, so for errors e_a, e_b symmetric about 0, E|e_a − e_b| / 2 = E|e_a + e_b| / 2:
+//! half the halves' difference is an estimate of the whole's error with no constant to fit
+//! (`halves_error`, which also weighs halves of unequal light: a colour the light emits in a
+//! few strata), and, measured after the filter, it counts what the filter gathered —
+//! neighbours whose samples err together as well as those that do not. The halves are the
+//! strata's own checkerboard (`half_of`): halves of whole blocks would see different parts of
+//! the light, and differ by more than their samples' error (3× the measured error at 256
+//! strata). It misses what neither half sees: a
+//! pixel the probes left unrefined (both halves agree), and the filter's own bias.
 
 use std::ops::Range;
 
@@ -60,18 +69,43 @@ const NORMAL_POWER: i32 = 8;
 /// The visibility range counted as penumbra for the estimate's mean.
 const PENUMBRA: (f32, f32) = (0.01, 0.99);
 
-/// A pixel's sums per channel (Σ L·G·V, Σ L·G), the samples they hold and the square of its
-/// estimated error.
+/// A pixel's sums per channel (Σ L·G·V, Σ L·G) over its samples, and over the second half of
+/// them alone (module docs: the error estimate).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(super) struct Texel {
     pub shadowed: [f32; 3],
     pub unshadowed: [f32; 3],
-    pub variance: f32,
-    pub samples: u32,
+    pub half_shadowed: [f32; 3],
+    pub half_unshadowed: [f32; 3],
 }
 
 impl Texel {
-    pub const UNCOVERED: Self = Self { shadowed: [0.0; 3], unshadowed: [0.0; 3], variance: 0.0, samples: 0 };
+    pub const UNCOVERED: Self = Self { shadowed: [0.0; 3], unshadowed: [0.0; 3], half_shadowed: [0.0; 3], half_unshadowed: [0.0; 3] };
+
+    /// Adds samples' sums, of the second half or not.
+    pub fn add(&mut self, shadowed: [f32; 3], unshadowed: [f32; 3], second_half: bool) {
+        for c in 0..3 {
+            self.shadowed[c] += shadowed[c];
+            self.unshadowed[c] += unshadowed[c];
+            if second_half {
+                self.half_shadowed[c] += shadowed[c];
+                self.half_unshadowed[c] += unshadowed[c];
+            }
+        }
+    }
+
+    /// The estimated error |V − Vref|, the channels' mean (module docs): per channel where both
+    /// halves see its light, else from the gray sums.
+    fn error(&self) -> f32 {
+        let first = |c: usize| (self.shadowed[c] - self.half_shadowed[c], self.unshadowed[c] - self.half_unshadowed[c]);
+        let second = |c: usize| (self.half_shadowed[c], self.half_unshadowed[c]);
+        let gray = |sums: [(f32, f32); 3]| sums.iter().fold((0.0, 0.0), |(s, u), x| (s + x.0, u + x.1));
+        let Some(gray) = halves_error(gray([0, 1, 2].map(first)), gray([0, 1, 2].map(second))) else {
+            return 0.0; // One half has no light here: nothing to compare.
+        };
+        (0..3).map(|c| halves_error(first(c), second(c)).unwrap_or(gray)).sum::<f32>() / 3.0
+    }
+
 
     /// Whether any sample saw the light from here (else V is undefined: 1).
     fn lit_at_all(&self) -> bool {
@@ -106,6 +140,20 @@ impl Texel {
             State::Mixed
         }
     }
+}
+
+/// The error of the ratio of two halves' sums taken together, from the halves' sums
+/// ((Σ L·G·V, Σ L·G) each): |V_a − V_b| · √(α(1 − α)), α the first half's share of Σ L·G. The
+/// whole's error is α e_a + (1 − α) e_b; with independent errors whose variances go as 1/α and
+/// 1/(1 − α), its spread is that of e_a − e_b times √(α(1 − α)) — half of it for equal halves.
+/// `None` where a half has no light.
+fn halves_error((s_a, u_a): (f32, f32), (s_b, u_b): (f32, f32)) -> Option<f32> {
+    if u_a <= 0.0 || u_b <= 0.0 {
+        return None;
+    }
+    let (v_a, v_b) = ((s_a / u_a).clamp(0.0, 1.0), (s_b / u_b).clamp(0.0, 1.0));
+    let alpha = u_a / (u_a + u_b);
+    Some((v_a - v_b).abs() * (alpha * (1.0 - alpha)).sqrt())
 }
 
 /// What a pixel's own samples say.
@@ -175,9 +223,6 @@ pub(super) struct FilterInputs<'a> {
     pub samples_across: f32,
     /// The filter's width in those steps (0: no filter).
     pub scale: f32,
-    /// Per channel, the samples' effective share (Kish's (Σ w)² / (n Σ w²) of the channel's
-    /// weights): 1 under a white light, ½ where a channel comes from half the light.
-    pub channel_share: [f32; 3],
     pub camera: &'a Camera,
 }
 
@@ -223,12 +268,8 @@ pub(super) fn filter(
     refined: &[bool],
 ) -> FilterOutput {
     let (width, height) = (inputs.width as usize, inputs.height as usize);
-    // Only refined pixels err and are filtered: the others' probes agree (V 0 or 1).
+    // Only refined pixels are filtered: the others' probes agree (V 0 or 1).
     let listed: Vec<usize> = (0..width * height).into_par_iter().filter(|&i| refined[i]).collect();
-    let errors: Vec<f32> = listed.par_iter().map(|&i| own_variance(&texels[i], inputs.channel_share)).collect();
-    for (&i, variance) in listed.iter().zip(errors) {
-        texels[i].variance = variance;
-    }
     let written = inputs.written.start as usize * width..inputs.written.end as usize * width;
     if inputs.scale <= 0.0 || listed.is_empty() {
         return output(&texels[written], 0);
@@ -298,8 +339,8 @@ pub(super) fn filter(
                 let inv_two_sigma2 = 0.5 / (sigma * sigma);
                 let tolerance = 0.5 * sigma + footprint(i);
                 let inv_two_tolerance2 = 0.5 / (tolerance * tolerance);
-                let (mut shadowed, mut unshadowed) = ([0.0f32; 3], [0.0f32; 3]);
-                let (mut weights, mut variance) = (0.0f32, 0.0f32);
+                let mut sum = Texel::UNCOVERED;
+                let mut weights = 0.0f32;
                 let r = radius as isize;
                 for k in -r..=r {
                     let (qx, qy) = (x + k * step.0, y + k * step.1);
@@ -319,20 +360,22 @@ pub(super) fn filter(
                     let facing = n.dot(surfaces.normals[j]).max(0.0).powi(NORMAL_POWER);
                     let w = (-d.length_squared() * inv_two_sigma2 - plane * plane * inv_two_tolerance2).exp() * facing;
                     for c in 0..3 {
-                        shadowed[c] += w * q.shadowed[c];
-                        unshadowed[c] += w * q.unshadowed[c];
+                        sum.shadowed[c] += w * q.shadowed[c];
+                        sum.unshadowed[c] += w * q.unshadowed[c];
+                        sum.half_shadowed[c] += w * q.half_shadowed[c];
+                        sum.half_unshadowed[c] += w * q.half_unshadowed[c];
                     }
                     weights += w;
-                    variance += w * w * q.variance;
                 }
                 if weights <= 0.0 {
                     return own;
                 }
+                let mean = |sums: [f32; 3]| sums.map(|s| s / weights);
                 Texel {
-                    shadowed: shadowed.map(|s| s / weights),
-                    unshadowed: unshadowed.map(|u| u / weights),
-                    variance: variance / (weights * weights),
-                    samples: own.samples,
+                    shadowed: mean(sum.shadowed),
+                    unshadowed: mean(sum.unshadowed),
+                    half_shadowed: mean(sum.half_shadowed),
+                    half_unshadowed: mean(sum.half_unshadowed),
                 }
             })
             .collect()
@@ -345,25 +388,13 @@ pub(super) fn filter(
     output(&texels[written], pixels_filtered)
 }
 
-/// The constant of the error model, fitted to the built-in suite (module docs).
-const ERROR_SCALE: f32 = 1.5;
-
-/// The square of `texel`'s own estimate's expected error, its channels' mean (module docs).
-fn own_variance(texel: &Texel, share: [f32; 3]) -> f32 {
-    let v = texel.visibility();
-    let n = texel.samples.max(1) as f32;
-    let error = (0..3).map(|c| (v[c] * (1.0 - v[c])).sqrt() * (n * share[c]).max(1.0).powf(-0.75)).sum::<f32>() / 3.0;
-    let error = ERROR_SCALE * error;
-    error * error
-}
-
 /// The visibility (w: the estimated error) and the estimate's mean over the penumbra.
 fn output(texels: &[Texel], pixels_filtered: usize) -> FilterOutput {
     let visibility: Vec<[f32; 4]> = texels
         .par_iter()
         .map(|t| {
             let [r, g, b] = t.visibility();
-            [r, g, b, t.variance.max(0.0).sqrt()]
+            [r, g, b, t.error()]
         })
         .collect();
     let (mut sum, mut count) = (0.0f64, 0usize);

@@ -102,12 +102,15 @@ impl ShadowMethod for Filtered {
             interleaved_light_samples(&spec.light, &spec.light_image, probes, refine, u64::from(params.get(&SEED)));
         let plan = SamplePlan::for_samples(ctx, params, samples, strata);
         let constants = plan.test_constants(params, spec.light.center);
-        let (probes_samples, others): (Vec<_>, Vec<_>) = plan.cpu_samples().into_iter().zip(&sets).partition(|(_, set)| **set == 0);
+        // The samples by round (the probes' set, the rest) and half of the checkerboard.
+        let mut rounds: [[Vec<CpuSample>; 2]; 2] = Default::default();
+        for (sample, &(set, half)) in plan.cpu_samples().into_iter().zip(&sets) {
+            rounds[usize::from(set != 0)][usize::from(half)].push(sample);
+        }
+        let [probe_samples, other_samples] = rounds;
         let shared = Shared {
-            probes,
-            probe_samples: probes_samples.into_iter().map(|(s, _)| s).collect(),
-            other_samples: others.into_iter().map(|(s, _)| s).collect(),
-            strata,
+            probe_samples,
+            other_samples,
             constants,
             channels: plan.channels() as usize,
             crop_size: plan.crop.size,
@@ -115,7 +118,6 @@ impl ShadowMethod for Filtered {
                 light_extent: spec.light.size_m.x.max(1e-6).sqrt() * spec.light.size_m.y.max(1e-6).sqrt(),
                 samples_across: (strata as f32).sqrt(),
                 scale: if params.get(&FILTER) { params.get(&FILTER_SCALE) } else { 0.0 },
-                channel_share: channel_share(&plan.samples),
             },
         };
         let mut done = Done { read_ms: started.elapsed().as_secs_f64() * 1e3, ..Done::default() };
@@ -159,13 +161,11 @@ const HALO_ROWS: u32 = 56;
 /// come after the receivers are let go.
 const BYTES_PER_PIXEL: u64 = 150;
 
-/// What every band shares: the samples, split into the probes and the rest, and the filter's
-/// shape.
+/// What every band shares: the samples, split into the probes and the rest, each in the two
+/// halves of the checkerboard, and the filter's shape.
 struct Shared {
-    probes: u32,
-    probe_samples: Vec<CpuSample>,
-    other_samples: Vec<CpuSample>,
-    strata: u32,
+    probe_samples: [Vec<CpuSample>; 2],
+    other_samples: [Vec<CpuSample>; 2],
     constants: cpu::TestConstants,
     channels: usize,
     crop_size: glam::UVec2,
@@ -177,7 +177,6 @@ struct FilterShape {
     light_extent: f32,
     samples_across: f32,
     scale: f32,
-    channel_share: [f32; 3],
 }
 
 /// What the bands did, summed.
@@ -206,7 +205,9 @@ fn render_band(ctx: &mut MethodContext<'_>, shared: &Shared, band: &Band, (index
     let probed = Receivers::of_pixels(&surfaces, SEGMENT, constants, |_, _| true);
     done.read_ms += started.elapsed().as_secs_f64() * 1e3;
 
-    let per_band = (shared.probe_samples.len() + shared.other_samples.len()) as u64;
+    let count_of = |halves: &[Vec<CpuSample>; 2]| (halves[0].len() + halves[1].len()) as u64;
+    let (probe_count, other_count) = (count_of(&shared.probe_samples), count_of(&shared.other_samples));
+    let per_band = probe_count + other_count;
     let total = per_band * count as u64;
     let supervisor = ctx.supervisor;
     let mut reported = index as u64 * per_band;
@@ -221,37 +222,38 @@ fn render_band(ctx: &mut MethodContext<'_>, shared: &Shared, band: &Band, (index
     let geometry = (ctx.scene.positions(), ctx.scene.indices());
     let mut texels = vec![Texel::UNCOVERED; (width * height) as usize];
     let mut blockers = vec![[0.0f32; 3]; (width * height) as usize];
+    // Tests `receivers` against both halves of a round, the first of them the `before`-th
+    // sample of the band, into the texels.
+    let mut test = |receivers: &Receivers, halves: &[Vec<CpuSample>; 2], before: u64, texels: &mut [Texel], done: &mut Done| {
+        let mut first = before;
+        for (half, samples) in halves.iter().enumerate() {
+            let (sums, met, spent) =
+                cpu::estimate_with::<true>(receivers, samples, constants, geometry, shared.channels, shared.crop_size, |n| {
+                    progress(first + n as u64)
+                });
+            first += samples.len() as u64;
+            gather(receivers, &sums, &met, (shared.channels, half == 1), texels, &mut blockers);
+            done.maps_ms += spent.maps_ms;
+            done.tests_ms += spent.tests_ms;
+            done.threads = spent.round;
+            done.segments += receivers.segments;
+        }
+    };
 
     // The probes, everywhere.
-    let (sums, met, spent) =
-        cpu::estimate_with::<true>(&probed, &shared.probe_samples, constants, geometry, shared.channels, shared.crop_size, |n| {
-            progress(n as u64)
-        });
-    gather(&probed, &sums, &met, (shared.channels, shared.probes), &mut texels, &mut blockers);
-    done.maps_ms += spent.maps_ms;
-    done.tests_ms += spent.tests_ms;
-    done.threads = spent.round;
-    done.segments += probed.segments;
+    test(&probed, &shared.probe_samples, 0, &mut texels, done);
     // Let go before the refinement's own (working memory: `BYTES_PER_PIXEL`).
-    drop((probed, sums, met));
+    drop(probed);
     // With one set there is nothing more to test; its varying pixels are still filtered.
     let refined = filter::refined(&surfaces, &texels);
     let written = band.first_row() as usize * width as usize..(band.first_row() as usize + band.rows.len()) * width as usize;
-    if !shared.other_samples.is_empty() {
+    if other_count > 0 {
         done.pixels_refined += refined[written].iter().filter(|&&r| r).count();
     }
     // The other strata, where a penumbra is.
-    if !supervisor.cancelled() && !shared.other_samples.is_empty() && refined.contains(&true) {
+    if !supervisor.cancelled() && other_count > 0 && refined.contains(&true) {
         let receivers = Receivers::of_pixels(&surfaces, SEGMENT, constants, |x, y| refined[(y * width + x) as usize]);
-        let first = shared.probe_samples.len() as u64;
-        let (sums, met, more) =
-            cpu::estimate_with::<true>(&receivers, &shared.other_samples, constants, geometry, shared.channels, shared.crop_size, |n| {
-                progress(first + n as u64)
-            });
-        gather(&receivers, &sums, &met, (shared.channels, shared.strata), &mut texels, &mut blockers);
-        done.maps_ms += more.maps_ms;
-        done.tests_ms += more.tests_ms;
-        done.segments += receivers.segments;
+        test(&receivers, &shared.other_samples, probe_count, &mut texels, done);
     }
 
     // The filter, and the visibility of the band's rows with its error estimate written to the frame.
@@ -265,7 +267,6 @@ fn render_band(ctx: &mut MethodContext<'_>, shared: &Shared, band: &Band, (index
         light_extent: shape.light_extent,
         samples_across: shape.samples_across,
         scale: shape.scale,
-        channel_share: shape.channel_share,
         camera: &ctx.spec.camera,
     };
     let filtered = filter::filter(&inputs, &surfaces, texels, &blockers, &refined);
@@ -278,39 +279,22 @@ fn render_band(ctx: &mut MethodContext<'_>, shared: &Shared, band: &Band, (index
     Ok(())
 }
 
-/// Per channel, the effective share of the samples that carry it: Kish's (Σ w)² / (n Σ w²).
-fn channel_share(samples: &[super::LightSample]) -> [f32; 3] {
-    [0, 1, 2].map(|c| {
-        let (sum, squares) =
-            samples.iter().fold((0.0f32, 0.0f32), |(s, q), sample| (s + sample.weight[c], q + sample.weight[c] * sample.weight[c]));
-        if squares > 0.0 {
-            sum * sum / (samples.len() as f32 * squares)
-        } else {
-            1.0
-        }
-    })
-}
-
 /// Adds a round of tests to the frame's pixels: per pixel its sums (the gray one standing for
-/// all three where `channels` is 1), then holding `samples` in all, and its depth from the
-/// light's plane with the count and summed depth of the blockers its tests met.
+/// all three where `channels` is 1), to its second half's too where `second_half`, and the
+/// count and summed depth of the blockers its tests met beside its own depth from the light's
+/// plane.
 fn gather(
     receivers: &Receivers,
     sums: &[SumBlock],
     met: &[BlockerBlock],
-    (channels, samples): (usize, u32),
+    (channels, second_half): (usize, bool),
     texels: &mut [Texel],
     blockers: &mut [[f32; 3]],
 ) {
     for (k, &pixel) in receivers.pixels().iter().enumerate() {
         let (block, lane) = (k / cpu::LANES, k % cpu::LANES);
         let (shadowed, unshadowed) = sums[block].lane(lane, channels);
-        let texel = &mut texels[pixel as usize];
-        for c in 0..3 {
-            texel.shadowed[c] += shadowed[c];
-            texel.unshadowed[c] += unshadowed[c];
-        }
-        texel.samples = samples;
+        texels[pixel as usize].add(shadowed, unshadowed, second_half);
         let blocker = &mut blockers[pixel as usize];
         *blocker = [receivers.depth(k), blocker[1] + met[block].count[lane], blocker[2] + met[block].depth_sum[lane]];
     }
