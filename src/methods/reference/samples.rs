@@ -84,7 +84,7 @@ pub fn interleaved_light_samples(
 /// (one stratum a block, the same in each) would lie in one half — so that each half takes
 /// every other stratum and every set is split over a checkerboard of the blocks.
 fn half_of(i: u32, j: u32, side: u32) -> bool {
-    let blocks = if side % 2 == 0 { i / side + j / side } else { 0 };
+    let blocks = if side.is_multiple_of(2) { i / side + j / side } else { 0 };
     (i + j + blocks) % 2 == 1
 }
 

@@ -101,7 +101,7 @@ fn the_error_estimate_is_the_halves_difference_weighed_by_their_light() {
     // Halves that agree: no error. Halves whose errors alternate from pixel to pixel: the filter
     // averages them away, and its estimate says so.
     assert_eq!(estimate(&|_| (0.5, 0.5), 0.5, 0.0).penumbra_error, 0.0);
-    let alternating = |x: u32| if x % 2 == 0 { (0.4, 0.6) } else { (0.6, 0.4) };
+    let alternating = |x: u32| if x.is_multiple_of(2) { (0.4, 0.6) } else { (0.6, 0.4) };
     let (raw, filtered) = (estimate(&alternating, 0.5, 0.0), estimate(&alternating, 0.5, 1.0));
     assert!(filtered.penumbra_error < 0.3 * raw.penumbra_error, "{} → {}", raw.penumbra_error, filtered.penumbra_error);
 }
