@@ -42,6 +42,9 @@ pub struct QualityReport {
     pub visibility: Regions,
     /// Pixels in the reference's penumbra.
     pub penumbra_pixels: usize,
+    /// Mean |V − Vref| (channels' mean) over the tenth of the reference's penumbra next to the
+    /// occluders' contacts (`contact_mask`), where a filter would bleed across them.
+    pub contact_mae: f64,
 }
 
 /// An image as the metrics see it: three channels per pixel in [0,1].
@@ -86,10 +89,64 @@ pub fn compare(test: &FrameOutput, reference: &FrameOutput, exposure: f32) -> Qu
     let mask = penumbra_mask(reference);
     let everywhere = vec![true; mask.len()];
     let regions = |a: &Planar, b: &Planar| Regions { whole: metrics(a, b, &everywhere), penumbra: metrics(a, b, &mask) };
+    let contact = contact_mask(reference, &mask);
+    let visibility = (Planar::visibility(test), Planar::visibility(reference));
     QualityReport {
         color: regions(&Planar::color(test, exposure), &Planar::color(reference, exposure)),
-        visibility: regions(&Planar::visibility(test), &Planar::visibility(reference)),
+        visibility: regions(&visibility.0, &visibility.1),
         penumbra_pixels: mask.iter().filter(|m| **m).count(),
+        contact_mae: metrics_mae(&visibility.0, &visibility.1, &contact),
+    }
+}
+
+/// The tenth of the reference's `penumbra` next to the occluders' contacts: where its penumbra
+/// is narrowest in the world. A penumbra's width goes as the gap between occluder and receiver
+/// (light × gap / occluder distance), to 0 at a contact, so its pixels with the steepest
+/// visibility per unit of world distance — the gray visibility's gradient in pixels over the
+/// view depth, which a pixel's footprint follows — are those nearest a contact. Without depth
+/// (a PNG's frame), the steepest in pixels.
+pub fn contact_mask(reference: &FrameOutput, penumbra: &[bool]) -> Vec<bool> {
+    let visibility = reference.visibility.as_ref().expect("reference visibility");
+    let (width, height) = (reference.width as usize, reference.height as usize);
+    let gray = |i: usize| visibility[i].iter().sum::<f32>() / 3.0;
+    let covered = |i: usize| reference.color.get(i).is_none_or(|c| c[3] > 0.0);
+    // Central differences where both neighbours are covered, one-sided where one is.
+    let slope = |i: usize, before: Option<usize>, after: Option<usize>| {
+        let (b, a) = (before.filter(|&j| covered(j)), after.filter(|&j| covered(j)));
+        match (b, a) {
+            (Some(b), Some(a)) => 0.5 * (gray(a) - gray(b)),
+            (Some(b), None) => gray(i) - gray(b),
+            (None, Some(a)) => gray(a) - gray(i),
+            (None, None) => 0.0,
+        }
+    };
+    let mut steepness: Vec<(f32, usize)> = (0..width * height)
+        .filter(|&i| penumbra[i])
+        .map(|i| {
+            let (x, y) = (i % width, i / width);
+            let dx = slope(i, (x > 0).then(|| i - 1), (x + 1 < width).then(|| i + 1));
+            let dy = slope(i, (y > 0).then(|| i - width), (y + 1 < height).then(|| i + width));
+            let depth = reference.depth.as_ref().map_or(1.0, |d| if d[i].is_finite() && d[i] > 0.0 { d[i] } else { 1.0 });
+            ((dx * dx + dy * dy).sqrt() / depth, i)
+        })
+        .collect();
+    steepness.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let mut mask = vec![false; penumbra.len()];
+    for &(_, i) in steepness.iter().take(steepness.len().div_ceil(10)) {
+        mask[i] = true;
+    }
+    mask
+}
+
+/// Mean absolute difference over `mask`, the channels' mean (0 for an empty mask).
+fn metrics_mae(test: &Planar, reference: &Planar, mask: &[bool]) -> f64 {
+    let (sum, count) = test.rgb.iter().zip(&reference.rgb).zip(mask).filter(|(_, m)| **m).fold((0.0f64, 0usize), |(sum, n), ((a, b), _)| {
+        (sum + (0..3).map(|k| f64::from((a[k] - b[k]).abs())).sum::<f64>() / 3.0, n + 1)
+    });
+    if count > 0 {
+        sum / count as f64
+    } else {
+        0.0
     }
 }
 

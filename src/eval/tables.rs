@@ -51,6 +51,7 @@ pub(super) fn write_tables(out: &Path, report: &EvalReport, methods: &[String], 
     write_flooding(&mut md, report)?;
     write_subdivision(&mut md, report)?;
     write_error_estimates(&mut md, report)?;
+    write_contact(&mut md, report)?;
     if let Some(sweep) = sweep {
         write_sweep(&mut md, report, sweep)?;
     }
@@ -284,6 +285,24 @@ fn write_error_estimates(md: &mut String, report: &EvalReport) -> std::fmt::Resu
         writeln!(md, "| {} | {} | {}×{} | {} | {estimate:.4} | {measured:.4} | {ratio:.2} |", r.scene, r.light, r.width, r.height, r.method)?;
     }
     writeln!(md, "\nWithin ±30 %: {within} of {} rows.", estimated.len())
+}
+
+/// Every row's error next to the occluders' contacts (`quality::contact_mask`) beside its
+/// error over the whole penumbra: a filter that bleeds across a contact shows there.
+fn write_contact(md: &mut String, report: &EvalReport) -> std::fmt::Result {
+    let rows: Vec<&Row> = report.rows.iter().filter(|r| r.method != "reference").collect();
+    if rows.is_empty() {
+        return Ok(());
+    }
+    writeln!(md, "\n## Next to contacts\n")?;
+    writeln!(md, "V MAE over the tenth of the reference's penumbra where it is narrowest in the world (next to the occluders' contacts), and over the whole penumbra.\n")?;
+    writeln!(md, "| scene | light | size | method | V MAE (contact) | V MAE (penumbra) |")?;
+    writeln!(md, "|---|---|---|---|---:|---:|")?;
+    for r in rows {
+        let q = &r.quality;
+        writeln!(md, "| {} | {} | {}×{} | {} | {:.4} | {:.4} |", r.scene, r.light, r.width, r.height, r.method, q.contact_mae, q.visibility.penumbra.mae)?;
+    }
+    Ok(())
 }
 
 /// `chun-oh`'s subdivision histogram (Chun & Oh 2016, Table 2), when the suite ran it.
