@@ -284,4 +284,34 @@ mod tests {
         assert!((report.visibility.whole.rmse - 0.1 * fraction.sqrt()).abs() < 1e-5);
         assert!(report.visibility.penumbra.ssim < 1.0 && report.visibility.penumbra.flip > 0.0);
     }
+
+    /// A penumbra that narrows down the frame, as one does towards an occluder's contact: rows
+    /// y have a ramp 4 + y/2 pixels wide. Its contact tenth is the steepest rows', and an error
+    /// only there shows in `contact_mae` and not (much) over the whole penumbra.
+    #[test]
+    fn the_contact_tenth_is_where_the_penumbra_is_narrowest() {
+        let width = |y: u32| 4.0 + 0.5 * (47 - y) as f32;
+        let ramp = |x: u32, y: u32| (1.0 - (x as f32 + 0.5 - 20.0) / width(y)).clamp(0.0, 1.0);
+        let reference = frame(64, 48, ramp);
+        let mask = penumbra_mask(&reference);
+        let contact = contact_mask(&reference, &mask);
+        let (count, listed) = (mask.iter().filter(|&&m| m).count(), contact.iter().filter(|&&m| m).count());
+        assert_eq!(listed, count.div_ceil(10));
+        // Every contact pixel lies in the narrowest rows (the bottom ones).
+        let rows: Vec<usize> = contact.iter().enumerate().filter(|(_, &c)| c).map(|(i, _)| i / 64).collect();
+        assert!(rows.iter().all(|&y| y >= 32), "{rows:?}");
+        // An error in the contact rows alone.
+        let test = frame(64, 48, |x, y| {
+            let v = ramp(x, y);
+            if y >= 32 && v > 0.0 && v < 1.0 {
+                (v + 0.1).min(1.0)
+            } else {
+                v
+            }
+        });
+        let report = compare(&test, &reference, 0.0);
+        assert!(report.contact_mae > 0.05, "{}", report.contact_mae);
+        assert!(report.visibility.penumbra.mae < 0.5 * report.contact_mae, "{:?}", report.visibility.penumbra);
+        assert_eq!(compare(&reference, &reference, 0.0).contact_mae, 0.0);
+    }
 }
