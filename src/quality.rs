@@ -140,9 +140,10 @@ pub fn contact_mask(reference: &FrameOutput, penumbra: &[bool]) -> Vec<bool> {
 
 /// Mean absolute difference over `mask`, the channels' mean (0 for an empty mask).
 fn metrics_mae(test: &Planar, reference: &Planar, mask: &[bool]) -> f64 {
-    let (sum, count) = test.rgb.iter().zip(&reference.rgb).zip(mask).filter(|(_, m)| **m).fold((0.0f64, 0usize), |(sum, n), ((a, b), _)| {
-        (sum + (0..3).map(|k| f64::from((a[k] - b[k]).abs())).sum::<f64>() / 3.0, n + 1)
-    });
+    let (sum, count) =
+        test.rgb.iter().zip(&reference.rgb).zip(mask).filter(|(_, m)| **m).fold((0.0f64, 0usize), |(sum, n), ((a, b), _)| {
+            (sum + (0..3).map(|k| f64::from((a[k] - b[k]).abs())).sum::<f64>() / 3.0, n + 1)
+        });
     if count > 0 {
         sum / count as f64
     } else {

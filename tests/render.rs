@@ -521,7 +521,10 @@ fn closed_form_error(method: serde_json::Value, image: &str) -> (f32, f32, Vec<(
 }
 
 /// `closed_form_error`, with the frame's counters.
-fn closed_form_error_and_counters(method: serde_json::Value, image: &str) -> (f32, f32, Vec<([f32; 3], Vec3)>, penumbra::methods::Counters) {
+fn closed_form_error_and_counters(
+    method: serde_json::Value,
+    image: &str,
+) -> (f32, f32, Vec<([f32; 3], Vec3)>, penumbra::methods::Counters) {
     let size = 64usize;
     let job = job(json!({
         "scene": {"builtin": "occluder"},

@@ -113,9 +113,17 @@ impl Engine {
         if limits.max_output_pixels > device_pixels {
             // Said as a warning only when the operator asked for more than the default.
             if limits.max_output_pixels > Limits::default().max_output_pixels {
-                tracing::warn!(max_output_pixels = limits.max_output_pixels, device_pixels, "output pixels lowered to what the device binds");
+                tracing::warn!(
+                    max_output_pixels = limits.max_output_pixels,
+                    device_pixels,
+                    "output pixels lowered to what the device binds"
+                );
             } else {
-                tracing::info!(max_output_pixels = limits.max_output_pixels, device_pixels, "output pixels lowered to what the device binds");
+                tracing::info!(
+                    max_output_pixels = limits.max_output_pixels,
+                    device_pixels,
+                    "output pixels lowered to what the device binds"
+                );
             }
             limits.max_output_pixels = device_pixels;
         }
@@ -127,11 +135,7 @@ impl Engine {
         }
         let mut renderer = Renderer::new(gpu.clone());
         renderer.cpu_working_bytes = limits.max_cpu_working_bytes;
-        let state = RenderState {
-            renderer,
-            scenes: Lru::new(SCENE_CACHE_ENTRIES),
-            lights: Lru::new(LIGHT_CACHE_ENTRIES),
-        };
+        let state = RenderState { renderer, scenes: Lru::new(SCENE_CACHE_ENTRIES), lights: Lru::new(LIGHT_CACHE_ENTRIES) };
         Self {
             gpu: std::sync::RwLock::new(gpu),
             device_resets: Default::default(),

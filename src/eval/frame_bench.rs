@@ -180,9 +180,7 @@ pub fn run(engine: &Engine, options: &BenchOptions) -> anyhow::Result<BenchRepor
                 for ((label, method), runs) in methods.iter().zip(&mut runs) {
                     progress.set_message(format!("{case}: {label} ({}/{})", repetition + 1, options.repeat));
                     let cpu_before = crate::timing::process_cpu_ms();
-                    let rendered = engine
-                        .render(&method_job(&base, method), &())
-                        .map_err(|e| anyhow::anyhow!("{case}: {label}: {e}"))?;
+                    let rendered = engine.render(&method_job(&base, method), &()).map_err(|e| anyhow::anyhow!("{case}: {label}: {e}"))?;
                     runs.push((rendered.timings, crate::timing::process_cpu_ms() - cpu_before));
                     progress.inc(1);
                 }

@@ -268,8 +268,7 @@ fn write_flooding(md: &mut String, report: &EvalReport) -> std::fmt::Result {
 /// The error a method estimated for itself (`filtered`'s mean over the pixels it finds in
 /// penumbra) against the one measured over the reference's penumbra, with their ratio.
 fn write_error_estimates(md: &mut String, report: &EvalReport) -> std::fmt::Result {
-    let estimated: Vec<(&Row, f64)> =
-        report.rows.iter().filter_map(|r| ERROR_ESTIMATE.get(&r.counters).map(|e| (r, e))).collect();
+    let estimated: Vec<(&Row, f64)> = report.rows.iter().filter_map(|r| ERROR_ESTIMATE.get(&r.counters).map(|e| (r, e))).collect();
     if estimated.is_empty() {
         return Ok(());
     }
@@ -282,7 +281,11 @@ fn write_error_estimates(md: &mut String, report: &EvalReport) -> std::fmt::Resu
         let measured = r.quality.visibility.penumbra.mae;
         let ratio = estimate / measured;
         within += usize::from((0.7..=1.3).contains(&ratio));
-        writeln!(md, "| {} | {} | {}×{} | {} | {estimate:.4} | {measured:.4} | {ratio:.2} |", r.scene, r.light, r.width, r.height, r.method)?;
+        writeln!(
+            md,
+            "| {} | {} | {}×{} | {} | {estimate:.4} | {measured:.4} | {ratio:.2} |",
+            r.scene, r.light, r.width, r.height, r.method
+        )?;
     }
     writeln!(md, "\nWithin ±30 %: {within} of {} rows.", estimated.len())
 }
@@ -300,7 +303,11 @@ fn write_contact(md: &mut String, report: &EvalReport) -> std::fmt::Result {
     writeln!(md, "|---|---|---|---|---:|---:|")?;
     for r in rows {
         let q = &r.quality;
-        writeln!(md, "| {} | {} | {}×{} | {} | {:.4} | {:.4} |", r.scene, r.light, r.width, r.height, r.method, q.contact_mae, q.visibility.penumbra.mae)?;
+        writeln!(
+            md,
+            "| {} | {} | {}×{} | {} | {:.4} | {:.4} |",
+            r.scene, r.light, r.width, r.height, r.method, q.contact_mae, q.visibility.penumbra.mae
+        )?;
     }
     Ok(())
 }

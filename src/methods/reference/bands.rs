@@ -58,7 +58,9 @@ mod tests {
 
     #[test]
     fn bands_cover_every_row_once_and_their_reach_fits() {
-        for (width, height, budget, halo) in [(4096, 2048, 128 << 20, 0), (4096, 2048, 100 << 20, 64), (300, 1001, 1 << 20, 64), (64, 9, 1, 4)] {
+        for (width, height, budget, halo) in
+            [(4096, 2048, 128 << 20, 0), (4096, 2048, 100 << 20, 64), (300, 1001, 1 << 20, 64), (64, 9, 1, 4)]
+        {
             let cut = bands(width, height, 100, budget, halo, 8);
             assert!(cut.len() > 1, "{width}×{height} in {budget} bytes");
             let mut next = 0;

@@ -106,7 +106,6 @@ impl Texel {
         (0..3).map(|c| halves_error(first(c), second(c)).unwrap_or(gray)).sum::<f32>() / 3.0
     }
 
-
     /// Whether any sample saw the light from here (else V is undefined: 1).
     fn lit_at_all(&self) -> bool {
         self.unshadowed.iter().sum::<f32>() > 0.0

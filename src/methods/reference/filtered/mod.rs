@@ -196,7 +196,13 @@ struct Done {
 
 /// Band `index` of `count`: the probes over its reach, every sample where they vary, the
 /// filter, and the visibility of its rows written to the frame.
-fn render_band(ctx: &mut MethodContext<'_>, shared: &Shared, band: &Band, (index, count): (usize, usize), done: &mut Done) -> JobResult<()> {
+fn render_band(
+    ctx: &mut MethodContext<'_>,
+    shared: &Shared,
+    band: &Band,
+    (index, count): (usize, usize),
+    done: &mut Done,
+) -> JobResult<()> {
     let started = std::time::Instant::now();
     let width = ctx.width;
     let height = band.reach.len() as u32;
