@@ -1295,6 +1295,31 @@ async fn limits_are_flags_listed_and_enforced_with_the_field_named() {
     assert_eq!(ok.status(), StatusCode::OK);
 }
 
+/// The output's pixel cap is what the device binds (a frame's per-pixel buffers are one
+/// storage binding each, 16 bytes a pixel): `/v1/limits` says the cap that holds, a frame of
+/// exactly that many pixels renders, and one more row is refused up front naming `output` —
+/// not a job that fails on the device (lavapipe binds 8,388,608 pixels, under the default 16 Mi).
+#[tokio::test(flavor = "multi_thread")]
+async fn the_output_cap_is_what_the_device_binds() {
+    let (_daemon, base) = serve(&["--job-store", "memory"], &[]).await;
+    let client = reqwest::Client::new();
+    let limits: Value = client.get(format!("{base}/v1/limits")).send().await.unwrap().json().await.unwrap();
+    let cap = limits["max_output_pixels"].as_u64().unwrap();
+    assert!(cap <= 16 * 1024 * 1024 && cap >= 4096 * 1024, "{limits}");
+    let job = |height: u64| json!({"scene": {"builtin": "torus"}, "method": {"name": "hard"}, "output": {"width": 4096, "height": height}});
+    let response = client.post(format!("{base}/v1/render")).json(&job(cap / 4096)).send().await.unwrap();
+    assert_eq!(response.status(), StatusCode::OK, "a frame of the cap's pixels renders");
+    assert!(response.bytes().await.unwrap().starts_with(b"\x89PNG"));
+    let response = client.post(format!("{base}/v1/render")).json(&job(cap / 4096 + 1)).send().await.unwrap();
+    let status = response.status();
+    let error = response.json::<Value>().await.unwrap()["error"].clone();
+    assert_eq!(
+        (status, error["code"].as_str(), error["field"].as_str()),
+        (StatusCode::UNPROCESSABLE_ENTITY, Some("limit_exceeded"), Some("output")),
+        "{error}"
+    );
+}
+
 /// `penumbra serve ARGS` (no warm-up, a free loopback port, `warn` logs) with extra
 /// environment variables, once ready: the daemon (killed when dropped) and its base URL.
 async fn serve(args: &[&str], env: &[(&str, &str)]) -> (Daemon, String) {
