@@ -18,9 +18,9 @@ pub(super) struct Band {
 }
 
 impl Band {
-    /// Where the band's `rows` begin within its `reach`, in rows.
-    pub fn first_row(&self) -> u32 {
-        self.rows.start - self.reach.start
+    /// The band's `rows`, counted from the start of its `reach`.
+    pub fn written(&self) -> Range<u32> {
+        self.rows.start - self.reach.start..self.rows.end - self.reach.start
     }
 }
 
@@ -70,6 +70,8 @@ mod tests {
                 assert!(band.reach.start <= band.rows.start && band.reach.end >= band.rows.end);
                 assert_eq!(band.reach.start, band.rows.start.saturating_sub(halo));
                 assert_eq!(band.reach.end, (band.rows.end + halo).min(height));
+                let written = band.written();
+                assert_eq!(written.start + band.reach.start..written.end + band.reach.start, band.rows);
                 let bytes = u64::from(band.reach.len() as u32) * u64::from(width) * 100;
                 assert!(bytes <= budget || band.rows.len() <= 8, "{band:?}: {bytes} bytes");
                 next = band.rows.end;

@@ -19,6 +19,7 @@ pub use samples::{interleaved_light_samples, light_samples, LightSample};
 use super::{Cap, Counters, MethodContext, Param, ParamSpec, Params, ShadowMethod};
 use crate::error::JobResult;
 use crate::params::choice;
+use crate::supervise::Supervisor;
 use crate::timing::PhaseName;
 
 pub struct Reference;
@@ -82,15 +83,15 @@ impl ShadowMethod for Reference {
         let maps = DepthMaps::new(ctx, plan.crop.size, layers, &view_projs);
         let accumulation = Accumulation::new(ctx, &plan, &batches);
         let total = plan.samples.len() as u64;
+        let mut progress = Progress::new(ctx.supervisor, total);
         let mut before = 0;
         for (b, &(count, _)) in batches.iter().enumerate() {
             let first = before as usize;
             maps.draw(ctx, first, &plan.crop.origins[first..first + count as usize]);
             accumulation.record(ctx, &maps, b, count, b + 1 == batches.len());
             let done = before + u64::from(count);
-            let flush = done / BATCH > before / BATCH || done == total;
             before = done;
-            if flush {
+            if progress.reaches(done) {
                 ctx.flush()?;
                 ctx.supervisor.progress(done, total);
                 // Cancelled: the renderer discards this frame, so the remaining batches
@@ -116,40 +117,26 @@ fn record_on_cpu(ctx: &mut MethodContext<'_>, params: &Params, plan: &SamplePlan
     let channels = plan.channels() as usize;
     let width = ctx.width;
     let bands = bands::bands(width, ctx.height, CPU_BYTES_PER_PIXEL, ctx.cpu_working_bytes, 0, 1);
-    let total = samples.len() as u64 * bands.len() as u64;
     let supervisor = ctx.supervisor;
+    let mut progress = Progress::new(supervisor, samples.len() as u64 * bands.len() as u64);
     let (mut read_ms, mut write_ms, mut spent, mut segments) = (0.0, 0.0, cpu::Spent::default(), 0);
     for (b, band) in bands.iter().enumerate() {
         let started = std::time::Instant::now();
         let receivers = ctx.read_gbuffer_rows(band.rows.clone(), |gbuffer| cpu::Receivers::new(gbuffer, SEGMENT, &constants))?;
         read_ms += started.elapsed().as_secs_f64() * 1e3;
         let first = b as u64 * samples.len() as u64;
-        let mut before = first;
-        let (sums, _, band_spent) = cpu::estimate_with::<false>(
-            &receivers,
-            &samples,
-            &constants,
-            (ctx.scene.positions(), ctx.scene.indices()),
-            channels,
-            plan.crop.size,
-            |done| {
-                // Progress as often as the GPU engine reports it: each time another `BATCH` are done.
-                let done = first + done as u64;
-                if done / BATCH > before / BATCH || done == total {
-                    supervisor.progress(done, total);
-                }
-                before = done;
-                // Cancelled: the renderer discards this frame.
-                !supervisor.cancelled()
-            },
-        );
+        let geometry = (ctx.scene.positions(), ctx.scene.indices());
+        // Cancelled: the renderer discards this frame.
+        let (sums, _, band_spent) =
+            cpu::estimate_with::<false>(&receivers, &samples, &constants, geometry, channels, plan.crop.size, |done| {
+                progress.at(first + done as u64)
+            });
         let written = std::time::Instant::now();
         let mut visibility = vec![0u8; width as usize * band.rows.len() * 16];
         cpu::write_visibility(&receivers, &sums, channels, width, &mut visibility);
         ctx.gpu.queue.write_buffer(ctx.visibility, u64::from(band.rows.start) * u64::from(width) * 16, &visibility);
         write_ms += written.elapsed().as_secs_f64() * 1e3;
-        (spent.maps_ms, spent.tests_ms, spent.round) =
-            (spent.maps_ms + band_spent.maps_ms, spent.tests_ms + band_spent.tests_ms, band_spent.round);
+        spent.add(band_spent);
         segments += receivers.segments;
         if supervisor.cancelled() {
             break;
@@ -166,6 +153,36 @@ fn record_on_cpu(ctx: &mut MethodContext<'_>, params: &Params, plan: &SamplePlan
         ("cpu_bands".to_owned(), bands.len() as f64),
     ]);
     Ok(counters)
+}
+
+/// A frame's progress through its samples, reported as the GPU engine reports it: each time
+/// another `BATCH` samples are done, and when all of them are.
+struct Progress<'a> {
+    supervisor: &'a dyn Supervisor,
+    total: u64,
+    done: u64,
+}
+
+impl<'a> Progress<'a> {
+    fn new(supervisor: &'a dyn Supervisor, total: u64) -> Self {
+        Self { supervisor, total, done: 0 }
+    }
+
+    /// Notes `done` samples done; whether that is a point to report (and flush) at.
+    fn reaches(&mut self, done: u64) -> bool {
+        let report = done / BATCH > self.done / BATCH || done == self.total;
+        self.done = done;
+        report
+    }
+
+    /// Notes `done` samples done, reports them where `reaches` says, and says whether to go on
+    /// (the job is not cancelled).
+    fn at(&mut self, done: u64) -> bool {
+        if self.reaches(done) {
+            self.supervisor.progress(done, self.total);
+        }
+        !self.supervisor.cancelled()
+    }
 }
 
 /// What the CPU engine holds a pixel at most, in bytes: its receiver (40) and listing (4),

@@ -208,6 +208,15 @@ pub(super) struct Spent {
     pub round: usize,
 }
 
+impl Spent {
+    /// Adds a later call's times (its round is the same machine's).
+    pub(super) fn add(&mut self, later: Spent) {
+        self.maps_ms += later.maps_ms;
+        self.tests_ms += later.tests_ms;
+        self.round = later.round;
+    }
+}
+
 /// Estimates every receiver's sums over `samples` (drawn from the triangles `positions` /
 /// `indices`), `channels` of them (1: every weight gray, the red one stands for all), and with
 /// `BLOCKERS` the blockers its tests met (else none are kept). `after` hears how many samples

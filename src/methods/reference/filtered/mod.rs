@@ -13,12 +13,11 @@
 //! probes' verdict (0 or 1, which more samples would only confirm). Every map is drawn once.
 //!
 //! Why not a few samples a pixel everywhere, rotated per pixel, as the papers do with rays: a
-//! sample is a depth map here, and a map costs what its triangles cost, whatever the pixels;
-//! at 256×192 the maps are 93 % of `reference`'s time, so the distinct samples, not the tests,
-//! set the price. And a penumbra there is two to four pixels wide: blurring the 1,024-sample
-//! truth by one pixel alone costs 0.025 of mean error, so a filter cannot make a few samples a
-//! pixel good. The probes cut the tests (at 1080p, three quarters of `reference`'s time); the
-//! filter then smooths what the strata leave where a penumbra spans pixels enough.
+//! sample is a depth map here, and a map costs what its triangles cost, whatever the pixels,
+//! so the distinct samples, not the tests, set the price; and at small sizes a penumbra is a
+//! few pixels wide, too narrow for a filter to make a few samples a pixel good (measured in
+//! docs/methods.md#filtered). The probes cut the tests; the filter then smooths what the
+//! strata leave where a penumbra spans pixels enough.
 
 mod filter;
 
@@ -26,7 +25,9 @@ use super::bands::{self, Band};
 use super::cpu::{self, BlockerBlock, CpuSample, Receivers, SumBlock};
 use super::gpu::SEGMENT;
 use super::samples::{interleaved_light_samples, SamplePlan};
-use super::{Counters, MethodContext, Param, ParamSpec, Params, ShadowMethod, BIAS_TEXELS, CROP, RESOLUTION, SEED, SLOPE_BIAS_TEXELS};
+use super::{
+    Counters, MethodContext, Param, ParamSpec, Params, Progress, ShadowMethod, BIAS_TEXELS, CROP, RESOLUTION, SEED, SLOPE_BIAS_TEXELS,
+};
 use crate::error::JobResult;
 use crate::params::Cap;
 use crate::render::method::CounterKey;
@@ -122,22 +123,24 @@ impl ShadowMethod for Filtered {
         };
         let mut done = Done { read_ms: started.elapsed().as_secs_f64() * 1e3, ..Done::default() };
         let bands = bands::bands(ctx.width, ctx.height, BYTES_PER_PIXEL, ctx.cpu_working_bytes, HALO_ROWS, filter::TILE);
+        let supervisor = ctx.supervisor;
+        let mut progress = Progress::new(supervisor, shared.samples() * bands.len() as u64);
         for (b, band) in bands.iter().enumerate() {
-            render_band(ctx, &shared, band, (b, bands.len()), &mut done)?;
-            if ctx.supervisor.cancelled() {
+            render_band(ctx, &shared, band, b as u64 * shared.samples(), &mut progress, &mut done)?;
+            if supervisor.cancelled() {
                 break;
             }
         }
         ctx.timer.cpu_pass(PhaseName::Method, "filtered_receivers", done.read_ms);
-        ctx.timer.cpu_pass(PhaseName::Method, "filtered_maps", done.maps_ms);
-        ctx.timer.cpu_pass(PhaseName::Method, "filtered_tests", done.tests_ms);
+        ctx.timer.cpu_pass(PhaseName::Method, "filtered_maps", done.spent.maps_ms);
+        ctx.timer.cpu_pass(PhaseName::Method, "filtered_tests", done.spent.tests_ms);
         ctx.timer.cpu_pass(PhaseName::Method, "filtered_filter", done.filter_ms);
 
         let mut counters = plan.counters(done.segments);
         counters.extend([
             ("probes".to_owned(), f64::from(probes)),
             ("refine".to_owned(), f64::from(refine)),
-            ("cpu_threads".to_owned(), done.threads as f64),
+            ("cpu_threads".to_owned(), done.spent.round as f64),
             ("cpu_bands".to_owned(), bands.len() as f64),
             ("pixels_filtered".to_owned(), done.pixels_filtered as f64),
             ("penumbra_pixels_estimated".to_owned(), done.penumbra_pixels as f64),
@@ -155,11 +158,11 @@ impl ShadowMethod for Filtered {
 /// around theirs (15 more) — rounded to whole tiles, so that the band's tiles are the frame's.
 const HALO_ROWS: u32 = 56;
 
-/// What `filtered` holds a pixel of a band at most, in bytes: its surface (24), texel (32) and
-/// blockers (12), the probes' receiver (44), sums (24) and blockers met (8), and its refined flag
-/// and filter index (5) — the filter's copies of the refined pixels and the visibility written
-/// come after the receivers are let go.
-const BYTES_PER_PIXEL: u64 = 150;
+/// What `filtered` holds a pixel of a band at most, in bytes: its surface (24), texel (48: the
+/// sums and its second half's) and blockers (12), the probes' receiver (44), sums (24) and
+/// blockers met (8), and its refined flag and filter index (5) — 165; the filter's copies of
+/// the refined pixels and the visibility written come after the receivers are let go.
+const BYTES_PER_PIXEL: u64 = 170;
 
 /// What every band shares: the samples, split into the probes and the rest, each in the two
 /// halves of the checkerboard, and the filter's shape.
@@ -170,6 +173,18 @@ struct Shared {
     channels: usize,
     crop_size: glam::UVec2,
     filter: FilterShape,
+}
+
+impl Shared {
+    /// How many samples, the probes and the rest.
+    fn samples(&self) -> u64 {
+        count(&self.probe_samples) + count(&self.other_samples)
+    }
+}
+
+/// The samples of a round's two halves.
+fn count(halves: &[Vec<CpuSample>; 2]) -> u64 {
+    (halves[0].len() + halves[1].len()) as u64
 }
 
 /// The filter's parameters from the light and the samples (`FilterInputs`).
@@ -183,10 +198,8 @@ struct FilterShape {
 #[derive(Default)]
 struct Done {
     read_ms: f64,
-    maps_ms: f64,
-    tests_ms: f64,
+    spent: cpu::Spent,
     filter_ms: f64,
-    threads: usize,
     segments: u32,
     pixels_refined: usize,
     pixels_filtered: usize,
@@ -194,13 +207,15 @@ struct Done {
     penumbra_error_sum: f64,
 }
 
-/// Band `index` of `count`: the probes over its reach, every sample where they vary, the
-/// filter, and the visibility of its rows written to the frame.
+/// A band of the frame, whose samples follow the frame's `before` others: the probes over its
+/// reach, every sample where they vary, the filter, and the visibility of its rows written to
+/// the frame.
 fn render_band(
     ctx: &mut MethodContext<'_>,
     shared: &Shared,
     band: &Band,
-    (index, count): (usize, usize),
+    before: u64,
+    progress: &mut Progress<'_>,
     done: &mut Done,
 ) -> JobResult<()> {
     let started = std::time::Instant::now();
@@ -211,39 +226,25 @@ fn render_band(
     let probed = Receivers::of_pixels(&surfaces, SEGMENT, constants, |_, _| true);
     done.read_ms += started.elapsed().as_secs_f64() * 1e3;
 
-    let count_of = |halves: &[Vec<CpuSample>; 2]| (halves[0].len() + halves[1].len()) as u64;
-    let (probe_count, other_count) = (count_of(&shared.probe_samples), count_of(&shared.other_samples));
-    let per_band = probe_count + other_count;
-    let total = per_band * count as u64;
+    let (probe_count, other_count) = (count(&shared.probe_samples), count(&shared.other_samples));
     let supervisor = ctx.supervisor;
-    let mut reported = index as u64 * per_band;
-    let mut progress = |done: u64| {
-        let done = index as u64 * per_band + done;
-        if done / super::BATCH > reported / super::BATCH || done == total {
-            supervisor.progress(done, total);
-        }
-        reported = done;
-        !supervisor.cancelled()
-    };
     let geometry = (ctx.scene.positions(), ctx.scene.indices());
     let mut texels = vec![Texel::UNCOVERED; (width * height) as usize];
     let mut blockers = vec![[0.0f32; 3]; (width * height) as usize];
-    // Tests `receivers` against both halves of a round, the first of them the `before`-th
+    // Tests `receivers` against both halves of a round, the first of them the `first`-th
     // sample of the band, into the texels.
-    let mut test = |receivers: &Receivers, halves: &[Vec<CpuSample>; 2], before: u64, texels: &mut [Texel], done: &mut Done| {
-        let mut first = before;
+    let mut test = |receivers: &Receivers, halves: &[Vec<CpuSample>; 2], mut first: u64, texels: &mut [Texel], done: &mut Done| {
         for (half, samples) in halves.iter().enumerate() {
             let (sums, met, spent) =
                 cpu::estimate_with::<true>(receivers, samples, constants, geometry, shared.channels, shared.crop_size, |n| {
-                    progress(first + n as u64)
+                    progress.at(before + first + n as u64)
                 });
             first += samples.len() as u64;
             gather(receivers, &sums, &met, (shared.channels, half == 1), texels, &mut blockers);
-            done.maps_ms += spent.maps_ms;
-            done.tests_ms += spent.tests_ms;
-            done.threads = spent.round;
-            done.segments += receivers.segments;
+            done.spent.add(spent);
         }
+        // The receivers' segments, once a round (as `reference` counts them once a frame).
+        done.segments += receivers.segments;
     };
 
     // The probes, everywhere.
@@ -252,9 +253,10 @@ fn render_band(
     drop(probed);
     // With one set there is nothing more to test; its varying pixels are still filtered.
     let refined = filter::refined(&surfaces, &texels);
-    let written = band.first_row() as usize * width as usize..(band.first_row() as usize + band.rows.len()) * width as usize;
+    let written = band.written();
     if other_count > 0 {
-        done.pixels_refined += refined[written].iter().filter(|&&r| r).count();
+        let pixels = written.start as usize * width as usize..written.end as usize * width as usize;
+        done.pixels_refined += refined[pixels].iter().filter(|&&r| r).count();
     }
     // The other strata, where a penumbra is.
     if !supervisor.cancelled() && other_count > 0 && refined.contains(&true) {
@@ -268,7 +270,7 @@ fn render_band(
     let inputs = FilterInputs {
         width,
         height,
-        written: band.first_row()..band.first_row() + band.rows.len() as u32,
+        written,
         frame_height: ctx.height,
         light_extent: shape.light_extent,
         samples_across: shape.samples_across,
