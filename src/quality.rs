@@ -95,7 +95,7 @@ pub fn compare(test: &FrameOutput, reference: &FrameOutput, exposure: f32) -> Qu
         color: regions(&Planar::color(test, exposure), &Planar::color(reference, exposure)),
         visibility: regions(&visibility.0, &visibility.1),
         penumbra_pixels: mask.iter().filter(|m| **m).count(),
-        contact_mae: metrics_mae(&visibility.0, &visibility.1, &contact),
+        contact_mae: mean_absolute(&visibility.0, &visibility.1, &contact),
     }
 }
 
@@ -138,25 +138,18 @@ pub fn contact_mask(reference: &FrameOutput, penumbra: &[bool]) -> Vec<bool> {
     mask
 }
 
-/// Mean absolute difference over `mask`, the channels' mean (0 for an empty mask).
-fn metrics_mae(test: &Planar, reference: &Planar, mask: &[bool]) -> f64 {
-    let (sum, count) =
-        test.rgb.iter().zip(&reference.rgb).zip(mask).filter(|(_, m)| **m).fold((0.0f64, 0usize), |(sum, n), ((a, b), _)| {
-            (sum + (0..3).map(|k| f64::from((a[k] - b[k]).abs())).sum::<f64>() / 3.0, n + 1)
-        });
-    if count > 0 {
-        sum / count as f64
-    } else {
-        0.0
-    }
-}
-
-fn metrics(test: &Planar, reference: &Planar, mask: &[bool]) -> Metrics {
+/// Mean absolute difference over `mask`, the channels' mean (`Metrics::mae`; 0 for an empty
+/// mask).
+fn mean_absolute(test: &Planar, reference: &Planar, mask: &[bool]) -> f64 {
     let count = mask.iter().filter(|m| **m).count();
     if count == 0 {
-        // No pixels in the region: nothing differs.
-        return Metrics { rmse: 0.0, mae: 0.0, mae_rgb: [0.0; 3], psnr_db: f64::INFINITY, ssim: 1.0, flip: 0.0 };
+        return 0.0;
     }
+    differences(test, reference, mask).1.iter().sum::<f64>() / (count * 3) as f64
+}
+
+/// Over `mask`: the sum of squared differences, and of absolute differences per channel.
+fn differences(test: &Planar, reference: &Planar, mask: &[bool]) -> (f64, [f64; 3]) {
     let (mut squared, mut absolute) = (0.0f64, [0.0f64; 3]);
     for ((a, b), _) in test.rgb.iter().zip(&reference.rgb).zip(mask).filter(|(_, m)| **m) {
         for k in 0..3 {
@@ -165,6 +158,16 @@ fn metrics(test: &Planar, reference: &Planar, mask: &[bool]) -> Metrics {
             absolute[k] += d.abs();
         }
     }
+    (squared, absolute)
+}
+
+fn metrics(test: &Planar, reference: &Planar, mask: &[bool]) -> Metrics {
+    let count = mask.iter().filter(|m| **m).count();
+    if count == 0 {
+        // No pixels in the region: nothing differs.
+        return Metrics { rmse: 0.0, mae: 0.0, mae_rgb: [0.0; 3], psnr_db: f64::INFINITY, ssim: 1.0, flip: 0.0 };
+    }
+    let (squared, absolute) = differences(test, reference, mask);
     let samples = (count * 3) as f64;
     let rmse = (squared / samples).sqrt();
     let (a8, b8) = (test.rgb8(), reference.rgb8());
@@ -286,8 +289,8 @@ mod tests {
         assert!(report.visibility.penumbra.ssim < 1.0 && report.visibility.penumbra.flip > 0.0);
     }
 
-    /// A penumbra that narrows down the frame, as one does towards an occluder's contact: rows
-    /// y have a ramp 4 + y/2 pixels wide. Its contact tenth is the steepest rows', and an error
+    /// A penumbra that narrows down the frame, as one does towards an occluder's contact: row y
+    /// has a ramp 4 + (47 − y)/2 pixels wide. Its contact tenth is the steepest rows', and an error
     /// only there shows in `contact_mae` and not (much) over the whole penumbra.
     #[test]
     fn the_contact_tenth_is_where_the_penumbra_is_narrowest() {
