@@ -108,7 +108,7 @@ impl Engine {
         // A frame's per-pixel buffers (visibility, E0: a `vec4<f32>` a pixel) are bound whole,
         // so the device's largest storage binding caps a frame's pixels (lavapipe's 128 MiB:
         // 8,388,608). Beyond it every job would fail on the device; lowered, they are refused
-        // up front with the field named, and `/v1/meta` says the limit that holds.
+        // up front with the field named, and `/v1/limits` says the limit that holds.
         let device_pixels = gpu.limits.max_storage_buffer_binding_size / 16;
         if limits.max_output_pixels > device_pixels {
             // Said as a warning only when the operator asked for more than the default.

@@ -24,20 +24,19 @@
 //! footprint it is another surface, even one close on screen, and gets none), and the
 //! agreement of their normals.
 //!
-//! The error estimate: the two halves of the samples, told apart. A checkerboard over the
-//! light's blocks of strata cuts the samples into two halves that each cover the whole light
-//! (`interleaved_light_samples`); every pixel keeps the second half's sums beside the whole's,
-//! and the filter averages both with the same weights. The two halves' estimates err
-//! independently (their strata are disjoint, each jittered on its own), and the whole's is
-//! their mean, so for errors e_a, e_b symmetric about 0, E|e_a − e_b| / 2 = E|e_a + e_b| / 2:
-//! half the halves' difference is an estimate of the whole's error with no constant to fit
-//! (`halves_error`, which also weighs halves of unequal light: a colour the light emits in a
-//! few strata), and, measured after the filter, it counts what the filter gathered —
-//! neighbours whose samples err together as well as those that do not. The halves are the
-//! strata's own checkerboard (`half_of`): halves of whole blocks would see different parts of
-//! the light, and differ by more than their samples' error (3× the measured error at 256
-//! strata). It misses what neither half sees: a
-//! pixel the probes left unrefined (both halves agree), and the filter's own bias.
+//! The error estimate: the two halves of the samples, told apart. The strata's own
+//! checkerboard (`half_of` in `samples.rs`) cuts the samples into two halves that each cover
+//! the whole light; every pixel keeps the second half's sums beside the whole's, and the
+//! filter averages both with the same weights. The two halves' estimates err independently
+//! (their strata are disjoint, each jittered on its own), and the whole's is their mean, so for
+//! errors e_a, e_b symmetric about 0, E|e_a − e_b| / 2 = E|e_a + e_b| / 2: half the halves'
+//! difference is an estimate of the whole's error with no constant to fit (`halves_error`,
+//! which also weighs halves of unequal light: a colour the light emits in a few strata), and,
+//! measured after the filter, it counts what the filter gathered — neighbours whose samples err
+//! together as well as those that do not. Halves of whole blocks of strata would see different
+//! parts of the light and differ by more than their samples' error (docs/performance-log.md).
+//! It misses what neither half sees: a pixel the probes left unrefined (both halves agree), and
+//! the filter's own bias.
 
 use std::ops::Range;
 
@@ -56,8 +55,7 @@ const MAX_RADIUS: u32 = 24;
 
 /// The least σ filtered, in pixels: where the strata's steps are finer than half a pixel, the
 /// pixel grid has averaged them already, and a kernel on the grid would only blur the ramp
-/// (measured: `terrain` under `stripes` at 256×192, 0.0175 → 0.0147 with this floor; the rest
-/// within 0.0001, 1080p unchanged).
+/// (measured in docs/performance-log.md).
 const MIN_SIGMA_PIXELS: f32 = 0.5;
 
 /// How far the kernel reaches, in its σ.
