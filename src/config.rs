@@ -227,6 +227,13 @@ pub struct ServeConfig {
     #[arg(long, env = "PENUMBRA_NO_WARM_UP")]
     pub no_warm_up: bool,
 
+    /// The cost and quality model `auto` jobs and estimates use: `measure` reads the one kept
+    /// under `--data-dir` for this adapter and build, or measures it in the background after
+    /// warm-up (about a minute on two cores; the shipped model answers meanwhile); `default`
+    /// keeps the shipped model.
+    #[arg(long, env = "PENUMBRA_MODEL", value_enum, default_value = "measure")]
+    pub model: crate::server::ModelMode,
+
     #[command(flatten)]
     pub render: RenderOptions,
 }

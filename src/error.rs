@@ -27,6 +27,9 @@ pub enum ErrorCode {
     InvalidAsset,
     /// The request exceeds a configured limit (size, pixels, triangles ...).
     LimitExceeded,
+    /// An `auto` job's budget that no method is predicted to meet on this device; the message
+    /// names the closest method and its prediction.
+    BudgetUnmet,
     /// The request body exceeds the configured size limit.
     PayloadTooLarge,
     /// A request header or query parameter (`Idempotency-Key`, a listing's `cursor`) is
@@ -69,6 +72,7 @@ impl ErrorCode {
             ErrorCode::PathNotAllowed => "path_not_allowed",
             ErrorCode::InvalidAsset => "invalid_asset",
             ErrorCode::LimitExceeded => "limit_exceeded",
+            ErrorCode::BudgetUnmet => "budget_unmet",
             ErrorCode::PayloadTooLarge => "payload_too_large",
             ErrorCode::InvalidParameter => "invalid_parameter",
             ErrorCode::IdempotencyKeyReused => "idempotency_key_reused",

@@ -17,6 +17,7 @@ pub mod image_input;
 pub mod job;
 pub mod light;
 pub mod methods;
+pub mod model;
 pub mod output;
 pub mod params;
 pub mod quality;

@@ -156,6 +156,9 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Eval { suite, options } => {
             let gpu = open_gpu(&options)?;
             let engine = Engine::new(gpu, options.limits.limits(), PathPolicy::Any);
+            if suite.model {
+                return measure_model(&engine, &suite.out);
+            }
             let report = penumbra::eval::run(&engine, &suite)?;
             eprintln!("wrote {} rows and {} pictures to {}", report.rows.len(), report.files.len(), suite.out.display());
             Ok(())
@@ -290,4 +293,36 @@ fn print_timings(adapter: &str, timings: &Timings, cpu_ms: f64) {
     }
     eprintln!("{:<12} {:>10.2}", "total", timings.total_ms);
     eprintln!("{:<12} {:>10.2}   ({:.2} cores)", "cpu", cpu_ms, cpu_ms / timings.total_ms);
+}
+
+/// `penumbra eval --model`: measures the model with a progress bar, prints its table and
+/// writes it (`model.json` is what `src/model/default.json` ships).
+fn measure_model(engine: &Engine, out: &std::path::Path) -> anyhow::Result<()> {
+    struct Bar(indicatif::ProgressBar);
+    impl penumbra::model::measure::Hooks for Bar {
+        fn device(&self) -> Box<dyn std::any::Any> {
+            Box::new(())
+        }
+        fn progress(&self, done: usize, total: usize, what: &str) {
+            self.0.set_length(total as u64);
+            self.0.set_position(done as u64);
+            self.0.set_message(what.to_owned());
+        }
+        fn cancelled(&self) -> bool {
+            false
+        }
+    }
+    let bar = Bar(indicatif::ProgressBar::new(1).with_style(
+        indicatif::ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} {msg}").expect("a valid template"),
+    ));
+    let key = penumbra::model::key_for(&engine.adapter());
+    let model = penumbra::model::measure::measure(engine, &penumbra::model::measure::Suite::standard(), key, &bar)?.expect("not cancelled");
+    bar.0.finish_and_clear();
+    std::fs::create_dir_all(out)?;
+    std::fs::write(out.join("model.json"), serde_json::to_vec_pretty(&model)?)?;
+    let table = model.table();
+    std::fs::write(out.join("model.md"), &table)?;
+    println!("{table}");
+    eprintln!("measured in {:.0} s; wrote {}", model.measure_seconds, out.join("model.json").display());
+    Ok(())
 }

@@ -110,6 +110,14 @@ impl Timings {
 
     /// The `Server-Timing` header value (W3C Server Timing): one entry per phase with its
     /// wall time, a `gpu_<phase>` entry where GPU time was measured, and `total`.
+    /// The render's own wall time: the total less a comparison's reference and metrics (what
+    /// an `auto` job's prediction is of).
+    pub fn render_ms(&self) -> f64 {
+        let compared: f64 =
+            self.phases.iter().filter(|p| matches!(p.name, PhaseName::Reference | PhaseName::Quality)).map(|p| p.cpu_ms).sum();
+        self.total_ms - compared
+    }
+
     pub fn server_timing(&self) -> String {
         let mut parts: Vec<String> = Vec::new();
         for phase in &self.phases {

@@ -1757,3 +1757,152 @@ async fn a_texture_never_stops_a_shadow_and_the_staging_is_said() {
     let (_, _, second) = common::decode_exr(&again_image);
     assert_eq!(first["R"], second["R"], "the staging reproduces the image");
 }
+
+/// `auto` (contract §5): the model in `/v1/methods`, estimates that render nothing, a budget
+/// resolved to the method the estimate names — answered with the choice, its prediction and
+/// the measured time, synchronously and submitted — and budgets nothing meets, or out of
+/// range, refused with the field named.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn auto_chooses_by_the_model_and_estimates_render_nothing() {
+    let (base, _dir) = start().await;
+    let client = reqwest::Client::new();
+    let methods: Value = client.get(format!("{base}/v1/methods")).send().await.unwrap().json().await.unwrap();
+    assert_eq!(methods["model"]["status"], "default", "{}", methods["model"]);
+    let candidates = methods["model"]["candidates"].as_array().unwrap().len();
+    assert!(candidates >= 12, "{}", methods["model"]);
+
+    let estimate = |job: Value| {
+        let client = client.clone();
+        let base = base.clone();
+        async move {
+            let response = client.post(format!("{base}/v1/estimate")).json(&job).send().await.unwrap();
+            let status = response.status();
+            (status, response.json::<Value>().await.unwrap())
+        }
+    };
+    let job = |method: Value| json!({"scene": {"builtin": "torus"}, "output": {"width": 96, "height": 64}, "method": method});
+    let (status, plain) = estimate(job(json!({"name": "wedges"}))).await;
+    assert_eq!(status, StatusCode::OK, "{plain}");
+    assert_eq!(plain["predictions"].as_array().unwrap().len(), candidates);
+    assert_eq!(plain["job"]["label"], "wedges", "{plain}");
+    assert_eq!(plain["features"]["triangles_known"], true);
+    assert_eq!(plain["features"]["pixels"], 96 * 64);
+    let wedges_ms = plain["job"]["predicted"]["ms"].as_f64().unwrap();
+    assert!(wedges_ms > 0.0);
+    // Nothing was rendered for it.
+    let stats: Value = client.get(format!("{base}/v1/stats")).send().await.unwrap().json().await.unwrap();
+    assert_eq!(stats["jobs"].as_array().map_or(0, Vec::len), 0, "{}", stats["jobs"]);
+
+    // A time budget: the estimate's choice is what renders, and the answer says so.
+    let budget = json!({"name": "auto", "max_ms": wedges_ms * 4.0});
+    let (_, planned) = estimate(job(budget.clone())).await;
+    let chosen = planned["auto"]["label"].as_str().expect("a choice").to_owned();
+    let predicted_ms = planned["auto"]["predicted"]["ms"].as_f64().unwrap();
+    assert!(predicted_ms * 1.25 <= wedges_ms * 4.0, "{planned}");
+    let response = client.post(format!("{base}/v1/render")).json(&job(budget.clone())).send().await.unwrap();
+    assert_eq!(response.status(), StatusCode::OK);
+    assert_eq!(response.headers()["x-penumbra-auto-method"], chosen.as_str());
+    let timing = response.headers()["server-timing"].to_str().unwrap();
+    assert!(timing.contains(&format!("auto;desc=\"{chosen}\"")), "{timing}");
+    let answer: Value = client
+        .post(format!("{base}/v1/render"))
+        .header("accept", "application/json")
+        .json(&job(budget.clone()))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(answer["auto"]["label"], chosen.as_str(), "{answer}");
+    assert_eq!(answer["method"], answer["auto"]["method"]["name"]);
+    assert_eq!(answer["auto"]["model"], "default");
+    assert!(answer["auto"]["measured_ms"].as_f64().unwrap() > 0.0);
+
+    // An error budget, compared: the measured error comes with it.
+    let mut compared = job(json!({"name": "auto", "max_error": 0.05}));
+    compared["compare"] = json!(true);
+    let answer: Value = client
+        .post(format!("{base}/v1/render"))
+        .header("accept", "application/json")
+        .json(&compared)
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert!(answer["auto"]["predicted"]["error"].as_f64().unwrap() * 1.25 <= 0.05, "{answer}");
+    assert!(answer["quality"]["visibility"]["penumbra"]["mae"].is_number(), "{answer}");
+
+    // Submitted: the record names the choice.
+    let accepted = client.post(format!("{base}/v1/jobs")).json(&job(budget)).send().await.unwrap();
+    assert_eq!(accepted.status(), StatusCode::ACCEPTED);
+    let links: Value = accepted.json().await.unwrap();
+    client.get(format!("{base}{}", links["events"].as_str().unwrap())).send().await.unwrap().text().await.unwrap();
+    let record: Value = client.get(format!("{base}{}", links["record"].as_str().unwrap())).send().await.unwrap().json().await.unwrap();
+    assert_eq!(record["status"], "succeeded", "{record}");
+    assert_eq!(record["auto"]["label"], chosen.as_str(), "{record}");
+
+    // Budgets nothing meets: 422 naming the field and the closest choice; estimates say why.
+    let (status, unmet) = estimate(job(json!({"name": "auto", "max_ms": 0.001}))).await;
+    assert_eq!(status, StatusCode::OK);
+    assert_eq!(unmet["unmet"]["field"], "method.max_ms", "{unmet}");
+    for (method, field, code) in [
+        (json!({"name": "auto", "max_ms": 0.001}), "method.max_ms", "budget_unmet"),
+        (json!({"name": "auto", "max_error": 1e-7}), "method.max_error", "budget_unmet"),
+        (json!({"name": "auto", "max_error": 1.5}), "method.max_error", "invalid_field"),
+        (json!({"name": "auto", "max_ms": -1}), "method.max_ms", "invalid_field"),
+        (json!({"name": "auto", "max_ms": 1e12}), "method.max_ms", "invalid_field"),
+        (json!({"name": "auto"}), "method.max_ms", "invalid_field"),
+        (json!({"name": "auto", "max_ms": 100, "samples": 4}), "method.samples", "unknown_field"),
+    ] {
+        for route in ["render", "jobs", "estimate"] {
+            if code == "budget_unmet" && route == "estimate" {
+                continue;
+            }
+            let response = client.post(format!("{base}/v1/{route}")).json(&job(method.clone())).send().await.unwrap();
+            assert_eq!(response.status(), StatusCode::UNPROCESSABLE_ENTITY, "{route} {method}");
+            let error: Value = response.json().await.unwrap();
+            assert_eq!((error["error"]["code"].as_str(), error["error"]["field"].as_str()), (Some(code), Some(field)), "{route} {error}");
+            if code == "budget_unmet" {
+                assert!(error["error"]["message"].as_str().unwrap().contains("closest"), "{error}");
+            }
+        }
+    }
+}
+
+/// A daemon that finds its device's model in the data directory uses it instead of measuring
+/// again; one for another build is not read.
+#[tokio::test(flavor = "multi_thread")]
+async fn a_stored_model_for_this_adapter_and_build_is_read_at_start() {
+    let data = tempdir::Dir::new();
+    let (probe, base) = serve(&[], &[]).await;
+    let ready: Value = reqwest::get(format!("{base}/readyz")).await.unwrap().json().await.unwrap();
+    drop(probe);
+    let build = format!("{}+{}", env!("CARGO_PKG_VERSION"), &sha256_hex(&std::fs::read(env!("CARGO_BIN_EXE_penumbra")).unwrap())[..12]);
+    let key = penumbra::model::ModelKey {
+        adapter: ready["adapter"]["name"].as_str().unwrap().to_owned(),
+        driver: ready["adapter"]["driver"].as_str().unwrap().to_owned(),
+        build,
+    };
+    let mut model = penumbra::model::Model::shipped();
+    model.key = key.clone();
+    model.source = "measured".into();
+    model.measure_seconds = 4242.0;
+    penumbra::model::save(data.path(), &model).unwrap();
+    let stale = penumbra::model::Model { key: penumbra::model::ModelKey { build: "0.0.0+old".into(), ..key }, ..model };
+    penumbra::model::save(data.path(), &stale).unwrap();
+    let data_dir = data.path().to_str().unwrap();
+    let (_daemon, base) = serve(&["--data-dir", data_dir, "--job-store", "memory"], &[("PENUMBRA_MODEL", "measure")]).await;
+    let mut shown = Value::Null;
+    for _ in 0..100 {
+        shown = reqwest::get(format!("{base}/v1/methods")).await.unwrap().json::<Value>().await.unwrap()["model"].clone();
+        if shown["status"] == "stored" {
+            break;
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(100)).await;
+    }
+    assert_eq!(shown["status"], "stored", "{shown}");
+    assert_eq!(shown["measure_seconds"], 4242.0);
+}

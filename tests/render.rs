@@ -1833,3 +1833,43 @@ fn the_worst_real_models_hold_their_errors_and_the_methods_say_what_they_cannot_
     assert!(said.iter().any(|w| w.starts_with("wedges:") && w.contains("two occluding layers")), "{said:?}");
     assert!(warned("BLEND-BlenderDefault_276", "wedges").iter().all(|w| !w.starts_with("wedges:")));
 }
+
+/// The model `auto` chooses by, measured on a suite small enough for a test: every candidate
+/// with a cost per kind of light that grows with the pixels, and errors that order the
+/// reference's sample counts as 1/√samples does.
+#[test]
+fn the_model_is_measured_on_the_device() {
+    use penumbra::model::{measure, Features, LightKind};
+    let suite = measure::Suite {
+        scenes: vec![("occluder", "{}")],
+        lights: vec![("white", LightKind::White), ("flame", LightKind::Coloured)],
+        sizes: vec![(48, 32), (128, 96)],
+        maps: vec![128, 256],
+        truth_samples: 256,
+        truth_seed: 7,
+    };
+    let engine = common::engine();
+    let key = penumbra::model::key_for(&engine.adapter());
+    let model = measure::measure(&engine, &suite, key, &measure::Plain).unwrap().expect("not cancelled");
+    let labels: Vec<&str> = model.candidates.iter().map(|c| c.label.as_str()).collect();
+    assert_eq!(labels.len(), measure::CANDIDATES.len() + 1, "{labels:?}");
+    let at = |pixels, light| Features {
+        pixels,
+        texels: 256 * 256,
+        triangles: 1_000,
+        triangles_known: true,
+        light,
+        scene: Some("occluder".into()),
+    };
+    for candidate in &model.candidates {
+        for light in [LightKind::White, LightKind::Coloured] {
+            let (small, large) = (candidate.predict(&at(48 * 32, light)), candidate.predict(&at(1920 * 1080, light)));
+            assert!(small.ms > 0.0 && large.ms >= small.ms, "{}: {small:?} {large:?}", candidate.label);
+            assert!((0.0..1.0).contains(&small.error), "{}: {small:?}", candidate.label);
+        }
+        assert_eq!(candidate.times.len(), if candidate.errors_measured { 8 } else { 0 }, "{}", candidate.label);
+    }
+    let error = |label: &str| model.candidates.iter().find(|c| c.label == label).unwrap().error(&at(128 * 96, LightKind::White));
+    assert!(error("reference:samples=16") > error("reference:samples=64"), "16: {}, 64: {}", error("reference:samples=16"), error("reference:samples=64"));
+    assert!(error("hard") > error("reference:samples=64"));
+}

@@ -96,6 +96,34 @@ impl Engine {
         Ok(image)
     }
 
+    /// The triangles of a job's scene where they can be counted without loading a file or
+    /// waiting for the renderer: a built-in's (built once, then remembered) or an upload's;
+    /// `None` for a path (what `auto` and estimates then assume: `model::UNKNOWN_TRIANGLES`).
+    pub fn scene_triangles(&self, scene: &SceneRef) -> Option<u64> {
+        let floor = if scene.floor.is_some() { 2 } else { 0 };
+        match &scene.asset {
+            AssetRef::Builtin { name, params } => {
+                let key = self.asset_key(&scene.asset, Kind::Scene, "scene").ok()?;
+                let mut counted = self.builtin_triangles.lock().unwrap_or_else(|p| p.into_inner());
+                if let Some(&n) = counted.get(&key) {
+                    return Some(n + floor);
+                }
+                let n = builtin::build(name, params, "scene", &self.limits).ok()?.triangle_count();
+                // A handful of built-in variants in practice; bounded all the same.
+                if counted.len() >= 256 {
+                    counted.clear();
+                }
+                counted.insert(key, n);
+                Some(n + floor)
+            }
+            AssetRef::Id(id) => match self.uploaded(Kind::Scene, id, "scene.id").ok()? {
+                Asset::Scene(loaded) => Some(loaded.triangle_count() + floor),
+                Asset::Light(_) => None,
+            },
+            AssetRef::Path(_) => None,
+        }
+    }
+
     /// The cache key of a job's scene: its asset's, and its floor.
     pub(super) fn scene_key(&self, scene: &SceneRef) -> JobResult<String> {
         let key = self.asset_key(&scene.asset, Kind::Scene, "scene")?;

@@ -57,6 +57,8 @@ pub struct Rendered {
     pub staging: crate::render::Staging,
     /// The SHA-256 of `bytes`, computed when first asked for (records and `ETag`s).
     pub digest: std::sync::OnceLock<String>,
+    /// What `auto` chose, when the job asked for it (set by the server, which resolves it).
+    pub auto: Option<crate::job::auto::AutoChoice>,
 }
 
 impl Rendered {
@@ -101,6 +103,8 @@ pub struct Engine {
     references: Mutex<Lru<String, Arc<FrameOutput>>>,
     /// The renderer's pool budget (`with_pool_budget`), kept for a renderer made anew.
     pool_bytes: u64,
+    /// Built-in scenes' triangles by asset key, counted for estimates (`scene_triangles`).
+    builtin_triangles: Mutex<std::collections::HashMap<String, u64>>,
 }
 
 impl Engine {
@@ -146,6 +150,7 @@ impl Engine {
             uploads: Mutex::new(UploadStore::new(DEFAULT_CACHE_BYTES)),
             last_stats: Mutex::new(EngineStats::default()),
             pool_bytes: crate::gpu::pool::DEFAULT_POOL_BYTES,
+            builtin_triangles: Mutex::default(),
         }
     }
 
@@ -219,12 +224,19 @@ impl Engine {
     /// Checks, renders and encodes one job, reporting the progress of long methods to
     /// `supervisor` (steps done, steps in all), which may also stop it.
     pub fn render(&self, job: &Job, supervisor: &dyn Supervisor) -> JobResult<Rendered> {
+        self.render_compared(job, &job.reference_job(), supervisor)
+    }
+
+    /// `render`, measured (where the job asks to `compare`) against `reference` rather than
+    /// the default reference: an `auto` job is measured against the truth its model's errors
+    /// were measured against.
+    pub fn render_compared(&self, job: &Job, reference: &Job, supervisor: &dyn Supervisor) -> JobResult<Rendered> {
         let started = Instant::now();
         let (frame, mut timings) = self.render_frame_reading(job, supervisor, crate::render::ExtraImages::for_encoding)?;
         // The frame is on the CPU: what follows runs outside the device lock.
         let quality = if job.compare {
             let start = Instant::now();
-            let reference = self.reference_for(job, supervisor)?;
+            let reference = self.reference_for(reference, supervisor)?;
             let start = timings.phase(PhaseName::Reference, start);
             let report = crate::quality::compare(&frame, &reference, job.output.exposure);
             timings.phase(PhaseName::Quality, start);
@@ -248,22 +260,23 @@ impl Engine {
             warnings: frame.warnings,
             staging: frame.staging,
             digest: std::sync::OnceLock::new(),
+            auto: None,
         })
     }
 
-    /// The reference frame for a job's scene, view, light and size, rendered once and
-    /// cached, so a sweep over methods renders it once.
-    pub fn reference_for(&self, job: &Job, supervisor: &dyn Supervisor) -> JobResult<Arc<FrameOutput>> {
-        let reference_job = job.reference_job();
+    /// A reference frame (`Job::reference_job`, or another reference method's) for a job's
+    /// scene, view, light and size, rendered once and cached, so a sweep over methods renders
+    /// it once.
+    pub fn reference_for(&self, reference_job: &Job, supervisor: &dyn Supervisor) -> JobResult<Arc<FrameOutput>> {
         let key = format!(
             "{}|{}",
-            self.scene_key(&job.scene)?,
-            serde_json::to_string(&reference_job).map_err(|e| crate::error::JobError::internal(e.to_string()))?
+            self.scene_key(&reference_job.scene)?,
+            serde_json::to_string(reference_job).map_err(|e| crate::error::JobError::internal(e.to_string()))?
         );
         if let Some(frame) = self.references.lock().unwrap_or_else(|p| p.into_inner()).get(&key) {
             return Ok(frame);
         }
-        let (frame, _) = self.render_frame(&reference_job, supervisor)?;
+        let (frame, _) = self.render_frame(reference_job, supervisor)?;
         let frame = Arc::new(frame);
         self.references.lock().unwrap_or_else(|p| p.into_inner()).insert(key, frame.clone());
         Ok(frame)

@@ -43,6 +43,11 @@ pub struct EvalOptions {
     /// Folder for the results.
     #[arg(long, default_value = "eval")]
     pub out: PathBuf,
+    /// Instead of the suite: measure this device's cost and quality model (what `auto` and
+    /// `POST /v1/estimate` predict by; contract §5), print it as a table and write it to
+    /// `model.json` and `model.md` in `--out`.
+    #[arg(long)]
+    pub model: bool,
     /// Sweep one numeric parameter of one method, e.g. `brabec:max_radius_texels=4,8,16,32`
     /// (other `key=value` parts stay fixed): adds one row per value and writes a table and a
     /// plot (`sweep-*.svg`) of cost and penumbra error against the value.

@@ -11,6 +11,7 @@ use serde_json::{Map, Value};
 use crate::error::{ErrorCode, JobError, JobResult};
 
 mod assets;
+pub mod auto;
 mod limits;
 pub mod submission;
 pub mod summary;

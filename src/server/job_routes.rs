@@ -56,7 +56,7 @@ pub(super) async fn submit_job(
         let body = body?;
         let job = Job::from_json_limited(&body, state.engine.limits())?;
         let uploads_here = state.shared_store().is_none();
-        state.engine.check(&job, uploads_here)?;
+        state.check_submission(&job, uploads_here)?;
         // The job as sent (it parsed, so it is JSON): what the store keeps and resumes.
         let sent: Value = serde_json::from_slice(&body).map_err(|e| JobError::new(ErrorCode::InvalidJson, e.to_string()))?;
         Ok((key, job, sent))

@@ -61,12 +61,17 @@ pub(super) async fn readyz(State(state): State<Arc<AppState>>) -> Response {
     }
 }
 
-pub(super) async fn methods() -> Json<Value> {
+/// `GET /v1/methods`: the registry, the built-ins, and the device's cost and quality model
+/// (`auto` chooses by it; its `status` says whether it is this device's yet).
+pub(super) async fn methods(State(state): State<Arc<AppState>>) -> Json<Value> {
     let methods: Vec<Value> = REGISTRY.iter().map(|m| json!({"name": m.name(), "summary": m.summary(), "params": m.params()})).collect();
+    let mut model = state.model.get().summary();
+    model["status"] = state.model.status().into();
     Json(json!({
         "methods": methods,
         "scenes": BUILTIN_SCENES,
         "light_images": BUILTIN_LIGHT_IMAGES,
+        "model": model,
     }))
 }
 

@@ -4,6 +4,7 @@
 //! pool so the async workers keep answering health checks while the device is busy.
 
 pub mod auth;
+mod auto;
 mod cluster;
 pub mod connections;
 mod dashboard;
@@ -46,6 +47,8 @@ use crate::scene::builtin::BUILTIN_SCENES;
 use crate::store::{new_job_id, JobStore as DurableStore, Store, StoreError, StoredJob, MAX_ATTEMPTS};
 use crate::supervise::Supervise;
 use crate::upload_store::{content_id, is_content_id, Kind};
+pub use auto::ModelMode;
+use auto::estimate;
 pub use cluster::Replica;
 use error::{store_error, ApiError};
 use job_routes::{cancel_job, immutable, job_events, job_image, job_record, job_thumbnail, list_jobs, not_modified, submit_job, unchanged};
@@ -86,6 +89,7 @@ pub fn app(state: Arc<AppState>) -> Router {
     // Everything under /v1 needs a token when tokens are configured.
     let v1 = Router::new()
         .route("/v1/render", post(render))
+        .route("/v1/estimate", post(estimate))
         .route("/v1/methods", get(methods))
         .route("/v1/limits", get(limits))
         .route("/v1/scenes", post(upload_scene))

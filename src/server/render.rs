@@ -3,6 +3,7 @@
 //! `render_blocking` is the one orchestration of a render, shared with submitted jobs.
 
 use super::*;
+use crate::job::auto::AutoChoice;
 
 fn wants_json(headers: &HeaderMap) -> bool {
     headers
@@ -19,6 +20,8 @@ pub(super) async fn render(
     let started = std::time::Instant::now();
     let body = body.map_err(|rejection| body_error(&state, rejection, ErrorCode::InvalidJson));
     let job = body.and_then(|body| Job::from_json_limited(&body, state.engine.limits()));
+    // An `auto` budget nothing meets is refused before the job is queued.
+    let job = job.and_then(|job| state.resolve_auto(&job, true).map(|_| job));
     let method = job.as_ref().map(|j| j.method.name.clone()).unwrap_or_default();
     let outcome = match job {
         Ok(job) => queue_and_render(&state, &method, job).await,
@@ -128,11 +131,31 @@ where
     C: Fn() -> bool + Send + 'static,
 {
     let span = tracing::info_span!("job", %id, method = %job.method.name);
+    // `auto`: chosen by this replica's model, which predicts this device.
+    let (job, auto) = match state.resolve_auto(&job, false) {
+        Ok(Some((chosen, choice))) => (chosen, Some(choice)),
+        Ok(None) => (job, None),
+        Err(error) => {
+            let outcome = Err(error);
+            finish(&outcome);
+            return outcome;
+        }
+    };
     let (engine, store) = (state.engine.clone(), state.store.clone());
     tokio::task::spawn_blocking(move || {
         let _hold = hold;
         span.in_scope(|| {
-            let outcome = fetch_shared_uploads(&engine, store.as_ref(), &job).and_then(|()| engine.render(&job, &supervise));
+            // An `auto` job is compared with the truth its model's errors were measured against.
+            let reference = match auto {
+                Some(_) => crate::model::measure::Suite::standard().truth_of(&job),
+                None => job.reference_job(),
+            };
+            let outcome = fetch_shared_uploads(&engine, store.as_ref(), &job)
+                .and_then(|()| engine.render_compared(&job, &reference, &supervise))
+                .map(|mut rendered| {
+                    rendered.auto = auto.map(|choice| AutoChoice { measured_ms: Some(rendered.timings.render_ms()), ..choice });
+                    rendered
+                });
             finish(&outcome);
             outcome
         })
@@ -156,6 +179,7 @@ pub(super) fn job_json(id: &str, rendered: &Rendered) -> Value {
         "quality": rendered.quality,
         "warnings": rendered.warnings,
         "staging": rendered.staging,
+        "auto": rendered.auto,
         "image": format!("/v1/jobs/{id}/image"),
     })
 }
@@ -164,7 +188,19 @@ pub(super) fn image_response(id: &str, rendered: &Rendered) -> Response {
     let mut response = rendered.bytes.clone().into_response();
     let headers = response.headers_mut();
     headers.insert(header::CONTENT_TYPE, HeaderValue::from_static(rendered.format.mime()));
-    if let Ok(timing) = HeaderValue::from_str(&rendered.timings.server_timing()) {
+    let mut timing = rendered.timings.server_timing();
+    if let Some(auto) = &rendered.auto {
+        // The choice and its prediction beside the measured phases.
+        timing.push_str(&format!(", auto;desc=\"{}\";dur={:.3}", auto.label, auto.predicted.ms));
+        if let Ok(choice) = HeaderValue::from_str(&auto.label) {
+            headers.insert("x-penumbra-auto-method", choice);
+        }
+        headers.insert("x-penumbra-predicted-ms", HeaderValue::from(auto.predicted.ms.round() as u64));
+        if let Ok(error) = HeaderValue::from_str(&format!("{:.5}", auto.predicted.error)) {
+            headers.insert("x-penumbra-predicted-error", error);
+        }
+    }
+    if let Ok(timing) = HeaderValue::from_str(&timing) {
         headers.insert("server-timing", timing);
     }
     if let Ok(id) = HeaderValue::from_str(id) {

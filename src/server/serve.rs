@@ -45,7 +45,7 @@ pub async fn serve(config: ServeConfig, engine: Arc<Engine>) -> anyhow::Result<(
     tracing::info!(address = %listener.local_addr()?, lavapipe_threads, max_connections = tracker.stats().max, "listening");
     tracker.spawn_sweeper();
     let listener = connections::TrackedListener::new(listener, tracker);
-    spawn_warm_up(state.clone(), !config.no_warm_up);
+    spawn_warm_up(state.clone(), !config.no_warm_up, (config.model, config.data_dir.clone()));
     let stopping = state.clone();
     let signal = async move {
         shutdown_signal().await;
@@ -96,8 +96,9 @@ fn replica_name(config: &ServeConfig) -> String {
 }
 
 /// Compiles the pipelines and uploads the default scene (unless `warm_up` is false) in the
-/// background, then marks the daemon ready, starts its workers and its heartbeat.
-fn spawn_warm_up(state: Arc<AppState>, warm_up: bool) {
+/// background, then marks the daemon ready, starts its workers and its heartbeat, and reads or
+/// measures the device's model (`auto.rs`).
+fn spawn_warm_up(state: Arc<AppState>, warm_up: bool, (model, data_dir): (ModelMode, std::path::PathBuf)) {
     tokio::spawn(async move {
         let started = std::time::Instant::now();
         if warm_up {
@@ -114,6 +115,8 @@ fn spawn_warm_up(state: Arc<AppState>, warm_up: bool) {
         // A replica of a shared store takes jobs, and joins the cluster view, once it is warm.
         state.spawn_workers();
         state.spawn_heartbeat();
+        // After readiness: `auto` answers with the shipped model until this one is in.
+        super::auto::spawn_model(state, model, data_dir);
     });
 }
 

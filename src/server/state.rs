@@ -35,6 +35,8 @@ pub struct AppState {
     pub(super) replica: Replica,
     /// The shared store's backlog as last read, and when (read at most once a second).
     backlog: tokio::sync::Mutex<Option<(std::time::Instant, Option<crate::store::Backlog>)>>,
+    /// The device's cost and quality model, for `auto` and estimates.
+    pub(super) model: super::auto::ModelState,
 }
 
 /// The least time between two reads of a shared store's backlog.
@@ -78,6 +80,7 @@ impl AppState {
             started: std::time::SystemTime::now(),
             idempotency: Idempotency::new(DEFAULT_IDEMPOTENCY_TTL, crate::job::submission::DEFAULT_MAX_KEYS),
             backlog: tokio::sync::Mutex::new(None),
+            model: super::auto::ModelState::shipped(),
             replica: Replica::new("penumbra", DEFAULT_HEARTBEAT),
         }
     }

@@ -21,11 +21,12 @@ pub fn free_address() -> String {
     std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().to_string()
 }
 
-/// `penumbra serve --listen ADDRESS` with logs at `warn` to nowhere: add flags, environment or
-/// a stderr pipe, then `Daemon::start` it.
+/// `penumbra serve --listen ADDRESS` with logs at `warn` to nowhere and the shipped model (no
+/// measurement in the background: tests share two cores): add flags, environment or a stderr
+/// pipe, then `Daemon::start` it.
 pub fn serve_command(address: &str) -> Command {
     let mut command = Command::new(env!("CARGO_BIN_EXE_penumbra"));
-    command.args(["serve", "--listen", address]).env("PENUMBRA_LOG", "warn").stderr(Stdio::null());
+    command.args(["serve", "--listen", address]).env("PENUMBRA_LOG", "warn").env("PENUMBRA_MODEL", "default").stderr(Stdio::null());
     command
 }
 

@@ -1,0 +1,352 @@
+//! Measuring the model (contract §5): every candidate rendered on a small built-in suite — three
+//! scene kinds, a white and a coloured light, two sizes, two map resolutions — its wall time
+//! fitted as a linear cost of the job's features, and its penumbra error taken against a
+//! 1,024-sample reference of another seed.
+
+use std::time::Instant;
+
+use serde_json::{json, Map};
+
+use super::{Candidate, Cost, Costs, ErrorPoint, Features, LightKind, Model, ModelKey, TimePoint, FEATURES};
+use crate::engine::Engine;
+use crate::error::JobResult;
+use crate::job::{AssetRef, Job, LightSpec, MethodSpec, OutputFormat, OutputSpec, ShadowMapSpec};
+use crate::render::FrameOutput;
+
+/// The candidates `auto` chooses among, cheapest first: every method at its defaults, and the
+/// reference at four sample counts (1,024 predicted from 64 and 256, not rendered: it is the
+/// suite's truth's own cost).
+pub const CANDIDATES: &[&str] = &[
+    "hard",
+    "pcss",
+    "chun-oh",
+    "brabec",
+    "jfa-l",
+    "jfa-e",
+    "wedges",
+    "filtered",
+    "reference:samples=16",
+    "reference:samples=64",
+    "reference:samples=256",
+];
+
+/// What the model is measured on. The daemon and `eval --model` measure `Suite::standard`.
+#[derive(Debug, Clone)]
+pub struct Suite {
+    /// Built-in scenes with their parameters (JSON objects).
+    pub scenes: Vec<(&'static str, &'static str)>,
+    pub lights: Vec<(&'static str, LightKind)>,
+    /// Output sizes: the cost's pixel terms need two or more, far apart.
+    pub sizes: Vec<(u32, u32)>,
+    /// Map resolutions: the cost's texel term needs two; errors are measured at the last.
+    pub maps: Vec<u32>,
+    /// Samples of the truth the errors are measured against, with a seed other than the
+    /// candidates' (whose strata it would otherwise share).
+    pub truth_samples: u32,
+    pub truth_seed: u32,
+}
+
+impl Suite {
+    /// One occluder over a floor, many, and a self-shadowing landscape; white and a light of
+    /// 26 coloured cells; 160×120 and 640×480; maps of 512² and 1,024²; a 1,024-sample truth.
+    /// About 100 s on two cores with lavapipe.
+    pub fn standard() -> Self {
+        Self {
+            scenes: vec![("torus", "{}"), ("crowd", "{}"), ("terrain", r#"{"triangles": 30000}"#)],
+            lights: vec![("white", LightKind::White), ("flame", LightKind::Coloured)],
+            sizes: vec![(160, 120), (640, 480)],
+            maps: vec![512, 1024],
+            truth_samples: 1024,
+            truth_seed: 7,
+        }
+    }
+
+    /// The truth a job's error is measured against: the reference with the suite's samples and
+    /// seed, and maps of the job's resolution (also what an `auto` job that asks to `compare`
+    /// is measured against).
+    pub fn truth_of(&self, job: &Job) -> Job {
+        let mut truth = job.reference_job();
+        truth.method.params.extend([
+            ("samples".into(), self.truth_samples.into()),
+            ("seed".into(), self.truth_seed.into()),
+            ("resolution".into(), job.shadow_map.resolution.into()),
+        ]);
+        truth
+    }
+}
+
+/// What the measurement needs from its caller: a way to wait for the device between renders
+/// (the daemon's job slots, so that jobs are never slowed by it), progress, and whether to stop.
+pub trait Hooks {
+    /// Called before each render; returns a guard held while it runs.
+    fn device(&self) -> Box<dyn std::any::Any>;
+    fn progress(&self, done: usize, total: usize, what: &str);
+    fn cancelled(&self) -> bool;
+}
+
+/// No waiting, no progress: `eval --model` and tests.
+pub struct Plain;
+
+impl Hooks for Plain {
+    fn device(&self) -> Box<dyn std::any::Any> {
+        Box::new(())
+    }
+    fn progress(&self, _: usize, _: usize, _: &str) {}
+    fn cancelled(&self) -> bool {
+        false
+    }
+}
+
+/// One render of the suite: a candidate's time on a case and, at the larger map, its error.
+pub(super) struct Sample {
+    features: Features,
+    ms: f64,
+}
+
+/// Measures every candidate on the suite; `None` if stopped.
+pub fn measure(engine: &Engine, suite: &Suite, key: ModelKey, hooks: &dyn Hooks) -> JobResult<Option<Model>> {
+    let started = Instant::now();
+    let candidates: Vec<(String, MethodSpec)> = CANDIDATES.iter().map(|label| ((*label).to_owned(), parse_label(label))).collect();
+    let cases = cases(suite);
+    let total = cases.len() * candidates.len() + cases.iter().filter(|c| c.errors_here).count();
+    let mut done = 0;
+    let mut times: Vec<Vec<Sample>> = candidates.iter().map(|_| Vec::new()).collect();
+    let mut errors: Vec<Vec<ErrorPoint>> = candidates.iter().map(|_| Vec::new()).collect();
+    // Every pipeline compiled before any render is timed (a light of several colours compiles
+    // its own).
+    let first_of_each_light = suite.lights.iter().filter_map(|(_, kind)| cases.iter().find(|c| c.features.light == *kind));
+    for case in first_of_each_light {
+        for (_, method) in &candidates {
+            let _device = hooks.device();
+            engine.render_frame(&case.job_with(method), &())?;
+        }
+    }
+    for case in &cases {
+        let truth = if case.errors_here {
+            let truth = suite.truth_of(&case.job);
+            let _device = hooks.device();
+            let (frame, _) = engine.render_frame(&truth, &())?;
+            done += 1;
+            Some(frame)
+        } else {
+            None
+        };
+        for (c, (label, method)) in candidates.iter().enumerate() {
+            if hooks.cancelled() {
+                return Ok(None);
+            }
+            hooks.progress(done, total, label);
+            let job = case.job_with(method);
+            let (frame, ms) = {
+                let _device = hooks.device();
+                timed_render(engine, &job)?
+            };
+            times[c].push(Sample { features: case.features.clone(), ms });
+            if let Some(truth) = &truth {
+                let quality = crate::quality::compare(&frame, truth, 0.0);
+                errors[c].push(ErrorPoint {
+                    scene: case.scene.to_owned(),
+                    light: case.features.light,
+                    pixels: case.features.pixels,
+                    error: quality.visibility.penumbra.mae,
+                });
+            }
+            done += 1;
+        }
+    }
+    let mut fitted: Vec<Candidate> = candidates
+        .into_iter()
+        .zip(times.iter().zip(errors))
+        .map(|((label, method), (samples, errors))| Candidate {
+            label,
+            method,
+            cost: Costs {
+                white: fit(samples.iter().filter(|s| s.features.light == LightKind::White)),
+                coloured: fit(samples.iter().filter(|s| s.features.light == LightKind::Coloured)),
+            },
+            errors,
+            errors_measured: true,
+            times: samples
+                .iter()
+                .map(|s| TimePoint {
+                    scene: s.features.scene.clone().unwrap_or_default(),
+                    light: s.features.light,
+                    pixels: s.features.pixels,
+                    texels: s.features.texels,
+                    triangles: s.features.triangles,
+                    ms: s.ms,
+                })
+                .collect(),
+        })
+        .collect();
+    if let Some(extrapolated) = reference_1024(&fitted) {
+        fitted.push(extrapolated);
+    }
+    Ok(Some(Model {
+        key,
+        source: "measured".into(),
+        measured_unix_ms: crate::job::submission::unix_ms(),
+        measure_seconds: started.elapsed().as_secs_f64(),
+        candidates: fitted,
+    }))
+}
+
+/// A render as a client's costs: the frame and its PNG, wall time in milliseconds.
+fn timed_render(engine: &Engine, job: &Job) -> JobResult<(FrameOutput, f64)> {
+    let started = Instant::now();
+    let (frame, _) = engine.render_frame(job, &())?;
+    crate::output::encode(&frame, OutputFormat::Png, 0.0)?;
+    Ok((frame, started.elapsed().as_secs_f64() * 1e3))
+}
+
+/// `name[:key=value…]` as a method spec (values are JSON).
+pub fn parse_label(label: &str) -> MethodSpec {
+    let mut parts = label.split(':');
+    let name = parts.next().unwrap_or_default().to_owned();
+    let params: Map<String, serde_json::Value> = parts
+        .filter_map(|kv| kv.split_once('='))
+        .map(|(k, v)| (k.to_owned(), serde_json::from_str(v).unwrap_or_else(|_| json!(v))))
+        .collect();
+    MethodSpec { name, params }
+}
+
+/// One case of the suite.
+struct Case {
+    scene: &'static str,
+    job: Job,
+    features: Features,
+    /// Errors are measured at the suite's last map only (the truth costs most of the suite).
+    errors_here: bool,
+}
+
+impl Case {
+    fn job_with(&self, method: &MethodSpec) -> Job {
+        let candidate =
+            Candidate { label: String::new(), method: method.clone(), cost: Costs::default(), errors: vec![], errors_measured: true, times: vec![] };
+        // `compare` reads the visibility back for the error (a little more than a PNG job reads).
+        Job { method: candidate.method_for(&self.job), compare: true, ..self.job.clone() }
+    }
+}
+
+fn cases(suite: &Suite) -> Vec<Case> {
+    let mut cases = Vec::new();
+    for &(scene, params) in &suite.scenes {
+        let params: Map<String, serde_json::Value> = serde_json::from_str(params).expect("the suite's scene parameters parse");
+        let triangles = crate::scene::builtin::build(scene, &params, "scene", &crate::job::Limits::default())
+            .map(|s| s.triangle_count())
+            .expect("the suite's scenes build");
+        for &(light, kind) in &suite.lights {
+            for &(width, height) in &suite.sizes {
+                for &resolution in &suite.maps {
+                    let job = Job {
+                        scene: AssetRef::Builtin { name: scene.into(), params: params.clone() }.into(),
+                        light: LightSpec { image: Some(AssetRef::builtin(light)), ..Default::default() },
+                        shadow_map: ShadowMapSpec { resolution },
+                        output: OutputSpec { width, height, format: OutputFormat::Png, exposure: 0.0 },
+                        ..Job::embedded_default()
+                    };
+                    let features = Features {
+                        pixels: u64::from(width) * u64::from(height),
+                        texels: u64::from(resolution).pow(2),
+                        triangles,
+                        triangles_known: true,
+                        light: kind,
+                        scene: Some(scene.into()),
+                    };
+                    cases.push(Case { scene, job, features, errors_here: Some(&resolution) == suite.maps.last() });
+                }
+            }
+        }
+    }
+    cases
+}
+
+/// The reference at 1,024 samples, from its fits at 64 and 256: each cost term grows linearly
+/// with the samples (a map and a test each), the errors fall as 1/√samples.
+fn reference_1024(candidates: &[Candidate]) -> Option<Candidate> {
+    let find = |label: &str| candidates.iter().find(|c| c.label == label);
+    let (at_64, at_256) = (find("reference:samples=64")?, find("reference:samples=256")?);
+    let extrapolate = |c64: &Cost, c256: &Cost| {
+        let (c64, c256) = (c64.as_array(), c256.as_array());
+        Cost::from_array(std::array::from_fn(|i| (c256[i] + (c256[i] - c64[i]) * (1024.0 - 256.0) / (256.0 - 64.0)).max(c256[i])))
+    };
+    let cost = Costs {
+        white: extrapolate(&at_64.cost.white, &at_256.cost.white),
+        coloured: extrapolate(&at_64.cost.coloured, &at_256.cost.coloured),
+    };
+    let errors = at_256.errors.iter().map(|p| ErrorPoint { error: p.error * 0.5, ..p.clone() }).collect();
+    Some(Candidate {
+        label: "reference:samples=1024".into(),
+        method: parse_label("reference:samples=1024"),
+        cost,
+        errors,
+        errors_measured: false,
+        times: Vec::new(),
+    })
+}
+
+/// The non-negative least-squares fit of the times on the features, each residual relative to
+/// its time (a 20 ms case counts as much as a 2 s one): every subset of the terms is solved by
+/// its normal equations and the best fit with no negative coefficient kept (2⁴ − 1 subsets).
+pub(super) fn fit<'a>(samples: impl Iterator<Item = &'a Sample>) -> Cost {
+    let rows: Vec<([f64; FEATURES], f64)> = samples
+        .filter(|s| s.ms > 0.0)
+        .map(|s| {
+            let x = s.features.vector();
+            (x.map(|v| v / s.ms), 1.0)
+        })
+        .collect();
+    let mut best: Option<(f64, [f64; FEATURES])> = None;
+    for subset in 1u32..(1 << FEATURES) {
+        let terms: Vec<usize> = (0..FEATURES).filter(|i| subset & (1 << i) != 0).collect();
+        let Some(solved) = least_squares(&rows, &terms) else { continue };
+        if solved.iter().any(|c| *c < 0.0) {
+            continue;
+        }
+        let mut coefficients = [0.0; FEATURES];
+        for (&term, &c) in terms.iter().zip(&solved) {
+            coefficients[term] = c;
+        }
+        let residual: f64 = rows.iter().map(|(x, b)| (x.iter().zip(&coefficients).map(|(x, c)| x * c).sum::<f64>() - b).powi(2)).sum();
+        if best.is_none_or(|(r, _)| residual < r) {
+            best = Some((residual, coefficients));
+        }
+    }
+    Cost::from_array(best.map_or([0.0; FEATURES], |(_, c)| c))
+}
+
+/// Least squares over `terms` of `rows` by the normal equations; `None` when they are singular.
+fn least_squares(rows: &[([f64; FEATURES], f64)], terms: &[usize]) -> Option<Vec<f64>> {
+    let n = terms.len();
+    let mut a = vec![vec![0.0; n + 1]; n];
+    for (x, b) in rows {
+        for (i, &ti) in terms.iter().enumerate() {
+            for (j, &tj) in terms.iter().enumerate() {
+                a[i][j] += x[ti] * x[tj];
+            }
+            a[i][n] += x[ti] * b;
+        }
+    }
+    // Gaussian elimination with partial pivoting.
+    for col in 0..n {
+        let pivot = (col..n).max_by(|&i, &j| a[i][col].abs().total_cmp(&a[j][col].abs()))?;
+        if a[pivot][col].abs() < 1e-12 {
+            return None;
+        }
+        a.swap(col, pivot);
+        for row in 0..n {
+            if row != col {
+                let factor = a[row][col] / a[col][col];
+                for k in col..=n {
+                    a[row][k] -= factor * a[col][k];
+                }
+            }
+        }
+    }
+    Some((0..n).map(|i| a[i][n] / a[i][i]).collect())
+}
+
+#[cfg(test)]
+pub(super) fn sample(features: Features, ms: f64) -> Sample {
+    Sample { features, ms }
+}

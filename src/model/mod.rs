@@ -1,0 +1,490 @@
+//! The cost and quality model of this device (contract §5): what each candidate method costs
+//! here as a function of a job's size, and how far its penumbra lies from the truth by kind of
+//! scene and light — measured by `measure.rs` on a small built-in suite, kept in the data
+//! directory per adapter and build, and read to predict a job before it renders
+//! (`POST /v1/estimate`) and to choose for `auto` under a time or an error budget.
+
+pub mod measure;
+
+use serde::{Deserialize, Serialize};
+use serde_json::{Map, Value};
+
+use crate::job::auto::{AutoBudget, AutoChoice, Prediction};
+use crate::job::{AssetRef, Job, MethodSpec};
+
+/// The shipped model: measured on lavapipe (2 cores) by `penumbra eval --model --out DIR`,
+/// what an `auto` job is chosen by until this device's own is measured.
+const SHIPPED: &str = include_str!("default.json");
+
+/// What a choice's predictions must fit inside: a prediction × this ≤ the budget. The time
+/// and error of a job vary about the model's fit (noisy machines, scenes unlike the suite's),
+/// and a budget asked for is a promise: choosing on the bare prediction would miss about
+/// half of the budgets that sit near it.
+pub const MARGIN: f64 = 1.25;
+
+/// The model of one device: every candidate's cost fit and measured errors.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct Model {
+    pub key: ModelKey,
+    /// `measured` on this device, or `default` (shipped, measured elsewhere).
+    pub source: String,
+    pub measured_unix_ms: u64,
+    /// Wall time the measurement took.
+    pub measure_seconds: f64,
+    pub candidates: Vec<Candidate>,
+}
+
+/// Which device and build a model was measured on: another adapter or another build of
+/// penumbra measures again.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq, Eq)]
+pub struct ModelKey {
+    pub adapter: String,
+    pub driver: String,
+    /// The crate version and a digest of the running executable.
+    pub build: String,
+}
+
+/// One method with its parameters, as `auto` may choose it.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct Candidate {
+    /// `name[:key=value…]`, as `eval` writes methods.
+    pub label: String,
+    pub method: MethodSpec,
+    /// Milliseconds of a whole render (frame and PNG encoding): `cost · features`, per kind
+    /// of light.
+    pub cost: Costs,
+    /// Mean |V − Vref| over the penumbra, per suite case.
+    pub errors: Vec<ErrorPoint>,
+    /// Whether the errors were measured (false: extrapolated from the reference's other
+    /// sample counts, as 1/√samples).
+    #[serde(default = "yes")]
+    pub errors_measured: bool,
+    /// The times the cost was fitted to (none where extrapolated).
+    #[serde(default)]
+    pub times: Vec<TimePoint>,
+}
+
+/// One measured render time and the job's features.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct TimePoint {
+    pub scene: String,
+    pub light: LightKind,
+    pub pixels: u64,
+    pub texels: u64,
+    pub triangles: u64,
+    pub ms: f64,
+}
+
+impl TimePoint {
+    pub fn features(&self) -> Features {
+        Features {
+            pixels: self.pixels,
+            texels: self.texels,
+            triangles: self.triangles,
+            triangles_known: true,
+            light: self.light,
+            scene: Some(self.scene.clone()),
+        }
+    }
+}
+
+fn yes() -> bool {
+    true
+}
+
+/// A linear cost: milliseconds per unit of each feature of a job, all ≥ 0 (fitted by
+/// non-negative least squares on relative errors, `measure::fit`).
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Default)]
+pub struct Cost {
+    pub base_ms: f64,
+    /// Per million output pixels.
+    pub per_mpixel: f64,
+    /// Per million scene triangles.
+    pub per_mtriangle: f64,
+    /// Per million shadow-map texels.
+    pub per_mtexel: f64,
+}
+
+impl Cost {
+    pub fn as_array(&self) -> [f64; FEATURES] {
+        [self.base_ms, self.per_mpixel, self.per_mtriangle, self.per_mtexel]
+    }
+
+    pub fn from_array(c: [f64; FEATURES]) -> Self {
+        Self { base_ms: c[0], per_mpixel: c[1], per_mtriangle: c[2], per_mtexel: c[3] }
+    }
+
+    pub fn ms(&self, features: &Features) -> f64 {
+        self.as_array().iter().zip(features.vector()).map(|(c, x)| c * x).sum()
+    }
+}
+
+/// A cost per kind of light, fitted apart: a coloured light costs E0 and the colour-aware
+/// methods more per pixel, and the sampling methods less where it has dark gaps (a sample on a
+/// black texel is skipped) — two effects one extra term could not tell apart.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Default)]
+pub struct Costs {
+    pub white: Cost,
+    pub coloured: Cost,
+}
+
+impl Costs {
+    pub fn of(&self, light: LightKind) -> &Cost {
+        match light {
+            LightKind::White => &self.white,
+            LightKind::Coloured => &self.coloured,
+        }
+    }
+
+    pub fn ms(&self, features: &Features) -> f64 {
+        self.of(features.light).ms(features)
+    }
+}
+
+/// How many terms a cost has.
+pub const FEATURES: usize = 4;
+
+/// One measured error: a scene kind (a built-in scene's name), a light kind and a size.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct ErrorPoint {
+    pub scene: String,
+    pub light: LightKind,
+    pub pixels: u64,
+    pub error: f64,
+}
+
+/// White light, or a light of several colours (any image but `white`).
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum LightKind {
+    White,
+    Coloured,
+}
+
+/// What a job's cost and error follow, read from the job (and the scene's triangles where the
+/// engine knows them).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Features {
+    pub pixels: u64,
+    pub texels: u64,
+    pub triangles: u64,
+    /// Whether `triangles` was counted (false: a guess, the suite's largest scene).
+    pub triangles_known: bool,
+    pub light: LightKind,
+    /// The built-in scene's name; `None` for a user's scene (its error is predicted as the
+    /// worst built-in kind's).
+    pub scene: Option<String>,
+}
+
+/// Triangles assumed for a scene the engine has not counted.
+pub const UNKNOWN_TRIANGLES: u64 = 100_000;
+
+impl Features {
+    /// A job's features; `triangles`: the scene's count, where known.
+    pub fn of(job: &Job, triangles: Option<u64>) -> Self {
+        let light = match &job.light.image {
+            None => LightKind::White,
+            Some(AssetRef::Builtin { name, .. }) if name == "white" => LightKind::White,
+            Some(_) => LightKind::Coloured,
+        };
+        let scene = match &job.scene.asset {
+            AssetRef::Builtin { name, .. } => Some(name.clone()),
+            _ => None,
+        };
+        Self {
+            pixels: u64::from(job.output.width) * u64::from(job.output.height),
+            texels: u64::from(job.shadow_map.resolution).pow(2),
+            triangles: triangles.unwrap_or(UNKNOWN_TRIANGLES),
+            triangles_known: triangles.is_some(),
+            light,
+            scene,
+        }
+    }
+
+    /// The cost's terms, in its units (millions).
+    pub fn vector(&self) -> [f64; FEATURES] {
+        [1.0, self.pixels as f64 / 1e6, self.triangles as f64 / 1e6, self.texels as f64 / 1e6]
+    }
+}
+
+impl Candidate {
+    /// The job this candidate renders in place of `job`'s method: a method that draws maps of
+    /// its own draws them at the job's shadow-map resolution, as the model measured it.
+    pub fn method_for(&self, job: &Job) -> MethodSpec {
+        let mut method = self.method.clone();
+        let draws_own_maps = crate::methods::find(&method.name)
+            .is_ok_and(|m| !m.reads_shadow_map() && m.params().iter().any(|p| p.name == "resolution"));
+        if draws_own_maps {
+            method.params.entry("resolution").or_insert_with(|| job.shadow_map.resolution.into());
+        }
+        method
+    }
+
+    /// The predicted error: the measured errors of the job's scene kind and light kind (every
+    /// kind's worst for a user's scene), interpolated over the output's pixels in log scale,
+    /// held at the ends.
+    pub fn error(&self, features: &Features) -> f64 {
+        let of_light = self.errors.iter().filter(|p| p.light == features.light);
+        let mut by_size: Vec<(u64, f64)> = Vec::new();
+        for point in of_light {
+            if features.scene.as_ref().is_some_and(|s| self.errors.iter().any(|p| &p.scene == s) && &point.scene != s) {
+                continue;
+            }
+            match by_size.iter_mut().find(|(pixels, _)| *pixels == point.pixels) {
+                Some((_, error)) => *error = error.max(point.error),
+                None => by_size.push((point.pixels, point.error)),
+            }
+        }
+        by_size.sort_by_key(|(pixels, _)| *pixels);
+        interpolate_log(&by_size, features.pixels)
+    }
+
+    /// The fitted cost's relative error over the times it was fitted to: the median and the
+    /// largest |predicted − measured| / measured (`None` where nothing was measured).
+    pub fn fit_error(&self) -> Option<(f64, f64)> {
+        let mut relative: Vec<f64> = self.times.iter().map(|t| (self.cost.ms(&t.features()) - t.ms).abs() / t.ms).collect();
+        relative.sort_by(f64::total_cmp);
+        Some((*relative.get(relative.len() / 2)?, *relative.last()?))
+    }
+
+    pub fn predict(&self, features: &Features) -> Prediction {
+        Prediction { ms: self.cost.ms(features), error: self.error(features) }
+    }
+}
+
+/// `points` (pixels ascending) at `pixels`, linear in log(pixels), held beyond the ends.
+fn interpolate_log(points: &[(u64, f64)], pixels: u64) -> f64 {
+    let Some(&(first_px, first)) = points.first() else { return 1.0 };
+    let &(last_px, last) = points.last().expect("not empty");
+    if pixels <= first_px {
+        return first;
+    }
+    if pixels >= last_px {
+        return last;
+    }
+    let x = (pixels as f64).ln();
+    for pair in points.windows(2) {
+        let ((p0, e0), (p1, e1)) = (pair[0], pair[1]);
+        if pixels <= p1 {
+            let t = (x - (p0 as f64).ln()) / ((p1 as f64).ln() - (p0 as f64).ln());
+            return e0 + t * (e1 - e0);
+        }
+    }
+    last
+}
+
+/// Why no candidate fits an `auto` budget: the field that cannot be met and the closest
+/// candidate with its prediction.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Unmet {
+    pub field: &'static str,
+    pub closest: String,
+    pub prediction: Prediction,
+    pub message: String,
+}
+
+impl Model {
+    /// The model shipped with penumbra.
+    pub fn shipped() -> Self {
+        let mut model: Model = serde_json::from_str(SHIPPED).expect("the shipped model parses (tested)");
+        model.source = "default".into();
+        model
+    }
+
+    /// Every candidate's prediction for a job with these features, in the model's order.
+    pub fn predictions(&self, features: &Features) -> Vec<(&Candidate, Prediction)> {
+        self.candidates.iter().map(|c| (c, c.predict(features))).collect()
+    }
+
+    /// The choice for an `auto` budget: under `max_ms` alone, the candidate of least predicted
+    /// error whose time fits; under `max_error` (alone or with `max_ms`), the cheapest whose
+    /// error (and time) fit — each prediction with the `MARGIN`.
+    pub fn choose(&self, budget: &AutoBudget, features: &Features) -> Result<(Candidate, Prediction), Unmet> {
+        let predictions = self.predictions(features);
+        let time_fits = |p: &Prediction| budget.max_ms.is_none_or(|max| p.ms * MARGIN <= max);
+        let error_fits = |p: &Prediction| budget.max_error.is_none_or(|max| p.error * MARGIN <= max);
+        let fitting = predictions.iter().filter(|(_, p)| time_fits(p) && error_fits(p));
+        let best = if budget.max_error.is_some() {
+            fitting.min_by(|a, b| a.1.ms.total_cmp(&b.1.ms))
+        } else {
+            fitting.min_by(|a, b| a.1.error.total_cmp(&b.1.error).then(a.1.ms.total_cmp(&b.1.ms)))
+        };
+        if let Some((candidate, prediction)) = best {
+            return Ok(((*candidate).clone(), *prediction));
+        }
+        // Nothing fits: the field that cannot be met, and the candidate nearest to it.
+        let Some(cheapest) = predictions.iter().min_by(|a, b| a.1.ms.total_cmp(&b.1.ms)) else {
+            let prediction = Prediction { ms: 0.0, error: 1.0 };
+            return Err(Unmet { field: "method.name", closest: String::new(), prediction, message: "this daemon's model is empty".into() });
+        };
+        let (field, (candidate, prediction)) = match (budget.max_ms, budget.max_error) {
+            (Some(max), _) if cheapest.1.ms * MARGIN > max => ("method.max_ms", cheapest),
+            (_, Some(max)) => {
+                // The most faithful within the time asked for (or at all).
+                let within = predictions.iter().filter(|(_, p)| time_fits(p));
+                let closest = within.min_by(|a, b| a.1.error.total_cmp(&b.1.error)).unwrap_or(cheapest);
+                let _ = max;
+                ("method.max_error", closest)
+            }
+            _ => ("method.max_ms", cheapest),
+        };
+        let message = format!(
+            "no method is predicted to meet it on this device (with a {:.0} % margin); the closest is {} at {:.0} ms and a penumbra error of {:.4}",
+            (MARGIN - 1.0) * 100.0,
+            candidate.label,
+            prediction.ms,
+            prediction.error
+        );
+        Err(Unmet { field, closest: candidate.label.clone(), prediction: *prediction, message })
+    }
+
+    /// The `AutoChoice` a job records for `candidate`.
+    pub fn choice(&self, candidate: &Candidate, prediction: Prediction, job: &Job) -> AutoChoice {
+        AutoChoice {
+            method: candidate.method_for(job),
+            label: candidate.label.clone(),
+            predicted: prediction,
+            model: self.source.clone(),
+            measured_ms: None,
+        }
+    }
+
+    /// The model as `GET /v1/methods` and `eval --model` show it: each candidate's cost terms
+    /// and its errors by scene and light.
+    pub fn summary(&self) -> Value {
+        let candidates: Vec<Value> = self
+            .candidates
+            .iter()
+            .map(|c| {
+                let mut errors = Map::new();
+                for p in &c.errors {
+                    errors.insert(format!("{}/{}/{}", p.scene, light_name(p.light), p.pixels), p.error.into());
+                }
+                serde_json::json!({"label": c.label, "method": c.method, "cost": c.cost, "errors": errors, "errors_measured": c.errors_measured})
+            })
+            .collect();
+        serde_json::json!({
+            "source": self.source,
+            "adapter": self.key.adapter,
+            "driver": self.key.driver,
+            "build": self.key.build,
+            "measured_unix_ms": self.measured_unix_ms,
+            "measure_seconds": self.measure_seconds,
+            "margin": MARGIN,
+            "candidates": candidates,
+        })
+    }
+
+    /// A Markdown table of the model: each candidate's predicted time at three sizes and its
+    /// error per scene kind and light, at the suite's largest size.
+    pub fn table(&self) -> String {
+        let mut scenes: Vec<&str> = self.candidates.iter().flat_map(|c| c.errors.iter().map(|p| p.scene.as_str())).collect();
+        scenes.sort_unstable();
+        scenes.dedup();
+        let sizes = [(256u32, 192u32), (640, 480), (1920, 1080)];
+        let mut out = format!(
+            "Model of {} ({}), build {}, {}.\n\n| candidate |",
+            self.key.adapter, self.key.driver, self.key.build, self.source
+        );
+        for (w, h) in sizes {
+            out.push_str(&format!(" ms {w}×{h} |"));
+        }
+        out.push_str(" ms 1920×1080, coloured | fit, median | fit, worst |");
+        for scene in &scenes {
+            out.push_str(&format!(" {scene} white | {scene} coloured |"));
+        }
+        out.push_str("\n|---|");
+        out.push_str(&"---:|".repeat(sizes.len() + 3 + 2 * scenes.len()));
+        out.push('\n');
+        let largest = self.candidates.iter().flat_map(|c| c.errors.iter().map(|p| p.pixels)).max().unwrap_or(0);
+        for c in &self.candidates {
+            out.push_str(&format!("| {} |", c.label));
+            for (w, h) in sizes {
+                let features = Features {
+                    pixels: u64::from(w) * u64::from(h),
+                    texels: 2048 * 2048,
+                    triangles: 10_000,
+                    triangles_known: true,
+                    light: LightKind::White,
+                    scene: None,
+                };
+                out.push_str(&format!(" {:.0} |", c.cost.ms(&features)));
+            }
+            let coloured = Features {
+                pixels: 1920 * 1080,
+                texels: 2048 * 2048,
+                triangles: 10_000,
+                triangles_known: true,
+                light: LightKind::Coloured,
+                scene: None,
+            };
+            out.push_str(&format!(" {:.0} |", c.cost.ms(&coloured)));
+            match c.fit_error() {
+                Some((median, worst)) => out.push_str(&format!(" {:.0} % | {:.0} % |", median * 100.0, worst * 100.0)),
+                None => out.push_str(" - | - |"),
+            }
+            for scene in &scenes {
+                for light in [LightKind::White, LightKind::Coloured] {
+                    let features = Features {
+                        pixels: largest,
+                        texels: 1 << 20,
+                        triangles: 10_000,
+                        triangles_known: true,
+                        light,
+                        scene: Some((*scene).to_owned()),
+                    };
+                    out.push_str(&format!(" {:.4}{} |", c.error(&features), if c.errors_measured { "" } else { "*" }));
+                }
+            }
+            out.push('\n');
+        }
+        out.push_str("\nTimes with 10,000 triangles and a 2,048² map, under white light but for the one column; the fit's relative error over the suite's times; errors (mean |V − Vref| over the penumbra) at the suite's largest size; * extrapolated, not measured.\n");
+        out
+    }
+}
+
+fn light_name(light: LightKind) -> &'static str {
+    match light {
+        LightKind::White => "white",
+        LightKind::Coloured => "coloured",
+    }
+}
+
+/// Where a device's model is kept under the data directory: one file per adapter and build.
+pub fn stored_path(data_dir: &std::path::Path, key: &ModelKey) -> std::path::PathBuf {
+    let digest = crate::upload_store::content_id(format!("{}|{}|{}", key.adapter, key.driver, key.build).as_bytes());
+    data_dir.join("models").join(format!("{}.json", &digest[..16]))
+}
+
+/// The model stored for `key`, if one is and it parses and names that key.
+pub fn load(data_dir: &std::path::Path, key: &ModelKey) -> Option<Model> {
+    let bytes = std::fs::read(stored_path(data_dir, key)).ok()?;
+    let model: Model = serde_json::from_slice(&bytes).ok()?;
+    (model.key == *key && !model.candidates.is_empty()).then_some(model)
+}
+
+/// Keeps `model` for the next start (written whole, then renamed into place).
+pub fn save(data_dir: &std::path::Path, model: &Model) -> std::io::Result<()> {
+    let path = stored_path(data_dir, &model.key);
+    std::fs::create_dir_all(path.parent().expect("under models/"))?;
+    let partial = path.with_extension("json.partial");
+    std::fs::write(&partial, serde_json::to_vec_pretty(model).map_err(std::io::Error::other)?)?;
+    std::fs::rename(partial, path)
+}
+
+/// The key of this build on `adapter`: the crate's version and the first 12 hex digits of the
+/// running executable's SHA-256, so that a rebuilt penumbra measures again.
+pub fn key_for(adapter: &crate::gpu::AdapterSummary) -> ModelKey {
+    let digest = std::env::current_exe()
+        .and_then(std::fs::read)
+        .map(|bytes| crate::upload_store::content_id(&bytes)[..12].to_owned())
+        .unwrap_or_else(|_| "unknown".into());
+    ModelKey {
+        adapter: adapter.name.clone(),
+        driver: adapter.driver.clone(),
+        build: format!("{}+{digest}", env!("CARGO_PKG_VERSION")),
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,117 @@
+use super::measure::{fit, parse_label, sample};
+use super::*;
+use crate::job::auto::AutoBudget;
+
+fn features(pixels: u64, triangles: u64, texels: u64, light: LightKind) -> Features {
+    Features { pixels, texels, triangles, triangles_known: true, light, scene: Some("torus".into()) }
+}
+
+#[test]
+fn the_fit_finds_the_costs_it_was_made_from() {
+    let truth = Cost { base_ms: 12.0, per_mpixel: 300.0, per_mtriangle: 40.0, per_mtexel: 0.0 };
+    let mut samples = Vec::new();
+    for pixels in [19_200, 76_800, 307_200] {
+        for triangles in [2_000, 9_000, 30_000] {
+            for texels in [1 << 18, 1 << 20] {
+                let f = features(pixels, triangles, texels, LightKind::White);
+                samples.push(sample(f.clone(), truth.ms(&f)));
+            }
+        }
+    }
+    let fitted = fit(samples.iter());
+    for (got, want) in fitted.as_array().iter().zip(truth.as_array()) {
+        assert!((got - want).abs() < 1e-6 * want.max(1.0), "{fitted:?} against {truth:?}");
+    }
+}
+
+#[test]
+fn no_cost_term_is_fitted_negative() {
+    // Times that fall with the pixels: least squares alone would give a negative term.
+    let samples: Vec<_> =
+        [(19_200, 30.0), (76_800, 29.0), (307_200, 28.0)].map(|(px, ms)| sample(features(px, 1_000, 1 << 20, LightKind::White), ms)).into();
+    assert!(fit(samples.iter()).as_array().iter().all(|c| *c >= 0.0));
+}
+
+fn candidate(label: &str, cost: Costs, error: f64) -> Candidate {
+    let errors = [LightKind::White, LightKind::Coloured]
+        .into_iter()
+        .flat_map(|light| {
+            [("torus", 1.0), ("terrain", 2.0)].map(|(scene, worse)| ErrorPoint { scene: scene.into(), light, pixels: 19_200, error: error * worse })
+        })
+        .collect();
+    Candidate { label: label.into(), method: parse_label(label), cost, errors, errors_measured: true, times: vec![] }
+}
+
+fn model() -> Model {
+    let ms = |base_ms| {
+        let cost = Cost { base_ms, ..Cost::default() };
+        Costs { white: cost, coloured: cost }
+    };
+    Model {
+        key: ModelKey { adapter: "a".into(), driver: "d".into(), build: "b".into() },
+        source: "measured".into(),
+        measured_unix_ms: 0,
+        measure_seconds: 0.0,
+        candidates: vec![
+            candidate("hard", ms(10.0), 0.2),
+            candidate("wedges", ms(40.0), 0.03),
+            candidate("reference:samples=64", ms(100.0), 0.02),
+            candidate("reference:samples=256", ms(400.0), 0.01),
+        ],
+    }
+}
+
+#[test]
+fn auto_takes_the_most_faithful_in_time_and_the_cheapest_in_error() {
+    let model = model();
+    let f = features(19_200, 1_000, 1 << 20, LightKind::White);
+    let choose = |max_ms, max_error| model.choose(&AutoBudget { max_ms, max_error }, &f).map(|(c, _)| c.label);
+    // The margin: 100 ms × 1.25 does not fit 120 ms.
+    assert_eq!(choose(Some(120.0), None).unwrap(), "wedges");
+    assert_eq!(choose(Some(125.0), None).unwrap(), "reference:samples=64");
+    assert_eq!(choose(None, Some(0.03)).unwrap(), "reference:samples=64");
+    assert_eq!(choose(None, Some(0.04)).unwrap(), "wedges");
+    assert_eq!(choose(Some(1000.0), Some(0.5)).unwrap(), "hard");
+    // Nothing fits: the field, and the closest candidate named.
+    let unmet = model.choose(&AutoBudget { max_ms: Some(5.0), max_error: None }, &f).unwrap_err();
+    assert_eq!((unmet.field, unmet.closest.as_str()), ("method.max_ms", "hard"));
+    let unmet = model.choose(&AutoBudget { max_ms: Some(200.0), max_error: Some(0.005) }, &f).unwrap_err();
+    assert_eq!((unmet.field, unmet.closest.as_str()), ("method.max_error", "reference:samples=64"));
+    assert!(unmet.message.contains("reference:samples=64"), "{}", unmet.message);
+}
+
+#[test]
+fn a_users_scene_is_predicted_by_the_worst_kind() {
+    let model = model();
+    let mut f = features(19_200, 1_000, 1 << 20, LightKind::White);
+    assert_eq!(model.candidates[1].error(&f), 0.03);
+    f.scene = None;
+    assert_eq!(model.candidates[1].error(&f), 0.06);
+    f.scene = Some("columns".into());
+    assert_eq!(model.candidates[1].error(&f), 0.06, "a built-in kind the suite did not measure counts as unknown");
+}
+
+#[test]
+fn errors_are_interpolated_over_log_pixels_and_held_at_the_ends() {
+    let points = [(10_000, 0.04), (1_000_000, 0.02)];
+    assert_eq!(interpolate_log(&points, 1_000), 0.04);
+    assert_eq!(interpolate_log(&points, 4_000_000), 0.02);
+    assert!((interpolate_log(&points, 100_000) - 0.03).abs() < 1e-12);
+}
+
+#[test]
+fn the_shipped_model_has_every_candidate_and_a_stored_one_is_read_back_for_its_key_only() {
+    let shipped = Model::shipped();
+    assert_eq!(shipped.source, "default");
+    let labels: Vec<&str> = shipped.candidates.iter().map(|c| c.label.as_str()).collect();
+    for label in measure::CANDIDATES.iter().copied().chain(["reference:samples=1024"]) {
+        assert!(labels.contains(&label), "{label} missing from the shipped model: {labels:?}");
+    }
+    let dir = std::env::temp_dir().join(format!("penumbra-model-{}", std::process::id()));
+    let model = model();
+    save(&dir, &model).unwrap();
+    assert_eq!(load(&dir, &model.key), Some(model.clone()));
+    let other = ModelKey { build: "another build".into(), ..model.key.clone() };
+    assert_eq!(load(&dir, &other), None);
+    std::fs::remove_dir_all(dir).unwrap();
+}

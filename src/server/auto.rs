@@ -1,0 +1,230 @@
+//! `auto` jobs and estimates (contract §5): the device's cost and quality model (the shipped
+//! one until this device's is measured in the background, or read from the data directory),
+//! a budget resolved to a method at submission and again on the replica that renders it, and
+//! `POST /v1/estimate`, which predicts a job without rendering it.
+
+use std::sync::RwLock;
+
+use super::*;
+use crate::job::auto::{AutoBudget, AutoChoice};
+use crate::model::{self, Features, Model};
+
+/// The model in use and where it stands.
+pub struct ModelState {
+    current: RwLock<Arc<Model>>,
+    /// `default` (the shipped model), `measuring`, `measured`, `stored` (read from the data
+    /// directory) or `failed` (the shipped model stays).
+    status: RwLock<&'static str>,
+}
+
+impl ModelState {
+    pub fn shipped() -> Self {
+        Self { current: RwLock::new(Arc::new(Model::shipped())), status: RwLock::new("default") }
+    }
+
+    pub fn get(&self) -> Arc<Model> {
+        self.current.read().unwrap_or_else(|p| p.into_inner()).clone()
+    }
+
+    pub fn status(&self) -> &'static str {
+        *self.status.read().unwrap_or_else(|p| p.into_inner())
+    }
+
+    fn set_status(&self, status: &'static str) {
+        *self.status.write().unwrap_or_else(|p| p.into_inner()) = status;
+    }
+
+    fn set(&self, model: Model, status: &'static str) {
+        *self.current.write().unwrap_or_else(|p| p.into_inner()) = Arc::new(model);
+        self.set_status(status);
+    }
+}
+
+/// What `--model` asks of the daemon's start.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum ModelMode {
+    /// The model stored for this adapter and build, else measure it in the background.
+    Measure,
+    /// The shipped model only (tests; a fleet that should not spend its first minute measuring).
+    Default,
+}
+
+/// Reads this device's stored model, or measures it in the background with the device's job
+/// slots (a job waits at most for one small frame of it); `/readyz` is not held for it.
+pub(super) fn spawn_model(state: Arc<AppState>, mode: ModelMode, data_dir: std::path::PathBuf) {
+    if mode == ModelMode::Default {
+        return;
+    }
+    tokio::spawn(async move {
+        let key = model::key_for(&state.engine.adapter());
+        if let Some(stored) = model::load(&data_dir, &key) {
+            tracing::info!(build = %key.build, "cost and quality model read from the data directory");
+            state.model.set(stored, "stored");
+            return;
+        }
+        state.model.set_status("measuring");
+        tracing::info!("measuring the cost and quality model in the background");
+        let measuring = state.clone();
+        let runtime = tokio::runtime::Handle::current();
+        let outcome = tokio::task::spawn_blocking(move || {
+            let hooks = SlotHooks { state: &measuring, runtime };
+            model::measure::measure(&measuring.engine, &model::measure::Suite::standard(), key, &hooks)
+        })
+        .await;
+        match outcome {
+            Ok(Ok(Some(measured))) => {
+                if let Err(error) = model::save(&data_dir, &measured) {
+                    tracing::warn!(%error, "the measured model could not be kept for the next start");
+                }
+                tracing::info!(seconds = measured.measure_seconds, "cost and quality model measured");
+                state.model.set(measured, "measured");
+            }
+            Ok(Ok(None)) => state.model.set_status("default"),
+            Ok(Err(error)) => {
+                tracing::warn!(%error, "measuring the model failed: auto keeps the shipped model");
+                state.model.set_status("failed");
+            }
+            Err(error) => {
+                tracing::warn!(%error, "measuring the model failed: auto keeps the shipped model");
+                state.model.set_status("failed");
+            }
+        }
+    });
+}
+
+/// The measurement's renders take a device slot each, as jobs do, and stop at shutdown.
+struct SlotHooks<'a> {
+    state: &'a AppState,
+    runtime: tokio::runtime::Handle,
+}
+
+impl model::measure::Hooks for SlotHooks<'_> {
+    fn device(&self) -> Box<dyn std::any::Any> {
+        Box::new(self.runtime.block_on(self.state.queue.device_slot()))
+    }
+
+    fn progress(&self, done: usize, total: usize, what: &str) {
+        tracing::debug!(done, total, what, "measuring the model");
+    }
+
+    fn cancelled(&self) -> bool {
+        *self.state.stopping.borrow()
+    }
+}
+
+impl AppState {
+    /// An `auto` job's method chosen: `None` for any other job. Checks the budget's fields
+    /// (`max_ms` at most the job deadline) and the rest of the job first. `strict` (at
+    /// submission) refuses a budget no candidate is predicted to meet, with a 422 naming the
+    /// field and the closest candidate; at render time (a replica whose model has changed
+    /// since) the closest is rendered instead and says so.
+    pub(super) fn resolve_auto(&self, job: &Job, strict: bool) -> Result<Option<(Job, AutoChoice)>, JobError> {
+        let Some(budget) = AutoBudget::of(&job.method)? else { return Ok(None) };
+        self.check_budget(&budget)?;
+        // Everything but the method, as any job is checked (built-in parameters included,
+        // before the scene is built to count its triangles).
+        self.engine.check(&Job { method: Default::default(), ..job.clone() }, false)?;
+        let model = self.model.get();
+        let features = Features::of(job, self.engine.scene_triangles(&job.scene));
+        let (candidate, prediction) = match model.choose(&budget, &features) {
+            Ok(chosen) => chosen,
+            Err(unmet) if strict => return Err(JobError::field(ErrorCode::BudgetUnmet, unmet.field, unmet.message)),
+            Err(unmet) => {
+                tracing::warn!(closest = %unmet.closest, "no method meets the budget at render time: the closest is rendered");
+                let closest = model.candidates.iter().find(|c| c.label == unmet.closest).expect("named from the model");
+                (closest.clone(), unmet.prediction)
+            }
+        };
+        let choice = model.choice(&candidate, prediction, job);
+        Ok(Some((Job { method: choice.method.clone(), ..job.clone() }, choice)))
+    }
+
+    /// `max_ms` no longer than a job may wait for the device (the deadline).
+    fn check_budget(&self, budget: &AutoBudget) -> Result<(), JobError> {
+        let deadline_ms = self.queue_config.deadline.as_secs_f64() * 1e3;
+        match budget.max_ms {
+            Some(max) if max > deadline_ms => {
+                Err(JobError::invalid("method.max_ms", format!("must be at most the job deadline, {deadline_ms:.0} ms")))
+            }
+            _ => Ok(()),
+        }
+    }
+
+    /// A job checked for admission: an `auto` job's budget resolved (strictly) and the
+    /// method chosen checked as any job's.
+    pub(super) fn check_submission(&self, job: &Job, uploads_here: bool) -> Result<(), JobError> {
+        match self.resolve_auto(job, true)? {
+            Some((chosen, _)) => self.engine.check(&chosen, uploads_here),
+            None => self.engine.check(job, uploads_here),
+        }
+    }
+}
+
+/// `POST /v1/estimate`: a job checked as a submission would be, and answered with what every
+/// candidate is predicted to cost and how far from the truth on this device — the job's own
+/// method's prediction where the model has it, and for `auto`, its choice or why none fits.
+pub(super) async fn estimate(State(state): State<Arc<AppState>>, body: Result<Bytes, BytesRejection>) -> Result<Json<Value>, ApiError> {
+    let body = body.map_err(|rejection| body_error(&state, rejection, ErrorCode::InvalidJson))?;
+    let job = Job::from_json_limited(&body, state.engine.limits())?;
+    let uploads_here = state.shared_store().is_none();
+    let model = state.model.get();
+    let budget = AutoBudget::of(&job.method)?;
+    match &budget {
+        Some(budget) => {
+            state.check_budget(budget)?;
+            state.engine.check(&Job { method: Default::default(), ..job.clone() }, uploads_here)?;
+        }
+        None => state.engine.check(&job, uploads_here)?,
+    }
+    let features = Features::of(&job, state.engine.scene_triangles(&job.scene));
+    let predictions: Vec<Value> = model
+        .predictions(&features)
+        .into_iter()
+        .map(|(c, p)| json!({"label": c.label, "method": c.method_for(&job), "ms": p.ms, "error": p.error}))
+        .collect();
+    let mut answer = json!({
+        "model": {"source": model.source, "status": state.model.status(), "adapter": model.key.adapter, "build": model.key.build},
+        "features": {
+            "pixels": features.pixels,
+            "texels": features.texels,
+            "triangles": features.triangles,
+            "triangles_known": features.triangles_known,
+            "light": features.light,
+            "scene": features.scene,
+        },
+        "margin": model::MARGIN,
+        "predictions": predictions,
+    });
+    match budget {
+        Some(budget) => match model.choose(&budget, &features) {
+            Ok((candidate, prediction)) => answer["auto"] = json!(model.choice(&candidate, prediction, &job)),
+            Err(unmet) => {
+                answer["unmet"] = json!({
+                    "field": unmet.field,
+                    "closest": unmet.closest,
+                    "predicted": unmet.prediction,
+                    "message": unmet.message,
+                })
+            }
+        },
+        None => {
+            let own = model.candidates.iter().find(|c| same_defaults(c, &job));
+            answer["job"] = match own {
+                Some(c) => json!({"label": c.label, "predicted": c.predict(&features)}),
+                None => Value::Null,
+            };
+        }
+    }
+    Ok(Json(answer))
+}
+
+/// Whether `candidate` is the job's method as the job gives it: the same name, and the same
+/// parameters once the map resolution a candidate takes from the job is set on both.
+fn same_defaults(candidate: &model::Candidate, job: &Job) -> bool {
+    let mut asked = job.method.clone();
+    let modelled = candidate.method_for(job);
+    if let Some(resolution) = modelled.params.get("resolution") {
+        asked.params.entry("resolution").or_insert_with(|| resolution.clone());
+    }
+    asked == modelled
+}
