@@ -312,9 +312,8 @@ fn measure_model(engine: &Engine, out: &std::path::Path) -> anyhow::Result<()> {
             false
         }
     }
-    let bar = Bar(indicatif::ProgressBar::new(1).with_style(
-        indicatif::ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} {msg}").expect("a valid template"),
-    ));
+    let bar = Bar(indicatif::ProgressBar::new(1)
+        .with_style(indicatif::ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} {msg}").expect("a valid template")));
     let key = penumbra::model::key_for(&engine.adapter());
     let model = penumbra::model::measure::measure(engine, &penumbra::model::measure::Suite::standard(), key, &bar)?.expect("not cancelled");
     bar.0.finish_and_clear();

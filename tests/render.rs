@@ -942,6 +942,7 @@ fn eval_writes_the_tables_and_the_pictures() {
         sweep: Some("hard:slope_bias_texels=0,1,4".into()),
         repeat: 2,
         colored: true,
+        model: false,
     };
     let report = penumbra::eval::run(&common::engine(), &options).unwrap();
     // 2 lights × 2 shadow maps; per case the reference, hard, jfa-l both ways, chun-oh, three sweep points.
@@ -1783,6 +1784,7 @@ fn the_worst_real_models_hold_their_errors_and_the_methods_say_what_they_cannot_
         scenes: models.iter().map(|m| suite.join(format!("{m}.glb")).display().to_string()).collect(),
         lights: vec!["white".into(), "stripes".into()],
         colored: false,
+        model: false,
         methods: METHODS.iter().map(|m| m.to_string()).collect(),
         sizes: vec!["240x180".into()],
         samples: 512,
@@ -1870,6 +1872,11 @@ fn the_model_is_measured_on_the_device() {
         assert_eq!(candidate.times.len(), if candidate.errors_measured { 8 } else { 0 }, "{}", candidate.label);
     }
     let error = |label: &str| model.candidates.iter().find(|c| c.label == label).unwrap().error(&at(128 * 96, LightKind::White));
-    assert!(error("reference:samples=16") > error("reference:samples=64"), "16: {}, 64: {}", error("reference:samples=16"), error("reference:samples=64"));
+    assert!(
+        error("reference:samples=16") > error("reference:samples=64"),
+        "16: {}, 64: {}",
+        error("reference:samples=16"),
+        error("reference:samples=64")
+    );
     assert!(error("hard") > error("reference:samples=64"));
 }

@@ -46,13 +46,7 @@ impl AutoBudget {
                     }
                     budget.max_error = Some(error);
                 }
-                _ => {
-                    return Err(JobError::field(
-                        crate::error::ErrorCode::UnknownField,
-                        field,
-                        "auto takes max_ms and max_error only",
-                    ))
-                }
+                _ => return Err(JobError::field(crate::error::ErrorCode::UnknownField, field, "auto takes max_ms and max_error only")),
             }
         }
         if budget.max_ms.is_none() && budget.max_error.is_none() {

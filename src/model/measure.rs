@@ -221,8 +221,14 @@ struct Case {
 
 impl Case {
     fn job_with(&self, method: &MethodSpec) -> Job {
-        let candidate =
-            Candidate { label: String::new(), method: method.clone(), cost: Costs::default(), errors: vec![], errors_measured: true, times: vec![] };
+        let candidate = Candidate {
+            label: String::new(),
+            method: method.clone(),
+            cost: Costs::default(),
+            errors: vec![],
+            errors_measured: true,
+            times: vec![],
+        };
         // `compare` reads the visibility back for the error (a little more than a PNG job reads).
         Job { method: candidate.method_for(&self.job), compare: true, ..self.job.clone() }
     }
@@ -334,11 +340,12 @@ fn least_squares(rows: &[([f64; FEATURES], f64)], terms: &[usize]) -> Option<Vec
             return None;
         }
         a.swap(col, pivot);
-        for row in 0..n {
-            if row != col {
-                let factor = a[row][col] / a[col][col];
-                for k in col..=n {
-                    a[row][k] -= factor * a[col][k];
+        let pivot_row = a[col].clone();
+        for (r, row) in a.iter_mut().enumerate() {
+            if r != col {
+                let factor = row[col] / pivot_row[col];
+                for (x, p) in row[col..].iter_mut().zip(&pivot_row[col..]) {
+                    *x -= factor * p;
                 }
             }
         }

@@ -212,8 +212,8 @@ impl Candidate {
     /// its own draws them at the job's shadow-map resolution, as the model measured it.
     pub fn method_for(&self, job: &Job) -> MethodSpec {
         let mut method = self.method.clone();
-        let draws_own_maps = crate::methods::find(&method.name)
-            .is_ok_and(|m| !m.reads_shadow_map() && m.params().iter().any(|p| p.name == "resolution"));
+        let draws_own_maps =
+            crate::methods::find(&method.name).is_ok_and(|m| !m.reads_shadow_map() && m.params().iter().any(|p| p.name == "resolution"));
         if draws_own_maps {
             method.params.entry("resolution").or_insert_with(|| job.shadow_map.resolution.into());
         }
@@ -382,10 +382,8 @@ impl Model {
         scenes.sort_unstable();
         scenes.dedup();
         let sizes = [(256u32, 192u32), (640, 480), (1920, 1080)];
-        let mut out = format!(
-            "Model of {} ({}), build {}, {}.\n\n| candidate |",
-            self.key.adapter, self.key.driver, self.key.build, self.source
-        );
+        let mut out =
+            format!("Model of {} ({}), build {}, {}.\n\n| candidate |", self.key.adapter, self.key.driver, self.key.build, self.source);
         for (w, h) in sizes {
             out.push_str(&format!(" ms {w}×{h} |"));
         }
@@ -479,11 +477,7 @@ pub fn key_for(adapter: &crate::gpu::AdapterSummary) -> ModelKey {
         .and_then(std::fs::read)
         .map(|bytes| crate::upload_store::content_id(&bytes)[..12].to_owned())
         .unwrap_or_else(|_| "unknown".into());
-    ModelKey {
-        adapter: adapter.name.clone(),
-        driver: adapter.driver.clone(),
-        build: format!("{}+{digest}", env!("CARGO_PKG_VERSION")),
-    }
+    ModelKey { adapter: adapter.name.clone(), driver: adapter.driver.clone(), build: format!("{}+{digest}", env!("CARGO_PKG_VERSION")) }
 }
 
 #[cfg(test)]

@@ -36,7 +36,12 @@ fn candidate(label: &str, cost: Costs, error: f64) -> Candidate {
     let errors = [LightKind::White, LightKind::Coloured]
         .into_iter()
         .flat_map(|light| {
-            [("torus", 1.0), ("terrain", 2.0)].map(|(scene, worse)| ErrorPoint { scene: scene.into(), light, pixels: 19_200, error: error * worse })
+            [("torus", 1.0), ("terrain", 2.0)].map(|(scene, worse)| ErrorPoint {
+                scene: scene.into(),
+                light,
+                pixels: 19_200,
+                error: error * worse,
+            })
         })
         .collect();
     Candidate { label: label.into(), method: parse_label(label), cost, errors, errors_measured: true, times: vec![] }

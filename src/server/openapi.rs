@@ -1,6 +1,6 @@
 //! The parts of `api/openapi.json` made from the code, so that the document cannot drift from
-//! it: `Method` as a `oneOf` over the registry with `name` as its discriminator (each method's
-//! parameters typed with their ranges, defaults and choices, as `GET /v1/methods` lists them),
+//! it: `Method` as a `oneOf` over the registry and `auto` with `name` as its discriminator (each
+//! method's parameters typed with their ranges, defaults and choices, as `GET /v1/methods` lists them),
 //! the built-in scenes (`SceneRef`) and light images (`LightImageRef`), the listing's `method` filter, and the example jobs
 //! of `api/examples/` on the operations that take a job. The test
 //! `openapi_document_is_generated_from_the_code` (tests/api.rs) holds the file to this, and
@@ -8,6 +8,7 @@
 
 use serde_json::{json, Map, Value};
 
+use crate::job::auto::AUTO;
 use crate::job::Limits;
 use crate::light::BUILTIN_LIGHT_IMAGES;
 use crate::methods::{ParamSpec, REGISTRY};
@@ -26,6 +27,25 @@ pub fn generate(doc: &mut Value, examples: &[(String, Value)]) {
         mapping.insert(method.name().to_owned(), json!(reference));
         one_of.push(json!({"$ref": reference}));
     }
+    // `auto` is no method of the registry: a budget the server resolves to one (contract §5).
+    schemas["MethodAuto"] = json!({
+        "title": "MethodAuto",
+        "description": "A time or error budget instead of a method: the server chooses the method and parameters its model of \
+                        this device predicts to fit (with a 25 % margin): under max_ms alone, the most faithful; under max_error, \
+                        the cheapest. A budget nothing is predicted to meet is a 422 budget_unmet naming the closest choice.",
+        "type": "object",
+        "properties": {
+            "name": {"type": "string", "const": AUTO},
+            "max_ms": {"type": "number", "exclusiveMinimum": 0, "description": "The render's wall time, ms; at most the job deadline."},
+            "max_error": {"type": "number", "exclusiveMinimum": 0, "exclusiveMaximum": 1,
+                          "description": "The mean |V − Vref| over the penumbra."},
+        },
+        "required": ["name"],
+        "anyOf": [{"required": ["max_ms"]}, {"required": ["max_error"]}],
+        "additionalProperties": false,
+    });
+    mapping.insert(AUTO.to_owned(), json!("#/components/schemas/MethodAuto"));
+    one_of.push(json!({"$ref": "#/components/schemas/MethodAuto"}));
     schemas["Method"] = json!({
         "description": "A method by name with its parameters next to it (GET /v1/methods lists them with their documentation; \
                         GET /v1/limits with the operator's caps on samples and rounds). Unknown parameters are errors.",
@@ -35,7 +55,7 @@ pub fn generate(doc: &mut Value, examples: &[(String, Value)]) {
     schemas["SceneRef"]["properties"]["builtin"]["enum"] = json!(BUILTIN_SCENES);
     schemas["LightImageRef"]["properties"]["builtin"]["enum"] = json!(BUILTIN_LIGHT_IMAGES);
 
-    let names: Vec<&str> = REGISTRY.iter().map(|m| m.name()).collect();
+    let names: Vec<&str> = REGISTRY.iter().map(|m| m.name()).chain([AUTO]).collect();
     if let Some(parameters) = doc["paths"]["/v1/jobs"]["get"]["parameters"].as_array_mut() {
         for parameter in parameters.iter_mut().filter(|p| p["name"] == "method") {
             parameter["schema"] = json!({"type": "string", "enum": names});
@@ -98,7 +118,8 @@ mod tests {
         let mut doc = json!({"components": {"schemas": {"SceneRef": builtin, "LightImageRef": builtin}}, "paths": {}});
         generate(&mut doc, &[("torus".into(), json!({"scene": {"builtin": "torus"}}))]);
         let method = &doc["components"]["schemas"]["Method"];
-        assert_eq!(method["oneOf"].as_array().unwrap().len(), REGISTRY.len());
+        assert_eq!(method["oneOf"].as_array().unwrap().len(), REGISTRY.len() + 1, "every method and auto");
+        assert_eq!(method["discriminator"]["mapping"]["auto"], "#/components/schemas/MethodAuto");
         assert_eq!(method["discriminator"]["mapping"]["jfa-l"], "#/components/schemas/MethodJfaL");
         let reference = &doc["components"]["schemas"]["MethodReference"];
         assert_eq!(reference["properties"]["name"]["const"], "reference");
