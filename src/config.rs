@@ -232,7 +232,7 @@ pub struct ServeConfig {
     /// warm-up (about a minute on two cores; the shipped model answers meanwhile); `default`
     /// keeps the shipped model.
     #[arg(long, env = "PENUMBRA_MODEL", value_enum, default_value = "measure")]
-    pub model: crate::server::ModelMode,
+    pub model: ModelMode,
 
     #[command(flatten)]
     pub render: RenderOptions,
@@ -279,4 +279,13 @@ mod tests {
             assert!(super::seconds(bad).is_err(), "{bad}");
         }
     }
+}
+
+/// What `--model` asks of the daemon's start (contract §5).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum ModelMode {
+    /// The model stored for this adapter and build, else measure it in the background.
+    Measure,
+    /// The shipped model only (tests; a fleet that should not spend its first minute measuring).
+    Default,
 }

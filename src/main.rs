@@ -188,6 +188,12 @@ fn run(cli: Cli) -> anyhow::Result<()> {
 
 /// `penumbra submit`: one job through a running daemon, with a progress bar.
 fn submit(options: &penumbra::client::SubmitOptions) -> anyhow::Result<()> {
+    if options.estimate {
+        let estimate = tokio::runtime::Runtime::new()?.block_on(penumbra::client::estimate(options))?;
+        println!("{}", serde_json::to_string_pretty(&estimate)?);
+        eprint!("{}", penumbra::client::estimate_table(&estimate));
+        return Ok(());
+    }
     let bar = if options.quiet { indicatif::ProgressBar::hidden() } else { indicatif::ProgressBar::new(0) };
     bar.set_style(
         indicatif::ProgressStyle::with_template("{bar:40} {percent:>3}% {pos}/{len} {elapsed_precise}")

@@ -16,7 +16,7 @@ use reqwest::StatusCode;
 
 pub use jobs::{run_jobs, JobsCommand};
 use submit::expect_success;
-pub use submit::{submit, SubmitOptions, SubmitReport, SCENE_HEADER};
+pub use submit::{estimate, estimate_table, submit, SubmitOptions, SubmitReport, SCENE_HEADER};
 
 /// Where the server is and how to reach it: shared by every subcommand that talks to one.
 #[derive(Debug, Clone, clap::Args)]

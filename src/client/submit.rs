@@ -25,8 +25,12 @@ pub struct SubmitOptions {
     #[command(flatten)]
     pub connect: ConnectOptions,
     /// Where to write the image; `.exr` asks for EXR, anything else PNG.
-    #[arg(short, long, required_unless_present = "detach")]
+    #[arg(short, long, required_unless_present_any = ["detach", "estimate"])]
     pub output: Option<PathBuf>,
+    /// Render nothing: print what the job is predicted to cost and how far from the truth on
+    /// the daemon's device (`POST /v1/estimate`; for `auto`, the method it would choose).
+    #[arg(long, conflicts_with = "detach")]
+    pub estimate: bool,
     /// Return once the job is accepted (its id on stdout; `penumbra jobs wait ID` later), and
     /// never cancel it.
     #[arg(long)]
@@ -63,11 +67,78 @@ impl SubmitReport {
 /// `progress(done, total)` is called on every event. Ctrl-C after the job was accepted cancels
 /// it on the server unless `--detach`.
 pub async fn submit(options: &SubmitOptions, progress: &(dyn Fn(u64, u64) + Sync)) -> Result<SubmitReport, ClientError> {
+    let mut client = Client::new(&options.connect)?;
+    let mut report = SubmitReport::new("");
+    let (job, scene) = prepare(options, &mut client, &mut report).await?;
+
+    // One key for every attempt of this submission: a retry after a lost answer gets the job
+    // the first attempt created.
+    let key = uuid::Uuid::new_v4().to_string();
+    let submitted = |http: &reqwest::Client, base: &str| {
+        http.post(format!("{base}/v1/jobs")).header(SCENE_HEADER, &scene).header("idempotency-key", &key).json(&job)
+    };
+    let accepted = client.json(submitted).await?;
+    report.id = accepted["id"].as_str().ok_or_else(|| ClientError::Job(format!("no id in the answer: {accepted}")))?.to_owned();
+    if options.detach {
+        report.retries = client.retries;
+        return Ok(report);
+    }
+    let output = options.output.clone().expect("clap requires -o without --detach");
+    let finished = tokio::select! {
+        finished = follow_and_fetch(&mut client, &mut report, &scene, &output, progress) => finished,
+        _ = tokio::signal::ctrl_c() => {
+            let outcome = super::jobs::cancel_quietly(&options.connect, &report.id).await;
+            return Err(ClientError::Interrupted { id: report.id.clone(), outcome });
+        }
+    };
+    finished?;
+    report.retries = client.retries;
+    Ok(report)
+}
+
+/// `penumbra submit --estimate`: the job prepared as for a submission (its files uploaded
+/// where the server lacks them) and estimated, not rendered: the server's answer.
+pub async fn estimate(options: &SubmitOptions) -> Result<Value, ClientError> {
+    let mut client = Client::new(&options.connect)?;
+    let (job, scene) = prepare(options, &mut client, &mut SubmitReport::new("")).await?;
+    client.json(|http, base| http.post(format!("{base}/v1/estimate")).header(SCENE_HEADER, &scene).json(&job)).await
+}
+
+/// An estimate as people read it: each candidate's predicted time and error, the job's own
+/// or `auto`'s choice marked, and why a budget cannot be met.
+pub fn estimate_table(estimate: &Value) -> String {
+    let chosen = estimate["auto"]["label"].as_str().or(estimate["job"]["label"].as_str()).unwrap_or_default();
+    let model = &estimate["model"];
+    let mut out = format!(
+        "predicted on {} by the {} model (status {})\n{:<24} {:>10} {:>10}\n",
+        model["adapter"].as_str().unwrap_or("?"),
+        model["source"].as_str().unwrap_or("?"),
+        model["status"].as_str().unwrap_or("?"),
+        "method",
+        "ms",
+        "error"
+    );
+    for p in estimate["predictions"].as_array().into_iter().flatten() {
+        let label = p["label"].as_str().unwrap_or_default();
+        let mark = if label == chosen { " <" } else { "" };
+        out.push_str(&format!(
+            "{label:<24} {:>10.0} {:>10.4}{mark}\n",
+            p["ms"].as_f64().unwrap_or(f64::NAN),
+            p["error"].as_f64().unwrap_or(f64::NAN)
+        ));
+    }
+    if let Some(message) = estimate["unmet"]["message"].as_str() {
+        out.push_str(&format!("{}: {message}\n", estimate["unmet"]["field"].as_str().unwrap_or("budget")));
+    }
+    out
+}
+
+/// The job file read, its local files uploaded where the server lacks them (the paths become
+/// content ids), its format set by the output's extension; with the routing key of its scene.
+async fn prepare(options: &SubmitOptions, client: &mut Client, report: &mut SubmitReport) -> Result<(Value, String), ClientError> {
     let text = std::fs::read(&options.job).map_err(|source| ClientError::Read { path: options.job.clone(), source })?;
     let mut job: Value = serde_json::from_slice(&text)?;
     let base_dir = options.job.parent().map(Path::to_path_buf).unwrap_or_default();
-    let mut client = Client::new(&options.connect)?;
-    let mut report = SubmitReport::new("");
 
     // Local assets become content ids, uploaded only when the server lacks them.
     let assets = [("/scene", "scenes"), ("/light/image", "lights")];
@@ -100,30 +171,7 @@ pub async fn submit(options: &SubmitOptions, progress: &(dyn Fn(u64, u64) + Sync
         output.or_insert_with(|| serde_json::json!({}))["format"] = "exr".into();
     }
     let scene = routing_key(&job);
-
-    // One key for every attempt of this submission: a retry after a lost answer gets the job
-    // the first attempt created.
-    let key = uuid::Uuid::new_v4().to_string();
-    let submitted = |http: &reqwest::Client, base: &str| {
-        http.post(format!("{base}/v1/jobs")).header(SCENE_HEADER, &scene).header("idempotency-key", &key).json(&job)
-    };
-    let accepted = client.json(submitted).await?;
-    report.id = accepted["id"].as_str().ok_or_else(|| ClientError::Job(format!("no id in the answer: {accepted}")))?.to_owned();
-    if options.detach {
-        report.retries = client.retries;
-        return Ok(report);
-    }
-    let output = options.output.clone().expect("clap requires -o without --detach");
-    let finished = tokio::select! {
-        finished = follow_and_fetch(&mut client, &mut report, &scene, &output, progress) => finished,
-        _ = tokio::signal::ctrl_c() => {
-            let outcome = super::jobs::cancel_quietly(&options.connect, &report.id).await;
-            return Err(ClientError::Interrupted { id: report.id.clone(), outcome });
-        }
-    };
-    finished?;
-    report.retries = client.retries;
-    Ok(report)
+    Ok((job, scene))
 }
 
 /// Follows the job's events to the end, then downloads the image to `output`.

@@ -1,3 +1,6 @@
+//! The model's fit, its choice under a budget, its error look-up and its storage, on made-up
+//! measurements (the measurement itself runs on the device: tests/render.rs).
+
 use super::measure::{fit, parse_label, sample};
 use super::*;
 use crate::job::auto::AutoBudget;

@@ -6,6 +6,7 @@
 use std::sync::RwLock;
 
 use super::*;
+use crate::config::ModelMode;
 use crate::job::auto::{AutoBudget, AutoChoice};
 use crate::model::{self, Features, Model};
 
@@ -38,15 +39,6 @@ impl ModelState {
         *self.current.write().unwrap_or_else(|p| p.into_inner()) = Arc::new(model);
         self.set_status(status);
     }
-}
-
-/// What `--model` asks of the daemon's start.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum ModelMode {
-    /// The model stored for this adapter and build, else measure it in the background.
-    Measure,
-    /// The shipped model only (tests; a fleet that should not spend its first minute measuring).
-    Default,
 }
 
 /// Reads this device's stored model, or measures it in the background with the device's job

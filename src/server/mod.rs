@@ -48,7 +48,6 @@ use crate::store::{new_job_id, JobStore as DurableStore, Store, StoreError, Stor
 use crate::supervise::Supervise;
 use crate::upload_store::{content_id, is_content_id, Kind};
 use auto::estimate;
-pub use auto::ModelMode;
 pub use cluster::Replica;
 use error::{store_error, ApiError};
 use job_routes::{cancel_job, immutable, job_events, job_image, job_record, job_thumbnail, list_jobs, not_modified, submit_job, unchanged};

@@ -2,7 +2,7 @@
 //! the engine up, serves until SIGINT or SIGTERM, then finishes the work it accepted.
 
 use super::*;
-use crate::config::JobStoreKind;
+use crate::config::{JobStoreKind, ModelMode};
 
 /// Binds, warms up, serves until SIGINT or SIGTERM, then finishes requests in flight.
 pub async fn serve(config: ServeConfig, engine: Arc<Engine>) -> anyhow::Result<()> {
