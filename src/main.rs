@@ -159,6 +159,10 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             if suite.model {
                 return measure_model(&engine, &suite.out);
             }
+            if suite.budgets {
+                penumbra::eval::budgets::run(&engine, &suite, suite.model_file.as_deref())?;
+                return Ok(());
+            }
             let report = penumbra::eval::run(&engine, &suite)?;
             eprintln!("wrote {} rows and {} pictures to {}", report.rows.len(), report.files.len(), suite.out.display());
             Ok(())

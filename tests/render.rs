@@ -943,6 +943,8 @@ fn eval_writes_the_tables_and_the_pictures() {
         repeat: 2,
         colored: true,
         model: false,
+        budgets: false,
+        model_file: None,
     };
     let report = penumbra::eval::run(&common::engine(), &options).unwrap();
     // 2 lights × 2 shadow maps; per case the reference, hard, jfa-l both ways, chun-oh, three sweep points.
@@ -1785,6 +1787,8 @@ fn the_worst_real_models_hold_their_errors_and_the_methods_say_what_they_cannot_
         lights: vec!["white".into(), "stripes".into()],
         colored: false,
         model: false,
+        budgets: false,
+        model_file: None,
         methods: METHODS.iter().map(|m| m.to_string()).collect(),
         sizes: vec!["240x180".into()],
         samples: 512,
@@ -1841,10 +1845,10 @@ fn the_worst_real_models_hold_their_errors_and_the_methods_say_what_they_cannot_
 /// reference's sample counts as 1/√samples does.
 #[test]
 fn the_model_is_measured_on_the_device() {
-    use penumbra::model::{measure, Features, LightKind};
+    use penumbra::model::{measure, Features};
     let suite = measure::Suite {
         scenes: vec![("occluder", "{}")],
-        lights: vec![("white", LightKind::White), ("flame", LightKind::Coloured)],
+        lights: vec!["white", "flame"],
         sizes: vec![(48, 32), (128, 96)],
         maps: vec![128, 256],
         truth_samples: 256,
@@ -1855,23 +1859,23 @@ fn the_model_is_measured_on_the_device() {
     let model = measure::measure(&engine, &suite, key, &measure::Plain).unwrap().expect("not cancelled");
     let labels: Vec<&str> = model.candidates.iter().map(|c| c.label.as_str()).collect();
     assert_eq!(labels.len(), measure::CANDIDATES.len() + 1, "{labels:?}");
-    let at = |pixels, light| Features {
+    let at = |pixels, light: &str| Features {
         pixels,
         texels: 256 * 256,
         triangles: 1_000,
         triangles_known: true,
-        light,
+        light: light.into(),
         scene: Some("occluder".into()),
     };
     for candidate in &model.candidates {
-        for light in [LightKind::White, LightKind::Coloured] {
+        for light in ["white", "flame", "image"] {
             let (small, large) = (candidate.predict(&at(48 * 32, light)), candidate.predict(&at(1920 * 1080, light)));
             assert!(small.ms > 0.0 && large.ms >= small.ms, "{}: {small:?} {large:?}", candidate.label);
             assert!((0.0..1.0).contains(&small.error), "{}: {small:?}", candidate.label);
         }
         assert_eq!(candidate.times.len(), if candidate.errors_measured { 8 } else { 0 }, "{}", candidate.label);
     }
-    let error = |label: &str| model.candidates.iter().find(|c| c.label == label).unwrap().error(&at(128 * 96, LightKind::White));
+    let error = |label: &str| model.candidates.iter().find(|c| c.label == label).unwrap().error(&at(128 * 96, "white"));
     assert!(
         error("reference:samples=16") > error("reference:samples=64"),
         "16: {}, 64: {}",

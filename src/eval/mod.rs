@@ -10,6 +10,7 @@
 //! Scenes are built-ins or real models (`suite.rs`): files made by others, staged on a floor
 //! with the fitted camera and light; their rows are also summed up per method (`real.rs`).
 
+pub mod budgets;
 mod compare;
 pub mod frame_bench;
 mod options;

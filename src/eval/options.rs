@@ -48,6 +48,15 @@ pub struct EvalOptions {
     /// `model.json` and `model.md` in `--out`.
     #[arg(long)]
     pub model: bool,
+    /// Instead of the suite: ask every case of it a range of `auto` budgets (time, as multiples
+    /// of its cheapest prediction; error, 0.01 to 0.08), render each choice, and report how many
+    /// budgets were kept and how close the predictions came (`budgets.md`; contract §5). Measures
+    /// the model first unless `--model-file` gives one.
+    #[arg(long)]
+    pub budgets: bool,
+    /// The model `--budgets` holds to its promises (`model.json` of `eval --model`).
+    #[arg(long, requires = "budgets")]
+    pub model_file: Option<PathBuf>,
     /// Sweep one numeric parameter of one method, e.g. `brabec:max_radius_texels=4,8,16,32`
     /// (other `key=value` parts stay fixed): adds one row per value and writes a table and a
     /// plot (`sweep-*.svg`) of cost and penumbra error against the value.

@@ -68,7 +68,7 @@ pub struct Candidate {
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct TimePoint {
     pub scene: String,
-    pub light: LightKind,
+    pub light: String,
     pub pixels: u64,
     pub texels: u64,
     pub triangles: u64,
@@ -82,7 +82,7 @@ impl TimePoint {
             texels: self.texels,
             triangles: self.triangles,
             triangles_known: true,
-            light: self.light,
+            light: self.light.clone(),
             scene: Some(self.scene.clone()),
         }
     }
@@ -119,47 +119,27 @@ impl Cost {
     }
 }
 
-/// A cost per kind of light, fitted apart: a coloured light costs E0 and the colour-aware
-/// methods more per pixel, and the sampling methods less where it has dark gaps (a sample on a
-/// black texel is skipped) — two effects one extra term could not tell apart.
-#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Default)]
-pub struct Costs {
-    pub white: Cost,
-    pub coloured: Cost,
-}
-
-impl Costs {
-    pub fn of(&self, light: LightKind) -> &Cost {
-        match light {
-            LightKind::White => &self.white,
-            LightKind::Coloured => &self.coloured,
-        }
-    }
-
-    pub fn ms(&self, features: &Features) -> f64 {
-        self.of(features.light).ms(features)
-    }
-}
+/// A cost per light the suite measured, fitted apart: a coloured light costs E0 and the
+/// colour-aware methods more per pixel, and the sampling methods less where it has dark gaps
+/// (a sample on a black texel is skipped) — effects a shared term could not tell apart.
+pub type Costs = std::collections::BTreeMap<String, Cost>;
 
 /// How many terms a cost has.
 pub const FEATURES: usize = 4;
 
-/// One measured error: a scene kind (a built-in scene's name), a light kind and a size.
+/// One measured error: a scene kind (a built-in scene's name), a light (a built-in image's
+/// name) and a size.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct ErrorPoint {
     pub scene: String,
-    pub light: LightKind,
+    pub light: String,
     pub pixels: u64,
     pub error: f64,
 }
 
-/// White light, or a light of several colours (any image but `white`).
-#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq)]
-#[serde(rename_all = "lowercase")]
-pub enum LightKind {
-    White,
-    Coloured,
-}
+/// The light of a job as the model knows lights: `white`, a built-in image's name, or
+/// `image` for a user's (predicted as the worst coloured light measured).
+pub const USER_IMAGE: &str = "image";
 
 /// What a job's cost and error follow, read from the job (and the scene's triangles where the
 /// engine knows them).
@@ -170,7 +150,8 @@ pub struct Features {
     pub triangles: u64,
     /// Whether `triangles` was counted (false: a guess, the suite's largest scene).
     pub triangles_known: bool,
-    pub light: LightKind,
+    /// `white`, a built-in image's name, or `image` (`USER_IMAGE`).
+    pub light: String,
     /// The built-in scene's name; `None` for a user's scene (its error is predicted as the
     /// worst built-in kind's).
     pub scene: Option<String>,
@@ -183,9 +164,9 @@ impl Features {
     /// A job's features; `triangles`: the scene's count, where known.
     pub fn of(job: &Job, triangles: Option<u64>) -> Self {
         let light = match &job.light.image {
-            None => LightKind::White,
-            Some(AssetRef::Builtin { name, .. }) if name == "white" => LightKind::White,
-            Some(_) => LightKind::Coloured,
+            None => "white".to_owned(),
+            Some(AssetRef::Builtin { name, .. }) => name.clone(),
+            Some(_) => USER_IMAGE.to_owned(),
         };
         let scene = match &job.scene.asset {
             AssetRef::Builtin { name, .. } => Some(name.clone()),
@@ -224,7 +205,9 @@ impl Candidate {
     /// kind's worst for a user's scene), interpolated over the output's pixels in log scale,
     /// held at the ends.
     pub fn error(&self, features: &Features) -> f64 {
-        let of_light = self.errors.iter().filter(|p| p.light == features.light);
+        // A light the suite did not measure: every coloured light's points, the worst kept.
+        let measured = self.errors.iter().any(|p| p.light == features.light);
+        let of_light = self.errors.iter().filter(|p| if measured { p.light == features.light } else { p.light != "white" });
         let mut by_size: Vec<(u64, f64)> = Vec::new();
         for point in of_light {
             if features.scene.as_ref().is_some_and(|s| self.errors.iter().any(|p| &p.scene == s) && &point.scene != s) {
@@ -242,13 +225,22 @@ impl Candidate {
     /// The fitted cost's relative error over the times it was fitted to: the median and the
     /// largest |predicted − measured| / measured (`None` where nothing was measured).
     pub fn fit_error(&self) -> Option<(f64, f64)> {
-        let mut relative: Vec<f64> = self.times.iter().map(|t| (self.cost.ms(&t.features()) - t.ms).abs() / t.ms).collect();
+        let mut relative: Vec<f64> = self.times.iter().map(|t| (self.ms(&t.features()) - t.ms).abs() / t.ms).collect();
         relative.sort_by(f64::total_cmp);
         Some((*relative.get(relative.len() / 2)?, *relative.last()?))
     }
 
+    /// The predicted time: the cost fitted under the job's light, or for a light the suite did
+    /// not measure the costliest of the coloured lights' at these features.
+    pub fn ms(&self, features: &Features) -> f64 {
+        match self.cost.get(&features.light) {
+            Some(cost) => cost.ms(features),
+            None => self.cost.iter().filter(|(light, _)| *light != "white").map(|(_, c)| c.ms(features)).fold(0.0, f64::max),
+        }
+    }
+
     pub fn predict(&self, features: &Features) -> Prediction {
-        Prediction { ms: self.cost.ms(features), error: self.error(features) }
+        Prediction { ms: self.ms(features), error: self.error(features) }
     }
 }
 
@@ -358,7 +350,7 @@ impl Model {
             .map(|c| {
                 let mut errors = Map::new();
                 for p in &c.errors {
-                    errors.insert(format!("{}/{}/{}", p.scene, light_name(p.light), p.pixels), p.error.into());
+                    errors.insert(format!("{}/{}/{}", p.scene, p.light, p.pixels), p.error.into());
                 }
                 serde_json::json!({"label": c.label, "method": c.method, "cost": c.cost, "errors": errors, "errors_measured": c.errors_measured})
             })
@@ -375,76 +367,72 @@ impl Model {
         })
     }
 
-    /// A Markdown table of the model: each candidate's predicted time at three sizes and its
-    /// error per scene kind and light, at the suite's largest size.
+    /// A Markdown table of the model: each candidate's predicted time at three sizes under
+    /// white light and at 1080p under each coloured light, how well its cost fits what was
+    /// measured, and its error per scene kind and light at the suite's largest size.
     pub fn table(&self) -> String {
-        let mut scenes: Vec<&str> = self.candidates.iter().flat_map(|c| c.errors.iter().map(|p| p.scene.as_str())).collect();
-        scenes.sort_unstable();
-        scenes.dedup();
+        let points = || self.candidates.iter().flat_map(|c| c.errors.iter());
+        let mut scenes: Vec<&str> = points().map(|p| p.scene.as_str()).collect();
+        let mut lights: Vec<&str> = points().map(|p| p.light.as_str()).collect();
+        for list in [&mut scenes, &mut lights] {
+            list.sort_unstable();
+            list.dedup();
+        }
+        let coloured: Vec<&str> = lights.iter().copied().filter(|l| *l != "white").collect();
         let sizes = [(256u32, 192u32), (640, 480), (1920, 1080)];
         let mut out =
             format!("Model of {} ({}), build {}, {}.\n\n| candidate |", self.key.adapter, self.key.driver, self.key.build, self.source);
         for (w, h) in sizes {
             out.push_str(&format!(" ms {w}×{h} |"));
         }
-        out.push_str(" ms 1920×1080, coloured | fit, median | fit, worst |");
+        for light in &coloured {
+            out.push_str(&format!(" ms 1920×1080 {light} |"));
+        }
+        out.push_str(" fit, median | fit, worst |");
         for scene in &scenes {
-            out.push_str(&format!(" {scene} white | {scene} coloured |"));
+            for light in &lights {
+                out.push_str(&format!(" {scene} {light} |"));
+            }
         }
         out.push_str("\n|---|");
-        out.push_str(&"---:|".repeat(sizes.len() + 3 + 2 * scenes.len()));
+        out.push_str(&"---:|".repeat(sizes.len() + coloured.len() + 2 + scenes.len() * lights.len()));
         out.push('\n');
-        let largest = self.candidates.iter().flat_map(|c| c.errors.iter().map(|p| p.pixels)).max().unwrap_or(0);
+        let largest = points().map(|p| p.pixels).max().unwrap_or(0);
+        let at = |pixels: u64, light: &str, scene: Option<&str>| Features {
+            pixels,
+            texels: 2048 * 2048,
+            triangles: 10_000,
+            triangles_known: true,
+            light: light.to_owned(),
+            scene: scene.map(str::to_owned),
+        };
         for c in &self.candidates {
             out.push_str(&format!("| {} |", c.label));
             for (w, h) in sizes {
-                let features = Features {
-                    pixels: u64::from(w) * u64::from(h),
-                    texels: 2048 * 2048,
-                    triangles: 10_000,
-                    triangles_known: true,
-                    light: LightKind::White,
-                    scene: None,
-                };
-                out.push_str(&format!(" {:.0} |", c.cost.ms(&features)));
+                out.push_str(&format!(" {:.0} |", c.ms(&at(u64::from(w) * u64::from(h), "white", None))));
             }
-            let coloured = Features {
-                pixels: 1920 * 1080,
-                texels: 2048 * 2048,
-                triangles: 10_000,
-                triangles_known: true,
-                light: LightKind::Coloured,
-                scene: None,
-            };
-            out.push_str(&format!(" {:.0} |", c.cost.ms(&coloured)));
+            for light in &coloured {
+                out.push_str(&format!(" {:.0} |", c.ms(&at(1920 * 1080, light, None))));
+            }
             match c.fit_error() {
                 Some((median, worst)) => out.push_str(&format!(" {:.0} % | {:.0} % |", median * 100.0, worst * 100.0)),
                 None => out.push_str(" - | - |"),
             }
             for scene in &scenes {
-                for light in [LightKind::White, LightKind::Coloured] {
-                    let features = Features {
-                        pixels: largest,
-                        texels: 1 << 20,
-                        triangles: 10_000,
-                        triangles_known: true,
-                        light,
-                        scene: Some((*scene).to_owned()),
-                    };
-                    out.push_str(&format!(" {:.4}{} |", c.error(&features), if c.errors_measured { "" } else { "*" }));
+                for light in &lights {
+                    out.push_str(&format!(
+                        " {:.4}{} |",
+                        c.error(&at(largest, light, Some(scene))),
+                        if c.errors_measured { "" } else { "*" }
+                    ));
                 }
             }
             out.push('\n');
         }
-        out.push_str("\nTimes with 10,000 triangles and a 2,048² map, under white light but for the one column; the fit's relative error over the suite's times; errors (mean |V − Vref| over the penumbra) at the suite's largest size; * extrapolated, not measured.\n");
+        out.push_str(
+            "\nTimes with 10,000 triangles and a 2,048² map; the fit's relative error over the suite's times; errors (mean |V − Vref| over the penumbra) at the suite's largest size; * extrapolated, not measured.\n",
+        );
         out
-    }
-}
-
-fn light_name(light: LightKind) -> &'static str {
-    match light {
-        LightKind::White => "white",
-        LightKind::Coloured => "coloured",
     }
 }
 

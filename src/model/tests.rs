@@ -5,8 +5,8 @@ use super::measure::{fit, parse_label, sample};
 use super::*;
 use crate::job::auto::AutoBudget;
 
-fn features(pixels: u64, triangles: u64, texels: u64, light: LightKind) -> Features {
-    Features { pixels, texels, triangles, triangles_known: true, light, scene: Some("torus".into()) }
+fn features(pixels: u64, triangles: u64, texels: u64, light: &str) -> Features {
+    Features { pixels, texels, triangles, triangles_known: true, light: light.into(), scene: Some("torus".into()) }
 }
 
 #[test]
@@ -16,7 +16,7 @@ fn the_fit_finds_the_costs_it_was_made_from() {
     for pixels in [19_200, 76_800, 307_200] {
         for triangles in [2_000, 9_000, 30_000] {
             for texels in [1 << 18, 1 << 20] {
-                let f = features(pixels, triangles, texels, LightKind::White);
+                let f = features(pixels, triangles, texels, "white");
                 samples.push(sample(f.clone(), truth.ms(&f)));
             }
         }
@@ -31,19 +31,19 @@ fn the_fit_finds_the_costs_it_was_made_from() {
 fn no_cost_term_is_fitted_negative() {
     // Times that fall with the pixels: least squares alone would give a negative term.
     let samples: Vec<_> =
-        [(19_200, 30.0), (76_800, 29.0), (307_200, 28.0)].map(|(px, ms)| sample(features(px, 1_000, 1 << 20, LightKind::White), ms)).into();
+        [(19_200, 30.0), (76_800, 29.0), (307_200, 28.0)].map(|(px, ms)| sample(features(px, 1_000, 1 << 20, "white"), ms)).into();
     assert!(fit(samples.iter()).as_array().iter().all(|c| *c >= 0.0));
 }
 
 fn candidate(label: &str, cost: Costs, error: f64) -> Candidate {
-    let errors = [LightKind::White, LightKind::Coloured]
+    let errors = [("white", 1.0), ("stripes", 1.5), ("flame", 2.0)]
         .into_iter()
-        .flat_map(|light| {
+        .flat_map(|(light, coloured)| {
             [("torus", 1.0), ("terrain", 2.0)].map(|(scene, worse)| ErrorPoint {
                 scene: scene.into(),
-                light,
+                light: light.into(),
                 pixels: 19_200,
-                error: error * worse,
+                error: error * worse * coloured,
             })
         })
         .collect();
@@ -51,9 +51,10 @@ fn candidate(label: &str, cost: Costs, error: f64) -> Candidate {
 }
 
 fn model() -> Model {
-    let ms = |base_ms| {
-        let cost = Cost { base_ms, ..Cost::default() };
-        Costs { white: cost, coloured: cost }
+    let ms = |base_ms| -> Costs {
+        [("white", 1.0), ("stripes", 1.5), ("flame", 1.2)]
+            .map(|(light, more)| (light.to_owned(), Cost { base_ms: base_ms * more, ..Cost::default() }))
+            .into()
     };
     Model {
         key: ModelKey { adapter: "a".into(), driver: "d".into(), build: "b".into() },
@@ -72,7 +73,7 @@ fn model() -> Model {
 #[test]
 fn auto_takes_the_most_faithful_in_time_and_the_cheapest_in_error() {
     let model = model();
-    let f = features(19_200, 1_000, 1 << 20, LightKind::White);
+    let f = features(19_200, 1_000, 1 << 20, "white");
     let choose = |max_ms, max_error| model.choose(&AutoBudget { max_ms, max_error }, &f).map(|(c, _)| c.label);
     // The margin: 100 ms × 1.25 does not fit 120 ms.
     assert_eq!(choose(Some(120.0), None).unwrap(), "wedges");
@@ -91,12 +92,22 @@ fn auto_takes_the_most_faithful_in_time_and_the_cheapest_in_error() {
 #[test]
 fn a_users_scene_is_predicted_by_the_worst_kind() {
     let model = model();
-    let mut f = features(19_200, 1_000, 1 << 20, LightKind::White);
+    let mut f = features(19_200, 1_000, 1 << 20, "white");
     assert_eq!(model.candidates[1].error(&f), 0.03);
     f.scene = None;
     assert_eq!(model.candidates[1].error(&f), 0.06);
     f.scene = Some("columns".into());
     assert_eq!(model.candidates[1].error(&f), 0.06, "a built-in kind the suite did not measure counts as unknown");
+}
+
+#[test]
+fn a_light_the_suite_did_not_measure_is_predicted_as_the_worst_coloured_one() {
+    let model = model();
+    let wedges = &model.candidates[1];
+    let mut f = features(19_200, 1_000, 1 << 20, "stripes");
+    assert_eq!((wedges.ms(&f), wedges.error(&f)), (60.0, 0.045));
+    f.light = USER_IMAGE.into();
+    assert_eq!((wedges.ms(&f), wedges.error(&f)), (60.0, 0.06), "stripes' time, flame's error: the worst of each");
 }
 
 #[test]

@@ -1,0 +1,212 @@
+//! `penumbra eval --budgets` (contract §5): whether `auto` keeps its promises on this device.
+//! The model is measured first (or read with `--model-file`); then every case of the suite
+//! (its scenes, lights and sizes — built-in scenes the model's suite did not measure, and sizes
+//! it did not render, included) is asked a range of time and error budgets, each choice is
+//! rendered and timed as the daemon would, and measured against the model's own truth.
+
+use anyhow::Context;
+use serde::Serialize;
+
+use super::options::{parse_size, EvalOptions};
+use super::{case_job, suite};
+use crate::engine::Engine;
+use crate::job::auto::AutoBudget;
+use crate::job::OutputFormat;
+use crate::model::measure::{self, Suite};
+use crate::model::{Features, Model, MARGIN};
+
+/// Time budgets, as multiples of the case's cheapest predicted time (with the margin): from
+/// one only the cheapest fits to one most candidates fit.
+const TIME_FACTORS: &[f64] = &[1.2, 2.0, 4.0, 8.0];
+/// Error budgets, mean |V − Vref| over the penumbra.
+const ERRORS: &[f64] = &[0.01, 0.02, 0.04, 0.08];
+/// How close a prediction must come to count as right (the issue's goal: ±25 %).
+const WITHIN: f64 = 0.25;
+
+/// One budget asked of one case, and what came of it.
+#[derive(Debug, Clone, Serialize)]
+pub struct BudgetRow {
+    pub scene: String,
+    pub light: String,
+    pub size: String,
+    /// `max_ms=…` or `max_error=…`.
+    pub budget: String,
+    /// The candidate chosen, or `refused (closest …)`.
+    pub choice: String,
+    pub predicted_ms: f64,
+    pub measured_ms: Option<f64>,
+    pub predicted_error: f64,
+    pub measured_error: Option<f64>,
+    /// Whether the measurement kept the budget (None: refused).
+    pub kept: Option<bool>,
+}
+
+/// The suite's answers, summed up against the goals.
+#[derive(Debug, Clone, Serialize)]
+pub struct BudgetReport {
+    pub model: String,
+    pub rows: Vec<BudgetRow>,
+    /// Time budgets kept, of those rendered.
+    pub time_kept: (usize, usize),
+    pub error_kept: (usize, usize),
+    /// Predictions within ±25 %, over every distinct (case, choice) rendered.
+    pub time_predicted: (usize, usize),
+    pub error_predicted: (usize, usize),
+}
+
+/// Runs the budgets over `options`' scenes, lights and sizes (at its first map resolution) and
+/// writes `budgets.md` and `budgets.json` under `options.out`.
+pub fn run(engine: &Engine, options: &EvalOptions, model_file: Option<&std::path::Path>) -> anyhow::Result<BudgetReport> {
+    std::fs::create_dir_all(&options.out).with_context(|| format!("cannot create {}", options.out.display()))?;
+    let model = match model_file {
+        Some(path) => serde_json::from_slice::<Model>(&std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?)
+            .with_context(|| format!("{} is not a model", path.display()))?,
+        None => {
+            eprintln!("measuring the model first (penumbra eval --model)");
+            let key = crate::model::key_for(&engine.adapter());
+            let model = measure::measure(engine, &Suite::standard(), key, &measure::Plain)?.context("cancelled")?;
+            std::fs::write(options.out.join("model.json"), serde_json::to_vec_pretty(&model)?)?;
+            model
+        }
+    };
+    let truth = Suite::standard();
+    let sizes: Vec<(u32, u32)> = options.sizes.iter().map(|s| parse_size(s)).collect::<anyhow::Result<_>>()?;
+    let shadow_map = options.shadow_map.first().copied().unwrap_or(1024);
+    let (mut rows, mut rendered) = (Vec::new(), Vec::<BudgetRow>::new());
+    // A daemon answers warm: each method's pipelines under each light are compiled by a first
+    // render that is not timed.
+    engine.warm_up().context("warm-up")?;
+    let mut warm: Vec<(String, String)> = Vec::new();
+    for scene in suite::scenes(&options.scenes)? {
+        for light in &options.lights {
+            for &size in &sizes {
+                let job = case_job(&scene, light, shadow_map, size, OutputFormat::Png)?;
+                let case = format!("{} / {light} / {}×{}", scene.label, size.0, size.1);
+                eprintln!("{case}: the truth");
+                let (reference, _) = engine.render_frame(&truth.truth_of(&job), &()).map_err(|e| anyhow::anyhow!("{case}: {e}"))?;
+                let features = Features::of(&job, engine.scene_triangles(&job.scene));
+                let cheapest = model.predictions(&features).iter().map(|(_, p)| p.ms).fold(f64::INFINITY, f64::min);
+                let budgets = TIME_FACTORS
+                    .iter()
+                    .map(|f| AutoBudget { max_ms: Some(cheapest * MARGIN * f), max_error: None })
+                    .chain(ERRORS.iter().map(|&e| AutoBudget { max_ms: None, max_error: Some(e) }));
+                let mut measured: Vec<(String, f64, f64)> = Vec::new();
+                for budget in budgets {
+                    let label = match (budget.max_ms, budget.max_error) {
+                        (Some(ms), _) => format!("max_ms={ms:.0}"),
+                        (_, Some(error)) => format!("max_error={error}"),
+                        _ => unreachable!("a budget has one"),
+                    };
+                    let mut row = BudgetRow {
+                        scene: scene.label.clone(),
+                        light: light.clone(),
+                        size: format!("{}×{}", size.0, size.1),
+                        budget: label,
+                        choice: String::new(),
+                        predicted_ms: 0.0,
+                        measured_ms: None,
+                        predicted_error: 0.0,
+                        measured_error: None,
+                        kept: None,
+                    };
+                    match model.choose(&budget, &features) {
+                        Err(unmet) => {
+                            row.choice = format!("refused (closest {})", unmet.closest);
+                            (row.predicted_ms, row.predicted_error) = (unmet.prediction.ms, unmet.prediction.error);
+                        }
+                        Ok((candidate, prediction)) => {
+                            let (ms, error) = match measured.iter().find(|(l, _, _)| *l == candidate.label) {
+                                Some(&(_, ms, error)) => (ms, error),
+                                None => {
+                                    eprintln!("{case}: {}", candidate.label);
+                                    let chosen = crate::job::Job { method: candidate.method_for(&job), compare: true, ..job.clone() };
+                                    if !warm.contains(&(candidate.label.clone(), light.clone())) {
+                                        engine.render_frame(&chosen, &()).map_err(|e| anyhow::anyhow!("{case}: {e}"))?;
+                                        warm.push((candidate.label.clone(), light.clone()));
+                                    }
+                                    let (frame, ms) = measure::timed_render(engine, &chosen).map_err(|e| anyhow::anyhow!("{case}: {e}"))?;
+                                    let error = crate::quality::compare(&frame, &reference, 0.0).visibility.penumbra.mae;
+                                    measured.push((candidate.label.clone(), ms, error));
+                                    (ms, error)
+                                }
+                            };
+                            row.choice = candidate.label.clone();
+                            (row.predicted_ms, row.predicted_error) = (prediction.ms, prediction.error);
+                            (row.measured_ms, row.measured_error) = (Some(ms), Some(error));
+                            row.kept = Some(budget.max_ms.is_none_or(|max| ms <= max) && budget.max_error.is_none_or(|max| error <= max));
+                            if !rendered
+                                .iter()
+                                .any(|r| r.scene == row.scene && r.light == row.light && r.size == row.size && r.choice == row.choice)
+                            {
+                                rendered.push(row.clone());
+                            }
+                        }
+                    }
+                    rows.push(row);
+                }
+            }
+        }
+    }
+    let share = |rows: &mut dyn Iterator<Item = bool>| rows.fold((0, 0), |(yes, all), kept| (yes + usize::from(kept), all + 1));
+    let kept_of = |time: bool| {
+        share(&mut rows.iter().filter(|r| r.budget.starts_with(if time { "max_ms" } else { "max_error" })).filter_map(|r| r.kept))
+    };
+    let close = |predicted: f64, measured: f64| (predicted - measured).abs() <= WITHIN * measured;
+    let report = BudgetReport {
+        model: format!("{} on {} ({})", model.source, model.key.adapter, model.key.build),
+        time_kept: kept_of(true),
+        error_kept: kept_of(false),
+        time_predicted: share(&mut rendered.iter().map(|r| close(r.predicted_ms, r.measured_ms.unwrap_or(0.0)))),
+        error_predicted: share(&mut rendered.iter().map(|r| close(r.predicted_error, r.measured_error.unwrap_or(0.0)))),
+        rows,
+    };
+    std::fs::write(options.out.join("budgets.json"), serde_json::to_vec_pretty(&report)?)?;
+    let table = table(&report);
+    std::fs::write(options.out.join("budgets.md"), &table)?;
+    println!("{table}");
+    Ok(report)
+}
+
+/// The report as Markdown: the summary against the goals, then every row.
+pub fn table(report: &BudgetReport) -> String {
+    let percent = |(yes, all): (usize, usize)| {
+        if all == 0 {
+            "-".to_owned()
+        } else {
+            format!("{yes} of {all} ({:.0} %)", 100.0 * yes as f64 / all as f64)
+        }
+    };
+    let mut out = format!(
+        "# auto's budgets, measured\n\nModel: {}.\n\n| what | measured | goal |\n|---|---:|---:|\n\
+         | time budgets kept | {} | ≥ 90 % |\n| error budgets kept | {} | ≥ 90 % |\n\
+         | time predicted within ±25 % | {} | ≥ 80 % |\n| error predicted within ±25 % | {} | ≥ 80 % |\n\n\
+         | scene | light | size | budget | choice | predicted ms | measured ms | predicted error | measured error | kept |\n\
+         |---|---|---|---|---|---:|---:|---:|---:|---|\n",
+        report.model,
+        percent(report.time_kept),
+        percent(report.error_kept),
+        percent(report.time_predicted),
+        percent(report.error_predicted)
+    );
+    let or_dash = |v: Option<f64>, digits: usize| v.map_or("-".to_owned(), |v| format!("{v:.digits$}"));
+    for r in &report.rows {
+        out.push_str(&format!(
+            "| {} | {} | {} | {} | {} | {:.0} | {} | {:.4} | {} | {} |\n",
+            r.scene,
+            r.light,
+            r.size,
+            r.budget,
+            r.choice,
+            r.predicted_ms,
+            or_dash(r.measured_ms, 0),
+            r.predicted_error,
+            or_dash(r.measured_error, 4),
+            match r.kept {
+                Some(true) => "yes",
+                Some(false) => "**no**",
+                None => "refused",
+            }
+        ));
+    }
+    out
+}
