@@ -1906,3 +1906,59 @@ async fn a_stored_model_for_this_adapter_and_build_is_read_at_start() {
     assert_eq!(shown["status"], "stored", "{shown}");
     assert_eq!(shown["measure_seconds"], 4242.0);
 }
+
+/// A daemon measures its device's model in the background (here the quick suite) while it
+/// answers `/readyz` 200 and `auto` jobs with the shipped model; once measured, `auto` says so,
+/// and the next start reads the model from the data directory instead of measuring again.
+#[tokio::test(flavor = "multi_thread")]
+async fn the_model_is_measured_in_the_background_and_kept_for_the_next_start() {
+    let data = tempdir::Dir::new();
+    let data_dir = data.path().to_str().unwrap().to_owned();
+    let flags = ["--data-dir", data_dir.as_str(), "--job-store", "memory"];
+    let (daemon, base) = serve(&flags, &[("PENUMBRA_MODEL", "quick")]).await;
+    let client = reqwest::Client::new();
+    let model = |client: reqwest::Client, base: String| async move {
+        client.get(format!("{base}/v1/methods")).send().await.unwrap().json::<Value>().await.unwrap()["model"].clone()
+    };
+    let job = json!({"scene": {"builtin": "torus"}, "output": {"width": 64, "height": 48}, "method": {"name": "auto", "max_ms": 5000}});
+    let mut seen = Vec::new();
+    let started = std::time::Instant::now();
+    while started.elapsed() < std::time::Duration::from_secs(300) {
+        let shown = model(client.clone(), base.clone()).await;
+        let status = shown["status"].as_str().unwrap().to_owned();
+        if !seen.contains(&status) {
+            seen.push(status.clone());
+        }
+        assert_eq!(client.get(format!("{base}/readyz")).send().await.unwrap().status(), StatusCode::OK, "ready while {status}");
+        if status == "measured" || status == "failed" {
+            break;
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(250)).await;
+    }
+    assert_eq!(seen.last().map(String::as_str), Some("measured"), "{seen:?}");
+    assert!(seen.iter().any(|s| s == "measuring"), "{seen:?}");
+    let answer: Value = client
+        .post(format!("{base}/v1/render"))
+        .header("accept", "application/json")
+        .json(&job)
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(answer["auto"]["model"], "measured", "{answer}");
+    drop(daemon);
+    let stored = std::fs::read_dir(data.path().join("models")).unwrap().count();
+    assert_eq!(stored, 1);
+    let (_again, base) = serve(&flags, &[("PENUMBRA_MODEL", "quick")]).await;
+    let mut shown = Value::Null;
+    for _ in 0..100 {
+        shown = model(client.clone(), base.clone()).await;
+        if shown["status"] != "default" {
+            break;
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(100)).await;
+    }
+    assert_eq!(shown["status"], "stored", "{shown}");
+}

@@ -48,7 +48,11 @@ pub(super) fn spawn_model(state: Arc<AppState>, mode: ModelMode, data_dir: std::
         return;
     }
     tokio::spawn(async move {
-        let key = model::key_for(&state.engine.adapter());
+        let mut key = model::key_for(&state.engine.adapter());
+        if mode == ModelMode::Quick {
+            // Kept apart: a quick model is not what a `measure` start should find.
+            key.build.push_str("+quick");
+        }
         if let Some(stored) = model::load(&data_dir, &key) {
             tracing::info!(build = %key.build, "cost and quality model read from the data directory");
             state.model.set(stored, "stored");
@@ -58,9 +62,13 @@ pub(super) fn spawn_model(state: Arc<AppState>, mode: ModelMode, data_dir: std::
         tracing::info!("measuring the cost and quality model in the background");
         let measuring = state.clone();
         let runtime = tokio::runtime::Handle::current();
+        let suite = match mode {
+            ModelMode::Quick => model::measure::Suite::quick(),
+            ModelMode::Measure | ModelMode::Default => model::measure::Suite::standard(),
+        };
         let outcome = tokio::task::spawn_blocking(move || {
             let hooks = SlotHooks { state: &measuring, runtime };
-            model::measure::measure(&measuring.engine, &model::measure::Suite::standard(), key, &hooks)
+            model::measure::measure(&measuring.engine, &suite, key, &hooks)
         })
         .await;
         match outcome {
