@@ -1758,6 +1758,11 @@ async fn a_texture_never_stops_a_shadow_and_the_staging_is_said() {
     assert_eq!(first["R"], second["R"], "the staging reproduces the image");
 }
 
+/// `job` rendered synchronously, answered as JSON.
+async fn render_json(client: &reqwest::Client, base: &str, job: &Value) -> Value {
+    client.post(format!("{base}/v1/render")).header("accept", "application/json").json(job).send().await.unwrap().json().await.unwrap()
+}
+
 /// `auto` (contract §5): the model in `/v1/methods`, estimates that render nothing, a budget
 /// resolved to the method the estimate names — answered with the choice, its prediction and
 /// the measured time, synchronously and submitted — and budgets nothing meets, or out of
@@ -1804,16 +1809,7 @@ async fn auto_chooses_by_the_model_and_estimates_render_nothing() {
     assert_eq!(response.headers()["x-penumbra-auto-method"], chosen.as_str());
     let timing = response.headers()["server-timing"].to_str().unwrap();
     assert!(timing.contains(&format!("auto;desc=\"{chosen}\"")), "{timing}");
-    let answer: Value = client
-        .post(format!("{base}/v1/render"))
-        .header("accept", "application/json")
-        .json(&job(budget.clone()))
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
+    let answer = render_json(&client, &base, &job(budget.clone())).await;
     assert_eq!(answer["auto"]["label"], chosen.as_str(), "{answer}");
     assert_eq!(answer["method"], answer["auto"]["method"]["name"]);
     assert_eq!(answer["auto"]["model"], "default");
@@ -1822,16 +1818,7 @@ async fn auto_chooses_by_the_model_and_estimates_render_nothing() {
     // An error budget, compared: the measured error comes with it.
     let mut compared = job(json!({"name": "auto", "max_error": 0.05}));
     compared["compare"] = json!(true);
-    let answer: Value = client
-        .post(format!("{base}/v1/render"))
-        .header("accept", "application/json")
-        .json(&compared)
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
+    let answer = render_json(&client, &base, &compared).await;
     assert!(answer["auto"]["predicted"]["error"].as_f64().unwrap() * 1.25 <= 0.05, "{answer}");
     assert!(answer["quality"]["visibility"]["penumbra"]["mae"].is_number(), "{answer}");
 
@@ -1937,16 +1924,7 @@ async fn the_model_is_measured_in_the_background_and_kept_for_the_next_start() {
     }
     assert_eq!(seen.last().map(String::as_str), Some("measured"), "{seen:?}");
     assert!(seen.iter().any(|s| s == "measuring"), "{seen:?}");
-    let answer: Value = client
-        .post(format!("{base}/v1/render"))
-        .header("accept", "application/json")
-        .json(&job)
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
+    let answer = render_json(&client, &base, &job).await;
     assert_eq!(answer["auto"]["model"], "measured", "{answer}");
     drop(daemon);
     let stored = std::fs::read_dir(data.path().join("models")).unwrap().count();

@@ -1073,6 +1073,7 @@ fn stalled_uploads_cannot_take_the_daemon_down() {
             .args(["--listen", &format!("127.0.0.1:{port}"), "--job-store", "memory"])
             .args(["--body-timeout-secs", &body_timeout_secs.to_string()])
             .env("PENUMBRA_LOG", "warn")
+            .env("PENUMBRA_MODEL", "default")
             .stderr(std::process::Stdio::null())
             .spawn()
             .unwrap(),
