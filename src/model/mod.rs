@@ -461,9 +461,21 @@ pub fn save(data_dir: &std::path::Path, model: &Model) -> std::io::Result<()> {
 /// The key of this build on `adapter`: the crate's version and the first 12 hex digits of the
 /// running executable's SHA-256, so that a rebuilt penumbra measures again.
 pub fn key_for(adapter: &crate::gpu::AdapterSummary) -> ModelKey {
+    // Streamed: the executable is ~140 MB with its line tables, not to be held at once.
     let digest = std::env::current_exe()
-        .and_then(std::fs::read)
-        .map(|bytes| crate::upload_store::content_id(&bytes)[..12].to_owned())
+        .and_then(std::fs::File::open)
+        .and_then(|mut file| {
+            use sha2::Digest;
+            use std::io::Read;
+            let (mut hasher, mut buffer) = (sha2::Sha256::new(), vec![0u8; 1 << 20]);
+            loop {
+                match file.read(&mut buffer)? {
+                    0 => break,
+                    n => hasher.update(&buffer[..n]),
+                }
+            }
+            Ok(hasher.finalize().iter().take(6).map(|b| format!("{b:02x}")).collect::<String>())
+        })
         .unwrap_or_else(|_| "unknown".into());
     ModelKey { adapter: adapter.name.clone(), driver: adapter.driver.clone(), build: format!("{}+{digest}", env!("CARGO_PKG_VERSION")) }
 }
