@@ -1844,7 +1844,7 @@ fn the_worst_real_models_hold_their_errors_and_the_methods_say_what_they_cannot_
 /// with a cost per kind of light that grows with the pixels, and errors that order the
 /// reference's sample counts as 1/√samples does.
 #[test]
-fn the_model_is_measured_on_the_device() {
+fn the_model_is_measured_on_the_device_and_held_to_its_budgets() {
     use penumbra::model::{measure, Features};
     let suite = measure::Suite {
         scenes: vec![("occluder", "{}")],
@@ -1883,4 +1883,36 @@ fn the_model_is_measured_on_the_device() {
         error("reference:samples=64")
     );
     assert!(error("hard") > error("reference:samples=64"));
+
+    // `eval --budgets` holds it to its promises on one case: four time and four error budgets,
+    // every one answered (chosen and measured, or refused), the summary counting them, the plot.
+    let out = std::env::temp_dir().join(format!("penumbra-budgets-{}", std::process::id()));
+    std::fs::create_dir_all(&out).unwrap();
+    let model_file = out.join("model.json");
+    std::fs::write(&model_file, serde_json::to_vec(&model).unwrap()).unwrap();
+    let options = penumbra::eval::EvalOptions {
+        scenes: vec!["occluder".into()],
+        lights: vec!["white".into()],
+        methods: vec![],
+        sizes: vec!["64x48".into()],
+        samples: 16,
+        shadow_map: vec![256],
+        out: out.clone(),
+        sweep: None,
+        repeat: 1,
+        colored: false,
+        model: false,
+        budgets: true,
+        model_file: Some(model_file.clone()),
+    };
+    let report = penumbra::eval::budgets::run(&engine, &options, Some(&model_file)).unwrap();
+    assert_eq!(report.rows.len(), 8);
+    let answered = report.rows.iter().filter(|r| r.kept.is_some()).count();
+    assert_eq!(report.time_kept.1 + report.error_kept.1, answered);
+    assert!(report.rows.iter().all(|r| r.kept.is_some() || r.choice.starts_with("refused")));
+    assert!(report.time_kept.1 >= 1, "the loosest time budget fits: {:?}", report.rows);
+    for file in ["budgets.md", "budgets.json", "budgets.svg"] {
+        assert!(out.join(file).exists(), "{file}");
+    }
+    std::fs::remove_dir_all(out).unwrap();
 }

@@ -2,7 +2,8 @@
 //! The model is measured first (or read with `--model-file`); then every case of the suite
 //! (its scenes, lights and sizes — built-in scenes the model's suite did not measure, and sizes
 //! it did not render, included) is asked a range of time and error budgets, each choice is
-//! rendered and timed as the daemon would, and measured against the model's own truth.
+//! rendered and timed as the daemon would, and measured against the model's own truth
+//! (`budgets.md`, `budgets.json`, and `budgets.svg`: measured against predicted).
 
 use anyhow::Context;
 use serde::Serialize;
@@ -161,6 +162,7 @@ pub fn run(engine: &Engine, options: &EvalOptions, model_file: Option<&std::path
         rows,
     };
     std::fs::write(options.out.join("budgets.json"), serde_json::to_vec_pretty(&report)?)?;
+    super::plots::plot_budgets(&options.out, &rendered)?;
     let table = table(&report);
     std::fs::write(options.out.join("budgets.md"), &table)?;
     println!("{table}");

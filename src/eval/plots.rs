@@ -97,3 +97,42 @@ pub(super) fn plot_scaling(
     std::fs::write(&path, svg)?;
     Ok(path)
 }
+
+/// `eval --budgets`' plot: each render's measured time and error against the model's
+/// prediction, in log scale, with the line of a perfect prediction and the ±25 % band around it.
+pub(super) fn plot_budgets(out: &Path, rendered: &[super::budgets::BudgetRow]) -> anyhow::Result<PathBuf> {
+    use plotters::prelude::*;
+    let path = out.join("budgets.svg");
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (960, 460)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let panels = root.split_evenly((1, 2));
+        let quantities: [(&str, fn(&super::budgets::BudgetRow) -> Option<(f64, f64)>); 2] = [
+            ("time, ms", |r| Some((r.predicted_ms, r.measured_ms?))),
+            ("penumbra error", |r| Some((r.predicted_error, r.measured_error?))),
+        ];
+        for (panel, (what, of)) in panels.iter().zip(quantities) {
+            let points: Vec<(f64, f64)> =
+                rendered.iter().filter_map(of).filter(|(p, m)| *p > 0.0 && *m > 0.0).map(|(p, m)| (p.log10(), m.log10())).collect();
+            let (low, high) = points.iter().fold((f64::MAX, f64::MIN), |(a, b), (p, m)| (a.min(p.min(*m)), b.max(p.max(*m))));
+            let (low, high) = if low < high { (low - 0.1, high + 0.1) } else { (0.0, 1.0) };
+            let mut chart = ChartBuilder::on(panel)
+                .caption(format!("{what}: measured against predicted"), ("sans-serif", 16))
+                .margin(12)
+                .x_label_area_size(36)
+                .y_label_area_size(56)
+                .build_cartesian_2d(low..high, low..high)?;
+            chart.configure_mesh().x_desc(format!("log10 predicted {what}")).y_desc(format!("log10 measured {what}")).draw()?;
+            for (offset, style) in
+                [(0.0, BLACK.stroke_width(1)), (1.25f64.log10(), RED.stroke_width(1)), (0.75f64.log10(), RED.stroke_width(1))]
+            {
+                chart.draw_series(LineSeries::new([(low, low + offset), (high, high + offset)], style))?;
+            }
+            chart.draw_series(points.iter().map(|&(p, m)| Circle::new((p, m), 3, BLUE.filled())))?;
+        }
+        root.present()?;
+    }
+    std::fs::write(&path, svg)?;
+    Ok(path)
+}
