@@ -108,7 +108,8 @@ pub(super) fn plot_budgets(out: &Path, rendered: &[super::budgets::BudgetRow]) -
         let root = SVGBackend::with_string(&mut svg, (960, 460)).into_drawing_area();
         root.fill(&WHITE)?;
         let panels = root.split_evenly((1, 2));
-        let quantities: [(&str, fn(&super::budgets::BudgetRow) -> Option<(f64, f64)>); 2] = [
+        type Pair = fn(&super::budgets::BudgetRow) -> Option<(f64, f64)>;
+        let quantities: [(&str, Pair); 2] = [
             ("time, ms", |r| Some((r.predicted_ms, r.measured_ms?))),
             ("penumbra error", |r| Some((r.predicted_error, r.measured_error?))),
         ];
