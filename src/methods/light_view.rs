@@ -202,7 +202,10 @@ mod tests {
         indices.extend([0, 1, 2, 0, 2, 3].map(|k| base + k));
     }
 
-    fn measure(occluders: &[((f32, f32), (f32, f32), f32)]) -> LightView {
+    /// A square occluder: its corners (x, z) and its height.
+    type Occluder = ((f32, f32), (f32, f32), f32);
+
+    fn measure(occluders: &[Occluder]) -> LightView {
         let (mut positions, mut indices) = (Vec::new(), Vec::new());
         quad(&mut positions, &mut indices, 0.0, (-20.0, -20.0), (20.0, 20.0)); // the floor
         for &(a, b, y) in occluders {
