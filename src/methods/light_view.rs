@@ -202,7 +202,7 @@ mod tests {
         indices.extend([0, 1, 2, 0, 2, 3].map(|k| base + k));
     }
 
-    /// A square occluder: its corners (x, z) and its height.
+    /// A level rectangle: two opposite corners (x, z) and its height.
     type Occluder = ((f32, f32), (f32, f32), f32);
 
     fn measure(occluders: &[Occluder]) -> LightView {
