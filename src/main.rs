@@ -257,6 +257,18 @@ fn render(job: Option<&Path>, output: &Path, timings_json: Option<&Path>, option
     let gpu = open_gpu(options)?;
     let adapter = format!("{} ({})", gpu.adapter.name, gpu.adapter.device_type);
     let engine = Engine::new(gpu, options.limits.limits(), PathPolicy::Any);
+    // `auto` here is chosen by the shipped model: a daemon measures its own device's.
+    if let Some(budget) = penumbra::job::auto::AutoBudget::of(&job.method)? {
+        let model = penumbra::model::Model::shipped();
+        let features = penumbra::model::Features::of(&job, engine.scene_triangles(&job.scene));
+        let (candidate, predicted) =
+            model.choose(&budget, &features).map_err(|unmet| anyhow::anyhow!("{}: {}", unmet.field, unmet.message))?;
+        eprintln!(
+            "auto: {} (predicted {:.0} ms and a penumbra error of {:.4} by the shipped model, measured on {})",
+            candidate.label, predicted.ms, predicted.error, model.key.adapter
+        );
+        job.method = candidate.method_for(&job);
+    }
     // Long methods (the reference) report samples done; show them as a progress bar.
     let bar = indicatif::ProgressBar::hidden();
     bar.set_style(

@@ -306,6 +306,21 @@ fn cli_renders_the_embedded_default_and_example_jobs() {
     let shadowed = channels["visibility.R"].iter().filter(|&&v| v < 0.5).count();
     assert!(shadowed > 100, "the shadow on the floor is in view: {shadowed} pixels");
 
+    // `auto` from the command line: chosen by the shipped model, and said.
+    let auto = dir.path().join("auto.json");
+    std::fs::write(
+        &auto,
+        r#"{"scene": {"builtin": "torus"}, "output": {"width": 64, "height": 48}, "method": {"name": "auto", "max_ms": 2000}}"#,
+    )
+    .unwrap();
+    let output = std::process::Command::new(exe).args(["render", auto.to_str().unwrap(), "-o", png.to_str().unwrap()]).output().unwrap();
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    assert!(String::from_utf8_lossy(&output.stderr).contains("auto: "), "{}", String::from_utf8_lossy(&output.stderr));
+    std::fs::write(&auto, r#"{"scene": {"builtin": "torus"}, "method": {"name": "auto", "max_error": 1e-6}}"#).unwrap();
+    let output = std::process::Command::new(exe).args(["render", auto.to_str().unwrap(), "-o", png.to_str().unwrap()]).output().unwrap();
+    assert!(!output.status.success());
+    assert!(String::from_utf8_lossy(&output.stderr).contains("method.max_error"));
+
     // A bad job: one clear line and a non-zero exit.
     let bad = dir.path().join("bad.json");
     std::fs::write(&bad, r#"{"scene": {"builtin": "torus"}, "method": {"name": "nope"}}"#).unwrap();
