@@ -14,7 +14,7 @@ use anyhow::Context as _;
 use serde::Serialize;
 use serde_json::Map;
 
-use super::{case_job, every_method_but_reference, median_timings, method_job, parse_methods, parse_named, parse_size, reference_of};
+use super::{case_job, every_method_but_reference, median_timings, method_job, parse_methods, parse_named, parse_size};
 use crate::engine::Engine;
 use crate::job::{Job, MethodSpec, OutputFormat};
 use crate::render::{E0Mode, FrameOutput};
@@ -154,7 +154,7 @@ pub fn run(engine: &Engine, options: &BenchOptions) -> anyhow::Result<BenchRepor
             let frame = |job: &Job, what: &str| engine.render_frame(&exr(job), &()).map_err(|e| anyhow::anyhow!("{case}: {what}: {e}"));
 
             progress.set_message(format!("{case}: reference, {} samples", options.samples));
-            let (truth, _) = frame(&reference_of(&base, options.samples, options.shadow_map), "reference")?;
+            let (truth, _) = frame(&base.reference_with(options.samples, options.shadow_map), "reference")?;
             progress.inc(1);
 
             progress.set_message(format!("{case}: E0, exact and interpolated"));

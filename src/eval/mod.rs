@@ -93,25 +93,10 @@ fn case_job(scene: &SuiteScene, light: &str, shadow_map: u32, (width, height): (
     })
 }
 
-/// `job` rendered by `reference` with `samples` light samples and maps of `resolution`².
-fn reference_of(job: &Job, samples: u32, resolution: u32) -> Job {
-    let mut reference = job.reference_job();
-    reference.method.params.insert("samples".into(), samples.into());
-    reference.method.params.insert("resolution".into(), resolution.into());
-    reference
-}
-
-/// `base` rendered by `method`. A method that draws maps of its own light samples
-/// (`reference`'s `resolution`) and leaves their resolution unset draws them at the case's
-/// shadow-map resolution, as the reference it is measured against does: otherwise its error
-/// would measure the maps' resolution rather than the method.
+/// `base` rendered by `method`, its own sample maps (if it draws any) at the case's shadow-map
+/// resolution, as the reference it is measured against draws them (`with_map_resolution`).
 fn method_job(base: &Job, method: &MethodSpec) -> Job {
-    let mut method = method.clone();
-    let draws_sample_maps = crate::methods::find(&method.name).is_ok_and(|m| m.params().iter().any(|p| p.name == "resolution"));
-    if draws_sample_maps && !method.params.contains_key("resolution") {
-        method.params.insert("resolution".into(), base.shadow_map.resolution.into());
-    }
-    Job { method, ..base.clone() }
+    Job { method: crate::methods::with_map_resolution(method, base.shadow_map.resolution), ..base.clone() }
 }
 
 /// Runs the suite and writes the results under `options.out`.
@@ -202,7 +187,7 @@ impl Suite<'_> {
         let base = case_job(scene, light, shadow_map, (width, height), OutputFormat::Exr)?;
         progress.set_message(format!("{case}: reference"));
         let (reference, reference_timings) = engine
-            .render_frame(&reference_of(&base, options.samples, shadow_map), &|done, total| {
+            .render_frame(&base.reference_with(options.samples, shadow_map), &|done, total| {
                 progress.set_message(format!("{case}: reference {done}/{total} samples"))
             })
             .with_context(|| format!("{case}: reference"))?;

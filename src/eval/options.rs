@@ -104,23 +104,13 @@ pub(super) fn parse_sweep(text: &str) -> anyhow::Result<Sweep> {
     Ok(Sweep { method, param, points })
 }
 
-/// A name with parameters as given on the command line, `name:key=value:key=value` (values
-/// in JSON, else strings).
+/// A name with parameters as given on the command line (`job::parse_named`).
 pub(super) fn parse_named(text: &str) -> anyhow::Result<(String, Map<String, Value>)> {
-    let mut parts = text.split(':');
-    let name = parts.next().unwrap_or_default().trim().to_owned();
-    let mut params = Map::new();
-    for part in parts {
-        let (key, value) = part.split_once('=').with_context(|| format!("parameter `{part}` of `{name}` must be key=value"))?;
-        let value: Value = serde_json::from_str(value).unwrap_or_else(|_| Value::String(value.to_owned()));
-        params.insert(key.to_owned(), value);
-    }
-    Ok((name, params))
+    crate::job::parse_named(text).map_err(anyhow::Error::msg)
 }
 
 pub(super) fn parse_method(text: &str) -> anyhow::Result<MethodSpec> {
-    let (name, params) = parse_named(text)?;
-    Ok(MethodSpec { name, params })
+    MethodSpec::parse(text).map_err(anyhow::Error::msg)
 }
 
 pub(super) fn parse_size(text: &str) -> anyhow::Result<(u32, u32)> {

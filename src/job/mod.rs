@@ -55,6 +55,29 @@ pub struct MethodSpec {
     pub params: Map<String, Value>,
 }
 
+impl MethodSpec {
+    /// A method written `name:key=value:key=value` (`parse_named`), as `eval` takes and labels
+    /// methods and `auto`'s candidates are named.
+    pub fn parse(text: &str) -> Result<Self, String> {
+        let (name, params) = parse_named(text)?;
+        Ok(Self { name, params })
+    }
+}
+
+/// A name with parameters, `name:key=value:key=value` (values in JSON, else strings): methods,
+/// scenes and light images as command lines and labels write them.
+pub fn parse_named(text: &str) -> Result<(String, Map<String, Value>), String> {
+    let mut parts = text.split(':');
+    let name = parts.next().unwrap_or_default().trim().to_owned();
+    let mut params = Map::new();
+    for part in parts {
+        let (key, value) = part.split_once('=').ok_or_else(|| format!("parameter `{part}` of `{name}` must be key=value"))?;
+        let value: Value = serde_json::from_str(value).unwrap_or_else(|_| Value::String(value.to_owned()));
+        params.insert(key.to_owned(), value);
+    }
+    Ok((name, params))
+}
+
 impl Default for MethodSpec {
     fn default() -> Self {
         Self { name: DEFAULT_METHOD.into(), params: Map::new() }
@@ -206,6 +229,15 @@ impl Job {
             compare: false,
             ..self.clone()
         }
+    }
+
+    /// `reference_job` with `samples` light samples and sample maps of `resolution`² (a
+    /// reference to measure against, its maps those of the job's methods).
+    pub fn reference_with(&self, samples: u32, resolution: u32) -> Job {
+        let mut reference = self.reference_job();
+        reference.method.params.insert("samples".into(), samples.into());
+        reference.method.params.insert("resolution".into(), resolution.into());
+        reference
     }
 
     /// Parses a job from JSON bytes under the default limits; type errors name the field by

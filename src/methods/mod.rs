@@ -39,6 +39,18 @@ pub fn find(name: &str) -> JobResult<&'static dyn ShadowMethod> {
     })
 }
 
+/// `method` as it renders a job whose shadow maps are `resolution`² texels: a method that
+/// draws maps of its own light samples (`reference`'s and `filtered`'s `resolution`) and leaves
+/// their resolution unset draws them at the job's, so that what it is measured or predicted
+/// against (a reference of the same maps) measures the method, not the maps.
+pub fn with_map_resolution(method: &crate::job::MethodSpec, resolution: u32) -> crate::job::MethodSpec {
+    let mut method = method.clone();
+    if find(&method.name).is_ok_and(|m| m.params().iter().any(|p| p.name == "resolution")) {
+        method.params.entry("resolution").or_insert_with(|| resolution.into());
+    }
+    method
+}
+
 /// The depth bias of a shadow-map test from the light centre, the same for every method that
 /// makes one (`hard`, `pcss`, `chun-oh`, `brabec`, `jfa-l`, `jfa-e`): constant and
 /// slope-scaled, in texels at the receiver's depth (`depth_bias` in `common/shadow.wgsl`).

@@ -5,7 +5,7 @@
 
 use std::time::Instant;
 
-use serde_json::{json, Map};
+use serde_json::Map;
 
 use super::{Candidate, Cost, Costs, ErrorPoint, Features, Model, ModelKey, TimePoint, FEATURES};
 use crate::engine::Engine;
@@ -82,12 +82,8 @@ impl Suite {
     /// seed, and maps of the job's resolution (also what an `auto` job that asks to `compare`
     /// is measured against).
     pub fn truth_of(&self, job: &Job) -> Job {
-        let mut truth = job.reference_job();
-        truth.method.params.extend([
-            ("samples".into(), self.truth_samples.into()),
-            ("seed".into(), self.truth_seed.into()),
-            ("resolution".into(), job.shadow_map.resolution.into()),
-        ]);
+        let mut truth = job.reference_with(self.truth_samples, job.shadow_map.resolution);
+        truth.method.params.insert("seed".into(), self.truth_seed.into());
         truth
     }
 }
@@ -114,20 +110,14 @@ impl Hooks for Plain {
     }
 }
 
-/// One render of the suite: a candidate's time on a case and, at the larger map, its error.
-pub(super) struct Sample {
-    features: Features,
-    ms: f64,
-}
-
 /// Measures every candidate on the suite; `None` if stopped.
 pub fn measure(engine: &Engine, suite: &Suite, key: ModelKey, hooks: &dyn Hooks) -> JobResult<Option<Model>> {
     let started = Instant::now();
-    let candidates: Vec<(String, MethodSpec)> = CANDIDATES.iter().map(|label| ((*label).to_owned(), parse_label(label))).collect();
+    let candidates: Vec<(String, MethodSpec)> = CANDIDATES.iter().map(|label| ((*label).to_owned(), candidate(label))).collect();
     let cases = cases(suite);
     let total = cases.len() * candidates.len() + cases.iter().filter(|c| c.errors_here).count();
     let mut done = 0;
-    let mut times: Vec<Vec<Sample>> = candidates.iter().map(|_| Vec::new()).collect();
+    let mut times: Vec<Vec<TimePoint>> = candidates.iter().map(|_| Vec::new()).collect();
     let mut errors: Vec<Vec<ErrorPoint>> = candidates.iter().map(|_| Vec::new()).collect();
     // Every pipeline compiled before any render is timed (a light of several colours compiles
     // its own).
@@ -158,7 +148,9 @@ pub fn measure(engine: &Engine, suite: &Suite, key: ModelKey, hooks: &dyn Hooks)
                 let _device = hooks.device();
                 timed_render(engine, &job)?
             };
-            times[c].push(Sample { features: case.features.clone(), ms });
+            let f = &case.features;
+            let (pixels, texels, triangles) = (f.pixels, f.texels, f.triangles);
+            times[c].push(TimePoint { scene: case.scene.to_owned(), light: f.light.clone(), pixels, texels, triangles, ms });
             if let Some(truth) = &truth {
                 let quality = crate::quality::compare(&frame, truth, 0.0);
                 errors[c].push(ErrorPoint {
@@ -173,24 +165,14 @@ pub fn measure(engine: &Engine, suite: &Suite, key: ModelKey, hooks: &dyn Hooks)
     }
     let mut fitted: Vec<Candidate> = candidates
         .into_iter()
-        .zip(times.iter().zip(errors))
-        .map(|((label, method), (samples, errors))| Candidate {
+        .zip(times.into_iter().zip(errors))
+        .map(|((label, method), (times, errors))| Candidate {
             label,
             method,
-            cost: suite.lights.iter().map(|&light| (light.to_owned(), fit(samples.iter().filter(|s| s.features.light == light)))).collect(),
+            cost: suite.lights.iter().map(|&light| (light.to_owned(), fit(times.iter().filter(|t| t.light == light)))).collect(),
             errors,
             errors_measured: true,
-            times: samples
-                .iter()
-                .map(|s| TimePoint {
-                    scene: s.features.scene.clone().unwrap_or_default(),
-                    light: s.features.light.clone(),
-                    pixels: s.features.pixels,
-                    texels: s.features.texels,
-                    triangles: s.features.triangles,
-                    ms: s.ms,
-                })
-                .collect(),
+            times,
         })
         .collect();
     if let Some(extrapolated) = reference_1024(&fitted) {
@@ -213,15 +195,9 @@ pub fn timed_render(engine: &Engine, job: &Job) -> JobResult<(FrameOutput, f64)>
     Ok((frame, started.elapsed().as_secs_f64() * 1e3))
 }
 
-/// `name[:key=value…]` as a method spec (values are JSON).
-pub fn parse_label(label: &str) -> MethodSpec {
-    let mut parts = label.split(':');
-    let name = parts.next().unwrap_or_default().to_owned();
-    let params: Map<String, serde_json::Value> = parts
-        .filter_map(|kv| kv.split_once('='))
-        .map(|(k, v)| (k.to_owned(), serde_json::from_str(v).unwrap_or_else(|_| json!(v))))
-        .collect();
-    MethodSpec { name, params }
+/// A candidate's method from its label.
+fn candidate(label: &str) -> MethodSpec {
+    MethodSpec::parse(label).expect("the candidates' labels parse")
 }
 
 /// One case of the suite.
@@ -235,16 +211,9 @@ struct Case {
 
 impl Case {
     fn job_with(&self, method: &MethodSpec) -> Job {
-        let candidate = Candidate {
-            label: String::new(),
-            method: method.clone(),
-            cost: Costs::default(),
-            errors: vec![],
-            errors_measured: true,
-            times: vec![],
-        };
+        let method = crate::methods::with_map_resolution(method, self.job.shadow_map.resolution);
         // `compare` reads the visibility back for the error (a little more than a PNG job reads).
-        Job { method: candidate.method_for(&self.job), compare: true, ..self.job.clone() }
+        Job { method, compare: true, ..self.job.clone() }
     }
 }
 
@@ -295,7 +264,7 @@ fn reference_1024(candidates: &[Candidate]) -> Option<Candidate> {
     let errors = at_256.errors.iter().map(|p| ErrorPoint { error: p.error * 0.5, ..p.clone() }).collect();
     Some(Candidate {
         label: "reference:samples=1024".into(),
-        method: parse_label("reference:samples=1024"),
+        method: candidate("reference:samples=1024"),
         cost,
         errors,
         errors_measured: false,
@@ -306,14 +275,8 @@ fn reference_1024(candidates: &[Candidate]) -> Option<Candidate> {
 /// The non-negative least-squares fit of the times on the features, each residual relative to
 /// its time (a 20 ms case counts as much as a 2 s one): every subset of the terms is solved by
 /// its normal equations and the best fit with no negative coefficient kept (2⁴ − 1 subsets).
-pub(super) fn fit<'a>(samples: impl Iterator<Item = &'a Sample>) -> Cost {
-    let rows: Vec<([f64; FEATURES], f64)> = samples
-        .filter(|s| s.ms > 0.0)
-        .map(|s| {
-            let x = s.features.vector();
-            (x.map(|v| v / s.ms), 1.0)
-        })
-        .collect();
+pub(super) fn fit<'a>(times: impl Iterator<Item = &'a TimePoint>) -> Cost {
+    let rows: Vec<([f64; FEATURES], f64)> = times.filter(|t| t.ms > 0.0).map(|t| (t.features().vector().map(|v| v / t.ms), 1.0)).collect();
     let mut best: Option<(f64, [f64; FEATURES])> = None;
     for subset in 1u32..(1 << FEATURES) {
         let terms: Vec<usize> = (0..FEATURES).filter(|i| subset & (1 << i) != 0).collect();
@@ -363,9 +326,4 @@ fn least_squares(rows: &[([f64; FEATURES], f64)], terms: &[usize]) -> Option<Vec
         }
     }
     Some((0..n).map(|i| a[i][n] / a[i][i]).collect())
-}
-
-#[cfg(test)]
-pub(super) fn sample(features: Features, ms: f64) -> Sample {
-    Sample { features, ms }
 }

@@ -189,30 +189,26 @@ impl Features {
 }
 
 impl Candidate {
-    /// The job this candidate renders in place of `job`'s method: a method that draws maps of
-    /// its own draws them at the job's shadow-map resolution, as the model measured it.
+    /// The method this candidate renders in place of `job`'s: its own sample maps (if it draws
+    /// any) at the job's shadow-map resolution, as the model measured it.
     pub fn method_for(&self, job: &Job) -> MethodSpec {
-        let mut method = self.method.clone();
-        let draws_own_maps =
-            crate::methods::find(&method.name).is_ok_and(|m| !m.reads_shadow_map() && m.params().iter().any(|p| p.name == "resolution"));
-        if draws_own_maps {
-            method.params.entry("resolution").or_insert_with(|| job.shadow_map.resolution.into());
-        }
-        method
+        crate::methods::with_map_resolution(&self.method, job.shadow_map.resolution)
     }
 
     /// The predicted error: the measured errors of the job's scene kind and light kind (every
     /// kind's worst for a user's scene), interpolated over the output's pixels in log scale,
     /// held at the ends.
     pub fn error(&self, features: &Features) -> f64 {
-        // A light the suite did not measure: every coloured light's points, the worst kept.
-        let measured = self.errors.iter().any(|p| p.light == features.light);
-        let of_light = self.errors.iter().filter(|p| if measured { p.light == features.light } else { p.light != "white" });
+        // A light the suite did not measure: every coloured light's points; a scene it did not
+        // measure: every scene's. The worst of them is kept.
+        let light_measured = self.errors.iter().any(|p| p.light == features.light);
+        let scene = features.scene.as_ref().filter(|s| self.errors.iter().any(|p| &p.scene == *s));
+        let chosen = self.errors.iter().filter(|p| {
+            let light = if light_measured { p.light == features.light } else { p.light != "white" };
+            light && scene.is_none_or(|s| &p.scene == s)
+        });
         let mut by_size: Vec<(u64, f64)> = Vec::new();
-        for point in of_light {
-            if features.scene.as_ref().is_some_and(|s| self.errors.iter().any(|p| &p.scene == s) && &point.scene != s) {
-                continue;
-            }
+        for point in chosen {
             match by_size.iter_mut().find(|(pixels, _)| *pixels == point.pixels) {
                 Some((_, error)) => *error = error.max(point.error),
                 None => by_size.push((point.pixels, point.error)),
@@ -311,12 +307,10 @@ impl Model {
         };
         let (field, (candidate, prediction)) = match (budget.max_ms, budget.max_error) {
             (Some(max), _) if cheapest.1.ms * MARGIN > max => ("method.max_ms", cheapest),
-            (_, Some(max)) => {
+            (_, Some(_)) => {
                 // The most faithful within the time asked for (or at all).
                 let within = predictions.iter().filter(|(_, p)| time_fits(p));
-                let closest = within.min_by(|a, b| a.1.error.total_cmp(&b.1.error)).unwrap_or(cheapest);
-                let _ = max;
-                ("method.max_error", closest)
+                ("method.max_error", within.min_by(|a, b| a.1.error.total_cmp(&b.1.error)).unwrap_or(cheapest))
             }
             _ => ("method.max_ms", cheapest),
         };

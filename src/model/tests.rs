@@ -1,12 +1,17 @@
 //! The model's fit, its choice under a budget, its error look-up and its storage, on made-up
 //! measurements (the measurement itself runs on the device: tests/render.rs).
 
-use super::measure::{fit, parse_label, sample};
+use super::measure::fit;
 use super::*;
 use crate::job::auto::AutoBudget;
 
 fn features(pixels: u64, triangles: u64, texels: u64, light: &str) -> Features {
     Features { pixels, texels, triangles, triangles_known: true, light: light.into(), scene: Some("torus".into()) }
+}
+
+/// A measured time of a white `torus` job.
+fn timed(pixels: u64, triangles: u64, texels: u64, ms: f64) -> TimePoint {
+    TimePoint { scene: "torus".into(), light: "white".into(), pixels, texels, triangles, ms }
 }
 
 #[test]
@@ -16,8 +21,7 @@ fn the_fit_finds_the_costs_it_was_made_from() {
     for pixels in [19_200, 76_800, 307_200] {
         for triangles in [2_000, 9_000, 30_000] {
             for texels in [1 << 18, 1 << 20] {
-                let f = features(pixels, triangles, texels, "white");
-                samples.push(sample(f.clone(), truth.ms(&f)));
+                samples.push(timed(pixels, triangles, texels, truth.ms(&features(pixels, triangles, texels, "white"))));
             }
         }
     }
@@ -30,8 +34,7 @@ fn the_fit_finds_the_costs_it_was_made_from() {
 #[test]
 fn no_cost_term_is_fitted_negative() {
     // Times that fall with the pixels: least squares alone would give a negative term.
-    let samples: Vec<_> =
-        [(19_200, 30.0), (76_800, 29.0), (307_200, 28.0)].map(|(px, ms)| sample(features(px, 1_000, 1 << 20, "white"), ms)).into();
+    let samples: Vec<_> = [(19_200, 30.0), (76_800, 29.0), (307_200, 28.0)].map(|(px, ms)| timed(px, 1_000, 1 << 20, ms)).into();
     assert!(fit(samples.iter()).as_array().iter().all(|c| *c >= 0.0));
 }
 
@@ -47,7 +50,7 @@ fn candidate(label: &str, cost: Costs, error: f64) -> Candidate {
             })
         })
         .collect();
-    Candidate { label: label.into(), method: parse_label(label), cost, errors, errors_measured: true, times: vec![] }
+    Candidate { label: label.into(), method: MethodSpec::parse(label).unwrap(), cost, errors, errors_measured: true, times: vec![] }
 }
 
 fn model() -> Model {

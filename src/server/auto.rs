@@ -48,48 +48,49 @@ pub(super) fn spawn_model(state: Arc<AppState>, mode: ModelMode, data_dir: std::
         return;
     }
     tokio::spawn(async move {
-        let mut key = model::key_for(&state.engine.adapter());
-        if mode == ModelMode::Quick {
-            // Kept apart: a quick model is not what a `measure` start should find.
-            key.build.push_str("+quick");
-        }
-        if let Some(stored) = model::load(&data_dir, &key) {
-            tracing::info!(build = %key.build, "cost and quality model read from the data directory");
-            state.model.set(stored, "stored");
-            return;
-        }
-        state.model.set_status("measuring");
-        tracing::info!("measuring the cost and quality model in the background");
-        let measuring = state.clone();
-        let runtime = tokio::runtime::Handle::current();
-        let suite = match mode {
-            ModelMode::Quick => model::measure::Suite::quick(),
-            ModelMode::Measure | ModelMode::Default => model::measure::Suite::standard(),
-        };
-        let outcome = tokio::task::spawn_blocking(move || {
-            let hooks = SlotHooks { state: &measuring, runtime };
-            model::measure::measure(&measuring.engine, &suite, key, &hooks)
-        })
-        .await;
-        match outcome {
-            Ok(Ok(Some(measured))) => {
-                if let Err(error) = model::save(&data_dir, &measured) {
-                    tracing::warn!(%error, "the measured model could not be kept for the next start");
-                }
-                tracing::info!(seconds = measured.measure_seconds, "cost and quality model measured");
-                state.model.set(measured, "measured");
-            }
-            Ok(Ok(None)) => state.model.set_status("default"),
-            Ok(Err(error)) => {
-                tracing::warn!(%error, "measuring the model failed: auto keeps the shipped model");
-                state.model.set_status("failed");
-            }
-            Err(error) => {
-                tracing::warn!(%error, "measuring the model failed: auto keeps the shipped model");
-                state.model.set_status("failed");
-            }
+        let (measuring, runtime) = (state.clone(), tokio::runtime::Handle::current());
+        // Blocking throughout (the executable hashed, a file read, renders): off the workers.
+        let outcome = tokio::task::spawn_blocking(move || read_or_measure(&measuring, mode, &data_dir, runtime)).await;
+        if let Err(error) = outcome {
+            tracing::warn!(%error, "measuring the model failed: auto keeps the shipped model");
+            state.model.set_status("failed");
         }
     });
+}
+
+/// `spawn_model`'s work: the model stored for this adapter and build, else one measured on
+/// the suite `mode` names and kept for the next start.
+fn read_or_measure(state: &AppState, mode: ModelMode, data_dir: &std::path::Path, runtime: tokio::runtime::Handle) {
+    let mut key = model::key_for(&state.engine.adapter());
+    if mode == ModelMode::Quick {
+        // Kept apart: a quick model is not what a `measure` start should find.
+        key.build.push_str("+quick");
+    }
+    if let Some(stored) = model::load(data_dir, &key) {
+        tracing::info!(build = %key.build, "cost and quality model read from the data directory");
+        state.model.set(stored, "stored");
+        return;
+    }
+    state.model.set_status("measuring");
+    tracing::info!("measuring the cost and quality model in the background");
+    let suite = match mode {
+        ModelMode::Quick => model::measure::Suite::quick(),
+        ModelMode::Measure | ModelMode::Default => model::measure::Suite::standard(),
+    };
+    match model::measure::measure(&state.engine, &suite, key, &SlotHooks { state, runtime }) {
+        Ok(Some(measured)) => {
+            if let Err(error) = model::save(data_dir, &measured) {
+                tracing::warn!(%error, "the measured model could not be kept for the next start");
+            }
+            tracing::info!(seconds = measured.measure_seconds, "cost and quality model measured");
+            state.model.set(measured, "measured");
+        }
+        Ok(None) => state.model.set_status("default"),
+        Err(error) => {
+            tracing::warn!(%error, "measuring the model failed: auto keeps the shipped model");
+            state.model.set_status("failed");
+        }
+    }
 }
 
 /// The measurement's renders take a device slot each, as jobs do, and stop at shutdown.
@@ -120,12 +121,8 @@ impl AppState {
     /// since) the closest is rendered instead and says so.
     pub(super) fn resolve_auto(&self, job: &Job, strict: bool) -> Result<Option<(Job, AutoChoice)>, JobError> {
         let Some(budget) = AutoBudget::of(&job.method)? else { return Ok(None) };
-        self.check_budget(&budget)?;
-        // Everything but the method, as any job is checked (built-in parameters included,
-        // before the scene is built to count its triangles).
-        self.engine.check(&Job { method: Default::default(), ..job.clone() }, false)?;
+        let features = self.checked_features(job, Some(&budget), false)?;
         let model = self.model.get();
-        let features = Features::of(job, self.engine.scene_triangles(&job.scene));
         let (candidate, prediction) = match model.choose(&budget, &features) {
             Ok(chosen) => chosen,
             Err(unmet) if strict => return Err(JobError::field(ErrorCode::BudgetUnmet, unmet.field, unmet.message)),
@@ -137,6 +134,20 @@ impl AppState {
         };
         let choice = model.choice(&candidate, prediction, job);
         Ok(Some((Job { method: choice.method.clone(), ..job.clone() }, choice)))
+    }
+
+    /// A job checked as a submission is — an `auto` one with its `budget` checked in place of
+    /// its method, everything else before the scene is built to count its triangles — and what
+    /// its predictions follow.
+    fn checked_features(&self, job: &Job, budget: Option<&AutoBudget>, uploads_here: bool) -> Result<Features, JobError> {
+        match budget {
+            Some(budget) => {
+                self.check_budget(budget)?;
+                self.engine.check(&Job { method: Default::default(), ..job.clone() }, uploads_here)?;
+            }
+            None => self.engine.check(job, uploads_here)?,
+        }
+        Ok(Features::of(job, self.engine.scene_triangles(&job.scene)))
     }
 
     /// `max_ms` no longer than a job may wait for the device (the deadline).
@@ -166,17 +177,9 @@ impl AppState {
 pub(super) async fn estimate(State(state): State<Arc<AppState>>, body: Result<Bytes, BytesRejection>) -> Result<Json<Value>, ApiError> {
     let body = body.map_err(|rejection| body_error(&state, rejection, ErrorCode::InvalidJson))?;
     let job = Job::from_json_limited(&body, state.engine.limits())?;
-    let uploads_here = state.shared_store().is_none();
-    let model = state.model.get();
     let budget = AutoBudget::of(&job.method)?;
-    match &budget {
-        Some(budget) => {
-            state.check_budget(budget)?;
-            state.engine.check(&Job { method: Default::default(), ..job.clone() }, uploads_here)?;
-        }
-        None => state.engine.check(&job, uploads_here)?,
-    }
-    let features = Features::of(&job, state.engine.scene_triangles(&job.scene));
+    let features = state.checked_features(&job, budget.as_ref(), state.shared_store().is_none())?;
+    let model = state.model.get();
     let predictions: Vec<Value> = model
         .predictions(&features)
         .into_iter()
@@ -221,10 +224,5 @@ pub(super) async fn estimate(State(state): State<Arc<AppState>>, body: Result<By
 /// Whether `candidate` is the job's method as the job gives it: the same name, and the same
 /// parameters once the map resolution a candidate takes from the job is set on both.
 fn same_defaults(candidate: &model::Candidate, job: &Job) -> bool {
-    let mut asked = job.method.clone();
-    let modelled = candidate.method_for(job);
-    if let Some(resolution) = modelled.params.get("resolution") {
-        asked.params.entry("resolution").or_insert_with(|| resolution.clone());
-    }
-    asked == modelled
+    crate::methods::with_map_resolution(&job.method, job.shadow_map.resolution) == candidate.method_for(job)
 }
