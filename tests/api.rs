@@ -166,6 +166,12 @@ async fn expect_error(client: &reqwest::Client, base: &str, body: Vec<u8>, statu
     }
 }
 
+/// A refused request's status and its `error` object.
+async fn refusal(response: reqwest::Response) -> (StatusCode, Value) {
+    let status = response.status();
+    (status, response.json::<Value>().await.unwrap()["error"].clone())
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn bad_input_gets_documented_errors_and_the_daemon_keeps_serving() {
     let (base, _dir) = start().await;
@@ -1253,9 +1259,7 @@ async fn limits_are_flags_listed_and_enforced_with_the_field_named() {
     let refused = |job: Value, path: &'static str| {
         let request = client.post(format!("{base}{path}")).json(&job);
         async move {
-            let response = request.send().await.unwrap();
-            let status = response.status();
-            let error = response.json::<Value>().await.unwrap()["error"].clone();
+            let (status, error) = refusal(request.send().await.unwrap()).await;
             (status.as_u16(), error["code"].as_str().unwrap_or("").to_owned(), error["field"].as_str().unwrap_or("").to_owned())
         }
     };
@@ -1288,8 +1292,7 @@ async fn limits_are_flags_listed_and_enforced_with_the_field_named() {
     // A scene over the vertex cap is refused from its declared counts, naming the field.
     let glb = penumbra::scene::gltf::height_field_glb(11, 1); // 121 vertices.
     let upload = client.post(format!("{base}/v1/scenes")).header("content-type", "model/gltf-binary").body(glb).send().await.unwrap();
-    let status = upload.status();
-    let error = upload.json::<Value>().await.unwrap()["error"].clone();
+    let (status, error) = refusal(upload).await;
     assert_eq!((status, error["code"].as_str()), (StatusCode::UNPROCESSABLE_ENTITY, Some("limit_exceeded")), "{error}");
     assert!(error["message"].as_str().unwrap().contains("max_vertices"), "{error}");
     // Three 64×64 textures decode to 49,152 bytes, past the scene's texture budget (the
@@ -1297,8 +1300,7 @@ async fn limits_are_flags_listed_and_enforced_with_the_field_named() {
     let rgba = image::ColorType::Rgba8;
     let glb = penumbra::scene::gltf::textured_height_field_glb(&[rgba, rgba, rgba], 64);
     let upload = client.post(format!("{base}/v1/scenes")).header("content-type", "model/gltf-binary").body(glb).send().await.unwrap();
-    let status = upload.status();
-    let error = upload.json::<Value>().await.unwrap()["error"].clone();
+    let (status, error) = refusal(upload).await;
     assert_eq!(
         (status, error["code"].as_str(), error["field"].as_str()),
         (StatusCode::UNPROCESSABLE_ENTITY, Some("limit_exceeded"), Some("body")),
@@ -1326,8 +1328,7 @@ async fn the_output_cap_is_what_the_device_binds() {
     assert_eq!(response.status(), StatusCode::OK, "a frame of the cap's pixels renders");
     assert!(response.bytes().await.unwrap().starts_with(b"\x89PNG"));
     let response = client.post(format!("{base}/v1/render")).json(&job(cap / 4096 + 1)).send().await.unwrap();
-    let status = response.status();
-    let error = response.json::<Value>().await.unwrap()["error"].clone();
+    let (status, error) = refusal(response).await;
     assert_eq!(
         (status, error["code"].as_str(), error["field"].as_str()),
         (StatusCode::UNPROCESSABLE_ENTITY, Some("limit_exceeded"), Some("output")),
@@ -1863,12 +1864,11 @@ async fn auto_chooses_by_the_model_and_estimates_render_nothing() {
             if code == "budget_unmet" && route == "estimate" {
                 continue;
             }
-            let response = client.post(format!("{base}/v1/{route}")).json(&job(method.clone())).send().await.unwrap();
-            assert_eq!(response.status(), StatusCode::UNPROCESSABLE_ENTITY, "{route} {method}");
-            let error: Value = response.json().await.unwrap();
-            assert_eq!((error["error"]["code"].as_str(), error["error"]["field"].as_str()), (Some(code), Some(field)), "{route} {error}");
+            let (status, error) = refusal(client.post(format!("{base}/v1/{route}")).json(&job(method.clone())).send().await.unwrap()).await;
+            assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY, "{route} {method}");
+            assert_eq!((error["code"].as_str(), error["field"].as_str()), (Some(code), Some(field)), "{route} {error}");
             if code == "budget_unmet" {
-                assert!(error["error"]["message"].as_str().unwrap().contains("closest"), "{error}");
+                assert!(error["message"].as_str().unwrap().contains("closest"), "{error}");
             }
         }
     }

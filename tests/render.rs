@@ -14,6 +14,16 @@ fn job(value: serde_json::Value) -> Job {
     Job::from_json(value.to_string().as_bytes()).unwrap()
 }
 
+/// `penumbra eval`'s options as its command line gives them: `args` over the defaults.
+fn eval_options(args: &[&str]) -> penumbra::eval::EvalOptions {
+    #[derive(clap::Parser)]
+    struct Eval {
+        #[command(flatten)]
+        options: penumbra::eval::EvalOptions,
+    }
+    <Eval as clap::Parser>::parse_from(std::iter::once("eval").chain(args.iter().copied())).options
+}
+
 /// The golden images, declared as data: (name in `tests/golden/`, scene, light image — None
 /// for the scene's own — and method), each rendered at 256×192 and compared under FLIP (mean
 /// ≤ 0.01, 99th percentile ≤ 0.1).
@@ -931,21 +941,27 @@ fn bench_writes_its_phase_table_and_the_e0_check() {
 #[test]
 fn eval_writes_the_tables_and_the_pictures() {
     let out = std::env::temp_dir().join(format!("penumbra-eval-{}", std::process::id()));
-    let options = penumbra::eval::EvalOptions {
-        scenes: vec!["torus".into()],
-        lights: vec!["white".into(), "stripes".into()],
-        methods: vec!["hard".into(), "jfa-l".into(), "jfa-l:flooding=\"standard\"".into(), "chun-oh".into()],
-        sizes: vec!["64x48".into()],
-        samples: 16,
-        shadow_map: vec![128, 256],
-        out: out.clone(),
-        sweep: Some("hard:slope_bias_texels=0,1,4".into()),
-        repeat: 2,
-        colored: true,
-        model: false,
-        budgets: false,
-        model_file: None,
-    };
+    let options = eval_options(&[
+        "--scenes",
+        "torus",
+        "--lights",
+        "white,stripes",
+        "--methods",
+        "hard,jfa-l,jfa-l:flooding=\"standard\",chun-oh",
+        "--sizes",
+        "64x48",
+        "--samples",
+        "16",
+        "--shadow-map",
+        "128,256",
+        "--out",
+        out.to_str().unwrap(),
+        "--sweep",
+        "hard:slope_bias_texels=0,1,4",
+        "--repeat",
+        "2",
+        "--colored",
+    ]);
     let report = penumbra::eval::run(&common::engine(), &options).unwrap();
     // 2 lights × 2 shadow maps; per case the reference, hard, jfa-l both ways, chun-oh, three sweep points.
     assert_eq!(report.rows.len(), 4 * 8);
@@ -1782,21 +1798,23 @@ fn the_worst_real_models_hold_their_errors_and_the_methods_say_what_they_cannot_
         "Collada-duck",
     ];
     let out = std::env::temp_dir().join(format!("penumbra-real-models-{}", std::process::id()));
-    let options = penumbra::eval::EvalOptions {
-        scenes: models.iter().map(|m| suite.join(format!("{m}.glb")).display().to_string()).collect(),
-        lights: vec!["white".into(), "stripes".into()],
-        colored: false,
-        model: false,
-        budgets: false,
-        model_file: None,
-        methods: METHODS.iter().map(|m| m.to_string()).collect(),
-        sizes: vec!["240x180".into()],
-        samples: 512,
-        shadow_map: vec![1024],
-        out: out.clone(),
-        sweep: None,
-        repeat: 1,
-    };
+    let scenes: Vec<String> = models.iter().map(|m| suite.join(format!("{m}.glb")).display().to_string()).collect();
+    let options = eval_options(&[
+        "--scenes",
+        &scenes.join(","),
+        "--lights",
+        "white,stripes",
+        "--methods",
+        &METHODS.join(","),
+        "--sizes",
+        "240x180",
+        "--samples",
+        "512",
+        "--shadow-map",
+        "1024",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
     let report = penumbra::eval::run(&common::engine(), &options).unwrap();
     std::fs::remove_dir_all(&out).ok();
     assert!(report.skipped.is_empty(), "{:?}", report.skipped);
@@ -1890,21 +1908,23 @@ fn the_model_is_measured_on_the_device_and_held_to_its_budgets() {
     std::fs::create_dir_all(&out).unwrap();
     let model_file = out.join("model.json");
     std::fs::write(&model_file, serde_json::to_vec(&model).unwrap()).unwrap();
-    let options = penumbra::eval::EvalOptions {
-        scenes: vec!["occluder".into()],
-        lights: vec!["white".into()],
-        methods: vec![],
-        sizes: vec!["64x48".into()],
-        samples: 16,
-        shadow_map: vec![256],
-        out: out.clone(),
-        sweep: None,
-        repeat: 1,
-        colored: false,
-        model: false,
-        budgets: true,
-        model_file: Some(model_file.clone()),
-    };
+    let options = eval_options(&[
+        "--scenes",
+        "occluder",
+        "--lights",
+        "white",
+        "--sizes",
+        "64x48",
+        "--samples",
+        "16",
+        "--shadow-map",
+        "256",
+        "--out",
+        out.to_str().unwrap(),
+        "--budgets",
+        "--model-file",
+        model_file.to_str().unwrap(),
+    ]);
     let report = penumbra::eval::budgets::run(&engine, &options, Some(&model_file)).unwrap();
     assert_eq!(report.rows.len(), 8);
     let answered = report.rows.iter().filter(|r| r.kept.is_some()).count();
