@@ -111,6 +111,9 @@ pub struct JobEvent {
     pub total: u64,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub error: Option<Value>,
+    /// A progressive job's latest round (contract §5).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub round: Option<crate::job::progressive::Round>,
     /// When the job reached `succeeded`, `failed` or `cancelled`: its record expires a while
     /// after.
     #[serde(skip)]
@@ -119,7 +122,7 @@ pub struct JobEvent {
 
 impl JobEvent {
     pub fn status(status: JobStatus) -> Self {
-        Self { status, done: 0, total: 0, error: None, finished_at: None }
+        Self { status, done: 0, total: 0, error: None, round: None, finished_at: None }
     }
 
     /// Marks the job `succeeded`, `failed` or `cancelled` as of now.
@@ -140,13 +143,32 @@ impl JobEvent {
 pub struct LiveJobs {
     results: Mutex<VecDeque<(String, Arc<Rendered>, Instant)>>,
     submitted: Mutex<VecDeque<Submitted>>,
+    /// Running progressive jobs' round images, by job: each job's are dropped when it ends
+    /// (`drop_rounds`), so they are bounded by the jobs running and their rounds.
+    rounds: Mutex<HashMap<String, Vec<Arc<Rendered>>>>,
     capacity: usize,
     ttl: Duration,
 }
 
 impl LiveJobs {
     pub fn new(results_kept: usize, ttl: Duration) -> Self {
-        Self { results: Mutex::new(VecDeque::new()), submitted: Mutex::new(VecDeque::new()), capacity: results_kept.max(1), ttl }
+        let (results, submitted, rounds) = (Mutex::default(), Mutex::default(), Mutex::default());
+        Self { results, submitted, rounds, capacity: results_kept.max(1), ttl }
+    }
+
+    /// Keeps a progressive job's next round (numbered from 0 in the order kept).
+    pub fn keep_round(&self, id: &str, rendered: Arc<Rendered>) {
+        self.rounds.lock().unwrap_or_else(|p| p.into_inner()).entry(id.to_owned()).or_default().push(rendered);
+    }
+
+    /// Round `round` of a running progressive job, while the job runs.
+    pub fn round(&self, id: &str, round: usize) -> Option<Arc<Rendered>> {
+        self.rounds.lock().unwrap_or_else(|p| p.into_inner()).get(id)?.get(round).cloned()
+    }
+
+    /// Lets a progressive job's rounds go: it has ended.
+    pub fn drop_rounds(&self, id: &str) {
+        self.rounds.lock().unwrap_or_else(|p| p.into_inner()).remove(id);
     }
 
     pub fn keep(&self, id: String, rendered: Arc<Rendered>) {

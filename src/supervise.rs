@@ -15,6 +15,47 @@ pub trait Supervisor {
     fn cancelled(&self) -> bool {
         false
     }
+    /// Where a progressive job's rounds keep what a method carries from one round to the next
+    /// (the reference's sums); `None` for a render that stands alone.
+    fn rounds(&self) -> Option<&Rounds> {
+        None
+    }
+}
+
+/// What a method carries between the rounds of a progressive job, held by the job's
+/// supervisor for the job's life: the method's own type, which it takes at the start of a
+/// round and puts back at the end (opaque here, so that nothing below the methods knows it).
+#[derive(Default)]
+pub struct Rounds(std::sync::Mutex<Option<Box<dyn std::any::Any + Send>>>);
+
+impl Rounds {
+    /// What the last round left, if it was a `T`.
+    pub fn take<T: 'static>(&self) -> Option<Box<T>> {
+        self.0.lock().unwrap_or_else(|p| p.into_inner()).take()?.downcast().ok()
+    }
+
+    pub fn put<T: Send + 'static>(&self, carried: T) {
+        *self.0.lock().unwrap_or_else(|p| p.into_inner()) = Some(Box::new(carried));
+    }
+}
+
+/// A supervisor with a progressive job's `Rounds`: `inner` hears the progress and says when
+/// to stop.
+pub struct WithRounds<'a, S: ?Sized> {
+    pub inner: &'a S,
+    pub rounds: &'a Rounds,
+}
+
+impl<S: Supervisor + ?Sized> Supervisor for WithRounds<'_, S> {
+    fn progress(&self, done: u64, total: u64) {
+        self.inner.progress(done, total)
+    }
+    fn cancelled(&self) -> bool {
+        self.inner.cancelled()
+    }
+    fn rounds(&self) -> Option<&Rounds> {
+        Some(self.rounds)
+    }
 }
 
 impl<F: Fn(u64, u64)> Supervisor for F {

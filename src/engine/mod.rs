@@ -59,6 +59,8 @@ pub struct Rendered {
     pub digest: std::sync::OnceLock<String>,
     /// What `auto` chose, when the job asked for it (set by the server, which resolves it).
     pub auto: Option<crate::job::auto::AutoChoice>,
+    /// A progressive job's rounds and why it stopped (set by the server, which runs them).
+    pub progressive: Option<crate::job::progressive::ProgressiveOutcome>,
 }
 
 impl Rendered {
@@ -261,6 +263,7 @@ impl Engine {
             staging: frame.staging,
             digest: std::sync::OnceLock::new(),
             auto: None,
+            progressive: None,
         })
     }
 

@@ -7,7 +7,7 @@ use std::path::Path;
 use super::{EvalReport, Row, Sweep};
 use crate::methods::chun_oh::{PIXELS_SUBDIVIDED, SPLITS_FORCED_BY_LIGHT};
 use crate::methods::filter::BACKGROUND_PIXELS;
-use crate::methods::reference::ERROR_ESTIMATE;
+use crate::render::method::ERROR_ESTIMATE;
 use crate::methods::{CounterKey, Counters};
 use crate::timing::{PhaseName, Timings};
 
@@ -268,7 +268,10 @@ fn write_flooding(md: &mut String, report: &EvalReport) -> std::fmt::Result {
 /// The error a method estimated for itself (`filtered`'s mean over the pixels it finds in
 /// penumbra) against the one measured over the reference's penumbra, with their ratio.
 fn write_error_estimates(md: &mut String, report: &EvalReport) -> std::fmt::Result {
-    let estimated: Vec<(&Row, f64)> = report.rows.iter().filter_map(|r| ERROR_ESTIMATE.get(&r.counters).map(|e| (r, e))).collect();
+    // The truth's own row (measured against itself: no error) says nothing of its estimate.
+    let measured = |r: &&Row| r.quality.visibility.penumbra.mae > 0.0;
+    let estimated: Vec<(&Row, f64)> =
+        report.rows.iter().filter(measured).filter_map(|r| ERROR_ESTIMATE.get(&r.counters).map(|e| (r, e))).collect();
     if estimated.is_empty() {
         return Ok(());
     }

@@ -13,6 +13,7 @@ use crate::error::{ErrorCode, JobError, JobResult};
 mod assets;
 pub mod auto;
 mod limits;
+pub mod progressive;
 pub mod submission;
 pub mod summary;
 
@@ -180,6 +181,9 @@ impl std::fmt::Display for JobStatus {
     }
 }
 
+/// The seed of the reference a job is compared with (`Job::reference_job`).
+pub const TRUTH_SEED: u32 = 7;
+
 /// One render job, as sent by a client.
 #[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
@@ -203,6 +207,10 @@ pub struct Job {
     /// quality metrics against it.
     #[serde(default)]
     pub compare: bool,
+    /// A submitted `reference` that answers in rounds until an error or a time is met
+    /// (contract §5, `progressive.rs`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub progressive: Option<progressive::Progressive>,
 }
 
 impl Job {
@@ -217,16 +225,21 @@ impl Job {
             output: OutputSpec::default(),
             ambient: None,
             compare: false,
+            progressive: None,
         }
     }
 
     /// The `reference` job for the same scene, view, light and size: what `compare`
     /// measures against. Its visibility is always read back.
+    /// Its seed is one of its own (`TRUTH_SEED`): a reference's samples are the first of one
+    /// sequence per seed, so a truth of the default seed would hold every sample of a tested
+    /// `reference` of fewer, and their errors would cancel.
     pub fn reference_job(&self) -> Job {
         Job {
-            method: MethodSpec { name: "reference".into(), params: Map::new() },
+            method: MethodSpec { name: "reference".into(), params: Map::from_iter([("seed".to_owned(), TRUTH_SEED.into())]) },
             output: OutputSpec { format: OutputFormat::Exr, exposure: 0.0, ..self.output.clone() },
             compare: false,
+            progressive: None,
             ..self.clone()
         }
     }
@@ -294,6 +307,9 @@ impl Job {
     /// parameters and built-in names are checked by `engine::check_job`; camera and light
     /// directions once merged with the scene's defaults.
     pub fn validate(&self, limits: &Limits) -> JobResult<()> {
+        if let Some(progressive) = &self.progressive {
+            progressive.check(self)?;
+        }
         self.light.check_given()?;
         self.camera.check_given()?;
         let out = &self.output;

@@ -288,7 +288,18 @@ impl Model {
     /// error whose time fits; under `max_error` (alone or with `max_ms`), the cheapest whose
     /// error (and time) fit — each prediction with the `MARGIN`.
     pub fn choose(&self, budget: &AutoBudget, features: &Features) -> Result<(Candidate, Prediction), Unmet> {
-        let predictions = self.predictions(features);
+        self.choose_among(budget, features, |_| true)
+    }
+
+    /// `choose` among the candidates `allowed` keeps (those this server's limits let a job
+    /// ask for: a candidate above an operator's cap is never chosen).
+    pub fn choose_among(
+        &self,
+        budget: &AutoBudget,
+        features: &Features,
+        allowed: impl Fn(&Candidate) -> bool,
+    ) -> Result<(Candidate, Prediction), Unmet> {
+        let predictions: Vec<(&Candidate, Prediction)> = self.predictions(features).into_iter().filter(|(c, _)| allowed(c)).collect();
         let time_fits = |p: &Prediction| budget.max_ms.is_none_or(|max| p.ms * MARGIN <= max);
         let error_fits = |p: &Prediction| budget.max_error.is_none_or(|max| p.error * MARGIN <= max);
         let fitting = predictions.iter().filter(|(_, p)| time_fits(p) && error_fits(p));
@@ -303,7 +314,8 @@ impl Model {
         // Nothing fits: the field that cannot be met, and the candidate nearest to it.
         let Some(cheapest) = predictions.iter().min_by(|a, b| a.1.ms.total_cmp(&b.1.ms)) else {
             let prediction = Prediction { ms: 0.0, error: 1.0 };
-            return Err(Unmet { field: "method.name", closest: String::new(), prediction, message: "this daemon's model is empty".into() });
+            let message = "this daemon's model has no method this server's limits allow".into();
+            return Err(Unmet { field: "method.name", closest: String::new(), prediction, message });
         };
         let (field, (candidate, prediction)) = match (budget.max_ms, budget.max_error) {
             (Some(max), _) if cheapest.1.ms * MARGIN > max => ("method.max_ms", cheapest),

@@ -80,6 +80,12 @@ impl CounterKey {
     }
 }
 
+/// The mean estimated error |V − Vref| over the pixels a method finds in penumbra. A method
+/// that writes it has written its estimate per pixel in the visibility target's fourth
+/// component (the others leave 1 there); outputs that carry the visibility then carry it too
+/// (EXR layer `error`).
+pub const ERROR_ESTIMATE: CounterKey = CounterKey("error_estimate_penumbra");
+
 /// Records the copy of `rows` of `texture` into `buffer`, rows `pitch` bytes apart from its
 /// start (`MethodContext::rows_buffer`).
 fn copy_rows(encoder: &mut wgpu::CommandEncoder, texture: &wgpu::Texture, buffer: &wgpu::Buffer, pitch: u32, rows: &Range<u32>) {
@@ -428,12 +434,6 @@ pub trait ShadowMethod: Send + Sync {
     /// so; for the others the G-buffer pass draws without that target, a tenth of the pass on
     /// lavapipe.
     fn reads_object_ids(&self) -> bool {
-        false
-    }
-    /// Whether the method writes an estimate of its error per pixel — the expected |V − Vref|
-    /// of its gray visibility — in the visibility target's fourth component (the others leave
-    /// 1 there). Outputs that carry the visibility then carry it too (EXR layer `error`).
-    fn writes_error_estimate(&self) -> bool {
         false
     }
 }

@@ -52,7 +52,7 @@ pub struct FrameOutput {
     /// Per-channel visibility V (EXR and comparisons), 1 wherever E0 = 0.
     pub visibility: Option<Vec<[f32; 3]>>,
     /// The method's estimate of its error per pixel, with the visibility, where it makes one
-    /// (`ShadowMethod::writes_error_estimate`); 0 wherever E0 = 0.
+    /// (a method that sets `method::ERROR_ESTIMATE`); 0 wherever E0 = 0.
     pub error_estimate: Option<Vec<f32>>,
     /// View depth in metres, +∞ for background (EXR only).
     pub depth: Option<Vec<f32>>,
@@ -370,7 +370,7 @@ impl Renderer {
             let v: &[[f32; 4]] = bytemuck::cast_slice(&images[v]);
             v.iter().zip(e).map(|(v, e)| if *e == [0.0; 3] { [1.0; 3] } else { [v[0], v[1], v[2]] }).collect()
         });
-        let error_estimate = visibility_index.zip(e0.as_ref()).filter(|_| spec.method.writes_error_estimate()).map(|(v, e)| {
+        let error_estimate = visibility_index.zip(e0.as_ref()).filter(|_| method::ERROR_ESTIMATE.get(&counters).is_some()).map(|(v, e)| {
             let v: &[[f32; 4]] = bytemuck::cast_slice(&images[v]);
             v.iter().zip(e).map(|(v, e)| if *e == [0.0; 3] { 0.0 } else { v[3] }).collect()
         });

@@ -7,7 +7,7 @@ use std::sync::RwLock;
 
 use super::*;
 use crate::config::ModelMode;
-use crate::job::auto::{AutoBudget, AutoChoice};
+use crate::job::auto::{AutoBudget, AutoChoice, Prediction};
 use crate::model::{self, Features, Model};
 
 /// The model in use and where it stands.
@@ -123,9 +123,11 @@ impl AppState {
         let Some(budget) = AutoBudget::of(&job.method)? else { return Ok(None) };
         let features = self.checked_features(job, Some(&budget), false)?;
         let model = self.model.get();
-        let (candidate, prediction) = match model.choose(&budget, &features) {
+        let (candidate, prediction) = match self.choose(&model, &budget, &features, job) {
             Ok(chosen) => chosen,
-            Err(unmet) if strict => return Err(JobError::field(ErrorCode::BudgetUnmet, unmet.field, unmet.message)),
+            Err(unmet) if strict || unmet.closest.is_empty() => {
+                return Err(JobError::field(ErrorCode::BudgetUnmet, unmet.field, unmet.message))
+            }
             Err(unmet) => {
                 tracing::warn!(closest = %unmet.closest, "no method meets the budget at render time: the closest is rendered");
                 let closest = model.candidates.iter().find(|c| c.label == unmet.closest).expect("named from the model");
@@ -134,6 +136,18 @@ impl AppState {
         };
         let choice = model.choice(&candidate, prediction, job);
         Ok(Some((Job { method: choice.method.clone(), ..job.clone() }, choice)))
+    }
+
+    /// The model's choice for `job` under `budget`, among the candidates this server's limits
+    /// allow (`--max-samples` may rule out the 1,024-sample reference).
+    pub(super) fn choose(
+        &self,
+        model: &model::Model,
+        budget: &AutoBudget,
+        features: &Features,
+        job: &Job,
+    ) -> Result<(model::Candidate, Prediction), model::Unmet> {
+        model.choose_among(budget, features, |c| self.engine.check(&Job { method: c.method_for(job), ..job.clone() }, false).is_ok())
     }
 
     /// A job checked as a submission is — an `auto` one with its `budget` checked in place of
@@ -164,6 +178,12 @@ impl AppState {
     /// A job checked for admission: an `auto` job's budget resolved (strictly) and the
     /// method chosen checked as any job's.
     pub(super) fn check_submission(&self, job: &Job, uploads_here: bool) -> Result<(), JobError> {
+        if let Some(max_ms) = job.progressive.and_then(|p| p.max_ms) {
+            let deadline_ms = self.queue_config.deadline.as_secs_f64() * 1e3;
+            if max_ms > deadline_ms {
+                return Err(JobError::invalid("progressive.max_ms", format!("must be at most the job deadline, {deadline_ms:.0} ms")));
+            }
+        }
         match self.resolve_auto(job, true)? {
             Some((chosen, _)) => self.engine.check(&chosen, uploads_here),
             None => self.engine.check(job, uploads_here),
@@ -199,7 +219,7 @@ pub(super) async fn estimate(State(state): State<Arc<AppState>>, body: Result<By
         "predictions": predictions,
     });
     match budget {
-        Some(budget) => match model.choose(&budget, &features) {
+        Some(budget) => match state.choose(&model, &budget, &features, &job) {
             Ok((candidate, prediction)) => answer["auto"] = json!(model.choice(&candidate, prediction, &job)),
             Err(unmet) => {
                 answer["unmet"] = json!({

@@ -276,7 +276,9 @@ pub(super) async fn job_events(State(state): State<Arc<AppState>>, Path(id): Pat
     let receiver = events.subscribe();
     // (receiver, ended): the current state first, then each change, until a final one.
     let stopping = state.stopping.subscribe();
-    let stream = futures_util::stream::unfold((receiver, stopping, false, true), |(mut receiver, mut stopping, ended, first)| async move {
+    // (receiver, stopping, ended, first, the last round sent)
+    let start = (receiver, stopping, false, true, None);
+    let stream = futures_util::stream::unfold(start, |(mut receiver, mut stopping, ended, first, last_round)| async move {
         if ended {
             return None;
         }
@@ -288,9 +290,15 @@ pub(super) async fn job_events(State(state): State<Arc<AppState>>, Path(id): Pat
             }
         }
         let event = receiver.borrow_and_update().clone();
-        let name = if event.finished() { event.status.as_str() } else { "progress" };
+        let round = event.round.as_ref().map(|r| r.round);
+        let name = match () {
+            _ if event.finished() => event.status.as_str(),
+            // A progressive job's new round (contract §5).
+            _ if round.is_some() && round != last_round => "round",
+            _ => "progress",
+        };
         let sse = Event::default().event(name).json_data(&event).unwrap_or_else(|_| Event::default().event(name));
-        Some((Ok::<_, std::convert::Infallible>(sse), (receiver, stopping, event.finished(), false)))
+        Some((Ok::<_, std::convert::Infallible>(sse), (receiver, stopping, event.finished(), false, round)))
     });
     Ok(Sse::new(stream).keep_alive(KeepAlive::default()).into_response())
 }
@@ -398,6 +406,23 @@ pub(super) async fn job_image(
             Ok(immutable(([(header::CONTENT_TYPE, mime)], bytes).into_response(), &etag))
         }
     }
+}
+
+/// `GET /v1/jobs/{id}/rounds/{round}`: a running progressive job's round image (contract
+/// §5), held by the replica that renders it until the job ends; 404 after (the last round is
+/// the job's image) or for a round not drawn.
+pub(super) async fn round_image(State(state): State<Arc<AppState>>, Path((id, round)): Path<(String, String)>) -> Result<Response, ApiError> {
+    let gone = || {
+        ApiError(JobError::new(
+            ErrorCode::NotFound,
+            format!("job `{id}` holds no round `{round}` here: rounds are kept while the job runs, and its last is its image"),
+        ))
+    };
+    let number: usize = round.parse().map_err(|_| gone())?;
+    let rendered = state.jobs.round(&id, number).ok_or_else(gone)?;
+    let mut response = rendered.bytes.clone().into_response();
+    response.headers_mut().insert(header::CONTENT_TYPE, HeaderValue::from_static(rendered.format.mime()));
+    Ok(response)
 }
 
 /// Where a succeeded job's image is: in this replica's memory, or in the durable store (the

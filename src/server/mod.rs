@@ -11,6 +11,7 @@ mod dashboard;
 pub mod error;
 mod job_routes;
 mod meta;
+mod progressive;
 pub mod metrics;
 pub mod openapi;
 mod render;
@@ -50,7 +51,9 @@ use crate::upload_store::{content_id, is_content_id, Kind};
 use auto::estimate;
 pub use cluster::Replica;
 use error::{store_error, ApiError};
-use job_routes::{cancel_job, immutable, job_events, job_image, job_record, job_thumbnail, list_jobs, not_modified, submit_job, unchanged};
+use job_routes::{
+    cancel_job, immutable, job_events, job_image, job_record, job_thumbnail, list_jobs, not_modified, round_image, submit_job, unchanged,
+};
 use meta::{limits, methods, metrics, readyz, stats};
 use render::{image_response, job_json, render, render_blocking};
 use requests::REQUEST_ID;
@@ -99,6 +102,7 @@ pub fn app(state: Arc<AppState>) -> Router {
         .route("/v1/jobs/{id}", get(job_record).delete(cancel_job))
         .route("/v1/jobs/{id}/events", get(job_events))
         .route("/v1/jobs/{id}/image", get(job_image))
+        .route("/v1/jobs/{id}/rounds/{round}", get(round_image))
         .route("/v1/jobs/{id}/thumbnail", get(job_thumbnail))
         .route("/v1/stats", get(stats))
         .route_layer(guard());

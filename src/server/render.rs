@@ -22,6 +22,11 @@ pub(super) async fn render(
     let job = body.and_then(|body| Job::from_json_limited(&body, state.engine.limits()));
     // An `auto` budget nothing meets is refused before the job is queued.
     let job = job.and_then(|job| state.resolve_auto(&job, true).map(|_| job));
+    // Rounds are announced as events of a submitted job: a synchronous answer has one image.
+    let job = job.and_then(|job| match job.progressive {
+        Some(_) => Err(JobError::invalid("progressive", "a progressive job is submitted (POST /v1/jobs), where its rounds are events")),
+        None => Ok(job),
+    });
     let method = job.as_ref().map(|j| j.method.name.clone()).unwrap_or_default();
     let outcome = match job {
         Ok(job) => queue_and_render(&state, &method, job).await,
@@ -180,6 +185,7 @@ pub(super) fn job_json(id: &str, rendered: &Rendered) -> Value {
         "warnings": rendered.warnings,
         "staging": rendered.staging,
         "auto": rendered.auto,
+        "progressive": rendered.progressive,
         "image": format!("/v1/jobs/{id}/image"),
     })
 }

@@ -154,10 +154,18 @@ pub(super) async fn render_and_store(
             }
         }
     };
-    let supervise = Supervise { progress: report, cancelled: move || *cancel.borrow() };
-    let outcome = render_blocking(state, &id, job, supervise, (), |_| {}).await;
+    // A progressive job's rounds are kept until it ends, whichever way it ends.
+    let _rounds = RoundsKept { state, id: id.clone() };
+    let outcome = match job.progressive {
+        Some(spec) => super::progressive::render_rounds(state, &id, job, spec, device, &events, cancel).await,
+        None => {
+            let supervise = Supervise { progress: report, cancelled: move || *cancel.borrow() };
+            let outcome = render_blocking(state, &id, job, supervise, (), |_| {}).await;
+            drop(device);
+            outcome
+        }
+    };
     drop(running);
-    drop(device);
     let rendered = match outcome {
         Ok(rendered) => Arc::new(rendered),
         Err(error) => {
@@ -196,6 +204,18 @@ pub(super) async fn render_and_store(
     events.send_modify(|event| event.finish(JobStatus::Succeeded, None));
     // The queue place goes only now: a drain that sees it back finds the job recorded.
     drop(admitted);
+}
+
+/// Drops a progressive job's round images when its life here ends.
+struct RoundsKept<'a> {
+    state: &'a AppState,
+    id: String,
+}
+
+impl Drop for RoundsKept<'_> {
+    fn drop(&mut self) {
+        self.state.jobs.drop_rounds(&self.id);
+    }
 }
 
 /// Writes a finished job's outcome to the store, retrying with backoff (0.25 s, doubling to

@@ -7,25 +7,31 @@
 mod bands;
 mod cpu;
 mod crop;
+mod estimate;
 mod filtered;
 mod gpu;
 mod samples;
 
-pub use filtered::{Filtered, ERROR_ESTIMATE};
+pub use filtered::Filtered;
 use gpu::{batch_layers, Accumulation, DepthMaps, BATCH, BATCH_MAP_BYTES, SEGMENT};
 use samples::SamplePlan;
 pub use samples::{interleaved_light_samples, light_samples, LightSample};
+use cpu::CpuSample;
 
 use super::{Cap, Counters, MethodContext, Param, ParamSpec, Params, ShadowMethod};
 use crate::error::JobResult;
 use crate::params::choice;
+use crate::render::method::ERROR_ESTIMATE;
 use crate::supervise::Supervisor;
 use crate::timing::PhaseName;
 
 pub struct Reference;
 
+/// The most light samples a reference takes.
+pub const MAX_SAMPLES: u32 = 4096;
+
 const SAMPLES: Param<u32> =
-    Param::integer("samples", 256, 1, 4096, "light samples (stratified, jittered); noise falls as 1/√samples").capped(Cap::Samples);
+    Param::integer("samples", 256, 1, MAX_SAMPLES as i64, "light samples (stratified, jittered); noise falls as 1/√samples").capped(Cap::Samples);
 const RESOLUTION: Param<u32> = Param::integer("resolution", 1024, 64, 4096, "side of each sample's depth map, texels");
 const BIAS_TEXELS: Param<f32> =
     Param::float("bias_texels", 1.0, 0.0, 64.0, "constant bias of the visibility test, in texels of the sample's map");
@@ -110,7 +116,11 @@ impl ShadowMethod for Reference {
 
 /// Engine `cpu` (`cpu.rs`): the G-buffer read back, the same maps and tests on the CPU's
 /// cores, and the visibility written to the frame's buffer — in bands of rows where the frame
-/// needs more than `cpu_working_bytes` (`bands.rs`; the same pixels).
+/// needs more than `cpu_working_bytes` (`bands.rs`; the same pixels). The two halves of the
+/// samples (`samples::half_of_index`) are summed apart, for the error estimate written beside
+/// the visibility (`estimate.rs`). In a progressive job's rounds the sums of the samples
+/// taken before come from the last round (`Carried`) and only the new samples are tested:
+/// each pixel's sums get the same samples in the same order as in one render of them all.
 fn record_on_cpu(ctx: &mut MethodContext<'_>, params: &Params, plan: &SamplePlan) -> JobResult<Counters> {
     let constants = plan.test_constants(params, ctx.spec.light.center);
     let samples = plan.cpu_samples();
@@ -118,25 +128,47 @@ fn record_on_cpu(ctx: &mut MethodContext<'_>, params: &Params, plan: &SamplePlan
     let width = ctx.width;
     let bands = bands::bands(width, ctx.height, CPU_BYTES_PER_PIXEL, ctx.cpu_working_bytes, 0, 1);
     let supervisor = ctx.supervisor;
-    let mut progress = Progress::new(supervisor, samples.len() as u64 * bands.len() as u64);
+    let rounds = supervisor.rounds();
+    let shape = (width, ctx.height, bands.len(), channels);
+    let mut carried = rounds
+        .and_then(|r| r.take::<Carried>())
+        .filter(|c| c.shape == shape && c.samples <= samples.len())
+        .map_or_else(|| Carried { shape, samples: 0, bands: vec![Default::default(); bands.len()] }, |c| *c);
+    let carried_samples = carried.samples;
+    // The new samples, by half, in order.
+    let mut halves: [Vec<CpuSample>; 2] = Default::default();
+    for (sample, &half) in samples.iter().zip(&plan.halves).skip(carried_samples) {
+        halves[usize::from(half)].push(sample.clone());
+    }
+    let new_samples = (samples.len() - carried_samples) as u64;
+    let mut progress = Progress::new(supervisor, new_samples * bands.len() as u64);
     let (mut read_ms, mut write_ms, mut spent, mut segments) = (0.0, 0.0, cpu::Spent::default(), 0);
+    let (mut error_sum, mut error_count) = (0.0, 0);
     for (b, band) in bands.iter().enumerate() {
         let started = std::time::Instant::now();
         let receivers = ctx.read_gbuffer_rows(band.rows.clone(), |gbuffer| cpu::Receivers::new(gbuffer, SEGMENT, &constants))?;
         read_ms += started.elapsed().as_secs_f64() * 1e3;
-        let first = b as u64 * samples.len() as u64;
         let geometry = (ctx.scene.positions(), ctx.scene.indices());
-        // Cancelled: the renderer discards this frame.
-        let (sums, _, band_spent) =
-            cpu::estimate_with::<false>(&receivers, &samples, &constants, geometry, channels, plan.crop.size, |done| {
-                progress.at(first + done as u64)
-            });
+        let sums = &mut carried.bands[b];
+        for half in sums.iter_mut() {
+            half.resize(receivers.blocks(), cpu::SumBlock::default());
+        }
+        let mut first = b as u64 * new_samples;
+        for (half, samples) in halves.iter().enumerate() {
+            // Cancelled: the renderer discards this frame.
+            let (_, half_spent) =
+                cpu::estimate_into::<false>(&receivers, samples, &constants, geometry, (channels, plan.crop.size), &mut sums[half], |done| {
+                    progress.at(first + done as u64)
+                });
+            first += samples.len() as u64;
+            spent.add(half_spent);
+        }
         let written = std::time::Instant::now();
         let mut visibility = vec![0u8; width as usize * band.rows.len() * 16];
-        cpu::write_visibility(&receivers, &sums, channels, width, &mut visibility);
+        let (sum, count) = cpu::write_visibility(&receivers, [&sums[0], &sums[1]], channels, width, &mut visibility);
+        (error_sum, error_count) = (error_sum + sum, error_count + count);
         ctx.gpu.queue.write_buffer(ctx.visibility, u64::from(band.rows.start) * u64::from(width) * 16, &visibility);
         write_ms += written.elapsed().as_secs_f64() * 1e3;
-        spent.add(band_spent);
         segments += receivers.segments;
         if supervisor.cancelled() {
             break;
@@ -151,8 +183,24 @@ fn record_on_cpu(ctx: &mut MethodContext<'_>, params: &Params, plan: &SamplePlan
         ("engine_cpu".to_owned(), 1.0),
         ("cpu_threads".to_owned(), spent.round as f64),
         ("cpu_bands".to_owned(), bands.len() as f64),
+        ("samples_carried".to_owned(), carried_samples as f64),
     ]);
+    ERROR_ESTIMATE.set(&mut counters, if error_count > 0 { error_sum / error_count as f64 } else { 0.0 });
+    if let Some(rounds) = rounds {
+        carried.samples = samples.len();
+        rounds.put(carried);
+    }
     Ok(counters)
+}
+
+/// What the CPU engine carries between a progressive job's rounds: per band of the frame, the
+/// two halves' sums of its receivers over the first `samples` of the plan. The frame is drawn
+/// again each round, the same (`shape`: size, bands and channels, checked), so its receivers
+/// come in the same order.
+struct Carried {
+    shape: (u32, u32, usize, usize),
+    samples: usize,
+    bands: Vec<[Vec<cpu::SumBlock>; 2]>,
 }
 
 /// A frame's progress through its samples, reported as the GPU engine reports it: each time
@@ -186,9 +234,9 @@ impl<'a> Progress<'a> {
 }
 
 /// What the CPU engine holds a pixel at most, in bytes: its receiver (40) and listing (4),
-/// its sums (24), and its visibility as written and as queued for the device (16 + 16) — the
-/// G-buffer's copy (24) is let go before the sums are made.
-const CPU_BYTES_PER_PIXEL: u64 = 100;
+/// its two halves' sums (48), and its visibility as written and as queued for the device
+/// (16 + 16) — the G-buffer's copy (24) is let go before the sums are made.
+const CPU_BYTES_PER_PIXEL: u64 = 124;
 
 #[cfg(test)]
 mod tests;

@@ -7,6 +7,10 @@ use glam::{Mat4, Vec3};
 use super::crop::MapCrop;
 use super::gpu::{BatchSample, BatchUniforms};
 use super::{Counters, MethodContext, Params, BIAS_TEXELS, CROP, RESOLUTION, SAMPLES, SEED, SLOPE_BIAS_TEXELS};
+
+/// The points of the sequence a plan's near plane and crop are made for: every sample a
+/// reference can take (`samples`' maximum).
+const PLANNED: u32 = super::MAX_SAMPLES;
 use crate::light::{AreaLight, LightImage};
 use crate::render::convex::{map_bounds, ConvexSolid};
 use crate::render::LightProjection;
@@ -32,11 +36,85 @@ pub struct LightSample {
     pub weight: Vec3,
 }
 
-/// Stratified jittered samples over the light, skipping those that land on black texels.
-/// Returns the samples and how many strata there were.
-pub fn light_samples(light: &AreaLight, image: &LightImage, requested: u32, seed: u64) -> (Vec<LightSample>, u32) {
-    let (samples, _, strata) = interleaved_light_samples(light, image, requested, 1, seed);
-    (samples, strata)
+/// The reference's samples: the first `requested` points of one sequence over the light
+/// (`sequence_point`), those on black texels skipped, each with its half (`half_of_index`).
+/// The samples of fewer are the first of more — a progressive job's rounds add samples to the
+/// sums without changing those already taken — and a weight does not depend on how many there
+/// are (`L(y)` times the light's area: the ratio estimator divides the count out). Returns the
+/// samples, their halves and how many points were drawn (black ones included).
+pub fn light_samples(light: &AreaLight, image: &LightImage, requested: u32, seed: u64) -> (Vec<LightSample>, Vec<bool>, u32) {
+    let scrambles = scramble_seeds(seed);
+    let area = light.area_m2();
+    let (mut samples, mut halves) = (Vec::with_capacity(requested as usize), Vec::with_capacity(requested as usize));
+    for i in 0..requested {
+        let half = half_of_index(i);
+        let (s, t) = sequence_point(i >> 1, scrambles[usize::from(half)]);
+        let (ti, tj) = image.texel_at(s, t);
+        let emission = image.emission(ti, tj);
+        if emission.max_element() <= 0.0 {
+            continue;
+        }
+        samples.push(LightSample { position: light.image_point(s, t), weight: emission * light.intensity * area });
+        halves.push(half);
+    }
+    (samples, halves, requested)
+}
+
+/// Which half of the reference's samples sample `i` is in: the even ones and the odd ones,
+/// each its own sequence (`light_samples`). The halves are two independent randomisations of
+/// one stratified sequence — randomised quasi-Monte Carlo's replicates (Owen 1997) — so half
+/// their difference estimates the whole's error without bias. Halves cut from one sequence
+/// (its blocks, say) would not do: its later points fill exactly the strata its earlier ones
+/// left empty, so each half alone is badly stratified and the halves differ by far more than
+/// the whole errs (measured: docs/performance-log.md).
+pub(super) fn half_of_index(i: u32) -> bool {
+    i & 1 == 1
+}
+
+/// Point `i` of a sequence in the unit square: the first two dimensions of Sobol's sequence
+/// (van der Corput's radical inverse, and the Pascal-matrix dimension), each Owen-scrambled
+/// by a hash of `scramble` (Burley 2020, "Practical Hash-based Owen Scrambling"). Sobol's 2D
+/// sequence is a (0,2)-sequence: every aligned block of 2^k points — a prefix of 2^k points
+/// among them — has one point in each of the 2^k elementary boxes of any shape (k even: a
+/// √2^k-square grid), and Owen scrambling keeps that while making every point uniform. So any
+/// prefix is stratified as finely as its length allows, where a jittered grid is stratified
+/// only at the count it was made for.
+pub(super) fn sequence_point(i: u32, (seed_x, seed_y): (u32, u32)) -> (f32, f32) {
+    let x = i.reverse_bits();
+    let mut y = 0u32;
+    let (mut bits, mut column) = (i, 1u32 << 31);
+    while bits != 0 {
+        if bits & 1 == 1 {
+            y ^= column;
+        }
+        bits >>= 1;
+        column ^= column >> 1;
+    }
+    let unit = |v: u32| (v >> 8) as f32 / (1u32 << 24) as f32;
+    (unit(owen_scramble(x, seed_x)), unit(owen_scramble(y, seed_y)))
+}
+
+/// The scrambling seeds of the two halves' sequences, one per dimension each, from the job's
+/// seed.
+fn scramble_seeds(seed: u64) -> [(u32, u32); 2] {
+    let mut rng = SplitMix64(seed.wrapping_mul(0x9e37_79b9_7f4a_7c15).wrapping_add(1));
+    let mut pair = || {
+        let word = rng.next_u64();
+        (word as u32, (word >> 32) as u32)
+    };
+    [pair(), pair()]
+}
+
+/// Owen scrambling of a fixed-point number in [0, 1): each digit flipped by a hash of the
+/// digits above it, by Laine and Karras' hash on the bit-reversed value (Burley 2020, §3).
+fn owen_scramble(v: u32, seed: u32) -> u32 {
+    let mut x = v.reverse_bits();
+    x = x.wrapping_add(seed);
+    x ^= x.wrapping_mul(0x6c50_b47c);
+    x ^= x.wrapping_mul(0xb82f_1e52);
+    x ^= x.wrapping_mul(0xc7af_e638);
+    x ^= x.wrapping_mul(0x8d22_f6e6);
+    x.reverse_bits()
 }
 
 /// `side`² interleaved sets of stratified jittered samples, `per_class` strata each, skipping
@@ -92,19 +170,25 @@ fn half_of(i: u32, j: u32, side: u32) -> bool {
 pub(super) struct SplitMix64(u64);
 
 impl SplitMix64 {
-    pub(super) fn next_f32(&mut self) -> f32 {
+    pub(super) fn next_u64(&mut self) -> u64 {
         self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
         let mut z = self.0;
         z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
         z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^= z >> 31;
-        (z >> 40) as f32 / (1u64 << 24) as f32
+        z ^ (z >> 31)
+    }
+
+    pub(super) fn next_f32(&mut self) -> f32 {
+        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
     }
 }
 
 /// A frame's light samples and how each one's map is drawn and read.
 pub(super) struct SamplePlan {
     pub(super) samples: Vec<LightSample>,
+    /// Each sample's half (`half_of_index`): the CPU engine keeps the halves' sums apart for
+    /// its error estimate. All in the first for plans of other samples.
+    pub(super) halves: Vec<bool>,
     /// Strata of the light, black ones included (`samples_skipped_black`).
     pub(super) strata: u32,
     pub(super) resolution: u32,
@@ -118,13 +202,24 @@ pub(super) struct SamplePlan {
     /// map's centre.
     pub(super) frusta: Vec<(Mat4, f32)>,
     pub(super) crop: MapCrop,
+    channels: u32,
 }
 
 impl SamplePlan {
+    /// The reference's plan: its first `samples` of the sequence, with the near plane and crop
+    /// of the sequence's every possible sample (`PLANNED`), so that the plan of fewer samples
+    /// is the first part of the plan of more, map for map (a progressive job's rounds).
     pub(super) fn new(ctx: &MethodContext<'_>, params: &Params) -> Self {
         let spec = ctx.spec;
-        let (samples, strata) = light_samples(&spec.light, &spec.light_image, params.get(&SAMPLES), u64::from(params.get(&SEED)));
-        Self::for_samples(ctx, params, samples, strata)
+        let seed = u64::from(params.get(&SEED));
+        let (planned, planned_halves, _) = light_samples(&spec.light, &spec.light_image, PLANNED, seed);
+        let requested = params.get(&SAMPLES).min(PLANNED);
+        // The first `requested` points of the sequence, less the black ones.
+        let taken = light_samples(&spec.light, &spec.light_image, requested, seed).0.len();
+        let mut plan = Self::for_samples(ctx, params, planned, PLANNED);
+        plan.keep_first(taken, requested);
+        plan.halves = planned_halves[..taken].to_vec();
+        plan
     }
 
     /// The plan of these samples (of `strata`, black ones included), with the maps'
@@ -159,7 +254,20 @@ impl SamplePlan {
         } else {
             MapCrop::whole(samples.len(), resolution)
         };
-        Self { samples, strata, resolution, rotation, near, plane, frusta, crop }
+        let halves = vec![false; samples.len()];
+        // One channel where every weight is gray (its three sums would be equal), else three.
+        let channels = if samples.iter().all(|s| s.weight.x == s.weight.y && s.weight.x == s.weight.z) { 1 } else { 3 };
+        Self { samples, halves, strata, resolution, rotation, near, plane, frusta, crop, channels }
+    }
+
+    /// Keeps the first `count` samples (of `strata` points drawn), with the near plane and
+    /// crop planned for all of them.
+    fn keep_first(&mut self, count: usize, strata: u32) {
+        self.samples.truncate(count);
+        self.halves.truncate(count);
+        self.frusta.truncate(count);
+        self.crop.origins.truncate(count);
+        self.strata = strata;
     }
 
     /// Per sample: its map's projection (the depth pass) and what the accumulate pass needs.
@@ -247,13 +355,10 @@ impl SamplePlan {
         ])
     }
 
-    /// Channels of the sums: one where every sample's weight is gray (its three sums would be
-    /// equal), else three.
+    /// Channels of the sums: one where every sample planned for has a gray weight (its three
+    /// sums would be equal), else three — of all the samples planned for, so that a plan of
+    /// fewer keeps its sums as a plan of more does.
     pub(super) fn channels(&self) -> u32 {
-        if self.samples.iter().all(|s| s.weight.x == s.weight.y && s.weight.x == s.weight.z) {
-            1
-        } else {
-            3
-        }
+        self.channels
     }
 }

@@ -19,6 +19,7 @@ mod raster;
 
 use raster::Map;
 
+use super::estimate::Texel;
 use crate::render::method::GBufferView;
 
 /// Receivers a block: one AVX2 vector of f32 (and the unit the threads share the frame by).
@@ -188,6 +189,11 @@ impl Receivers {
         Self { blocks, pixels, segments }
     }
 
+    /// How many blocks of `LANES` receivers there are (the length of their sums).
+    pub(super) fn blocks(&self) -> usize {
+        self.blocks.len()
+    }
+
     /// The pixel (index into the frame's rows) of each receiver, in block order.
     pub(super) fn pixels(&self) -> &[u32] {
         &self.pixels
@@ -225,12 +231,29 @@ pub(super) fn estimate_with<const BLOCKERS: bool>(
     receivers: &Receivers,
     samples: &[CpuSample],
     constants: &TestConstants,
-    (positions, indices): (&[Vec3], &[u32]),
+    geometry: (&[Vec3], &[u32]),
     channels: usize,
     crop_size: UVec2,
-    mut after: impl FnMut(usize) -> bool,
+    after: impl FnMut(usize) -> bool,
 ) -> (Vec<SumBlock>, Vec<BlockerBlock>, Spent) {
     let mut sums = vec![SumBlock::default(); receivers.blocks.len()];
+    let (blockers, spent) = estimate_into::<BLOCKERS>(receivers, samples, constants, geometry, (channels, crop_size), &mut sums, after);
+    (sums, blockers, spent)
+}
+
+/// `estimate_with`, adding to `sums` (one per block of `receivers`): the sums of samples
+/// tested before, which the new ones follow in order — as if they had all been tested in one
+/// call (a progressive job's rounds).
+pub(super) fn estimate_into<const BLOCKERS: bool>(
+    receivers: &Receivers,
+    samples: &[CpuSample],
+    constants: &TestConstants,
+    (positions, indices): (&[Vec3], &[u32]),
+    (channels, crop_size): (usize, UVec2),
+    sums: &mut [SumBlock],
+    mut after: impl FnMut(usize) -> bool,
+) -> (Vec<BlockerBlock>, Spent) {
+    debug_assert_eq!(sums.len(), receivers.blocks.len());
     let mut blockers = vec![BlockerBlock::default(); if BLOCKERS { receivers.blocks.len() } else { 0 }];
     let mut spent = Spent::default();
     let threads = rayon::current_num_threads().max(1);
@@ -266,36 +289,52 @@ pub(super) fn estimate_with<const BLOCKERS: bool>(
             break;
         }
     }
-    (sums, blockers, spent)
+    (blockers, spent)
 }
 
-/// Writes every pixel's visibility into `out`, a `vec4<f32>` of bytes each (rgb; w 1), rows of
-/// `width` pixels: the ratio of its receiver's sums per channel (`ratio` in
-/// `accumulate.wgsl`), 1 where no receiver is. Row by row on every core.
-pub(super) fn write_visibility(receivers: &Receivers, sums: &[SumBlock], channels: usize, width: u32, out: &mut [u8]) {
-    let channel = |c: usize| if channels == 1 { 0 } else { c };
-    let ratio = |k: usize| {
-        let (b, l) = (&sums[k / LANES], k % LANES);
-        let shadowed = Vec3::from_array([0, 1, 2].map(|c| b.shadowed[channel(c)][l]));
-        let unshadowed = Vec3::from_array([0, 1, 2].map(|c| b.unshadowed[channel(c)][l]));
-        let total = unshadowed.element_sum();
-        let gray = if total > 0.0 { shadowed.element_sum() / total } else { 1.0 };
-        let v = Vec3::from_array([0, 1, 2].map(|c| if unshadowed[c] > 0.0 { shadowed[c] / unshadowed[c] } else { gray }));
-        v.clamp(Vec3::ZERO, Vec3::ONE).extend(1.0).to_array()
+/// Writes every pixel's visibility into `out`, a `vec4<f32>` of bytes each (rgb; w the error
+/// estimate), rows of `width` pixels: the ratio of its receiver's sums per channel, both halves
+/// together (`ratio` in `accumulate.wgsl`), and half the halves' difference (`Texel::error`);
+/// 1 (and 0) where no receiver is. Row by row on every core. Returns the estimate's sum and
+/// count over the pixels in a penumbra.
+pub(super) fn write_visibility(receivers: &Receivers, halves: [&[SumBlock]; 2], channels: usize, width: u32, out: &mut [u8]) -> (f64, usize) {
+    let texel = |k: usize| {
+        let (b, l) = (k / LANES, k % LANES);
+        let mut texel = Texel::UNCOVERED;
+        for (half, sums) in halves.iter().enumerate() {
+            let (shadowed, unshadowed) = sums[b].lane(l, channels);
+            texel.add(shadowed, unshadowed, half == 1);
+        }
+        texel
     };
     let row_bytes = width as usize * 16;
-    out.par_chunks_mut(row_bytes).enumerate().for_each(|(y, row)| {
-        for texel in row.chunks_exact_mut(16) {
-            texel.copy_from_slice(bytemuck::bytes_of(&[1.0f32; 4]));
-        }
-        // The receivers are listed row by row: this row's lie between these two.
-        let first = receivers.pixels.partition_point(|&p| p < y as u32 * width);
-        let end = receivers.pixels.partition_point(|&p| p < (y as u32 + 1) * width);
-        for k in first..end {
-            let x = (receivers.pixels[k] % width) as usize;
-            row[16 * x..16 * x + 16].copy_from_slice(bytemuck::bytes_of(&ratio(k)));
-        }
-    });
+    out.par_chunks_mut(row_bytes)
+        .enumerate()
+        .map(|(y, row)| {
+            for texel in row.chunks_exact_mut(16) {
+                texel.copy_from_slice(bytemuck::bytes_of(&[1.0f32, 1.0, 1.0, 0.0]));
+            }
+            // The receivers are listed row by row: this row's lie between these two.
+            let first = receivers.pixels.partition_point(|&p| p < y as u32 * width);
+            let end = receivers.pixels.partition_point(|&p| p < (y as u32 + 1) * width);
+            let (mut sum, mut count) = (0.0f64, 0usize);
+            for k in first..end {
+                let x = (receivers.pixels[k] % width) as usize;
+                let t = texel(k);
+                let error = t.error();
+                let [r, g, b] = t.visibility();
+                row[16 * x..16 * x + 16].copy_from_slice(bytemuck::bytes_of(&[r, g, b, error]));
+                if let Some(error) = t.penumbra_error() {
+                    sum += f64::from(error);
+                    count += 1;
+                }
+            }
+            (sum, count)
+        })
+        .collect::<Vec<_>>()
+        // Summed in row order: the same mean on every machine.
+        .into_iter()
+        .fold((0.0, 0), |a, b| (a.0 + b.0, a.1 + b.1))
 }
 
 /// Tests `blocks` against one sample's map and adds to their sums (`add_sample` in

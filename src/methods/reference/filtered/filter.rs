@@ -30,7 +30,7 @@
 //! filter averages both with the same weights. The two halves' estimates err independently
 //! (their strata are disjoint, each jittered on its own), and the whole's is their mean, so for
 //! errors e_a, e_b symmetric about 0, E|e_a − e_b| / 2 = E|e_a + e_b| / 2: half the halves'
-//! difference is an estimate of the whole's error with no constant to fit (`halves_error`,
+//! difference is an estimate of the whole's error with no constant to fit (`estimate::halves_error`,
 //! which also weighs halves of unequal light: a colour the light emits in a few strata), and,
 //! measured after the filter, it counts what the filter gathered — neighbours whose samples err
 //! together as well as those that do not. Halves of whole blocks of strata would see different
@@ -43,6 +43,7 @@ use std::ops::Range;
 use glam::Vec3;
 use rayon::prelude::*;
 
+use super::super::estimate::{Texel, PENUMBRA};
 use crate::render::method::GBufferView;
 use crate::render::Camera;
 
@@ -64,93 +65,17 @@ const REACH_SIGMAS: f32 = 2.5;
 /// The sharpness of the normal weight: (n·n')^this.
 const NORMAL_POWER: i32 = 8;
 
-/// The visibility range counted as penumbra for the estimate's mean.
-const PENUMBRA: (f32, f32) = (0.01, 0.99);
-
-/// A pixel's sums per channel (Σ L·G·V, Σ L·G) over its samples, and over the second half of
-/// them alone (module docs: the error estimate).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub(super) struct Texel {
-    pub shadowed: [f32; 3],
-    pub unshadowed: [f32; 3],
-    pub half_shadowed: [f32; 3],
-    pub half_unshadowed: [f32; 3],
-}
-
-impl Texel {
-    pub const UNCOVERED: Self = Self { shadowed: [0.0; 3], unshadowed: [0.0; 3], half_shadowed: [0.0; 3], half_unshadowed: [0.0; 3] };
-
-    /// Adds samples' sums, of the second half or not.
-    pub fn add(&mut self, shadowed: [f32; 3], unshadowed: [f32; 3], second_half: bool) {
-        for c in 0..3 {
-            self.shadowed[c] += shadowed[c];
-            self.unshadowed[c] += unshadowed[c];
-            if second_half {
-                self.half_shadowed[c] += shadowed[c];
-                self.half_unshadowed[c] += unshadowed[c];
-            }
-        }
+/// What a pixel's own samples say of it.
+fn state(texel: &Texel) -> State {
+    if !texel.lit_at_all() {
+        State::Dark
+    } else if texel.shadowed == texel.unshadowed {
+        State::Lit
+    } else if texel.shadowed == [0.0; 3] {
+        State::Umbra
+    } else {
+        State::Mixed
     }
-
-    /// The estimated error |V − Vref|, the channels' mean (module docs): per channel where both
-    /// halves see its light, else from the gray sums.
-    fn error(&self) -> f32 {
-        let first = |c: usize| (self.shadowed[c] - self.half_shadowed[c], self.unshadowed[c] - self.half_unshadowed[c]);
-        let second = |c: usize| (self.half_shadowed[c], self.half_unshadowed[c]);
-        let gray = |sums: [(f32, f32); 3]| sums.iter().fold((0.0, 0.0), |(s, u), x| (s + x.0, u + x.1));
-        let Some(gray) = halves_error(gray([0, 1, 2].map(first)), gray([0, 1, 2].map(second))) else {
-            return 0.0; // One half has no light here: nothing to compare.
-        };
-        (0..3).map(|c| halves_error(first(c), second(c)).unwrap_or(gray)).sum::<f32>() / 3.0
-    }
-
-    /// Whether any sample saw the light from here (else V is undefined: 1).
-    fn lit_at_all(&self) -> bool {
-        self.unshadowed.iter().sum::<f32>() > 0.0
-    }
-
-    /// The gray ratio: the white twin's visibility.
-    fn gray(&self) -> f32 {
-        let total: f32 = self.unshadowed.iter().sum();
-        if total > 0.0 {
-            (self.shadowed.iter().sum::<f32>() / total).clamp(0.0, 1.0)
-        } else {
-            1.0
-        }
-    }
-
-    /// The ratio per channel (`write_visibility` in `cpu`), the gray one where a channel has
-    /// no light.
-    fn visibility(&self) -> [f32; 3] {
-        let gray = self.gray();
-        [0, 1, 2].map(|c| if self.unshadowed[c] > 0.0 { (self.shadowed[c] / self.unshadowed[c]).clamp(0.0, 1.0) } else { gray })
-    }
-
-    fn state(&self) -> State {
-        if !self.lit_at_all() {
-            State::Dark
-        } else if self.shadowed == self.unshadowed {
-            State::Lit
-        } else if self.shadowed == [0.0; 3] {
-            State::Umbra
-        } else {
-            State::Mixed
-        }
-    }
-}
-
-/// The error of the ratio of two halves' sums taken together, from the halves' sums
-/// ((Σ L·G·V, Σ L·G) each): |V_a − V_b| · √(α(1 − α)), α the first half's share of Σ L·G. The
-/// whole's error is α e_a + (1 − α) e_b; with independent errors whose variances go as 1/α and
-/// 1/(1 − α), its spread is that of e_a − e_b times √(α(1 − α)) — half of it for equal halves.
-/// `None` where a half has no light.
-fn halves_error((s_a, u_a): (f32, f32), (s_b, u_b): (f32, f32)) -> Option<f32> {
-    if u_a <= 0.0 || u_b <= 0.0 {
-        return None;
-    }
-    let (v_a, v_b) = ((s_a / u_a).clamp(0.0, 1.0), (s_b / u_b).clamp(0.0, 1.0));
-    let alpha = u_a / (u_a + u_b);
-    Some((v_a - v_b).abs() * (alpha * (1.0 - alpha)).sqrt())
 }
 
 /// What a pixel's own samples say.
@@ -245,7 +170,7 @@ pub(super) fn refined(surfaces: &Surfaces, texels: &[Texel]) -> Vec<bool> {
     // Per tile: the states its pixels' probes are in, a bit per `State`.
     let mut states = vec![0u8; tiles.count()];
     for (i, texel) in texels.iter().enumerate().filter(|&(i, _)| covered(i)) {
-        states[tiles.of(i)] |= 1 << texel.state() as u8;
+        states[tiles.of(i)] |= 1 << state(texel) as u8;
     }
     // A tile varies with a mixed pixel around it, or two of the states.
     let varies = |i: usize| {

@@ -30,9 +30,10 @@ use super::{
 };
 use crate::error::JobResult;
 use crate::params::Cap;
-use crate::render::method::CounterKey;
+use crate::render::method::{CounterKey, ERROR_ESTIMATE};
 use crate::timing::PhaseName;
-use filter::{FilterInputs, Texel};
+use super::estimate::Texel;
+use filter::FilterInputs;
 
 pub struct Filtered;
 
@@ -68,8 +69,6 @@ const PARAMS: &[ParamSpec] = &[
     CROP.spec,
 ];
 
-/// The mean estimated error |V − Vref| over the pixels the method finds in penumbra.
-pub const ERROR_ESTIMATE: CounterKey = CounterKey("error_estimate_penumbra");
 /// Pixels tested against every sample, not the probes alone.
 pub const PIXELS_REFINED: CounterKey = CounterKey("pixels_refined");
 
@@ -89,10 +88,6 @@ impl ShadowMethod for Filtered {
     /// As `reference`: maps of the samples' own.
     fn reads_shadow_map(&self) -> bool {
         false
-    }
-
-    fn writes_error_estimate(&self) -> bool {
-        true
     }
 
     fn record(&self, ctx: &mut MethodContext<'_>, params: &Params) -> JobResult<Counters> {

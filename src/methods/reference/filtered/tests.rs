@@ -3,7 +3,8 @@
 
 use glam::Vec3;
 
-use super::filter::{self, FilterInputs, Surfaces, Texel};
+use super::super::estimate::Texel;
+use super::filter::{self, FilterInputs, Surfaces};
 use crate::render::Camera;
 
 const SIZE: u32 = 64;
