@@ -293,6 +293,57 @@ function drawThumbnails(stats) {
   });
 }
 
+// Running progressive jobs refining (contract §5): each one's latest round, its image and its
+// estimated error, redrawn when a new round comes; a job that ends leaves (its last round is
+// then among the recent renders).
+async function drawRefining() {
+  const box = document.getElementById("refining");
+  const response = await fetch("/v1/jobs?status=running&limit=8", { headers: { accept: "application/json", ...authHeaders() } });
+  if (!response.ok) return;
+  const running = (await response.json()).jobs;
+  const records = await Promise.all(
+    running.map((job) =>
+      fetch(`/v1/jobs/${encodeURIComponent(job.id)}`, { headers: authHeaders() })
+        .then((r) => (r.ok ? r.json() : null))
+        .catch(() => null),
+    ),
+  );
+  const refining = records.filter((r) => r && r.round);
+  const wanted = new Set(refining.map((r) => r.id));
+  for (const child of [...box.children]) {
+    if (!wanted.has(child.dataset.id)) {
+      const img = child.querySelector("img");
+      if (img && img.src.startsWith("blob:")) URL.revokeObjectURL(img.src);
+      child.remove();
+    }
+  }
+  for (const record of refining) {
+    let item = box.querySelector(`[data-id="${record.id}"]`);
+    if (!item) {
+      item = document.createElement("figure");
+      item.dataset.id = record.id;
+      item.append(document.createElement("img"), document.createElement("figcaption"));
+      box.append(item);
+    }
+    const round = record.round;
+    if (item.dataset.round === String(round.round)) continue;
+    item.dataset.round = String(round.round);
+    const img = item.querySelector("img");
+    img.alt = `round ${round.round} of a progressive job`;
+    fetch(round.image, { headers: authHeaders() })
+      .then((r) => (r.ok ? r.blob() : Promise.reject(new Error(String(r.status)))))
+      .then((blob) => {
+        if (img.src.startsWith("blob:")) URL.revokeObjectURL(img.src);
+        img.src = URL.createObjectURL(blob);
+      })
+      .catch(() => {}); // moved past already: the next poll shows the next round
+    const error = `${round.predicted ? "predicted" : "estimated"} error ${round.error_estimate.toFixed(4)}`;
+    item.querySelector("figcaption").textContent = `round ${round.round} · ${round.method} · ${error} · ${(round.elapsed_ms / 1000).toFixed(1)} s`;
+  }
+  document.getElementById("refining-section").hidden = refining.length === 0;
+  document.body.dataset.refining = refining.map((r) => `${r.id}:${r.round.round}`).join(",");
+}
+
 async function poll() {
   const status = document.getElementById("status");
   try {
@@ -308,6 +359,7 @@ async function poll() {
     drawReplicas(stats);
     drawJobs(stats);
     drawThumbnails(stats);
+    await drawRefining();
     status.textContent = "live";
     status.className = "status ok";
     polls += 1;

@@ -213,6 +213,15 @@ fn submit(options: &penumbra::client::SubmitOptions) -> anyhow::Result<()> {
     bar.finish();
     println!("{}", serde_json::to_string(&report)?);
     match &options.output {
+        Some(output) if !report.rounds.is_empty() => {
+            let last = report.rounds.last().expect("not empty");
+            let (rounds, error) = (report.rounds.len(), last["error_estimate"].as_f64().unwrap_or(f64::NAN));
+            eprintln!(
+                "wrote {} after {rounds} rounds ({}, estimated error {error:.4})",
+                output.display(),
+                last["method"].as_str().unwrap_or("?")
+            );
+        }
         Some(output) if !options.detach => eprintln!("wrote {} ({} bytes)", output.display(), report.output_bytes),
         _ => eprintln!("accepted as job {}: penumbra jobs wait {}", report.id, report.id),
     }

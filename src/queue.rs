@@ -114,6 +114,9 @@ pub struct JobEvent {
     /// A progressive job's latest round (contract §5).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub round: Option<crate::job::progressive::Round>,
+    /// Every round so far, so that an event stream that fell behind still sends each one.
+    #[serde(skip)]
+    pub rounds: Vec<crate::job::progressive::Round>,
     /// When the job reached `succeeded`, `failed` or `cancelled`: its record expires a while
     /// after.
     #[serde(skip)]
@@ -122,7 +125,7 @@ pub struct JobEvent {
 
 impl JobEvent {
     pub fn status(status: JobStatus) -> Self {
-        Self { status, done: 0, total: 0, error: None, round: None, finished_at: None }
+        Self { status, done: 0, total: 0, error: None, round: None, rounds: Vec::new(), finished_at: None }
     }
 
     /// Marks the job `succeeded`, `failed` or `cancelled` as of now.

@@ -1955,3 +1955,165 @@ async fn the_model_is_measured_in_the_background_and_kept_for_the_next_start() {
     }
     assert_eq!(shown["status"], "stored", "{shown}");
 }
+
+/// The server-sent events of a finished job's stream: (name, data) in order.
+async fn read_events(client: &reqwest::Client, url: &str) -> Vec<(String, Value)> {
+    let text = client.get(url).send().await.unwrap().text().await.unwrap();
+    text.split("\n\n")
+        .filter(|block| block.contains("data:"))
+        .map(|block| {
+            let name = block.lines().find_map(|l| l.strip_prefix("event: ")).unwrap_or_default().to_owned();
+            let data = block.lines().find_map(|l| l.strip_prefix("data: ")).unwrap();
+            (name, serde_json::from_str(data).unwrap())
+        })
+        .collect()
+}
+
+/// Progressive jobs (contract §5): a first image from a fast method, then the reference in
+/// rounds of 16, 32, 64 samples, each an SSE `round` event with its samples, its error
+/// estimate and its image; the final image is the reference of those samples and that seed,
+/// byte for byte; the rounds stop at the error or the time asked for; bad budgets are 422s
+/// naming their field, and `penumbra submit --progressive` writes each round over its output.
+#[tokio::test(flavor = "multi_thread")]
+async fn a_progressive_job_refines_in_rounds_and_ends_as_the_reference_of_its_samples() {
+    let (base, _dir) = start().await;
+    let client = reqwest::Client::new();
+    let job = |progressive: Value| {
+        json!({"scene": {"builtin": "torus"}, "output": {"width": 96, "height": 64},
+               "method": {"name": "reference", "samples": 64, "seed": 3}, "progressive": progressive})
+    };
+    let submit = |job: Value| {
+        let (client, base) = (client.clone(), base.clone());
+        async move {
+            let accepted = client.post(format!("{base}/v1/jobs")).json(&job).send().await.unwrap();
+            assert_eq!(accepted.status(), StatusCode::ACCEPTED);
+            let links: Value = accepted.json().await.unwrap();
+            let events = read_events(&client, &format!("{base}{}", links["events"].as_str().unwrap())).await;
+            let record: Value =
+                client.get(format!("{base}{}", links["record"].as_str().unwrap())).send().await.unwrap().json().await.unwrap();
+            (events, record)
+        }
+    };
+
+    // Every sample asked for: four rounds, each an event, the last the job's image.
+    let (events, record) = submit(job(json!({"max_error": 1e-6}))).await;
+    assert_eq!(record["status"], "succeeded", "{record}");
+    let rounds: Vec<&Value> = events.iter().filter(|(name, _)| name == "round").map(|(_, e)| &e["round"]).collect();
+    assert_eq!(rounds.iter().map(|r| r["round"].as_u64().unwrap()).collect::<Vec<_>>(), [0, 1, 2, 3], "{events:?}");
+    assert_eq!(rounds.iter().map(|r| r["samples"].as_u64().unwrap()).collect::<Vec<_>>(), [0, 16, 32, 64]);
+    assert_eq!(rounds[0]["predicted"], true, "the first image's error is the model's");
+    assert_ne!(rounds[0]["method"], "reference");
+    assert!(rounds[1..].iter().all(|r| r["predicted"] == false && r["error_estimate"].as_f64().unwrap() > 0.0), "{rounds:?}");
+    assert!(rounds[3]["error_estimate"].as_f64() < rounds[1]["error_estimate"].as_f64(), "the estimate falls: {rounds:?}");
+    assert!(rounds.iter().enumerate().all(|(k, r)| r["image"].as_str().unwrap().ends_with(&format!("/rounds/{k}"))));
+    assert_eq!(events.last().unwrap().0, "succeeded");
+    let progressive = &record["progressive"];
+    assert_eq!(progressive["stopped"], "samples", "{record}");
+    assert_eq!(progressive["rounds"].as_array().unwrap().len(), 4);
+    assert_eq!(progressive["equivalent"], json!({"name": "reference", "samples": 64, "seed": 3, "engine": "cpu"}));
+    // The final image is that reference's, rendered once.
+    let id = record["id"].as_str().unwrap();
+    let image = client.get(format!("{base}/v1/jobs/{id}/image")).send().await.unwrap().bytes().await.unwrap();
+    let once = json!({"scene": {"builtin": "torus"}, "output": {"width": 96, "height": 64}, "method": progressive["equivalent"]});
+    let rendered = client.post(format!("{base}/v1/render")).json(&once).send().await.unwrap().bytes().await.unwrap();
+    assert!(image == rendered, "the progressive job's final image is the reference of its samples, byte for byte");
+    // Round images are kept only while the job runs.
+    let gone = client.get(format!("{base}/v1/jobs/{id}/rounds/1")).send().await.unwrap();
+    assert_eq!(gone.status(), StatusCode::NOT_FOUND);
+
+    // An error budget: it stops at the first round whose estimate meets it.
+    let (_, record) = submit(job(json!({"max_error": 0.2}))).await;
+    assert_eq!(record["progressive"]["stopped"], "max_error", "{record}");
+    let last = record["progressive"]["rounds"].as_array().unwrap().last().unwrap().clone();
+    assert!(last["error_estimate"].as_f64().unwrap() <= 0.2 && last["samples"] == 16, "{record}");
+    // A time budget spent by the first image: no reference round starts.
+    let (_, record) = submit(job(json!({"max_ms": 1}))).await;
+    assert_eq!(record["status"], "succeeded", "{record}");
+    assert_eq!(record["progressive"]["stopped"], "max_ms", "{record}");
+    assert_eq!(record["progressive"]["rounds"].as_array().unwrap().len(), 1);
+    assert_ne!(record["progressive"]["equivalent"]["name"], "reference");
+
+    // Bad budgets, and what a progressive job cannot be.
+    let mut compared = job(json!({"max_error": 0.01}));
+    compared["compare"] = json!(true);
+    let mut pcss = job(json!({"max_error": 0.01}));
+    pcss["method"] = json!({"name": "pcss"});
+    for (body, route, field) in [
+        (job(json!({})), "jobs", "progressive.max_error"),
+        (job(json!({"max_error": 1.5})), "jobs", "progressive.max_error"),
+        (job(json!({"max_ms": -3})), "jobs", "progressive.max_ms"),
+        (job(json!({"max_ms": 1e12})), "jobs", "progressive.max_ms"),
+        (compared, "jobs", "compare"),
+        (pcss, "jobs", "method.name"),
+        (job(json!({"max_error": 0.01})), "render", "progressive"),
+    ] {
+        let (status, error) = refusal(client.post(format!("{base}/v1/{route}")).json(&body).send().await.unwrap()).await;
+        assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY, "{route} {body}");
+        assert_eq!(error["field"], field, "{route} {error}");
+    }
+
+    // The client follows the rounds, writing each over its output.
+    let work = tempdir::Dir::new();
+    let mut cli_job = job(json!({}));
+    cli_job.as_object_mut().unwrap().remove("progressive");
+    std::fs::write(work.path().join("job.json"), cli_job.to_string()).unwrap();
+    let output = work.path().join("refined.png");
+    let args = [
+        "submit".to_owned(),
+        work.path().join("job.json").display().to_string(),
+        "--server".into(),
+        base.clone(),
+        "--quiet".into(),
+        "--progressive".into(),
+        "--max-error".into(),
+        "1e-6".into(),
+        "-o".into(),
+        output.display().to_string(),
+    ];
+    let ran = tokio::task::spawn_blocking(move || std::process::Command::new(env!("CARGO_BIN_EXE_penumbra")).args(&args).output().unwrap())
+        .await
+        .unwrap();
+    assert!(ran.status.success(), "{}", String::from_utf8_lossy(&ran.stderr));
+    let report: Value = serde_json::from_slice(&ran.stdout).unwrap();
+    assert_eq!(report["rounds"].as_array().unwrap().len(), 4, "{report}");
+    assert!(std::fs::read(&output).unwrap() == rendered, "the file ends as the final image");
+    assert!(String::from_utf8_lossy(&ran.stderr).contains("after 4 rounds"), "{}", String::from_utf8_lossy(&ran.stderr));
+}
+
+/// The dashboard shows a running progressive job refining: its latest round's image and
+/// estimated error, fetched while the job runs (headless Chromium).
+#[tokio::test(flavor = "multi_thread")]
+async fn the_dashboard_shows_a_progressive_job_refining() {
+    let (base, _dir) = start().await;
+    let client = reqwest::Client::new();
+    // Every sample a reference may take, at an error nothing reaches: it runs until cancelled.
+    let job = json!({"scene": {"builtin": "crowd"}, "output": {"width": 320, "height": 240},
+                     "method": {"name": "reference", "samples": 4096}, "progressive": {"max_error": 1e-6}});
+    let accepted: Value = client.post(format!("{base}/v1/jobs")).json(&job).send().await.unwrap().json().await.unwrap();
+    let record = format!("{base}{}", accepted["record"].as_str().unwrap());
+    let id = accepted["id"].as_str().unwrap().to_owned();
+    // Bounded: the first reference round of a small frame comes within seconds.
+    let mut round = Value::Null;
+    for _ in 0..600 {
+        let now: Value = client.get(&record).send().await.unwrap().json().await.unwrap();
+        assert_eq!(now["status"].as_str().is_some_and(|s| s == "queued" || s == "running"), true, "{now}");
+        if now["round"]["round"].as_u64().is_some_and(|r| r >= 1) {
+            round = now["round"].clone();
+            break;
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(100)).await;
+    }
+    assert!(round.is_object(), "a reference round was published");
+    let image = client.get(format!("{base}{}", round["image"].as_str().unwrap())).send().await.unwrap();
+    assert_eq!(image.status(), StatusCode::OK, "a running job's round image is served");
+    assert_eq!(image.headers()[reqwest::header::CONTENT_TYPE], "image/png");
+
+    let url = format!("{base}/");
+    let dom = tokio::task::spawn_blocking(move || common::chromium(&["--dump-dom"], &url)).await.unwrap();
+    let body = common::body_tag(&dom);
+    assert!(common::attribute(&body, "data-refining").starts_with(&format!("{id}:")), "{body}");
+    assert!(dom.contains("id=\"refining-section\"") && !dom.contains("id=\"refining-section\" hidden"), "shown");
+    assert!(dom.contains("estimated error 0."), "the round's caption: {dom}");
+    assert!(dom.contains("<img alt=\"round "), "the round's image");
+    assert_eq!(client.delete(&record).send().await.unwrap().status(), StatusCode::ACCEPTED);
+}

@@ -70,7 +70,7 @@ pub async fn run_jobs(command: &JobsCommand) -> Result<String, ClientError> {
             })
         }
         JobsAction::Wait { id, output } => {
-            follow(&mut client, &mut SubmitReport::new(id), None, &|_, _| {}).await?;
+            follow(&mut client, &mut SubmitReport::new(id), None, &|_, _| {}, None).await?;
             let url = job_path(id);
             let job = succeeded(client.json(|http, base| http.get(format!("{base}{url}"))).await?)?;
             if let Some(path) = output {

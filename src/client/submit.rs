@@ -38,6 +38,16 @@ pub struct SubmitOptions {
     /// No progress bar (for scripts and logs).
     #[arg(long)]
     pub quiet: bool,
+    /// A progressive job (contract §5): write each round's image over the output as it comes.
+    /// The job's `progressive` budget is the job file's, or `--max-error` / `--max-ms`.
+    #[arg(long, conflicts_with_all = ["detach", "estimate"], requires = "output")]
+    pub progressive: bool,
+    /// With `--progressive`: stop refining once the estimated penumbra error is at most this.
+    #[arg(long, requires = "progressive")]
+    pub max_error: Option<f64>,
+    /// With `--progressive`: start no round that would end past this many milliseconds.
+    #[arg(long, requires = "progressive")]
+    pub max_ms: Option<f64>,
 }
 
 /// What a submission did.
@@ -54,12 +64,15 @@ pub struct SubmitReport {
     pub output_bytes: u64,
     /// Requests repeated after a 429, 503 or 507 or a connection error.
     pub retries: u32,
+    /// A progressive job's rounds as its events announced them, each written over the output.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub rounds: Vec<Value>,
 }
 
 impl SubmitReport {
     /// Nothing done yet for job `id` (empty before it is accepted).
     pub(super) fn new(id: &str) -> Self {
-        Self { id: id.to_owned(), uploaded: vec![], reused: vec![], done: 0, total: 0, output_bytes: 0, retries: 0 }
+        Self { id: id.to_owned(), uploaded: vec![], reused: vec![], done: 0, total: 0, output_bytes: 0, retries: 0, rounds: vec![] }
     }
 }
 
@@ -170,6 +183,15 @@ async fn prepare(options: &SubmitOptions, client: &mut Client, report: &mut Subm
         let output = job.as_object_mut().ok_or_else(|| ClientError::Job("the job is not a JSON object".into()))?.entry("output");
         output.or_insert_with(|| serde_json::json!({}))["format"] = "exr".into();
     }
+    if options.progressive {
+        let object = job.as_object_mut().ok_or_else(|| ClientError::Job("the job is not a JSON object".into()))?;
+        let budget = object.entry("progressive").or_insert_with(|| serde_json::json!({}));
+        for (key, value) in [("max_error", options.max_error), ("max_ms", options.max_ms)] {
+            if let Some(value) = value {
+                budget[key] = value.into();
+            }
+        }
+    }
     let scene = routing_key(&job);
     Ok((job, scene))
 }
@@ -183,23 +205,25 @@ async fn follow_and_fetch(
     progress: &(dyn Fn(u64, u64) + Sync),
 ) -> Result<(), ClientError> {
     let id = report.id.clone();
-    succeeded(follow(client, report, Some(scene), progress).await?)?;
+    succeeded(follow(client, report, Some(scene), progress, Some(output)).await?)?;
     report.output_bytes = download(client, &id, Some(scene), output).await?;
     Ok(())
 }
 
 /// Follows job `report.id`'s events to its final one, reporting progress; a dropped stream (a
-/// replica going away) is reopened. `scene` routes the requests (`SCENE_HEADER`).
+/// replica going away) is reopened. `scene` routes the requests (`SCENE_HEADER`). A
+/// progressive job's rounds are written over `rounds_to` as they come.
 pub(super) async fn follow(
     client: &mut Client,
     report: &mut SubmitReport,
     scene: Option<&str>,
     progress: &(dyn Fn(u64, u64) + Sync),
+    rounds_to: Option<&Path>,
 ) -> Result<Value, ClientError> {
     let events = format!("{}/events", job_path(&report.id));
     loop {
         let response = expect_success(client.send(|http, base| routed(http.get(format!("{base}{events}")), scene)).await?).await?;
-        match follow_events(response, report, progress).await {
+        match follow_events(response, report, progress, rounds_to.map(|path| (&mut *client, scene, path))).await {
             Some(event) => return Ok(event),
             None => client.backoff().await?,
         }
@@ -217,10 +241,19 @@ pub(super) fn succeeded(job: Value) -> Result<Value, ClientError> {
 
 /// Downloads job `id`'s image to `output`: its length.
 pub(super) async fn download(client: &mut Client, id: &str, scene: Option<&str>, output: &Path) -> Result<u64, ClientError> {
-    let image = format!("{}/image", job_path(id));
-    let response = client.send(|http, base| routed(http.get(format!("{base}{image}")), scene)).await?;
+    download_to(client, &format!("{}/image", job_path(id)), scene, output).await
+}
+
+/// Downloads the image at `url` (a path on the server) over `output`, whole or not at all (a
+/// viewer watching the file never reads half an image): its length.
+async fn download_to(client: &mut Client, url: &str, scene: Option<&str>, output: &Path) -> Result<u64, ClientError> {
+    let response = client.send(|http, base| routed(http.get(format!("{base}{url}")), scene)).await?;
     let bytes = expect_success(response).await?.bytes().await.map_err(|e| ClientError::Job(e.to_string()))?;
-    std::fs::write(output, &bytes).map_err(|source| ClientError::Write { path: output.to_owned(), source })?;
+    let mut partial = output.as_os_str().to_owned();
+    partial.push(".partial");
+    let partial = PathBuf::from(partial);
+    std::fs::write(&partial, &bytes).map_err(|source| ClientError::Write { path: partial.clone(), source })?;
+    std::fs::rename(&partial, output).map_err(|source| ClientError::Write { path: output.to_owned(), source })?;
     Ok(bytes.len() as u64)
 }
 
@@ -248,11 +281,13 @@ fn routing_key(job: &Value) -> String {
 }
 
 /// Reads server-sent events, reporting progress, until a final one (returned) or the end of
-/// the stream without one (None).
+/// the stream without one (None). With `rounds`, each new round of a progressive job is
+/// downloaded over its path.
 pub(super) async fn follow_events(
     response: reqwest::Response,
     report: &mut SubmitReport,
     progress: &(dyn Fn(u64, u64) + Sync),
+    mut rounds: Option<(&mut Client, Option<&str>, &Path)>,
 ) -> Option<Value> {
     let mut stream = response.bytes_stream();
     let mut buffer = String::new();
@@ -265,6 +300,15 @@ pub(super) async fn follow_events(
             report.done = event["done"].as_u64().unwrap_or(report.done);
             report.total = event["total"].as_u64().unwrap_or(report.total);
             progress(report.done, report.total);
+            let round = &event["round"];
+            let new_round = round.is_object() && report.rounds.last().is_none_or(|last| last["round"] != round["round"]);
+            if let (true, Some((client, scene, path))) = (new_round, rounds.as_mut()) {
+                report.rounds.push(round.clone());
+                // A round the job has moved past may be gone: its last is the job's image.
+                if let Some(image) = round["image"].as_str() {
+                    let _ = download_to(client, image, *scene, path).await;
+                }
+            }
             if matches!(event["status"].as_str(), Some("succeeded" | "failed" | "cancelled")) {
                 return Some(event);
             }

@@ -7,8 +7,8 @@ use std::path::Path;
 use super::{EvalReport, Row, Sweep};
 use crate::methods::chun_oh::{PIXELS_SUBDIVIDED, SPLITS_FORCED_BY_LIGHT};
 use crate::methods::filter::BACKGROUND_PIXELS;
-use crate::render::method::ERROR_ESTIMATE;
 use crate::methods::{CounterKey, Counters};
+use crate::render::method::ERROR_ESTIMATE;
 use crate::timing::{PhaseName, Timings};
 
 /// The render phases the cost tables list, in pass order.

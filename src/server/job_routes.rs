@@ -12,7 +12,12 @@ pub(super) async fn job_record(State(state): State<Arc<AppState>>, Path(id): Pat
         (job_json(&id, &rendered), held_request())
     } else if let Some(events) = state.jobs.submitted(&id) {
         let event = events.borrow().clone();
-        (state_record(&id, event.status, (event.done, event.total), event.error), held_request())
+        let mut record = state_record(&id, event.status, (event.done, event.total), event.error);
+        // A running progressive job's latest round (contract §5).
+        if let Some(round) = event.round.filter(|_| !event.status.finished()) {
+            record["round"] = json!(round);
+        }
+        (record, held_request())
     } else {
         let stored = stored_job(&state, &id).await?.ok_or_else(|| unknown_job(&id))?;
         let record = match stored.result {
@@ -257,7 +262,8 @@ pub(super) async fn list_jobs(
 }
 
 /// `GET /v1/jobs/{id}/events`: server-sent events — `progress` with the job's state at once and
-/// on every change, then one `succeeded` or `failed`, and the stream ends.
+/// on every change, a progressive job's `round` for each of its rounds, then one `succeeded`
+/// or `failed`, and the stream ends.
 pub(super) async fn job_events(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Result<Response, ApiError> {
     use axum::response::sse::{Event, KeepAlive, Sse};
     let events = match state.jobs.submitted(&id) {
@@ -276,9 +282,14 @@ pub(super) async fn job_events(State(state): State<Arc<AppState>>, Path(id): Pat
     let receiver = events.subscribe();
     // (receiver, ended): the current state first, then each change, until a final one.
     let stopping = state.stopping.subscribe();
-    // (receiver, stopping, ended, first, the last round sent)
-    let start = (receiver, stopping, false, true, None);
-    let stream = futures_util::stream::unfold(start, |(mut receiver, mut stopping, ended, first, last_round)| async move {
+    // (receiver, stopping, ended, first, rounds sent, events to send before the next change):
+    // a progressive job's every round is an event of its own, even to a stream that fell
+    // behind its rounds.
+    let start = (receiver, stopping, false, true, 0usize, std::collections::VecDeque::new());
+    let stream = futures_util::stream::unfold(start, |(mut receiver, mut stopping, ended, first, mut sent, mut pending)| async move {
+        if let Some(sse) = pending.pop_front() {
+            return Some((Ok::<_, std::convert::Infallible>(sse), (receiver, stopping, ended, first, sent, pending)));
+        }
         if ended {
             return None;
         }
@@ -290,15 +301,20 @@ pub(super) async fn job_events(State(state): State<Arc<AppState>>, Path(id): Pat
             }
         }
         let event = receiver.borrow_and_update().clone();
-        let round = event.round.as_ref().map(|r| r.round);
-        let name = match () {
-            _ if event.finished() => event.status.as_str(),
-            // A progressive job's new round (contract §5).
-            _ if round.is_some() && round != last_round => "round",
-            _ => "progress",
-        };
-        let sse = Event::default().event(name).json_data(&event).unwrap_or_else(|_| Event::default().event(name));
-        Some((Ok::<_, std::convert::Infallible>(sse), (receiver, stopping, event.finished(), false, round)))
+        let sse =
+            |name: &str, event: &JobEvent| Event::default().event(name).json_data(event).unwrap_or_else(|_| Event::default().event(name));
+        for round in event.rounds.iter().skip(sent) {
+            pending.push_back(sse("round", &JobEvent { round: Some(round.clone()), ..event.clone() }));
+        }
+        let had_rounds = sent < event.rounds.len();
+        sent = event.rounds.len();
+        if event.finished() {
+            pending.push_back(sse(event.status.as_str(), &event));
+        } else if !had_rounds {
+            pending.push_back(sse("progress", &event));
+        }
+        let next = pending.pop_front()?;
+        Some((Ok(next), (receiver, stopping, event.finished(), false, sent, pending)))
     });
     Ok(Sse::new(stream).keep_alive(KeepAlive::default()).into_response())
 }
@@ -411,7 +427,10 @@ pub(super) async fn job_image(
 /// `GET /v1/jobs/{id}/rounds/{round}`: a running progressive job's round image (contract
 /// §5), held by the replica that renders it until the job ends; 404 after (the last round is
 /// the job's image) or for a round not drawn.
-pub(super) async fn round_image(State(state): State<Arc<AppState>>, Path((id, round)): Path<(String, String)>) -> Result<Response, ApiError> {
+pub(super) async fn round_image(
+    State(state): State<Arc<AppState>>,
+    Path((id, round)): Path<(String, String)>,
+) -> Result<Response, ApiError> {
     let gone = || {
         ApiError(JobError::new(
             ErrorCode::NotFound,

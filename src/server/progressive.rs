@@ -44,7 +44,9 @@ pub(super) async fn render_rounds(
     // a tenth of the time asked for (without a time, of the first reference round's), else
     // the cheapest.
     let first_budget = AutoBudget { max_ms: spec.max_ms.map(|ms| ms / 10.0).or(first_round_ms), max_error: None };
-    let fast = |c: &crate::model::Candidate| c.method.name != "reference" && state.engine.check(&Job { method: c.method_for(&job), ..job.clone() }, false).is_ok();
+    let fast = |c: &crate::model::Candidate| {
+        c.method.name != "reference" && state.engine.check(&Job { method: c.method_for(&job), ..job.clone() }, false).is_ok()
+    };
     let (candidate, prediction) = match model.choose_among(&first_budget, &features, fast) {
         Ok(chosen) => chosen,
         Err(_) => {
@@ -138,7 +140,10 @@ impl Published<'_> {
             image: format!("/v1/jobs/{}/rounds/{number}", self.id),
         };
         tracing::info!(id = self.id, round = number, samples, error_estimate, "progressive round");
-        self.events.send_modify(|event| event.round = Some(round.clone()));
+        self.events.send_modify(|event| {
+            event.round = Some(round.clone());
+            event.rounds.push(round.clone());
+        });
         self.rounds.push(round);
     }
 }

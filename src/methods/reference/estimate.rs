@@ -80,7 +80,6 @@ fn halves_error((s_a, u_a): (f32, f32), (s_b, u_b): (f32, f32)) -> Option<f32> {
     Some((v_a - v_b).abs() * (alpha * (1.0 - alpha)).sqrt())
 }
 
-
 impl Texel {
     /// The error estimate where the pixel is in a penumbra by its own samples (its gray
     /// visibility within `PENUMBRA`): what the estimate's mean over the penumbra averages.

@@ -12,11 +12,11 @@ mod filtered;
 mod gpu;
 mod samples;
 
+use cpu::CpuSample;
 pub use filtered::Filtered;
 use gpu::{batch_layers, Accumulation, DepthMaps, BATCH, BATCH_MAP_BYTES, SEGMENT};
 use samples::SamplePlan;
 pub use samples::{interleaved_light_samples, light_samples, LightSample};
-use cpu::CpuSample;
 
 use super::{Cap, Counters, MethodContext, Param, ParamSpec, Params, ShadowMethod};
 use crate::error::JobResult;
@@ -31,7 +31,8 @@ pub struct Reference;
 pub const MAX_SAMPLES: u32 = 4096;
 
 const SAMPLES: Param<u32> =
-    Param::integer("samples", 256, 1, MAX_SAMPLES as i64, "light samples (stratified, jittered); noise falls as 1/√samples").capped(Cap::Samples);
+    Param::integer("samples", 256, 1, MAX_SAMPLES as i64, "light samples (stratified, jittered); noise falls as 1/√samples")
+        .capped(Cap::Samples);
 const RESOLUTION: Param<u32> = Param::integer("resolution", 1024, 64, 4096, "side of each sample's depth map, texels");
 const BIAS_TEXELS: Param<f32> =
     Param::float("bias_texels", 1.0, 0.0, 64.0, "constant bias of the visibility test, in texels of the sample's map");
@@ -156,10 +157,15 @@ fn record_on_cpu(ctx: &mut MethodContext<'_>, params: &Params, plan: &SamplePlan
         let mut first = b as u64 * new_samples;
         for (half, samples) in halves.iter().enumerate() {
             // Cancelled: the renderer discards this frame.
-            let (_, half_spent) =
-                cpu::estimate_into::<false>(&receivers, samples, &constants, geometry, (channels, plan.crop.size), &mut sums[half], |done| {
-                    progress.at(first + done as u64)
-                });
+            let (_, half_spent) = cpu::estimate_into::<false>(
+                &receivers,
+                samples,
+                &constants,
+                geometry,
+                (channels, plan.crop.size),
+                &mut sums[half],
+                |done| progress.at(first + done as u64),
+            );
             first += samples.len() as u64;
             spent.add(half_spent);
         }

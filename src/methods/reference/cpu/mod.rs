@@ -297,7 +297,13 @@ pub(super) fn estimate_into<const BLOCKERS: bool>(
 /// together (`ratio` in `accumulate.wgsl`), and half the halves' difference (`Texel::error`);
 /// 1 (and 0) where no receiver is. Row by row on every core. Returns the estimate's sum and
 /// count over the pixels in a penumbra.
-pub(super) fn write_visibility(receivers: &Receivers, halves: [&[SumBlock]; 2], channels: usize, width: u32, out: &mut [u8]) -> (f64, usize) {
+pub(super) fn write_visibility(
+    receivers: &Receivers,
+    halves: [&[SumBlock]; 2],
+    channels: usize,
+    width: u32,
+    out: &mut [u8],
+) -> (f64, usize) {
     let texel = |k: usize| {
         let (b, l) = (k / LANES, k % LANES);
         let mut texel = Texel::UNCOVERED;

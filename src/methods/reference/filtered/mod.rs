@@ -23,6 +23,7 @@ mod filter;
 
 use super::bands::{self, Band};
 use super::cpu::{self, BlockerBlock, CpuSample, Receivers, SumBlock};
+use super::estimate::Texel;
 use super::gpu::SEGMENT;
 use super::samples::{interleaved_light_samples, SamplePlan};
 use super::{
@@ -32,7 +33,6 @@ use crate::error::JobResult;
 use crate::params::Cap;
 use crate::render::method::{CounterKey, ERROR_ESTIMATE};
 use crate::timing::PhaseName;
-use super::estimate::Texel;
 use filter::FilterInputs;
 
 pub struct Filtered;
