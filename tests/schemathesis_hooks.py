@@ -11,7 +11,8 @@ generated, so both the acceptance and the refusal paths run. The bytes themselve
 The stateful phase follows `submitJob` to `cancelJob`, but the jobs a schema generates are
 small and finish in milliseconds, before the link is followed: the first few positive submits
 of that phase become a job that renders for seconds (a 1,024-sample `reference`), so that a
-cancellation meets a job still queued or rendering, as a client's would.
+cancellation meets a job still queued or rendering, as a client's would. A generated progressive
+job refines for at most two seconds.
 """
 
 import base64
@@ -77,6 +78,7 @@ _slow_sent = 0
 def before_call(context, case, kwargs):
     operation = (case.operation.method.upper(), case.operation.path)
     if operation == ("POST", "/v1/jobs"):
+        _bound_rounds(case)
         _slow_down(case)
         return
     kind = UPLOADS.get(operation) or HEADS.get(operation)
@@ -115,6 +117,25 @@ def _slow_down(case):
     _slow_sent += 1
     case.body = dict(SLOW_JOB)
     _stay_positive(case)
+
+
+# The most a generated progressive job may refine, in milliseconds: one asking for an error
+# nothing reaches would otherwise take every sample the server allows (seconds of the two
+# cores the other cases share).
+MAX_ROUNDS_MS = 2000
+
+
+def _bound_rounds(case):
+    """A progressive budget without a time, or with a longer one, gets `MAX_ROUNDS_MS`; an
+    invalid one (negative, not a number) stays as generated, to be refused."""
+    body = case.body
+    if not isinstance(body, dict) or not isinstance(body.get("progressive"), dict):
+        return
+    budget = body["progressive"]
+    max_ms = budget.get("max_ms")
+    is_number = isinstance(max_ms, (int, float)) and not isinstance(max_ms, bool)
+    if max_ms is None or (is_number and max_ms > MAX_ROUNDS_MS):
+        budget["max_ms"] = MAX_ROUNDS_MS
 
 
 def _negative(case):

@@ -2,8 +2,10 @@
 //! The model is measured first (or read with `--model-file`); then every case of the suite
 //! (its scenes, lights and sizes — built-in scenes the model's suite did not measure, and sizes
 //! it did not render, included) is asked a range of time and error budgets, each choice is
-//! rendered and timed as the daemon would, and measured against the model's own truth
-//! (`budgets.md`, `budgets.json`, and `budgets.svg`: measured against predicted).
+//! rendered and timed as the daemon would, and measured against the model's own truth; and
+//! the reference's rounds as a progressive job runs them, each round's error estimate against
+//! its measured error (`budgets.md`, `budgets.json`, and `budgets.svg`: measured against
+//! predicted and estimated).
 
 use anyhow::Context;
 use serde::Serialize;
@@ -23,6 +25,11 @@ const TIME_FACTORS: &[f64] = &[1.2, 2.0, 4.0, 8.0];
 const ERRORS: &[f64] = &[0.01, 0.02, 0.04, 0.08];
 /// How close a prediction must come to count as right (the issue's goal: ±25 %).
 const WITHIN: f64 = 0.25;
+/// How close a progressive round's error estimate must come (the goal: ±30 %).
+const ESTIMATE_WITHIN: f64 = 0.30;
+/// The samples a case's progressive rounds reach: a quarter of the truth's, so that the
+/// truth's own noise adds little to the errors measured against it.
+const ROUND_SAMPLES: u32 = 256;
 
 /// One budget asked of one case, and what came of it.
 #[derive(Debug, Clone, Serialize)]
@@ -42,6 +49,18 @@ pub struct BudgetRow {
     pub kept: Option<bool>,
 }
 
+/// One round of a case's progressive job: its error estimate and its error measured against
+/// the truth.
+#[derive(Debug, Clone, Serialize)]
+pub struct RoundRow {
+    pub scene: String,
+    pub light: String,
+    pub size: String,
+    pub samples: u32,
+    pub estimated: f64,
+    pub measured: f64,
+}
+
 /// The suite's answers, summed up against the goals.
 #[derive(Debug, Clone, Serialize)]
 pub struct BudgetReport {
@@ -53,6 +72,9 @@ pub struct BudgetReport {
     /// Predictions within ±25 %, over every distinct (case, choice) rendered.
     pub time_predicted: (usize, usize),
     pub error_predicted: (usize, usize),
+    pub rounds: Vec<RoundRow>,
+    /// Progressive rounds whose estimate is within ±30 % of their measured error.
+    pub rounds_estimated: (usize, usize),
 }
 
 /// Runs the budgets over `options`' scenes, lights and sizes (at its first map resolution) and
@@ -73,7 +95,7 @@ pub fn run(engine: &Engine, options: &EvalOptions, model_file: Option<&std::path
     let truth = Suite::standard();
     let sizes: Vec<(u32, u32)> = options.sizes.iter().map(|s| parse_size(s)).collect::<anyhow::Result<_>>()?;
     let shadow_map = options.shadow_map.first().copied().unwrap_or(1024);
-    let (mut rows, mut rendered) = (Vec::new(), Vec::<BudgetRow>::new());
+    let (mut rows, mut rendered, mut rounds) = (Vec::new(), Vec::<BudgetRow>::new(), Vec::new());
     // A daemon answers warm: each method's pipelines under each light are compiled by a first
     // render that is not timed.
     engine.warm_up().context("warm-up")?;
@@ -145,6 +167,13 @@ pub fn run(engine: &Engine, options: &EvalOptions, model_file: Option<&std::path
                     }
                     rows.push(row);
                 }
+                eprintln!("{case}: progressive rounds");
+                for (samples, estimated, measured) in
+                    progressive_rounds(engine, &job, &reference).map_err(|e| anyhow::anyhow!("{case}: {e}"))?
+                {
+                    let (scene, light, size) = (scene.label.clone(), light.clone(), format!("{}×{}", size.0, size.1));
+                    rounds.push(RoundRow { scene, light, size, samples, estimated, measured });
+                }
             }
         }
     }
@@ -160,13 +189,38 @@ pub fn run(engine: &Engine, options: &EvalOptions, model_file: Option<&std::path
         time_predicted: share(&mut rendered.iter().map(|r| close(r.predicted_ms, r.measured_ms.unwrap_or(0.0)))),
         error_predicted: share(&mut rendered.iter().map(|r| close(r.predicted_error, r.measured_error.unwrap_or(0.0)))),
         rows,
+        rounds_estimated: share(&mut rounds.iter().map(|r| (r.estimated - r.measured).abs() <= ESTIMATE_WITHIN * r.measured)),
+        rounds,
     };
     std::fs::write(options.out.join("budgets.json"), serde_json::to_vec_pretty(&report)?)?;
-    super::plots::plot_budgets(&options.out, &rendered)?;
+    super::plots::plot_budgets(&options.out, &rendered, &report.rounds)?;
     let table = table(&report);
     std::fs::write(options.out.join("budgets.md"), &table)?;
     println!("{table}");
     Ok(report)
+}
+
+/// A progressive job's reference rounds on `job` (16, 32 … `ROUND_SAMPLES` samples, each
+/// round's sums carried to the next as the daemon carries them): per round, its samples, its
+/// error estimate and its error measured against `truth`.
+fn progressive_rounds(
+    engine: &Engine,
+    job: &crate::job::Job,
+    truth: &crate::render::FrameOutput,
+) -> crate::error::JobResult<Vec<(u32, f64, f64)>> {
+    let carried = crate::supervise::Rounds::default();
+    let supervisor = crate::supervise::WithRounds { inner: &(), rounds: &carried };
+    let mut rounds = Vec::new();
+    for samples in crate::job::progressive::round_samples(ROUND_SAMPLES) {
+        let mut method = crate::job::MethodSpec { name: "reference".into(), params: Default::default() };
+        method.params.insert("samples".into(), samples.into());
+        method.params.insert("engine".into(), "cpu".into());
+        let round = crate::job::Job { method: crate::methods::with_map_resolution(&method, job.shadow_map.resolution), ..job.clone() };
+        let (frame, _) = engine.render_frame(&round, &supervisor)?;
+        let estimated = crate::render::method::ERROR_ESTIMATE.get(&frame.counters).unwrap_or(f64::NAN);
+        rounds.push((samples, estimated, crate::quality::compare(&frame, truth, 0.0).visibility.penumbra.mae));
+    }
+    Ok(rounds)
 }
 
 /// The report as Markdown: the summary against the goals, then every row.
@@ -181,14 +235,16 @@ pub fn table(report: &BudgetReport) -> String {
     let mut out = format!(
         "# auto's budgets, measured\n\nModel: {}.\n\n| what | measured | goal |\n|---|---:|---:|\n\
          | time budgets kept | {} | ≥ 90 % |\n| error budgets kept | {} | ≥ 90 % |\n\
-         | time predicted within ±25 % | {} | ≥ 80 % |\n| error predicted within ±25 % | {} | ≥ 80 % |\n\n\
+         | time predicted within ±25 % | {} | ≥ 80 % |\n| error predicted within ±25 % | {} | ≥ 80 % |\n\
+         | progressive rounds' error estimated within ±30 % | {} | ≥ 80 % |\n\n\
          | scene | light | size | budget | choice | predicted ms | measured ms | predicted error | measured error | kept |\n\
          |---|---|---|---|---|---:|---:|---:|---:|---|\n",
         report.model,
         percent(report.time_kept),
         percent(report.error_kept),
         percent(report.time_predicted),
-        percent(report.error_predicted)
+        percent(report.error_predicted),
+        percent(report.rounds_estimated)
     );
     let or_dash = |v: Option<f64>, digits: usize| v.map_or("-".to_owned(), |v| format!("{v:.digits$}"));
     for r in &report.rows {
@@ -208,6 +264,23 @@ pub fn table(report: &BudgetReport) -> String {
                 Some(false) => "**no**",
                 None => "refused",
             }
+        ));
+    }
+    out.push_str(
+        "\n## Progressive rounds\n\nThe reference's rounds as a progressive job runs them (sums carried), each round's \
+         error estimate (half its two halves' difference) against its error measured against the truth.\n\n\
+         | scene | light | size | samples | estimated | measured | estimated ÷ measured |\n|---|---|---|---:|---:|---:|---:|\n",
+    );
+    for r in &report.rounds {
+        out.push_str(&format!(
+            "| {} | {} | {} | {} | {:.4} | {:.4} | {:.2} |\n",
+            r.scene,
+            r.light,
+            r.size,
+            r.samples,
+            r.estimated,
+            r.measured,
+            r.estimated / r.measured
         ));
     }
     out

@@ -99,34 +99,41 @@ pub(super) fn plot_scaling(
 }
 
 /// `eval --budgets`' plot: each render's measured time and error against the model's
-/// prediction, in log scale, with the line of a perfect prediction and the ±25 % band around it.
-pub(super) fn plot_budgets(out: &Path, rendered: &[super::budgets::BudgetRow]) -> anyhow::Result<PathBuf> {
+/// prediction, and each progressive round's measured error against its own estimate, in log
+/// scale, with the line of a perfect prediction and the band of the goal around it (±25 %,
+/// ±30 %).
+pub(super) fn plot_budgets(
+    out: &Path,
+    rendered: &[super::budgets::BudgetRow],
+    rounds: &[super::budgets::RoundRow],
+) -> anyhow::Result<PathBuf> {
     use plotters::prelude::*;
     let path = out.join("budgets.svg");
     let mut svg = String::new();
     {
-        let root = SVGBackend::with_string(&mut svg, (960, 460)).into_drawing_area();
+        let root = SVGBackend::with_string(&mut svg, (1380, 460)).into_drawing_area();
         root.fill(&WHITE)?;
-        let panels = root.split_evenly((1, 2));
-        type Pair = fn(&super::budgets::BudgetRow) -> Option<(f64, f64)>;
-        let quantities: [(&str, Pair); 2] = [
-            ("time, ms", |r| Some((r.predicted_ms, r.measured_ms?))),
-            ("penumbra error", |r| Some((r.predicted_error, r.measured_error?))),
+        let panels = root.split_evenly((1, 3));
+        let pairs = |of: fn(&super::budgets::BudgetRow) -> Option<(f64, f64)>| rendered.iter().filter_map(of).collect::<Vec<_>>();
+        // (what, (predicted or estimated, measured) pairs, the band counted as right)
+        let quantities = [
+            ("time, ms", "predicted", pairs(|r| Some((r.predicted_ms, r.measured_ms?))), 0.25f64),
+            ("penumbra error", "predicted", pairs(|r| Some((r.predicted_error, r.measured_error?))), 0.25),
+            ("progressive rounds' error", "estimated", rounds.iter().map(|r| (r.estimated, r.measured)).collect(), 0.30),
         ];
-        for (panel, (what, of)) in panels.iter().zip(quantities) {
-            let points: Vec<(f64, f64)> =
-                rendered.iter().filter_map(of).filter(|(p, m)| *p > 0.0 && *m > 0.0).map(|(p, m)| (p.log10(), m.log10())).collect();
+        for (panel, (what, by, pairs, band)) in panels.iter().zip(quantities) {
+            let points: Vec<(f64, f64)> = pairs.iter().filter(|(p, m)| *p > 0.0 && *m > 0.0).map(|(p, m)| (p.log10(), m.log10())).collect();
             let (low, high) = points.iter().fold((f64::MAX, f64::MIN), |(a, b), (p, m)| (a.min(p.min(*m)), b.max(p.max(*m))));
             let (low, high) = if low < high { (low - 0.1, high + 0.1) } else { (0.0, 1.0) };
             let mut chart = ChartBuilder::on(panel)
-                .caption(format!("{what}: measured against predicted"), ("sans-serif", 16))
+                .caption(format!("{what}: measured against {by}"), ("sans-serif", 16))
                 .margin(12)
                 .x_label_area_size(36)
                 .y_label_area_size(56)
                 .build_cartesian_2d(low..high, low..high)?;
-            chart.configure_mesh().x_desc(format!("log10 predicted {what}")).y_desc(format!("log10 measured {what}")).draw()?;
+            chart.configure_mesh().x_desc(format!("log10 {by} {what}")).y_desc(format!("log10 measured {what}")).draw()?;
             for (offset, style) in
-                [(0.0, BLACK.stroke_width(1)), (1.25f64.log10(), RED.stroke_width(1)), (0.75f64.log10(), RED.stroke_width(1))]
+                [(0.0, BLACK.stroke_width(1)), ((1.0 + band).log10(), RED.stroke_width(1)), ((1.0 - band).log10(), RED.stroke_width(1))]
             {
                 chart.draw_series(LineSeries::new([(low, low + offset), (high, high + offset)], style))?;
             }

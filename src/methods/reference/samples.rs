@@ -3,6 +3,7 @@
 
 use bytemuck::Zeroable as _;
 use glam::{Mat4, Vec3};
+use rayon::prelude::*;
 
 use super::crop::MapCrop;
 use super::gpu::{BatchSample, BatchUniforms};
@@ -11,9 +12,11 @@ use super::{Counters, MethodContext, Params, BIAS_TEXELS, CROP, RESOLUTION, SAMP
 /// The points of the sequence a plan's near plane and crop are made for: every sample a
 /// reference can take (`samples`' maximum).
 const PLANNED: u32 = super::MAX_SAMPLES;
+use crate::gpu::pool::DerivedKey;
+use crate::gpu::scene::GpuScene;
 use crate::light::{AreaLight, LightImage};
 use crate::render::convex::{map_bounds, ConvexSolid};
-use crate::render::LightProjection;
+use crate::render::{FrameSpec, LightProjection};
 
 /// The projection a sample's depth map is drawn with: the angle `fit` gives that sample and the
 /// near plane every map shares, reversed-Z with the far plane at infinity, so the stored depth
@@ -183,7 +186,25 @@ impl SplitMix64 {
     }
 }
 
+/// What a reference's whole plan follows from: the light and its image, the seed, the maps'
+/// resolution and crop, the scene's bounds and the camera's view of them.
+fn plan_fingerprint(ctx: &MethodContext<'_>, params: &Params) -> u64 {
+    use std::hash::{Hash, Hasher};
+    let mut hasher = std::collections::hash_map::DefaultHasher::new();
+    let light = &ctx.spec.light;
+    let vectors = [light.center, light.n, light.u, light.r, ctx.scene.bounds_min, ctx.scene.bounds_max];
+    for v in vectors.iter().chain(&ctx.scene.shadow_fit_points(light)) {
+        v.to_array().map(f32::to_bits).hash(&mut hasher);
+    }
+    (light.size_m.to_array().map(f32::to_bits), light.intensity.to_bits()).hash(&mut hasher);
+    ctx.spec.light_image.fingerprint().hash(&mut hasher);
+    (params.get(&SEED), params.get(&RESOLUTION), params.get(&CROP), ctx.width, ctx.height).hash(&mut hasher);
+    ctx.spec.camera.view_proj(ctx.width as f32 / ctx.height as f32).to_cols_array().map(f32::to_bits).hash(&mut hasher);
+    hasher.finish()
+}
+
 /// A frame's light samples and how each one's map is drawn and read.
+#[derive(Clone)]
 pub(super) struct SamplePlan {
     pub(super) samples: Vec<LightSample>,
     /// Each sample's half (`half_of_index`): the CPU engine keeps the halves' sums apart for
@@ -208,32 +229,50 @@ pub(super) struct SamplePlan {
 impl SamplePlan {
     /// The reference's plan: its first `samples` of the sequence, with the near plane and crop
     /// of the sequence's every possible sample (`PLANNED`), so that the plan of fewer samples
-    /// is the first part of the plan of more, map for map (a progressive job's rounds).
-    pub(super) fn new(ctx: &MethodContext<'_>, params: &Params) -> Self {
+    /// is the first part of the plan of more, map for map (a progressive job's rounds). The
+    /// whole plan is kept for later frames of the same view, light and maps (`ctx.derived`):
+    /// a progressive job's rounds, and a daemon's repeated jobs, make it once.
+    pub(super) fn new(ctx: &mut MethodContext<'_>, params: &Params) -> Self {
         let spec = ctx.spec;
         let seed = u64::from(params.get(&SEED));
-        let (planned, planned_halves, _) = light_samples(&spec.light, &spec.light_image, PLANNED, seed);
+        let key = DerivedKey { name: "reference.plan", fingerprint: plan_fingerprint(ctx, params) };
+        let (scene, size) = (ctx.scene, (ctx.width, ctx.height));
+        let planned = ctx.derived.get_or_create(key, || {
+            let (planned, halves, _) = light_samples(&spec.light, &spec.light_image, PLANNED, seed);
+            Self { halves, ..Self::plan(spec, scene, size, params, planned, PLANNED) }
+        });
         let requested = params.get(&SAMPLES).min(PLANNED);
         // The first `requested` points of the sequence, less the black ones.
         let taken = light_samples(&spec.light, &spec.light_image, requested, seed).0.len();
-        let mut plan = Self::for_samples(ctx, params, planned, PLANNED);
+        let mut plan = (*planned).clone();
         plan.keep_first(taken, requested);
-        plan.halves = planned_halves[..taken].to_vec();
         plan
     }
 
     /// The plan of these samples (of `strata`, black ones included), with the maps'
     /// resolution, crop and bias of `params`.
     pub(super) fn for_samples(ctx: &MethodContext<'_>, params: &Params, samples: Vec<LightSample>, strata: u32) -> Self {
-        let spec = ctx.spec;
+        Self::plan(ctx.spec, ctx.scene, (ctx.width, ctx.height), params, samples, strata)
+    }
+
+    /// `for_samples` for a frame of `spec` on `scene`, `size` pixels.
+    fn plan(
+        spec: &FrameSpec,
+        scene: &GpuScene,
+        (width, height): (u32, u32),
+        params: &Params,
+        samples: Vec<LightSample>,
+        strata: u32,
+    ) -> Self {
         let resolution = params.get(&RESOLUTION);
-        let corners = ctx.scene.shadow_fit_points(&spec.light);
+        let corners = scene.shadow_fit_points(&spec.light);
         let rotation = sample_rotation(&spec.light);
         // Each sample's frustum: its angle fitted to the scene from its point, and one near
         // plane for every map (the nearest any fit allows), so that the accumulate pass reads
         // it once per pixel, not per sample.
+        // On every core: a reference's plan is made for all 4,096 samples it may take.
         let fits: Vec<LightProjection> =
-            samples.iter().map(|sample| LightProjection::fit(&AreaLight { center: sample.position, ..spec.light }, &corners)).collect();
+            samples.par_iter().map(|sample| LightProjection::fit(&AreaLight { center: sample.position, ..spec.light }, &corners)).collect();
         let near = fits.iter().map(|fit| fit.near).reduce(f32::min).unwrap_or(1.0);
         let plane = rotation.transform_point3(spec.light.center).z;
         let frusta: Vec<(Mat4, f32)> = samples
@@ -248,9 +287,9 @@ impl SamplePlan {
         let crop = if params.get(&CROP) {
             // Every receiver of the frame (a G-buffer position) lies in what the camera sees of
             // the scene's bounds.
-            let receivers = ConvexSolid::frustum(spec.camera.view_proj(ctx.width as f32 / ctx.height as f32))
-                .intersect(&ConvexSolid::cuboid(ctx.scene.bounds_min, ctx.scene.bounds_max));
-            MapCrop::fit(frusta.iter().map(|(view_proj, ..)| map_bounds(&receivers, *view_proj, resolution)).collect(), resolution)
+            let receivers = ConvexSolid::frustum(spec.camera.view_proj(width as f32 / height as f32))
+                .intersect(&ConvexSolid::cuboid(scene.bounds_min, scene.bounds_max));
+            MapCrop::fit(frusta.par_iter().map(|(view_proj, ..)| map_bounds(&receivers, *view_proj, resolution)).collect(), resolution)
         } else {
             MapCrop::whole(samples.len(), resolution)
         };
