@@ -266,6 +266,10 @@ fn render(job: Option<&Path>, output: &Path, timings_json: Option<&Path>, option
     let gpu = open_gpu(options)?;
     let adapter = format!("{} ({})", gpu.adapter.name, gpu.adapter.device_type);
     let engine = Engine::new(gpu, options.limits.limits(), PathPolicy::Any);
+    // Rounds are events of a submitted job; here there is one render.
+    if job.progressive.is_some() {
+        anyhow::bail!("a progressive job is submitted to a daemon, where its rounds are events: penumbra submit JOB -o OUT --progressive");
+    }
     // `auto` here is chosen by the shipped model: a daemon measures its own device's.
     if let Some(budget) = penumbra::job::auto::AutoBudget::of(&job.method)? {
         let model = penumbra::model::Model::shipped();

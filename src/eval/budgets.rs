@@ -215,7 +215,10 @@ fn progressive_rounds(
         let mut method = crate::job::MethodSpec { name: "reference".into(), params: Default::default() };
         method.params.insert("samples".into(), samples.into());
         method.params.insert("engine".into(), "cpu".into());
-        let round = crate::job::Job { method: crate::methods::with_map_resolution(&method, job.shadow_map.resolution), ..job.clone() };
+        // EXR: its visibility comes back, to be measured.
+        let output = crate::job::OutputSpec { format: OutputFormat::Exr, ..job.output.clone() };
+        let method = crate::methods::with_map_resolution(&method, job.shadow_map.resolution);
+        let round = crate::job::Job { method, output, ..job.clone() };
         let (frame, _) = engine.render_frame(&round, &supervisor)?;
         let estimated = crate::render::method::ERROR_ESTIMATE.get(&frame.counters).unwrap_or(f64::NAN);
         rounds.push((samples, estimated, crate::quality::compare(&frame, truth, 0.0).visibility.penumbra.mae));

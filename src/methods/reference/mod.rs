@@ -16,7 +16,7 @@ use cpu::CpuSample;
 pub use filtered::Filtered;
 use gpu::{batch_layers, Accumulation, DepthMaps, BATCH, BATCH_MAP_BYTES, SEGMENT};
 use samples::SamplePlan;
-pub use samples::{interleaved_light_samples, light_samples, LightSample};
+pub use samples::{half_of_index, light_samples, LightSample};
 
 use super::{Cap, Counters, MethodContext, Param, ParamSpec, Params, ShadowMethod};
 use crate::error::JobResult;
@@ -157,6 +157,9 @@ fn record_on_cpu(ctx: &mut MethodContext<'_>, params: &Params, plan: &SamplePlan
         let mut first = b as u64 * new_samples;
         for (half, samples) in halves.iter().enumerate() {
             // Cancelled: the renderer discards this frame.
+            if supervisor.cancelled() {
+                break;
+            }
             let (_, half_spent) = cpu::estimate_into::<false>(
                 &receivers,
                 samples,

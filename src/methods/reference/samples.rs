@@ -44,11 +44,12 @@ pub struct LightSample {
 /// The samples of fewer are the first of more — a progressive job's rounds add samples to the
 /// sums without changing those already taken — and a weight does not depend on how many there
 /// are (`L(y)` times the light's area: the ratio estimator divides the count out). Returns the
-/// samples, their halves and how many points were drawn (black ones included).
-pub fn light_samples(light: &AreaLight, image: &LightImage, requested: u32, seed: u64) -> (Vec<LightSample>, Vec<bool>, u32) {
+/// samples, each one's index in the sequence (its half: `half_of_index`) and how many points
+/// were drawn (black ones included).
+pub fn light_samples(light: &AreaLight, image: &LightImage, requested: u32, seed: u64) -> (Vec<LightSample>, Vec<u32>, u32) {
     let scrambles = scramble_seeds(seed);
     let area = light.area_m2();
-    let (mut samples, mut halves) = (Vec::with_capacity(requested as usize), Vec::with_capacity(requested as usize));
+    let (mut samples, mut indices) = (Vec::with_capacity(requested as usize), Vec::with_capacity(requested as usize));
     for i in 0..requested {
         let half = half_of_index(i);
         let (s, t) = sequence_point(i >> 1, scrambles[usize::from(half)]);
@@ -58,9 +59,9 @@ pub fn light_samples(light: &AreaLight, image: &LightImage, requested: u32, seed
             continue;
         }
         samples.push(LightSample { position: light.image_point(s, t), weight: emission * light.intensity * area });
-        halves.push(half);
+        indices.push(i);
     }
-    (samples, halves, requested)
+    (samples, indices, requested)
 }
 
 /// Which half of the reference's samples sample `i` is in: the even ones and the odd ones,
@@ -70,7 +71,7 @@ pub fn light_samples(light: &AreaLight, image: &LightImage, requested: u32, seed
 /// (its blocks, say) would not do: its later points fill exactly the strata its earlier ones
 /// left empty, so each half alone is badly stratified and the halves differ by far more than
 /// the whole errs (measured: docs/performance-log.md).
-pub(super) fn half_of_index(i: u32) -> bool {
+pub fn half_of_index(i: u32) -> bool {
     i & 1 == 1
 }
 
@@ -120,55 +121,6 @@ fn owen_scramble(v: u32, seed: u32) -> u32 {
     x.reverse_bits()
 }
 
-/// `side`² interleaved sets of stratified jittered samples, `per_class` strata each, skipping
-/// those that land on black texels: the light is cut into a grid of `side × side` blocks of
-/// strata, and set (class) `a + side·b` takes the stratum at (a, b) of every block — so each
-/// set is stratified over the whole light on its own, and all of them together are a finer
-/// stratification (method `filtered`, which probes with one set and refines with the rest).
-/// With `side` 1 these are `light_samples`. Returns the samples in grid order, each one's set
-/// and its half (`half_of`: two halves that each cover the whole light, and that cut every set
-/// in two as well; `filtered`'s error estimate compares them), and how many strata there were.
-pub fn interleaved_light_samples(
-    light: &AreaLight,
-    image: &LightImage,
-    per_class: u32,
-    side: u32,
-    seed: u64,
-) -> (Vec<LightSample>, Vec<(u32, bool)>, u32) {
-    let aspect = light.size_m.x / light.size_m.y;
-    let cx = ((per_class as f32 * aspect).sqrt().round() as u32).clamp(1, per_class.max(1));
-    let cy = per_class.div_ceil(cx).max(1);
-    let side = side.max(1);
-    let (gx, gy) = (cx * side, cy * side);
-    let stratum_area = light.area_m2() / (gx * gy) as f32;
-    let mut rng = SplitMix64(seed.wrapping_mul(0x9e37_79b9_7f4a_7c15).wrapping_add(1));
-    let mut samples = Vec::with_capacity((gx * gy) as usize);
-    let mut classes = Vec::with_capacity((gx * gy) as usize);
-    for j in 0..gy {
-        for i in 0..gx {
-            let s = (i as f32 + rng.next_f32()) / gx as f32;
-            let t = (j as f32 + rng.next_f32()) / gy as f32;
-            let (ti, tj) = image.texel_at(s, t);
-            let emission = image.emission(ti, tj);
-            if emission.max_element() <= 0.0 {
-                continue;
-            }
-            samples.push(LightSample { position: light.image_point(s, t), weight: emission * light.intensity * stratum_area });
-            classes.push((i % side + side * (j % side), half_of(i, j, side)));
-        }
-    }
-    (samples, classes, gx * gy)
-}
-
-/// Which half of the light's strata stratum (i, j) is in (blocks of `side`² strata): the
-/// strata's own checkerboard — flipped on every other block where `side` is even, else a set
-/// (one stratum a block, the same in each) would lie in one half — so that each half takes
-/// every other stratum and every set is split over a checkerboard of the blocks.
-fn half_of(i: u32, j: u32, side: u32) -> bool {
-    let blocks = if side.is_multiple_of(2) { i / side + j / side } else { 0 };
-    (i + j + blocks) % 2 == 1
-}
-
 /// splitmix64: a tiny, well-mixed generator whose stream never changes between versions.
 pub(super) struct SplitMix64(u64);
 
@@ -179,10 +131,6 @@ impl SplitMix64 {
         z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
         z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
         z ^ (z >> 31)
-    }
-
-    pub(super) fn next_f32(&mut self) -> f32 {
-        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
     }
 }
 
@@ -233,15 +181,22 @@ impl SamplePlan {
     /// whole plan is kept for later frames of the same view, light and maps (`ctx.derived`):
     /// a progressive job's rounds, and a daemon's repeated jobs, make it once.
     pub(super) fn new(ctx: &mut MethodContext<'_>, params: &Params) -> Self {
+        Self::first(ctx, params, params.get(&SAMPLES))
+    }
+
+    /// The plan of the sequence's first `requested` points (`new`'s, for a count of one's own:
+    /// method `filtered`'s).
+    pub(super) fn first(ctx: &mut MethodContext<'_>, params: &Params, requested: u32) -> Self {
         let spec = ctx.spec;
         let seed = u64::from(params.get(&SEED));
         let key = DerivedKey { name: "reference.plan", fingerprint: plan_fingerprint(ctx, params) };
         let (scene, size) = (ctx.scene, (ctx.width, ctx.height));
         let planned = ctx.derived.get_or_create(key, || {
-            let (planned, halves, _) = light_samples(&spec.light, &spec.light_image, PLANNED, seed);
+            let (planned, indices, _) = light_samples(&spec.light, &spec.light_image, PLANNED, seed);
+            let halves = indices.into_iter().map(half_of_index).collect();
             Self { halves, ..Self::plan(spec, scene, size, params, planned, PLANNED) }
         });
-        let requested = params.get(&SAMPLES).min(PLANNED);
+        let requested = requested.min(PLANNED);
         // The first `requested` points of the sequence, less the black ones.
         let taken = light_samples(&spec.light, &spec.light_image, requested, seed).0.len();
         let mut plan = (*planned).clone();
@@ -249,13 +204,8 @@ impl SamplePlan {
         plan
     }
 
-    /// The plan of these samples (of `strata`, black ones included), with the maps'
-    /// resolution, crop and bias of `params`.
-    pub(super) fn for_samples(ctx: &MethodContext<'_>, params: &Params, samples: Vec<LightSample>, strata: u32) -> Self {
-        Self::plan(ctx.spec, ctx.scene, (ctx.width, ctx.height), params, samples, strata)
-    }
-
-    /// `for_samples` for a frame of `spec` on `scene`, `size` pixels.
+    /// The plan of these samples (of `strata`, black ones included) for a frame of `spec` on
+    /// `scene`, `size` pixels, with the maps' resolution, crop and bias of `params`.
     fn plan(
         spec: &FrameSpec,
         scene: &GpuScene,

@@ -5,12 +5,13 @@
 //! cannot gather enough (§5, adaptive sampling) and a filter sized by the penumbra (§4),
 //! guided by the G-buffer as in SVGF (Schied et al. 2017).
 //!
-//! The samples are `reference`'s (the same strata, jitter, maps, crops and bias): the light is
-//! cut into `samples × refine²` strata, and one stratified set of `samples` of them — one per
-//! block of `refine × refine` strata — probes every pixel. A pixel whose tile or a neighbour
-//! tile has a pixel its probes see partly lit, or both fully lit and fully shadowed pixels, is
-//! in or near a penumbra: it is tested against the other strata too. The rest keep their
-//! probes' verdict (0 or 1, which more samples would only confirm). Every map is drawn once.
+//! The samples are `reference`'s (the same sequence, maps, crops and bias): the first
+//! `samples × refine²` of its sequence, whose first `samples` — themselves stratified over the
+//! whole light, as every prefix of the sequence is — probe every pixel. A pixel whose tile or a
+//! neighbour tile has a pixel its probes see partly lit, or both fully lit and fully shadowed
+//! pixels, is in or near a penumbra: it is tested against the rest too, and there it is
+//! `reference` with `samples × refine²` samples. The rest keep their probes' verdict (0 or 1,
+//! which more samples would only confirm). Every map is drawn once.
 //!
 //! Why not a few samples a pixel everywhere, rotated per pixel, as the papers do with rays: a
 //! sample is a depth map here, and a map costs what its triangles cost, whatever the pixels,
@@ -25,7 +26,7 @@ use super::bands::{self, Band};
 use super::cpu::{self, BlockerBlock, CpuSample, Receivers, SumBlock};
 use super::estimate::Texel;
 use super::gpu::SEGMENT;
-use super::samples::{interleaved_light_samples, SamplePlan};
+use super::samples::{half_of_index, light_samples, SamplePlan};
 use super::{
     Counters, MethodContext, Param, ParamSpec, Params, Progress, ShadowMethod, BIAS_TEXELS, CROP, RESOLUTION, SEED, SLOPE_BIAS_TEXELS,
 };
@@ -94,14 +95,15 @@ impl ShadowMethod for Filtered {
         let started = std::time::Instant::now();
         let spec = ctx.spec;
         let (probes, refine) = (params.get(&SAMPLES), params.get(&REFINE));
-        let (samples, sets, strata) =
-            interleaved_light_samples(&spec.light, &spec.light_image, probes, refine, u64::from(params.get(&SEED)));
-        let plan = SamplePlan::for_samples(ctx, params, samples, strata);
+        let strata = probes * refine * refine;
+        // The reference's plan of as many samples: the same maps.
+        let plan = SamplePlan::first(ctx, params, strata);
+        let (_, indices, _) = light_samples(&spec.light, &spec.light_image, strata, u64::from(params.get(&SEED)));
         let constants = plan.test_constants(params, spec.light.center);
-        // The samples by round (the probes' set, the rest) and half of the checkerboard.
+        // The samples by round (the probes, the rest) and half (the sequence's two).
         let mut rounds: [[Vec<CpuSample>; 2]; 2] = Default::default();
-        for (sample, &(set, half)) in plan.cpu_samples().into_iter().zip(&sets) {
-            rounds[usize::from(set != 0)][usize::from(half)].push(sample);
+        for (sample, &index) in plan.cpu_samples().into_iter().zip(&indices) {
+            rounds[usize::from(index >= probes)][usize::from(half_of_index(index))].push(sample);
         }
         let [probe_samples, other_samples] = rounds;
         let shared = Shared {
