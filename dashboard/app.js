@@ -259,11 +259,8 @@ function drawJobs(stats) {
   );
 }
 
-// Thumbnails of the newest successful jobs; ids are unique, so existing images are kept.
-function drawThumbnails(stats) {
-  const box = document.getElementById("thumbnails");
-  const jobs = stats.jobs.recent.filter((j) => j.outcome === "ok").slice(0, 12);
-  const wanted = new Set(jobs.map((j) => j.id));
+// Removes a grid's figures whose job is no longer wanted, letting their images' blobs go.
+function removeStale(box, wanted) {
   for (const child of [...box.children]) {
     if (!wanted.has(child.dataset.id)) {
       const img = child.querySelector("img");
@@ -271,6 +268,14 @@ function drawThumbnails(stats) {
       child.remove();
     }
   }
+}
+
+// Thumbnails of the newest successful jobs; ids are unique, so existing images are kept.
+function drawThumbnails(stats) {
+  const box = document.getElementById("thumbnails");
+  const jobs = stats.jobs.recent.filter((j) => j.outcome === "ok").slice(0, 12);
+  const wanted = new Set(jobs.map((j) => j.id));
+  removeStale(box, wanted);
   jobs.forEach((job, k) => {
     let item = box.querySelector(`[data-id="${job.id}"]`);
     if (!item) {
@@ -310,13 +315,7 @@ async function drawRefining() {
   );
   const refining = records.filter((r) => r && r.round);
   const wanted = new Set(refining.map((r) => r.id));
-  for (const child of [...box.children]) {
-    if (!wanted.has(child.dataset.id)) {
-      const img = child.querySelector("img");
-      if (img && img.src.startsWith("blob:")) URL.revokeObjectURL(img.src);
-      child.remove();
-    }
-  }
+  removeStale(box, wanted);
   for (const record of refining) {
     let item = box.querySelector(`[data-id="${record.id}"]`);
     if (!item) {

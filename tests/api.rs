@@ -1097,21 +1097,10 @@ async fn submit_uploads_only_what_the_server_lacks_and_follows_progress() {
                      "method": {"name": "reference", "samples": 16, "resolution": 256}, "output": {"width": 64, "height": 48}});
     std::fs::write(work.path().join("job.json"), job.to_string()).unwrap();
     let submit = |output: &str| {
-        let args = [
-            "submit".to_owned(),
-            work.path().join("job.json").display().to_string(),
-            "--server".into(),
-            base.clone(),
-            "--quiet".into(),
-            "-o".into(),
-            work.path().join(output).display().to_string(),
-        ];
+        let (job_file, output_file) = (work.path().join("job.json").display().to_string(), work.path().join(output).display().to_string());
+        let args = ["submit", &job_file, "--server", &base, "--quiet", "-o", &output_file].map(str::to_owned).to_vec();
         async move {
-            let output = tokio::task::spawn_blocking(move || {
-                std::process::Command::new(env!("CARGO_BIN_EXE_penumbra")).args(&args).output().unwrap()
-            })
-            .await
-            .unwrap();
+            let output = tools::cli(args, vec![]).await;
             assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
             serde_json::from_slice::<Value>(&output.stdout).expect("a JSON report on stdout")
         }
@@ -2058,21 +2047,9 @@ async fn a_progressive_job_refines_in_rounds_and_ends_as_the_reference_of_its_sa
     cli_job.as_object_mut().unwrap().remove("progressive");
     std::fs::write(work.path().join("job.json"), cli_job.to_string()).unwrap();
     let output = work.path().join("refined.png");
-    let args = [
-        "submit".to_owned(),
-        work.path().join("job.json").display().to_string(),
-        "--server".into(),
-        base.clone(),
-        "--quiet".into(),
-        "--progressive".into(),
-        "--max-error".into(),
-        "1e-6".into(),
-        "-o".into(),
-        output.display().to_string(),
-    ];
-    let ran = tokio::task::spawn_blocking(move || std::process::Command::new(env!("CARGO_BIN_EXE_penumbra")).args(&args).output().unwrap())
-        .await
-        .unwrap();
+    let (job_file, output_file) = (work.path().join("job.json").display().to_string(), output.display().to_string());
+    let args = ["submit", &job_file, "--server", &base, "--quiet", "--progressive", "--max-error", "1e-6", "-o", &output_file];
+    let ran = tools::cli(args.map(str::to_owned).to_vec(), vec![]).await;
     assert!(ran.status.success(), "{}", String::from_utf8_lossy(&ran.stderr));
     let report: Value = serde_json::from_slice(&ran.stdout).unwrap();
     assert_eq!(report["rounds"].as_array().unwrap().len(), 4, "{report}");

@@ -200,6 +200,11 @@ pub fn run(engine: &Engine, options: &EvalOptions, model_file: Option<&std::path
     Ok(report)
 }
 
+/// A row of a Markdown table.
+fn row(cells: &[String]) -> String {
+    format!("| {} |\n", cells.join(" | "))
+}
+
 /// A progressive job's reference rounds on `job` (16, 32 … `ROUND_SAMPLES` samples, each
 /// round's sums carried to the next as the daemon carries them): per round, its samples, its
 /// error estimate and its error measured against `truth`.
@@ -251,23 +256,23 @@ pub fn table(report: &BudgetReport) -> String {
     );
     let or_dash = |v: Option<f64>, digits: usize| v.map_or("-".to_owned(), |v| format!("{v:.digits$}"));
     for r in &report.rows {
-        out.push_str(&format!(
-            "| {} | {} | {} | {} | {} | {:.0} | {} | {:.4} | {} | {} |\n",
-            r.scene,
-            r.light,
-            r.size,
-            r.budget,
-            r.choice,
-            r.predicted_ms,
+        let kept = match r.kept {
+            Some(true) => "yes",
+            Some(false) => "**no**",
+            None => "refused",
+        };
+        out.push_str(&row(&[
+            r.scene.clone(),
+            r.light.clone(),
+            r.size.clone(),
+            r.budget.clone(),
+            r.choice.clone(),
+            format!("{:.0}", r.predicted_ms),
             or_dash(r.measured_ms, 0),
-            r.predicted_error,
+            format!("{:.4}", r.predicted_error),
             or_dash(r.measured_error, 4),
-            match r.kept {
-                Some(true) => "yes",
-                Some(false) => "**no**",
-                None => "refused",
-            }
-        ));
+            kept.to_owned(),
+        ]));
     }
     out.push_str(
         "\n## Progressive rounds\n\nThe reference's rounds as a progressive job runs them (sums carried), each round's \
@@ -275,16 +280,15 @@ pub fn table(report: &BudgetReport) -> String {
          | scene | light | size | samples | estimated | measured | estimated ÷ measured |\n|---|---|---|---:|---:|---:|---:|\n",
     );
     for r in &report.rounds {
-        out.push_str(&format!(
-            "| {} | {} | {} | {} | {:.4} | {:.4} | {:.2} |\n",
-            r.scene,
-            r.light,
-            r.size,
-            r.samples,
-            r.estimated,
-            r.measured,
-            r.estimated / r.measured
-        ));
+        out.push_str(&row(&[
+            r.scene.clone(),
+            r.light.clone(),
+            r.size.clone(),
+            r.samples.to_string(),
+            format!("{:.4}", r.estimated),
+            format!("{:.4}", r.measured),
+            format!("{:.2}", r.estimated / r.measured),
+        ]));
     }
     out
 }

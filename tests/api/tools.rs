@@ -394,7 +394,7 @@ async fn openapi_document_is_generated_from_the_code() {
 }
 
 /// `penumbra` run with `args` (and environment), off the async workers: its output.
-async fn cli(args: Vec<String>, env: Vec<(&'static str, String)>) -> std::process::Output {
+pub(super) async fn cli(args: Vec<String>, env: Vec<(&'static str, String)>) -> std::process::Output {
     tokio::task::spawn_blocking(move || {
         std::process::Command::new(env!("CARGO_BIN_EXE_penumbra"))
             .args(&args)
