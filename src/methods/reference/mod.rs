@@ -30,9 +30,14 @@ pub struct Reference;
 /// The most light samples a reference takes.
 pub const MAX_SAMPLES: u32 = 4096;
 
-const SAMPLES: Param<u32> =
-    Param::integer("samples", 256, 1, MAX_SAMPLES as i64, "light samples (stratified, jittered); noise falls as 1/√samples")
-        .capped(Cap::Samples);
+const SAMPLES: Param<u32> = Param::integer(
+    "samples",
+    256,
+    1,
+    MAX_SAMPLES as i64,
+    "light samples, the first of one nested, stratified sequence per seed; noise falls as 1/√samples or faster",
+)
+.capped(Cap::Samples);
 const RESOLUTION: Param<u32> = Param::integer("resolution", 1024, 64, 4096, "side of each sample's depth map, texels");
 const BIAS_TEXELS: Param<f32> =
     Param::float("bias_texels", 1.0, 0.0, 64.0, "constant bias of the visibility test, in texels of the sample's map");

@@ -1,5 +1,6 @@
-//! The reference's light samples and their plan: stratified, jittered points on the light's
-//! emitting texels with their weights, each sample's frustum and map, in batches.
+//! The reference's light samples and their plan: the first points of a nested, stratified
+//! sequence on the light's emitting texels with their weights, each sample's frustum and map,
+//! in batches.
 
 use bytemuck::Zeroable as _;
 use glam::{Mat4, Vec3};

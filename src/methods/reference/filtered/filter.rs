@@ -24,17 +24,18 @@
 //! footprint it is another surface, even one close on screen, and gets none), and the
 //! agreement of their normals.
 //!
-//! The error estimate: the two halves of the samples, told apart. The strata's own
-//! checkerboard (`half_of` in `samples.rs`) cuts the samples into two halves that each cover
-//! the whole light; every pixel keeps the second half's sums beside the whole's, and the
+//! The error estimate: the two halves of the samples, told apart. The reference's two
+//! halves (`half_of_index` in `samples.rs`: its two independently scrambled sequences) each
+//! cover the whole light; every pixel keeps the second half's sums beside the whole's, and the
 //! filter averages both with the same weights. The two halves' estimates err independently
-//! (their strata are disjoint, each jittered on its own), and the whole's is their mean, so for
-//! errors e_a, e_b symmetric about 0, E|e_a − e_b| / 2 = E|e_a + e_b| / 2: half the halves'
-//! difference is an estimate of the whole's error with no constant to fit (`estimate::halves_error`,
-//! which also weighs halves of unequal light: a colour the light emits in a few strata), and,
-//! measured after the filter, it counts what the filter gathered — neighbours whose samples err
-//! together as well as those that do not. Halves of whole blocks of strata would see different
-//! parts of the light and differ by more than their samples' error (docs/performance-log.md).
+//! (two randomisations of one design), and the whole's is their mean, so for errors e_a, e_b
+//! symmetric about 0, E|e_a − e_b| / 2 = E|e_a + e_b| / 2: half the halves' difference is an
+//! estimate of the whole's error with no constant to fit (`estimate::halves_error`, which also
+//! weighs halves of unequal light: a colour the light emits in a few places), and, measured
+//! after the filter, it counts what the filter gathered — neighbours whose samples err together
+//! as well as those that do not. Halves cut from one stratified design (blocks of a grid, or of
+//! one sequence) would each be stratified worse than the whole and differ by more than its
+//! error (docs/performance-log.md).
 //! It misses what neither half sees: a pixel the probes left unrefined (both halves agree), and
 //! the filter's own bias.
 

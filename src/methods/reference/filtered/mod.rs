@@ -161,8 +161,8 @@ const HALO_ROWS: u32 = 56;
 /// the refined pixels and the visibility written come after the receivers are let go.
 const BYTES_PER_PIXEL: u64 = 170;
 
-/// What every band shares: the samples, split into the probes and the rest, each in the two
-/// halves of the checkerboard, and the filter's shape.
+/// What every band shares: the samples, split into the probes and the rest, each in the
+/// reference's two halves, and the filter's shape.
 struct Shared {
     probe_samples: [Vec<CpuSample>; 2],
     other_samples: [Vec<CpuSample>; 2],
