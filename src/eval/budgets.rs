@@ -217,9 +217,8 @@ fn progressive_rounds(
     let supervisor = crate::supervise::WithRounds { inner: &(), rounds: &carried };
     let mut rounds = Vec::new();
     for samples in crate::job::progressive::round_samples(ROUND_SAMPLES) {
-        let mut method = crate::job::MethodSpec { name: "reference".into(), params: Default::default() };
-        method.params.insert("samples".into(), samples.into());
-        method.params.insert("engine".into(), "cpu".into());
+        let reference = crate::job::MethodSpec { name: "reference".into(), params: Default::default() };
+        let method = crate::job::progressive::round_method(&reference, samples);
         // EXR: its visibility comes back, to be measured.
         let output = crate::job::OutputSpec { format: OutputFormat::Exr, ..job.output.clone() };
         let method = crate::methods::with_map_resolution(&method, job.shadow_map.resolution);

@@ -73,6 +73,15 @@ pub fn round_samples(cap: u32) -> Vec<u32> {
     }
 }
 
+/// A round's method: the job's reference with `samples` so far, on the CPU engine — the only
+/// one that carries its sums between rounds (the round's image is that of this method).
+pub fn round_method(method: &super::MethodSpec, samples: u32) -> super::MethodSpec {
+    let mut method = method.clone();
+    method.params.insert("samples".into(), samples.into());
+    method.params.insert("engine".into(), "cpu".into());
+    method
+}
+
 /// One round of a progressive job, as its events and record report it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Round {

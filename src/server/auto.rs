@@ -147,7 +147,12 @@ impl AppState {
         features: &Features,
         job: &Job,
     ) -> Result<(model::Candidate, Prediction), model::Unmet> {
-        model.choose_among(budget, features, |c| self.engine.check(&Job { method: c.method_for(job), ..job.clone() }, false).is_ok())
+        model.choose_among(budget, features, |c| self.allows(c, job))
+    }
+
+    /// Whether this server's limits let `job` ask for `candidate`'s method.
+    pub(super) fn allows(&self, candidate: &model::Candidate, job: &Job) -> bool {
+        self.engine.check(&Job { method: candidate.method_for(job), ..job.clone() }, false).is_ok()
     }
 
     /// A job checked as a submission is — an `auto` one with its `budget` checked in place of

@@ -13,8 +13,7 @@ use tokio::sync::{watch, OwnedSemaphorePermit};
 
 use super::*;
 use crate::job::auto::AutoBudget;
-use crate::job::progressive::{round_samples, Progressive, ProgressiveOutcome, Round, Stopped};
-use crate::job::MethodSpec;
+use crate::job::progressive::{round_method, round_samples, Progressive, ProgressiveOutcome, Round, Stopped, FIRST_ROUND_SAMPLES};
 use crate::model::Features;
 use crate::render::method::ERROR_ESTIMATE;
 use crate::supervise::{Rounds, WithRounds};
@@ -44,9 +43,7 @@ pub(super) async fn render_rounds(
     // a tenth of the time asked for (without a time, of the first reference round's), else
     // the cheapest.
     let first_budget = AutoBudget { max_ms: spec.max_ms.map(|ms| ms / 10.0).or(first_round_ms), max_error: None };
-    let fast = |c: &crate::model::Candidate| {
-        c.method.name != "reference" && state.engine.check(&Job { method: c.method_for(&job), ..job.clone() }, false).is_ok()
-    };
+    let fast = |c: &crate::model::Candidate| c.method.name != "reference" && state.allows(c, &job);
     let (candidate, prediction) = match model.choose_among(&first_budget, &features, fast) {
         Ok(chosen) => chosen,
         Err(_) => {
@@ -74,7 +71,7 @@ pub(super) async fn render_rounds(
             // too, so this errs long), or the model's for the first.
             let predicted = match last_round {
                 Some((samples, ms)) => ms * f64::from(total - before) / f64::from(samples),
-                None => first_round_ms.unwrap_or(0.0) * f64::from(total) / 16.0,
+                None => first_round_ms.unwrap_or(0.0) * f64::from(total) / f64::from(FIRST_ROUND_SAMPLES),
             };
             if started.elapsed().as_secs_f64() * 1e3 + predicted > max_ms {
                 stopped = Stopped::MaxMs;
@@ -105,15 +102,6 @@ pub(super) async fn render_rounds(
 fn samples_cap(job: &Job, limits: &crate::job::Limits) -> u32 {
     let given = job.method.params.get("samples").and_then(|v| v.as_u64()).and_then(|n| u32::try_from(n).ok());
     given.unwrap_or_else(|| limits.max_samples.min(crate::methods::reference::MAX_SAMPLES))
-}
-
-/// A round's method: the job's reference with `samples` so far, on the CPU engine — the only
-/// one that carries its sums between rounds (the final image is that of this method).
-fn round_method(method: &MethodSpec, samples: u32) -> MethodSpec {
-    let mut method = method.clone();
-    method.params.insert("samples".into(), samples.into());
-    method.params.insert("engine".into(), "cpu".into());
-    method
 }
 
 /// The rounds published so far.

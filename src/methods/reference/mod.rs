@@ -143,8 +143,8 @@ fn record_on_cpu(ctx: &mut MethodContext<'_>, params: &Params, plan: &SamplePlan
     let carried_samples = carried.samples;
     // The new samples, by half, in order.
     let mut halves: [Vec<CpuSample>; 2] = Default::default();
-    for (sample, &half) in samples.iter().zip(&plan.halves).skip(carried_samples) {
-        halves[usize::from(half)].push(sample.clone());
+    for (sample, &index) in samples.iter().zip(&plan.indices).skip(carried_samples) {
+        halves[usize::from(half_of_index(index))].push(sample.clone());
     }
     let new_samples = (samples.len() - carried_samples) as u64;
     let mut progress = Progress::new(supervisor, new_samples * bands.len() as u64);

@@ -9,15 +9,15 @@ use rayon::prelude::*;
 use super::crop::MapCrop;
 use super::gpu::{BatchSample, BatchUniforms};
 use super::{Counters, MethodContext, Params, BIAS_TEXELS, CROP, RESOLUTION, SAMPLES, SEED, SLOPE_BIAS_TEXELS};
-
-/// The points of the sequence a plan's near plane and crop are made for: every sample a
-/// reference can take (`samples`' maximum).
-const PLANNED: u32 = super::MAX_SAMPLES;
 use crate::gpu::pool::DerivedKey;
 use crate::gpu::scene::GpuScene;
 use crate::light::{AreaLight, LightImage};
 use crate::render::convex::{map_bounds, ConvexSolid};
 use crate::render::{FrameSpec, LightProjection};
+
+/// The points of the sequence a plan's near plane and crop are made for: every sample a
+/// reference can take (`samples`' maximum).
+const PLANNED: u32 = super::MAX_SAMPLES;
 
 /// The projection a sample's depth map is drawn with: the angle `fit` gives that sample and the
 /// near plane every map shares, reversed-Z with the far plane at infinity, so the stored depth
@@ -156,9 +156,9 @@ fn plan_fingerprint(ctx: &MethodContext<'_>, params: &Params) -> u64 {
 #[derive(Clone)]
 pub(super) struct SamplePlan {
     pub(super) samples: Vec<LightSample>,
-    /// Each sample's half (`half_of_index`): the CPU engine keeps the halves' sums apart for
-    /// its error estimate. All in the first for plans of other samples.
-    pub(super) halves: Vec<bool>,
+    /// Each sample's index in the sequence (its half: `half_of_index`; the CPU engine keeps
+    /// the halves' sums apart for its error estimate).
+    pub(super) indices: Vec<u32>,
     /// Strata of the light, black ones included (`samples_skipped_black`).
     pub(super) strata: u32,
     pub(super) resolution: u32,
@@ -194,25 +194,24 @@ impl SamplePlan {
         let (scene, size) = (ctx.scene, (ctx.width, ctx.height));
         let planned = ctx.derived.get_or_create(key, || {
             let (planned, indices, _) = light_samples(&spec.light, &spec.light_image, PLANNED, seed);
-            let halves = indices.into_iter().map(half_of_index).collect();
-            Self { halves, ..Self::plan(spec, scene, size, params, planned, PLANNED) }
+            Self::plan(spec, scene, size, params, (planned, indices), PLANNED)
         });
         let requested = requested.min(PLANNED);
-        // The first `requested` points of the sequence, less the black ones.
-        let taken = light_samples(&spec.light, &spec.light_image, requested, seed).0.len();
         let mut plan = (*planned).clone();
-        plan.keep_first(taken, requested);
+        // The first `requested` points of the sequence, less the black ones.
+        plan.keep_first(planned.indices.partition_point(|&i| i < requested), requested);
         plan
     }
 
-    /// The plan of these samples (of `strata`, black ones included) for a frame of `spec` on
-    /// `scene`, `size` pixels, with the maps' resolution, crop and bias of `params`.
+    /// The plan of these samples and their indices in the sequence (of `strata` points, black
+    /// ones included) for a frame of `spec` on `scene`, `size` pixels, with the maps'
+    /// resolution, crop and bias of `params`.
     fn plan(
         spec: &FrameSpec,
         scene: &GpuScene,
         (width, height): (u32, u32),
         params: &Params,
-        samples: Vec<LightSample>,
+        (samples, indices): (Vec<LightSample>, Vec<u32>),
         strata: u32,
     ) -> Self {
         let resolution = params.get(&RESOLUTION);
@@ -244,17 +243,16 @@ impl SamplePlan {
         } else {
             MapCrop::whole(samples.len(), resolution)
         };
-        let halves = vec![false; samples.len()];
         // One channel where every weight is gray (its three sums would be equal), else three.
         let channels = if samples.iter().all(|s| s.weight.x == s.weight.y && s.weight.x == s.weight.z) { 1 } else { 3 };
-        Self { samples, halves, strata, resolution, rotation, near, plane, frusta, crop, channels }
+        Self { samples, indices, strata, resolution, rotation, near, plane, frusta, crop, channels }
     }
 
     /// Keeps the first `count` samples (of `strata` points drawn), with the near plane and
     /// crop planned for all of them.
     fn keep_first(&mut self, count: usize, strata: u32) {
         self.samples.truncate(count);
-        self.halves.truncate(count);
+        self.indices.truncate(count);
         self.frusta.truncate(count);
         self.crop.origins.truncate(count);
         self.strata = strata;

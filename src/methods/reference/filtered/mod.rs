@@ -26,7 +26,7 @@ use super::bands::{self, Band};
 use super::cpu::{self, BlockerBlock, CpuSample, Receivers, SumBlock};
 use super::estimate::Texel;
 use super::gpu::SEGMENT;
-use super::samples::{half_of_index, light_samples, SamplePlan};
+use super::samples::{half_of_index, SamplePlan};
 use super::{
     Counters, MethodContext, Param, ParamSpec, Params, Progress, ShadowMethod, BIAS_TEXELS, CROP, RESOLUTION, SEED, SLOPE_BIAS_TEXELS,
 };
@@ -98,11 +98,10 @@ impl ShadowMethod for Filtered {
         let strata = probes * refine * refine;
         // The reference's plan of as many samples: the same maps.
         let plan = SamplePlan::first(ctx, params, strata);
-        let (_, indices, _) = light_samples(&spec.light, &spec.light_image, strata, u64::from(params.get(&SEED)));
         let constants = plan.test_constants(params, spec.light.center);
         // The samples by round (the probes, the rest) and half (the sequence's two).
         let mut rounds: [[Vec<CpuSample>; 2]; 2] = Default::default();
-        for (sample, &index) in plan.cpu_samples().into_iter().zip(&indices) {
+        for (sample, &index) in plan.cpu_samples().into_iter().zip(&plan.indices) {
             rounds[usize::from(index >= probes)][usize::from(half_of_index(index))].push(sample);
         }
         let [probe_samples, other_samples] = rounds;
