@@ -149,7 +149,8 @@ fn record_on_cpu(ctx: &mut MethodContext<'_>, params: &Params, plan: &SamplePlan
     let new_samples = (samples.len() - carried_samples) as u64;
     let mut progress = Progress::new(supervisor, new_samples * bands.len() as u64);
     let (mut read_ms, mut write_ms, mut spent, mut segments) = (0.0, 0.0, cpu::Spent::default(), 0);
-    let (mut error_sum, mut error_count) = (0.0, 0);
+    let effective = estimate::effective_samples(samples.iter().map(|s| s.weight));
+    let mut penumbra = estimate::PenumbraMean::default();
     for (b, band) in bands.iter().enumerate() {
         let started = std::time::Instant::now();
         let receivers = ctx.read_gbuffer_rows(band.rows.clone(), |gbuffer| cpu::Receivers::new(gbuffer, SEGMENT, &constants))?;
@@ -179,8 +180,7 @@ fn record_on_cpu(ctx: &mut MethodContext<'_>, params: &Params, plan: &SamplePlan
         }
         let written = std::time::Instant::now();
         let mut visibility = vec![0u8; width as usize * band.rows.len() * 16];
-        let (sum, count) = cpu::write_visibility(&receivers, [&sums[0], &sums[1]], channels, width, &mut visibility);
-        (error_sum, error_count) = (error_sum + sum, error_count + count);
+        penumbra.merge(cpu::write_visibility(&receivers, [&sums[0], &sums[1]], (channels, effective), width, &mut visibility));
         ctx.gpu.queue.write_buffer(ctx.visibility, u64::from(band.rows.start) * u64::from(width) * 16, &visibility);
         write_ms += written.elapsed().as_secs_f64() * 1e3;
         segments += receivers.segments;
@@ -199,7 +199,9 @@ fn record_on_cpu(ctx: &mut MethodContext<'_>, params: &Params, plan: &SamplePlan
         ("cpu_bands".to_owned(), bands.len() as f64),
         ("samples_carried".to_owned(), carried_samples as f64),
     ]);
-    ERROR_ESTIMATE.set(&mut counters, if error_count > 0 { error_sum / error_count as f64 } else { 0.0 });
+    counters.insert("samples_effective".to_owned(), f64::from(effective));
+    counters.insert("penumbra_pixels_estimated".to_owned(), penumbra.pixels());
+    ERROR_ESTIMATE.set(&mut counters, penumbra.mean());
     if let Some(rounds) = rounds {
         carried.samples = samples.len();
         rounds.put(carried);

@@ -19,7 +19,7 @@ mod raster;
 
 use raster::Map;
 
-use super::estimate::Texel;
+use super::estimate::{PenumbraMean, Texel};
 use crate::render::method::GBufferView;
 
 /// Receivers a block: one AVX2 vector of f32 (and the unit the threads share the frame by).
@@ -295,15 +295,15 @@ pub(super) fn estimate_into<const BLOCKERS: bool>(
 /// Writes every pixel's visibility into `out`, a `vec4<f32>` of bytes each (rgb; w the error
 /// estimate), rows of `width` pixels: the ratio of its receiver's sums per channel, both halves
 /// together (`ratio` in `accumulate.wgsl`), and half the halves' difference (`Texel::error`);
-/// 1 (and 0) where no receiver is. Row by row on every core. Returns the estimate's sum and
-/// count over the pixels in a penumbra.
+/// 1 (and 0) where no receiver is. Row by row on every core. Returns the estimate's mean over
+/// the penumbra, `samples` the samples' effective count.
 pub(super) fn write_visibility(
     receivers: &Receivers,
     halves: [&[SumBlock]; 2],
-    channels: usize,
+    (channels, samples): (usize, f32),
     width: u32,
     out: &mut [u8],
-) -> (f64, usize) {
+) -> PenumbraMean {
     let texel = |k: usize| {
         let (b, l) = (k / LANES, k % LANES);
         let mut texel = Texel::UNCOVERED;
@@ -323,24 +323,23 @@ pub(super) fn write_visibility(
             // The receivers are listed row by row: this row's lie between these two.
             let first = receivers.pixels.partition_point(|&p| p < y as u32 * width);
             let end = receivers.pixels.partition_point(|&p| p < (y as u32 + 1) * width);
-            let (mut sum, mut count) = (0.0f64, 0usize);
+            let mut penumbra = PenumbraMean::default();
             for k in first..end {
                 let x = (receivers.pixels[k] % width) as usize;
                 let t = texel(k);
-                let error = t.error();
                 let [r, g, b] = t.visibility();
-                row[16 * x..16 * x + 16].copy_from_slice(bytemuck::bytes_of(&[r, g, b, error]));
-                if let Some(error) = t.penumbra_error() {
-                    sum += f64::from(error);
-                    count += 1;
-                }
+                row[16 * x..16 * x + 16].copy_from_slice(bytemuck::bytes_of(&[r, g, b, t.error()]));
+                penumbra.add(&t, samples);
             }
-            (sum, count)
+            penumbra
         })
         .collect::<Vec<_>>()
         // Summed in row order: the same mean on every machine.
         .into_iter()
-        .fold((0.0, 0), |a, b| (a.0 + b.0, a.1 + b.1))
+        .fold(PenumbraMean::default(), |mut all, row| {
+            all.merge(row);
+            all
+        })
 }
 
 /// Tests `blocks` against one sample's map and adds to their sums (`add_sample` in

@@ -44,7 +44,7 @@ use std::ops::Range;
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::super::estimate::{Texel, PENUMBRA};
+use super::super::estimate::{PenumbraMean, Texel};
 use crate::render::method::GBufferView;
 use crate::render::Camera;
 
@@ -146,6 +146,8 @@ pub(super) struct FilterInputs<'a> {
     pub samples_across: f32,
     /// The filter's width in those steps (0: no filter).
     pub scale: f32,
+    /// The effective count of a refined pixel's samples (`estimate::PenumbraMean`).
+    pub samples_effective: f32,
     pub camera: &'a Camera,
 }
 
@@ -154,9 +156,8 @@ pub(super) struct FilterInputs<'a> {
 pub(super) struct FilterOutput {
     pub visibility: Vec<[f32; 4]>,
     pub pixels_filtered: usize,
-    /// The mean estimated error over the pixels in penumbra, and how many they were.
-    pub penumbra_error: f64,
-    pub penumbra_pixels: usize,
+    /// The estimated error over the penumbra.
+    pub penumbra: PenumbraMean,
 }
 
 /// The pixels to test against every sample: the surfaces in the tiles that vary, by their
@@ -195,7 +196,7 @@ pub(super) fn filter(
     let listed: Vec<usize> = (0..width * height).into_par_iter().filter(|&i| refined[i]).collect();
     let written = inputs.written.start as usize * width..inputs.written.end as usize * width;
     if inputs.scale <= 0.0 || listed.is_empty() {
-        return output(&texels[written], 0);
+        return output(&texels[written], 0, inputs.samples_effective);
     }
     // A pixel's footprint in the world at its distance (the slant of its surface aside).
     let per_distance = 2.0 * (0.5 * inputs.camera.fov_y_deg.to_radians()).tan() / inputs.frame_height as f32;
@@ -308,11 +309,11 @@ pub(super) fn filter(
     for (&i, texel) in listed.iter().zip(both) {
         texels[i] = texel;
     }
-    output(&texels[written], pixels_filtered)
+    output(&texels[written], pixels_filtered, inputs.samples_effective)
 }
 
 /// The visibility (w: the estimated error) and the estimate's mean over the penumbra.
-fn output(texels: &[Texel], pixels_filtered: usize) -> FilterOutput {
+fn output(texels: &[Texel], pixels_filtered: usize, samples: f32) -> FilterOutput {
     let visibility: Vec<[f32; 4]> = texels
         .par_iter()
         .map(|t| {
@@ -320,15 +321,11 @@ fn output(texels: &[Texel], pixels_filtered: usize) -> FilterOutput {
             [r, g, b, t.error()]
         })
         .collect();
-    let (mut sum, mut count) = (0.0f64, 0usize);
-    for (t, v) in texels.iter().zip(&visibility) {
-        let gray = t.gray();
-        if t.lit_at_all() && gray > PENUMBRA.0 && gray < PENUMBRA.1 {
-            sum += f64::from(v[3]);
-            count += 1;
-        }
+    let mut penumbra = PenumbraMean::default();
+    for t in texels {
+        penumbra.add(t, samples);
     }
-    FilterOutput { visibility, pixels_filtered, penumbra_error: if count > 0 { sum / count as f64 } else { 0.0 }, penumbra_pixels: count }
+    FilterOutput { visibility, pixels_filtered, penumbra }
 }
 
 /// The frame in tiles of `TILE`², for the refinement's classes and the fallback σ.

@@ -24,7 +24,7 @@ mod filter;
 
 use super::bands::{self, Band};
 use super::cpu::{self, BlockerBlock, CpuSample, Receivers, SumBlock};
-use super::estimate::Texel;
+use super::estimate::{self, PenumbraMean, Texel};
 use super::gpu::SEGMENT;
 use super::samples::{half_of_index, SamplePlan};
 use super::{
@@ -101,7 +101,9 @@ impl ShadowMethod for Filtered {
         let constants = plan.test_constants(params, spec.light.center);
         // The samples by round (the probes, the rest) and half (the sequence's two).
         let mut rounds: [[Vec<CpuSample>; 2]; 2] = Default::default();
-        for (sample, &index) in plan.cpu_samples().into_iter().zip(&plan.indices) {
+        let samples = plan.cpu_samples();
+        let samples_effective = estimate::effective_samples(samples.iter().map(|s| s.weight));
+        for (sample, &index) in samples.into_iter().zip(&plan.indices) {
             rounds[usize::from(index >= probes)][usize::from(half_of_index(index))].push(sample);
         }
         let [probe_samples, other_samples] = rounds;
@@ -115,6 +117,7 @@ impl ShadowMethod for Filtered {
                 light_extent: spec.light.size_m.x.max(1e-6).sqrt() * spec.light.size_m.y.max(1e-6).sqrt(),
                 samples_across: (strata as f32).sqrt(),
                 scale: if params.get(&FILTER) { params.get(&FILTER_SCALE) } else { 0.0 },
+                samples_effective,
             },
         };
         let mut done = Done { read_ms: started.elapsed().as_secs_f64() * 1e3, ..Done::default() };
@@ -135,15 +138,15 @@ impl ShadowMethod for Filtered {
         let mut counters = plan.counters(done.segments);
         counters.extend([
             ("probes".to_owned(), f64::from(probes)),
+            ("samples_effective".to_owned(), f64::from(shared.filter.samples_effective)),
             ("refine".to_owned(), f64::from(refine)),
             ("cpu_threads".to_owned(), done.spent.round as f64),
             ("cpu_bands".to_owned(), bands.len() as f64),
             ("pixels_filtered".to_owned(), done.pixels_filtered as f64),
-            ("penumbra_pixels_estimated".to_owned(), done.penumbra_pixels as f64),
+            ("penumbra_pixels_estimated".to_owned(), done.penumbra.pixels()),
         ]);
         PIXELS_REFINED.set(&mut counters, done.pixels_refined as f64);
-        let error = if done.penumbra_pixels > 0 { done.penumbra_error_sum / done.penumbra_pixels as f64 } else { 0.0 };
-        ERROR_ESTIMATE.set(&mut counters, error);
+        ERROR_ESTIMATE.set(&mut counters, done.penumbra.mean());
         Ok(counters)
     }
 }
@@ -188,6 +191,7 @@ struct FilterShape {
     light_extent: f32,
     samples_across: f32,
     scale: f32,
+    samples_effective: f32,
 }
 
 /// What the bands did, summed.
@@ -199,8 +203,7 @@ struct Done {
     segments: u32,
     pixels_refined: usize,
     pixels_filtered: usize,
-    penumbra_pixels: usize,
-    penumbra_error_sum: f64,
+    penumbra: PenumbraMean,
 }
 
 /// A band of the frame, whose samples follow the frame's `before` others: the probes over its
@@ -271,6 +274,7 @@ fn render_band(
         light_extent: shape.light_extent,
         samples_across: shape.samples_across,
         scale: shape.scale,
+        samples_effective: shape.samples_effective,
         camera: &ctx.spec.camera,
     };
     let filtered = filter::filter(&inputs, &surfaces, texels, &blockers, &refined);
@@ -278,8 +282,7 @@ fn render_band(
     ctx.gpu.queue.write_buffer(ctx.visibility, offset, bytemuck::cast_slice(&filtered.visibility));
     done.filter_ms += filtering.elapsed().as_secs_f64() * 1e3;
     done.pixels_filtered += filtered.pixels_filtered;
-    done.penumbra_pixels += filtered.penumbra_pixels;
-    done.penumbra_error_sum += filtered.penumbra_error * filtered.penumbra_pixels as f64;
+    done.penumbra.merge(filtered.penumbra);
     Ok(())
 }
 

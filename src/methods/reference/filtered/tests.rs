@@ -40,7 +40,17 @@ fn halves(v: impl Fn(u32) -> (f32, f32), share: f32) -> Vec<Texel> {
 }
 
 fn inputs(camera: &Camera, scale: f32) -> FilterInputs<'_> {
-    FilterInputs { width: SIZE, height: SIZE, written: 0..SIZE, frame_height: SIZE, light_extent: 1.0, samples_across: 1.0, scale, camera }
+    FilterInputs {
+        width: SIZE,
+        height: SIZE,
+        written: 0..SIZE,
+        frame_height: SIZE,
+        light_extent: 1.0,
+        samples_across: 1.0,
+        scale,
+        samples_effective: 256.0,
+        camera,
+    }
 }
 
 /// Blockers that make σ = `sigma` world units with `inputs` (light 1, one stratum across):
@@ -95,14 +105,15 @@ fn the_error_estimate_is_the_halves_difference_weighed_by_their_light() {
     // Halves of equal light at 0.4 and 0.6: the whole is 0.5, its error half the difference.
     let even = estimate(&|_| (0.4, 0.6), 0.5, 0.0);
     assert!(even.visibility.iter().all(|v| (v[0] - 0.5).abs() < 1e-6 && (v[3] - 0.1).abs() < 1e-6), "{:?}", even.visibility[0]);
-    assert!((even.penumbra_error - 0.1).abs() < 1e-6 && even.penumbra_pixels == (SIZE * SIZE) as usize);
+    assert!((even.penumbra.mean() - 0.1).abs() < 1e-6 && even.penumbra.pixels() == f64::from(SIZE * SIZE));
     // A second half of a quarter of the light: |0.4 − 0.6| · √(¾ · ¼).
     let uneven = estimate(&|_| (0.4, 0.6), 0.25, 0.0);
     assert!((uneven.visibility[0][3] - 0.2 * (0.1875f32).sqrt()).abs() < 1e-6, "{:?}", uneven.visibility[0]);
     // Halves that agree: no error. Halves whose errors alternate from pixel to pixel: the filter
     // averages them away, and its estimate says so.
-    assert_eq!(estimate(&|_| (0.5, 0.5), 0.5, 0.0).penumbra_error, 0.0);
+    assert_eq!(estimate(&|_| (0.5, 0.5), 0.5, 0.0).penumbra.mean(), 0.0);
     let alternating = |x: u32| if x.is_multiple_of(2) { (0.4, 0.6) } else { (0.6, 0.4) };
     let (raw, filtered) = (estimate(&alternating, 0.5, 0.0), estimate(&alternating, 0.5, 1.0));
-    assert!(filtered.penumbra_error < 0.3 * raw.penumbra_error, "{} → {}", raw.penumbra_error, filtered.penumbra_error);
+    let (raw, filtered) = (raw.penumbra.mean(), filtered.penumbra.mean());
+    assert!(filtered < 0.3 * raw, "{raw} → {filtered}");
 }
