@@ -16,7 +16,7 @@ use crate::render::FrameOutput;
 /// Visibility strictly between these bounds in some channel marks a penumbra pixel. The
 /// reference's ratio estimator gives exactly 0 and 1 outside penumbrae; the margin only
 /// absorbs float rounding.
-pub const PENUMBRA_EPSILON: f32 = 1e-4;
+const PENUMBRA_EPSILON: f32 = 1e-4;
 
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct Metrics {

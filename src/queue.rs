@@ -140,6 +140,14 @@ impl JobEvent {
     }
 }
 
+/// A running progressive job's round image: its format, and its bytes where they are kept in
+/// memory (`None`: on the job store's disk, `JobStore::put_round`).
+#[derive(Clone)]
+pub struct KeptRound {
+    pub format: crate::job::OutputFormat,
+    pub bytes: Option<Arc<Vec<u8>>>,
+}
+
 /// Finished renders (newest last) and submitted jobs' event channels. Both are bounded by the
 /// number of results kept (finished submissions go first, unfinished ones stay) and by age: a
 /// finished job is dropped `ttl` after it finished.
@@ -148,7 +156,7 @@ pub struct LiveJobs {
     submitted: Mutex<VecDeque<Submitted>>,
     /// Running progressive jobs' round images, by job: each job's are dropped when it ends
     /// (`drop_rounds`), so they are bounded by the jobs running and their rounds.
-    rounds: Mutex<HashMap<String, Vec<Arc<Rendered>>>>,
+    rounds: Mutex<HashMap<String, Vec<KeptRound>>>,
     capacity: usize,
     ttl: Duration,
 }
@@ -160,12 +168,12 @@ impl LiveJobs {
     }
 
     /// Keeps a progressive job's next round (numbered from 0 in the order kept).
-    pub fn keep_round(&self, id: &str, rendered: Arc<Rendered>) {
-        self.rounds.lock().unwrap_or_else(|p| p.into_inner()).entry(id.to_owned()).or_default().push(rendered);
+    pub fn keep_round(&self, id: &str, round: KeptRound) {
+        self.rounds.lock().unwrap_or_else(|p| p.into_inner()).entry(id.to_owned()).or_default().push(round);
     }
 
     /// Round `round` of a running progressive job, while the job runs.
-    pub fn round(&self, id: &str, round: usize) -> Option<Arc<Rendered>> {
+    pub fn round(&self, id: &str, round: usize) -> Option<KeptRound> {
         self.rounds.lock().unwrap_or_else(|p| p.into_inner()).get(id)?.get(round).cloned()
     }
 

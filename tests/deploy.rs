@@ -1058,6 +1058,54 @@ fn the_embedded_store_reopens_by_itself_after_its_disk_was_full() {
     assert!(store.get("after").unwrap().is_some());
 }
 
+/// A progressive job's round images live on the embedded store's disk while it runs and count
+/// against its promise (contract §5): a progressive job whose result and rounds would not fit
+/// is refused (507) where the same job without rounds is taken; one that fits keeps each round
+/// as a file, served while the job runs and removed when it ends.
+#[test]
+fn progressive_rounds_take_room_on_the_data_disk_only_while_the_job_runs() {
+    let disk = Tmpfs::mount("10m");
+    let port = free_port();
+    let base = format!("http://127.0.0.1:{port}");
+    let _daemon = daemon(port, &["--no-warm-up", "--data-dir", disk.0.to_str().unwrap(), "--min-free-bytes", "1048576"]);
+    wait_ready(port);
+    let submit = |job: &str| {
+        let (status, body) = http("POST", &format!("{base}/v1/jobs"), Some(job)).unwrap();
+        (status, json(&body))
+    };
+    // 1024² PNG: 4.3 MB at most, ×11 with a first image and nine rounds — more than the disk.
+    let (status, body) = submit(
+        r#"{"scene": {"builtin": "torus"}, "method": {"name": "reference"}, "progressive": {"max_error": 0.01}, "output": {"width": 1024, "height": 1024}}"#,
+    );
+    assert_eq!((status, body["error"]["code"].as_str()), (507, Some("insufficient_storage")), "{body}");
+    assert!(body["error"]["message"].as_str().unwrap().contains("rounds"), "{body}");
+    let (status, body) = submit(r#"{"scene": {"builtin": "torus"}, "output": {"width": 1024, "height": 1024}}"#);
+    assert_eq!(status, 202, "the same size without rounds fits: {body}");
+    let plain = body["id"].as_str().unwrap().to_owned();
+    assert_eq!(finished_record(&base, &plain, Duration::from_secs(60))["status"], "succeeded");
+
+    // A small one fits; an error it never reaches keeps it refining until it is cancelled.
+    let (status, body) = submit(
+        r#"{"scene": {"builtin": "occluder"}, "method": {"name": "reference"}, "progressive": {"max_error": 1e-9}, "output": {"width": 128, "height": 96}}"#,
+    );
+    assert_eq!(status, 202, "{body}");
+    let id = body["id"].as_str().unwrap().to_owned();
+    let rounds = disk.0.join("rounds").join(&id);
+    let refining = wait_until(Duration::from_secs(60), || {
+        http("GET", &format!("{base}/v1/jobs/{id}"), None).is_some_and(|(_, b)| json(&b)["round"]["round"].as_u64() >= Some(1))
+    });
+    assert!(refining.is_some(), "no reference round came");
+    let on_disk = std::fs::read(rounds.join("1")).expect("round 1 kept on the data disk");
+    let (status, served) = http("GET", &format!("{base}/v1/jobs/{id}/rounds/1"), None).unwrap();
+    assert_eq!((status, served == on_disk), (200, true), "round 1 is served from its file");
+    assert_eq!(png_width(&served), 128);
+    assert_eq!(http("DELETE", &format!("{base}/v1/jobs/{id}"), None).map(|(s, _)| s), Some(202));
+    assert_eq!(finished_record(&base, &id, Duration::from_secs(60))["status"], "cancelled");
+    assert!(wait_until(Duration::from_secs(10), || !rounds.exists()).is_some(), "the rounds outlived their job");
+    let (status, _) = http("GET", &format!("{base}/v1/jobs/{id}/rounds/1"), None).unwrap();
+    assert_eq!(status, 404);
+}
+
 /// 1,100 clients that send an upload's headers and one byte of its body, then stall, against
 /// a daemon under `ulimit -n 1024` (a common default): `/healthz` and a render answer within a
 /// second throughout, and the stalled connections are closed after the body timeout (or

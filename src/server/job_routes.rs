@@ -171,10 +171,7 @@ async fn accept_job(
     };
     // Room for the result on a local store's disk, promised until it is stored.
     let reservation = match store.as_ref().filter(|s| !s.shared()) {
-        Some(store) => {
-            let bytes = crate::output::max_result_bytes(job.output.width, job.output.height, job.output.format);
-            Some(store.reserve(bytes).await.map_err(store_error)?)
-        }
+        Some(store) => Some(store.reserve(promised_bytes(&job, state.engine.limits())).await.map_err(store_error)?),
         None => None,
     };
     // A local place in the queue, unless the shared queue holds the job (its workers take one
@@ -424,6 +421,17 @@ pub(super) async fn job_image(
     }
 }
 
+/// The bytes a job's images may take on a local store's disk: its result's, and a progressive
+/// job's round images' besides (contract §5: kept until it ends) — its first image and as
+/// many rounds as its samples allow.
+pub(super) fn promised_bytes(job: &Job, limits: &crate::job::Limits) -> u64 {
+    let images = match job.progressive {
+        Some(_) => 2 + crate::job::progressive::round_samples(super::progressive::samples_cap(job, limits)).len() as u64,
+        None => 1,
+    };
+    images * crate::output::max_result_bytes(job.output.width, job.output.height, job.output.format)
+}
+
 /// `GET /v1/jobs/{id}/rounds/{round}`: a running progressive job's round image (contract
 /// §5), held by the replica that renders it until the job ends; 404 after (the last round is
 /// the job's image) or for a round not drawn.
@@ -438,9 +446,17 @@ pub(super) async fn round_image(
         ))
     };
     let number: usize = round.parse().map_err(|_| gone())?;
-    let rendered = state.jobs.round(&id, number).ok_or_else(gone)?;
-    let mut response = rendered.bytes.clone().into_response();
-    response.headers_mut().insert(header::CONTENT_TYPE, HeaderValue::from_static(rendered.format.mime()));
+    let kept = state.jobs.round(&id, number).ok_or_else(gone)?;
+    let bytes = match kept.bytes {
+        Some(bytes) => bytes.as_ref().clone(),
+        None => {
+            let store = state.store.clone().ok_or_else(gone)?;
+            let job = id.clone();
+            store.call(move |s| s.round(&job, number)).await.map_err(store_error)?.ok_or_else(gone)?
+        }
+    };
+    let mut response = bytes.into_response();
+    response.headers_mut().insert(header::CONTENT_TYPE, HeaderValue::from_static(kept.format.mime()));
     Ok(response)
 }
 

@@ -56,7 +56,7 @@ pub(super) async fn render_rounds(
     let mut published = Published { state, id, events, started, rounds: Vec::new() };
     let mut last = render_round(state, id, first_job.clone(), None, events, cancel.clone()).await?;
     drop(device);
-    published.publish(&last, &candidate.label, 0, prediction.error, true);
+    published.publish(&last, &candidate.label, 0, prediction.error, true).await;
     let mut equivalent = first_job.method;
 
     // The reference's rounds, each in a device slot of its own.
@@ -86,7 +86,7 @@ pub(super) async fn render_rounds(
         last_round = Some((total - before, round_started.elapsed().as_secs_f64() * 1e3));
         before = total;
         let error = ERROR_ESTIMATE.get(&rendered.counters).unwrap_or(f64::NAN);
-        published.publish(&rendered, &format!("reference:samples={total}"), total, error, false);
+        published.publish(&rendered, &format!("reference:samples={total}"), total, error, false).await;
         (last, equivalent) = (rendered, round_job.method);
         if spec.max_error.is_some_and(|max| error <= max) {
             stopped = Stopped::MaxError;
@@ -99,7 +99,7 @@ pub(super) async fn render_rounds(
 
 /// The most samples a progressive job takes: its `samples` where it gives them, else every
 /// sample this server allows a reference.
-fn samples_cap(job: &Job, limits: &crate::job::Limits) -> u32 {
+pub(super) fn samples_cap(job: &Job, limits: &crate::job::Limits) -> u32 {
     let given = job.method.params.get("samples").and_then(|v| v.as_u64()).and_then(|n| u32::try_from(n).ok());
     given.unwrap_or_else(|| limits.max_samples.min(crate::methods::reference::MAX_SAMPLES))
 }
@@ -114,10 +114,21 @@ struct Published<'a> {
 }
 
 impl Published<'_> {
-    /// Keeps a round's image while the job runs and announces it.
-    fn publish(&mut self, rendered: &Rendered, method: &str, samples: u32, error_estimate: f64, predicted: bool) {
+    /// Keeps a round's image while the job runs — on a local store's disk, where admission
+    /// promised it room, else in memory — and announces it.
+    async fn publish(&mut self, rendered: &Rendered, method: &str, samples: u32, error_estimate: f64, predicted: bool) {
         let number = self.rounds.len() as u32;
-        self.state.jobs.keep_round(self.id, Arc::new(rendered.clone()));
+        let mut bytes = Some(Arc::new(rendered.bytes.clone()));
+        if let (Some(store), Some(image)) = (self.state.store.as_ref().filter(|s| !s.shared()), bytes.clone()) {
+            let id = self.id.to_owned();
+            match store.call(move |s| s.put_round(&id, number as usize, &image)).await {
+                Ok(true) => bytes = None,
+                Ok(false) => {}
+                // Kept in memory instead: the round is still served, and the job goes on.
+                Err(error) => tracing::warn!(id = self.id, round = number, %error, "could not keep a round image on disk"),
+            }
+        }
+        self.state.jobs.keep_round(self.id, crate::queue::KeptRound { format: rendered.format, bytes });
         let round = Round {
             round: number,
             method: method.to_owned(),

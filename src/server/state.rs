@@ -237,8 +237,7 @@ impl AppState {
                 Ok(_) if stored.attempts >= MAX_ATTEMPTS => Some(abandoned(stored.attempts)),
                 Ok(job) => {
                     let admitted = self.queue.admit_waiting().await?;
-                    let reservation =
-                        store.reserve_accepted(crate::output::max_result_bytes(job.output.width, job.output.height, job.output.format));
+                    let reservation = store.reserve_accepted(super::job_routes::promised_bytes(&job, self.engine.limits()));
                     self.spawn_submitted(stored.listed(), job, (admitted, Some(reservation)));
                     resumed += 1;
                     None

@@ -215,6 +215,14 @@ struct RoundsKept<'a> {
 impl Drop for RoundsKept<'_> {
     fn drop(&mut self) {
         self.state.jobs.drop_rounds(&self.id);
+        if let Some(store) = self.state.store.clone().filter(|s| !s.shared()) {
+            let id = self.id.clone();
+            tokio::task::spawn_blocking(move || {
+                if let Err(error) = store.call_blocking(|s| s.drop_rounds(&id)) {
+                    tracing::warn!(%id, %error, "could not remove a finished job's round images");
+                }
+            });
+        }
     }
 }
 

@@ -84,6 +84,13 @@ impl EmbeddedStore {
         let store = Self { dir: dir.to_owned(), db: RwLock::new(None), max_keys: DEFAULT_MAX_KEYS };
         store.with_db(|_| Ok(())).map_err(|e| anyhow::anyhow!("cannot open the job store {}: {e}", dir.display()))?;
         store.remove_orphan_images()?;
+        // Rounds of jobs that were running when the daemon stopped: those jobs start over.
+        match std::fs::remove_dir_all(store.dir.join("rounds")) {
+            Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+                anyhow::bail!("cannot clear the rounds of the last run under {}: {e}", dir.display())
+            }
+            _ => {}
+        }
         Ok(store)
     }
 
@@ -151,6 +158,11 @@ impl EmbeddedStore {
             *self.db.write().unwrap_or_else(|p| p.into_inner()) = None;
         }
         result
+    }
+
+    /// Where a progressive job's round images are kept while it runs (`put_round`).
+    fn rounds_dir(&self, id: &str) -> PathBuf {
+        self.dir.join("rounds").join(id)
     }
 
     fn image_path(&self, id: &str) -> PathBuf {
@@ -399,6 +411,37 @@ impl JobStore for EmbeddedStore {
 
     fn free_bytes(&self) -> Option<u64> {
         available_bytes(&self.dir)
+    }
+
+    /// A file each, not synced: a round is worth nothing after a crash (its job starts over).
+    fn put_round(&self, id: &str, round: usize, image: &[u8]) -> StoreResult<bool> {
+        if !safe_id(id) {
+            return Ok(false);
+        }
+        let dir = self.rounds_dir(id);
+        std::fs::create_dir_all(&dir).and_then(|()| std::fs::write(dir.join(round.to_string()), image)).map_err(io_error)?;
+        Ok(true)
+    }
+
+    fn round(&self, id: &str, round: usize) -> StoreResult<Option<Vec<u8>>> {
+        if !safe_id(id) {
+            return Ok(None);
+        }
+        match std::fs::read(self.rounds_dir(id).join(round.to_string())) {
+            Ok(bytes) => Ok(Some(bytes)),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
+            Err(e) => Err(io_error(e)),
+        }
+    }
+
+    fn drop_rounds(&self, id: &str) -> StoreResult<()> {
+        if !safe_id(id) {
+            return Ok(());
+        }
+        match std::fs::remove_dir_all(self.rounds_dir(id)) {
+            Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(io_error(e)),
+            _ => Ok(()),
+        }
     }
 
     fn make_room(&self, wanted: u64) -> StoreResult<usize> {

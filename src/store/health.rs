@@ -207,8 +207,8 @@ impl Store {
             return Ok(reservation);
         }
         Err(StoreError::Full(format!(
-            "the data directory has {free} bytes free: not enough for this result (up to {bytes} bytes), the {} bytes promised to \
-             accepted jobs and the {}-byte margin",
+            "the data directory has {free} bytes free: not enough for this job's images (up to {bytes} bytes: its result, and a \
+             progressive job's rounds), the {} bytes promised to accepted jobs and the {}-byte margin",
             total - bytes,
             health.min_free_bytes
         )))

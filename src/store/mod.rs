@@ -305,4 +305,18 @@ pub trait JobStore: Send + Sync {
     fn delete_upload(&self, _kind: Kind, _id: &str) -> StoreResult<bool> {
         Ok(false)
     }
+    /// Keeps a running progressive job's round image on the store's own disk, until
+    /// `drop_rounds` (contract §5: the rounds count against the disk's promise). Ok(false): this
+    /// store has no disk of its own, and the caller keeps the image in memory.
+    fn put_round(&self, _id: &str, _round: usize, _image: &[u8]) -> StoreResult<bool> {
+        Ok(false)
+    }
+    /// A round image `put_round` kept.
+    fn round(&self, _id: &str, _round: usize) -> StoreResult<Option<Vec<u8>>> {
+        Ok(None)
+    }
+    /// Lets a job's round images go: it has ended.
+    fn drop_rounds(&self, _id: &str) -> StoreResult<()> {
+        Ok(())
+    }
 }
