@@ -1903,7 +1903,8 @@ fn the_model_is_measured_on_the_device_and_held_to_its_budgets() {
     assert!(error("hard") > error("reference:samples=64"));
 
     // `eval --budgets` holds it to its promises on one case: four time and four error budgets,
-    // every one answered (chosen and measured, or refused), the summary counting them, the plot.
+    // every one answered (chosen and measured twice, or refused), a progressive job's first
+    // image for four budgets, the summary counting them, the plot.
     let out = std::env::temp_dir().join(format!("penumbra-budgets-{}", std::process::id()));
     std::fs::create_dir_all(&out).unwrap();
     let model_file = out.join("model.json");
@@ -1922,11 +1923,17 @@ fn the_model_is_measured_on_the_device_and_held_to_its_budgets() {
         "--out",
         out.to_str().unwrap(),
         "--budgets",
+        "--repeat",
+        "2",
         "--model-file",
         model_file.to_str().unwrap(),
     ]);
     let report = penumbra::eval::budgets::run(&engine, &options, Some(&model_file)).unwrap();
     assert_eq!(report.rows.len(), 8);
+    // A progressive job's first image per time budget: a fast method, never the reference.
+    assert_eq!(report.first_images.len(), 4);
+    assert_eq!(report.first_images_kept.1, 4);
+    assert!(report.first_images.iter().all(|r| !r.choice.starts_with("reference") && r.measured_ms > 0.0), "{:?}", report.first_images);
     let answered = report.rows.iter().filter(|r| r.kept.is_some()).count();
     assert_eq!(report.time_kept.1 + report.error_kept.1, answered);
     assert!(report.rows.iter().all(|r| r.kept.is_some() || r.choice.starts_with("refused")));

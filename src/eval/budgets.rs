@@ -76,6 +76,65 @@ pub struct BudgetReport {
     pub rounds: Vec<RoundRow>,
     /// Progressive rounds whose estimate is within ±30 % of their measured error.
     pub rounds_estimated: (usize, usize),
+    pub first_images: Vec<FirstImageRow>,
+    /// Progressive jobs' first images that came within a tenth of `max_ms`.
+    pub first_images_kept: (usize, usize),
+}
+
+/// A progressive job's first image for one case and `max_ms`: the daemon's choice
+/// (`Model::first_image`) and its time against a tenth of the budget.
+#[derive(Debug, Clone, Serialize)]
+pub struct FirstImageRow {
+    pub scene: String,
+    pub light: String,
+    pub size: String,
+    pub max_ms: f64,
+    pub choice: String,
+    pub predicted_ms: f64,
+    /// The median of `--repeat` renders.
+    pub measured_ms: f64,
+    /// Whether every render came within `max_ms / 10`.
+    pub kept: bool,
+}
+
+/// What measuring a case's choices shares: each candidate rendered once untimed per light
+/// (`warm`), then timed `repeat` times, its error against the truth, kept per case so that a
+/// candidate chosen twice is rendered once.
+struct Measuring<'a> {
+    engine: &'a Engine,
+    job: &'a crate::job::Job,
+    reference: &'a crate::render::FrameOutput,
+    case: &'a str,
+    light: &'a str,
+    repeat: u32,
+    warm: &'a mut Vec<(String, String)>,
+    measured: Vec<(String, f64, f64, f64)>,
+}
+
+/// A candidate's time on the case — the median of `repeat` renders, and the slowest (every
+/// render must keep a budget) — and its penumbra error.
+fn measure_choice(m: &mut Measuring<'_>, candidate: &crate::model::Candidate) -> anyhow::Result<(f64, f64, f64)> {
+    if let Some(&(_, ms, slowest, error)) = m.measured.iter().find(|(l, ..)| *l == candidate.label) {
+        return Ok((ms, slowest, error));
+    }
+    let case = m.case;
+    eprintln!("{case}: {}", candidate.label);
+    let chosen = crate::job::Job { method: candidate.method_for(m.job), compare: true, ..m.job.clone() };
+    let warm_key = (candidate.label.clone(), m.light.to_owned());
+    if !m.warm.contains(&warm_key) {
+        m.engine.render_frame(&chosen, &()).map_err(|e| anyhow::anyhow!("{case}: {e}"))?;
+        m.warm.push(warm_key);
+    }
+    let (mut times, mut error) = (Vec::new(), 0.0);
+    for _ in 0..m.repeat {
+        let (frame, ms) = measure::timed_render(m.engine, &chosen).map_err(|e| anyhow::anyhow!("{case}: {e}"))?;
+        error = crate::quality::compare(&frame, m.reference, 0.0).visibility.penumbra.mae;
+        times.push(ms);
+    }
+    times.sort_by(f64::total_cmp);
+    let (median, slowest) = (times[times.len() / 2], times[times.len() - 1]);
+    m.measured.push((candidate.label.clone(), median, slowest, error));
+    Ok((median, slowest, error))
 }
 
 /// Runs the budgets over `options`' scenes, lights and sizes (at its first map resolution) and
@@ -96,7 +155,7 @@ pub fn run(engine: &Engine, options: &EvalOptions, model_file: Option<&std::path
     let truth = Suite::standard();
     let sizes: Vec<(u32, u32)> = options.sizes.iter().map(|s| parse_size(s)).collect::<anyhow::Result<_>>()?;
     let shadow_map = options.shadow_map.first().copied().unwrap_or(1024);
-    let (mut rows, mut rendered, mut rounds) = (Vec::new(), Vec::<BudgetRow>::new(), Vec::new());
+    let (mut rows, mut rendered, mut rounds, mut firsts) = (Vec::new(), Vec::<BudgetRow>::new(), Vec::new(), Vec::new());
     // A daemon answers warm: each method's pipelines under each light are compiled by a first
     // render that is not timed.
     engine.warm_up().context("warm-up")?;
@@ -114,7 +173,16 @@ pub fn run(engine: &Engine, options: &EvalOptions, model_file: Option<&std::path
                     .iter()
                     .map(|f| AutoBudget { max_ms: Some(cheapest * MARGIN * f), max_error: None })
                     .chain(ERRORS.iter().map(|&e| AutoBudget { max_ms: None, max_error: Some(e) }));
-                let mut measured: Vec<(String, f64, f64, f64)> = Vec::new();
+                let mut measuring = Measuring {
+                    engine,
+                    job: &job,
+                    reference: &reference,
+                    case: &case,
+                    light,
+                    repeat: options.repeat,
+                    warm: &mut warm,
+                    measured: Vec::new(),
+                };
                 for budget in budgets {
                     let label = match (budget.max_ms, budget.max_error) {
                         (Some(ms), _) => format!("max_ms={ms:.0}"),
@@ -139,31 +207,7 @@ pub fn run(engine: &Engine, options: &EvalOptions, model_file: Option<&std::path
                             (row.predicted_ms, row.predicted_error) = (unmet.prediction.ms, unmet.prediction.error);
                         }
                         Ok((candidate, prediction)) => {
-                            let (ms, slowest, error) = match measured.iter().find(|(l, ..)| *l == candidate.label) {
-                                Some(&(_, ms, slowest, error)) => (ms, slowest, error),
-                                None => {
-                                    eprintln!("{case}: {}", candidate.label);
-                                    let chosen = crate::job::Job { method: candidate.method_for(&job), compare: true, ..job.clone() };
-                                    if !warm.contains(&(candidate.label.clone(), light.clone())) {
-                                        engine.render_frame(&chosen, &()).map_err(|e| anyhow::anyhow!("{case}: {e}"))?;
-                                        warm.push((candidate.label.clone(), light.clone()));
-                                    }
-                                    // `--repeat` renders: the median is the prediction's measure, the
-                                    // slowest the budget's (every render must keep it).
-                                    let mut times = Vec::new();
-                                    let mut error = 0.0;
-                                    for _ in 0..options.repeat {
-                                        let (frame, ms) =
-                                            measure::timed_render(engine, &chosen).map_err(|e| anyhow::anyhow!("{case}: {e}"))?;
-                                        error = crate::quality::compare(&frame, &reference, 0.0).visibility.penumbra.mae;
-                                        times.push(ms);
-                                    }
-                                    times.sort_by(f64::total_cmp);
-                                    let (median, slowest) = (times[times.len() / 2], times[times.len() - 1]);
-                                    measured.push((candidate.label.clone(), median, slowest, error));
-                                    (median, slowest, error)
-                                }
-                            };
+                            let (ms, slowest, error) = measure_choice(&mut measuring, &candidate)?;
                             row.choice = candidate.label.clone();
                             (row.predicted_ms, row.predicted_error) = (prediction.ms, prediction.error);
                             (row.measured_ms, row.measured_error) = (Some(ms), Some(error));
@@ -179,6 +223,24 @@ pub fn run(engine: &Engine, options: &EvalOptions, model_file: Option<&std::path
                     }
                     rows.push(row);
                 }
+                // A progressive job's first image, for time budgets ten times auto's: the
+                // daemon's choice, held to a tenth of the budget.
+                for factor in TIME_FACTORS {
+                    let max_ms = 10.0 * cheapest * MARGIN * factor;
+                    let Some((candidate, prediction)) = model.first_image(Some(max_ms), &features, |_| true) else { continue };
+                    let (ms, slowest, _) = measure_choice(&mut measuring, &candidate)?;
+                    firsts.push(FirstImageRow {
+                        scene: scene.label.clone(),
+                        light: light.clone(),
+                        size: format!("{}×{}", size.0, size.1),
+                        max_ms,
+                        choice: candidate.label.clone(),
+                        predicted_ms: prediction.ms,
+                        measured_ms: ms,
+                        kept: slowest <= max_ms / 10.0,
+                    });
+                }
+                drop(measuring);
                 eprintln!("{case}: progressive rounds");
                 for (samples, estimated, measured) in
                     progressive_rounds(engine, &job, &reference).map_err(|e| anyhow::anyhow!("{case}: {e}"))?
@@ -203,6 +265,8 @@ pub fn run(engine: &Engine, options: &EvalOptions, model_file: Option<&std::path
         rows,
         rounds_estimated: share(&mut rounds.iter().map(|r| (r.estimated - r.measured).abs() <= ESTIMATE_WITHIN * r.measured)),
         rounds,
+        first_images_kept: share(&mut firsts.iter().map(|r| r.kept)),
+        first_images: firsts,
     };
     std::fs::write(options.out.join("budgets.json"), serde_json::to_vec_pretty(&report)?)?;
     super::plots::plot_budgets(&options.out, &rendered, &report.rounds)?;
@@ -255,7 +319,8 @@ pub fn table(report: &BudgetReport) -> String {
         "# auto's budgets, measured\n\nModel: {}.\n\n| what | measured | goal |\n|---|---:|---:|\n\
          | time budgets kept | {} | ≥ 90 % |\n| error budgets kept | {} | ≥ 90 % |\n\
          | time predicted within ±25 % | {} | ≥ 80 % |\n| error predicted within ±25 % | {} | ≥ 80 % |\n\
-         | progressive rounds' error estimated within ±30 % | {} | ≥ 80 % |\n\n\
+         | progressive rounds' error estimated within ±30 % | {} | ≥ 80 % |\n\
+         | progressive first images within a tenth of max_ms | {} | ≥ 90 % |\n\n\
          | scene | light | size | budget | choice | predicted ms | measured ms | predicted error | measured error | kept |\n\
          |---|---|---|---|---|---:|---:|---:|---:|---|\n",
         report.model,
@@ -263,7 +328,8 @@ pub fn table(report: &BudgetReport) -> String {
         percent(report.error_kept),
         percent(report.time_predicted),
         percent(report.error_predicted),
-        percent(report.rounds_estimated)
+        percent(report.rounds_estimated),
+        percent(report.first_images_kept)
     );
     let or_dash = |v: Option<f64>, digits: usize| v.map_or("-".to_owned(), |v| format!("{v:.digits$}"));
     for r in &report.rows {
@@ -299,6 +365,24 @@ pub fn table(report: &BudgetReport) -> String {
             format!("{:.4}", r.estimated),
             format!("{:.4}", r.measured),
             format!("{:.2}", r.estimated / r.measured),
+        ]));
+    }
+    out.push_str(
+        "\n## Progressive first images\n\nA progressive job's first image for `max_ms` ten times each of auto's time \
+         budgets: the method the daemon picks for a tenth of it, and its time (the median of `--repeat` renders; kept when \
+         every render came within the tenth).\n\n\
+         | scene | light | size | max_ms | first image | predicted ms | measured ms | within a tenth |\n|---|---|---|---:|---|---:|---:|---|\n",
+    );
+    for r in &report.first_images {
+        out.push_str(&row(&[
+            r.scene.clone(),
+            r.light.clone(),
+            r.size.clone(),
+            format!("{:.0}", r.max_ms),
+            r.choice.clone(),
+            format!("{:.0}", r.predicted_ms),
+            format!("{:.0}", r.measured_ms),
+            if r.kept { "yes" } else { "**no**" }.to_owned(),
         ]));
     }
     out

@@ -16,6 +16,10 @@ use crate::job::{AssetRef, Job, MethodSpec};
 /// what an `auto` job is chosen by until this device's own is measured.
 const SHIPPED: &str = include_str!("default.json");
 
+/// The model's label of the reference candidate a progressive job's first round is predicted
+/// by.
+const FIRST_ROUND_CANDIDATE: &str = "reference:samples=16";
+
 /// What a choice's predictions must fit inside: a prediction × this ≤ the budget. The time
 /// and error of a job vary about the model's fit (noisy machines, scenes unlike the suite's),
 /// and a budget asked for is a promise: choosing on the bare prediction would miss about
@@ -277,6 +281,31 @@ impl Model {
         let mut model: Model = serde_json::from_str(SHIPPED).expect("the shipped model parses (tested)");
         model.source = "default".into();
         model
+    }
+
+    /// The first reference round's predicted time (`reference:samples=16`), where the model
+    /// has it.
+    pub fn first_round_ms(&self, features: &Features) -> Option<f64> {
+        self.candidates.iter().find(|c| c.label == FIRST_ROUND_CANDIDATE).map(|c| c.ms(features))
+    }
+
+    /// A progressive job's first image (contract §5): among the candidates other than the
+    /// reference that `allowed` keeps, the most faithful predicted to take a tenth of `max_ms`
+    /// (without `max_ms`: the first reference round's predicted time), else the cheapest.
+    /// `None` where the model has no such candidate.
+    pub fn first_image(
+        &self,
+        max_ms: Option<f64>,
+        features: &Features,
+        allowed: impl Fn(&Candidate) -> bool,
+    ) -> Option<(Candidate, Prediction)> {
+        let budget = AutoBudget { max_ms: max_ms.map(|ms| ms / 10.0).or(self.first_round_ms(features)), max_error: None };
+        let fast = |c: &Candidate| c.method.name != "reference" && allowed(c);
+        if let Ok(chosen) = self.choose_among(&budget, features, fast) {
+            return Some(chosen);
+        }
+        let cheapest = self.predictions(features).into_iter().filter(|(c, _)| fast(c)).min_by(|a, b| a.1.ms.total_cmp(&b.1.ms));
+        cheapest.map(|(c, p)| (c.clone(), p))
     }
 
     /// Every candidate's prediction for a job with these features, in the model's order.

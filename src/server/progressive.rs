@@ -12,14 +12,10 @@ use std::time::Instant;
 use tokio::sync::{watch, OwnedSemaphorePermit};
 
 use super::*;
-use crate::job::auto::AutoBudget;
 use crate::job::progressive::{round_method, round_samples, Progressive, ProgressiveOutcome, Round, Stopped, FIRST_ROUND_SAMPLES};
 use crate::model::Features;
 use crate::render::method::ERROR_ESTIMATE;
 use crate::supervise::{Rounds, WithRounds};
-
-/// The model's label of the reference candidate a first round is predicted by.
-const FIRST_ROUND_CANDIDATE: &str = "reference:samples=16";
 
 /// Renders a progressive job, `device` its first slot: every round published as it comes,
 /// the last returned with the rounds' story (`ProgressiveOutcome`).
@@ -37,21 +33,10 @@ pub(super) async fn render_rounds(
     let job = Job { progressive: None, ..job };
     let model = state.model.get();
     let features = Features::of(&job, state.engine.scene_triangles(&job.scene));
-    let first_round_ms = model.candidates.iter().find(|c| c.label == FIRST_ROUND_CANDIDATE).map(|c| c.ms(&features));
-
-    // The first image: the most faithful method other than the reference predicted to take
-    // a tenth of the time asked for (without a time, of the first reference round's), else
-    // the cheapest.
-    let first_budget = AutoBudget { max_ms: spec.max_ms.map(|ms| ms / 10.0).or(first_round_ms), max_error: None };
-    let fast = |c: &crate::model::Candidate| c.method.name != "reference" && state.allows(c, &job);
-    let (candidate, prediction) = match model.choose_among(&first_budget, &features, fast) {
-        Ok(chosen) => chosen,
-        Err(_) => {
-            let cheapest = model.predictions(&features).into_iter().filter(|(c, _)| fast(c)).min_by(|a, b| a.1.ms.total_cmp(&b.1.ms));
-            let (c, p) = cheapest.ok_or_else(|| JobError::internal("the device's model has no method for a first image"))?;
-            (c.clone(), p)
-        }
-    };
+    let first_round_ms = model.first_round_ms(&features);
+    let (candidate, prediction) = model
+        .first_image(spec.max_ms, &features, |c| state.allows(c, &job))
+        .ok_or_else(|| JobError::internal("the device's model has no method for a first image"))?;
     let first_job = Job { method: candidate.method_for(&job), ..job.clone() };
     let mut published = Published { state, id, events, started, rounds: Vec::new() };
     let mut last = render_round(state, id, first_job.clone(), None, events, cancel.clone()).await?;
