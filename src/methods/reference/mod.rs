@@ -179,9 +179,22 @@ fn record_on_cpu(ctx: &mut MethodContext<'_>, params: &Params, plan: &SamplePlan
             spent.add(half_spent);
         }
         let written = std::time::Instant::now();
-        let mut visibility = vec![0u8; width as usize * band.rows.len() * 16];
-        penumbra.merge(cpu::write_visibility(&receivers, [&sums[0], &sums[1]], (channels, effective), width, &mut visibility));
-        ctx.gpu.queue.write_buffer(ctx.visibility, u64::from(band.rows.start) * u64::from(width) * 16, &visibility);
+        // A few rows at a time: the band's visibility is never held whole beside the device's
+        // copy of it.
+        let mut visibility = Vec::new();
+        for first in band.rows.clone().step_by(VISIBILITY_ROWS as usize) {
+            let rows = VISIBILITY_ROWS.min(band.rows.end - first);
+            visibility.resize(width as usize * rows as usize * 16, 0);
+            let relative = first - band.rows.start;
+            penumbra.merge(cpu::write_visibility(
+                &receivers,
+                [&sums[0], &sums[1]],
+                (channels, effective),
+                (width, relative),
+                &mut visibility,
+            ));
+            ctx.gpu.queue.write_buffer(ctx.visibility, u64::from(first) * u64::from(width) * 16, &visibility);
+        }
         write_ms += written.elapsed().as_secs_f64() * 1e3;
         segments += receivers.segments;
         if supervisor.cancelled() {
@@ -250,9 +263,12 @@ impl<'a> Progress<'a> {
 }
 
 /// What the CPU engine holds a pixel at most, in bytes: its receiver (40) and listing (4),
-/// its two halves' sums (48), and its visibility as written and as queued for the device
-/// (16 + 16) — the G-buffer's copy (24) is let go before the sums are made.
-const CPU_BYTES_PER_PIXEL: u64 = 124;
+/// its two halves' sums (48), and its visibility as queued for the device (16; written
+/// `VISIBILITY_ROWS` at a time) — the G-buffer's copy (24) is let go before the sums are made.
+const CPU_BYTES_PER_PIXEL: u64 = 108;
+
+/// Rows of visibility written to the device at a time.
+const VISIBILITY_ROWS: u32 = 64;
 
 #[cfg(test)]
 mod tests;

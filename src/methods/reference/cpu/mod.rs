@@ -295,13 +295,14 @@ pub(super) fn estimate_into<const BLOCKERS: bool>(
 /// Writes every pixel's visibility into `out`, a `vec4<f32>` of bytes each (rgb; w the error
 /// estimate), rows of `width` pixels: the ratio of its receiver's sums per channel, both halves
 /// together (`ratio` in `accumulate.wgsl`), and half the halves' difference (`Texel::error`);
-/// 1 (and 0) where no receiver is. Row by row on every core. Returns the estimate's mean over
-/// the penumbra, `samples` the samples' effective count.
+/// 1 (and 0) where no receiver is; `out` holds the rows from `first_row` on. Row by row on
+/// every core. Returns the estimate's mean over the penumbra, `samples` the samples' effective
+/// count.
 pub(super) fn write_visibility(
     receivers: &Receivers,
     halves: [&[SumBlock]; 2],
     (channels, samples): (usize, f32),
-    width: u32,
+    (width, first_row): (u32, u32),
     out: &mut [u8],
 ) -> PenumbraMean {
     let texel = |k: usize| {
@@ -317,12 +318,13 @@ pub(super) fn write_visibility(
     out.par_chunks_mut(row_bytes)
         .enumerate()
         .map(|(y, row)| {
+            let y = first_row + y as u32;
             for texel in row.chunks_exact_mut(16) {
                 texel.copy_from_slice(bytemuck::bytes_of(&[1.0f32, 1.0, 1.0, 0.0]));
             }
             // The receivers are listed row by row: this row's lie between these two.
-            let first = receivers.pixels.partition_point(|&p| p < y as u32 * width);
-            let end = receivers.pixels.partition_point(|&p| p < (y as u32 + 1) * width);
+            let first = receivers.pixels.partition_point(|&p| p < y * width);
+            let end = receivers.pixels.partition_point(|&p| p < (y + 1) * width);
             let mut penumbra = PenumbraMean::default();
             for k in first..end {
                 let x = (receivers.pixels[k] % width) as usize;

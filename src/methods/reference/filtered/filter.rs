@@ -151,13 +151,25 @@ pub(super) struct FilterInputs<'a> {
     pub camera: &'a Camera,
 }
 
-/// The visibility of the `written` rows (rgb, and w the estimated error), with what the filter
-/// did there.
+/// The filtered texels of the `written` rows, with what the filter did there.
 pub(super) struct FilterOutput {
-    pub visibility: Vec<[f32; 4]>,
+    pub texels: Vec<Texel>,
     pub pixels_filtered: usize,
     /// The estimated error over the penumbra.
     pub penumbra: PenumbraMean,
+}
+
+impl FilterOutput {
+    /// The visibility of texels `range` (rgb, and w the estimated error).
+    pub fn visibility(&self, range: Range<usize>) -> Vec<[f32; 4]> {
+        self.texels[range]
+            .par_iter()
+            .map(|t| {
+                let [r, g, b] = t.visibility();
+                [r, g, b, t.error()]
+            })
+            .collect()
+    }
 }
 
 /// The pixels to test against every sample: the surfaces in the tiles that vary, by their
@@ -196,7 +208,7 @@ pub(super) fn filter(
     let listed: Vec<usize> = (0..width * height).into_par_iter().filter(|&i| refined[i]).collect();
     let written = inputs.written.start as usize * width..inputs.written.end as usize * width;
     if inputs.scale <= 0.0 || listed.is_empty() {
-        return output(&texels[written], 0, inputs.samples_effective);
+        return output(texels, written, 0, inputs.samples_effective);
     }
     // A pixel's footprint in the world at its distance (the slant of its surface aside).
     let per_distance = 2.0 * (0.5 * inputs.camera.fov_y_deg.to_radians()).tan() / inputs.frame_height as f32;
@@ -309,23 +321,18 @@ pub(super) fn filter(
     for (&i, texel) in listed.iter().zip(both) {
         texels[i] = texel;
     }
-    output(&texels[written], pixels_filtered, inputs.samples_effective)
+    output(texels, written, pixels_filtered, inputs.samples_effective)
 }
 
-/// The visibility (w: the estimated error) and the estimate's mean over the penumbra.
-fn output(texels: &[Texel], pixels_filtered: usize, samples: f32) -> FilterOutput {
-    let visibility: Vec<[f32; 4]> = texels
-        .par_iter()
-        .map(|t| {
-            let [r, g, b] = t.visibility();
-            [r, g, b, t.error()]
-        })
-        .collect();
+/// The `written` texels (the rest let go), and the estimate's mean over their penumbra.
+fn output(mut texels: Vec<Texel>, written: Range<usize>, pixels_filtered: usize, samples: f32) -> FilterOutput {
+    texels.truncate(written.end);
+    texels.drain(..written.start);
     let mut penumbra = PenumbraMean::default();
-    for t in texels {
+    for t in &texels {
         penumbra.add(t, samples);
     }
-    FilterOutput { visibility, pixels_filtered, penumbra }
+    FilterOutput { texels, pixels_filtered, penumbra }
 }
 
 /// The frame in tiles of `TILE`², for the refinement's classes and the fallback σ.

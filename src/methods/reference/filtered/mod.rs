@@ -29,6 +29,7 @@ use super::gpu::SEGMENT;
 use super::samples::{half_of_index, SamplePlan};
 use super::{
     Counters, MethodContext, Param, ParamSpec, Params, Progress, ShadowMethod, BIAS_TEXELS, CROP, RESOLUTION, SEED, SLOPE_BIAS_TEXELS,
+    VISIBILITY_ROWS,
 };
 use crate::error::JobResult;
 use crate::params::Cap;
@@ -278,8 +279,13 @@ fn render_band(
         camera: &ctx.spec.camera,
     };
     let filtered = filter::filter(&inputs, &surfaces, texels, &blockers, &refined);
-    let offset = u64::from(band.rows.start) * u64::from(width) * 16;
-    ctx.gpu.queue.write_buffer(ctx.visibility, offset, bytemuck::cast_slice(&filtered.visibility));
+    // A few rows at a time: the band's visibility is never held whole beside the device's copy.
+    let row = width as usize;
+    for first in (0..filtered.texels.len()).step_by(row * VISIBILITY_ROWS as usize) {
+        let end = (first + row * VISIBILITY_ROWS as usize).min(filtered.texels.len());
+        let offset = (u64::from(band.rows.start) * u64::from(width) + first as u64) * 16;
+        ctx.gpu.queue.write_buffer(ctx.visibility, offset, bytemuck::cast_slice(&filtered.visibility(first..end)));
+    }
     done.filter_ms += filtering.elapsed().as_secs_f64() * 1e3;
     done.pixels_filtered += filtered.pixels_filtered;
     done.penumbra.merge(filtered.penumbra);
