@@ -217,11 +217,17 @@ impl Drop for RoundsKept<'_> {
         self.state.jobs.drop_rounds(&self.id);
         if let Some(store) = self.state.store.clone().filter(|s| !s.shared()) {
             let id = self.id.clone();
-            tokio::task::spawn_blocking(move || {
+            let remove = move || {
                 if let Err(error) = store.call_blocking(|s| s.drop_rounds(&id)) {
                     tracing::warn!(%id, %error, "could not remove a finished job's round images");
                 }
-            });
+            };
+            // Off the runtime's threads where there is one (a task dropped as the runtime
+            // shuts down has none: the next start clears the rounds anyway).
+            match tokio::runtime::Handle::try_current() {
+                Ok(runtime) => drop(runtime.spawn_blocking(remove)),
+                Err(_) => remove(),
+            }
         }
     }
 }
