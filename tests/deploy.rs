@@ -925,17 +925,24 @@ impl Drop for Tmpfs {
     }
 }
 
+/// A daemon whose embedded store is on a tmpfs of `size`, keeping 1 MiB of it free: the disk,
+/// the daemon and its base URL, once ready. Bound in this order (`let (disk, _daemon, base)`),
+/// the daemon stops before the disk is unmounted.
+fn daemon_on_small_disk(size: &str) -> (Tmpfs, Child, String) {
+    let disk = Tmpfs::mount(size);
+    let port = free_port();
+    let daemon = daemon(port, &["--no-warm-up", "--data-dir", disk.0.to_str().unwrap(), "--min-free-bytes", "1048576"]);
+    wait_ready(port);
+    (disk, daemon, format!("http://127.0.0.1:{port}"))
+}
+
 /// The embedded store's data directory on a small disk. Admission refuses jobs (507
 /// `insufficient_storage`) before the disk is full, and every job it accepted succeeds. Then
 /// another tenant fills the disk while a job renders: the job is not failed, readiness and
 /// admission say why, and once the space is freed the daemon serves again — no restart.
 #[test]
 fn a_full_data_disk_refuses_new_jobs_loses_none_and_recovers_without_a_restart() {
-    let disk = Tmpfs::mount("6m");
-    let port = free_port();
-    let base = format!("http://127.0.0.1:{port}");
-    let _daemon = daemon(port, &["--no-warm-up", "--data-dir", disk.0.to_str().unwrap(), "--min-free-bytes", "1048576"]);
-    wait_ready(port);
+    let (disk, _daemon, base) = daemon_on_small_disk("6m");
     let small = r#"{"scene": {"builtin": "torus"}, "output": {"width": 256, "height": 192}}"#;
     // Slow enough (several seconds alone, far more beside the other suites) that it cannot
     // finish before the disk is full again, whatever the machine's load: 4.4 s alone on the
@@ -1064,11 +1071,7 @@ fn the_embedded_store_reopens_by_itself_after_its_disk_was_full() {
 /// as a file, served while the job runs and removed when it ends.
 #[test]
 fn progressive_rounds_take_room_on_the_data_disk_only_while_the_job_runs() {
-    let disk = Tmpfs::mount("10m");
-    let port = free_port();
-    let base = format!("http://127.0.0.1:{port}");
-    let _daemon = daemon(port, &["--no-warm-up", "--data-dir", disk.0.to_str().unwrap(), "--min-free-bytes", "1048576"]);
-    wait_ready(port);
+    let (disk, _daemon, base) = daemon_on_small_disk("10m");
     let submit = |job: &str| {
         let (status, body) = http("POST", &format!("{base}/v1/jobs"), Some(job)).unwrap();
         (status, json(&body))
