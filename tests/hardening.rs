@@ -185,7 +185,8 @@ print("generated client:", accepted.id, len(image.content), "bytes")
 /// Load, bounded: `deploy/load.py` drives the real daemon on loopback with 16
 /// clients mixing methods, sizes, uploads and async jobs; every answer is 200/201/202 or the
 /// documented 429, the daemon exits cleanly, and its resident memory does not climb once
-/// warm (the upload cache is kept small, so it is full early). The report and plot are kept in
+/// warm (the upload cache is kept small, so it is full early; warm is 10 s and 150 renders,
+/// whichever comes later, for a machine this suite's other tests keep busy). The report and plot are kept in
 /// `target/test-artifacts/load/` (figures for notes come from the 5-minute form; no timing is
 /// asserted).
 #[test]
