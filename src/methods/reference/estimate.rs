@@ -107,8 +107,10 @@ impl PenumbraMean {
             return;
         }
         // The chance of a pixel seen partly shadowed, at least that of one sample's worth of
-        // shadow (v = 1/n): a v̂ nearer 0 or 1 comes of a light sample of little weight.
-        let n = samples.max(1.0);
+        // shadow (v = 1/n): a v̂ nearer 0 or 1 comes of a light sample of little weight. Fewer
+        // than two samples' worth (a light whose few samples weigh very unequally) counts as
+        // two: a pixel seen partly shadowed then stands for at most two.
+        let n = samples.max(2.0);
         let v = gray.clamp(1.0 / n, 1.0 - 1.0 / n);
         let seen = (1.0 - v.powf(n) - (1.0 - v).powf(n)).max(f32::EPSILON);
         self.error_sum += f64::from(texel.error());
@@ -172,6 +174,12 @@ mod tests {
         two.add(&texel(0.5, 0.25), 2.0);
         assert!((two.pixels() - 2.0).abs() < 1e-5, "{two:?}");
         assert!((two.mean() - 0.125).abs() < 1e-5, "{two:?}");
+        // Less than two samples' worth (unequal weights): as two, never a degenerate clamp.
+        for samples in [0.0, 1.0, 1.5, 1.98] {
+            let mut few = PenumbraMean::default();
+            few.add(&texel(0.3, 0.1), samples);
+            assert!((few.pixels() - 2.0).abs() < 1e-5, "{samples}: {few:?}");
+        }
         // Pixels out of the penumbra count nothing.
         let mut none = PenumbraMean::default();
         none.add(&texel(1.0, 0.0), 16.0);
