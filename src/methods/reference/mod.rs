@@ -149,7 +149,7 @@ fn record_on_cpu(ctx: &mut MethodContext<'_>, params: &Params, plan: &SamplePlan
     let new_samples = (samples.len() - carried_samples) as u64;
     let mut progress = Progress::new(supervisor, new_samples * bands.len() as u64);
     let (mut read_ms, mut write_ms, mut spent, mut segments) = (0.0, 0.0, cpu::Spent::default(), 0);
-    let effective = estimate::effective_samples(samples.iter().map(|s| s.weight));
+    let effective = plan.effective_samples();
     let mut penumbra = estimate::PenumbraMean::default();
     for (b, band) in bands.iter().enumerate() {
         let started = std::time::Instant::now();

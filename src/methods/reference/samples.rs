@@ -248,6 +248,11 @@ impl SamplePlan {
         Self { samples, indices, strata, resolution, rotation, near, plane, frusta, crop, channels }
     }
 
+    /// The samples' effective count (`estimate::effective_samples`).
+    pub(super) fn effective_samples(&self) -> f32 {
+        super::estimate::effective_samples(self.samples.iter().map(|s| s.weight))
+    }
+
     /// Keeps the first `count` samples (of `strata` points drawn), with the near plane and
     /// crop planned for all of them.
     fn keep_first(&mut self, count: usize, strata: u32) {

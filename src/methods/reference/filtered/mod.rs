@@ -24,7 +24,7 @@ mod filter;
 
 use super::bands::{self, Band};
 use super::cpu::{self, BlockerBlock, CpuSample, Receivers, SumBlock};
-use super::estimate::{self, PenumbraMean, Texel};
+use super::estimate::{PenumbraMean, Texel};
 use super::gpu::SEGMENT;
 use super::samples::{half_of_index, SamplePlan};
 use super::{
@@ -102,9 +102,7 @@ impl ShadowMethod for Filtered {
         let constants = plan.test_constants(params, spec.light.center);
         // The samples by round (the probes, the rest) and half (the sequence's two).
         let mut rounds: [[Vec<CpuSample>; 2]; 2] = Default::default();
-        let samples = plan.cpu_samples();
-        let samples_effective = estimate::effective_samples(samples.iter().map(|s| s.weight));
-        for (sample, &index) in samples.into_iter().zip(&plan.indices) {
+        for (sample, &index) in plan.cpu_samples().into_iter().zip(&plan.indices) {
             rounds[usize::from(index >= probes)][usize::from(half_of_index(index))].push(sample);
         }
         let [probe_samples, other_samples] = rounds;
@@ -118,7 +116,7 @@ impl ShadowMethod for Filtered {
                 light_extent: spec.light.size_m.x.max(1e-6).sqrt() * spec.light.size_m.y.max(1e-6).sqrt(),
                 samples_across: (strata as f32).sqrt(),
                 scale: if params.get(&FILTER) { params.get(&FILTER_SCALE) } else { 0.0 },
-                samples_effective,
+                samples_effective: plan.effective_samples(),
             },
         };
         let mut done = Done { read_ms: started.elapsed().as_secs_f64() * 1e3, ..Done::default() };
