@@ -273,7 +273,7 @@ fn render(job: Option<&Path>, output: &Path, timings_json: Option<&Path>, option
     // `auto` here is chosen by the shipped model: a daemon measures its own device's.
     if let Some(budget) = penumbra::job::auto::AutoBudget::of(&job.method)? {
         let model = penumbra::model::Model::shipped();
-        let features = penumbra::model::Features::of(&job, engine.scene_triangles(&job.scene));
+        let features = penumbra::model::Features::of(&job, engine.scene_shape(&job.scene).as_ref());
         let (candidate, predicted) =
             model.choose(&budget, &features).map_err(|unmet| anyhow::anyhow!("{}: {}", unmet.field, unmet.message))?;
         eprintln!(

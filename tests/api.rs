@@ -1797,6 +1797,11 @@ async fn auto_chooses_by_the_model_and_estimates_render_nothing() {
     assert_eq!(plain["job"]["label"], "wedges", "{plain}");
     assert_eq!(plain["features"]["triangles_known"], true);
     assert_eq!(plain["features"]["pixels"], 96 * 64);
+    // The torus fills its view: whole maps. A view of a few columns on a wide floor: cropped.
+    assert_eq!(plain["features"]["map_share"], 1.0, "{plain}");
+    let (_, columns) = estimate(json!({"scene": {"builtin": "columns"}, "method": {"name": "wedges"}})).await;
+    let share = columns["features"]["map_share"].as_f64().unwrap();
+    assert!(share > 0.0 && share <= 0.25, "{columns}");
     let wedges_ms = plain["job"]["predicted"]["ms"].as_f64().unwrap();
     assert!(wedges_ms > 0.0);
     // Nothing was rendered for it.

@@ -762,6 +762,36 @@ fn reference_is_gray_under_white_and_colored_where_the_model_says() {
 }
 
 #[test]
+fn the_maps_crop_is_predicted_before_rendering() {
+    // What the model's cost reads (`Features::map_share`), from the scene's shape alone, against
+    // the crop the reference's plan draws: a view that fills with the scene draws whole maps,
+    // a view of a part of it a crop. The prediction takes the light's whole rectangle as
+    // emitting, so it is never tighter than the plan's and, under a light emitting where the
+    // samples fall, as tight.
+    let engine = common::engine();
+    let top_down = json!({"eye": [0, 12, 0.0], "target": [0, 0, 0], "up": [0, 0, -1], "fov_y_deg": 24, "near": 5, "far": 20});
+    for (scene, camera, light, cropped) in [
+        ("torus", json!({}), "white", false),
+        ("columns", json!({}), "white", true),
+        ("columns", json!({}), "flame", true),
+        ("crowd", top_down, "stripes", true),
+    ] {
+        let job = job(json!({
+            "scene": {"builtin": scene},
+            "camera": camera,
+            "light": {"image": {"builtin": light}},
+            "method": {"name": "reference", "samples": 16, "resolution": 1024},
+            "output": {"width": 160, "height": 120}
+        }));
+        let predicted = penumbra::model::Features::of(&job, engine.scene_shape(&job.scene).as_ref()).map_share;
+        let drawn = engine.render_frame(&job, &()).unwrap().0.counters["map_crop_fraction"];
+        eprintln!("{scene} / {light}: map share predicted {predicted:.4}, drawn {drawn:.4}");
+        assert_eq!(drawn < 1.0, cropped, "{scene}: {drawn}");
+        assert!(predicted >= drawn && predicted <= drawn * 1.5, "{scene} / {light}: predicted {predicted}, drawn {drawn}");
+    }
+}
+
+#[test]
 fn reference_maps_cropped_to_the_receivers_see_what_whole_maps_see() {
     // Seen from above, only the middle of `crowd` is in view: each sample's map is drawn only
     // where those receivers fall in it.
@@ -1880,6 +1910,7 @@ fn the_model_is_measured_on_the_device_and_held_to_its_budgets() {
     let at = |pixels, light: &str| Features {
         pixels,
         texels: 256 * 256,
+        map_share: 1.0,
         triangles: 1_000,
         triangles_known: true,
         light: light.into(),

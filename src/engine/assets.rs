@@ -11,7 +11,11 @@ use crate::error::{ErrorCode, JobError, JobResult};
 use crate::gpu::scene::GpuScene;
 use crate::job::{AssetRef, SceneRef};
 use crate::light::LightImage;
-use crate::scene::{self, builtin};
+use crate::scene::{self, builtin, Shape};
+
+/// The triangles a terrain is built with for its shape alone (`Engine::scene_shape`): its
+/// bounds are those of the same landscape at any count, to within its grid's step.
+const COARSE_TERRAIN_TRIANGLES: u64 = 20_000;
 use crate::timing::Timings;
 use crate::upload_store::{Asset, Kind};
 
@@ -96,33 +100,37 @@ impl Engine {
         Ok(image)
     }
 
-    /// The triangles of a job's scene where they can be counted without loading a file or
-    /// waiting for the renderer: a built-in's (built once, then remembered) or an upload's;
-    /// `None` for a path (what `auto` and estimates then assume: `model::UNKNOWN_TRIANGLES`).
-    pub fn scene_triangles(&self, scene: &SceneRef) -> Option<u64> {
-        let floor = if scene.floor.is_some() { 2 } else { 0 };
+    /// What a job's predictions need of its scene (its triangles, where it lies, its default
+    /// view: `scene::Shape`) where that is known without loading a file or waiting for the
+    /// renderer: a built-in's (built once, then remembered) or an upload's; `None` for a path
+    /// (what `auto` and estimates then assume: `model::UNKNOWN_TRIANGLES`, whole maps).
+    pub fn scene_shape(&self, scene: &SceneRef) -> Option<Shape> {
+        let floor = scene.floor.as_ref();
         match &scene.asset {
             AssetRef::Builtin { name, params } => {
                 let key = self.asset_key(&scene.asset, Kind::Scene, "scene").ok()?;
-                let mut counted = self.builtin_triangles.lock().unwrap_or_else(|p| p.into_inner());
-                if let Some(&n) = counted.get(&key) {
-                    return Some(n + floor);
+                let mut known = self.builtin_shapes.lock().unwrap_or_else(|p| p.into_inner());
+                if let Some(shape) = known.get(&key) {
+                    return Some(shape.clone().on(floor));
                 }
-                // A terrain's count is its parameter (a fuzzer's ten million need not be built
-                // to be counted); the fixed scenes are cheap to build once.
-                let n = match builtin::parse(name, params, "scene", &self.limits).ok()? {
-                    builtin::Builtin::Terrain { triangles, .. } => triangles,
-                    _ => builtin::build(name, params, "scene", &self.limits).ok()?.triangle_count(),
+                // A terrain's count is its parameter, and its bounds barely depend on it: a
+                // fuzzer's ten million triangles are not built to be predicted.
+                let shape = match builtin::parse(name, params, "scene", &self.limits).ok()? {
+                    builtin::Builtin::Terrain { triangles, seed } => {
+                        let coarse = builtin::Builtin::Terrain { triangles: triangles.min(COARSE_TERRAIN_TRIANGLES), seed };
+                        Shape { triangles, ..builtin::build_parsed(coarse).shape(None) }
+                    }
+                    _ => builtin::build(name, params, "scene", &self.limits).ok()?.shape(None),
                 };
                 // A handful of built-in variants in practice; bounded all the same.
-                if counted.len() >= 256 {
-                    counted.clear();
+                if known.len() >= 256 {
+                    known.clear();
                 }
-                counted.insert(key, n);
-                Some(n + floor)
+                known.insert(key, shape.clone());
+                Some(shape.on(floor))
             }
             AssetRef::Id(id) => match self.uploaded(Kind::Scene, id, "scene.id").ok()? {
-                Asset::Scene(loaded) => Some(loaded.triangle_count() + floor),
+                Asset::Scene(loaded) => Some(loaded.shape(floor)),
                 Asset::Light(_) => None,
             },
             AssetRef::Path(_) => None,

@@ -105,8 +105,8 @@ pub struct Engine {
     references: Mutex<Lru<String, Arc<FrameOutput>>>,
     /// The renderer's pool budget (`with_pool_budget`), kept for a renderer made anew.
     pool_bytes: u64,
-    /// Built-in scenes' triangles by asset key, counted for estimates (`scene_triangles`).
-    builtin_triangles: Mutex<std::collections::HashMap<String, u64>>,
+    /// Built-in scenes' shapes by asset key, for estimates (`scene_shape`).
+    builtin_shapes: Mutex<std::collections::HashMap<String, crate::scene::Shape>>,
 }
 
 impl Engine {
@@ -152,7 +152,7 @@ impl Engine {
             uploads: Mutex::new(UploadStore::new(DEFAULT_CACHE_BYTES)),
             last_stats: Mutex::new(EngineStats::default()),
             pool_bytes: crate::gpu::pool::DEFAULT_POOL_BYTES,
-            builtin_triangles: Mutex::default(),
+            builtin_shapes: Mutex::default(),
         }
     }
 

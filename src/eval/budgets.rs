@@ -167,7 +167,7 @@ pub fn run(engine: &Engine, options: &EvalOptions, model_file: Option<&std::path
                 let case = format!("{} / {light} / {}×{}", scene.label, size.0, size.1);
                 eprintln!("{case}: the truth");
                 let (reference, _) = engine.render_frame(&truth.truth_of(&job), &()).map_err(|e| anyhow::anyhow!("{case}: {e}"))?;
-                let features = Features::of(&job, engine.scene_triangles(&job.scene));
+                let features = Features::of(&job, engine.scene_shape(&job.scene).as_ref());
                 let cheapest = model.predictions(&features).iter().map(|(_, p)| p.ms).fold(f64::INFINITY, f64::min);
                 let budgets = TIME_FACTORS
                     .iter()

@@ -8,7 +8,8 @@ use wgpu::util::DeviceExt;
 use super::GpuContext;
 use crate::light::AreaLight;
 use crate::scene::adjacency::{Casting, EdgeMesh};
-use crate::scene::{DrawRange, OnFloor, Scene, SceneDefaults};
+pub use crate::scene::box_corners;
+use crate::scene::{DrawRange, Extent, OnFloor, Scene, SceneDefaults};
 
 /// A material's constant part as the G-buffer shader reads it.
 #[repr(C)]
@@ -149,35 +150,19 @@ impl GpuScene {
         &self.indices
     }
 
-    /// The eight corners of the scene's bounding box.
-    pub fn corners(&self) -> [Vec3; 8] {
-        box_corners(self.bounds_min, self.bounds_max)
+    /// Where the scene lies: its bounds and what stands on its floor.
+    pub fn extent(&self) -> Extent {
+        Extent { bounds_min: self.bounds_min, bounds_max: self.bounds_max, on_floor: self.on_floor }
     }
 
-    /// The points a shadow map's frustum from `light` must hold (`LightProjection::fit`): the
-    /// scene's bounds, or, on a floor added under the scene (contract §3), what stands on it
-    /// and the part of the floor it can shadow from some point of the light — the corners of
-    /// its bounds cast from the light's corners and centre onto the floor. The floor reaches
-    /// well past the scene; the rest of it is lit whichever way (every method takes a point
-    /// outside the frustum as lit), and framing it all would spread the map's texels thin.
-    /// A light not above everything on the floor gets the whole bounds.
+    /// The eight corners of the scene's bounding box.
+    pub fn corners(&self) -> [Vec3; 8] {
+        self.extent().corners()
+    }
+
+    /// `Extent::shadow_fit_points` of this scene.
     pub fn shadow_fit_points(&self, light: &AreaLight) -> Vec<Vec3> {
-        let Some(on_floor) = self.on_floor else { return self.corners().to_vec() };
-        let standing = box_corners(on_floor.bounds_min, on_floor.bounds_max);
-        let half = 0.5 * light.size_m;
-        let light_points = [(-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0), (0.0, 0.0)]
-            .map(|(s, t)| light.center + light.r * (s * half.x) + light.u * (t * half.y));
-        let mut points = standing.to_vec();
-        for from in light_points {
-            for corner in standing {
-                if from.y <= corner.y + 1e-6 * (1.0 + corner.y.abs()) {
-                    return self.corners().to_vec();
-                }
-                let cast = from + (corner - from) * ((from.y - on_floor.height) / (from.y - corner.y));
-                points.push(cast.clamp(self.bounds_min, self.bounds_max));
-            }
-        }
-        points
+        self.extent().shadow_fit_points(light)
     }
 }
 
@@ -230,13 +215,6 @@ fn material_bind_groups(gpu: &GpuContext, scene: &Scene, material_layout: &wgpu:
             (group, texture.is_some())
         })
         .unzip()
-}
-
-/// The eight corners of the box [a, b], corner k taking b's coordinate where bit 0 (x), 1 (y)
-/// or 2 (z) of k is set.
-pub fn box_corners(a: Vec3, b: Vec3) -> [Vec3; 8] {
-    [0, 1, 2, 3, 4, 5, 6, 7]
-        .map(|k| Vec3::new(if k & 1 == 0 { a.x } else { b.x }, if k & 2 == 0 { a.y } else { b.y }, if k & 4 == 0 { a.z } else { b.z }))
 }
 
 #[cfg(test)]

@@ -49,12 +49,14 @@ pub struct Suite {
 }
 
 impl Suite {
-    /// One occluder over a floor, many, and a self-shadowing landscape; white, stripes of three
-    /// colours, and a flame of 26 cells with dark gaps; 160×120 and 640×480; maps of 512² and
-    /// 1,024²; a 1,024-sample truth. About two minutes on two cores with lavapipe.
+    /// One occluder over a floor, many, a view of a few of many on a wide floor (whose sample
+    /// maps are cropped to a fifth: the maps' cost apart from the triangles'), and a
+    /// self-shadowing landscape; white, stripes of three colours, and a flame of 26 cells with
+    /// dark gaps; 160×120 and 640×480; maps of 512² and 1,024²; a 1,024-sample truth. About
+    /// three minutes on two cores with lavapipe.
     pub fn standard() -> Self {
         Self {
-            scenes: vec![("torus", "{}"), ("crowd", "{}"), ("terrain", r#"{"triangles": 30000}"#)],
+            scenes: vec![("torus", "{}"), ("crowd", "{}"), ("columns", "{}"), ("terrain", r#"{"triangles": 30000}"#)],
             lights: vec!["white", "stripes", "flame"],
             sizes: vec![(160, 120), (640, 480)],
             maps: vec![512, 1024],
@@ -149,8 +151,9 @@ pub fn measure(engine: &Engine, suite: &Suite, key: ModelKey, hooks: &dyn Hooks)
                 timed_render(engine, &job)?
             };
             let f = &case.features;
-            let (pixels, texels, triangles) = (f.pixels, f.texels, f.triangles);
-            times[c].push(TimePoint { scene: case.scene.to_owned(), light: f.light.clone(), pixels, texels, triangles, ms });
+            let (pixels, texels, triangles, map_share) = (f.pixels, f.texels, f.triangles, f.map_share);
+            let light = f.light.clone();
+            times[c].push(TimePoint { scene: case.scene.to_owned(), light, pixels, texels, triangles, map_share, ms });
             if let Some(truth) = &truth {
                 let quality = crate::quality::compare(&frame, truth, 0.0);
                 errors[c].push(ErrorPoint {
@@ -168,8 +171,12 @@ pub fn measure(engine: &Engine, suite: &Suite, key: ModelKey, hooks: &dyn Hooks)
         .zip(times.into_iter().zip(errors))
         .map(|((label, method), (times, errors))| Candidate {
             label,
+            cost: suite
+                .lights
+                .iter()
+                .map(|&light| (light.to_owned(), fit(times.iter().filter(|t| t.light == light), super::crops(&method))))
+                .collect(),
             method,
-            cost: suite.lights.iter().map(|&light| (light.to_owned(), fit(times.iter().filter(|t| t.light == light)))).collect(),
             errors,
             errors_measured: true,
             times,
@@ -221,9 +228,8 @@ fn cases(suite: &Suite) -> Vec<Case> {
     let mut cases = Vec::new();
     for &(scene, params) in &suite.scenes {
         let params: Map<String, serde_json::Value> = serde_json::from_str(params).expect("the suite's scene parameters parse");
-        let triangles = crate::scene::builtin::build(scene, &params, "scene", &crate::job::Limits::default())
-            .map(|s| s.triangle_count())
-            .expect("the suite's scenes build");
+        let built =
+            crate::scene::builtin::build(scene, &params, "scene", &crate::job::Limits::default()).expect("the suite's scenes build");
         for &light in &suite.lights {
             for &(width, height) in &suite.sizes {
                 for &resolution in &suite.maps {
@@ -234,14 +240,8 @@ fn cases(suite: &Suite) -> Vec<Case> {
                         output: OutputSpec { width, height, format: OutputFormat::Png, exposure: 0.0 },
                         ..Job::embedded_default()
                     };
-                    let features = Features {
-                        pixels: u64::from(width) * u64::from(height),
-                        texels: u64::from(resolution).pow(2),
-                        triangles,
-                        triangles_known: true,
-                        light: light.to_owned(),
-                        scene: Some(scene.into()),
-                    };
+                    // As the daemon predicts a job: from the scene's shape (`Engine::scene_shape`).
+                    let features = Features::of(&job, Some(&built.shape(job.scene.floor.as_ref())));
                     cases.push(Case { scene, job, features, errors_here: Some(&resolution) == suite.maps.last() });
                 }
             }
@@ -272,11 +272,13 @@ fn reference_1024(candidates: &[Candidate]) -> Option<Candidate> {
     })
 }
 
-/// The non-negative least-squares fit of the times on the features, each residual relative to
-/// its time (a 20 ms case counts as much as a 2 s one): every subset of the terms is solved by
-/// its normal equations and the best fit with no negative coefficient kept (2⁴ − 1 subsets).
-pub(super) fn fit<'a>(times: impl Iterator<Item = &'a TimePoint>) -> Cost {
-    let rows: Vec<([f64; FEATURES], f64)> = times.filter(|t| t.ms > 0.0).map(|t| (t.features().vector().map(|v| v / t.ms), 1.0)).collect();
+/// The non-negative least-squares fit of the times on the features (`cropped`: the texels a
+/// cropping method draws, `Features::vector`), each residual relative to its time (a 20 ms
+/// case counts as much as a 2 s one): every subset of the terms is solved by its normal
+/// equations and the best fit with no negative coefficient kept (2⁴ − 1 subsets).
+pub(super) fn fit<'a>(times: impl Iterator<Item = &'a TimePoint>, cropped: bool) -> Cost {
+    let rows: Vec<([f64; FEATURES], f64)> =
+        times.filter(|t| t.ms > 0.0).map(|t| (t.features().vector(cropped).map(|v| v / t.ms), 1.0)).collect();
     let mut best: Option<(f64, [f64; FEATURES])> = None;
     for subset in 1u32..(1 << FEATURES) {
         let terms: Vec<usize> = (0..FEATURES).filter(|i| subset & (1 << i) != 0).collect();

@@ -76,6 +76,9 @@ pub struct TimePoint {
     pub pixels: u64,
     pub texels: u64,
     pub triangles: u64,
+    /// `Features::map_share` of the case (1 in models measured before it was).
+    #[serde(default = "one")]
+    pub map_share: f64,
     pub ms: f64,
 }
 
@@ -84,6 +87,7 @@ impl TimePoint {
         Features {
             pixels: self.pixels,
             texels: self.texels,
+            map_share: self.map_share,
             triangles: self.triangles,
             triangles_known: true,
             light: self.light.clone(),
@@ -94,6 +98,10 @@ impl TimePoint {
 
 fn yes() -> bool {
     true
+}
+
+fn one() -> f64 {
+    1.0
 }
 
 /// A linear cost: milliseconds per unit of each feature of a job, all ≥ 0 (fitted by
@@ -118,8 +126,9 @@ impl Cost {
         Self { base_ms: c[0], per_mpixel: c[1], per_mtriangle: c[2], per_mtexel: c[3] }
     }
 
-    pub fn ms(&self, features: &Features) -> f64 {
-        self.as_array().iter().zip(features.vector()).map(|(c, x)| c * x).sum()
+    /// Milliseconds for a job of these terms (`Candidate::terms`).
+    pub fn ms(&self, terms: [f64; FEATURES]) -> f64 {
+        self.as_array().iter().zip(terms).map(|(c, x)| c * x).sum()
     }
 }
 
@@ -150,7 +159,13 @@ pub const USER_IMAGE: &str = "image";
 #[derive(Debug, Clone, PartialEq)]
 pub struct Features {
     pub pixels: u64,
+    /// A shadow map's texels (the job's resolution²).
     pub texels: u64,
+    /// The share of each sample map a reference or `filtered` frame draws: the crop of what
+    /// the camera sees (`reference::predicted_map_share`; 1 where the scene's shape is not
+    /// known before rendering). A view of a small part of a large scene crops its maps to a
+    /// fifth, and the maps' cost with them.
+    pub map_share: f64,
     pub triangles: u64,
     /// Whether `triangles` was counted (false: a guess, the suite's largest scene).
     pub triangles_known: bool,
@@ -161,12 +176,18 @@ pub struct Features {
     pub scene: Option<String>,
 }
 
+/// Whether `method` draws its sample maps cropped to the view: the reference and `filtered`
+/// (`reference`'s maps), unless its `crop` is false.
+pub fn crops(method: &MethodSpec) -> bool {
+    matches!(method.name.as_str(), "reference" | "filtered") && method.params.get("crop").and_then(Value::as_bool) != Some(false)
+}
+
 /// Triangles assumed for a scene the engine has not counted.
 pub const UNKNOWN_TRIANGLES: u64 = 100_000;
 
 impl Features {
-    /// A job's features; `triangles`: the scene's count, where known.
-    pub fn of(job: &Job, triangles: Option<u64>) -> Self {
+    /// A job's features; `shape`: its scene's, where known (`Engine::scene_shape`).
+    pub fn of(job: &Job, shape: Option<&crate::scene::Shape>) -> Self {
         let light = match &job.light.image {
             None => "white".to_owned(),
             Some(AssetRef::Builtin { name, .. }) => name.clone(),
@@ -176,19 +197,32 @@ impl Features {
             AssetRef::Builtin { name, .. } => Some(name.clone()),
             _ => None,
         };
+        let resolution = job.shadow_map.resolution;
+        // A camera or light the job cannot resolve fails at render time with its field named;
+        // predicted, it draws whole maps.
+        let map_share = shape
+            .and_then(|shape| {
+                let (camera, light, _) = crate::render::resolve_view(job, &shape.defaults, &shape.extent.corners()).ok()?;
+                let aspect = job.output.width as f32 / job.output.height.max(1) as f32;
+                Some(crate::methods::reference::predicted_map_share(camera.view_proj(aspect), &light, &shape.extent, resolution))
+            })
+            .unwrap_or(1.0);
         Self {
             pixels: u64::from(job.output.width) * u64::from(job.output.height),
-            texels: u64::from(job.shadow_map.resolution).pow(2),
-            triangles: triangles.unwrap_or(UNKNOWN_TRIANGLES),
-            triangles_known: triangles.is_some(),
+            texels: u64::from(resolution).pow(2),
+            map_share,
+            triangles: shape.map_or(UNKNOWN_TRIANGLES, |s| s.triangles),
+            triangles_known: shape.is_some(),
             light,
             scene,
         }
     }
 
-    /// The cost's terms, in its units (millions).
-    pub fn vector(&self) -> [f64; FEATURES] {
-        [1.0, self.pixels as f64 / 1e6, self.triangles as f64 / 1e6, self.texels as f64 / 1e6]
+    /// The cost's terms, in its units (millions); `cropped`: whether the method draws only
+    /// `map_share` of each map.
+    pub fn vector(&self, cropped: bool) -> [f64; FEATURES] {
+        let texels = self.texels as f64 * if cropped { self.map_share } else { 1.0 };
+        [1.0, self.pixels as f64 / 1e6, self.triangles as f64 / 1e6, texels / 1e6]
     }
 }
 
@@ -197,6 +231,17 @@ impl Candidate {
     /// any) at the job's shadow-map resolution, as the model measured it.
     pub fn method_for(&self, job: &Job) -> MethodSpec {
         crate::methods::with_map_resolution(&self.method, job.shadow_map.resolution)
+    }
+
+    /// Whether this candidate draws its sample maps cropped to the view (`Features::map_share`):
+    /// the reference and `filtered`, unless told not to.
+    pub fn cropped(&self) -> bool {
+        crops(&self.method)
+    }
+
+    /// A job's cost terms for this candidate.
+    pub fn terms(&self, features: &Features) -> [f64; FEATURES] {
+        features.vector(self.cropped())
     }
 
     /// The predicted error: the measured errors of the job's scene kind and light kind (every
@@ -233,9 +278,10 @@ impl Candidate {
     /// The predicted time: the cost fitted under the job's light, or for a light the suite did
     /// not measure the costliest of the coloured lights' at these features.
     pub fn ms(&self, features: &Features) -> f64 {
+        let terms = self.terms(features);
         match self.cost.get(&features.light) {
-            Some(cost) => cost.ms(features),
-            None => self.cost.iter().filter(|(light, _)| *light != "white").map(|(_, c)| c.ms(features)).fold(0.0, f64::max),
+            Some(cost) => cost.ms(terms),
+            None => self.cost.iter().filter(|(light, _)| *light != "white").map(|(_, c)| c.ms(terms)).fold(0.0, f64::max),
         }
     }
 
@@ -436,6 +482,7 @@ impl Model {
         let at = |pixels: u64, light: &str, scene: Option<&str>| Features {
             pixels,
             texels: 2048 * 2048,
+            map_share: 1.0,
             triangles: 10_000,
             triangles_known: true,
             light: light.to_owned(),

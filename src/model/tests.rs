@@ -6,12 +6,12 @@ use super::*;
 use crate::job::auto::AutoBudget;
 
 fn features(pixels: u64, triangles: u64, texels: u64, light: &str) -> Features {
-    Features { pixels, texels, triangles, triangles_known: true, light: light.into(), scene: Some("torus".into()) }
+    Features { pixels, texels, map_share: 1.0, triangles, triangles_known: true, light: light.into(), scene: Some("torus".into()) }
 }
 
 /// A measured time of a white `torus` job.
 fn timed(pixels: u64, triangles: u64, texels: u64, ms: f64) -> TimePoint {
-    TimePoint { scene: "torus".into(), light: "white".into(), pixels, texels, triangles, ms }
+    TimePoint { scene: "torus".into(), light: "white".into(), pixels, texels, triangles, map_share: 1.0, ms }
 }
 
 #[test]
@@ -21,21 +21,50 @@ fn the_fit_finds_the_costs_it_was_made_from() {
     for pixels in [19_200, 76_800, 307_200] {
         for triangles in [2_000, 9_000, 30_000] {
             for texels in [1 << 18, 1 << 20] {
-                samples.push(timed(pixels, triangles, texels, truth.ms(&features(pixels, triangles, texels, "white"))));
+                samples.push(timed(pixels, triangles, texels, truth.ms(features(pixels, triangles, texels, "white").vector(false))));
             }
         }
     }
-    let fitted = fit(samples.iter());
+    let fitted = fit(samples.iter(), false);
     for (got, want) in fitted.as_array().iter().zip(truth.as_array()) {
         assert!((got - want).abs() < 1e-6 * want.max(1.0), "{fitted:?} against {truth:?}");
     }
 }
 
 #[test]
+fn a_cropping_method_is_fitted_and_predicted_on_the_texels_it_draws() {
+    // Maps cost by the texels drawn: a view cropped to a fifth of each map draws a fifth.
+    let truth = Cost { base_ms: 5.0, per_mpixel: 200.0, per_mtriangle: 3_000.0, per_mtexel: 50.0 };
+    let mut samples = Vec::new();
+    for (triangles, share) in [(3_000, 1.0), (9_000, 1.0), (30_000, 1.0), (6_000, 0.2)] {
+        for pixels in [19_200, 307_200] {
+            for texels in [1 << 18, 1 << 20] {
+                let drawn = Features { map_share: share, ..features(pixels, triangles, texels, "white") };
+                samples.push(TimePoint { map_share: share, ..timed(pixels, triangles, texels, truth.ms(drawn.vector(true))) });
+            }
+        }
+    }
+    let fitted = fit(samples.iter(), true);
+    for (got, want) in fitted.as_array().iter().zip(truth.as_array()) {
+        assert!((got - want).abs() < 1e-6 * want.max(1.0), "{fitted:?} against {truth:?}");
+    }
+    // Predicted: the reference's maps shrink with the crop, `hard`'s map does not.
+    let costs: Costs = [("white".to_owned(), truth)].into();
+    let job = |share| Features { map_share: share, ..features(76_800, 6_000, 1 << 20, "white") };
+    let reference = Candidate { cost: costs.clone(), ..candidate("reference:samples=64", Costs::new(), 0.01) };
+    let hard = Candidate { cost: costs, ..candidate("hard", Costs::new(), 0.2) };
+    assert!(reference.cropped() && !hard.cropped());
+    let not_cropped = Candidate { cost: reference.cost.clone(), ..candidate("reference:crop=false", Costs::new(), 0.01) };
+    assert!(!not_cropped.cropped());
+    assert!((reference.ms(&job(1.0)) - reference.ms(&job(0.2)) - 0.8 * 50.0 * 1.048_576).abs() < 1e-9);
+    assert_eq!(hard.ms(&job(1.0)), hard.ms(&job(0.2)));
+}
+
+#[test]
 fn no_cost_term_is_fitted_negative() {
     // Times that fall with the pixels: least squares alone would give a negative term.
     let samples: Vec<_> = [(19_200, 30.0), (76_800, 29.0), (307_200, 28.0)].map(|(px, ms)| timed(px, 1_000, 1 << 20, ms)).into();
-    assert!(fit(samples.iter()).as_array().iter().all(|c| *c >= 0.0));
+    assert!(fit(samples.iter(), false).as_array().iter().all(|c| *c >= 0.0));
 }
 
 fn candidate(label: &str, cost: Costs, error: f64) -> Candidate {

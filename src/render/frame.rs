@@ -12,6 +12,7 @@ use crate::job::{Job, OutputFormat};
 use crate::light::{edges_acute_from, light_cells, AreaLight, LightCell, LightImage, E0_GRID};
 use crate::params::Params;
 use crate::render::method::ShadowMethod;
+use crate::scene::SceneDefaults;
 
 /// The eye camera, complete and valid.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -254,26 +255,7 @@ impl FrameSpec {
         light_image: Arc<LightImage>,
         (method, params): (&'static dyn ShadowMethod, &Params),
     ) -> JobResult<Self> {
-        let d = &scene.defaults;
-        let v3 = |v: Option<[f32; 3]>, default: Vec3| v.map(Vec3::from).unwrap_or(default);
-        let camera = resolve_camera(
-            v3(job.camera.eye, d.eye),
-            v3(job.camera.target, d.target),
-            v3(job.camera.up, d.up),
-            job.camera.fov_y_deg.unwrap_or(d.fov_y_deg),
-            job.camera.near,
-            job.camera.far,
-            &scene.corners(),
-        )?;
-        let l = &job.light;
-        let (direction, up) = (v3(l.direction, d.light_direction), v3(l.up, d.light_up));
-        let light = AreaLight::new(
-            v3(l.center, d.light_center),
-            direction,
-            up,
-            l.size.map(Vec2::from).unwrap_or(d.light_size_m),
-            l.intensity.unwrap_or(d.light_intensity),
-        )?;
+        let (camera, light, (direction, up)) = resolve_view(job, &scene.defaults, &scene.corners())?;
         let staging = Staging::new(job, scene, &camera, &light, (direction, up));
         Ok(Self {
             camera,
@@ -292,6 +274,32 @@ impl FrameSpec {
             staging,
         })
     }
+}
+
+/// The job's camera and light merged over the scene's `defaults`, the camera's near and far
+/// fitted to the scene's bounds (`corners`); with the light's direction and up as given.
+pub fn resolve_view(job: &Job, defaults: &SceneDefaults, corners: &[Vec3; 8]) -> JobResult<(Camera, AreaLight, (Vec3, Vec3))> {
+    let d = defaults;
+    let v3 = |v: Option<[f32; 3]>, default: Vec3| v.map(Vec3::from).unwrap_or(default);
+    let camera = resolve_camera(
+        v3(job.camera.eye, d.eye),
+        v3(job.camera.target, d.target),
+        v3(job.camera.up, d.up),
+        job.camera.fov_y_deg.unwrap_or(d.fov_y_deg),
+        job.camera.near,
+        job.camera.far,
+        corners,
+    )?;
+    let l = &job.light;
+    let (direction, up) = (v3(l.direction, d.light_direction), v3(l.up, d.light_up));
+    let light = AreaLight::new(
+        v3(l.center, d.light_center),
+        direction,
+        up,
+        l.size.map(Vec2::from).unwrap_or(d.light_size_m),
+        l.intensity.unwrap_or(d.light_intensity),
+    )?;
+    Ok((camera, light, (direction, up)))
 }
 
 fn resolve_camera(

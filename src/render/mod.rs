@@ -29,7 +29,7 @@ use crate::supervise::{cancelled_error, Supervisor};
 use crate::timing::PhaseName;
 use crate::timing::Timings;
 pub use draw::{vertex_layout, ScenePipeline, DEPTH_BUFFER_FORMAT};
-pub use frame::{Camera, ExtraImages, FrameSpec, LightProjection, Staging};
+pub use frame::{resolve_view, Camera, ExtraImages, FrameSpec, LightProjection, Staging};
 pub use inputs::FrameInputs;
 use inputs::{FrameUniforms, LightCellGpu};
 pub use passes::{screen_compute_pipeline, E0Mode};

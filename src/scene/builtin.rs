@@ -79,13 +79,18 @@ pub fn parse(name: &str, params: &Map<String, Value>, field: &str, limits: &Limi
 
 /// Builds a built-in scene; `field` is where the scene was named in the job (for errors).
 pub fn build(name: &str, params: &Map<String, Value>, field: &str, limits: &Limits) -> JobResult<Scene> {
-    Ok(match parse(name, params, field, limits)? {
+    Ok(build_parsed(parse(name, params, field, limits)?))
+}
+
+/// Builds a parsed built-in scene.
+pub fn build_parsed(builtin: Builtin) -> Scene {
+    match builtin {
         Builtin::Torus => torus_scene(),
         Builtin::Crowd => crowd_scene(),
         Builtin::Columns => columns_scene(),
         Builtin::Occluder { height } => occluder_scene(height),
         Builtin::Terrain { triangles, seed } => terrain_scene(triangles, seed),
-    })
+    }
 }
 
 fn integer_param(params: &Map<String, Value>, key: &str, field: &str, default: u64, min: u64, max: u64) -> JobResult<u64> {

@@ -11,6 +11,7 @@ pub mod gltf;
 use glam::{Mat3, Mat4, Vec2, Vec3};
 
 use crate::job::{AssetRef, FloorSpec};
+use crate::light::AreaLight;
 
 /// One vertex as the G-buffer and shadow-map passes read it.
 #[repr(C)]
@@ -89,6 +90,98 @@ pub struct OnFloor {
     pub height: f32,
 }
 
+/// Where a scene lies: its bounds and, on a floor, what stands on it — what framing a camera
+/// and a shadow map needs, without the triangles (`Scene::extent`, `GpuScene::extent`): an
+/// estimate predicts a reference's crop from it before the scene is uploaded.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Extent {
+    pub bounds_min: Vec3,
+    pub bounds_max: Vec3,
+    pub on_floor: Option<OnFloor>,
+}
+
+impl Extent {
+    /// This extent with a floor under it (`Scene::with_floor`): the floor's square joins the
+    /// bounds, and what stood there is what stands on the floor.
+    pub fn with_floor(&self, floor: &FloorSpec) -> Extent {
+        let (min, max) = (self.bounds_min, self.bounds_max);
+        let ((x0, z0), (x1, z1), y) = self.floor_square(floor);
+        Extent {
+            bounds_min: min.min(Vec3::new(x0, y, z0)),
+            bounds_max: max.max(Vec3::new(x1, y, z1)),
+            on_floor: Some(OnFloor { bounds_min: min, bounds_max: max, height: y }),
+        }
+    }
+
+    /// The floor's corners in x and z and its height: centred under the bounds, `margin`
+    /// bounding radii past them, a hair below their lowest point.
+    fn floor_square(&self, floor: &FloorSpec) -> ((f32, f32), (f32, f32), f32) {
+        let (min, max) = (self.bounds_min, self.bounds_max);
+        let radius = ((max - min) * 0.5).length().max(1e-3);
+        let reach = floor.margin * radius;
+        ((min.x - reach, min.z - reach), (max.x + reach, max.z + reach), min.y - 1e-3 * radius)
+    }
+
+    /// The eight corners of the bounding box.
+    pub fn corners(&self) -> [Vec3; 8] {
+        box_corners(self.bounds_min, self.bounds_max)
+    }
+
+    /// The points a shadow map's frustum from `light` must hold (`LightProjection::fit`): the
+    /// scene's bounds, or, on a floor added under the scene (contract §3), what stands on it
+    /// and the part of the floor it can shadow from some point of the light — the corners of
+    /// its bounds cast from the light's corners and centre onto the floor. The floor reaches
+    /// well past the scene; the rest of it is lit whichever way (every method takes a point
+    /// outside the frustum as lit), and framing it all would spread the map's texels thin.
+    /// A light not above everything on the floor gets the whole bounds.
+    pub fn shadow_fit_points(&self, light: &AreaLight) -> Vec<Vec3> {
+        let Some(on_floor) = self.on_floor else { return self.corners().to_vec() };
+        let standing = box_corners(on_floor.bounds_min, on_floor.bounds_max);
+        let half = 0.5 * light.size_m;
+        let light_points = [(-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0), (0.0, 0.0)]
+            .map(|(s, t)| light.center + light.r * (s * half.x) + light.u * (t * half.y));
+        let mut points = standing.to_vec();
+        for from in light_points {
+            for corner in standing {
+                if from.y <= corner.y + 1e-6 * (1.0 + corner.y.abs()) {
+                    return self.corners().to_vec();
+                }
+                let cast = from + (corner - from) * ((from.y - on_floor.height) / (from.y - corner.y));
+                points.push(cast.clamp(self.bounds_min, self.bounds_max));
+            }
+        }
+        points
+    }
+}
+
+/// What predicting a job needs of its scene, without its triangles (`Engine::scene_shape`):
+/// how many there are, where the scene lies and the view it is shown with by default.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Shape {
+    /// The floor's two included.
+    pub triangles: u64,
+    pub extent: Extent,
+    pub defaults: SceneDefaults,
+}
+
+impl Shape {
+    /// This shape with `floor` under it, if one is added (`Scene::with_floor`).
+    pub fn on(mut self, floor: Option<&FloorSpec>) -> Shape {
+        if let Some(floor) = floor {
+            self.triangles += 2;
+            self.extent = self.extent.with_floor(floor);
+        }
+        self
+    }
+}
+
+/// The eight corners of the box [a, b], corner k taking b's coordinate where bit 0 (x), 1 (y)
+/// or 2 (z) of k is set.
+pub fn box_corners(a: Vec3, b: Vec3) -> [Vec3; 8] {
+    [0, 1, 2, 3, 4, 5, 6, 7]
+        .map(|k| Vec3::new(if k & 1 == 0 { a.x } else { b.x }, if k & 2 == 0 { a.y } else { b.y }, if k & 4 == 0 { a.z } else { b.z }))
+}
+
 impl Scene {
     pub fn triangle_count(&self) -> u64 {
         self.indices.len() as u64 / 3
@@ -102,7 +195,6 @@ impl Scene {
         ((self.bounds_max - self.bounds_min) * 0.5).length().max(1e-3)
     }
 
-    /// Bytes this scene occupies once uploaded (vertices, indices, textures).
     /// This scene with a floor under it (contract §3): a square at the bounds' lowest height
     /// (a hair below it, so that a face resting there does not fight the floor in depth),
     /// centred under the bounds and reaching `margin` bounding radii past them on every side.
@@ -110,10 +202,7 @@ impl Scene {
     /// (`fitted_defaults` already frames the shadow on it).
     pub fn with_floor(&self, floor: &FloorSpec) -> Scene {
         let mut out = self.clone();
-        let (min, max, radius) = (self.bounds_min, self.bounds_max, self.radius());
-        let reach = floor.margin * radius;
-        let (x0, x1, z0, z1) = (min.x - reach, max.x + reach, min.z - reach, max.z + reach);
-        let y = min.y - 1e-3 * radius;
+        let ((x0, z0), (x1, z1), y) = self.floor_square(floor);
         let object_id = out.objects.len() as u32;
         out.objects.push("floor".into());
         let material = out.materials.len() as u32;
@@ -126,12 +215,28 @@ impl Scene {
         // Counter-clockwise seen from above (+y), glTF's front face.
         out.draws.push(DrawRange { material, first_index: out.indices.len() as u32, index_count: 6 });
         out.indices.extend([0, 1, 2, 0, 2, 3].map(|k| base + k));
-        out.bounds_min = min.min(Vec3::new(x0, y, z0));
-        out.bounds_max = max.max(Vec3::new(x1, y, z1));
-        out.on_floor = Some(OnFloor { bounds_min: min, bounds_max: max, height: y });
+        Extent { bounds_min: out.bounds_min, bounds_max: out.bounds_max, on_floor: out.on_floor } = self.extent(Some(floor));
         out
     }
 
+    /// Where this scene lies, on `floor` if one is added (`with_floor`'s bounds, without
+    /// copying the scene).
+    pub fn extent(&self, floor: Option<&FloorSpec>) -> Extent {
+        let extent = Extent { bounds_min: self.bounds_min, bounds_max: self.bounds_max, on_floor: self.on_floor };
+        floor.map_or(extent, |floor| extent.with_floor(floor))
+    }
+
+    /// What predicting a job on this scene needs of it, on `floor` if one is added.
+    pub fn shape(&self, floor: Option<&FloorSpec>) -> Shape {
+        Shape { triangles: self.triangle_count(), extent: self.extent(None), defaults: self.defaults.clone() }.on(floor)
+    }
+
+    /// The floor's corners in x and z and its height (`Extent::floor_square`).
+    fn floor_square(&self, floor: &FloorSpec) -> ((f32, f32), (f32, f32), f32) {
+        self.extent(None).floor_square(floor)
+    }
+
+    /// Bytes this scene occupies once uploaded (vertices, indices, textures).
     pub fn gpu_bytes(&self) -> u64 {
         (self.vertices.len() * std::mem::size_of::<Vertex>()
             + self.indices.len() * 4

@@ -166,7 +166,7 @@ impl AppState {
             }
             None => self.engine.check(job, uploads_here)?,
         }
-        Ok(Features::of(job, self.engine.scene_triangles(&job.scene)))
+        Ok(Features::of(job, self.engine.scene_shape(&job.scene).as_ref()))
     }
 
     /// `max_ms` no longer than a job may wait for the device (the deadline).
@@ -217,6 +217,7 @@ pub(super) async fn estimate(State(state): State<Arc<AppState>>, body: Result<By
             "texels": features.texels,
             "triangles": features.triangles,
             "triangles_known": features.triangles_known,
+            "map_share": features.map_share,
             "light": features.light,
             "scene": features.scene,
         },

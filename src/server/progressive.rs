@@ -32,7 +32,7 @@ pub(super) async fn render_rounds(
     // Each round is a job rendered once.
     let job = Job { progressive: None, ..job };
     let model = state.model.get();
-    let features = Features::of(&job, state.engine.scene_triangles(&job.scene));
+    let features = Features::of(&job, state.engine.scene_shape(&job.scene).as_ref());
     let first_round_ms = model.first_round_ms(&features);
     let (candidate, prediction) = model
         .first_image(spec.max_ms, &features, |c| state.allows(c, &job))

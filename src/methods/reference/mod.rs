@@ -16,7 +16,7 @@ use cpu::CpuSample;
 pub use filtered::Filtered;
 use gpu::{batch_layers, Accumulation, DepthMaps, BATCH, BATCH_MAP_BYTES, SEGMENT};
 use samples::SamplePlan;
-pub use samples::{half_of_index, light_samples, LightSample};
+pub use samples::{half_of_index, light_samples, predicted_map_share, LightSample};
 
 use super::{Cap, Counters, MethodContext, Param, ParamSpec, Params, ShadowMethod};
 use crate::error::JobResult;

@@ -14,6 +14,7 @@ use crate::gpu::scene::GpuScene;
 use crate::light::{AreaLight, LightImage};
 use crate::render::convex::{map_bounds, ConvexSolid};
 use crate::render::{FrameSpec, LightProjection};
+use crate::scene::Extent;
 
 /// The points of the sequence a plan's near plane and crop are made for: every sample a
 /// reference can take (`samples`' maximum).
@@ -152,6 +153,55 @@ fn plan_fingerprint(ctx: &MethodContext<'_>, params: &Params) -> u64 {
     hasher.finish()
 }
 
+/// Each sample's whole map from its point on the light (`positions`): its view-projection and
+/// its texels per unit of tan from the map's centre; with the near plane every map shares.
+/// Each frustum's angle is fitted to the scene (`corners`: `Extent::shadow_fit_points`) from
+/// its point, and one near plane serves every map (the nearest any fit allows), so that the
+/// accumulate pass reads it once per pixel, not per sample.
+fn frusta(light: &AreaLight, positions: &[Vec3], corners: &[Vec3], resolution: u32) -> (f32, Vec<(Mat4, f32)>) {
+    let rotation = sample_rotation(light);
+    // On every core: a reference's plan is made for all 4,096 samples it may take.
+    let fits: Vec<LightProjection> =
+        positions.par_iter().map(|&center| LightProjection::fit(&AreaLight { center, ..*light }, corners)).collect();
+    let near = fits.iter().map(|fit| fit.near).reduce(f32::min).unwrap_or(1.0);
+    let frusta = positions
+        .iter()
+        .zip(&fits)
+        .map(|(position, fit)| {
+            let view = rotation * Mat4::from_translation(-*position);
+            let proj = reversed_projection(fit.tan_half, near);
+            (proj * view, proj.y_axis.y * resolution as f32 * 0.5)
+        })
+        .collect();
+    (near, frusta)
+}
+
+/// The crop of the maps `frusta` draw that holds every receiver of a frame seen through
+/// `camera_view_proj`: every receiver (a G-buffer position) lies in what the camera sees of
+/// the scene's bounds.
+fn receivers_crop(camera_view_proj: Mat4, extent: &Extent, frusta: &[(Mat4, f32)], resolution: u32) -> MapCrop {
+    let receivers = ConvexSolid::frustum(camera_view_proj).intersect(&ConvexSolid::cuboid(extent.bounds_min, extent.bounds_max));
+    MapCrop::fit(frusta.par_iter().map(|(view_proj, ..)| map_bounds(&receivers, *view_proj, resolution)).collect(), resolution)
+}
+
+/// The share of each sample map's texels a reference frame of this view draws (its crop's
+/// area over the whole map's; 1 where the maps are drawn whole), predicted before the scene is
+/// uploaded, for the model's cost (`model::Features`): the plan's own crop, made for nine
+/// points of the light's rectangle (its corners, its edges' midpoints and its centre) in place
+/// of its samples. The samples lie inside the rectangle, whose corners' maps reach furthest,
+/// so this is the crop of a light that emits everywhere: a light with dark parts may crop
+/// tighter.
+pub fn predicted_map_share(camera_view_proj: Mat4, light: &AreaLight, extent: &Extent, resolution: u32) -> f64 {
+    let half = 0.5 * light.size_m;
+    let positions: Vec<Vec3> = [-1.0f32, 0.0, 1.0]
+        .into_iter()
+        .flat_map(|s| [-1.0f32, 0.0, 1.0].map(|t| light.center + light.r * (s * half.x) + light.u * (t * half.y)))
+        .collect();
+    let (_, frusta) = frusta(light, &positions, &extent.shadow_fit_points(light), resolution);
+    let crop = receivers_crop(camera_view_proj, extent, &frusta, resolution);
+    f64::from(crop.size.element_product()) / f64::from(resolution).powi(2)
+}
+
 /// A frame's light samples and how each one's map is drawn and read.
 #[derive(Clone)]
 pub(super) struct SamplePlan {
@@ -215,31 +265,12 @@ impl SamplePlan {
         strata: u32,
     ) -> Self {
         let resolution = params.get(&RESOLUTION);
-        let corners = scene.shadow_fit_points(&spec.light);
         let rotation = sample_rotation(&spec.light);
-        // Each sample's frustum: its angle fitted to the scene from its point, and one near
-        // plane for every map (the nearest any fit allows), so that the accumulate pass reads
-        // it once per pixel, not per sample.
-        // On every core: a reference's plan is made for all 4,096 samples it may take.
-        let fits: Vec<LightProjection> =
-            samples.par_iter().map(|sample| LightProjection::fit(&AreaLight { center: sample.position, ..spec.light }, &corners)).collect();
-        let near = fits.iter().map(|fit| fit.near).reduce(f32::min).unwrap_or(1.0);
+        let positions: Vec<Vec3> = samples.iter().map(|sample| sample.position).collect();
+        let (near, frusta) = frusta(&spec.light, &positions, &scene.shadow_fit_points(&spec.light), resolution);
         let plane = rotation.transform_point3(spec.light.center).z;
-        let frusta: Vec<(Mat4, f32)> = samples
-            .iter()
-            .zip(&fits)
-            .map(|(sample, fit)| {
-                let view = rotation * Mat4::from_translation(-sample.position);
-                let proj = reversed_projection(fit.tan_half, near);
-                (proj * view, proj.y_axis.y * resolution as f32 * 0.5)
-            })
-            .collect();
         let crop = if params.get(&CROP) {
-            // Every receiver of the frame (a G-buffer position) lies in what the camera sees of
-            // the scene's bounds.
-            let receivers = ConvexSolid::frustum(spec.camera.view_proj(width as f32 / height as f32))
-                .intersect(&ConvexSolid::cuboid(scene.bounds_min, scene.bounds_max));
-            MapCrop::fit(frusta.par_iter().map(|(view_proj, ..)| map_bounds(&receivers, *view_proj, resolution)).collect(), resolution)
+            receivers_crop(spec.camera.view_proj(width as f32 / height as f32), &scene.extent(), &frusta, resolution)
         } else {
             MapCrop::whole(samples.len(), resolution)
         };
