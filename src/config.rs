@@ -229,7 +229,7 @@ pub struct ServeConfig {
 
     /// The cost and quality model `auto` jobs and estimates use: `measure` reads the one kept
     /// under `--data-dir` for this adapter and build, or measures it in the background after
-    /// warm-up (about two minutes on two cores; the shipped model answers meanwhile); `quick`
+    /// warm-up (about three minutes on two cores; the shipped model answers meanwhile); `quick`
     /// the same on a suite of a tenth of the time; `default` keeps the shipped model.
     #[arg(long, env = "PENUMBRA_MODEL", value_enum, default_value = "measure")]
     pub model: ModelMode,
