@@ -108,8 +108,6 @@ impl Timings {
         self.phases.iter().find(|p| p.name == name)
     }
 
-    /// The `Server-Timing` header value (W3C Server Timing): one entry per phase with its
-    /// wall time, a `gpu_<phase>` entry where GPU time was measured, and `total`.
     /// The render's own wall time: the total less a comparison's reference and metrics (what
     /// an `auto` job's prediction is of).
     pub fn render_ms(&self) -> f64 {
@@ -118,6 +116,8 @@ impl Timings {
         self.total_ms - compared
     }
 
+    /// The `Server-Timing` header value (W3C Server Timing): one entry per phase with its
+    /// wall time, a `gpu_<phase>` entry where GPU time was measured, and `total`.
     pub fn server_timing(&self) -> String {
         let mut parts: Vec<String> = Vec::new();
         for phase in &self.phases {

@@ -1799,6 +1799,7 @@ async fn auto_chooses_by_the_model_and_estimates_render_nothing() {
     assert_eq!(plain["features"]["pixels"], 96 * 64);
     // The torus fills its view: whole maps. A view of a few columns on a wide floor: cropped.
     assert_eq!(plain["features"]["map_share"], 1.0, "{plain}");
+    assert_eq!(plain["features"]["pace"], 1.0, "nothing rendered yet: {plain}");
     let (_, columns) = estimate(json!({"scene": {"builtin": "columns"}, "method": {"name": "wedges"}})).await;
     let share = columns["features"]["map_share"].as_f64().unwrap();
     assert!(share > 0.0 && share <= 0.25, "{columns}");
@@ -1840,6 +1841,18 @@ async fn auto_chooses_by_the_model_and_estimates_render_nothing() {
     let record: Value = client.get(format!("{base}{}", links["record"].as_str().unwrap())).send().await.unwrap().json().await.unwrap();
     assert_eq!(record["status"], "succeeded", "{record}");
     assert_eq!(record["auto"]["label"], chosen.as_str(), "{record}");
+
+    // The four jobs rendered set the model's pace (their measured ÷ predicted times), and every
+    // time predicted since follows it.
+    let methods: Value = client.get(format!("{base}/v1/methods")).send().await.unwrap().json().await.unwrap();
+    let pace = &methods["model"]["pace"];
+    assert_eq!(pace["renders"], 4, "{pace}");
+    let factor = pace["factor"].as_f64().unwrap();
+    assert!((0.5..=2.0).contains(&factor), "{pace}");
+    let (_, paced) = estimate(job(json!({"name": "wedges"}))).await;
+    assert_eq!(paced["features"]["pace"].as_f64(), Some(factor), "{paced}");
+    let paced_ms = paced["job"]["predicted"]["ms"].as_f64().unwrap();
+    assert!((paced_ms - wedges_ms * factor).abs() <= 1e-9 * paced_ms, "{paced_ms} against {wedges_ms} × {factor}");
 
     // Budgets nothing meets: 422 naming the field and the closest choice; estimates say why.
     let (status, unmet) = estimate(job(json!({"name": "auto", "max_ms": 0.001}))).await;

@@ -1915,6 +1915,7 @@ fn the_model_is_measured_on_the_device_and_held_to_its_budgets() {
         triangles_known: true,
         light: light.into(),
         scene: Some("occluder".into()),
+        pace: 1.0,
     };
     for candidate in &model.candidates {
         for light in ["white", "flame", "image"] {

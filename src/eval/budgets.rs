@@ -41,7 +41,10 @@ pub struct BudgetRow {
     pub budget: String,
     /// The candidate chosen, or `refused (closest …)`.
     pub choice: String,
+    /// At the device's pace: the model's time × `pace`.
     pub predicted_ms: f64,
+    /// `model::Pace::factor` when the choice was made.
+    pub pace: f64,
     /// The median of `--repeat` renders.
     pub measured_ms: Option<f64>,
     pub predicted_error: f64,
@@ -72,6 +75,8 @@ pub struct BudgetReport {
     pub error_kept: (usize, usize),
     /// Predictions within ±25 %, over every distinct (case, choice) rendered.
     pub time_predicted: (usize, usize),
+    /// The same for the model alone (pace 1).
+    pub time_predicted_unpaced: (usize, usize),
     pub error_predicted: (usize, usize),
     pub rounds: Vec<RoundRow>,
     /// Progressive rounds whose estimate is within ±30 % of their measured error.
@@ -103,6 +108,9 @@ pub struct FirstImageRow {
 struct Measuring<'a> {
     engine: &'a Engine,
     job: &'a crate::job::Job,
+    /// The job's features at pace 1, and the pace each new measurement is told.
+    features: &'a Features,
+    pace: &'a crate::model::Pace,
     reference: &'a crate::render::FrameOutput,
     case: &'a str,
     light: &'a str,
@@ -133,6 +141,8 @@ fn measure_choice(m: &mut Measuring<'_>, candidate: &crate::model::Candidate) ->
     }
     times.sort_by(f64::total_cmp);
     let (median, slowest) = (times[times.len() / 2], times[times.len() - 1]);
+    // As a daemon follows the jobs it renders.
+    m.pace.observe(candidate.ms(m.features), median);
     m.measured.push((candidate.label.clone(), median, slowest, error));
     Ok((median, slowest, error))
 }
@@ -160,6 +170,7 @@ pub fn run(engine: &Engine, options: &EvalOptions, model_file: Option<&std::path
     // render that is not timed.
     engine.warm_up().context("warm-up")?;
     let mut warm: Vec<(String, String)> = Vec::new();
+    let pace = crate::model::Pace::default();
     for scene in suite::scenes(&options.scenes)? {
         for light in &options.lights {
             for &size in &sizes {
@@ -167,8 +178,9 @@ pub fn run(engine: &Engine, options: &EvalOptions, model_file: Option<&std::path
                 let case = format!("{} / {light} / {}×{}", scene.label, size.0, size.1);
                 eprintln!("{case}: the truth");
                 let (reference, _) = engine.render_frame(&truth.truth_of(&job), &()).map_err(|e| anyhow::anyhow!("{case}: {e}"))?;
-                let features = Features::of(&job, engine.scene_shape(&job.scene).as_ref());
-                let cheapest = model.predictions(&features).iter().map(|(_, p)| p.ms).fold(f64::INFINITY, f64::min);
+                let unpaced = Features::of(&job, engine.scene_shape(&job.scene).as_ref());
+                let paced = || Features { pace: pace.factor(), ..unpaced.clone() };
+                let cheapest = model.predictions(&paced()).iter().map(|(_, p)| p.ms).fold(f64::INFINITY, f64::min);
                 let budgets = TIME_FACTORS
                     .iter()
                     .map(|f| AutoBudget { max_ms: Some(cheapest * MARGIN * f), max_error: None })
@@ -176,6 +188,8 @@ pub fn run(engine: &Engine, options: &EvalOptions, model_file: Option<&std::path
                 let mut measuring = Measuring {
                     engine,
                     job: &job,
+                    features: &unpaced,
+                    pace: &pace,
                     reference: &reference,
                     case: &case,
                     light,
@@ -196,11 +210,14 @@ pub fn run(engine: &Engine, options: &EvalOptions, model_file: Option<&std::path
                         budget: label,
                         choice: String::new(),
                         predicted_ms: 0.0,
+                        pace: 1.0,
                         measured_ms: None,
                         predicted_error: 0.0,
                         measured_error: None,
                         kept: None,
                     };
+                    let features = paced();
+                    row.pace = features.pace;
                     match model.choose(&budget, &features) {
                         Err(unmet) => {
                             row.choice = format!("refused (closest {})", unmet.closest);
@@ -227,7 +244,7 @@ pub fn run(engine: &Engine, options: &EvalOptions, model_file: Option<&std::path
                 // daemon's choice, held to a tenth of the budget.
                 for factor in TIME_FACTORS {
                     let max_ms = 10.0 * cheapest * MARGIN * factor;
-                    let Some((candidate, prediction)) = model.first_image(Some(max_ms), &features, |_| true) else { continue };
+                    let Some((candidate, prediction)) = model.first_image(Some(max_ms), &paced(), |_| true) else { continue };
                     let (ms, slowest, _) = measure_choice(&mut measuring, &candidate)?;
                     firsts.push(FirstImageRow {
                         scene: scene.label.clone(),
@@ -261,6 +278,7 @@ pub fn run(engine: &Engine, options: &EvalOptions, model_file: Option<&std::path
         time_kept: kept_of(true),
         error_kept: kept_of(false),
         time_predicted: share(&mut rendered.iter().map(|r| close(r.predicted_ms, r.measured_ms.unwrap_or(0.0)))),
+        time_predicted_unpaced: share(&mut rendered.iter().map(|r| close(r.predicted_ms / r.pace, r.measured_ms.unwrap_or(0.0)))),
         error_predicted: share(&mut rendered.iter().map(|r| close(r.predicted_error, r.measured_error.unwrap_or(0.0)))),
         rows,
         rounds_estimated: share(&mut rounds.iter().map(|r| (r.estimated - r.measured).abs() <= ESTIMATE_WITHIN * r.measured)),
@@ -318,15 +336,17 @@ pub fn table(report: &BudgetReport) -> String {
     let mut out = format!(
         "# auto's budgets, measured\n\nModel: {}.\n\n| what | measured | goal |\n|---|---:|---:|\n\
          | time budgets kept | {} | ≥ 90 % |\n| error budgets kept | {} | ≥ 90 % |\n\
-         | time predicted within ±25 % | {} | ≥ 80 % |\n| error predicted within ±25 % | {} | ≥ 80 % |\n\
+         | time predicted within ±25 % | {} | ≥ 80 % |\n| … by the model alone (pace 1) | {} | |\n\
+         | error predicted within ±25 % | {} | ≥ 80 % |\n\
          | progressive rounds' error estimated within ±30 % | {} | ≥ 80 % |\n\
          | progressive first images within a tenth of max_ms | {} | ≥ 90 % |\n\n\
-         | scene | light | size | budget | choice | predicted ms | measured ms | predicted error | measured error | kept |\n\
-         |---|---|---|---|---|---:|---:|---:|---:|---|\n",
+         | scene | light | size | budget | choice | pace | predicted ms | measured ms | predicted error | measured error | kept |\n\
+         |---|---|---|---|---|---:|---:|---:|---:|---:|---|\n",
         report.model,
         percent(report.time_kept),
         percent(report.error_kept),
         percent(report.time_predicted),
+        percent(report.time_predicted_unpaced),
         percent(report.error_predicted),
         percent(report.rounds_estimated),
         percent(report.first_images_kept)
@@ -344,6 +364,7 @@ pub fn table(report: &BudgetReport) -> String {
             r.size.clone(),
             r.budget.clone(),
             r.choice.clone(),
+            format!("{:.2}", r.pace),
             format!("{:.0}", r.predicted_ms),
             or_dash(r.measured_ms, 0),
             format!("{:.4}", r.predicted_error),

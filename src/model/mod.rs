@@ -92,6 +92,7 @@ impl TimePoint {
             triangles_known: true,
             light: self.light.clone(),
             scene: Some(self.scene.clone()),
+            pace: 1.0,
         }
     }
 }
@@ -171,6 +172,9 @@ pub struct Features {
     pub triangles_known: bool,
     /// `white`, a built-in image's name, or `image` (`USER_IMAGE`).
     pub light: String,
+    /// How fast this device has lately run against its model (`Pace::factor`): every time
+    /// predicted is multiplied by it. 1 for the model's own fit.
+    pub pace: f64,
     /// The built-in scene's name; `None` for a user's scene (its error is predicted as the
     /// worst built-in kind's).
     pub scene: Option<String>,
@@ -215,6 +219,7 @@ impl Features {
             triangles_known: shape.is_some(),
             light,
             scene,
+            pace: 1.0,
         }
     }
 
@@ -279,10 +284,11 @@ impl Candidate {
     /// not measure the costliest of the coloured lights' at these features.
     pub fn ms(&self, features: &Features) -> f64 {
         let terms = self.terms(features);
-        match self.cost.get(&features.light) {
+        let fitted = match self.cost.get(&features.light) {
             Some(cost) => cost.ms(terms),
             None => self.cost.iter().filter(|(light, _)| *light != "white").map(|(_, c)| c.ms(terms)).fold(0.0, f64::max),
-        }
+        };
+        fitted * features.pace
     }
 
     pub fn predict(&self, features: &Features) -> Prediction {
@@ -309,6 +315,67 @@ fn interpolate_log(points: &[(u64, f64)], pixels: u64) -> f64 {
         }
     }
     last
+}
+
+/// Renders whose times a `Pace` follows: the last this many.
+pub const PACE_WINDOW: usize = 8;
+
+/// Renders a `Pace` waits for before it moves off 1.
+const PACE_FIRST: usize = 4;
+
+/// What the pace may scale predictions by, at most, either way: a device twice as slow as its
+/// model is one to measure again, not to follow.
+const PACE_LIMIT: f64 = 2.0;
+
+/// How fast this device runs against its model lately (contract §5): the median of the last
+/// `PACE_WINDOW` renders' measured ÷ predicted times, by which every time prediction is
+/// multiplied (`Features::pace`). The model is measured once, and the device's speed drifts:
+/// on a shared two-core machine by ±40 % from minute to minute and up to 1.8× from day to day
+/// (docs/performance-log.md); on any machine with its clocks, its neighbours and its load. A
+/// short window follows minutes; the median lets a few renders unlike the rest (a scene the
+/// fit misses) not move it. Kept per model: a new model starts at 1.
+#[derive(Debug, Default)]
+pub struct Pace {
+    ratios: std::sync::Mutex<std::collections::VecDeque<f64>>,
+}
+
+impl Pace {
+    /// A render predicted at `predicted_ms` (by the model alone: pace 1) took `measured_ms`.
+    pub fn observe(&self, predicted_ms: f64, measured_ms: f64) {
+        let ratio = measured_ms / predicted_ms;
+        if !(ratio.is_finite() && ratio > 0.0) {
+            return;
+        }
+        let mut ratios = self.ratios.lock().unwrap_or_else(|p| p.into_inner());
+        if ratios.len() == PACE_WINDOW {
+            ratios.pop_front();
+        }
+        ratios.push_back(ratio);
+    }
+
+    /// The median ratio of the window, within [1/`PACE_LIMIT`, `PACE_LIMIT`]; 1 until
+    /// `PACE_FIRST` renders were seen.
+    pub fn factor(&self) -> f64 {
+        let ratios = self.ratios.lock().unwrap_or_else(|p| p.into_inner());
+        if ratios.len() < PACE_FIRST {
+            return 1.0;
+        }
+        let mut sorted: Vec<f64> = ratios.iter().copied().collect();
+        sorted.sort_by(f64::total_cmp);
+        let n = sorted.len();
+        let median = if n % 2 == 1 { sorted[n / 2] } else { 0.5 * (sorted[n / 2 - 1] + sorted[n / 2]) };
+        median.clamp(1.0 / PACE_LIMIT, PACE_LIMIT)
+    }
+
+    /// Forgets every render seen: back to 1.
+    pub fn reset(&self) {
+        self.ratios.lock().unwrap_or_else(|p| p.into_inner()).clear();
+    }
+
+    /// Renders seen, up to the window.
+    pub fn observed(&self) -> usize {
+        self.ratios.lock().unwrap_or_else(|p| p.into_inner()).len()
+    }
 }
 
 /// Why no candidate fits an `auto` budget: the field that cannot be met and the closest
@@ -487,6 +554,7 @@ impl Model {
             triangles_known: true,
             light: light.to_owned(),
             scene: scene.map(str::to_owned),
+            pace: 1.0,
         };
         for c in &self.candidates {
             out.push_str(&format!("| {} |", c.label));

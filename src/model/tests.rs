@@ -6,7 +6,8 @@ use super::*;
 use crate::job::auto::AutoBudget;
 
 fn features(pixels: u64, triangles: u64, texels: u64, light: &str) -> Features {
-    Features { pixels, texels, map_share: 1.0, triangles, triangles_known: true, light: light.into(), scene: Some("torus".into()) }
+    let light = light.into();
+    Features { pixels, texels, map_share: 1.0, triangles, triangles_known: true, light, scene: Some("torus".into()), pace: 1.0 }
 }
 
 /// A measured time of a white `torus` job.
@@ -165,4 +166,38 @@ fn the_shipped_model_has_every_candidate_and_a_stored_one_is_read_back_for_its_k
     let other = ModelKey { build: "another build".into(), ..model.key.clone() };
     assert_eq!(load(&dir, &other), None);
     std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
+fn the_pace_follows_the_devices_recent_renders() {
+    let pace = Pace::default();
+    // Too few renders to say: the model as fitted.
+    for _ in 0..PACE_FIRST - 1 {
+        pace.observe(100.0, 150.0);
+    }
+    assert_eq!(pace.factor(), 1.0);
+    pace.observe(100.0, 150.0);
+    assert_eq!(pace.factor(), 1.5);
+    // A render unlike the rest moves the median little; a slower minute moves it all.
+    pace.observe(100.0, 900.0);
+    assert_eq!(pace.factor(), 1.5);
+    for _ in 0..PACE_WINDOW {
+        pace.observe(50.0, 40.0);
+    }
+    assert_eq!(pace.observed(), PACE_WINDOW);
+    assert!((pace.factor() - 0.8).abs() < 1e-12);
+    // Bounded both ways, and blind to renders that say nothing.
+    for _ in 0..PACE_WINDOW {
+        pace.observe(10.0, 1_000.0);
+        pace.observe(0.0, 10.0);
+        pace.observe(10.0, f64::NAN);
+    }
+    assert_eq!(pace.factor(), PACE_LIMIT);
+    // Every time predicted follows it; errors do not.
+    let model = model();
+    let at = features(76_800, 10_000, 1 << 20, "white");
+    let (fitted, paced) = (model.predictions(&at), model.predictions(&Features { pace: 1.5, ..at.clone() }));
+    for ((_, a), (_, b)) in fitted.iter().zip(&paced) {
+        assert!((b.ms - 1.5 * a.ms).abs() < 1e-9 && a.error == b.error);
+    }
 }

@@ -13,6 +13,8 @@ use crate::model::{self, Features, Model};
 /// The model in use and where it stands.
 pub struct ModelState {
     current: RwLock<Arc<Model>>,
+    /// How fast the device runs against `current` lately.
+    pace: model::Pace,
     /// `default` (the shipped model), `measuring`, `measured`, `stored` (read from the data
     /// directory) or `failed` (the shipped model stays).
     status: RwLock<&'static str>,
@@ -20,11 +22,35 @@ pub struct ModelState {
 
 impl ModelState {
     pub fn shipped() -> Self {
-        Self { current: RwLock::new(Arc::new(Model::shipped())), status: RwLock::new("default") }
+        Self { current: RwLock::new(Arc::new(Model::shipped())), pace: model::Pace::default(), status: RwLock::new("default") }
     }
 
     pub fn get(&self) -> Arc<Model> {
         self.current.read().unwrap_or_else(|p| p.into_inner()).clone()
+    }
+
+    /// `Pace::factor` of the model in use.
+    pub fn pace(&self) -> f64 {
+        self.pace.factor()
+    }
+
+    /// Renders the pace follows now (`Pace::observed`).
+    pub fn pace_renders(&self) -> usize {
+        self.pace.observed()
+    }
+
+    /// A rendered job's time against the model's prediction for it (`Pace::observe`), where
+    /// the model has its method (an `auto` job's choice, or a job whose method is a
+    /// candidate's) and its scene was counted (a path's triangles are a guess: its time says
+    /// nothing of the device's pace). `features`: the job's, at pace 1.
+    pub fn observe(&self, job: &Job, features: &Features, measured_ms: f64) {
+        if !features.triangles_known {
+            return;
+        }
+        let model = self.get();
+        if let Some(candidate) = model.candidates.iter().find(|c| same_defaults(c, job)) {
+            self.pace.observe(candidate.ms(features), measured_ms);
+        }
     }
 
     pub fn status(&self) -> &'static str {
@@ -35,8 +61,10 @@ impl ModelState {
         *self.status.write().unwrap_or_else(|p| p.into_inner()) = status;
     }
 
+    /// A new model, its pace started afresh (it was measured on the device as it runs now).
     fn set(&self, model: Model, status: &'static str) {
         *self.current.write().unwrap_or_else(|p| p.into_inner()) = Arc::new(model);
+        self.pace.reset();
         self.set_status(status);
     }
 }
@@ -166,7 +194,12 @@ impl AppState {
             }
             None => self.engine.check(job, uploads_here)?,
         }
-        Ok(Features::of(job, self.engine.scene_shape(&job.scene).as_ref()))
+        Ok(self.features(job))
+    }
+
+    /// What `job`'s predictions follow, at the device's pace.
+    pub(super) fn features(&self, job: &Job) -> Features {
+        Features { pace: self.model.pace(), ..Features::of(job, self.engine.scene_shape(&job.scene).as_ref()) }
     }
 
     /// `max_ms` no longer than a job may wait for the device (the deadline).
@@ -218,6 +251,7 @@ pub(super) async fn estimate(State(state): State<Arc<AppState>>, body: Result<By
             "triangles": features.triangles,
             "triangles_known": features.triangles_known,
             "map_share": features.map_share,
+            "pace": features.pace,
             "light": features.light,
             "scene": features.scene,
         },

@@ -67,6 +67,7 @@ pub(super) async fn methods(State(state): State<Arc<AppState>>) -> Json<Value> {
     let methods: Vec<Value> = REGISTRY.iter().map(|m| json!({"name": m.name(), "summary": m.summary(), "params": m.params()})).collect();
     let mut model = state.model.get().summary();
     model["status"] = state.model.status().into();
+    model["pace"] = json!({"factor": state.model.pace(), "renders": state.model.pace_renders(), "window": crate::model::PACE_WINDOW});
     Json(json!({
         "methods": methods,
         "scenes": BUILTIN_SCENES,

@@ -13,7 +13,6 @@ use tokio::sync::{watch, OwnedSemaphorePermit};
 
 use super::*;
 use crate::job::progressive::{round_method, round_samples, Progressive, ProgressiveOutcome, Round, Stopped, FIRST_ROUND_SAMPLES};
-use crate::model::Features;
 use crate::render::method::ERROR_ESTIMATE;
 use crate::supervise::{Rounds, WithRounds};
 
@@ -32,7 +31,7 @@ pub(super) async fn render_rounds(
     // Each round is a job rendered once.
     let job = Job { progressive: None, ..job };
     let model = state.model.get();
-    let features = Features::of(&job, state.engine.scene_shape(&job.scene).as_ref());
+    let features = state.features(&job);
     let first_round_ms = model.first_round_ms(&features);
     let (candidate, prediction) = model
         .first_image(spec.max_ms, &features, |c| state.allows(c, &job))

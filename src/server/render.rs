@@ -4,6 +4,7 @@
 
 use super::*;
 use crate::job::auto::AutoChoice;
+use crate::model::Features;
 
 fn wants_json(headers: &HeaderMap) -> bool {
     headers
@@ -146,7 +147,7 @@ where
             return outcome;
         }
     };
-    let (engine, store) = (state.engine.clone(), state.store.clone());
+    let (engine, store, pacing) = (state.engine.clone(), state.store.clone(), state.clone());
     tokio::task::spawn_blocking(move || {
         let _hold = hold;
         span.in_scope(|| {
@@ -158,7 +159,10 @@ where
             let outcome = fetch_shared_uploads(&engine, store.as_ref(), &job)
                 .and_then(|()| engine.render_compared(&job, &reference, &supervise))
                 .map(|mut rendered| {
-                    rendered.auto = auto.map(|choice| AutoChoice { measured_ms: Some(rendered.timings.render_ms()), ..choice });
+                    let measured_ms = rendered.timings.render_ms();
+                    let features = Features::of(&job, engine.scene_shape(&job.scene).as_ref());
+                    pacing.model.observe(&job, &features, measured_ms);
+                    rendered.auto = auto.map(|choice| AutoChoice { measured_ms: Some(measured_ms), ..choice });
                     rendered
                 });
             finish(&outcome);
