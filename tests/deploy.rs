@@ -805,6 +805,82 @@ fn replicas_started_together_issue_distinct_ids_and_each_client_reads_its_own_jo
     }
 }
 
+/// A progressive job's rounds (contract §5) are events on every replica of a shared store,
+/// whichever renders it, and every replica serves each round's image while the job runs; when
+/// it ends, the images are gone from every replica and from Redis.
+#[test]
+fn every_replica_streams_a_progressive_jobs_rounds_and_serves_their_images() {
+    use std::io::BufRead;
+    let (redis_port, _redis) = start_redis();
+    let store = format!("redis://127.0.0.1:{redis_port}/0");
+    let ports = [free_port(), free_port()];
+    let _replicas: Vec<Child> = ports.iter().map(|&port| daemon(port, &["--no-warm-up", "--job-store", &store])).collect();
+    for &port in &ports {
+        wait_ready(port);
+    }
+    // Rounds of 16 … 1,024 samples (an error no round reaches): seconds of rounds to watch.
+    let job = r#"{"scene": {"builtin": "crowd"}, "output": {"width": 480, "height": 360},
+                  "method": {"name": "reference", "samples": 1024}, "progressive": {"max_error": 0.0001}}"#;
+    let (status, body) = http("POST", &format!("http://127.0.0.1:{}/v1/jobs", ports[0]), Some(job)).unwrap();
+    assert_eq!(status, 202, "{}", String::from_utf8_lossy(&body));
+    let id = json(&body)["id"].as_str().unwrap().to_owned();
+    // Each replica's event stream, read as it comes; the first round's image fetched from the
+    // same replica the moment its event arrives (the job runs on for seconds).
+    let followed: Vec<(Vec<u32>, Option<(u16, Vec<u8>)>, String)> = std::thread::scope(|scope| {
+        let streams: Vec<_> = ports
+            .iter()
+            .map(|&port| {
+                let id = id.clone();
+                scope.spawn(move || {
+                    let base = format!("http://127.0.0.1:{port}");
+                    let mut curl = Child(
+                        Command::new("curl")
+                            .args(["-sN", "-m", "300", &format!("{base}/v1/jobs/{id}/events")])
+                            .stdout(std::process::Stdio::piped())
+                            .spawn()
+                            .unwrap(),
+                    );
+                    let lines = std::io::BufReader::new(curl.0.stdout.take().unwrap()).lines();
+                    let (mut rounds, mut first_image, mut name, mut last) = (Vec::new(), None, String::new(), String::new());
+                    for line in lines.map_while(Result::ok) {
+                        if let Some(event) = line.strip_prefix("event:") {
+                            name = event.trim().to_owned();
+                        } else if let Some(data) = line.strip_prefix("data:") {
+                            let event = json(data.trim().as_bytes());
+                            last = name.clone();
+                            if name == "round" {
+                                rounds.push(event["round"]["round"].as_u64().unwrap() as u32);
+                                if first_image.is_none() {
+                                    first_image = http("GET", &format!("{base}{}", event["round"]["image"].as_str().unwrap()), None);
+                                }
+                            }
+                            if matches!(name.as_str(), "succeeded" | "failed" | "cancelled") {
+                                break;
+                            }
+                        }
+                    }
+                    (rounds, first_image, last)
+                })
+            })
+            .collect();
+        streams.into_iter().map(|stream| stream.join().unwrap()).collect()
+    });
+    for ((rounds, first_image, last), port) in followed.iter().zip(ports) {
+        assert_eq!(last, "succeeded", "replica {port}: {rounds:?}");
+        // Every round, in order, on both replicas: the first image and 16 … 1,024 samples.
+        assert_eq!(*rounds, (0..=7).collect::<Vec<u32>>(), "replica {port}");
+        let (status, image) = first_image.as_ref().expect("the first round's image was asked for");
+        assert_eq!((*status, png_width(image)), (200, 480), "replica {port}");
+    }
+    // Ended: its rounds are gone everywhere (its last is its image), Redis holds none.
+    for port in ports {
+        let (status, _) = http("GET", &format!("http://127.0.0.1:{port}/v1/jobs/{id}/rounds/1"), None).unwrap();
+        assert_eq!(status, 404, "replica {port}");
+    }
+    let left = run(Command::new("redis-cli").args(["-p", &redis_port.to_string(), "--raw", "EXISTS", &format!("penumbra:rounds:{id}")]));
+    assert_eq!(left.trim(), "0");
+}
+
 /// Redis, persisting every write (AOF, `appendfsync always`), is SIGKILLed while two replicas
 /// work through a batch, and restarted on the same files: while it is gone, new jobs get 503
 /// `store_unavailable` with Retry-After and readiness is 503 while liveness stays 200; the

@@ -3,6 +3,8 @@
 //! each replica's workers take jobs from the store's queue and follow jobs run elsewhere.
 
 use super::*;
+use crate::job::OutputFormat;
+use crate::queue::KeptRound;
 
 /// `GET /v1/jobs/{id}`: a finished render's record, or a submitted job's state; a submitted
 /// job's record names the request that submitted it (`request_id`).
@@ -22,7 +24,14 @@ pub(super) async fn job_record(State(state): State<Arc<AppState>>, Path(id): Pat
         let stored = stored_job(&state, &id).await?.ok_or_else(|| unknown_job(&id))?;
         let record = match stored.result {
             Some(result) if stored.status == JobStatus::Succeeded => result,
-            _ => state_record(&id, stored.status, (stored.done, stored.total), stored.error),
+            _ => {
+                let mut record = state_record(&id, stored.status, (stored.done, stored.total), stored.error);
+                // A progressive job running on another replica: its latest round.
+                if let Some(round) = stored.rounds.last().filter(|_| !stored.status.finished()) {
+                    record["round"] = json!(round);
+                }
+                record
+            }
         };
         (record, stored.request_id)
     };
@@ -321,6 +330,7 @@ pub(super) fn event_of(stored: &StoredJob) -> JobEvent {
     let status = stored.status;
     let mut event = JobEvent::status(status);
     (event.done, event.total) = (stored.done, stored.total);
+    (event.round, event.rounds) = (stored.rounds.last().cloned(), stored.rounds.clone());
     if event.finished() {
         event.finish(status, stored.error.clone());
     }
@@ -351,7 +361,8 @@ pub(super) async fn follow_stored(store: Store, id: String, events: tokio::sync:
         let event = event_of(&stored);
         let finished = event.finished();
         events.send_if_modified(|current| {
-            let changed = (current.status, current.done, current.total) != (event.status, event.done, event.total);
+            let changed = (current.status, current.done, current.total, current.rounds.len())
+                != (event.status, event.done, event.total, event.rounds.len());
             *current = event;
             changed
         });
@@ -433,8 +444,9 @@ pub(super) fn promised_bytes(job: &Job, limits: &crate::job::Limits) -> u64 {
 }
 
 /// `GET /v1/jobs/{id}/rounds/{round}`: a running progressive job's round image (contract
-/// §5), held by the replica that renders it until the job ends; 404 after (the last round is
-/// the job's image) or for a round not drawn.
+/// §5), held by the replica that renders it — and, through a shared store, served by every
+/// replica — until the job ends; 404 after (the last round is the job's image) or for a round
+/// not drawn.
 pub(super) async fn round_image(
     State(state): State<Arc<AppState>>,
     Path((id, round)): Path<(String, String)>,
@@ -446,17 +458,24 @@ pub(super) async fn round_image(
         ))
     };
     let number: usize = round.parse().map_err(|_| gone())?;
-    let kept = state.jobs.round(&id, number).ok_or_else(gone)?;
-    let bytes = match kept.bytes {
-        Some(bytes) => bytes.as_ref().clone(),
+    let from_store = |store: Option<Store>| {
+        let job = id.clone();
+        async move {
+            let Some(store) = store else { return Ok(None) };
+            store.call(move |s| s.round(&job, number)).await.map_err(store_error)
+        }
+    };
+    let (format, bytes) = match state.jobs.round(&id, number) {
+        Some(KeptRound { format, bytes: Some(bytes) }) => (format, bytes.as_ref().clone()),
+        Some(KeptRound { format, bytes: None }) => (format, from_store(state.store.clone()).await?.ok_or_else(gone)?),
+        // Drawn by another replica of a shared store: a PNG or an EXR, as its job asked.
         None => {
-            let store = state.store.clone().ok_or_else(gone)?;
-            let job = id.clone();
-            store.call(move |s| s.round(&job, number)).await.map_err(store_error)?.ok_or_else(gone)?
+            let bytes = from_store(state.store.clone().filter(|s| s.shared())).await?.ok_or_else(gone)?;
+            (if bytes.starts_with(b"\x89PNG") { OutputFormat::Png } else { OutputFormat::Exr }, bytes)
         }
     };
     let mut response = bytes.into_response();
-    response.headers_mut().insert(header::CONTENT_TYPE, HeaderValue::from_static(kept.format.mime()));
+    response.headers_mut().insert(header::CONTENT_TYPE, HeaderValue::from_static(format.mime()));
     Ok(response)
 }
 

@@ -99,17 +99,20 @@ struct Published<'a> {
 
 impl Published<'_> {
     /// Keeps a round's image while the job runs — on a local store's disk, where admission
-    /// promised it room, else in memory — and announces it.
+    /// promised it room, else in memory, and in a shared store for the other replicas too —
+    /// and announces it, to the other replicas through a shared store.
     async fn publish(&mut self, rendered: &Rendered, method: &str, samples: u32, error_estimate: f64, predicted: bool) {
         let number = self.rounds.len() as u32;
-        let mut bytes = Some(Arc::new(rendered.bytes.clone()));
-        if let (Some(store), Some(image)) = (self.state.store.as_ref().filter(|s| !s.shared()), bytes.clone()) {
-            let id = self.id.to_owned();
+        let image = Arc::new(rendered.bytes.clone());
+        let mut bytes = Some(image.clone());
+        if let Some(store) = &self.state.store {
+            let (id, shared) = (self.id.to_owned(), store.shared());
             match store.call(move |s| s.put_round(&id, number as usize, &image)).await {
-                Ok(true) => bytes = None,
-                Ok(false) => {}
-                // Kept in memory instead: the round is still served, and the job goes on.
-                Err(error) => tracing::warn!(id = self.id, round = number, %error, "could not keep a round image on disk"),
+                // This replica serves it from the local disk; from memory where it is shared.
+                Ok(true) if !shared => bytes = None,
+                Ok(_) => {}
+                // Kept in memory (only): the round is still served here, and the job goes on.
+                Err(error) => tracing::warn!(id = self.id, round = number, %error, "could not keep a round image in the store"),
             }
         }
         self.state.jobs.keep_round(self.id, crate::queue::KeptRound { format: rendered.format, bytes });
@@ -127,6 +130,12 @@ impl Published<'_> {
             event.round = Some(round.clone());
             event.rounds.push(round.clone());
         });
+        if let Some(store) = self.state.store.as_ref().filter(|s| s.shared()) {
+            let (id, drawn) = (self.id.to_owned(), round.clone());
+            if let Err(error) = store.call(move |s| s.round_drawn(&id, &drawn)).await {
+                tracing::warn!(id = self.id, round = number, %error, "could not announce a round to the other replicas");
+            }
+        }
         self.rounds.push(round);
     }
 }

@@ -215,7 +215,7 @@ struct RoundsKept<'a> {
 impl Drop for RoundsKept<'_> {
     fn drop(&mut self) {
         self.state.jobs.drop_rounds(&self.id);
-        if let Some(store) = self.state.store.clone().filter(|s| !s.shared()) {
+        if let Some(store) = self.state.store.clone() {
             let id = self.id.clone();
             let remove = move || {
                 if let Err(error) = store.call_blocking(|s| s.drop_rounds(&id)) {

@@ -61,6 +61,10 @@ pub struct StoredJob {
     /// The id of the request that submitted it (`x-request-id`), for the logs of its life.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub request_id: Option<String>,
+    /// A progressive job's rounds so far, as its events report them (shared stores: for
+    /// readers on other replicas).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub rounds: Vec<crate::job::progressive::Round>,
 }
 
 impl StoredJob {
@@ -305,11 +309,16 @@ pub trait JobStore: Send + Sync {
     fn delete_upload(&self, _kind: Kind, _id: &str) -> StoreResult<bool> {
         Ok(false)
     }
-    /// Keeps a running progressive job's round image on the store's own disk, until
-    /// `drop_rounds` (contract §5: the rounds count against the disk's promise). Ok(false): this
-    /// store has no disk of its own, and the caller keeps the image in memory.
+    /// Keeps a running progressive job's round image until `drop_rounds`: on the store's own
+    /// disk (contract §5: the rounds count against the disk's promise), or in a shared store
+    /// for every replica to serve. Ok(false): this store keeps none, and the caller keeps the
+    /// image in memory.
     fn put_round(&self, _id: &str, _round: usize, _image: &[u8]) -> StoreResult<bool> {
         Ok(false)
+    }
+    /// Records a progressive job's round for readers on other replicas (shared stores).
+    fn round_drawn(&self, _id: &str, _round: &crate::job::progressive::Round) -> StoreResult<()> {
+        Ok(())
     }
     /// A round image `put_round` kept.
     fn round(&self, _id: &str, _round: usize) -> StoreResult<Option<Vec<u8>>> {

@@ -78,6 +78,11 @@ fn idempotency_key(key: &str) -> String {
     format!("penumbra:key:{}", key_digest(key))
 }
 
+/// A running progressive job's round images, a field each (`put_round`).
+fn rounds_key(id: &str) -> String {
+    format!("penumbra:rounds:{id}")
+}
+
 fn replica_key(replica: &str) -> String {
     format!("penumbra:replica:{replica}")
 }
@@ -563,6 +568,27 @@ impl JobStore for RedisStore {
         }
         let listed: Vec<Vec<u8>> = self.with(|c| c.lrange(RECENT, 0, n as isize - 1))?;
         Ok(listed.iter().filter_map(|json| serde_json::from_slice(json).ok()).collect())
+    }
+
+    /// In one hash per job, expiring as finished records do: a replica that dies mid-job
+    /// leaves none for longer than that.
+    fn put_round(&self, id: &str, round: usize, image: &[u8]) -> StoreResult<bool> {
+        let (key, ttl) = (rounds_key(id), self.ttl.as_secs().max(1) as i64);
+        self.with(|c| redis::pipe().atomic().hset(&key, round, image).ignore().expire(&key, ttl).ignore().query::<()>(c))?;
+        Ok(true)
+    }
+
+    fn round(&self, id: &str, round: usize) -> StoreResult<Option<Vec<u8>>> {
+        self.with(|c| c.hget(rounds_key(id), round))
+    }
+
+    fn drop_rounds(&self, id: &str) -> StoreResult<()> {
+        self.with(|c| c.del(rounds_key(id)))
+    }
+
+    fn round_drawn(&self, id: &str, round: &crate::job::progressive::Round) -> StoreResult<()> {
+        let job = self.update(id, |job| job.rounds.push(round.clone()))?;
+        self.put_record(&job, false)
     }
 
     fn put_upload(&self, kind: Kind, id: &str, bytes: &[u8]) -> StoreResult<()> {
