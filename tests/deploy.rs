@@ -826,7 +826,13 @@ fn every_replica_streams_a_progressive_jobs_rounds_and_serves_their_images() {
     let id = json(&body)["id"].as_str().unwrap().to_owned();
     // Each replica's event stream, read as it comes; the first round's image fetched from the
     // same replica the moment its event arrives (the job runs on for seconds).
-    let followed: Vec<(Vec<u32>, Option<(u16, Vec<u8>)>, String)> = std::thread::scope(|scope| {
+    /// What one replica's stream said: its rounds, the first one's image, its last event.
+    struct Followed {
+        rounds: Vec<u32>,
+        first_image: Option<(u16, Vec<u8>)>,
+        last: String,
+    }
+    let followed: Vec<Followed> = std::thread::scope(|scope| {
         let streams: Vec<_> = ports
             .iter()
             .map(|&port| {
@@ -859,13 +865,13 @@ fn every_replica_streams_a_progressive_jobs_rounds_and_serves_their_images() {
                             }
                         }
                     }
-                    (rounds, first_image, last)
+                    Followed { rounds, first_image, last }
                 })
             })
             .collect();
         streams.into_iter().map(|stream| stream.join().unwrap()).collect()
     });
-    for ((rounds, first_image, last), port) in followed.iter().zip(ports) {
+    for (Followed { rounds, first_image, last }, port) in followed.iter().zip(ports) {
         assert_eq!(last, "succeeded", "replica {port}: {rounds:?}");
         // Every round, in order, on both replicas: the first image and 16 … 1,024 samples.
         assert_eq!(*rounds, (0..=7).collect::<Vec<u32>>(), "replica {port}");
