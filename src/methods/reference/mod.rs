@@ -179,22 +179,9 @@ fn record_on_cpu(ctx: &mut MethodContext<'_>, params: &Params, plan: &SamplePlan
             spent.add(half_spent);
         }
         let written = std::time::Instant::now();
-        // A few rows at a time: the band's visibility is never held whole beside the device's
-        // copy of it.
-        let mut visibility = Vec::new();
-        for first in band.rows.clone().step_by(VISIBILITY_ROWS as usize) {
-            let rows = VISIBILITY_ROWS.min(band.rows.end - first);
-            visibility.resize(width as usize * rows as usize * 16, 0);
-            let relative = first - band.rows.start;
-            penumbra.merge(cpu::write_visibility(
-                &receivers,
-                [&sums[0], &sums[1]],
-                (channels, effective),
-                (width, relative),
-                &mut visibility,
-            ));
-            ctx.gpu.queue.write_buffer(ctx.visibility, u64::from(first) * u64::from(width) * 16, &visibility);
-        }
+        write_visibility_rows(ctx, band.rows.clone(), width, |rows, out| {
+            penumbra.merge(cpu::write_visibility(&receivers, [&sums[0], &sums[1]], (channels, effective), (width, rows.start), out));
+        });
         write_ms += written.elapsed().as_secs_f64() * 1e3;
         segments += receivers.segments;
         if supervisor.cancelled() {
@@ -269,6 +256,26 @@ const CPU_BYTES_PER_PIXEL: u64 = 108;
 
 /// Rows of visibility written to the device at a time.
 const VISIBILITY_ROWS: u32 = 64;
+
+/// Writes the visibility of a band (the frame's rows `band_rows`, `width` pixels each) to the
+/// frame's buffer `VISIBILITY_ROWS` rows at a time, so that it is never held whole beside the
+/// device's copy: `fill(rows, out)` writes the band's rows `rows` (counted from its first) into
+/// `out` as `vec4<f32>` texels, 16 bytes a pixel.
+fn write_visibility_rows(
+    ctx: &MethodContext<'_>,
+    band_rows: std::ops::Range<u32>,
+    width: u32,
+    mut fill: impl FnMut(std::ops::Range<u32>, &mut [u8]),
+) {
+    let mut visibility = Vec::new();
+    for first in band_rows.clone().step_by(VISIBILITY_ROWS as usize) {
+        let rows = VISIBILITY_ROWS.min(band_rows.end - first);
+        visibility.resize(width as usize * rows as usize * 16, 0);
+        let relative = first - band_rows.start;
+        fill(relative..relative + rows, &mut visibility);
+        ctx.gpu.queue.write_buffer(ctx.visibility, u64::from(first) * u64::from(width) * 16, &visibility);
+    }
+}
 
 #[cfg(test)]
 mod tests;

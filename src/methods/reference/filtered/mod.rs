@@ -28,8 +28,8 @@ use super::estimate::{PenumbraMean, Texel};
 use super::gpu::SEGMENT;
 use super::samples::{half_of_index, SamplePlan};
 use super::{
-    Counters, MethodContext, Param, ParamSpec, Params, Progress, ShadowMethod, BIAS_TEXELS, CROP, RESOLUTION, SEED, SLOPE_BIAS_TEXELS,
-    VISIBILITY_ROWS,
+    write_visibility_rows, Counters, MethodContext, Param, ParamSpec, Params, Progress, ShadowMethod, BIAS_TEXELS, CROP, RESOLUTION, SEED,
+    SLOPE_BIAS_TEXELS,
 };
 use crate::error::JobResult;
 use crate::params::Cap;
@@ -277,13 +277,11 @@ fn render_band(
         camera: &ctx.spec.camera,
     };
     let filtered = filter::filter(&inputs, &surfaces, texels, &blockers, &refined);
-    // A few rows at a time: the band's visibility is never held whole beside the device's copy.
     let row = width as usize;
-    for first in (0..filtered.texels.len()).step_by(row * VISIBILITY_ROWS as usize) {
-        let end = (first + row * VISIBILITY_ROWS as usize).min(filtered.texels.len());
-        let offset = (u64::from(band.rows.start) * u64::from(width) + first as u64) * 16;
-        ctx.gpu.queue.write_buffer(ctx.visibility, offset, bytemuck::cast_slice(&filtered.visibility(first..end)));
-    }
+    write_visibility_rows(ctx, band.rows.clone(), width, |rows, out| {
+        let texels = filtered.visibility(rows.start as usize * row..rows.end as usize * row);
+        out.copy_from_slice(bytemuck::cast_slice(&texels));
+    });
     done.filter_ms += filtering.elapsed().as_secs_f64() * 1e3;
     done.pixels_filtered += filtered.pixels_filtered;
     done.penumbra.merge(filtered.penumbra);
