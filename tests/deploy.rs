@@ -758,18 +758,26 @@ fn finished_record(base: &str, id: &str, limit: Duration) -> serde_json::Value {
     record
 }
 
+/// Redis on a free loopback port and two replicas sharing it as their job store, started
+/// together and ready: (Redis's port, the replicas' ports, the processes — the replicas are
+/// dropped before Redis).
+fn two_replicas_on_redis() -> (u16, [u16; 2], (Vec<Child>, Child)) {
+    let (redis_port, redis) = start_redis();
+    let store = format!("redis://127.0.0.1:{redis_port}/0");
+    let ports = [free_port(), free_port()];
+    let replicas: Vec<Child> = ports.iter().map(|&port| daemon(port, &["--no-warm-up", "--job-store", &store])).collect();
+    for &port in &ports {
+        wait_ready(port);
+    }
+    (redis_port, ports, (replicas, redis))
+}
+
 /// Two replicas started in the same moment on one Redis (as a Deployment starts its pods)
 /// take jobs from clients through both: every id is distinct, and every client reads back
 /// the job it asked for (method and size) through either replica.
 #[test]
 fn replicas_started_together_issue_distinct_ids_and_each_client_reads_its_own_job() {
-    let (redis_port, _redis) = start_redis();
-    let store = format!("redis://127.0.0.1:{redis_port}/0");
-    let ports = [free_port(), free_port()];
-    let _replicas: Vec<Child> = ports.iter().map(|&port| daemon(port, &["--no-warm-up", "--job-store", &store])).collect();
-    for &port in &ports {
-        wait_ready(port);
-    }
+    let (_, ports, _processes) = two_replicas_on_redis();
     let methods = ["hard", "pcss", "brabec", "jfa-l", "jfa-e", "chun-oh", "wedges"];
     // Each client asks for its own job: a method and a width no other client asks for.
     let asked: Vec<(u16, &str, u32)> = (0..14).map(|k| (ports[k % 2], methods[k % methods.len()], 48 + 4 * k as u32)).collect();
@@ -811,13 +819,7 @@ fn replicas_started_together_issue_distinct_ids_and_each_client_reads_its_own_jo
 #[test]
 fn every_replica_streams_a_progressive_jobs_rounds_and_serves_their_images() {
     use std::io::BufRead;
-    let (redis_port, _redis) = start_redis();
-    let store = format!("redis://127.0.0.1:{redis_port}/0");
-    let ports = [free_port(), free_port()];
-    let _replicas: Vec<Child> = ports.iter().map(|&port| daemon(port, &["--no-warm-up", "--job-store", &store])).collect();
-    for &port in &ports {
-        wait_ready(port);
-    }
+    let (redis_port, ports, _processes) = two_replicas_on_redis();
     // Rounds of 16 … 1,024 samples (an error no round reaches): seconds of rounds to watch.
     let job = r#"{"scene": {"builtin": "crowd"}, "output": {"width": 480, "height": 360},
                   "method": {"name": "reference", "samples": 1024}, "progressive": {"max_error": 0.0001}}"#;
