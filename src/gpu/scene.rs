@@ -160,10 +160,36 @@ impl GpuScene {
         self.extent().corners()
     }
 
-    /// `Extent::shadow_fit_points` of this scene.
+    /// `shadow_fit_points` of this scene.
     pub fn shadow_fit_points(&self, light: &AreaLight) -> Vec<Vec3> {
-        self.extent().shadow_fit_points(light)
+        shadow_fit_points(&self.extent(), light)
     }
+}
+
+/// The points a shadow map's frustum from `light` must hold (`LightProjection::fit`) for a
+/// scene lying in `extent`: its bounds, or, on a floor added under the scene (contract §3),
+/// what stands on it and the part of the floor it can shadow from some point of the light —
+/// the corners of its bounds cast from the light's corners and centre onto the floor. The floor reaches
+/// well past the scene; the rest of it is lit whichever way (every method takes a point
+/// outside the frustum as lit), and framing it all would spread the map's texels thin.
+/// A light not above everything on the floor gets the whole bounds.
+pub fn shadow_fit_points(extent: &Extent, light: &AreaLight) -> Vec<Vec3> {
+    let Some(on_floor) = extent.on_floor else { return extent.corners().to_vec() };
+    let standing = box_corners(on_floor.bounds_min, on_floor.bounds_max);
+    let half = 0.5 * light.size_m;
+    let light_points = [(-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0), (0.0, 0.0)]
+        .map(|(s, t)| light.center + light.r * (s * half.x) + light.u * (t * half.y));
+    let mut points = standing.to_vec();
+    for from in light_points {
+        for corner in standing {
+            if from.y <= corner.y + 1e-6 * (1.0 + corner.y.abs()) {
+                return extent.corners().to_vec();
+            }
+            let cast = from + (corner - from) * ((from.y - on_floor.height) / (from.y - corner.y));
+            points.push(cast.clamp(extent.bounds_min, extent.bounds_max));
+        }
+    }
+    points
 }
 
 /// Each material's bind group (its texture, or a white texel, and the scene's sampler) and

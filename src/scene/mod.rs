@@ -11,7 +11,6 @@ pub mod gltf;
 use glam::{Mat3, Mat4, Vec2, Vec3};
 
 use crate::job::{AssetRef, FloorSpec};
-use crate::light::AreaLight;
 
 /// One vertex as the G-buffer and shadow-map passes read it.
 #[repr(C)]
@@ -91,8 +90,9 @@ pub struct OnFloor {
 }
 
 /// Where a scene lies: its bounds and, on a floor, what stands on it — what framing a camera
-/// and a shadow map needs, without the triangles (`Scene::extent`, `GpuScene::extent`): an
-/// estimate predicts a reference's crop from it before the scene is uploaded.
+/// and a shadow map needs (`gpu::scene::shadow_fit_points`), without the triangles
+/// (`Scene::extent`, `GpuScene::extent`): an estimate predicts a reference's crop from it
+/// before the scene is uploaded.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Extent {
     pub bounds_min: Vec3,
@@ -125,32 +125,6 @@ impl Extent {
     /// The eight corners of the bounding box.
     pub fn corners(&self) -> [Vec3; 8] {
         box_corners(self.bounds_min, self.bounds_max)
-    }
-
-    /// The points a shadow map's frustum from `light` must hold (`LightProjection::fit`): the
-    /// scene's bounds, or, on a floor added under the scene (contract §3), what stands on it
-    /// and the part of the floor it can shadow from some point of the light — the corners of
-    /// its bounds cast from the light's corners and centre onto the floor. The floor reaches
-    /// well past the scene; the rest of it is lit whichever way (every method takes a point
-    /// outside the frustum as lit), and framing it all would spread the map's texels thin.
-    /// A light not above everything on the floor gets the whole bounds.
-    pub fn shadow_fit_points(&self, light: &AreaLight) -> Vec<Vec3> {
-        let Some(on_floor) = self.on_floor else { return self.corners().to_vec() };
-        let standing = box_corners(on_floor.bounds_min, on_floor.bounds_max);
-        let half = 0.5 * light.size_m;
-        let light_points = [(-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0), (0.0, 0.0)]
-            .map(|(s, t)| light.center + light.r * (s * half.x) + light.u * (t * half.y));
-        let mut points = standing.to_vec();
-        for from in light_points {
-            for corner in standing {
-                if from.y <= corner.y + 1e-6 * (1.0 + corner.y.abs()) {
-                    return self.corners().to_vec();
-                }
-                let cast = from + (corner - from) * ((from.y - on_floor.height) / (from.y - corner.y));
-                points.push(cast.clamp(self.bounds_min, self.bounds_max));
-            }
-        }
-        points
     }
 }
 

@@ -197,7 +197,7 @@ pub fn predicted_map_share(camera_view_proj: Mat4, light: &AreaLight, extent: &E
         .into_iter()
         .flat_map(|s| [-1.0f32, 0.0, 1.0].map(|t| light.center + light.r * (s * half.x) + light.u * (t * half.y)))
         .collect();
-    let (_, frusta) = frusta(light, &positions, &extent.shadow_fit_points(light), resolution);
+    let (_, frusta) = frusta(light, &positions, &crate::gpu::scene::shadow_fit_points(extent, light), resolution);
     let crop = receivers_crop(camera_view_proj, extent, &frusta, resolution);
     f64::from(crop.size.element_product()) / f64::from(resolution).powi(2)
 }
