@@ -155,7 +155,7 @@ fn plan_fingerprint(ctx: &MethodContext<'_>, params: &Params) -> u64 {
 
 /// Each sample's whole map from its point on the light (`positions`): its view-projection and
 /// its texels per unit of tan from the map's centre; with the near plane every map shares.
-/// Each frustum's angle is fitted to the scene (`corners`: `Extent::shadow_fit_points`) from
+/// Each frustum's angle is fitted to the scene (`corners`: `gpu::scene::shadow_fit_points`) from
 /// its point, and one near plane serves every map (the nearest any fit allows), so that the
 /// accumulate pass reads it once per pixel, not per sample.
 fn frusta(light: &AreaLight, positions: &[Vec3], corners: &[Vec3], resolution: u32) -> (f32, Vec<(Mat4, f32)>) {
