@@ -359,12 +359,16 @@ impl JobStore for RedisStore {
         }
     }
 
+    /// A new attempt (a replica that died mid-job leaves its job to another) draws a
+    /// progressive job's rounds afresh: the last attempt's are forgotten.
     fn start(&self, id: &str) -> StoreResult<()> {
         let job = self.update(id, |job| {
             job.status = JobStatus::Running;
             job.attempts += 1;
+            job.rounds.clear();
         })?;
-        self.put_record(&job, false)
+        self.put_record(&job, false)?;
+        self.drop_rounds(id)
     }
 
     fn succeed(&self, id: &str, result: &Value, image: &[u8]) -> StoreResult<bool> {
