@@ -12,12 +12,12 @@ use crate::gpu::scene::GpuScene;
 use crate::job::{AssetRef, SceneRef};
 use crate::light::LightImage;
 use crate::scene::{self, builtin, Shape};
+use crate::timing::Timings;
+use crate::upload_store::{Asset, Kind};
 
 /// The triangles a terrain is built with for its shape alone (`Engine::scene_shape`): its
 /// bounds are those of the same landscape at any count, to within its grid's step.
 const COARSE_TERRAIN_TRIANGLES: u64 = 20_000;
-use crate::timing::Timings;
-use crate::upload_store::{Asset, Kind};
 
 /// Where `{"path": ...}` assets may be read from.
 #[derive(Debug, Clone, PartialEq, Eq)]

@@ -8,8 +8,7 @@ use wgpu::util::DeviceExt;
 use super::GpuContext;
 use crate::light::AreaLight;
 use crate::scene::adjacency::{Casting, EdgeMesh};
-pub use crate::scene::box_corners;
-use crate::scene::{DrawRange, Extent, OnFloor, Scene, SceneDefaults};
+use crate::scene::{box_corners, DrawRange, Extent, OnFloor, Scene, SceneDefaults};
 
 /// A material's constant part as the G-buffer shader reads it.
 #[repr(C)]
@@ -169,10 +168,10 @@ impl GpuScene {
 /// The points a shadow map's frustum from `light` must hold (`LightProjection::fit`) for a
 /// scene lying in `extent`: its bounds, or, on a floor added under the scene (contract §3),
 /// what stands on it and the part of the floor it can shadow from some point of the light —
-/// the corners of its bounds cast from the light's corners and centre onto the floor. The floor reaches
-/// well past the scene; the rest of it is lit whichever way (every method takes a point
-/// outside the frustum as lit), and framing it all would spread the map's texels thin.
-/// A light not above everything on the floor gets the whole bounds.
+/// the corners of its bounds cast from the light's corners and centre onto the floor. The
+/// floor reaches well past the scene; the rest of it is lit whichever way (every method takes
+/// a point outside the frustum as lit), and framing it all would spread the map's texels
+/// thin. A light not above everything on the floor gets the whole bounds.
 pub fn shadow_fit_points(extent: &Extent, light: &AreaLight) -> Vec<Vec3> {
     let Some(on_floor) = extent.on_floor else { return extent.corners().to_vec() };
     let standing = box_corners(on_floor.bounds_min, on_floor.bounds_max);

@@ -4,7 +4,7 @@
 
 use glam::{Mat4, Vec2, Vec3, Vec4};
 
-use crate::gpu::scene::box_corners;
+use crate::scene::box_corners;
 
 /// A bounded convex solid: its faces, each a convex polygon, and the planes that bound it,
 /// `plane · (p, 1) ≥ 0` inside. A solid with no faces is empty.

@@ -116,10 +116,14 @@ impl Extent {
     /// The floor's corners in x and z and its height: centred under the bounds, `margin`
     /// bounding radii past them, a hair below their lowest point.
     fn floor_square(&self, floor: &FloorSpec) -> ((f32, f32), (f32, f32), f32) {
-        let (min, max) = (self.bounds_min, self.bounds_max);
-        let radius = ((max - min) * 0.5).length().max(1e-3);
+        let (min, max, radius) = (self.bounds_min, self.bounds_max, self.radius());
         let reach = floor.margin * radius;
         ((min.x - reach, min.z - reach), (max.x + reach, max.z + reach), min.y - 1e-3 * radius)
+    }
+
+    /// Half the bounding box's diagonal (at least a millimetre).
+    pub fn radius(&self) -> f32 {
+        ((self.bounds_max - self.bounds_min) * 0.5).length().max(1e-3)
     }
 
     /// The eight corners of the bounding box.
@@ -166,7 +170,7 @@ impl Scene {
     }
 
     pub fn radius(&self) -> f32 {
-        ((self.bounds_max - self.bounds_min) * 0.5).length().max(1e-3)
+        self.extent(None).radius()
     }
 
     /// This scene with a floor under it (contract §3): a square at the bounds' lowest height
@@ -176,7 +180,7 @@ impl Scene {
     /// (`fitted_defaults` already frames the shadow on it).
     pub fn with_floor(&self, floor: &FloorSpec) -> Scene {
         let mut out = self.clone();
-        let ((x0, z0), (x1, z1), y) = self.floor_square(floor);
+        let ((x0, z0), (x1, z1), y) = self.extent(None).floor_square(floor);
         let object_id = out.objects.len() as u32;
         out.objects.push("floor".into());
         let material = out.materials.len() as u32;
@@ -203,11 +207,6 @@ impl Scene {
     /// What predicting a job on this scene needs of it, on `floor` if one is added.
     pub fn shape(&self, floor: Option<&FloorSpec>) -> Shape {
         Shape { triangles: self.triangle_count(), extent: self.extent(None), defaults: self.defaults.clone() }.on(floor)
-    }
-
-    /// The floor's corners in x and z and its height (`Extent::floor_square`).
-    fn floor_square(&self, floor: &FloorSpec) -> ((f32, f32), (f32, f32), f32) {
-        self.extent(None).floor_square(floor)
     }
 
     /// Bytes this scene occupies once uploaded (vertices, indices, textures).

@@ -42,14 +42,14 @@ impl ModelState {
     /// A rendered job's time against the model's prediction for it (`Pace::observe`), where
     /// the model has its method (an `auto` job's choice, or a job whose method is a
     /// candidate's) and its scene was counted (a path's triangles are a guess: its time says
-    /// nothing of the device's pace). `features`: the job's, at pace 1.
-    pub fn observe(&self, job: &Job, features: &Features, measured_ms: f64) {
-        if !features.triangles_known {
-            return;
-        }
+    /// nothing of the device's pace). `features`: the job's, at pace 1 — made only for a job
+    /// the model has.
+    pub fn observe(&self, job: &Job, features: impl FnOnce() -> Features, measured_ms: f64) {
         let model = self.get();
-        if let Some(candidate) = model.candidates.iter().find(|c| same_defaults(c, job)) {
-            self.pace.observe(candidate.ms(features), measured_ms);
+        let Some(candidate) = model.candidates.iter().find(|c| same_defaults(c, job)) else { return };
+        let features = features();
+        if features.triangles_known {
+            self.pace.observe(candidate.ms(&features), measured_ms);
         }
     }
 

@@ -160,8 +160,7 @@ where
                 .and_then(|()| engine.render_compared(&job, &reference, &supervise))
                 .map(|mut rendered| {
                     let measured_ms = rendered.timings.render_ms();
-                    let features = Features::of(&job, engine.scene_shape(&job.scene).as_ref());
-                    pacing.model.observe(&job, &features, measured_ms);
+                    pacing.model.observe(&job, || Features::of(&job, engine.scene_shape(&job.scene).as_ref()), measured_ms);
                     rendered.auto = auto.map(|choice| AutoChoice { measured_ms: Some(measured_ms), ..choice });
                     rendered
                 });

@@ -368,7 +368,10 @@ impl JobStore for RedisStore {
             job.rounds.clear();
         })?;
         self.put_record(&job, false)?;
-        self.drop_rounds(id)
+        if job.attempts > 1 {
+            self.drop_rounds(id)?;
+        }
+        Ok(())
     }
 
     fn succeed(&self, id: &str, result: &Value, image: &[u8]) -> StoreResult<bool> {

@@ -192,11 +192,7 @@ fn receivers_crop(camera_view_proj: Mat4, extent: &Extent, frusta: &[(Mat4, f32)
 /// so this is the crop of a light that emits everywhere: a light with dark parts may crop
 /// tighter.
 pub fn predicted_map_share(camera_view_proj: Mat4, light: &AreaLight, extent: &Extent, resolution: u32) -> f64 {
-    let half = 0.5 * light.size_m;
-    let positions: Vec<Vec3> = [-1.0f32, 0.0, 1.0]
-        .into_iter()
-        .flat_map(|s| [-1.0f32, 0.0, 1.0].map(|t| light.center + light.r * (s * half.x) + light.u * (t * half.y)))
-        .collect();
+    let positions: Vec<Vec3> = [0.0f32, 0.5, 1.0].into_iter().flat_map(|s| [0.0f32, 0.5, 1.0].map(|t| light.image_point(s, t))).collect();
     let (_, frusta) = frusta(light, &positions, &crate::gpu::scene::shadow_fit_points(extent, light), resolution);
     let crop = receivers_crop(camera_view_proj, extent, &frusta, resolution);
     f64::from(crop.size.element_product()) / f64::from(resolution).powi(2)
