@@ -9,12 +9,12 @@ use super::CpuSample;
 /// Fixed-point steps per texel of a map's vertex coordinates: llvmpipe's 8 bits of sub-texel
 /// precision (`FIXED_ORDER`), so that a vertex lands where lavapipe puts it and a texel centre
 /// on a shared edge goes to the triangle Vulkan's top-left rule gives it.
-const SUBTEXEL: f32 = 256.0;
+pub(super) const SUBTEXEL: f32 = 256.0;
 
 /// Coordinates (texels) within which a triangle is rasterised in exact fixed point: products of
 /// two such coordinates in sub-texel steps stay far inside an `i64`. Beyond it (a vertex just
 /// past the near plane of a wide frustum) the edges are evaluated in `f64` instead.
-const FIXED_RANGE: f32 = (1 << 20) as f32;
+pub(super) const FIXED_RANGE: f32 = (1 << 20) as f32;
 
 /// Rows of a triangle at least this many texels wide find where they are covered by solving
 /// each edge for x (three divisions) instead of testing every texel: the same texels, fewer
@@ -46,14 +46,16 @@ impl Map {
         // near plane and w the view depth, so Vulkan's clip volume 0 ≤ z ≤ w leaves only the
         // near plane to clip against (w ≥ z); x and y are clipped by the map's bounds below.
         for triangle in indices.chunks_exact(3) {
-            let [a, b, c] = [0, 1, 2].map(|i| clip[triangle[i] as usize]);
-            let inside = [a, b, c].map(|v| v.w >= v.z);
-            if inside.iter().all(|&i| i) {
-                self.triangle([a, b, c]);
-            } else if inside.iter().any(|&i| i) {
-                let polygon = clip_near([a, b, c]);
-                for k in 1..polygon.len().saturating_sub(1) {
-                    self.triangle([polygon[0], polygon[k], polygon[k + 1]]);
+            let (a, b, c) = (clip[triangle[0] as usize], clip[triangle[1] as usize], clip[triangle[2] as usize]);
+            let inside = (a.w >= a.z, b.w >= b.z, c.w >= c.z);
+            match inside {
+                (true, true, true) => self.triangle([a, b, c]),
+                (false, false, false) => {}
+                _ => {
+                    let polygon = clip_near([a, b, c]);
+                    for k in 1..polygon.len().saturating_sub(1) {
+                        self.triangle([polygon[0], polygon[k], polygon[k + 1]]);
+                    }
                 }
             }
         }
@@ -64,10 +66,11 @@ impl Map {
         let (w, h) = (self.size.x as f32, self.size.y as f32);
         // Viewport transform: x right and y down from the top-left corner, in texels; depth
         // z / w, as the rasteriser interpolates it (affine across the screen).
-        let screen = vertices.map(|v| {
+        let to_screen = |v: Vec4| {
             let inv = 1.0 / v.w;
             Vec3::new((v.x * inv + 1.0) * 0.5 * w, (1.0 - v.y * inv) * 0.5 * h, v.z * inv)
-        });
+        };
+        let screen = [to_screen(vertices[0]), to_screen(vertices[1]), to_screen(vertices[2])];
         let fits = screen.iter().all(|s| s.x.abs() < FIXED_RANGE && s.y.abs() < FIXED_RANGE);
         if fits {
             self.fixed(screen);
@@ -85,7 +88,8 @@ impl Map {
     /// `fixed`, finding the covered span of rows at least `span_from` texels wide by solving
     /// the edges (`SPAN_FROM`) and testing every texel of narrower ones.
     pub(super) fn fixed_spans_from(&mut self, screen: [Vec3; 3], span_from: i64) {
-        let fixed = screen.map(|s| [(s.x * SUBTEXEL).round() as i64, (s.y * SUBTEXEL).round() as i64]);
+        let snap = |s: Vec3| [round_to_i64(s.x * SUBTEXEL), round_to_i64(s.y * SUBTEXEL)];
+        let fixed = [snap(screen[0]), snap(screen[1]), snap(screen[2])];
         let area = cross(fixed[0], fixed[1], fixed[2]);
         if area == 0 {
             return;
@@ -93,7 +97,7 @@ impl Map {
         // Both faces are drawn (contract §1: a back face casts a shadow too): order the
         // vertices so that the inside of every edge is where its function is positive.
         let order = if area > 0 { [0, 1, 2] } else { [0, 2, 1] };
-        let [p0, p1, p2] = order.map(|i| fixed[i]);
+        let [p0, p1, p2] = [fixed[order[0]], fixed[order[1]], fixed[order[2]]];
         let sub = SUBTEXEL as i64;
         let (lo_x, hi_x) = (p0[0].min(p1[0]).min(p2[0]), p0[0].max(p1[0]).max(p2[0]));
         let (lo_y, hi_y) = (p0[1].min(p1[1]).min(p2[1]), p0[1].max(p1[1]).max(p2[1]));
@@ -110,12 +114,15 @@ impl Map {
         let edges = [edge(p1, p2), edge(p2, p0), edge(p0, p1)];
         let centre = |i: i64| i * sub + sub / 2;
         let at = |e: &Edge| e.a * centre(x0) + e.b * centre(y0) + e.c;
-        let mut row = edges.each_ref().map(at);
-        let depth = DepthPlane::new(order.map(|i| screen[i]));
+        let mut row = [at(&edges[0]), at(&edges[1]), at(&edges[2])];
+        let depth = DepthPlane::new([screen[order[0]], screen[order[1]], screen[order[2]]]);
         let width = self.size.x as usize;
+        // Texel centres as f32 are exact (integers and a half, far below 2²³): stepping them by
+        // one gives what converting each would.
+        let px0 = x0 as f32 + 0.5;
         for y in y0..=y1 {
             let line = &mut self.depths[y as usize * width..][..width];
-            let py = y as f32 + 0.5;
+            let across = depth.row(y as f32 + 0.5);
             if x1 - x0 >= span_from {
                 let (mut from, mut to) = (x0, x1);
                 for k in 0..3 {
@@ -129,20 +136,23 @@ impl Map {
                         _ => {}
                     }
                 }
-                for x in from..=to {
-                    let stored = &mut line[x as usize];
-                    *stored = stored.max(depth.at(x as f32 + 0.5, py));
+                if from <= to {
+                    let mut px = from as f32 + 0.5;
+                    for stored in &mut line[from as usize..=to as usize] {
+                        *stored = stored.max(across.at(px));
+                        px += 1.0;
+                    }
                 }
             } else {
                 let mut w = row;
-                for x in x0..=x1 {
+                let step = [edges[0].a * sub, edges[1].a * sub, edges[2].a * sub];
+                let mut px = px0;
+                for stored in &mut line[x0 as usize..=x1 as usize] {
                     if (w[0] | w[1] | w[2]) >= 0 {
-                        let stored = &mut line[x as usize];
-                        *stored = stored.max(depth.at(x as f32 + 0.5, py));
+                        *stored = stored.max(across.at(px));
                     }
-                    for k in 0..3 {
-                        w[k] += edges[k].a * sub;
-                    }
+                    px += 1.0;
+                    w = [w[0] + step[0], w[1] + step[1], w[2] + step[2]];
                 }
             }
             for k in 0..3 {
@@ -236,6 +246,39 @@ impl DepthPlane {
 
     fn at(&self, x: f32, y: f32) -> f32 {
         self.origin.z + self.dx * (x - self.origin.x) + self.dy * (y - self.origin.y)
+    }
+
+    /// The plane along the row of texel centres at `y`: `at(x, y)` for any x, its row's term
+    /// taken once (the last one added, so the sum is the same to the bit).
+    fn row(&self, y: f32) -> DepthRow {
+        DepthRow { z: self.origin.z, x: self.origin.x, dx: self.dx, across: self.dy * (y - self.origin.y) }
+    }
+}
+
+/// `DepthPlane::at` along one row.
+struct DepthRow {
+    z: f32,
+    x: f32,
+    dx: f32,
+    across: f32,
+}
+
+impl DepthRow {
+    #[inline]
+    fn at(&self, x: f32) -> f32 {
+        self.z + self.dx * (x - self.x) + self.across
+    }
+}
+
+/// `v.round() as i64` (half away from zero), without a call to libm's `roundf` (baseline x86-64
+/// has no rounding instruction): |v| + ½ is exact in f64, and truncating it is rounding |v|.
+#[inline]
+pub(super) fn round_to_i64(v: f32) -> i64 {
+    let magnitude = (f64::from(v.abs()) + 0.5) as i64;
+    if v < 0.0 {
+        -magnitude
+    } else {
+        magnitude
     }
 }
 

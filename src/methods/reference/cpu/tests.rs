@@ -210,3 +210,14 @@ fn the_avx2_tests_match_the_scalar_ones_bit_for_bit() {
         }
     }
 }
+
+#[test]
+fn snapping_rounds_as_f32_round_does() {
+    let mut next = xorshift(7);
+    let special = [0.5, -0.5, 1.5, -1.5, 2.5, 0.49999997, -0.49999997, 0.0, -0.0, 8_388_607.5, 262_143.5, -1e9];
+    let range = super::raster::FIXED_RANGE * super::raster::SUBTEXEL;
+    let random = (0..100_000).map(|_| (next() - 0.5) * 2.0 * range);
+    for v in special.into_iter().chain(random) {
+        assert_eq!(super::raster::round_to_i64(v), v.round() as i64, "{v}");
+    }
+}
