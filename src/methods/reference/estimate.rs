@@ -100,8 +100,9 @@ pub(super) struct PenumbraMean {
 }
 
 impl PenumbraMean {
-    /// Counts a pixel, `samples` the effective count of the samples it was estimated from.
-    pub fn add(&mut self, texel: &Texel, samples: f32) {
+    /// Counts a pixel, `error` its `Texel::error` (taken once, by the caller that writes it),
+    /// `samples` the effective count of the samples it was estimated from.
+    pub fn add(&mut self, texel: &Texel, error: f32, samples: f32) {
         let gray = texel.gray();
         if !texel.lit_at_all() || gray <= PENUMBRA.0 || gray >= PENUMBRA.1 {
             return;
@@ -113,7 +114,7 @@ impl PenumbraMean {
         let n = samples.max(2.0);
         let v = gray.clamp(1.0 / n, 1.0 - 1.0 / n);
         let seen = (1.0 - v.powf(n) - (1.0 - v).powf(n)).max(f32::EPSILON);
-        self.error_sum += f64::from(texel.error());
+        self.error_sum += f64::from(error);
         self.pixels += f64::from(1.0 / seen);
     }
 
@@ -161,29 +162,34 @@ mod tests {
         t
     }
 
+    /// Counts `t` in `mean`, with its own error.
+    fn counted(mean: &mut PenumbraMean, t: Texel, samples: f32) {
+        mean.add(&t, t.error(), samples);
+    }
+
     #[test]
     fn the_penumbra_mean_counts_each_pixel_by_its_chance_to_be_seen() {
         // Many samples: every pixel in a penumbra is seen, and the mean is the plain mean.
         let mut many = PenumbraMean::default();
         for (v, spread) in [(0.3, 0.01), (0.5, 0.03), (0.8, 0.02)] {
-            many.add(&texel(v, spread), 4096.0);
+            counted(&mut many, texel(v, spread), 4096.0);
         }
         assert!((many.pixels() - 3.0).abs() < 1e-6 && (many.mean() - 0.02).abs() < 1e-6, "{many:?}");
         // Two samples see a pixel of v = ½ partly shadowed half the time: it stands for two.
         let mut two = PenumbraMean::default();
-        two.add(&texel(0.5, 0.25), 2.0);
+        counted(&mut two, texel(0.5, 0.25), 2.0);
         assert!((two.pixels() - 2.0).abs() < 1e-5, "{two:?}");
         assert!((two.mean() - 0.125).abs() < 1e-5, "{two:?}");
         // Less than two samples' worth (unequal weights): as two, never a degenerate clamp.
         for samples in [0.0, 1.0, 1.5, 1.98] {
             let mut few = PenumbraMean::default();
-            few.add(&texel(0.3, 0.1), samples);
+            counted(&mut few, texel(0.3, 0.1), samples);
             assert!((few.pixels() - 2.0).abs() < 1e-5, "{samples}: {few:?}");
         }
         // Pixels out of the penumbra count nothing.
         let mut none = PenumbraMean::default();
-        none.add(&texel(1.0, 0.0), 16.0);
-        none.add(&texel(0.0, 0.0), 16.0);
+        counted(&mut none, texel(1.0, 0.0), 16.0);
+        counted(&mut none, texel(0.0, 0.0), 16.0);
         assert_eq!((none.pixels(), none.mean()), (0.0, 0.0));
     }
 

@@ -330,8 +330,9 @@ pub(super) fn write_visibility(
                 let x = (receivers.pixels[k] % width) as usize;
                 let t = texel(k);
                 let [r, g, b] = t.visibility();
-                row[16 * x..16 * x + 16].copy_from_slice(bytemuck::bytes_of(&[r, g, b, t.error()]));
-                penumbra.add(&t, samples);
+                let error = t.error();
+                row[16 * x..16 * x + 16].copy_from_slice(bytemuck::bytes_of(&[r, g, b, error]));
+                penumbra.add(&t, error, samples);
             }
             penumbra
         })

@@ -155,20 +155,27 @@ pub(super) struct FilterInputs<'a> {
 pub(super) struct FilterOutput {
     pub texels: Vec<Texel>,
     pub pixels_filtered: usize,
-    /// The estimated error over the penumbra.
-    pub penumbra: PenumbraMean,
+    /// The effective count of a refined pixel's samples (`FilterInputs`).
+    samples_effective: f32,
 }
 
 impl FilterOutput {
-    /// The visibility of texels `range` (rgb, and w the estimated error).
-    pub fn visibility(&self, range: Range<usize>) -> Vec<[f32; 4]> {
-        self.texels[range]
+    /// The visibility of texels `range` (rgb, and w the estimated error), and the estimate's
+    /// sum over their penumbra added to `penumbra` (texel by texel, in order: the same mean
+    /// however the rows are cut).
+    pub fn visibility(&self, range: Range<usize>, penumbra: &mut PenumbraMean) -> Vec<[f32; 4]> {
+        let texels = &self.texels[range];
+        let visibility: Vec<[f32; 4]> = texels
             .par_iter()
             .map(|t| {
                 let [r, g, b] = t.visibility();
                 [r, g, b, t.error()]
             })
-            .collect()
+            .collect();
+        for (t, v) in texels.iter().zip(&visibility) {
+            penumbra.add(t, v[3], self.samples_effective);
+        }
+        visibility
     }
 }
 
@@ -324,15 +331,11 @@ pub(super) fn filter(
     output(texels, written, pixels_filtered, inputs.samples_effective)
 }
 
-/// The `written` texels (the rest let go), and the estimate's mean over their penumbra.
-fn output(mut texels: Vec<Texel>, written: Range<usize>, pixels_filtered: usize, samples: f32) -> FilterOutput {
+/// The `written` texels (the rest let go).
+fn output(mut texels: Vec<Texel>, written: Range<usize>, pixels_filtered: usize, samples_effective: f32) -> FilterOutput {
     texels.truncate(written.end);
     texels.drain(..written.start);
-    let mut penumbra = PenumbraMean::default();
-    for t in &texels {
-        penumbra.add(t, samples);
-    }
-    FilterOutput { texels, pixels_filtered, penumbra }
+    FilterOutput { texels, pixels_filtered, samples_effective }
 }
 
 /// The frame in tiles of `TILE`², for the refinement's classes and the fallback σ.

@@ -278,13 +278,14 @@ fn render_band(
     };
     let filtered = filter::filter(&inputs, &surfaces, texels, &blockers, &refined);
     let row = width as usize;
+    let mut penumbra = PenumbraMean::default();
     write_visibility_rows(ctx, band.rows.clone(), width, |rows, out| {
-        let texels = filtered.visibility(rows.start as usize * row..rows.end as usize * row);
+        let texels = filtered.visibility(rows.start as usize * row..rows.end as usize * row, &mut penumbra);
         out.copy_from_slice(bytemuck::cast_slice(&texels));
     });
     done.filter_ms += filtering.elapsed().as_secs_f64() * 1e3;
     done.pixels_filtered += filtered.pixels_filtered;
-    done.penumbra.merge(filtered.penumbra);
+    done.penumbra.merge(penumbra);
     Ok(())
 }
 
