@@ -3,8 +3,8 @@
 
 use glam::Vec3;
 
-use super::super::estimate::Texel;
-use super::filter::{self, FilterInputs, Surfaces};
+use super::super::estimate::{PenumbraMean, Texel};
+use super::filter::{self, FilterInputs, FilterOutput, Surfaces};
 use crate::render::Camera;
 
 const SIZE: u32 = 64;
@@ -13,6 +13,12 @@ const SIZE: u32 = 64;
 fn camera() -> Camera {
     let fov = 2.0 * (0.5 * SIZE as f32 / 100.0).atan().to_degrees();
     Camera { eye: Vec3::new(32.0, 100.0, 32.0), target: Vec3::new(32.0, 0.0, 32.0), up: -Vec3::Z, fov_y_deg: fov, near: 1.0, far: 200.0 }
+}
+
+/// Every texel's visibility (rgb and the error estimate) as written, and the estimate's mean.
+fn written(out: &FilterOutput) -> (Vec<[f32; 4]>, PenumbraMean) {
+    let mut penumbra = PenumbraMean::default();
+    (out.visibility(0..out.texels.len(), &mut penumbra), penumbra)
 }
 
 /// The floor y = `height(x)` under pixel (x, y), facing up.
@@ -71,7 +77,8 @@ fn a_straight_ramp_stays_where_it_was_and_steps_are_smoothed() {
     assert!(refined[(32 * SIZE + 32) as usize] && !refined[(32 * SIZE + 2) as usize], "the penumbra is refined, the lit floor not");
     let out = filter::filter(&inputs(&camera, 1.0), &surfaces, texels(stepped), &blockers(2.0), &refined);
     let error = |v: &dyn Fn(u32) -> f32| (20..44).map(|x| (v(x) - ramp(x)).abs()).sum::<f32>() / 24.0;
-    let filtered = |x: u32| out.visibility(0..out.texels.len())[(32 * SIZE + x) as usize][0];
+    let (visibility, _) = written(&out);
+    let filtered = |x: u32| visibility[(32 * SIZE + x) as usize][0];
     let (before, after) = (error(&stepped), error(&filtered));
     assert!(after < 0.3 * before, "the steps are smoothed: mean error {before} → {after}");
     // Far from the penumbra nothing changes.
@@ -89,7 +96,7 @@ fn nothing_is_filtered_across_another_surface() {
     let refined = vec![true; (SIZE * SIZE) as usize];
     let out = filter::filter(&inputs(&camera, 1.0), &surfaces, values, &blockers(3.0), &refined);
     for x in [30, 31, 32, 33] {
-        let v = out.visibility(0..out.texels.len())[(10 * SIZE + x) as usize][0];
+        let v = written(&out).0[(10 * SIZE + x) as usize][0];
         assert_eq!(v, if x < 32 { 0.0 } else { 1.0 }, "pixel {x}: the other surface is out of the average");
     }
 }
@@ -104,18 +111,18 @@ fn the_error_estimate_is_the_halves_difference_weighed_by_their_light() {
     };
     // Halves of equal light at 0.4 and 0.6: the whole is 0.5, its error half the difference.
     let even = estimate(&|_| (0.4, 0.6), 0.5, 0.0);
-    let visibility = even.visibility(0..even.texels.len());
+    let (visibility, penumbra) = written(&even);
     assert!(visibility.iter().all(|v| (v[0] - 0.5).abs() < 1e-6 && (v[3] - 0.1).abs() < 1e-6), "{:?}", visibility[0]);
-    assert!((even.penumbra.mean() - 0.1).abs() < 1e-6 && even.penumbra.pixels() == f64::from(SIZE * SIZE));
+    assert!((penumbra.mean() - 0.1).abs() < 1e-6 && penumbra.pixels() == f64::from(SIZE * SIZE));
     // A second half of a quarter of the light: |0.4 − 0.6| · √(¾ · ¼).
     let uneven = estimate(&|_| (0.4, 0.6), 0.25, 0.0);
-    let first = uneven.visibility(0..1)[0];
+    let first = written(&uneven).0[0];
     assert!((first[3] - 0.2 * (0.1875f32).sqrt()).abs() < 1e-6, "{first:?}");
     // Halves that agree: no error. Halves whose errors alternate from pixel to pixel: the filter
     // averages them away, and its estimate says so.
-    assert_eq!(estimate(&|_| (0.5, 0.5), 0.5, 0.0).penumbra.mean(), 0.0);
+    assert_eq!(written(&estimate(&|_| (0.5, 0.5), 0.5, 0.0)).1.mean(), 0.0);
     let alternating = |x: u32| if x.is_multiple_of(2) { (0.4, 0.6) } else { (0.6, 0.4) };
     let (raw, filtered) = (estimate(&alternating, 0.5, 0.0), estimate(&alternating, 0.5, 1.0));
-    let (raw, filtered) = (raw.penumbra.mean(), filtered.penumbra.mean());
+    let (raw, filtered) = (written(&raw).1.mean(), written(&filtered).1.mean());
     assert!(filtered < 0.3 * raw, "{raw} → {filtered}");
 }
