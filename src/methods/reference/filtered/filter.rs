@@ -99,10 +99,18 @@ pub(super) struct Surfaces {
 }
 
 impl Surfaces {
+    /// The G-buffer's rows, decoded on every core.
     pub fn new(gbuffer: &GBufferView<'_>) -> Self {
         let (width, height) = (gbuffer.width, gbuffer.height);
-        let pixels = (0..height).flat_map(|y| (0..width).map(move |x| (x, y)));
-        let (positions, normals) = pixels.map(|(x, y)| (gbuffer.position(x, y), gbuffer.normal(x, y).unwrap_or(Vec3::ZERO))).unzip();
+        let pixels = (width * height) as usize;
+        let (mut positions, mut normals) = (vec![Vec3::ZERO; pixels], vec![Vec3::ZERO; pixels]);
+        let rows = positions.par_chunks_mut(width as usize).zip(normals.par_chunks_mut(width as usize));
+        rows.enumerate().for_each(|(y, (positions, normals))| {
+            for (x, (position, normal)) in positions.iter_mut().zip(normals).enumerate() {
+                *position = gbuffer.position(x as u32, y as u32);
+                *normal = gbuffer.normal(x as u32, y as u32).unwrap_or(Vec3::ZERO);
+            }
+        });
         Self { width, height, positions, normals }
     }
 }
