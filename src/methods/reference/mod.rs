@@ -132,14 +132,14 @@ fn record_on_cpu(ctx: &mut MethodContext<'_>, params: &Params, plan: &SamplePlan
     let samples = plan.cpu_samples();
     let channels = plan.channels() as usize;
     let width = ctx.width;
-    let bands = bands::bands(width, ctx.height, CPU_BYTES_PER_PIXEL, ctx.cpu_working_bytes, 0, 1);
+    let bands = bands::bands(width, ctx.height, cpu_bytes_per_pixel(channels), ctx.cpu_working_bytes, 0, 1);
     let supervisor = ctx.supervisor;
     let rounds = supervisor.rounds();
     let shape = (width, ctx.height, bands.len(), channels);
     let mut carried = rounds
         .and_then(|r| r.take::<Carried>())
         .filter(|c| c.shape == shape && c.samples <= samples.len())
-        .map_or_else(|| Carried { shape, samples: 0, bands: vec![Default::default(); bands.len()] }, |c| *c);
+        .map_or_else(|| Carried { shape, samples: 0, bands: vec![[0, 1].map(|_| cpu::Sums::new(0, channels)); bands.len()] }, |c| *c);
     let carried_samples = carried.samples;
     // The new samples, by half, in order.
     let mut halves: [Vec<CpuSample>; 2] = Default::default();
@@ -158,7 +158,7 @@ fn record_on_cpu(ctx: &mut MethodContext<'_>, params: &Params, plan: &SamplePlan
         let geometry = (ctx.scene.positions(), ctx.scene.indices());
         let sums = &mut carried.bands[b];
         for half in sums.iter_mut() {
-            half.resize(receivers.blocks(), cpu::SumBlock::default());
+            half.resize(receivers.blocks());
         }
         let mut first = b as u64 * new_samples;
         for (half, samples) in halves.iter().enumerate() {
@@ -166,21 +166,16 @@ fn record_on_cpu(ctx: &mut MethodContext<'_>, params: &Params, plan: &SamplePlan
             if supervisor.cancelled() {
                 break;
             }
-            let (_, half_spent) = cpu::estimate_into::<false>(
-                &receivers,
-                samples,
-                &constants,
-                geometry,
-                (channels, plan.crop.size),
-                &mut sums[half],
-                |done| progress.at(first + done as u64),
-            );
+            let (_, half_spent) =
+                cpu::estimate_into::<false>(&receivers, samples, &constants, geometry, plan.crop.size, &mut sums[half], |done| {
+                    progress.at(first + done as u64)
+                });
             first += samples.len() as u64;
             spent.add(half_spent);
         }
         let written = std::time::Instant::now();
         write_visibility_rows(ctx, band.rows.clone(), width, |rows, out| {
-            penumbra.merge(cpu::write_visibility(&receivers, [&sums[0], &sums[1]], (channels, effective), (width, rows.start), out));
+            penumbra.merge(cpu::write_visibility(&receivers, [&sums[0], &sums[1]], effective, (width, rows.start), out));
         });
         write_ms += written.elapsed().as_secs_f64() * 1e3;
         segments += receivers.segments;
@@ -216,7 +211,7 @@ fn record_on_cpu(ctx: &mut MethodContext<'_>, params: &Params, plan: &SamplePlan
 struct Carried {
     shape: (u32, u32, usize, usize),
     samples: usize,
-    bands: Vec<[Vec<cpu::SumBlock>; 2]>,
+    bands: Vec<[cpu::Sums; 2]>,
 }
 
 /// A frame's progress through its samples, reported as the GPU engine reports it: each time
@@ -249,10 +244,14 @@ impl<'a> Progress<'a> {
     }
 }
 
-/// What the CPU engine holds a pixel at most, in bytes: its receiver (40) and listing (4),
-/// its two halves' sums (48), and its visibility as queued for the device (16; written
-/// `VISIBILITY_ROWS` at a time) — the G-buffer's copy (24) is let go before the sums are made.
-const CPU_BYTES_PER_PIXEL: u64 = 108;
+/// What the CPU engine holds a pixel at most, in bytes, under a light of `channels` channels:
+/// its receiver (40) and listing (4), its two halves' sums (16 a channel: `cpu::Sums`), and
+/// its visibility as queued for the device (16; written `VISIBILITY_ROWS` at a time) — the
+/// G-buffer's copy (24) is let go before the sums are made. 108 under a coloured light, 76
+/// under a gray one.
+fn cpu_bytes_per_pixel(channels: usize) -> u64 {
+    40 + 4 + 16 * channels as u64 + 16
+}
 
 /// Rows of visibility written to the device at a time.
 const VISIBILITY_ROWS: u32 = 64;

@@ -1,7 +1,7 @@
 //! The receiver tests of `SampleTest` eight receivers at a time with AVX2 and FMA: the same
 //! arithmetic as the scalar twin (`scalar_add_sample`), lane by lane.
 
-use super::{BlockerBlock, ReceiverBlock, SampleTest, SumBlock};
+use super::{BlockerBlock, ReceiverBlock, SampleTest, LANES};
 use std::arch::x86_64::*;
 
 /// `scalar_add_sample` for the eight lanes at once (the texels by one gather); with
@@ -12,7 +12,7 @@ use std::arch::x86_64::*;
 #[target_feature(enable = "avx2,fma")]
 pub(super) unsafe fn add_sample<const BLOCKERS: bool>(
     b: &ReceiverBlock,
-    sums: &mut SumBlock,
+    sums: &mut [[f32; LANES]],
     blockers: &mut BlockerBlock,
     t: &SampleTest<'_>,
     channels: usize,
@@ -69,7 +69,8 @@ pub(super) unsafe fn add_sample<const BLOCKERS: bool>(
     let lit = _mm256_and_ps(visible, g);
     for c in 0..channels {
         let w = _mm256_set1_ps(t.weight[c]);
-        let (s, u) = (&mut sums.shadowed[c], &mut sums.unshadowed[c]);
+        let (shadowed, unshadowed) = sums.split_at_mut(channels);
+        let (s, u) = (&mut shadowed[c], &mut unshadowed[c]);
         unsafe {
             _mm256_storeu_ps(s.as_mut_ptr(), _mm256_fmadd_ps(w, lit, _mm256_loadu_ps(s.as_ptr())));
             _mm256_storeu_ps(u.as_mut_ptr(), _mm256_fmadd_ps(w, g, _mm256_loadu_ps(u.as_ptr())));

@@ -48,18 +48,50 @@ pub(super) struct ReceiverBlock {
     bias_depth2: [f32; LANES],
 }
 
-/// A block's sums per channel (one or three): Σ L·G·V, then Σ L·G.
-#[derive(Clone, Copy, Default)]
-pub(super) struct SumBlock {
-    shadowed: [[f32; LANES]; 3],
-    unshadowed: [[f32; LANES]; 3],
+/// Every block's sums per channel (one or three): a block's Σ L·G·V of each channel, then its
+/// Σ L·G of each, `LANES` receivers a row. Sized by the channels: a gray light (one channel)
+/// holds a third of a coloured one's bytes (16 a receiver for the two sums of two halves,
+/// against 48).
+#[derive(Clone)]
+pub(super) struct Sums {
+    channels: usize,
+    rows: Vec<[f32; LANES]>,
 }
 
-impl SumBlock {
-    /// One lane's sums, three channels (the first standing for all where `channels` is 1).
-    pub(super) fn lane(&self, lane: usize, channels: usize) -> ([f32; 3], [f32; 3]) {
-        let channel = |c: usize| if channels == 1 { 0 } else { c };
-        ([0, 1, 2].map(|c| self.shadowed[channel(c)][lane]), [0, 1, 2].map(|c| self.unshadowed[channel(c)][lane]))
+impl Sums {
+    /// `blocks` blocks' sums of `channels` channels (1 or 3), all 0.
+    pub(super) fn new(blocks: usize, channels: usize) -> Self {
+        assert!(channels == 1 || channels == 3, "{channels} channels");
+        Self { channels, rows: vec![[0.0; LANES]; blocks * 2 * channels] }
+    }
+
+    /// Rows a block takes.
+    fn stride(&self) -> usize {
+        2 * self.channels
+    }
+
+    /// How many blocks.
+    pub(super) fn blocks(&self) -> usize {
+        self.rows.len() / self.stride().max(1)
+    }
+
+    /// Makes room for `blocks` blocks, the new ones 0.
+    pub(super) fn resize(&mut self, blocks: usize) {
+        let rows = blocks * self.stride();
+        self.rows.resize(rows, [0.0; LANES]);
+    }
+
+    /// Block `block`'s lane `lane`, three channels (the first standing for all where there is
+    /// one).
+    #[inline]
+    pub(super) fn lane(&self, block: usize, lane: usize) -> ([f32; 3], [f32; 3]) {
+        if self.channels == 1 {
+            let rows = &self.rows[2 * block..2 * block + 2];
+            ([rows[0][lane]; 3], [rows[1][lane]; 3])
+        } else {
+            let rows = &self.rows[6 * block..6 * block + 6];
+            ([rows[0][lane], rows[1][lane], rows[2][lane]], [rows[3][lane], rows[4][lane], rows[5][lane]])
+        }
     }
 }
 
@@ -235,25 +267,26 @@ pub(super) fn estimate_with<const BLOCKERS: bool>(
     channels: usize,
     crop_size: UVec2,
     after: impl FnMut(usize) -> bool,
-) -> (Vec<SumBlock>, Vec<BlockerBlock>, Spent) {
-    let mut sums = vec![SumBlock::default(); receivers.blocks.len()];
-    let (blockers, spent) = estimate_into::<BLOCKERS>(receivers, samples, constants, geometry, (channels, crop_size), &mut sums, after);
+) -> (Sums, Vec<BlockerBlock>, Spent) {
+    let mut sums = Sums::new(receivers.blocks.len(), channels);
+    let (blockers, spent) = estimate_into::<BLOCKERS>(receivers, samples, constants, geometry, crop_size, &mut sums, after);
     (sums, blockers, spent)
 }
 
-/// `estimate_with`, adding to `sums` (one per block of `receivers`): the sums of samples
-/// tested before, which the new ones follow in order — as if they had all been tested in one
-/// call (a progressive job's rounds).
+/// `estimate_with`, adding to `sums` (one block per block of `receivers`, of its channels):
+/// the sums of samples tested before, which the new ones follow in order — as if they had all
+/// been tested in one call (a progressive job's rounds).
 pub(super) fn estimate_into<const BLOCKERS: bool>(
     receivers: &Receivers,
     samples: &[CpuSample],
     constants: &TestConstants,
     (positions, indices): (&[Vec3], &[u32]),
-    (channels, crop_size): (usize, UVec2),
-    sums: &mut [SumBlock],
+    crop_size: UVec2,
+    sums: &mut Sums,
     mut after: impl FnMut(usize) -> bool,
 ) -> (Vec<BlockerBlock>, Spent) {
-    debug_assert_eq!(sums.len(), receivers.blocks.len());
+    debug_assert_eq!(sums.blocks(), receivers.blocks.len());
+    let (channels, stride) = (sums.channels, sums.stride());
     let mut blockers = vec![BlockerBlock::default(); if BLOCKERS { receivers.blocks.len() } else { 0 }];
     let mut spent = Spent::default();
     let threads = rayon::current_num_threads().max(1);
@@ -270,13 +303,13 @@ pub(super) fn estimate_into<const BLOCKERS: bool>(
         let drawn = std::time::Instant::now();
         let maps = &maps[..chunk.len()];
         // Each task's share of the blockers: empty without `BLOCKERS`.
-        let tasks = sums.len().div_ceil(BLOCKS_PER_TASK);
+        let tasks = receivers.blocks.len().div_ceil(BLOCKS_PER_TASK);
         let mut shares: Vec<&mut [BlockerBlock]> = if BLOCKERS {
             blockers.chunks_mut(BLOCKS_PER_TASK).collect()
         } else {
             std::iter::repeat_with(|| &mut [][..]).take(tasks).collect()
         };
-        let work = sums.par_chunks_mut(BLOCKS_PER_TASK).zip(receivers.blocks.par_chunks(BLOCKS_PER_TASK));
+        let work = sums.rows.par_chunks_mut(BLOCKS_PER_TASK * stride).zip(receivers.blocks.par_chunks(BLOCKS_PER_TASK));
         work.zip(shares.par_iter_mut()).for_each(|((sums, blocks), share)| {
             for (map, sample) in maps.iter().zip(chunk) {
                 test_blocks::<BLOCKERS>(blocks, sums, share, map, sample, constants, channels, avx2);
@@ -300,8 +333,8 @@ pub(super) fn estimate_into<const BLOCKERS: bool>(
 /// count.
 pub(super) fn write_visibility(
     receivers: &Receivers,
-    halves: [&[SumBlock]; 2],
-    (channels, samples): (usize, f32),
+    halves: [&Sums; 2],
+    samples: f32,
     (width, first_row): (u32, u32),
     out: &mut [u8],
 ) -> PenumbraMean {
@@ -309,7 +342,7 @@ pub(super) fn write_visibility(
         let (b, l) = (k / LANES, k % LANES);
         let mut texel = Texel::UNCOVERED;
         for (half, sums) in halves.iter().enumerate() {
-            let (shadowed, unshadowed) = sums[b].lane(l, channels);
+            let (shadowed, unshadowed) = sums.lane(b, l);
             texel.add(shadowed, unshadowed, half == 1);
         }
         texel
@@ -346,12 +379,12 @@ pub(super) fn write_visibility(
 }
 
 /// Tests `blocks` against one sample's map and adds to their sums (`add_sample` in
-/// `accumulate.wgsl`).
+/// `accumulate.wgsl`): `sums` holds `2 · channels` rows a block (`Sums`).
 /// With `BLOCKERS`, `blockers` (one per block; empty without) hears the blockers met.
 #[allow(clippy::too_many_arguments)]
 fn test_blocks<const BLOCKERS: bool>(
     blocks: &[ReceiverBlock],
-    sums: &mut [SumBlock],
+    sums: &mut [[f32; LANES]],
     blockers: &mut [BlockerBlock],
     map: &Map,
     sample: &CpuSample,
@@ -361,7 +394,7 @@ fn test_blocks<const BLOCKERS: bool>(
 ) {
     let test = SampleTest::new(map, sample, c);
     let mut spare = BlockerBlock::default();
-    for (k, (block, sum)) in blocks.iter().zip(sums.iter_mut()).enumerate() {
+    for (k, (block, sum)) in blocks.iter().zip(sums.chunks_exact_mut(2 * channels)).enumerate() {
         let met = if BLOCKERS { &mut blockers[k] } else { &mut spare };
         #[cfg(target_arch = "x86_64")]
         if avx2 {
@@ -412,9 +445,11 @@ impl<'a> SampleTest<'a> {
 /// The test of eight receivers against one sample, one lane at a time: the reference for the
 /// AVX2 path (the same operations in the same order, fused where it fuses them: the same
 /// bits) and the path on CPUs without it.
+// A lane indexes every array of the block and its sums alike.
+#[allow(clippy::needless_range_loop)]
 fn scalar_add_sample<const BLOCKERS: bool>(
     b: &ReceiverBlock,
-    sums: &mut SumBlock,
+    sums: &mut [[f32; LANES]],
     blockers: &mut BlockerBlock,
     t: &SampleTest<'_>,
     channels: usize,
@@ -442,8 +477,8 @@ fn scalar_add_sample<const BLOCKERS: bool>(
         };
         for c in 0..channels {
             let lit = if visible { g } else { 0.0 };
-            sums.shadowed[c][l] = t.weight[c].mul_add(lit, sums.shadowed[c][l]);
-            sums.unshadowed[c][l] = t.weight[c].mul_add(g, sums.unshadowed[c][l]);
+            sums[c][l] = t.weight[c].mul_add(lit, sums[c][l]);
+            sums[channels + c][l] = t.weight[c].mul_add(g, sums[channels + c][l]);
         }
     }
 }

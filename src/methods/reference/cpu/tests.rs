@@ -181,7 +181,8 @@ fn the_avx2_tests_match_the_scalar_ones_bit_for_bit() {
                 weight: Vec3::new(0.3, 0.5, 0.9),
             };
             let test = SampleTest::new(&map, &sample, &constants);
-            let (mut scalar, mut vector) = (SumBlock::default(), SumBlock::default());
+            // A block's sums of three channels: Σ L·G·V of each, then Σ L·G of each.
+            let (mut scalar, mut vector) = ([[0.0f32; LANES]; 6], [[0.0f32; LANES]; 6]);
             let (mut scalar_met, mut vector_met) = (BlockerBlock::default(), BlockerBlock::default());
             for _ in 0..3 {
                 scalar_add_sample::<true>(&block, &mut scalar, &mut scalar_met, &test, 3);
@@ -193,8 +194,8 @@ fn the_avx2_tests_match_the_scalar_ones_bit_for_bit() {
             }
             for c in 0..3 {
                 for l in 0..LANES {
-                    assert_eq!(scalar.shadowed[c][l].to_bits(), vector.shadowed[c][l].to_bits(), "shadowed, lane {l}");
-                    assert_eq!(scalar.unshadowed[c][l].to_bits(), vector.unshadowed[c][l].to_bits(), "unshadowed, lane {l}");
+                    assert_eq!(scalar[c][l].to_bits(), vector[c][l].to_bits(), "shadowed, lane {l}");
+                    assert_eq!(scalar[3 + c][l].to_bits(), vector[3 + c][l].to_bits(), "unshadowed, lane {l}");
                 }
             }
             // The blockers met (method `filtered`), alike to the bit.
@@ -205,8 +206,8 @@ fn the_avx2_tests_match_the_scalar_ones_bit_for_bit() {
             if !empty {
                 assert!(scalar_met.count.iter().any(|&c| c > 0.0), "some lane meets a blocker");
             }
-            assert!(scalar.unshadowed[0][..7].iter().any(|&u| u > 0.0), "some lane faces the sample");
-            assert_eq!(scalar.unshadowed[0][7], 0.0, "a lane at depth 0 has no weight");
+            assert!(scalar[3][..7].iter().any(|&u| u > 0.0), "some lane faces the sample");
+            assert_eq!(scalar[3][7], 0.0, "a lane at depth 0 has no weight");
         }
     }
 }

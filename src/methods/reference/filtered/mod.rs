@@ -23,7 +23,7 @@
 mod filter;
 
 use super::bands::{self, Band};
-use super::cpu::{self, BlockerBlock, CpuSample, Receivers, SumBlock};
+use super::cpu::{self, BlockerBlock, CpuSample, Receivers, Sums};
 use super::estimate::{PenumbraMean, Texel};
 use super::gpu::SEGMENT;
 use super::samples::{half_of_index, SamplePlan};
@@ -238,7 +238,7 @@ fn render_band(
                     progress.at(before + first + n as u64)
                 });
             first += samples.len() as u64;
-            gather(receivers, &sums, &met, (shared.channels, half == 1), texels, &mut blockers);
+            gather(receivers, &sums, &met, half == 1, texels, &mut blockers);
             done.spent.add(spent);
         }
         // The receivers' segments, once a round (as `reference` counts them once a frame).
@@ -290,20 +290,13 @@ fn render_band(
 }
 
 /// Adds a round of tests to the frame's pixels: per pixel its sums (the gray one standing for
-/// all three where `channels` is 1), to its second half's too where `second_half`, and the
+/// all three under a gray light), to its second half's too where `second_half`, and the
 /// count and summed depth of the blockers its tests met beside its own depth from the light's
 /// plane.
-fn gather(
-    receivers: &Receivers,
-    sums: &[SumBlock],
-    met: &[BlockerBlock],
-    (channels, second_half): (usize, bool),
-    texels: &mut [Texel],
-    blockers: &mut [[f32; 3]],
-) {
+fn gather(receivers: &Receivers, sums: &Sums, met: &[BlockerBlock], second_half: bool, texels: &mut [Texel], blockers: &mut [[f32; 3]]) {
     for (k, &pixel) in receivers.pixels().iter().enumerate() {
         let (block, lane) = (k / cpu::LANES, k % cpu::LANES);
-        let (shadowed, unshadowed) = sums[block].lane(lane, channels);
+        let (shadowed, unshadowed) = sums.lane(block, lane);
         texels[pixel as usize].add(shadowed, unshadowed, second_half);
         let blocker = &mut blockers[pixel as usize];
         *blocker = [receivers.depth(k), blocker[1] + met[block].count[lane], blocker[2] + met[block].depth_sum[lane]];
