@@ -175,9 +175,8 @@ impl GpuScene {
 pub fn shadow_fit_points(extent: &Extent, light: &AreaLight) -> Vec<Vec3> {
     let Some(on_floor) = extent.on_floor else { return extent.corners().to_vec() };
     let standing = box_corners(on_floor.bounds_min, on_floor.bounds_max);
-    let half = 0.5 * light.size_m;
-    let light_points = [(-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0), (0.0, 0.0)]
-        .map(|(s, t)| light.center + light.r * (s * half.x) + light.u * (t * half.y));
+    // The light's corners and centre.
+    let light_points = [(0.0, 1.0), (1.0, 1.0), (0.0, 0.0), (1.0, 0.0), (0.5, 0.5)].map(|(s, t)| light.image_point(s, t));
     let mut points = standing.to_vec();
     for from in light_points {
         for corner in standing {

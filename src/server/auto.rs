@@ -199,7 +199,12 @@ impl AppState {
 
     /// What `job`'s predictions follow, at the device's pace.
     pub(super) fn features(&self, job: &Job) -> Features {
-        Features { pace: self.model.pace(), ..Features::of(job, self.engine.scene_shape(&job.scene).as_ref()) }
+        Features { pace: self.model.pace(), ..self.unpaced_features(job) }
+    }
+
+    /// `features` at pace 1: what the pace itself is measured against.
+    pub(super) fn unpaced_features(&self, job: &Job) -> Features {
+        Features::of(job, self.engine.scene_shape(&job.scene).as_ref())
     }
 
     /// `max_ms` no longer than a job may wait for the device (the deadline).

@@ -4,7 +4,6 @@
 
 use super::*;
 use crate::job::auto::AutoChoice;
-use crate::model::Features;
 
 fn wants_json(headers: &HeaderMap) -> bool {
     headers
@@ -160,7 +159,7 @@ where
                 .and_then(|()| engine.render_compared(&job, &reference, &supervise))
                 .map(|mut rendered| {
                     let measured_ms = rendered.timings.render_ms();
-                    pacing.model.observe(&job, || Features::of(&job, engine.scene_shape(&job.scene).as_ref()), measured_ms);
+                    pacing.model.observe(&job, || pacing.unpaced_features(&job), measured_ms);
                     rendered.auto = auto.map(|choice| AutoChoice { measured_ms: Some(measured_ms), ..choice });
                     rendered
                 });

@@ -72,7 +72,7 @@ impl Sums {
 
     /// How many blocks.
     pub(super) fn blocks(&self) -> usize {
-        self.rows.len() / self.stride().max(1)
+        self.rows.len() / self.stride()
     }
 
     /// Makes room for `blocks` blocks, the new ones 0.

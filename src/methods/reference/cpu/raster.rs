@@ -245,17 +245,17 @@ impl DepthPlane {
     }
 
     fn at(&self, x: f32, y: f32) -> f32 {
-        self.origin.z + self.dx * (x - self.origin.x) + self.dy * (y - self.origin.y)
+        self.row(y).at(x)
     }
 
-    /// The plane along the row of texel centres at `y`: `at(x, y)` for any x, its row's term
-    /// taken once (the last one added, so the sum is the same to the bit).
+    /// The plane along the row of texel centres at `y`, its row's term taken once: the last
+    /// one added, so a texel's depth is the same to the bit however its row is walked.
     fn row(&self, y: f32) -> DepthRow {
         DepthRow { z: self.origin.z, x: self.origin.x, dx: self.dx, across: self.dy * (y - self.origin.y) }
     }
 }
 
-/// `DepthPlane::at` along one row.
+/// `DepthPlane` along one row: z + dx·(x − x₀) + the row's term.
 struct DepthRow {
     z: f32,
     x: f32,
