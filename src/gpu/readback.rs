@@ -54,6 +54,12 @@ impl Default for Readback {
 
 /// Copies a (small) storage buffer back to the CPU and waits for it.
 pub fn read_buffer(gpu: &GpuContext, buffer: &wgpu::Buffer) -> Result<Vec<u8>, GpuError> {
+    read_buffer_with(gpu, buffer, <[u8]>::to_vec)
+}
+
+/// Copies a storage buffer back to the CPU, waits for it and hands its bytes to `read` where
+/// they were mapped (a large buffer is not copied again).
+pub fn read_buffer_with<R>(gpu: &GpuContext, buffer: &wgpu::Buffer, read: impl FnOnce(&[u8]) -> R) -> Result<R, GpuError> {
     let staging = gpu.device.create_buffer(&wgpu::BufferDescriptor {
         label: Some("Readback::staging"),
         size: buffer.size(),
@@ -64,7 +70,7 @@ pub fn read_buffer(gpu: &GpuContext, buffer: &wgpu::Buffer) -> Result<Vec<u8>, G
     encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, buffer.size());
     gpu.queue.submit([encoder.finish()]);
     gpu.map_for_reading(&[staging.slice(..)])?;
-    let bytes = staging.slice(..).get_mapped_range().map_err(|e| GpuError::Map(e.to_string()))?.to_vec();
+    let read = read(&staging.slice(..).get_mapped_range().map_err(|e| GpuError::Map(e.to_string()))?);
     staging.unmap();
-    Ok(bytes)
+    Ok(read)
 }

@@ -1,7 +1,9 @@
 // Method `reference`, per batch of light samples: adds the batch's contributions to the two
 // sums of the ratio estimator, per pixel: Σ L·G·V (shadowed) and Σ L·G (unshadowed), with
 // G = cosθx·cosθy/|x−y|² and V from each sample's depth map (contract §1); the last batch
-// writes their ratio, the visibility, instead (`LAST`).
+// writes their ratio, the visibility, instead (`LAST`). Method `filtered`'s GPU engine tests
+// the same way with its own entry point (`filtered_main`), which keeps the halves' sums and
+// the blockers met for the CPU's filter.
 //
 // Why it is written this way (each measured on lavapipe at 1080p): a pass per sample paid for
 // the G-buffer reads and the sums' update every sample, so a batch reads and updates each
@@ -41,6 +43,11 @@ override FIRST: bool = false;
 override LAST: bool = false;
 // Whether the maps are crops (`BatchSample::origin.z`); whole maps begin at texel 0.
 override CROPPED: bool = true;
+// `filtered_main` only: the blockers each test meets are counted and their depths summed
+// (what sizes `filtered`'s filter), and the half of the samples this batch holds (0: the
+// even ones, 1: the odd ones; `samples::half_of_index`), whose sums it adds to.
+override BLOCKERS: bool = false;
+override HALF: u32 = 0u;
 
 struct BatchSample {
     origin: vec4<f32>,   // xy: the sample point y in view coordinates (rotation · y; its z is `Batch::plane`); z: the whole-map texel where its layer's crop begins, x | y << 16 (one float fewer to load); w: unused
@@ -75,6 +82,10 @@ struct Batch {
 // first pixel, and the grid of the dispatch over them (`segments_size`).
 @group(1) @binding(4) var<storage, read_write> segments: PixelList;
 @group(1) @binding(5) var<storage, read_write> segment_groups: array<u32, 3>;
+// `filtered_main`'s records, one per lane of a listed segment (list position × `SEGMENT` +
+// lane), 4·CHANNELS + 2 floats each: each half's Σ L·G·V and Σ L·G per channel, then the blockers
+// met (count, summed depth from the light's plane). Cleared before a round's first batch.
+@group(1) @binding(6) var<storage, read_write> records: array<f32>;
 
 // Pixels of a row per listed segment: one SIMD group of llvmpipe's (8 lanes of 32 bits on a
 // 256-bit machine), the lanes that run as one whatever branches they take.
@@ -83,6 +94,7 @@ const SEGMENT: u32 = 8u;
 struct Sums {
     shadowed: vec3<f32>,
     unshadowed: vec3<f32>,
+    blocked: vec2<f32>, // `BLOCKERS`: blocked tests, and the blockers' summed depth
 }
 
 // What every sample's test needs of a receiver x (normal n), both in view coordinates, taken
@@ -127,7 +139,13 @@ fn add_sample(sums: ptr<function, Sums>, r: Receiver, last: vec2<f32>, layer: u3
     // empty texel (0) is lit without a division. Outside the frustum nothing is recorded: lit.
     // (Behind the sample, G is 0 whatever the test says.)
     let inside = all(abs(f) < vec2<f32>(r.half));
-    let visible = !inside || (r.depth * k - r.bias_depth2 * inv_dist) * stored <= r.near * k;
+    let lit = (r.depth * k - r.bias_depth2 * inv_dist) * stored <= r.near * k;
+    let visible = !inside || lit;
+    // A blocked test of a receiver that faces the sample met a blocker at depth near / stored
+    // from the light's plane (the CPU engine's `BLOCKERS`).
+    if BLOCKERS && inside && !lit && g > 0.0 {
+        (*sums).blocked += vec2<f32>(1.0, r.near / stored);
+    }
     if CHANNELS == 1u {
         (*sums).shadowed.x += s.radiance.r * select(0.0, g, visible);
         (*sums).unshadowed.x += s.radiance.r * g;
@@ -191,22 +209,10 @@ fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index
         }
         return;
     }
-    let world = textureLoad(gbuf_position, pixel, 0).xyz;
-    let normal = normal_texel.xyz;
-    let r = batch.rotation;
-    let x = vec3<f32>(dot(r[0].xyz, world), dot(r[1].xyz, world), dot(r[2].xyz, world));
-    let n = vec3<f32>(dot(r[0].xyz, normal), dot(r[1].xyz, normal), dot(r[2].xyz, normal));
-    // The bias of the visibility test in texels, constant plus slope-scaled by tanθ between
-    // the normal and the direction to the light's centre (the same for every sample: it
-    // takes a square root and a division out of each).
-    let cos_c = clamp(dot(normal, normalize(frame.light_center.xyz - world)), 0.0, 1.0);
-    let tan_c = min(sqrt(1.0 - cos_c * cos_c) / max(cos_c, 0.05), 10.0);
-    let bias = batch.bias_texels + batch.slope_bias_texels * tan_c;
-    let depth = batch.plane - x.z;
-    let receiver = Receiver(x.xy, n, depth, 1.0 / depth, depth * depth, -n.z * depth, max(depth, 0.0), depth * depth * bias, 0.5 * f32(batch.resolution), batch.near);
+    let receiver = receiver_at(pixel, normal_texel.xyz);
     // The last texel of a layer: each holds its map's crop (`MapCrop`), all the same size.
     let last = vec2<f32>(textureDimensions(depths)) - 1.0;
-    var s = Sums(vec3<f32>(0.0), vec3<f32>(0.0));
+    var s = Sums(vec3<f32>(0.0), vec3<f32>(0.0), vec2<f32>(0.0));
     // Spelled out by `#unroll` (a loop over them ran slower: constant indices); a slot past
     // `SAMPLES` compiles away.
     #unroll k in 0..32 {
@@ -229,6 +235,60 @@ fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index
             sums[base + CHANNELS + c] = s.unshadowed[c];
         }
     }
+}
+
+// What every test of the batch needs of the receiver at `pixel` (`normal`: its unit normal).
+fn receiver_at(pixel: vec2<u32>, normal: vec3<f32>) -> Receiver {
+    let world = textureLoad(gbuf_position, pixel, 0).xyz;
+    let r = batch.rotation;
+    let x = vec3<f32>(dot(r[0].xyz, world), dot(r[1].xyz, world), dot(r[2].xyz, world));
+    let n = vec3<f32>(dot(r[0].xyz, normal), dot(r[1].xyz, normal), dot(r[2].xyz, normal));
+    // The bias of the visibility test in texels, constant plus slope-scaled by tanθ between
+    // the normal and the direction to the light's centre (the same for every sample: it
+    // takes a square root and a division out of each).
+    let cos_c = clamp(dot(normal, normalize(frame.light_center.xyz - world)), 0.0, 1.0);
+    let tan_c = min(sqrt(1.0 - cos_c * cos_c) / max(cos_c, 0.05), 10.0);
+    let bias = batch.bias_texels + batch.slope_bias_texels * tan_c;
+    let depth = batch.plane - x.z;
+    return Receiver(x.xy, n, depth, 1.0 / depth, depth * depth, -n.z * depth, max(depth, 0.0), depth * depth * bias, 0.5 * f32(batch.resolution), batch.near);
+}
+
+// Method `filtered`'s GPU engine (`methods/reference/filtered/gpu.rs`), per batch of one
+// half's samples, per lane of a segment the CPU listed (its probes: every covered one; its
+// refinement: those the probes' tiles send there): the tests of `main`, added to the lane's
+// record with the blockers they met. The CPU reads the records back, classifies and filters.
+@compute @workgroup_size(64)
+fn filtered_main(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) lane: u32) {
+    frame = frame_uniform;
+    let i = list_position(group, lane);
+    if i >= atomicLoad(&segments.count) * SEGMENT {
+        return;
+    }
+    let pixel = listed_pixel(segments.pixels[i / SEGMENT]) + vec2<u32>(i % SEGMENT, 0u);
+    if pixel.x >= frame.sizes.x {
+        return;
+    }
+    let normal_texel = textureLoad(gbuf_normal, pixel, 0);
+    if !covers(normal_texel) {
+        return;
+    }
+    let receiver = receiver_at(pixel, normal_texel.xyz);
+    let last = vec2<f32>(textureDimensions(depths)) - 1.0;
+    var s = Sums(vec3<f32>(0.0), vec3<f32>(0.0), vec2<f32>(0.0));
+    #unroll k in 0..32 {
+        if SAMPLES > k {
+            add_sample(&s, receiver, last, k, batch.samples[k]);
+        }
+    }
+    // A record: the two halves' 2·CHANNELS sums, then the blockers' two floats.
+    let base = i * (4u * CHANNELS + 2u);
+    let half = base + 2u * CHANNELS * HALF;
+    for (var c = 0u; c < CHANNELS; c++) {
+        records[half + c] += s.shadowed[c];
+        records[half + CHANNELS + c] += s.unshadowed[c];
+    }
+    records[base + 4u * CHANNELS] += s.blocked.x;
+    records[base + 4u * CHANNELS + 1u] += s.blocked.y;
 }
 
 // Visibility per channel as the ratio of the two sums, V = Σ L·G·V / Σ L·G. Using the same

@@ -103,16 +103,16 @@ impl DepthMaps {
         Self { layer_views, array_view, pipeline, projections }
     }
 
-    /// Draws a batch's maps: samples `first..` of the frame, whose crop origins are `origins`
+    /// Draws a batch's maps, timed as `pass`: samples `first..` of the frame, whose crop origins are `origins`
     /// (`None`: no receiver of the frame falls in that map, cleared and left empty), into
     /// layers `0..`. Timed together where timestamps can be written between passes (a scope per
     /// map would take the timer's queries at 256 samples). A render pass each, though lavapipe
     /// begins every pass by waiting until the one before is rasterised: a multiview pass saved
     /// little and needs a guard against a lavapipe bug, and a batch in one pass (an atlas) would round each map's vertices
     /// differently (`docs/performance-log.md`).
-    pub(super) fn draw(&self, ctx: &mut MethodContext<'_>, first: usize, origins: &[Option<UVec2>]) {
+    pub(super) fn draw(&self, ctx: &mut MethodContext<'_>, pass: &'static str, first: usize, origins: &[Option<UVec2>]) {
         let scene = ctx.scene;
-        ctx.timer.time_encoder(ctx.encoder, PhaseName::Method, "reference_maps", |encoder| {
+        ctx.timer.time_encoder(ctx.encoder, PhaseName::Method, pass, |encoder| {
             for (layer, origin) in origins.iter().enumerate() {
                 let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
                     label: Some("Reference::sample_depth"),

@@ -99,7 +99,7 @@ impl ShadowMethod for Reference {
         let mut before = 0;
         for (b, &(count, _)) in batches.iter().enumerate() {
             let first = before as usize;
-            maps.draw(ctx, first, &plan.crop.origins[first..first + count as usize]);
+            maps.draw(ctx, "reference_maps", first, &plan.crop.origins[first..first + count as usize]);
             accumulation.record(ctx, &maps, b, count, b + 1 == batches.len());
             let done = before + u64::from(count);
             before = done;

@@ -11,7 +11,9 @@
 //! neighbour tile has a pixel its probes see partly lit, or both fully lit and fully shadowed
 //! pixels, is in or near a penumbra: it is tested against the rest too, and there it is
 //! `reference` with `samples × refine²` samples. The rest keep their probes' verdict (0 or 1,
-//! which more samples would only confirm). Every map is drawn once.
+//! which more samples would only confirm). Every map is drawn once. Either of the reference's
+//! engines draws the maps and makes the tests (`engine`): the CPU's cores, or the device
+//! (`gpu.rs`); the classification and the filter are the CPU's either way.
 //!
 //! Why not a few samples a pixel everywhere, rotated per pixel, as the papers do with rays: a
 //! sample is a depth map here, and a map costs what its triangles cost, whatever the pixels,
@@ -21,15 +23,18 @@
 //! strata leave where a penumbra spans pixels enough.
 
 mod filter;
+mod gpu;
+
+use rayon::prelude::*;
 
 use super::bands::{self, Band};
-use super::cpu::{self, BlockerBlock, CpuSample, Receivers, Sums};
+use super::cpu::{self, BlockerBlock, CpuSample, Receivers, Sums, Surfaces as _};
 use super::estimate::{PenumbraMean, Texel};
 use super::gpu::SEGMENT;
 use super::samples::{half_of_index, SamplePlan};
 use super::{
-    write_visibility_rows, Counters, MethodContext, Param, ParamSpec, Params, Progress, ShadowMethod, BIAS_TEXELS, CROP, RESOLUTION, SEED,
-    SLOPE_BIAS_TEXELS,
+    write_visibility_rows, Counters, Engine, MethodContext, Param, ParamSpec, Params, Progress, ShadowMethod, BIAS_TEXELS, CROP, ENGINE,
+    RESOLUTION, SEED, SLOPE_BIAS_TEXELS,
 };
 use crate::error::JobResult;
 use crate::params::Cap;
@@ -69,6 +74,7 @@ const PARAMS: &[ParamSpec] = &[
     SLOPE_BIAS_TEXELS.spec,
     SEED.spec,
     CROP.spec,
+    ENGINE.spec,
 ];
 
 /// Pixels tested against every sample, not the probes alone.
@@ -100,12 +106,21 @@ impl ShadowMethod for Filtered {
         // The reference's plan of as many samples: the same maps.
         let plan = SamplePlan::first(ctx, params, strata);
         let constants = plan.test_constants(params, spec.light.center);
-        // The samples by round (the probes, the rest) and half (the sequence's two).
-        let mut rounds: [[Vec<CpuSample>; 2]; 2] = Default::default();
-        for (sample, &index) in plan.cpu_samples().into_iter().zip(&plan.indices) {
-            rounds[usize::from(index >= probes)][usize::from(half_of_index(index))].push(sample);
+        // The samples by round (the probes, the rest) and half (the sequence's two), by their
+        // place in the plan.
+        let mut order: [[Vec<usize>; 2]; 2] = Default::default();
+        for (k, &index) in plan.indices.iter().enumerate() {
+            order[usize::from(index >= probes)][usize::from(half_of_index(index))].push(k);
         }
-        let [probe_samples, other_samples] = rounds;
+        let cpu_samples = plan.cpu_samples();
+        let [probe_samples, other_samples] =
+            order.clone().map(|halves| halves.map(|ks| ks.iter().map(|&k| cpu_samples[k].clone()).collect()));
+        let on_cpu = match params.get(&ENGINE) {
+            Engine::Cpu => true,
+            Engine::Gpu => false,
+            Engine::Auto => ctx.gpu.software,
+        };
+        let device = (!on_cpu).then(|| gpu::DeviceTests::new(ctx, &plan, params, &order));
         let shared = Shared {
             probe_samples,
             other_samples,
@@ -120,18 +135,23 @@ impl ShadowMethod for Filtered {
             },
         };
         let mut done = Done { read_ms: started.elapsed().as_secs_f64() * 1e3, ..Done::default() };
-        let bands = bands::bands(ctx.width, ctx.height, BYTES_PER_PIXEL, ctx.cpu_working_bytes, HALO_ROWS, filter::TILE);
+        let per_pixel = device.as_ref().map_or(BYTES_PER_PIXEL, |device| gpu_bytes_per_pixel(device.record_floats()));
+        let bands = bands::bands(ctx.width, ctx.height, per_pixel, ctx.cpu_working_bytes, HALO_ROWS, filter::TILE);
         let supervisor = ctx.supervisor;
         let mut progress = Progress::new(supervisor, shared.samples() * bands.len() as u64);
         for (b, band) in bands.iter().enumerate() {
-            render_band(ctx, &shared, band, b as u64 * shared.samples(), &mut progress, &mut done)?;
+            render_band(ctx, &shared, device.as_ref(), band, (b as u64 * shared.samples(), &mut progress), &mut done)?;
             if supervisor.cancelled() {
                 break;
             }
         }
         ctx.timer.cpu_pass(PhaseName::Method, "filtered_receivers", done.read_ms);
-        ctx.timer.cpu_pass(PhaseName::Method, "filtered_maps", done.spent.maps_ms);
-        ctx.timer.cpu_pass(PhaseName::Method, "filtered_tests", done.spent.tests_ms);
+        if on_cpu {
+            ctx.timer.cpu_pass(PhaseName::Method, "filtered_maps", done.spent.maps_ms);
+            ctx.timer.cpu_pass(PhaseName::Method, "filtered_tests", done.spent.tests_ms);
+        } else {
+            ctx.timer.cpu_pass(PhaseName::Method, "filtered_gather", done.gather_ms);
+        }
         ctx.timer.cpu_pass(PhaseName::Method, "filtered_filter", done.filter_ms);
 
         let mut counters = plan.counters(done.segments);
@@ -139,6 +159,7 @@ impl ShadowMethod for Filtered {
             ("probes".to_owned(), f64::from(probes)),
             ("samples_effective".to_owned(), f64::from(shared.filter.samples_effective)),
             ("refine".to_owned(), f64::from(refine)),
+            ("engine_cpu".to_owned(), f64::from(u8::from(on_cpu))),
             ("cpu_threads".to_owned(), done.spent.round as f64),
             ("cpu_bands".to_owned(), bands.len() as f64),
             ("pixels_filtered".to_owned(), done.pixels_filtered as f64),
@@ -161,6 +182,13 @@ const HALO_ROWS: u32 = 56;
 /// blockers met (8), and its refined flag and filter index (5) — 165; the filter's copies of
 /// the refined pixels and the visibility written come after the receivers are let go.
 const BYTES_PER_PIXEL: u64 = 170;
+
+/// What the GPU engine's bands hold a pixel at most, in bytes, with records of `record_floats`
+/// floats: its surface (24), texel (48), blockers (12), refined flag and filter index (5), and
+/// a round's record read back (`gpu::DeviceTests::test`), mapped and as the device left it.
+fn gpu_bytes_per_pixel(record_floats: usize) -> u64 {
+    24 + 48 + 12 + 5 + 2 * 4 * record_floats as u64
+}
 
 /// What every band shares: the samples, split into the probes and the rest, each in the
 /// reference's two halves, and the filter's shape.
@@ -198,6 +226,8 @@ struct FilterShape {
 struct Done {
     read_ms: f64,
     spent: cpu::Spent,
+    /// The GPU engine's records added to the texels.
+    gather_ms: f64,
     filter_ms: f64,
     segments: u32,
     pixels_refined: usize,
@@ -206,61 +236,41 @@ struct Done {
 }
 
 /// A band of the frame, whose samples follow the frame's `before` others: the probes over its
-/// reach, every sample where they vary, the filter, and the visibility of its rows written to
-/// the frame.
+/// reach, every sample where they vary (on the device where `device` is given, else on the
+/// CPU's cores), the filter, and the visibility of its rows written to the frame.
 fn render_band(
     ctx: &mut MethodContext<'_>,
     shared: &Shared,
+    device: Option<&gpu::DeviceTests>,
     band: &Band,
-    before: u64,
-    progress: &mut Progress<'_>,
+    (before, progress): (u64, &mut Progress<'_>),
     done: &mut Done,
 ) -> JobResult<()> {
     let started = std::time::Instant::now();
     let width = ctx.width;
     let height = band.reach.len() as u32;
     let surfaces = ctx.read_gbuffer_rows(band.reach.clone(), filter::Surfaces::new)?;
-    let constants = &shared.constants;
-    let probed = Receivers::of_pixels(&surfaces, SEGMENT, constants, |_, _| true);
     done.read_ms += started.elapsed().as_secs_f64() * 1e3;
 
     let (probe_count, other_count) = (count(&shared.probe_samples), count(&shared.other_samples));
-    let supervisor = ctx.supervisor;
-    let geometry = (ctx.scene.positions(), ctx.scene.indices());
     let mut texels = vec![Texel::UNCOVERED; (width * height) as usize];
     let mut blockers = vec![[0.0f32; 3]; (width * height) as usize];
-    // Tests `receivers` against both halves of a round, the first of them the `first`-th
-    // sample of the band, into the texels.
-    let mut test = |receivers: &Receivers, halves: &[Vec<CpuSample>; 2], mut first: u64, texels: &mut [Texel], done: &mut Done| {
-        for (half, samples) in halves.iter().enumerate() {
-            let (sums, met, spent) =
-                cpu::estimate_with::<true>(receivers, samples, constants, geometry, shared.channels, shared.crop_size, |n| {
-                    progress.at(before + first + n as u64)
-                });
-            first += samples.len() as u64;
-            gather(receivers, &sums, &met, half == 1, texels, &mut blockers);
-            done.spent.add(spent);
-        }
-        // The receivers' segments, once a round (as `reference` counts them once a frame).
-        done.segments += receivers.segments;
-    };
+    let mut round = Round { ctx, shared, device, band, surfaces: &surfaces, progress, done };
 
     // The probes, everywhere.
-    test(&probed, &shared.probe_samples, 0, &mut texels, done);
-    // Let go before the refinement's own (working memory: `BYTES_PER_PIXEL`).
-    drop(probed);
+    round.test(0, before, |_, _| true, &mut texels, &mut blockers)?;
     // With one set there is nothing more to test; its varying pixels are still filtered.
     let refined = filter::refined(&surfaces, &texels);
     let written = band.written();
     if other_count > 0 {
         let pixels = written.start as usize * width as usize..written.end as usize * width as usize;
-        done.pixels_refined += refined[pixels].iter().filter(|&&r| r).count();
+        round.done.pixels_refined += refined[pixels].iter().filter(|&&r| r).count();
     }
     // The other strata, where a penumbra is.
-    if !supervisor.cancelled() && other_count > 0 && refined.contains(&true) {
-        let receivers = Receivers::of_pixels(&surfaces, SEGMENT, constants, |x, y| refined[(y * width + x) as usize]);
-        test(&receivers, &shared.other_samples, probe_count, &mut texels, done);
+    if !round.ctx.supervisor.cancelled() && other_count > 0 && refined.contains(&true) {
+        round.test(1, before + probe_count, |x, y| refined[(y * width + x) as usize], &mut texels, &mut blockers)?;
     }
+    let Round { ctx, done, .. } = round;
 
     // The filter, and the visibility of the band's rows with its error estimate written to the frame.
     let filtering = std::time::Instant::now();
@@ -287,6 +297,103 @@ fn render_band(
     done.pixels_filtered += filtered.pixels_filtered;
     done.penumbra.merge(penumbra);
     Ok(())
+}
+
+/// One band's rounds of tests, on the engine the frame runs on.
+struct Round<'r, 'c, 'p> {
+    ctx: &'r mut MethodContext<'c>,
+    shared: &'r Shared,
+    device: Option<&'r gpu::DeviceTests>,
+    band: &'r Band,
+    surfaces: &'r filter::Surfaces,
+    progress: &'r mut Progress<'p>,
+    done: &'r mut Done,
+}
+
+impl Round<'_, '_, '_> {
+    /// Tests the band's covered pixels (x, y) that `keep` keeps against round `round`'s
+    /// samples (0: the probes, 1: the rest), both halves, the first of them the frame's
+    /// `first`-th sample, and adds their sums and blockers to `texels` and `blockers`.
+    fn test(
+        &mut self,
+        round: usize,
+        first: u64,
+        keep: impl Fn(u32, u32) -> bool + Sync,
+        texels: &mut [Texel],
+        blockers: &mut [[f32; 3]],
+    ) -> JobResult<()> {
+        let (shared, surfaces, width) = (self.shared, self.surfaces, self.ctx.width);
+        let constants = &shared.constants;
+        let started = std::time::Instant::now();
+        let Some(device) = self.device else {
+            let receivers = Receivers::of_pixels(surfaces, SEGMENT, constants, keep);
+            self.done.read_ms += started.elapsed().as_secs_f64() * 1e3;
+            let halves = if round == 0 { &shared.probe_samples } else { &shared.other_samples };
+            let geometry = (self.ctx.scene.positions(), self.ctx.scene.indices());
+            let mut first = first;
+            for (half, samples) in halves.iter().enumerate() {
+                let progress = &mut *self.progress;
+                let (sums, met, spent) =
+                    cpu::estimate_with::<true>(&receivers, samples, constants, geometry, shared.channels, shared.crop_size, |n| {
+                        progress.at(first + n as u64)
+                    });
+                first += samples.len() as u64;
+                gather(&receivers, &sums, &met, half == 1, texels, blockers);
+                self.done.spent.add(spent);
+            }
+            // The receivers' segments, once a round (as `reference` counts them once a frame).
+            self.done.segments += receivers.segments;
+            return Ok(());
+        };
+        // The row segments that hold a pixel to test, each by its first pixel in the frame.
+        let band_start = self.band.reach.start * width;
+        let kept = |x: u32, y: u32| keep(x, y) && surfaces.normal(x, y).is_some();
+        let segments: Vec<u32> = (0..self.band.reach.len() as u32)
+            .into_par_iter()
+            .flat_map_iter(|y| {
+                (0..width.div_ceil(SEGMENT))
+                    .filter(move |s| (s * SEGMENT..((s + 1) * SEGMENT).min(width)).any(|x| kept(x, y)))
+                    .map(move |s| band_start + y * width + s * SEGMENT)
+            })
+            .collect();
+        self.done.read_ms += started.elapsed().as_secs_f64() * 1e3;
+        let (floats, channels) = (device.record_floats(), shared.channels);
+        let mut gather_ms = 0.0;
+        device.test(self.ctx, round, &segments, (first, self.progress), |records| {
+            let gathering = std::time::Instant::now();
+            // Each half's sums as `Texel::add` takes them (the gray one standing for all three).
+            let sums = |at: &[f32]| {
+                if channels == 1 {
+                    ([at[0]; 3], [at[1]; 3])
+                } else {
+                    ([at[0], at[1], at[2]], [at[3], at[4], at[5]])
+                }
+            };
+            let row = constants.rotation.row(2).truncate();
+            for (s, &start) in segments.iter().enumerate() {
+                for lane in 0..SEGMENT.min(width - start % width) {
+                    let (x, y) = ((start - band_start + lane) % width, (start - band_start + lane) / width);
+                    if !kept(x, y) {
+                        continue;
+                    }
+                    let record = &records[(s * SEGMENT as usize + lane as usize) * floats..][..floats];
+                    let pixel = (y * width + x) as usize;
+                    for half in 0..2 {
+                        let (shadowed, unshadowed) = sums(&record[2 * channels * half..]);
+                        texels[pixel].add(shadowed, unshadowed, half == 1);
+                    }
+                    // The receiver's depth from the light's plane, as `Receivers` takes it.
+                    let depth = constants.plane - row.dot(surfaces.position(x, y));
+                    let (met, blocker) = (&record[4 * channels..], &mut blockers[pixel]);
+                    *blocker = [depth, blocker[1] + met[0], blocker[2] + met[1]];
+                }
+            }
+            gather_ms = gathering.elapsed().as_secs_f64() * 1e3;
+        })?;
+        self.done.gather_ms += gather_ms;
+        self.done.segments += segments.len() as u32;
+        Ok(())
+    }
 }
 
 /// Adds a round of tests to the frame's pixels: per pixel its sums (the gray one standing for
