@@ -17,7 +17,7 @@ fn timed(pixels: u64, triangles: u64, texels: u64, ms: f64) -> TimePoint {
 
 #[test]
 fn the_fit_finds_the_costs_it_was_made_from() {
-    let truth = Cost { base_ms: 12.0, per_mpixel: 300.0, per_mtriangle: 40.0, per_mtexel: 0.0 };
+    let truth = Cost { base_ms: 12.0, per_mpixel: 300.0, per_mtriangle: 40.0, per_mtexel: 0.0, per_mtexel_whole: 0.0 };
     let mut samples = Vec::new();
     for pixels in [19_200, 76_800, 307_200] {
         for triangles in [2_000, 9_000, 30_000] {
@@ -34,8 +34,9 @@ fn the_fit_finds_the_costs_it_was_made_from() {
 
 #[test]
 fn a_cropping_method_is_fitted_and_predicted_on_the_texels_it_draws() {
-    // Maps cost by the texels drawn: a view cropped to a fifth of each map draws a fifth.
-    let truth = Cost { base_ms: 5.0, per_mpixel: 200.0, per_mtriangle: 3_000.0, per_mtexel: 50.0 };
+    // Maps cost by the texels drawn, and a little by the whole map's: a view cropped to a
+    // fifth of each map draws a fifth.
+    let truth = Cost { base_ms: 5.0, per_mpixel: 200.0, per_mtriangle: 3_000.0, per_mtexel: 50.0, per_mtexel_whole: 8.0 };
     let mut samples = Vec::new();
     for (triangles, share) in [(3_000, 1.0), (9_000, 1.0), (30_000, 1.0), (6_000, 0.2)] {
         for pixels in [19_200, 307_200] {
@@ -199,5 +200,29 @@ fn the_pace_follows_the_devices_recent_renders() {
     let (fitted, paced) = (model.predictions(&at), model.predictions(&Features { pace: 1.5, ..at.clone() }));
     for ((_, a), (_, b)) in fitted.iter().zip(&paced) {
         assert!((b.ms - 1.5 * a.ms).abs() < 1e-9 && a.error == b.error);
+    }
+}
+
+/// The shipped model's costs are what this build fits to its times: a change of the fit
+/// reaches it too (`PENUMBRA_BLESS=1 cargo test --release --lib shipped_model` fits it again
+/// and writes `default.json`).
+#[test]
+fn the_shipped_model_is_fitted_as_this_build_fits() {
+    let shipped: Model = serde_json::from_str(SHIPPED).unwrap();
+    let mut refitted = shipped.clone();
+    super::measure::refit(&mut refitted);
+    if std::env::var_os("PENUMBRA_BLESS").is_some() {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/src/model/default.json");
+        std::fs::write(path, serde_json::to_string_pretty(&refitted).unwrap()).unwrap();
+        return;
+    }
+    assert_eq!(shipped.candidates.len(), refitted.candidates.len());
+    for (stored, fitted) in shipped.candidates.iter().zip(&refitted.candidates) {
+        assert_eq!(stored.cost.keys().collect::<Vec<_>>(), fitted.cost.keys().collect::<Vec<_>>(), "{}", stored.label);
+        for (light, cost) in &stored.cost {
+            for (a, b) in cost.as_array().iter().zip(fitted.cost[light].as_array()) {
+                assert!((a - b).abs() <= 1e-9 * b.abs().max(1.0), "{} under {light}: {cost:?} stored, {:?} fitted", stored.label, fitted.cost[light]);
+            }
+        }
     }
 }
