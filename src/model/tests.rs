@@ -221,7 +221,12 @@ fn the_shipped_model_is_fitted_as_this_build_fits() {
         assert_eq!(stored.cost.keys().collect::<Vec<_>>(), fitted.cost.keys().collect::<Vec<_>>(), "{}", stored.label);
         for (light, cost) in &stored.cost {
             for (a, b) in cost.as_array().iter().zip(fitted.cost[light].as_array()) {
-                assert!((a - b).abs() <= 1e-9 * b.abs().max(1.0), "{} under {light}: {cost:?} stored, {:?} fitted", stored.label, fitted.cost[light]);
+                assert!(
+                    (a - b).abs() <= 1e-9 * b.abs().max(1.0),
+                    "{} under {light}: {cost:?} stored, {:?} fitted",
+                    stored.label,
+                    fitted.cost[light]
+                );
             }
         }
     }

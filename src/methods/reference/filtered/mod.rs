@@ -135,8 +135,18 @@ impl ShadowMethod for Filtered {
             },
         };
         let mut done = Done { read_ms: started.elapsed().as_secs_f64() * 1e3, ..Done::default() };
-        let per_pixel = device.as_ref().map_or(BYTES_PER_PIXEL, |device| gpu_bytes_per_pixel(device.record_floats()));
-        let bands = bands::bands(ctx.width, ctx.height, per_pixel, ctx.cpu_working_bytes, HALO_ROWS, filter::TILE);
+        let (per_pixel, budget) = match &device {
+            None => (BYTES_PER_PIXEL, ctx.cpu_working_bytes),
+            Some(device) => {
+                // A band's records are one storage binding on the device too: at most a row of
+                // segments' lanes (the width rounded up to a segment) a row of the reach.
+                let per_pixel = gpu_bytes_per_pixel(device.record_floats());
+                let row_bytes = u64::from(ctx.width.next_multiple_of(SEGMENT)) * 4 * device.record_floats() as u64;
+                let rows = u64::from(ctx.gpu.device.limits().max_storage_buffer_binding_size) / row_bytes;
+                (per_pixel, ctx.cpu_working_bytes.min(rows * u64::from(ctx.width) * per_pixel))
+            }
+        };
+        let bands = bands::bands(ctx.width, ctx.height, per_pixel, budget, HALO_ROWS, filter::TILE);
         let supervisor = ctx.supervisor;
         let mut progress = Progress::new(supervisor, shared.samples() * bands.len() as u64);
         for (b, band) in bands.iter().enumerate() {
