@@ -193,33 +193,18 @@ fn segments_size() {
 @compute @workgroup_size(64)
 fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) lane: u32) {
     frame = frame_uniform;
-    let i = list_position(group, lane);
-    if i >= atomicLoad(&segments.count) * SEGMENT {
+    let at = listed_lane(group, lane);
+    if !at.listed {
         return;
     }
-    let pixel = listed_pixel(segments.pixels[i / SEGMENT]) + vec2<u32>(i % SEGMENT, 0u);
-    if pixel.x >= frame.sizes.x {
-        return;
-    }
-    // The normal texel once, for the coverage and the normal (`covers`).
-    let normal_texel = textureLoad(gbuf_normal, pixel, 0);
-    if !covers(normal_texel) {
+    let pixel = at.pixel;
+    if !covers(at.normal) {
         if LAST {
             visibility_out[pixel_index(pixel)] = vec4<f32>(1.0);
         }
         return;
     }
-    let receiver = receiver_at(pixel, normal_texel.xyz);
-    // The last texel of a layer: each holds its map's crop (`MapCrop`), all the same size.
-    let last = vec2<f32>(textureDimensions(depths)) - 1.0;
-    var s = Sums(vec3<f32>(0.0), vec3<f32>(0.0), vec2<f32>(0.0));
-    // Spelled out by `#unroll` (a loop over them ran slower: constant indices); a slot past
-    // `SAMPLES` compiles away.
-    #unroll k in 0..32 {
-        if SAMPLES > k {
-            add_sample(&s, receiver, last, k, batch.samples[k]);
-        }
-    }
+    var s = batch_sums(pixel, at.normal.xyz);
     let base = 2u * CHANNELS * (pixel.y * frame.sizes.x + pixel.x);
     if !FIRST {
         for (var c = 0u; c < CHANNELS; c++) {
@@ -235,6 +220,45 @@ fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index
             sums[base + CHANNELS + c] = s.unshadowed[c];
         }
     }
+}
+
+// A lane of a dispatch over the listed segments: its list position (`index`: segment ×
+// `SEGMENT` + lane), its pixel, whether it is one (within the list and the frame), and the
+// normal texel there, read once for the coverage and the normal (`covers`).
+struct Lane {
+    index: u32,
+    pixel: vec2<u32>,
+    listed: bool,
+    normal: vec4<f32>,
+}
+
+fn listed_lane(group: vec3<u32>, lane: u32) -> Lane {
+    let i = list_position(group, lane);
+    if i >= atomicLoad(&segments.count) * SEGMENT {
+        return Lane(i, vec2<u32>(0u), false, vec4<f32>(0.0));
+    }
+    let pixel = listed_pixel(segments.pixels[i / SEGMENT]) + vec2<u32>(i % SEGMENT, 0u);
+    if pixel.x >= frame.sizes.x {
+        return Lane(i, pixel, false, vec4<f32>(0.0));
+    }
+    return Lane(i, pixel, true, textureLoad(gbuf_normal, pixel, 0));
+}
+
+// The batch's L·G·V and L·G (and, with `BLOCKERS`, the blockers met) at the covered `pixel`
+// of unit normal `normal`.
+fn batch_sums(pixel: vec2<u32>, normal: vec3<f32>) -> Sums {
+    let receiver = receiver_at(pixel, normal);
+    // The last texel of a layer: each holds its map's crop (`MapCrop`), all the same size.
+    let last = vec2<f32>(textureDimensions(depths)) - 1.0;
+    var s = Sums(vec3<f32>(0.0), vec3<f32>(0.0), vec2<f32>(0.0));
+    // Spelled out by `#unroll` (a loop over them ran slower: constant indices); a slot past
+    // `SAMPLES` compiles away.
+    #unroll k in 0..32 {
+        if SAMPLES > k {
+            add_sample(&s, receiver, last, k, batch.samples[k]);
+        }
+    }
+    return s;
 }
 
 // What every test of the batch needs of the receiver at `pixel` (`normal`: its unit normal).
@@ -260,26 +284,12 @@ fn receiver_at(pixel: vec2<u32>, normal: vec3<f32>) -> Receiver {
 @compute @workgroup_size(64)
 fn filtered_main(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) lane: u32) {
     frame = frame_uniform;
-    let i = list_position(group, lane);
-    if i >= atomicLoad(&segments.count) * SEGMENT {
+    let at = listed_lane(group, lane);
+    if !at.listed || !covers(at.normal) {
         return;
     }
-    let pixel = listed_pixel(segments.pixels[i / SEGMENT]) + vec2<u32>(i % SEGMENT, 0u);
-    if pixel.x >= frame.sizes.x {
-        return;
-    }
-    let normal_texel = textureLoad(gbuf_normal, pixel, 0);
-    if !covers(normal_texel) {
-        return;
-    }
-    let receiver = receiver_at(pixel, normal_texel.xyz);
-    let last = vec2<f32>(textureDimensions(depths)) - 1.0;
-    var s = Sums(vec3<f32>(0.0), vec3<f32>(0.0), vec2<f32>(0.0));
-    #unroll k in 0..32 {
-        if SAMPLES > k {
-            add_sample(&s, receiver, last, k, batch.samples[k]);
-        }
-    }
+    let s = batch_sums(at.pixel, at.normal.xyz);
+    let i = at.index;
     // A record: the two halves' 2·CHANNELS sums, then the blockers' two floats.
     let base = i * (4u * CHANNELS + 2u);
     let half = base + 2u * CHANNELS * HALF;

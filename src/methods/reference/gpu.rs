@@ -139,6 +139,20 @@ impl DepthMaps {
     }
 }
 
+/// Binding 1 of an accumulate pass (`accumulate.wgsl`): the batch's depth maps, a layer each.
+pub(super) fn maps_entry() -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding: 1,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Texture {
+            sample_type: wgpu::TextureSampleType::Depth,
+            view_dimension: wgpu::TextureViewDimension::D2Array,
+            multisampled: false,
+        },
+        count: None,
+    }
+}
+
 /// What every batch's accumulate pass binds besides its maps, and what picks its pipeline.
 pub(super) struct Accumulation {
     /// The batches' uniforms, a slot each.
@@ -182,16 +196,7 @@ impl Accumulation {
             ("methods/reference/accumulate.wgsl", "main"),
             &[
                 layout::uniform_dynamic(0),
-                wgpu::BindGroupLayoutEntry {
-                    binding: 1,
-                    visibility: wgpu::ShaderStages::COMPUTE,
-                    ty: wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Depth,
-                        view_dimension: wgpu::TextureViewDimension::D2Array,
-                        multisampled: false,
-                    },
-                    count: None,
-                },
+                maps_entry(),
                 layout::storage_read_write(2),
                 layout::storage_read_write(3),
                 layout::storage_read_write(4),

@@ -6,7 +6,7 @@
 
 use glam::UVec2;
 
-use super::super::gpu::{batch_layers, BatchUniforms, DepthMaps, SEGMENT};
+use super::super::gpu::{batch_layers, maps_entry, BatchUniforms, DepthMaps, SEGMENT};
 use super::super::samples::SamplePlan;
 use super::super::{MethodContext, Params, Progress};
 use crate::error::JobResult;
@@ -117,21 +117,7 @@ impl DeviceTests {
             let pipeline = ctx.screen_specialized(
                 "filtered.accumulate",
                 ("methods/reference/accumulate.wgsl", "filtered_main"),
-                &[
-                    layout::uniform_dynamic(0),
-                    wgpu::BindGroupLayoutEntry {
-                        binding: 1,
-                        visibility: wgpu::ShaderStages::COMPUTE,
-                        ty: wgpu::BindingType::Texture {
-                            sample_type: wgpu::TextureSampleType::Depth,
-                            view_dimension: wgpu::TextureViewDimension::D2Array,
-                            multisampled: false,
-                        },
-                        count: None,
-                    },
-                    layout::storage_read_write(4),
-                    layout::storage_read_write(6),
-                ],
+                &[layout::uniform_dynamic(0), maps_entry(), layout::storage_read_write(4), layout::storage_read_write(6)],
                 &[
                     ("SAMPLES", f64::from(batch.count)),
                     ("CHANNELS", f64::from(self.channels)),

@@ -142,7 +142,7 @@ impl ShadowMethod for Filtered {
                 // segments' lanes (the width rounded up to a segment) a row of the reach.
                 let per_pixel = gpu_bytes_per_pixel(device.record_floats());
                 let row_bytes = u64::from(ctx.width.next_multiple_of(SEGMENT)) * 4 * device.record_floats() as u64;
-                let rows = u64::from(ctx.gpu.device.limits().max_storage_buffer_binding_size) / row_bytes;
+                let rows = ctx.gpu.device.limits().max_storage_buffer_binding_size / row_bytes;
                 (per_pixel, ctx.cpu_working_bytes.min(rows * u64::from(ctx.width) * per_pixel))
             }
         };
