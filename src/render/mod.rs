@@ -33,7 +33,7 @@ pub use frame::{resolve_view, Camera, ExtraImages, FrameSpec, LightProjection, S
 pub use inputs::FrameInputs;
 use inputs::{FrameUniforms, LightCellGpu};
 pub use passes::{screen_compute_pipeline, E0Mode};
-pub use pixel_list::PixelListBuffers;
+pub use pixel_list::{list_grid, PixelListBuffers};
 use targets::FrameTargets;
 
 /// The frame's counter of the pixels E0 summed exactly because its interpolation refused

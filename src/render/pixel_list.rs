@@ -6,6 +6,18 @@ use crate::gpu::pool::{BufferKey, BufferPool};
 use crate::gpu::timing::GpuTimer;
 use crate::render::method::Scratch;
 
+/// Lanes a workgroup of a listed dispatch, and the most workgroups a row of its grid holds
+/// (`LIST_GROUP` and `LIST_MAX_GROUPS` in `pixel_list.wgsl`).
+const LIST_GROUP: u32 = 64;
+const LIST_MAX_GROUPS: u32 = 65535;
+
+/// The workgroup grid (x, y) of a dispatch over `count` listed entries whose count the CPU
+/// knows: `list_dispatch` in `pixel_list.wgsl`.
+pub fn list_grid(count: u64) -> (u32, u32) {
+    let groups = count.div_ceil(u64::from(LIST_GROUP)) as u32;
+    (groups.min(LIST_MAX_GROUPS), groups.div_ceil(LIST_MAX_GROUPS))
+}
+
 /// A `PixelList` and its dispatch, lent by the pools for one frame.
 pub struct PixelListBuffers {
     /// The count (cleared here), then at most `capacity` entries.

@@ -150,6 +150,14 @@ pub(super) struct TestConstants {
     pub light_center: Vec3,
 }
 
+impl TestConstants {
+    /// A receiver's depth along the light normal from the light's plane (every sample's
+    /// depth of it: they all lie on that plane).
+    pub fn depth_of(&self, world: Vec3) -> f32 {
+        self.plane - self.rotation.row(2).truncate().dot(world)
+    }
+}
+
 /// One sample as its map is drawn and read.
 #[derive(Clone)]
 pub(super) struct CpuSample {
@@ -198,15 +206,14 @@ impl Receivers {
             for (l, &pixel) in block_pixels.iter().enumerate() {
                 let (px, py) = (pixel % width, pixel / width);
                 let (world, normal) = (gbuffer.position(px, py), gbuffer.normal(px, py).unwrap_or_default());
-                let x = Vec3::new(rotation[0].dot(world), rotation[1].dot(world), rotation[2].dot(world));
                 let n = Vec3::new(rotation[0].dot(normal), rotation[1].dot(normal), rotation[2].dot(normal));
                 // The bias in texels, constant plus slope-scaled by tanθ to the light's centre.
                 let cos_c = normal.dot((c.light_center - world).normalize()).clamp(0.0, 1.0);
                 let tan_c = ((1.0 - cos_c * cos_c).sqrt() / cos_c.max(0.05)).min(10.0);
                 let bias = c.bias_texels + c.slope_bias_texels * tan_c;
-                let depth = c.plane - x.z;
-                b.x[l] = x.x;
-                b.y[l] = x.y;
+                let depth = c.depth_of(world);
+                b.x[l] = rotation[0].dot(world);
+                b.y[l] = rotation[1].dot(world);
                 b.nx[l] = n.x;
                 b.ny[l] = n.y;
                 b.depth[l] = depth;

@@ -13,11 +13,6 @@ use crate::error::JobResult;
 use crate::gpu::layout;
 use crate::timing::PhaseName;
 
-/// Lanes a workgroup of `filtered_main` (`@workgroup_size`), and the most workgroups a row of
-/// its grid holds (`LIST_GROUP` and `LIST_MAX_GROUPS` in `pixel_list.wgsl`).
-const LIST_GROUP: u32 = 64;
-const LIST_MAX_GROUPS: u32 = 65535;
-
 /// A batch: consecutive samples of one round's half, drawn into the maps' layers and tested
 /// by one pass.
 struct Batch {
@@ -108,8 +103,7 @@ impl DeviceTests {
         let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST;
         let records = ctx.scratch_buffer("Filtered::records", bytes, usage);
         ctx.encoder.clear_buffer(&records, 0, None);
-        let groups = lanes.div_ceil(u64::from(LIST_GROUP)) as u32;
-        let grid = (groups.min(LIST_MAX_GROUPS), groups.div_ceil(LIST_MAX_GROUPS));
+        let grid = crate::render::list_grid(lanes);
         let mut done = before;
         for batch in batches {
             let range = batch.first..batch.first + batch.count as usize;

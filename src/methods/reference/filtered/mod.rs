@@ -379,7 +379,6 @@ impl Round<'_, '_, '_> {
                     ([at[0], at[1], at[2]], [at[3], at[4], at[5]])
                 }
             };
-            let row = constants.rotation.row(2).truncate();
             for (s, &start) in segments.iter().enumerate() {
                 for lane in 0..SEGMENT.min(width - start % width) {
                     let (x, y) = ((start - band_start + lane) % width, (start - band_start + lane) / width);
@@ -392,8 +391,7 @@ impl Round<'_, '_, '_> {
                         let (shadowed, unshadowed) = sums(&record[2 * channels * half..]);
                         texels[pixel].add(shadowed, unshadowed, half == 1);
                     }
-                    // The receiver's depth from the light's plane, as `Receivers` takes it.
-                    let depth = constants.plane - row.dot(surfaces.position(x, y));
+                    let depth = constants.depth_of(surfaces.position(x, y));
                     let (met, blocker) = (&record[4 * channels..], &mut blockers[pixel]);
                     *blocker = [depth, blocker[1] + met[0], blocker[2] + met[1]];
                 }
