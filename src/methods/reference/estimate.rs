@@ -4,6 +4,7 @@
 //! engine and method `filtered` keep their pixels so.
 
 use glam::Vec3;
+use rayon::prelude::*;
 
 /// The gray visibility counted as penumbra for the estimate's mean (`PenumbraMean`).
 const PENUMBRA: (f32, f32) = (0.01, 0.99);
@@ -65,6 +66,105 @@ impl Texel {
     pub fn visibility(&self) -> [f32; 3] {
         let gray = self.gray();
         [0, 1, 2].map(|c| if self.unshadowed[c] > 0.0 { (self.shadowed[c] / self.unshadowed[c]).clamp(0.0, 1.0) } else { gray })
+    }
+}
+
+/// Pixels' `Texel`s stored by the light's channels: under a gray light every channel holds the
+/// same sums (the gray one stands for all three), so one is kept — 16 bytes a pixel instead
+/// of 48 — and copied to the three as a pixel is read. The same values as a `Vec<Texel>`.
+#[derive(Debug, Clone)]
+pub(super) struct Texels {
+    channels: usize,
+    /// Per pixel: Σ L·G·V, Σ L·G, and the second half's two, each `channels` wide.
+    sums: Vec<f32>,
+}
+
+impl Texels {
+    /// `pixels` uncovered texels of `channels` (1 or 3) channels.
+    pub fn new(pixels: usize, channels: usize) -> Self {
+        assert!(channels == 1 || channels == 3, "{channels} channels");
+        Self { channels, sums: vec![0.0; pixels * 4 * channels] }
+    }
+
+    /// These texels, `channels` of them kept (1: the first stands for all three).
+    #[cfg(test)]
+    pub fn from_texels(channels: usize, texels: impl IntoIterator<Item = Texel>) -> Self {
+        let mut all = Self::new(0, channels);
+        for texel in texels {
+            all.sums.resize(all.sums.len() + 4 * channels, 0.0);
+            all.set(all.len() - 1, texel);
+        }
+        all
+    }
+
+    /// The channels kept a sum: 1 or 3.
+    pub fn channels(&self) -> usize {
+        self.channels
+    }
+
+    pub fn len(&self) -> usize {
+        self.sums.len() / (4 * self.channels)
+    }
+
+    /// Pixel `i`'s sums.
+    #[inline]
+    pub fn get(&self, i: usize) -> Texel {
+        if self.channels == 1 {
+            let &[s, u, hs, hu] = self.sums[4 * i..4 * i + 4].first_chunk::<4>().expect("a texel");
+            Texel { shadowed: [s; 3], unshadowed: [u; 3], half_shadowed: [hs; 3], half_unshadowed: [hu; 3] }
+        } else {
+            let at = self.sums[12 * i..12 * i + 12].first_chunk::<12>().expect("a texel");
+            let three = |k: usize| [at[3 * k], at[3 * k + 1], at[3 * k + 2]];
+            Texel { shadowed: three(0), unshadowed: three(1), half_shadowed: three(2), half_unshadowed: three(3) }
+        }
+    }
+
+    /// `len` texels of `channels` channels, texel k `make(k)`, made on every core.
+    pub fn par_from_fn(len: usize, channels: usize, make: impl Fn(usize) -> Texel + Sync) -> Self {
+        let mut all = Self::new(len, channels);
+        all.sums.par_chunks_mut(4 * channels).enumerate().for_each(|(k, at)| store(at, make(k)));
+        all
+    }
+
+    /// Sets pixel `i`'s sums (its first channel alone under a gray light).
+    #[inline]
+    pub fn set(&mut self, i: usize, texel: Texel) {
+        let c = self.channels;
+        store(&mut self.sums[4 * c * i..4 * c * (i + 1)], texel);
+    }
+
+    /// `Texel::add` to pixel `i`.
+    #[inline]
+    pub fn add(&mut self, i: usize, shadowed: [f32; 3], unshadowed: [f32; 3], second_half: bool) {
+        let c = self.channels;
+        let at = &mut self.sums[4 * c * i..4 * c * (i + 1)];
+        let (whole, half) = at.split_at_mut(2 * c);
+        for k in 0..c {
+            whole[k] += shadowed[k];
+            whole[c + k] += unshadowed[k];
+            if second_half {
+                half[k] += shadowed[k];
+                half[c + k] += unshadowed[k];
+            }
+        }
+    }
+
+    /// Keeps the texels `range` alone.
+    pub fn keep(&mut self, range: std::ops::Range<usize>) {
+        let per = 4 * self.channels;
+        self.sums.truncate(range.end * per);
+        self.sums.drain(..range.start * per);
+    }
+}
+
+/// Stores `texel` in a `Texels` pixel's sums, `at`: its channels are `at`'s length over 4.
+#[inline]
+fn store(at: &mut [f32], texel: Texel) {
+    let sums = [texel.shadowed, texel.unshadowed, texel.half_shadowed, texel.half_unshadowed];
+    if let Some(at) = at.first_chunk_mut::<12>() {
+        *at = bytemuck::cast(sums);
+    } else if let Some(at) = at.first_chunk_mut::<4>() {
+        *at = sums.map(|s| s[0]);
     }
 }
 
@@ -191,6 +291,31 @@ mod tests {
         counted(&mut none, texel(1.0, 0.0), 16.0);
         counted(&mut none, texel(0.0, 0.0), 16.0);
         assert_eq!((none.pixels(), none.mean()), (0.0, 0.0));
+    }
+
+    #[test]
+    fn texels_of_one_channel_read_as_the_three_they_stand_for() {
+        let sums = [([0.25; 3], [1.5; 3], false), ([0.5; 3], [2.0; 3], true), ([0.125; 3], [0.75; 3], true)];
+        let mut whole = Texel::UNCOVERED;
+        let (mut gray, mut coloured) = (Texels::new(3, 1), Texels::new(3, 3));
+        for (shadowed, unshadowed, second_half) in sums {
+            whole.add(shadowed, unshadowed, second_half);
+            gray.add(1, shadowed, unshadowed, second_half);
+            coloured.add(1, shadowed, unshadowed, second_half);
+        }
+        assert_eq!((gray.get(1), coloured.get(1), gray.get(0)), (whole, whole, Texel::UNCOVERED));
+        // Three channels keep each its own; one keeps its first.
+        let rgb = texel(0.5, 0.1);
+        let rgb = Texel { shadowed: [0.1, 0.2, 0.3], ..rgb };
+        coloured.set(2, rgb);
+        gray.set(2, rgb);
+        assert_eq!(coloured.get(2), rgb);
+        assert_eq!(gray.get(2).shadowed, [0.1; 3]);
+        let made = Texels::par_from_fn(3, 3, |k| coloured.get(k));
+        assert_eq!((0..3).map(|k| made.get(k)).collect::<Vec<_>>(), (0..3).map(|k| coloured.get(k)).collect::<Vec<_>>());
+        let mut kept = made.clone();
+        kept.keep(1..3);
+        assert_eq!((kept.len(), kept.get(0), kept.get(1)), (2, whole, rgb));
     }
 
     #[test]

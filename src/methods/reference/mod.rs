@@ -245,12 +245,12 @@ impl<'a> Progress<'a> {
 }
 
 /// What the CPU engine holds a pixel at most, in bytes, under a light of `channels` channels:
-/// its receiver (40) and listing (4), its two halves' sums (16 a channel: `cpu::Sums`), and
-/// its visibility as queued for the device (16; written `VISIBILITY_ROWS` at a time) — the
-/// G-buffer's copy (24) is let go before the sums are made. 108 under a coloured light, 76
-/// under a gray one.
+/// its receiver (28: `cpu::ReceiverBlock`) and listing (4), its two halves' sums (16 a channel:
+/// `cpu::Sums`), and its visibility as queued for the device (16; written `VISIBILITY_ROWS` at
+/// a time) — the G-buffer's copy (24) is let go before the sums are made. 96 under a coloured
+/// light, 64 under a gray one.
 fn cpu_bytes_per_pixel(channels: usize) -> u64 {
-    40 + 4 + 16 * channels as u64 + 16
+    28 + 4 + 16 * channels as u64 + 16
 }
 
 /// Rows of visibility written to the device at a time.

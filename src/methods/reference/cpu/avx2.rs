@@ -18,15 +18,18 @@ pub(super) unsafe fn add_sample<const BLOCKERS: bool>(
     channels: usize,
 ) {
     let load = |a: &[f32; 8]| unsafe { _mm256_loadu_ps(a.as_ptr()) };
+    let depth = load(&b.depth);
+    let depth2 = _mm256_mul_ps(depth, depth);
     let dx = _mm256_sub_ps(load(&b.x), _mm256_set1_ps(t.origin[0]));
     let dy = _mm256_sub_ps(load(&b.y), _mm256_set1_ps(t.origin[1]));
-    let dist2 = _mm256_fmadd_ps(dx, dx, _mm256_fmadd_ps(dy, dy, load(&b.depth2)));
+    let dist2 = _mm256_fmadd_ps(dx, dx, _mm256_fmadd_ps(dy, dy, depth2));
     let inv_dist = _mm256_div_ps(_mm256_set1_ps(1.0), _mm256_sqrt_ps(dist2));
     let inv_dist2 = _mm256_mul_ps(inv_dist, inv_dist);
     let facing = _mm256_fmadd_ps(load(&b.nx), dx, _mm256_fmadd_ps(load(&b.ny), dy, load(&b.n_dot_z)));
     let cos = _mm256_max_ps(_mm256_sub_ps(_mm256_setzero_ps(), facing), _mm256_setzero_ps());
-    let g = _mm256_mul_ps(_mm256_mul_ps(_mm256_mul_ps(cos, load(&b.g_depth)), inv_dist2), inv_dist2);
-    let ki = _mm256_mul_ps(_mm256_set1_ps(t.k), load(&b.inv_depth));
+    let g_depth = _mm256_max_ps(depth, _mm256_setzero_ps());
+    let g = _mm256_mul_ps(_mm256_mul_ps(_mm256_mul_ps(cos, g_depth), inv_dist2), inv_dist2);
+    let ki = _mm256_mul_ps(_mm256_set1_ps(t.k), _mm256_div_ps(_mm256_set1_ps(1.0), depth));
     let (fx, fy) = (_mm256_mul_ps(dx, ki), _mm256_mul_ps(dy, ki));
     let visible = if t.empty {
         _mm256_castsi256_ps(_mm256_set1_epi32(-1))
@@ -46,9 +49,9 @@ pub(super) unsafe fn add_sample<const BLOCKERS: bool>(
         );
         let lhs = _mm256_mul_ps(
             _mm256_fmadd_ps(
-                _mm256_sub_ps(_mm256_setzero_ps(), load(&b.bias_depth2)),
+                _mm256_sub_ps(_mm256_setzero_ps(), _mm256_mul_ps(depth2, load(&b.bias))),
                 inv_dist,
-                _mm256_mul_ps(load(&b.depth), _mm256_set1_ps(t.k)),
+                _mm256_mul_ps(depth, _mm256_set1_ps(t.k)),
             ),
             stored,
         );

@@ -29,23 +29,24 @@ pub(super) const LANES: usize = 8;
 const BLOCKS_PER_TASK: usize = 256;
 
 /// Eight receivers, structure of arrays: what the test of `accumulate.wgsl` takes once per
-/// pixel, in every sample's view coordinates (`Receiver` there).
+/// pixel, in every sample's view coordinates (`Receiver` there). Only what the receiver is
+/// (28 bytes a receiver): its depth's reciprocal, square and clamp, and the bias scaled by its
+/// square, are taken again in each test (the same operations: the same bits), since streaming
+/// them from memory cost more than computing them and they were most of the engine's
+/// per-pixel bytes.
 #[derive(Clone, Copy, Default)]
 pub(super) struct ReceiverBlock {
     x: [f32; LANES],
     y: [f32; LANES],
     nx: [f32; LANES],
     ny: [f32; LANES],
-    /// Depth along the light normal from the light's plane, its reciprocal and its square.
+    /// Depth along the light normal from the light's plane (0 for the padding past the last
+    /// receiver: no weight, whatever its test says).
     depth: [f32; LANES],
-    inv_depth: [f32; LANES],
-    depth2: [f32; LANES],
     /// n·v's part along the normal, the same from every sample: `n.z · (−depth)`.
     n_dot_z: [f32; LANES],
-    /// `cosθy·|v|`, 0 behind the light's plane (and for the padding past the last receiver).
-    g_depth: [f32; LANES],
-    /// depth² × the test's bias in texels.
-    bias_depth2: [f32; LANES],
+    /// The test's bias in texels.
+    bias: [f32; LANES],
 }
 
 /// Every block's sums per channel (one or three): a block's Σ L·G·V of each channel, then its
@@ -217,14 +218,10 @@ impl Receivers {
                 b.nx[l] = n.x;
                 b.ny[l] = n.y;
                 b.depth[l] = depth;
-                b.inv_depth[l] = 1.0 / depth;
-                b.depth2[l] = depth * depth;
                 b.n_dot_z[l] = -n.z * depth;
-                b.g_depth[l] = depth.max(0.0);
-                b.bias_depth2[l] = depth * depth * bias;
+                b.bias[l] = bias;
             }
         });
-        // The padding lanes keep depth 0: no weight (g_depth 0), whatever their test says.
         Self { blocks, pixels, segments }
     }
 
@@ -236,11 +233,6 @@ impl Receivers {
     /// The pixel (index into the frame's rows) of each receiver, in block order.
     pub(super) fn pixels(&self) -> &[u32] {
         &self.pixels
-    }
-
-    /// Receiver `k`'s depth from the light's plane.
-    pub(super) fn depth(&self, k: usize) -> f32 {
-        self.blocks[k / LANES].depth[k % LANES]
     }
 }
 
@@ -462,19 +454,23 @@ fn scalar_add_sample<const BLOCKERS: bool>(
     channels: usize,
 ) {
     for l in 0..LANES {
+        let depth = b.depth[l];
+        let depth2 = depth * depth;
         let dx = b.x[l] - t.origin[0];
         let dy = b.y[l] - t.origin[1];
-        let inv_dist = 1.0 / dx.mul_add(dx, dy.mul_add(dy, b.depth2[l])).sqrt();
+        let inv_dist = 1.0 / dx.mul_add(dx, dy.mul_add(dy, depth2)).sqrt();
         let inv_dist2 = inv_dist * inv_dist;
-        let g = (-b.nx[l].mul_add(dx, b.ny[l].mul_add(dy, b.n_dot_z[l]))).max(0.0) * b.g_depth[l] * inv_dist2 * inv_dist2;
-        let ki = t.k * b.inv_depth[l];
+        // `cosθy·|v|`: 0 behind the light's plane and for the padding.
+        let g_depth = depth.max(0.0);
+        let g = (-b.nx[l].mul_add(dx, b.ny[l].mul_add(dy, b.n_dot_z[l]))).max(0.0) * g_depth * inv_dist2 * inv_dist2;
+        let ki = t.k * (1.0 / depth);
         let (fx, fy) = (dx * ki, dy * ki);
         let visible = t.empty || {
             let tx = (t.half + fx - t.crop[0]).clamp(0.0, t.last[0]);
             let ty = (t.half - fy - t.crop[1]).clamp(0.0, t.last[1]);
             let stored = t.depths[ty as usize * t.width as usize + tx as usize];
             let inside = fx.abs() < t.half && fy.abs() < t.half;
-            let lit = (-b.bias_depth2[l]).mul_add(inv_dist, b.depth[l] * t.k) * stored <= t.near_k;
+            let lit = (-(depth2 * b.bias[l])).mul_add(inv_dist, depth * t.k) * stored <= t.near_k;
             if BLOCKERS && inside && !lit && g > 0.0 {
                 let depth = (t.near_k / t.k) / stored;
                 blockers.count[l] += 1.0;

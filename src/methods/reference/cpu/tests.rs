@@ -155,11 +155,8 @@ fn the_avx2_tests_match_the_scalar_ones_bit_for_bit() {
         block.ny[l] = random() - 0.5;
         let depth = if l == 7 { 0.0 } else { 0.5 + 3.0 * random() };
         block.depth[l] = depth;
-        block.inv_depth[l] = if depth > 0.0 { 1.0 / depth } else { 0.0 };
-        block.depth2[l] = depth * depth;
         block.n_dot_z[l] = -0.7 * depth;
-        block.g_depth[l] = depth;
-        block.bias_depth2[l] = depth * depth * (1.0 + random());
+        block.bias[l] = 1.0 + random();
     }
     let constants = TestConstants {
         rotation: Mat4::IDENTITY,

@@ -44,7 +44,7 @@ use std::ops::Range;
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::super::estimate::{PenumbraMean, Texel};
+use super::super::estimate::{PenumbraMean, Texel, Texels};
 use crate::render::method::GBufferView;
 use crate::render::Camera;
 
@@ -157,11 +157,13 @@ pub(super) struct FilterInputs<'a> {
     /// The effective count of a refined pixel's samples (`estimate::PenumbraMean`).
     pub samples_effective: f32,
     pub camera: &'a Camera,
+    /// A surface's depth from the light's plane (`cpu::TestConstants::depth_of`).
+    pub depth_of: &'a (dyn Fn(Vec3) -> f32 + Sync),
 }
 
 /// The filtered texels of the `written` rows, with what the filter did there.
 pub(super) struct FilterOutput {
-    pub texels: Vec<Texel>,
+    pub texels: Texels,
     pub pixels_filtered: usize,
     /// The effective count of a refined pixel's samples (`FilterInputs`).
     samples_effective: f32,
@@ -172,16 +174,17 @@ impl FilterOutput {
     /// sum over their penumbra added to `penumbra` (texel by texel, in order: the same mean
     /// however the rows are cut).
     pub fn visibility(&self, range: Range<usize>, penumbra: &mut PenumbraMean) -> Vec<[f32; 4]> {
-        let texels = &self.texels[range];
-        let visibility: Vec<[f32; 4]> = texels
-            .par_iter()
-            .map(|t| {
+        let visibility: Vec<[f32; 4]> = range
+            .clone()
+            .into_par_iter()
+            .map(|i| {
+                let t = self.texels.get(i);
                 let [r, g, b] = t.visibility();
                 [r, g, b, t.error()]
             })
             .collect();
-        for (t, v) in texels.iter().zip(&visibility) {
-            penumbra.add(t, v[3], self.samples_effective);
+        for (i, v) in range.zip(&visibility) {
+            penumbra.add(&self.texels.get(i), v[3], self.samples_effective);
         }
         visibility
     }
@@ -193,13 +196,13 @@ impl FilterOutput {
 /// A surface that no probe lights (`Dark`) counts as a state of its own: next to lit or
 /// shadowed pixels it is a terminator, where the probes may all lie below a horizon the other
 /// samples clear. A pixel without a surface counts for nothing.
-pub(super) fn refined(surfaces: &Surfaces, texels: &[Texel]) -> Vec<bool> {
+pub(super) fn refined(surfaces: &Surfaces, texels: &Texels) -> Vec<bool> {
     let tiles = Tiles::new(surfaces.width, surfaces.height);
     let covered = |i: usize| surfaces.normals[i] != Vec3::ZERO;
     // Per tile: the states its pixels' probes are in, a bit per `State`.
     let mut states = vec![0u8; tiles.count()];
-    for (i, texel) in texels.iter().enumerate().filter(|&(i, _)| covered(i)) {
-        states[tiles.of(i)] |= 1 << state(texel) as u8;
+    for i in (0..texels.len()).filter(|&i| covered(i)) {
+        states[tiles.of(i)] |= 1 << state(&texels.get(i)) as u8;
     }
     // A tile varies with a mixed pixel around it, or two of the states.
     let varies = |i: usize| {
@@ -209,13 +212,13 @@ pub(super) fn refined(surfaces: &Surfaces, texels: &[Texel]) -> Vec<bool> {
     (0..texels.len()).map(|i| covered(i) && varies(i)).collect()
 }
 
-/// Filters the `refined` pixels' `texels` over `surfaces`, sized by `blockers` ([receiver
-/// depth, blockers met, their summed depth] from the light's plane, per pixel).
+/// Filters the `refined` pixels' `texels` over `surfaces`, sized by `blockers` ([blockers
+/// met, their summed depth from the light's plane] per pixel) and the receiver's own depth.
 pub(super) fn filter(
     inputs: &FilterInputs<'_>,
     surfaces: &Surfaces,
-    mut texels: Vec<Texel>,
-    blockers: &[[f32; 3]],
+    mut texels: Texels,
+    blockers: &[[f32; 2]],
     refined: &[bool],
 ) -> FilterOutput {
     let (width, height) = (inputs.width as usize, inputs.height as usize);
@@ -232,7 +235,8 @@ pub(super) fn filter(
     let own_sigma: Vec<f32> = listed
         .par_iter()
         .map(|&i| {
-            let [receiver, count, depth] = blockers[i];
+            let [count, depth] = blockers[i];
+            let receiver = (inputs.depth_of)(surfaces.positions[i]);
             let blocker = if count > 0.0 { depth / count } else { 0.0 };
             if blocker > 0.0 && receiver > blocker {
                 inputs.scale * inputs.light_extent * (receiver - blocker) / blocker / inputs.samples_across.max(1.0)
@@ -276,73 +280,70 @@ pub(super) fn filter(
         slot[i] = k as u32;
     }
     // One pass over the listed pixels along `step`; a neighbour's sums are `read(j)`.
-    let pass = |read: &(dyn Fn(usize) -> Texel + Sync), step: (isize, isize)| -> Vec<Texel> {
-        listed
-            .par_iter()
-            .zip(&kernels)
-            .map(|(&i, &(sigma, radius))| {
-                let own = read(i);
-                if radius == 0 {
-                    return own;
+    let channels = texels.channels();
+    let pass = |read: &(dyn Fn(usize) -> Texel + Sync), step: (isize, isize)| -> Texels {
+        Texels::par_from_fn(listed.len(), channels, |k| {
+            let (i, (sigma, radius)) = (listed[k], kernels[k]);
+            let own = read(i);
+            if radius == 0 {
+                return own;
+            }
+            let (x, y) = ((i % width) as isize, (i / width) as isize);
+            let (p, n) = (surfaces.positions[i], surfaces.normals[i]);
+            let inv_two_sigma2 = 0.5 / (sigma * sigma);
+            let tolerance = 0.5 * sigma + footprint(i);
+            let inv_two_tolerance2 = 0.5 / (tolerance * tolerance);
+            let mut sum = Texel::UNCOVERED;
+            let mut weights = 0.0f32;
+            let r = radius as isize;
+            for k in -r..=r {
+                let (qx, qy) = (x + k * step.0, y + k * step.1);
+                if qx < 0 || qy < 0 || qx >= width as isize || qy >= height as isize {
+                    continue;
                 }
-                let (x, y) = ((i % width) as isize, (i / width) as isize);
-                let (p, n) = (surfaces.positions[i], surfaces.normals[i]);
-                let inv_two_sigma2 = 0.5 / (sigma * sigma);
-                let tolerance = 0.5 * sigma + footprint(i);
-                let inv_two_tolerance2 = 0.5 / (tolerance * tolerance);
-                let mut sum = Texel::UNCOVERED;
-                let mut weights = 0.0f32;
-                let r = radius as isize;
-                for k in -r..=r {
-                    let (qx, qy) = (x + k * step.0, y + k * step.1);
-                    if qx < 0 || qy < 0 || qx >= width as isize || qy >= height as isize {
-                        continue;
-                    }
-                    let j = qy as usize * width + qx as usize;
-                    let q = read(j);
-                    if !q.lit_at_all() {
-                        continue;
-                    }
-                    let d = surfaces.positions[j] - p;
-                    let plane = n.dot(d);
-                    if plane.abs() > tolerance {
-                        continue; // Off the pixel's tangent plane: another surface.
-                    }
-                    let facing = n.dot(surfaces.normals[j]).max(0.0).powi(NORMAL_POWER);
-                    let w = (-d.length_squared() * inv_two_sigma2 - plane * plane * inv_two_tolerance2).exp() * facing;
-                    for c in 0..3 {
-                        sum.shadowed[c] += w * q.shadowed[c];
-                        sum.unshadowed[c] += w * q.unshadowed[c];
-                        sum.half_shadowed[c] += w * q.half_shadowed[c];
-                        sum.half_unshadowed[c] += w * q.half_unshadowed[c];
-                    }
-                    weights += w;
+                let j = qy as usize * width + qx as usize;
+                let q = read(j);
+                if !q.lit_at_all() {
+                    continue;
                 }
-                if weights <= 0.0 {
-                    return own;
+                let d = surfaces.positions[j] - p;
+                let plane = n.dot(d);
+                if plane.abs() > tolerance {
+                    continue; // Off the pixel's tangent plane: another surface.
                 }
-                let mean = |sums: [f32; 3]| sums.map(|s| s / weights);
-                Texel {
-                    shadowed: mean(sum.shadowed),
-                    unshadowed: mean(sum.unshadowed),
-                    half_shadowed: mean(sum.half_shadowed),
-                    half_unshadowed: mean(sum.half_unshadowed),
+                let facing = n.dot(surfaces.normals[j]).max(0.0).powi(NORMAL_POWER);
+                let w = (-d.length_squared() * inv_two_sigma2 - plane * plane * inv_two_tolerance2).exp() * facing;
+                for c in 0..3 {
+                    sum.shadowed[c] += w * q.shadowed[c];
+                    sum.unshadowed[c] += w * q.unshadowed[c];
+                    sum.half_shadowed[c] += w * q.half_shadowed[c];
+                    sum.half_unshadowed[c] += w * q.half_unshadowed[c];
                 }
-            })
-            .collect()
+                weights += w;
+            }
+            if weights <= 0.0 {
+                return own;
+            }
+            let mean = |sums: [f32; 3]| sums.map(|s| s / weights);
+            Texel {
+                shadowed: mean(sum.shadowed),
+                unshadowed: mean(sum.unshadowed),
+                half_shadowed: mean(sum.half_shadowed),
+                half_unshadowed: mean(sum.half_unshadowed),
+            }
+        })
     };
-    let rows = pass(&|j| texels[j], (1, 0));
-    let both = pass(&|j| if slot[j] == u32::MAX { texels[j] } else { rows[slot[j] as usize] }, (0, 1));
-    for (&i, texel) in listed.iter().zip(both) {
-        texels[i] = texel;
+    let rows = pass(&|j| texels.get(j), (1, 0));
+    let both = pass(&|j| if slot[j] == u32::MAX { texels.get(j) } else { rows.get(slot[j] as usize) }, (0, 1));
+    for (k, &i) in listed.iter().enumerate() {
+        texels.set(i, both.get(k));
     }
     output(texels, written, pixels_filtered, inputs.samples_effective)
 }
 
 /// The `written` texels (the rest let go).
-fn output(mut texels: Vec<Texel>, written: Range<usize>, pixels_filtered: usize, samples_effective: f32) -> FilterOutput {
-    texels.truncate(written.end);
-    texels.drain(..written.start);
+fn output(mut texels: Texels, written: Range<usize>, pixels_filtered: usize, samples_effective: f32) -> FilterOutput {
+    texels.keep(written);
     FilterOutput { texels, pixels_filtered, samples_effective }
 }
 

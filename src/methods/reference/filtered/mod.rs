@@ -29,7 +29,7 @@ use rayon::prelude::*;
 
 use super::bands::{self, Band};
 use super::cpu::{self, BlockerBlock, CpuSample, Receivers, Sums, Surfaces as _};
-use super::estimate::{PenumbraMean, Texel};
+use super::estimate::{PenumbraMean, Texels};
 use super::gpu::SEGMENT;
 use super::samples::{half_of_index, SamplePlan};
 use super::{
@@ -136,11 +136,11 @@ impl ShadowMethod for Filtered {
         };
         let mut done = Done { read_ms: started.elapsed().as_secs_f64() * 1e3, ..Done::default() };
         let (per_pixel, budget) = match &device {
-            None => (BYTES_PER_PIXEL, ctx.cpu_working_bytes),
+            None => (cpu_bytes_per_pixel(shared.channels), ctx.cpu_working_bytes),
             Some(device) => {
                 // A band's records are one storage binding on the device too: at most a row of
                 // segments' lanes (the width rounded up to a segment) a row of the reach.
-                let per_pixel = gpu_bytes_per_pixel(device.record_floats());
+                let per_pixel = gpu_bytes_per_pixel(shared.channels, device.record_floats());
                 let row_bytes = u64::from(ctx.width.next_multiple_of(SEGMENT)) * 4 * device.record_floats() as u64;
                 let rows = ctx.gpu.device.limits().max_storage_buffer_binding_size / row_bytes;
                 (per_pixel, ctx.cpu_working_bytes.min(rows * u64::from(ctx.width) * per_pixel))
@@ -187,17 +187,22 @@ impl ShadowMethod for Filtered {
 /// around theirs (15 more) — rounded to whole tiles, so that the band's tiles are the frame's.
 const HALO_ROWS: u32 = 56;
 
-/// What `filtered` holds a pixel of a band at most, in bytes: its surface (24), texel (48: the
-/// sums and its second half's) and blockers (12), the probes' receiver (44), sums (24) and
-/// blockers met (8), and its refined flag and filter index (5) — 165; the filter's copies of
-/// the refined pixels and the visibility written come after the receivers are let go.
-const BYTES_PER_PIXEL: u64 = 170;
+/// What `filtered` holds a pixel of a band at most, in bytes, under a light of `channels`
+/// channels (1 or 3): its surface (24), texel (16 a channel: `Texels`) and blockers met (8),
+/// the probes' receiver (32), a half's sums (8 a channel) and its blockers met (8), and its
+/// refined flag and filter slot (5) — 101 under a gray light, 149 under a coloured one; the
+/// filter's copies of the refined pixels and the visibility written come after the receivers
+/// are let go.
+fn cpu_bytes_per_pixel(channels: usize) -> u64 {
+    24 + 16 * channels as u64 + 8 + 32 + 8 * channels as u64 + 8 + 5
+}
 
 /// What the GPU engine's bands hold a pixel at most, in bytes, with records of `record_floats`
-/// floats: its surface (24), texel (48), blockers (12), refined flag and filter index (5), and
-/// a round's record read back (`gpu::DeviceTests::test`), mapped and as the device left it.
-fn gpu_bytes_per_pixel(record_floats: usize) -> u64 {
-    24 + 48 + 12 + 5 + 2 * 4 * record_floats as u64
+/// floats under a light of `channels` channels: its surface (24), texel (16 a channel),
+/// blockers met (8), refined flag and filter slot (5), and a round's record read back
+/// (`gpu::DeviceTests::test`), mapped and as the device left it.
+fn gpu_bytes_per_pixel(channels: usize, record_floats: usize) -> u64 {
+    24 + 16 * channels as u64 + 8 + 5 + 2 * 4 * record_floats as u64
 }
 
 /// What every band shares: the samples, split into the probes and the rest, each in the
@@ -263,8 +268,8 @@ fn render_band(
     done.read_ms += started.elapsed().as_secs_f64() * 1e3;
 
     let (probe_count, other_count) = (count(&shared.probe_samples), count(&shared.other_samples));
-    let mut texels = vec![Texel::UNCOVERED; (width * height) as usize];
-    let mut blockers = vec![[0.0f32; 3]; (width * height) as usize];
+    let mut texels = Texels::new((width * height) as usize, shared.channels);
+    let mut blockers = vec![[0.0f32; 2]; (width * height) as usize];
     let mut round = Round { ctx, shared, device, band, surfaces: &surfaces, progress, done };
 
     // The probes, everywhere.
@@ -295,6 +300,7 @@ fn render_band(
         scale: shape.scale,
         samples_effective: shape.samples_effective,
         camera: &ctx.spec.camera,
+        depth_of: &|position| shared.constants.depth_of(position),
     };
     let filtered = filter::filter(&inputs, &surfaces, texels, &blockers, &refined);
     let row = width as usize;
@@ -329,8 +335,8 @@ impl Round<'_, '_, '_> {
         round: usize,
         first: u64,
         keep: impl Fn(u32, u32) -> bool + Sync,
-        texels: &mut [Texel],
-        blockers: &mut [[f32; 3]],
+        texels: &mut Texels,
+        blockers: &mut [[f32; 2]],
     ) -> JobResult<()> {
         let (shared, surfaces, width) = (self.shared, self.surfaces, self.ctx.width);
         let constants = &shared.constants;
@@ -389,11 +395,10 @@ impl Round<'_, '_, '_> {
                     let pixel = (y * width + x) as usize;
                     for half in 0..2 {
                         let (shadowed, unshadowed) = sums(&record[2 * channels * half..]);
-                        texels[pixel].add(shadowed, unshadowed, half == 1);
+                        texels.add(pixel, shadowed, unshadowed, half == 1);
                     }
-                    let depth = constants.depth_of(surfaces.position(x, y));
                     let (met, blocker) = (&record[4 * channels..], &mut blockers[pixel]);
-                    *blocker = [depth, blocker[1] + met[0], blocker[2] + met[1]];
+                    *blocker = [blocker[0] + met[0], blocker[1] + met[1]];
                 }
             }
             gather_ms = gathering.elapsed().as_secs_f64() * 1e3;
@@ -406,15 +411,14 @@ impl Round<'_, '_, '_> {
 
 /// Adds a round of tests to the frame's pixels: per pixel its sums (the gray one standing for
 /// all three under a gray light), to its second half's too where `second_half`, and the
-/// count and summed depth of the blockers its tests met beside its own depth from the light's
-/// plane.
-fn gather(receivers: &Receivers, sums: &Sums, met: &[BlockerBlock], second_half: bool, texels: &mut [Texel], blockers: &mut [[f32; 3]]) {
+/// count and summed depth of the blockers its tests met.
+fn gather(receivers: &Receivers, sums: &Sums, met: &[BlockerBlock], second_half: bool, texels: &mut Texels, blockers: &mut [[f32; 2]]) {
     for (k, &pixel) in receivers.pixels().iter().enumerate() {
         let (block, lane) = (k / cpu::LANES, k % cpu::LANES);
         let (shadowed, unshadowed) = sums.lane(block, lane);
-        texels[pixel as usize].add(shadowed, unshadowed, second_half);
+        texels.add(pixel as usize, shadowed, unshadowed, second_half);
         let blocker = &mut blockers[pixel as usize];
-        *blocker = [receivers.depth(k), blocker[1] + met[block].count[lane], blocker[2] + met[block].depth_sum[lane]];
+        *blocker = [blocker[0] + met[block].count[lane], blocker[1] + met[block].depth_sum[lane]];
     }
 }
 

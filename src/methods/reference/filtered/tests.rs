@@ -3,7 +3,7 @@
 
 use glam::Vec3;
 
-use super::super::estimate::{PenumbraMean, Texel};
+use super::super::estimate::{PenumbraMean, Texel, Texels};
 use super::filter::{self, FilterInputs, FilterOutput, Surfaces};
 use crate::render::Camera;
 
@@ -27,22 +27,21 @@ fn floor(height: impl Fn(u32) -> f32) -> Surfaces {
 }
 
 /// Gray texels of visibility `v(x)`, both halves of their samples agreeing.
-fn texels(v: impl Fn(u32) -> f32) -> Vec<Texel> {
+fn texels(v: impl Fn(u32) -> f32) -> Texels {
     halves(|x| (v(x), v(x)), 0.5)
 }
 
 /// Gray texels whose halves see visibility `v(x)` (first, second), the second holding `share`
 /// of the light.
-fn halves(v: impl Fn(u32) -> (f32, f32), share: f32) -> Vec<Texel> {
-    (0..SIZE * SIZE)
-        .map(|i| {
-            let (a, b) = v(i % SIZE);
-            let mut texel = Texel::UNCOVERED;
-            texel.add([a * (1.0 - share); 3], [1.0 - share; 3], false);
-            texel.add([b * share; 3], [share; 3], true);
-            texel
-        })
-        .collect()
+fn halves(v: impl Fn(u32) -> (f32, f32), share: f32) -> Texels {
+    let texel = |i: u32| {
+        let (a, b) = v(i % SIZE);
+        let mut texel = Texel::UNCOVERED;
+        texel.add([a * (1.0 - share); 3], [1.0 - share; 3], false);
+        texel.add([b * share; 3], [share; 3], true);
+        texel
+    };
+    Texels::from_texels(1, (0..SIZE * SIZE).map(texel))
 }
 
 fn inputs(camera: &Camera, scale: f32) -> FilterInputs<'_> {
@@ -56,13 +55,17 @@ fn inputs(camera: &Camera, scale: f32) -> FilterInputs<'_> {
         scale,
         samples_effective: 256.0,
         camera,
+        depth_of: &|_| RECEIVER_DEPTH,
     }
 }
 
+/// Every surface's depth from the light's plane.
+const RECEIVER_DEPTH: f32 = 2.0;
+
 /// Blockers that make σ = `sigma` world units with `inputs` (light 1, one stratum across):
-/// (d_r − d_b) / d_b = σ with d_b = 1.
-fn blockers(sigma: f32) -> Vec<[f32; 3]> {
-    vec![[1.0 + sigma, 1.0, 1.0]; (SIZE * SIZE) as usize]
+/// (d_r − d_b) / d_b = σ, one blocker met at d_b = d_r / (1 + σ).
+fn blockers(sigma: f32) -> Vec<[f32; 2]> {
+    vec![[1.0, RECEIVER_DEPTH / (1.0 + sigma)]; (SIZE * SIZE) as usize]
 }
 
 #[test]
