@@ -99,20 +99,18 @@ fn copy_rows(encoder: &mut wgpu::CommandEncoder, texture: &wgpu::Texture, buffer
     );
 }
 
-/// The G-buffer on the CPU (`MethodContext::read_gbuffer`), as copied into buffers: rows
-/// `*_pitch` bytes apart from the top-left, read in place.
-pub struct GBufferView<'a> {
+/// A few rows of the G-buffer on the CPU (`MethodContext::read_surfaces`), as copied into
+/// buffers: rows `*_pitch` bytes apart from the top-left, read in place.
+struct GBufferView<'a> {
     positions: &'a [u8],
     normals: &'a [u8],
     position_pitch: usize,
     normal_pitch: usize,
-    pub width: u32,
-    pub height: u32,
 }
 
 impl GBufferView<'_> {
     /// Pixel (x, y)'s world position (`Rgba32Float`).
-    pub fn position(&self, x: u32, y: u32) -> glam::Vec3 {
+    fn position(&self, x: u32, y: u32) -> glam::Vec3 {
         let at = y as usize * self.position_pitch + x as usize * 16;
         let word = |i: usize| f32::from_le_bytes(self.positions[at + 4 * i..at + 4 * i + 4].try_into().expect("four bytes"));
         glam::Vec3::new(word(0), word(1), word(2))
@@ -120,12 +118,47 @@ impl GBufferView<'_> {
 
     /// Pixel (x, y)'s unit normal facing the eye (`Rgba16Float`), `None` where no surface
     /// covers the pixel (w ≤ 0.5).
-    pub fn normal(&self, x: u32, y: u32) -> Option<glam::Vec3> {
+    fn normal(&self, x: u32, y: u32) -> Option<glam::Vec3> {
         let at = y as usize * self.normal_pitch + x as usize * 8;
         let half = |i: usize| half::f16::from_le_bytes([self.normals[at + 2 * i], self.normals[at + 2 * i + 1]]).to_f32();
         (half(3) > 0.5).then(|| glam::Vec3::new(half(0), half(1), half(2)))
     }
 }
+
+/// The surface each pixel of some rows of the frame shows, decoded from the G-buffer into the
+/// CPU's memory (`MethodContext::read_surfaces`), for the methods that work on the CPU: world
+/// position and unit normal facing the eye, the normal zero where no surface covers the pixel.
+pub struct Surfaces {
+    pub width: u32,
+    pub height: u32,
+    /// Row after row, from the rows' first.
+    pub positions: Vec<glam::Vec3>,
+    pub normals: Vec<glam::Vec3>,
+}
+
+impl Surfaces {
+    /// Surfaces made by hand: `at(x, y)` gives a pixel's position and normal (zero: none).
+    pub fn from_fn(width: u32, height: u32, at: impl Fn(u32, u32) -> (glam::Vec3, glam::Vec3)) -> Self {
+        let (positions, normals) = (0..height).flat_map(|y| (0..width).map(move |x| (x, y))).map(|(x, y)| at(x, y)).unzip();
+        Self { width, height, positions, normals }
+    }
+
+    /// Pixel (x, y)'s world position.
+    pub fn position(&self, x: u32, y: u32) -> glam::Vec3 {
+        self.positions[(y * self.width + x) as usize]
+    }
+
+    /// Pixel (x, y)'s unit normal facing the eye, `None` where no surface covers the pixel.
+    pub fn normal(&self, x: u32, y: u32) -> Option<glam::Vec3> {
+        let normal = self.normals[(y * self.width + x) as usize];
+        (normal != glam::Vec3::ZERO).then_some(normal)
+    }
+}
+
+/// Rows of the G-buffer `MethodContext::read_surfaces` reads back at a time: 24 bytes a pixel
+/// in pooled buffers of this many rows (6 MB at 1920 wide), not of the frame's — a buffer that
+/// the pool keeps would add its bytes to the CPU methods' working memory for the whole frame.
+const SURFACE_ROWS: u32 = 128;
 
 /// What a method gets to record its passes.
 pub struct MethodContext<'a> {
@@ -287,16 +320,35 @@ impl MethodContext<'_> {
         (buffer, pitch)
     }
 
-    /// Hands `read` the G-buffer's positions and normals on the CPU, once what was recorded so
-    /// far has run: for work done on the CPU. Copied into pooled buffers (on lavapipe a fresh
-    /// one costs a page fault a page the first time it is written) and read where they lie.
-    pub fn read_gbuffer<R>(&mut self, read: impl FnOnce(&GBufferView<'_>) -> R) -> JobResult<R> {
-        self.read_gbuffer_rows(0..self.height, read)
+    /// The G-buffer's surfaces on the frame's `rows` (a band of a frame worked on in bands, or
+    /// all of them), decoded on the CPU's cores once what was recorded so far has run: for work
+    /// done on the CPU. Read back `SURFACE_ROWS` rows at a time through pooled buffers (on
+    /// lavapipe a fresh one costs a page fault a page the first time it is written).
+    pub fn read_surfaces(&mut self, rows: Range<u32>) -> JobResult<Surfaces> {
+        use rayon::prelude::*;
+        let (width, height) = (self.width, rows.len() as u32);
+        let pixels = width as usize * height as usize;
+        let (mut positions, mut normals) = (vec![glam::Vec3::ZERO; pixels], vec![glam::Vec3::ZERO; pixels]);
+        let chunk_pixels = SURFACE_ROWS as usize * width as usize;
+        let chunks = positions.chunks_mut(chunk_pixels).zip(normals.chunks_mut(chunk_pixels));
+        for ((positions, normals), first) in chunks.zip(rows.clone().step_by(SURFACE_ROWS as usize)) {
+            let chunk = first..(first + SURFACE_ROWS).min(rows.end);
+            self.read_gbuffer_rows(chunk, |gbuffer| {
+                let rows = positions.par_chunks_mut(width as usize).zip(normals.par_chunks_mut(width as usize));
+                rows.enumerate().for_each(|(y, (positions, normals))| {
+                    for (x, (position, normal)) in positions.iter_mut().zip(normals).enumerate() {
+                        *position = gbuffer.position(x as u32, y as u32);
+                        *normal = gbuffer.normal(x as u32, y as u32).unwrap_or(glam::Vec3::ZERO);
+                    }
+                });
+            })?;
+        }
+        Ok(Surfaces { width, height, positions, normals })
     }
 
-    /// `read_gbuffer` for the frame's `rows` alone (a band of a frame worked on in bands): the
-    /// view's row 0 is the frame's row `rows.start`.
-    pub fn read_gbuffer_rows<R>(&mut self, rows: Range<u32>, read: impl FnOnce(&GBufferView<'_>) -> R) -> JobResult<R> {
+    /// Hands `read` the G-buffer's `rows` on the CPU, read where they lie: the view's row 0 is
+    /// the frame's row `rows.start`.
+    fn read_gbuffer_rows<R>(&mut self, rows: Range<u32>, read: impl FnOnce(&GBufferView<'_>) -> R) -> JobResult<R> {
         let (position_texture, normal_texture) = (self.gbuffer_position, self.gbuffer_normal);
         let count = rows.len() as u32;
         let (positions, position_pitch) =
@@ -316,13 +368,11 @@ impl MethodContext<'_> {
                 normals: &normal_bytes,
                 position_pitch: position_pitch as usize,
                 normal_pitch: normal_pitch as usize,
-                width: self.width,
-                height: count,
             })
         };
         positions.unmap();
         normals.unmap();
-        // Both were read and let go: the next band may have them.
+        // Both were read and let go: the next rows may have them.
         self.scratch.release_last_buffers(2, self.buffers);
         Ok(result)
     }

@@ -66,7 +66,7 @@ impl FrameTargets {
             shadow_depth: get("FrameTargets::shadow_depth", shadow, shadow, SHADOW_DEPTH_FORMAT, attachment | U::COPY_SRC),
             shadow_id: get("FrameTargets::shadow_id", shadow, shadow, ID_FORMAT, attachment),
             depth_buffer: get("FrameTargets::depth_buffer", width, height, DEPTH_BUFFER_FORMAT, U::RENDER_ATTACHMENT),
-            // Read back by an engine that works on the CPU (`MethodContext::read_gbuffer`).
+            // Read back by an engine that works on the CPU (`MethodContext::read_surfaces`).
             position: get("FrameTargets::position", width, height, POSITION_FORMAT, attachment | U::COPY_SRC),
             normal: get("FrameTargets::normal", width, height, NORMAL_FORMAT, attachment | U::COPY_SRC),
             albedo: get("FrameTargets::albedo", width, height, ALBEDO_FORMAT, attachment),

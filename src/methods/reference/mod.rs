@@ -153,7 +153,7 @@ fn record_on_cpu(ctx: &mut MethodContext<'_>, params: &Params, plan: &SamplePlan
     let mut penumbra = estimate::PenumbraMean::default();
     for (b, band) in bands.iter().enumerate() {
         let started = std::time::Instant::now();
-        let receivers = ctx.read_gbuffer_rows(band.rows.clone(), |gbuffer| cpu::Receivers::new(gbuffer, SEGMENT, &constants))?;
+        let receivers = cpu::Receivers::new(&ctx.read_surfaces(band.rows.clone())?, SEGMENT, &constants);
         read_ms += started.elapsed().as_secs_f64() * 1e3;
         let geometry = (ctx.scene.positions(), ctx.scene.indices());
         let sums = &mut carried.bands[b];

@@ -20,7 +20,7 @@ mod raster;
 use raster::Map;
 
 use super::estimate::{PenumbraMean, Texel};
-use crate::render::method::GBufferView;
+use crate::render::method::Surfaces;
 
 /// Receivers a block: one AVX2 vector of f32 (and the unit the threads share the frame by).
 pub(super) const LANES: usize = 8;
@@ -96,30 +96,6 @@ impl Sums {
     }
 }
 
-/// Where the receivers come from: a frame's surfaces, pixel by pixel — the G-buffer, or a
-/// copy of it.
-pub(super) trait Surfaces: Sync {
-    /// Width and height in pixels.
-    fn size(&self) -> (u32, u32);
-    fn position(&self, x: u32, y: u32) -> Vec3;
-    /// The unit normal facing the eye, `None` where no surface covers the pixel.
-    fn normal(&self, x: u32, y: u32) -> Option<Vec3>;
-}
-
-impl Surfaces for GBufferView<'_> {
-    fn size(&self) -> (u32, u32) {
-        (self.width, self.height)
-    }
-
-    fn position(&self, x: u32, y: u32) -> Vec3 {
-        GBufferView::position(self, x, y)
-    }
-
-    fn normal(&self, x: u32, y: u32) -> Option<Vec3> {
-        GBufferView::normal(self, x, y)
-    }
-}
-
 /// The blockers eight receivers' tests met (method `filtered`, which sizes its filter by
 /// them): how many tests were blocked, and the sum of the blockers' depths from the light's
 /// plane.
@@ -175,19 +151,19 @@ pub(super) struct CpuSample {
 }
 
 impl Receivers {
-    /// The covered pixels of the frame's G-buffer, `segment` pixels a listed segment.
-    pub fn new(gbuffer: &GBufferView<'_>, segment: u32, c: &TestConstants) -> Self {
-        Self::of_pixels(gbuffer, segment, c, |_, _| true)
+    /// The covered pixels of the frame's surfaces, `segment` pixels a listed segment.
+    pub fn new(surfaces: &Surfaces, segment: u32, c: &TestConstants) -> Self {
+        Self::of_pixels(surfaces, segment, c, |_, _| true)
     }
 
-    /// The covered pixels (x, y) of the frame's G-buffer that `keep` keeps.
-    pub fn of_pixels(gbuffer: &impl Surfaces, segment: u32, c: &TestConstants, keep: impl Fn(u32, u32) -> bool + Sync) -> Self {
-        let (width, height) = gbuffer.size();
+    /// The covered pixels (x, y) of the frame's surfaces that `keep` keeps.
+    pub fn of_pixels(surfaces: &Surfaces, segment: u32, c: &TestConstants, keep: impl Fn(u32, u32) -> bool + Sync) -> Self {
+        let (width, height) = (surfaces.width, surfaces.height);
         // Row by row on every core: the covered pixels, and the segments that hold one.
         let rows: Vec<(Vec<u32>, u32)> = (0..height)
             .into_par_iter()
             .map(|y| {
-                let covered: Vec<u32> = (0..width).filter(|&x| keep(x, y) && gbuffer.normal(x, y).is_some()).collect();
+                let covered: Vec<u32> = (0..width).filter(|&x| keep(x, y) && surfaces.normal(x, y).is_some()).collect();
                 let mut segments = 0;
                 let mut last = u32::MAX;
                 for &x in &covered {
@@ -206,7 +182,7 @@ impl Receivers {
         blocks.par_iter_mut().zip(pixels.par_chunks(LANES)).for_each(|(b, block_pixels)| {
             for (l, &pixel) in block_pixels.iter().enumerate() {
                 let (px, py) = (pixel % width, pixel / width);
-                let (world, normal) = (gbuffer.position(px, py), gbuffer.normal(px, py).unwrap_or_default());
+                let (world, normal) = (surfaces.position(px, py), surfaces.normal(px, py).unwrap_or_default());
                 let n = Vec3::new(rotation[0].dot(normal), rotation[1].dot(normal), rotation[2].dot(normal));
                 // The bias in texels, constant plus slope-scaled by tanθ to the light's centre.
                 let cos_c = normal.dot((c.light_center - world).normalize()).clamp(0.0, 1.0);

@@ -45,7 +45,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use super::super::estimate::{PenumbraMean, Texel, Texels};
-use crate::render::method::GBufferView;
+pub(super) use crate::render::method::Surfaces;
 use crate::render::Camera;
 
 /// Pixels a tile side, for the classification and the fallback width.
@@ -87,56 +87,6 @@ enum State {
     Lit,
     Umbra,
     Mixed,
-}
-
-/// The surface each pixel shows: world position and normal (zero: none), copied from the
-/// G-buffer once for the tests and the filter.
-pub(super) struct Surfaces {
-    width: u32,
-    height: u32,
-    positions: Vec<Vec3>,
-    normals: Vec<Vec3>,
-}
-
-impl Surfaces {
-    /// The G-buffer's rows, decoded on every core.
-    pub fn new(gbuffer: &GBufferView<'_>) -> Self {
-        let (width, height) = (gbuffer.width, gbuffer.height);
-        let pixels = (width * height) as usize;
-        let (mut positions, mut normals) = (vec![Vec3::ZERO; pixels], vec![Vec3::ZERO; pixels]);
-        let rows = positions.par_chunks_mut(width as usize).zip(normals.par_chunks_mut(width as usize));
-        rows.enumerate().for_each(|(y, (positions, normals))| {
-            for (x, (position, normal)) in positions.iter_mut().zip(normals).enumerate() {
-                *position = gbuffer.position(x as u32, y as u32);
-                *normal = gbuffer.normal(x as u32, y as u32).unwrap_or(Vec3::ZERO);
-            }
-        });
-        Self { width, height, positions, normals }
-    }
-}
-
-#[cfg(test)]
-impl Surfaces {
-    /// Surfaces made by hand: `at(x, y)` gives a pixel's position and normal (zero: none).
-    pub fn from_fn(width: u32, height: u32, at: impl Fn(u32, u32) -> (Vec3, Vec3)) -> Self {
-        let (positions, normals) = (0..height).flat_map(|y| (0..width).map(move |x| (x, y))).map(|(x, y)| at(x, y)).unzip();
-        Self { width, height, positions, normals }
-    }
-}
-
-impl super::cpu::Surfaces for Surfaces {
-    fn size(&self) -> (u32, u32) {
-        (self.width, self.height)
-    }
-
-    fn position(&self, x: u32, y: u32) -> Vec3 {
-        self.positions[(y * self.width + x) as usize]
-    }
-
-    fn normal(&self, x: u32, y: u32) -> Option<Vec3> {
-        let normal = self.normals[(y * self.width + x) as usize];
-        (normal != Vec3::ZERO).then_some(normal)
-    }
 }
 
 /// What the filter needs of the frame and the samples.

@@ -28,7 +28,7 @@ mod gpu;
 use rayon::prelude::*;
 
 use super::bands::{self, Band};
-use super::cpu::{self, BlockerBlock, CpuSample, Receivers, Sums, Surfaces as _};
+use super::cpu::{self, BlockerBlock, CpuSample, Receivers, Sums};
 use super::estimate::{PenumbraMean, Texels};
 use super::gpu::SEGMENT;
 use super::samples::{half_of_index, SamplePlan};
@@ -264,7 +264,7 @@ fn render_band(
     let started = std::time::Instant::now();
     let width = ctx.width;
     let height = band.reach.len() as u32;
-    let surfaces = ctx.read_gbuffer_rows(band.reach.clone(), filter::Surfaces::new)?;
+    let surfaces = ctx.read_surfaces(band.reach.clone())?;
     done.read_ms += started.elapsed().as_secs_f64() * 1e3;
 
     let (probe_count, other_count) = (count(&shared.probe_samples), count(&shared.other_samples));
