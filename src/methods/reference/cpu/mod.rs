@@ -158,46 +158,19 @@ impl Receivers {
 
     /// The covered pixels (x, y) of the frame's surfaces that `keep` keeps.
     pub fn of_pixels(surfaces: &Surfaces, segment: u32, c: &TestConstants, keep: impl Fn(u32, u32) -> bool + Sync) -> Self {
-        let (width, height) = (surfaces.width, surfaces.height);
-        // Row by row on every core: the covered pixels, and the segments that hold one.
-        let rows: Vec<(Vec<u32>, u32)> = (0..height)
-            .into_par_iter()
-            .map(|y| {
-                let covered: Vec<u32> = (0..width).filter(|&x| keep(x, y) && surfaces.normal(x, y).is_some()).collect();
-                let mut segments = 0;
-                let mut last = u32::MAX;
-                for &x in &covered {
-                    if x / segment != last {
-                        segments += 1;
-                        last = x / segment;
-                    }
-                }
-                (covered.into_iter().map(|x| y * width + x).collect(), segments)
-            })
-            .collect();
-        let segments = rows.iter().map(|(_, count)| count).sum();
-        let pixels: Vec<u32> = rows.into_iter().flat_map(|(pixels, _)| pixels).collect();
-        let rotation = [0, 1, 2].map(|i| c.rotation.row(i).truncate());
+        let (pixels, segments) = covered_pixels(surfaces, segment, keep);
+        Self::of_list(surfaces, pixels, segments, c)
+    }
+
+    /// The receivers of `pixels` (covered pixels, in row order; `covered_pixels`), which lie
+    /// in `segments` row segments.
+    pub fn of_list(surfaces: &Surfaces, pixels: Vec<u32>, segments: u32, c: &TestConstants) -> Self {
+        let rotation = rotation_rows(c);
         let mut blocks = vec![ReceiverBlock::default(); pixels.len().div_ceil(LANES)];
-        blocks.par_iter_mut().zip(pixels.par_chunks(LANES)).for_each(|(b, block_pixels)| {
-            for (l, &pixel) in block_pixels.iter().enumerate() {
-                let (px, py) = (pixel % width, pixel / width);
-                let (world, normal) = (surfaces.position(px, py), surfaces.normal(px, py).unwrap_or_default());
-                let n = Vec3::new(rotation[0].dot(normal), rotation[1].dot(normal), rotation[2].dot(normal));
-                // The bias in texels, constant plus slope-scaled by tanθ to the light's centre.
-                let cos_c = normal.dot((c.light_center - world).normalize()).clamp(0.0, 1.0);
-                let tan_c = ((1.0 - cos_c * cos_c).sqrt() / cos_c.max(0.05)).min(10.0);
-                let bias = c.bias_texels + c.slope_bias_texels * tan_c;
-                let depth = c.depth_of(world);
-                b.x[l] = rotation[0].dot(world);
-                b.y[l] = rotation[1].dot(world);
-                b.nx[l] = n.x;
-                b.ny[l] = n.y;
-                b.depth[l] = depth;
-                b.n_dot_z[l] = -n.z * depth;
-                b.bias[l] = bias;
-            }
-        });
+        blocks
+            .par_iter_mut()
+            .zip(pixels.par_chunks(LANES))
+            .for_each(|(b, block_pixels)| *b = receiver_block(surfaces, block_pixels, c, &rotation));
         Self { blocks, pixels, segments }
     }
 
@@ -210,6 +183,60 @@ impl Receivers {
     pub(super) fn pixels(&self) -> &[u32] {
         &self.pixels
     }
+}
+
+/// The covered pixels (x, y) of `surfaces` that `keep` keeps, as indices in row order, and
+/// how many row segments of `segment` pixels hold one (the GPU engine's `segments_tested`).
+/// Row by row on every core.
+pub(super) fn covered_pixels(surfaces: &Surfaces, segment: u32, keep: impl Fn(u32, u32) -> bool + Sync) -> (Vec<u32>, u32) {
+    let (width, height) = (surfaces.width, surfaces.height);
+    let rows: Vec<(Vec<u32>, u32)> = (0..height)
+        .into_par_iter()
+        .map(|y| {
+            let covered: Vec<u32> = (0..width).filter(|&x| keep(x, y) && surfaces.normal(x, y).is_some()).collect();
+            let mut segments = 0;
+            let mut last = u32::MAX;
+            for &x in &covered {
+                if x / segment != last {
+                    segments += 1;
+                    last = x / segment;
+                }
+            }
+            (covered.into_iter().map(|x| y * width + x).collect(), segments)
+        })
+        .collect();
+    let segments = rows.iter().map(|(_, count)| count).sum();
+    (rows.into_iter().flat_map(|(pixels, _)| pixels).collect(), segments)
+}
+
+/// The rows of the rotation into the samples' view coordinates.
+fn rotation_rows(c: &TestConstants) -> [Vec3; 3] {
+    [0, 1, 2].map(|i| c.rotation.row(i).truncate())
+}
+
+/// The block of the receivers of `pixels` (at most `LANES`, indices into the rows of
+/// `surfaces`) as the accumulate pass builds its `Receiver`; the padding lanes keep depth 0:
+/// no weight, whatever their test says.
+fn receiver_block(surfaces: &Surfaces, pixels: &[u32], c: &TestConstants, rotation: &[Vec3; 3]) -> ReceiverBlock {
+    let mut b = ReceiverBlock::default();
+    for (l, &pixel) in pixels.iter().enumerate() {
+        let (px, py) = (pixel % surfaces.width, pixel / surfaces.width);
+        let (world, normal) = (surfaces.position(px, py), surfaces.normal(px, py).unwrap_or_default());
+        let n = Vec3::new(rotation[0].dot(normal), rotation[1].dot(normal), rotation[2].dot(normal));
+        // The bias in texels, constant plus slope-scaled by tanθ to the light's centre.
+        let cos_c = normal.dot((c.light_center - world).normalize()).clamp(0.0, 1.0);
+        let tan_c = ((1.0 - cos_c * cos_c).sqrt() / cos_c.max(0.05)).min(10.0);
+        let bias = c.bias_texels + c.slope_bias_texels * tan_c;
+        let depth = c.depth_of(world);
+        b.x[l] = rotation[0].dot(world);
+        b.y[l] = rotation[1].dot(world);
+        b.nx[l] = n.x;
+        b.ny[l] = n.y;
+        b.depth[l] = depth;
+        b.n_dot_z[l] = -n.z * depth;
+        b.bias[l] = bias;
+    }
+    b
 }
 
 /// Wall time of the two kinds of work, summed over the rounds (ms), and the maps a round drew
@@ -298,6 +325,62 @@ pub(super) fn estimate_into<const BLOCKERS: bool>(
         }
     }
     (blockers, spent)
+}
+
+/// What `estimate_with` holds a receiver for the whole frame, in bytes, beyond its pixel's
+/// index: its block's share (`ReceiverBlock`), a call's sums of `channels` channels and the
+/// blockers it met.
+pub(super) fn receiver_bytes(channels: usize) -> u64 {
+    (std::mem::size_of::<ReceiverBlock>() / LANES + 8 * channels + std::mem::size_of::<BlockerBlock>() / LANES) as u64
+}
+
+/// `estimate_with::<true>` over the receivers of `pixels` (`covered_pixels` of `surfaces`)
+/// with none of its frame-sized parts: every map of `samples` is drawn first and held, then
+/// each task makes its `BLOCKS_PER_TASK` blocks of receivers, tests them against every map in
+/// order and hands their pixels, sums and blockers met to `gather`, a few tasks' worth at a
+/// time. The same sums and blockers to the bit (each receiver's samples are added in the same
+/// order, its block the same), for the bytes of the maps instead of `receiver_bytes` a
+/// receiver: method `filtered`'s few probes over a whole frame hold less so.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn estimate_tiled(
+    surfaces: &Surfaces,
+    pixels: &[u32],
+    samples: &[CpuSample],
+    constants: &TestConstants,
+    (positions, indices): (&[Vec3], &[u32]),
+    channels: usize,
+    crop_size: UVec2,
+    mut gather: impl FnMut(&[u32], &Sums, &[BlockerBlock]),
+) -> Spent {
+    let started = std::time::Instant::now();
+    let mut maps: Vec<Map> = samples.iter().map(|_| Map { size: crop_size, depths: Vec::new(), empty: true }).collect();
+    maps.par_iter_mut().zip(samples).for_each(|(map, sample)| map.draw(sample, positions, indices));
+    let threads = rayon::current_num_threads().max(1);
+    let mut spent = Spent { maps_ms: started.elapsed().as_secs_f64() * 1e3, tests_ms: 0.0, round: threads.min(samples.len()) };
+    let (rotation, avx2) = (rotation_rows(constants), has_avx2());
+    let task = BLOCKS_PER_TASK * LANES;
+    // A few tasks a thread at a time: their sums are gathered before the next ones are made.
+    for wave in pixels.chunks(task * 8 * threads) {
+        let testing = std::time::Instant::now();
+        let results: Vec<(Sums, Vec<BlockerBlock>)> = wave
+            .par_chunks(task)
+            .map(|task_pixels| {
+                let blocks: Vec<ReceiverBlock> =
+                    task_pixels.chunks(LANES).map(|block| receiver_block(surfaces, block, constants, &rotation)).collect();
+                let mut sums = Sums::new(blocks.len(), channels);
+                let mut met = vec![BlockerBlock::default(); blocks.len()];
+                for (map, sample) in maps.iter().zip(samples) {
+                    test_blocks::<true>(&blocks, &mut sums.rows, &mut met, map, sample, constants, channels, avx2);
+                }
+                (sums, met)
+            })
+            .collect();
+        spent.tests_ms += testing.elapsed().as_secs_f64() * 1e3;
+        for (task_pixels, (sums, met)) in wave.chunks(task).zip(&results) {
+            gather(task_pixels, sums, met);
+        }
+    }
+    spent
 }
 
 /// Writes every pixel's visibility into `out`, a `vec4<f32>` of bytes each (rgb; w the error

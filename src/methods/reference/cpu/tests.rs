@@ -219,3 +219,67 @@ fn snapping_rounds_as_f32_round_does() {
         assert_eq!(super::raster::round_to_i64(v), v.round() as i64, "{v}");
     }
 }
+
+#[test]
+fn receivers_made_a_task_at_a_time_sum_as_the_whole_frame_s_do() {
+    // A floor (y = 0) under a square light at y = 5 facing down, a triangle between them
+    // at y = 1, and pixels with no surface here and there; enough pixels for several waves of
+    // tasks.
+    let (width, height) = (240u32, 160u32);
+    let surfaces = Surfaces::from_fn(width, height, |x, y| {
+        let position = Vec3::new(4.0 * x as f32 / width as f32 - 2.0, 0.0, 4.0 * y as f32 / height as f32 - 2.0);
+        (position, if (x * 7 + y * 3) % 11 == 0 { Vec3::ZERO } else { Vec3::Y })
+    });
+    let rotation = Mat4::look_to_rh(Vec3::ZERO, -Vec3::Y, Vec3::Z);
+    let center = Vec3::new(0.0, 5.0, 0.0);
+    let (resolution, near) = (64u32, 0.5f32);
+    let constants = TestConstants {
+        rotation,
+        plane: rotation.transform_point3(center).z,
+        near,
+        resolution,
+        bias_texels: 1.0,
+        slope_bias_texels: 1.0,
+        light_center: center,
+    };
+    let projection = super::super::samples::reversed_projection(1.0, near);
+    let samples: Vec<CpuSample> = [(-0.3, -0.2), (0.25, 0.1), (0.0, 0.3)]
+        .into_iter()
+        .map(|(dx, dz)| {
+            let position = center + Vec3::new(dx, 0.0, dz);
+            let view = rotation.transform_point3(position);
+            CpuSample {
+                view_proj: projection * rotation * Mat4::from_translation(-position),
+                origin: [view.x, view.y],
+                texels_per_tan: projection.y_axis.y * resolution as f32 * 0.5,
+                crop_origin: Some(UVec2::ZERO),
+                weight: Vec3::new(0.2, 0.5, 0.8),
+            }
+        })
+        .collect();
+    let positions = [Vec3::new(-1.0, 1.0, -1.0), Vec3::new(1.5, 1.0, -0.5), Vec3::new(0.0, 1.0, 1.5)];
+    let geometry = (&positions[..], &[0u32, 1, 2][..]);
+    let crop = UVec2::splat(resolution);
+    let (pixels, segments) = covered_pixels(&surfaces, 16, |_, _| true);
+    assert!(pixels.len() > 8 * BLOCKS_PER_TASK * LANES, "several tasks");
+    let receivers = Receivers::of_list(&surfaces, pixels.clone(), segments, &constants);
+    let (sums, met, _) = estimate_with::<true>(&receivers, &samples, &constants, geometry, 3, crop, |_| true);
+    let mut seen = 0;
+    estimate_tiled(&surfaces, &pixels, &samples, &constants, geometry, 3, crop, |task_pixels, task_sums, task_met| {
+        assert_eq!(task_pixels, &pixels[seen..seen + task_pixels.len()], "tasks in order");
+        for k in 0..task_pixels.len() {
+            let (whole, task) = (seen + k, k);
+            let bits = |(shadowed, unshadowed): ([f32; 3], [f32; 3])| [shadowed, unshadowed].map(|sums| sums.map(f32::to_bits));
+            let (a, b) = (sums.lane(whole / LANES, whole % LANES), task_sums.lane(task / LANES, task % LANES));
+            assert_eq!(bits(a), bits(b), "receiver {whole}");
+            let (a, b) = (&met[whole / LANES], &task_met[task / LANES]);
+            assert_eq!(a.count[whole % LANES], b.count[task % LANES], "receiver {whole}");
+            assert_eq!(a.depth_sum[whole % LANES].to_bits(), b.depth_sum[task % LANES].to_bits(), "receiver {whole}");
+        }
+        seen += task_pixels.len();
+    });
+    assert_eq!(seen, pixels.len());
+    // The triangle shadows some receivers and not others.
+    let shadowed = (0..pixels.len()).filter(|&k| met[k / LANES].count[k % LANES] > 0.0).count();
+    assert!(shadowed > 0 && shadowed < pixels.len(), "{shadowed} of {}", pixels.len());
+}

@@ -342,23 +342,48 @@ impl Round<'_, '_, '_> {
         let constants = &shared.constants;
         let started = std::time::Instant::now();
         let Some(device) = self.device else {
-            let receivers = Receivers::of_pixels(surfaces, SEGMENT, constants, keep);
-            self.done.read_ms += started.elapsed().as_secs_f64() * 1e3;
+            let (pixels, segments) = cpu::covered_pixels(surfaces, SEGMENT, keep);
             let halves = if round == 0 { &shared.probe_samples } else { &shared.other_samples };
             let geometry = (self.ctx.scene.positions(), self.ctx.scene.indices());
+            let (channels, crop_size) = (shared.channels, shared.crop_size);
+            // A half's maps held at once where they take fewer bytes than the frame-sized
+            // receivers and sums would (the probes over a large frame): the same sums.
+            let map_bytes = u64::from(crop_size.x) * u64::from(crop_size.y) * 4;
+            let most = halves.iter().map(Vec::len).max().unwrap_or(0) as u64;
+            let tiled = most * map_bytes < pixels.len() as u64 * cpu::receiver_bytes(channels);
+            let (receivers, pixels) =
+                if tiled { (None, pixels) } else { (Some(Receivers::of_list(surfaces, pixels, segments, constants)), Vec::new()) };
+            self.done.read_ms += started.elapsed().as_secs_f64() * 1e3;
             let mut first = first;
             for (half, samples) in halves.iter().enumerate() {
                 let progress = &mut *self.progress;
-                let (sums, met, spent) =
-                    cpu::estimate_with::<true>(&receivers, samples, constants, geometry, shared.channels, shared.crop_size, |n| {
-                        progress.at(first + n as u64)
-                    });
+                let second_half = half == 1;
+                let spent = match &receivers {
+                    None => {
+                        let spent =
+                            cpu::estimate_tiled(surfaces, &pixels, samples, constants, geometry, channels, crop_size, |p, sums, met| {
+                                gather(p, sums, met, second_half, texels, blockers)
+                            });
+                        progress.at(first + samples.len() as u64);
+                        spent
+                    }
+                    Some(receivers) => {
+                        let (sums, met, spent) =
+                            cpu::estimate_with::<true>(receivers, samples, constants, geometry, channels, crop_size, |n| {
+                                progress.at(first + n as u64)
+                            });
+                        gather(receivers.pixels(), &sums, &met, second_half, texels, blockers);
+                        spent
+                    }
+                };
                 first += samples.len() as u64;
-                gather(&receivers, &sums, &met, half == 1, texels, blockers);
                 self.done.spent.add(spent);
+                if self.ctx.supervisor.cancelled() {
+                    break;
+                }
             }
             // The receivers' segments, once a round (as `reference` counts them once a frame).
-            self.done.segments += receivers.segments;
+            self.done.segments += segments;
             return Ok(());
         };
         // The row segments that hold a pixel to test, each by its first pixel in the frame.
@@ -409,11 +434,11 @@ impl Round<'_, '_, '_> {
     }
 }
 
-/// Adds a round of tests to the frame's pixels: per pixel its sums (the gray one standing for
-/// all three under a gray light), to its second half's too where `second_half`, and the
-/// count and summed depth of the blockers its tests met.
-fn gather(receivers: &Receivers, sums: &Sums, met: &[BlockerBlock], second_half: bool, texels: &mut Texels, blockers: &mut [[f32; 2]]) {
-    for (k, &pixel) in receivers.pixels().iter().enumerate() {
+/// Adds a round of tests of the receivers of `pixels` to the frame's pixels: per pixel its
+/// sums (the gray one standing for all three under a gray light), to its second half's too
+/// where `second_half`, and the count and summed depth of the blockers its tests met.
+fn gather(pixels: &[u32], sums: &Sums, met: &[BlockerBlock], second_half: bool, texels: &mut Texels, blockers: &mut [[f32; 2]]) {
+    for (k, &pixel) in pixels.iter().enumerate() {
         let (block, lane) = (k / cpu::LANES, k % cpu::LANES);
         let (shadowed, unshadowed) = sums.lane(block, lane);
         texels.add(pixel as usize, shadowed, unshadowed, second_half);
