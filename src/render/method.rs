@@ -138,6 +138,7 @@ pub struct Surfaces {
 
 impl Surfaces {
     /// Surfaces made by hand: `at(x, y)` gives a pixel's position and normal (zero: none).
+    #[cfg(test)]
     pub fn from_fn(width: u32, height: u32, at: impl Fn(u32, u32) -> (glam::Vec3, glam::Vec3)) -> Self {
         let (positions, normals) = (0..height).flat_map(|y| (0..width).map(move |x| (x, y))).map(|(x, y)| at(x, y)).unzip();
         Self { width, height, positions, normals }

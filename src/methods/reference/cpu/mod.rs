@@ -153,12 +153,7 @@ pub(super) struct CpuSample {
 impl Receivers {
     /// The covered pixels of the frame's surfaces, `segment` pixels a listed segment.
     pub fn new(surfaces: &Surfaces, segment: u32, c: &TestConstants) -> Self {
-        Self::of_pixels(surfaces, segment, c, |_, _| true)
-    }
-
-    /// The covered pixels (x, y) of the frame's surfaces that `keep` keeps.
-    pub fn of_pixels(surfaces: &Surfaces, segment: u32, c: &TestConstants, keep: impl Fn(u32, u32) -> bool + Sync) -> Self {
-        let (pixels, segments) = covered_pixels(surfaces, segment, keep);
+        let (pixels, segments) = covered_pixels(surfaces, segment, |_, _| true);
         Self::of_list(surfaces, pixels, segments, c)
     }
 
