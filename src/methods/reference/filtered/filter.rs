@@ -65,9 +65,9 @@ const REACH_SIGMAS: f32 = 2.5;
 
 /// The sharpness of the normal weight: (n·n')^this, ½ at 2° apart. Sharper than SVGF's 128:
 /// where a surface bends, the part of the light above its tangent plane, and so V, can jump
-/// (a faceted model's every edge), and a softer weight averaged across those jumps — on the
-/// built-in terrain at 1080p the filter cost 25 % more error than none at 8, none at 1,024
-/// (docs/performance-log.md). Smooth surfaces and planes filter as before.
+/// (a faceted model's every edge), and a softer weight averages across those jumps, adding
+/// error the unfiltered samples do not have (measured: docs/performance-log.md). Smooth
+/// surfaces and planes keep their neighbours.
 const NORMAL_POWER: i32 = 1024;
 
 /// What a pixel's own samples say of it.
