@@ -21,8 +21,17 @@
 //!
 //! The weights (SVGF, Schied et al. 2017 §4): the world distance between the two points, the
 //! distance of the neighbour from the pixel's tangent plane (beyond half σ and a pixel's
-//! footprint it is another surface, even one close on screen, and gets none), and the
-//! agreement of their normals.
+//! footprint it is another surface, even one close on screen, and gets none), the agreement of
+//! their normals, and two that the samples give (`Guide`): the light each sees unshadowed and
+//! the shadow each is in. The ratio estimator divides the neighbours' summed Σ L·G·V by their
+//! summed Σ L·G, so a neighbour that sees more of the light than the pixel weighs more; where
+//! the tangent plane cuts the light (a terminator, a grazing slope) a neighbour can see parts
+//! of it, or colours, the pixel does not, and would lend it their visibility. And the filter
+//! is there to average the samples' noise, not the shadow's shape: next to a contact, where the
+//! kernel is cut by the occluder's wall, the neighbours left are all on one side and brighter.
+//! SVGF stops its kernel where the luminance differs by more than a few of its estimated
+//! deviations; here a neighbour whose visibility differs from the pixel's by several times
+//! their estimated error (below) is told apart the same way.
 //!
 //! The error estimate: the two halves of the samples, told apart. The reference's two
 //! halves (`half_of_index` in `samples.rs`: its two independently scrambled sequences) each
@@ -69,6 +78,62 @@ const REACH_SIGMAS: f32 = 2.5;
 /// error the unfiltered samples do not have (measured: docs/performance-log.md). Smooth
 /// surfaces and planes keep their neighbours.
 const NORMAL_POWER: i32 = 1024;
+
+/// The unshadowed guide's sharpness: a neighbour weighs r^this, r the least ratio over the
+/// channels between its Σ L·G and the pixel's (1 on a plane under a distant light, 0 where one
+/// of the two sees a colour of the light the other does not). Measured on `terrain` at 1080p
+/// under `stripes`, where grazing slopes see the light's stripes set one by one: 2 to 16 do
+/// alike (docs/performance-log.md).
+const UNSHADOWED_POWER: i32 = 4;
+
+/// How far apart two pixels' visibilities may be and still be averaged, in their estimated
+/// errors: a Gaussian of this many errors (SVGF's luminance weight stops at 4 deviations of an
+/// L1 distance; measured from 4 to 16, docs/performance-log.md).
+const VISIBILITY_ERRORS: f32 = 8.0;
+
+/// The least error the visibility weight assumes: where both halves agree (a pixel in a
+/// stratum's step, or one its probes settled) the estimate is 0, and a step of the strata
+/// must still be smoothed.
+const LEAST_ERROR: f32 = 0.01;
+
+/// What a pixel's samples say of its shadow: its gray visibility and estimated error, taken
+/// once per pixel a pass reads (the error costs three square roots).
+#[derive(Debug, Clone, Copy)]
+struct Verdict {
+    gray: f32,
+    error: f32,
+}
+
+impl Verdict {
+    fn of(texel: &Texel) -> Self {
+        Self { gray: texel.gray(), error: texel.error() }
+    }
+}
+
+/// What the samples say a neighbour must share with a pixel to be averaged with it (module
+/// docs): the light it sees unshadowed, and its visibility within their errors.
+struct Guide {
+    unshadowed: [f32; 3],
+    verdict: Verdict,
+}
+
+impl Guide {
+    /// Neighbour `q`'s weight, from 0 to 1, given its geometry's as exp(`exponent`) (one
+    /// exponential for both).
+    fn weight(&self, q: &Texel, verdict: Verdict, exponent: f32) -> f32 {
+        let seen = (0..3).fold(1.0f32, |least, c| {
+            let (a, b) = (self.unshadowed[c], q.unshadowed[c]);
+            if a.max(b) > 0.0 {
+                least.min(a.min(b) / a.max(b))
+            } else {
+                least // Neither sees this colour.
+            }
+        });
+        let tolerance = VISIBILITY_ERRORS * (0.5 * (self.verdict.error + verdict.error)).max(LEAST_ERROR);
+        let apart = (self.verdict.gray - verdict.gray) / tolerance;
+        seen.powi(UNSHADOWED_POWER) * (exponent - 0.5 * apart * apart).exp()
+    }
+}
 
 /// What a pixel's own samples say of it.
 fn state(texel: &Texel) -> State {
@@ -235,13 +300,15 @@ pub(super) fn filter(
     }
     // One pass over the listed pixels along `step`; a neighbour's sums are `read(j)`.
     let channels = texels.channels();
-    let pass = |read: &(dyn Fn(usize) -> Texel + Sync), step: (isize, isize)| -> Texels {
+    // A pass reads texels by `read` and their verdicts by `verdict`.
+    let pass = |read: &(dyn Fn(usize) -> Texel + Sync), verdict: &(dyn Fn(usize) -> Verdict + Sync), step: (isize, isize)| -> Texels {
         Texels::par_from_fn(listed.len(), channels, |k| {
             let (i, (sigma, radius)) = (listed[k], kernels[k]);
             let own = read(i);
             if radius == 0 {
                 return own;
             }
+            let guide = Guide { unshadowed: own.unshadowed, verdict: verdict(i) };
             let (x, y) = ((i % width) as isize, (i / width) as isize);
             let (p, n) = (surfaces.positions[i], surfaces.normals[i]);
             let inv_two_sigma2 = 0.5 / (sigma * sigma);
@@ -266,7 +333,7 @@ pub(super) fn filter(
                     continue; // Off the pixel's tangent plane: another surface.
                 }
                 let facing = n.dot(surfaces.normals[j]).max(0.0).powi(NORMAL_POWER);
-                let w = (-d.length_squared() * inv_two_sigma2 - plane * plane * inv_two_tolerance2).exp() * facing;
+                let w = guide.weight(&q, verdict(j), -d.length_squared() * inv_two_sigma2 - plane * plane * inv_two_tolerance2) * facing;
                 for c in 0..3 {
                     sum.shadowed[c] += w * q.shadowed[c];
                     sum.unshadowed[c] += w * q.unshadowed[c];
@@ -287,8 +354,15 @@ pub(super) fn filter(
             }
         })
     };
-    let rows = pass(&|j| texels.get(j), (1, 0));
-    let both = pass(&|j| if slot[j] == u32::MAX { texels.get(j) } else { rows.get(slot[j] as usize) }, (0, 1));
+    // The verdicts of what each pass reads, listed pixels' taken once; an unlisted neighbour's
+    // (its probes' 0 or 1) as it is read.
+    let verdict_of =
+        |listed: &[Verdict], j: usize| if slot[j] == u32::MAX { Verdict::of(&texels.get(j)) } else { listed[slot[j] as usize] };
+    let first: Vec<Verdict> = listed.par_iter().map(|&i| Verdict::of(&texels.get(i))).collect();
+    let rows = pass(&|j| texels.get(j), &|j| verdict_of(&first, j), (1, 0));
+    drop(first);
+    let second: Vec<Verdict> = (0..listed.len()).into_par_iter().map(|k| Verdict::of(&rows.get(k))).collect();
+    let both = pass(&|j| if slot[j] == u32::MAX { texels.get(j) } else { rows.get(slot[j] as usize) }, &|j| verdict_of(&second, j), (0, 1));
     for (k, &i) in listed.iter().enumerate() {
         texels.set(i, both.get(k));
     }

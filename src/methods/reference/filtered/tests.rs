@@ -72,13 +72,20 @@ fn blockers(sigma: f32) -> Vec<[f32; 2]> {
 fn a_straight_ramp_stays_where_it_was_and_steps_are_smoothed() {
     let camera = camera();
     // A penumbra from x = 16 to 48, cut into steps of 4 pixels as coarse strata would (each
-    // step at the ramp's mean over it).
+    // step at the ramp's mean over it), the two halves' steps 2 pixels apart, as two
+    // independently stratified sets put them.
     let ramp = |x: u32| ((x as f32 + 0.5 - 16.0) / 32.0).clamp(0.0, 1.0);
-    let stepped = |x: u32| ((((x as f32 - 16.0) / 4.0).floor() * 4.0 + 2.0) / 32.0).clamp(0.0, 1.0);
+    let steps = |x: u32, offset: f32| match x {
+        ..16 => 0.0,
+        48.. => 1.0,
+        _ => ((((x as f32 - offset) / 4.0).floor() * 4.0 + 2.0 + offset - 16.0) / 32.0).clamp(0.0, 1.0),
+    };
+    let halved = |x: u32| (steps(x, 16.0), steps(x, 14.0));
+    let stepped = |x: u32| 0.5 * (halved(x).0 + halved(x).1);
     let surfaces = floor(|_| 0.0);
-    let refined = filter::refined(&surfaces, &texels(stepped));
+    let refined = filter::refined(&surfaces, &halves(halved, 0.5));
     assert!(refined[(32 * SIZE + 32) as usize] && !refined[(32 * SIZE + 2) as usize], "the penumbra is refined, the lit floor not");
-    let out = filter::filter(&inputs(&camera, 1.0), &surfaces, texels(stepped), &blockers(2.0), &refined);
+    let out = filter::filter(&inputs(&camera, 1.0), &surfaces, halves(halved, 0.5), &blockers(2.0), &refined);
     let error = |v: &dyn Fn(u32) -> f32| (20..44).map(|x| (v(x) - ramp(x)).abs()).sum::<f32>() / 24.0;
     let (visibility, _) = written(&out);
     let filtered = |x: u32| visibility[(32 * SIZE + x) as usize][0];
@@ -128,4 +135,49 @@ fn the_error_estimate_is_the_halves_difference_weighed_by_their_light() {
     let (raw, filtered) = (estimate(&alternating, 0.5, 0.0), estimate(&alternating, 0.5, 1.0));
     let (raw, filtered) = (written(&raw).1.mean(), written(&filtered).1.mean());
     assert!(filtered < 0.3 * raw, "{raw} → {filtered}");
+}
+
+#[test]
+fn a_neighbour_that_sees_other_colours_of_the_light_lends_it_none() {
+    let camera = camera();
+    let surfaces = floor(|_| 0.0);
+    // Left of x = 32 the whole light is above the horizon, half of it shadowed. Right of it,
+    // a terminator: only its red part is (green and blue barely), and the red is half
+    // shadowed, the rest lit — the same gray visibility, another colour.
+    let texel = |x: u32| {
+        let (shadowed, unshadowed) = if x < 32 { ([0.5; 3], [1.0; 3]) } else { ([0.5, 0.01, 0.01], [1.0, 0.01, 0.01]) };
+        let mut texel = Texel::UNCOVERED;
+        texel.add(shadowed.map(|s| 0.5 * s), unshadowed.map(|u| 0.5 * u), false);
+        texel.add(shadowed.map(|s| 0.5 * s), unshadowed.map(|u| 0.5 * u), true);
+        texel
+    };
+    let values = Texels::from_texels(3, (0..SIZE * SIZE).map(|i| texel(i % SIZE)));
+    let refined = vec![true; (SIZE * SIZE) as usize];
+    let out = filter::filter(&inputs(&camera, 1.0), &surfaces, values, &blockers(3.0), &refined);
+    let (visibility, _) = written(&out);
+    let at = |x: u32| visibility[(10 * SIZE + x) as usize];
+    for x in [30, 31] {
+        assert!(at(x)[..3].iter().all(|v| (v - 0.5).abs() < 1e-4), "pixel {x}: {:?}", at(x));
+    }
+    for x in [32, 33] {
+        let v = at(x);
+        assert!((v[0] - 0.5).abs() < 1e-4 && v[1] > 0.999 && v[2] > 0.999, "pixel {x} keeps its green and blue lit: {v:?}");
+    }
+}
+
+#[test]
+fn the_kernel_stops_where_the_shadow_differs_by_more_than_its_noise() {
+    let camera = camera();
+    let surfaces = floor(|_| 0.0);
+    // One surface whose visibility jumps from 0.3 to 0.7 at x = 32 (next to a contact), each
+    // side's halves 0.02 apart: the jump is ten times the estimated error, and stays.
+    let jump = |x: u32| if x < 32 { (0.29, 0.31) } else { (0.69, 0.71) };
+    let refined = vec![true; (SIZE * SIZE) as usize];
+    let out = filter::filter(&inputs(&camera, 1.0), &surfaces, halves(jump, 0.5), &blockers(3.0), &refined);
+    let (visibility, _) = written(&out);
+    for x in [29, 30, 31, 32, 33, 34] {
+        let v = visibility[(10 * SIZE + x) as usize][0];
+        let own = if x < 32 { 0.3 } else { 0.7 };
+        assert!((v - own).abs() < 2e-3, "pixel {x}: {v}, not {own}");
+    }
 }
