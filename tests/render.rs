@@ -606,7 +606,7 @@ fn reference_converges_to_the_closed_form() {
 /// `filtered` without refinement or filter is the CPU engine of `reference` with its probes
 /// for samples: the same strata, maps and tests, pixel for pixel (to rounding); and the same as `reference`
 /// with `samples × refine²` samples where every pixel is refined (a light whose penumbra covers
-/// the view).
+/// the view). A frame of more pixels than ten a triangle, so that the probes choose.
 #[test]
 fn filtered_is_the_reference_where_it_refines_and_its_probes_elsewhere() {
     let render = |method: serde_json::Value| {
@@ -614,7 +614,7 @@ fn filtered_is_the_reference_where_it_refines_and_its_probes_elsewhere() {
             "scene": {"builtin": "crowd"},
             "light": {"image": {"builtin": "stripes"}},
             "method": method,
-            "output": {"width": 160, "height": 120, "format": "exr"}
+            "output": {"width": 400, "height": 300, "format": "exr"}
         });
         let (frame, _) = common::engine().render_frame(&job(value), &()).unwrap();
         (frame.visibility.unwrap(), frame.error_estimate, frame.counters)
@@ -641,6 +641,7 @@ fn filtered_is_the_reference_where_it_refines_and_its_probes_elsewhere() {
     // have varied: the whole frame is the 16-sample reference's, to rounding.
     assert!(worst < 1e-4, "refined to the reference with every sample, the rest agreeing: worst {worst}, {off} pixels off");
     assert!(refined_pixels > 500.0, "the penumbrae are refined ({refined_pixels} pixels)");
+    assert_eq!(counters["refined_everywhere"], 0.0, "the probes chose the pixels to refine");
     let errors = errors.expect("filtered estimates its error");
     assert!(errors.iter().all(|e| e.is_finite() && *e >= 0.0));
     let penumbra = full.iter().zip(&errors).filter(|(v, _)| v.iter().any(|&c| c > 0.05 && c < 0.95));
@@ -662,6 +663,35 @@ fn filtered_matches_the_closed_form_as_the_reference_it_refines_to() {
     assert!(filtered < 0.6 * probes, "filtered {filtered} against its probes' {probes}");
     // Its estimate of that error, from its own samples, is within ±30 % of the truth's.
     assert!((0.7..=1.3).contains(&(estimate / filtered)), "estimated {estimate} against the closed form's {filtered}");
+}
+
+/// On a frame of at most ten pixels a triangle every covered pixel is tested against every
+/// sample (the maps cost far more than those tests): `filtered` without its filter is then the
+/// reference with as many samples everywhere, a small penumbra all its probes missed included;
+/// on a larger frame of the same scene the probes choose again.
+#[test]
+fn filtered_refines_every_pixel_where_the_maps_cost_far_more_than_the_tests() {
+    let render = |method: serde_json::Value, (width, height): (u32, u32)| {
+        let value = json!({
+            "scene": {"builtin": "terrain", "triangles": 20000},
+            "light": {"image": {"builtin": "flame"}},
+            "method": method,
+            "output": {"width": width, "height": height, "format": "exr"}
+        });
+        let (frame, _) = common::engine().render_frame(&job(value), &()).unwrap();
+        (frame.visibility.unwrap(), frame.counters)
+    };
+    let small = (256, 192);
+    let (filtered, counters) = render(json!({"name": "filtered", "samples": 4, "refine": 2, "filter": false}), small);
+    let (reference, _) = render(json!({"name": "reference", "samples": 16, "engine": "cpu"}), small);
+    assert_eq!(counters["refined_everywhere"], 1.0);
+    let refined = counters["pixels_refined"];
+    assert!(refined > 0.5 * f64::from(small.0 * small.1), "{refined} pixels refined");
+    let worst = filtered.iter().zip(&reference).map(|(a, b)| (Vec3::from(*a) - Vec3::from(*b)).abs().max_element()).fold(0.0, f32::max);
+    assert!(worst < 1e-4, "every pixel is the 16-sample reference's, to rounding: worst {worst}");
+    // About 20,000 triangles, 307,200 pixels: the probes choose.
+    let (_, counters) = render(json!({"name": "filtered", "samples": 4, "refine": 2, "filter": false}), (640, 480));
+    assert_eq!(counters["refined_everywhere"], 0.0);
 }
 
 /// An EXR of `filtered` carries its error estimate as a layer of its own.
@@ -693,7 +723,8 @@ fn the_methods_that_work_on_the_cpu_render_the_same_pixels_in_bands() {
         json!({"name": "filtered", "samples": 4, "engine": "gpu"}),
     ];
     for method in methods {
-        let value = json!({"scene": {"builtin": "crowd"}, "light": {"image": {"builtin": "stripes"}}, "method": method,
+        // More pixels than ten a triangle: the probes choose the pixels to refine, band by band.
+        let value = json!({"scene": {"builtin": "columns"}, "light": {"image": {"builtin": "stripes"}}, "method": method,
                            "output": {"width": 320, "height": 240, "format": "exr"}});
         let whole = common::engine().render_frame(&job(value.clone()), &()).unwrap().0;
         let bands = banded.render_frame(&job(value), &()).unwrap().0;
@@ -759,9 +790,9 @@ fn reference_engines_draw_the_same_maps_and_make_the_same_tests() {
 #[test]
 fn filtered_engines_make_the_same_tests() {
     let cases = [
-        // Coloured, cropped maps.
-        json!({"scene": {"builtin": "crowd"}, "light": {"image": {"builtin": "stripes"}}}),
-        // A landscape seen to its horizon, whole maps, gray.
+        // Coloured, cropped maps; more pixels than ten a triangle: the probes choose.
+        json!({"scene": {"builtin": "columns"}, "light": {"image": {"builtin": "stripes"}}}),
+        // A landscape seen to its horizon, whole maps, gray; every pixel refined.
         json!({"scene": {"builtin": "terrain", "triangles": 20000}, "light": {"image": {"builtin": "white"}}}),
     ];
     for case in cases {

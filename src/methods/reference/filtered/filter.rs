@@ -231,6 +231,11 @@ pub(super) fn refined(surfaces: &Surfaces, texels: &Texels) -> Vec<bool> {
     (0..texels.len()).map(|i| covered(i) && varies(i)).collect()
 }
 
+/// Every pixel with a surface: a frame refined everywhere.
+pub(super) fn covered(surfaces: &Surfaces) -> Vec<bool> {
+    surfaces.normals.par_iter().map(|&n| n != Vec3::ZERO).collect()
+}
+
 /// Filters the `refined` pixels' `texels` over `surfaces`, sized by `blockers` ([blockers
 /// met, their summed depth from the light's plane] per pixel) and the receiver's own depth.
 pub(super) fn filter(

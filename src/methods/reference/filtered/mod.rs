@@ -11,7 +11,9 @@
 //! neighbour tile has a pixel its probes see partly lit, or both fully lit and fully shadowed
 //! pixels, is in or near a penumbra: it is tested against the rest too, and there it is
 //! `reference` with `samples × refine²` samples. The rest keep their probes' verdict (0 or 1,
-//! which more samples would only confirm). Every map is drawn once. Either of the reference's
+//! which more samples would only confirm). Every map is drawn once. On a frame of few pixels
+//! for its triangles every pixel is tested against every sample: there the maps cost far more
+//! than the tests the probes would save (`REFINE_EVERYWHERE_PIXELS_PER_TRIANGLE`). Either of the reference's
 //! engines draws the maps and makes the tests (`engine`): the CPU's cores, or the device
 //! (`gpu.rs`); the classification and the filter are the CPU's either way.
 //!
@@ -53,7 +55,7 @@ const REFINE: Param<u32> = Param::integer(
     4,
     1,
     4,
-    "a pixel in or near a penumbra is tested against samples × refine² samples (each probe's stratum cut refine × refine)",
+    "a pixel in or near a penumbra (every pixel on a frame of at most ten pixels a scene triangle) is tested against samples × refine² samples (each probe's stratum cut refine × refine)",
 );
 const FILTER: Param<bool> = Param::boolean("filter", true, "filter the visibility over the penumbra (off: each pixel's own samples)");
 const FILTER_SCALE: Param<f32> = Param::float(
@@ -121,7 +123,10 @@ impl ShadowMethod for Filtered {
             Engine::Auto => ctx.gpu.software,
         };
         let device = (!on_cpu).then(|| gpu::DeviceTests::new(ctx, &plan, params, &order));
+        let triangles = ctx.scene.indices().len() / 3;
+        let everywhere = u64::from(ctx.width) * u64::from(ctx.height) <= REFINE_EVERYWHERE_PIXELS_PER_TRIANGLE * triangles as u64;
         let shared = Shared {
+            everywhere,
             probe_samples,
             other_samples,
             constants,
@@ -169,6 +174,7 @@ impl ShadowMethod for Filtered {
             ("probes".to_owned(), f64::from(probes)),
             ("samples_effective".to_owned(), f64::from(shared.filter.samples_effective)),
             ("refine".to_owned(), f64::from(refine)),
+            ("refined_everywhere".to_owned(), f64::from(u8::from(shared.everywhere))),
             ("engine_cpu".to_owned(), f64::from(u8::from(on_cpu))),
             ("cpu_threads".to_owned(), done.spent.round as f64),
             ("cpu_bands".to_owned(), bands.len() as f64),
@@ -180,6 +186,16 @@ impl ShadowMethod for Filtered {
         Ok(counters)
     }
 }
+
+/// The most pixels a frame has, per triangle of its scene, for every covered pixel to be
+/// tested against every sample, not only those the probes find near a penumbra. The
+/// refinement saves tests, and every map is drawn anyway: a triangle set up and drawn into a
+/// map costs about as much as 50 to 150 tests of a pixel against one (the CPU engine at
+/// 1080p: `crowd` ~190 ns a triangle, `terrain` ~70; ~1.3 ns a test), so on a frame of at most
+/// ten pixels a triangle, testing every pixel adds at most about a fifth of the maps' time,
+/// and no small penumbra that all the probes happened to miss is left out (docs/methods.md).
+/// Counted on the frame, not a band, so that bands give the frame's pixels.
+const REFINE_EVERYWHERE_PIXELS_PER_TRIANGLE: u64 = 10;
 
 /// The rows a band reads beyond those it writes, either side: what a written pixel depends on —
 /// the column pass's reach (`MAX_RADIUS`, 24), the fallback σ of the tiles around the pixels it
@@ -208,6 +224,8 @@ fn gpu_bytes_per_pixel(channels: usize, record_floats: usize) -> u64 {
 /// What every band shares: the samples, split into the probes and the rest, each in the
 /// reference's two halves, and the filter's shape.
 struct Shared {
+    /// Every covered pixel is tested against every sample (`REFINE_EVERYWHERE_PIXELS_PER_TRIANGLE`).
+    everywhere: bool,
     probe_samples: [Vec<CpuSample>; 2],
     other_samples: [Vec<CpuSample>; 2],
     constants: cpu::TestConstants,
@@ -275,7 +293,7 @@ fn render_band(
     // The probes, everywhere.
     round.test(0, before, |_, _| true, &mut texels, &mut blockers)?;
     // With one set there is nothing more to test; its varying pixels are still filtered.
-    let refined = filter::refined(&surfaces, &texels);
+    let refined = if shared.everywhere { filter::covered(&surfaces) } else { filter::refined(&surfaces, &texels) };
     let written = band.written();
     if other_count > 0 {
         let pixels = written.start as usize * width as usize..written.end as usize * width as usize;
