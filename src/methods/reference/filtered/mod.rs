@@ -13,9 +13,9 @@
 //! `reference` with `samples × refine²` samples. The rest keep their probes' verdict (0 or 1,
 //! which more samples would only confirm). Every map is drawn once. On a frame of few pixels
 //! for its triangles every pixel is tested against every sample: there the maps cost far more
-//! than the tests the probes would save (`REFINE_EVERYWHERE_PIXELS_PER_TRIANGLE`). Either of the reference's
-//! engines draws the maps and makes the tests (`engine`): the CPU's cores, or the device
-//! (`gpu.rs`); the classification and the filter are the CPU's either way.
+//! than the tests the probes would save (`REFINE_EVERYWHERE_PIXELS_PER_TRIANGLE`). Either of
+//! the reference's engines draws the maps and makes the tests (`engine`): the CPU's cores, or
+//! the device (`gpu.rs`); the classification and the filter are the CPU's either way.
 //!
 //! Why not a few samples a pixel everywhere, rotated per pixel, as the papers do with rays: a
 //! sample is a depth map here, and a map costs what its triangles cost, whatever the pixels,
@@ -224,7 +224,8 @@ fn gpu_bytes_per_pixel(channels: usize, record_floats: usize) -> u64 {
 /// What every band shares: the samples, split into the probes and the rest, each in the
 /// reference's two halves, and the filter's shape.
 struct Shared {
-    /// Every covered pixel is tested against every sample (`REFINE_EVERYWHERE_PIXELS_PER_TRIANGLE`).
+    /// Whether every covered pixel is tested against every sample
+    /// (`REFINE_EVERYWHERE_PIXELS_PER_TRIANGLE`).
     everywhere: bool,
     probe_samples: [Vec<CpuSample>; 2],
     other_samples: [Vec<CpuSample>; 2],
