@@ -217,7 +217,7 @@ impl FilterOutput {
 /// samples clear. A pixel without a surface counts for nothing.
 pub(super) fn refined(surfaces: &Surfaces, texels: &Texels) -> Vec<bool> {
     let tiles = Tiles::new(surfaces.width, surfaces.height);
-    let covered = |i: usize| surfaces.normals[i] != Vec3::ZERO;
+    let covered = |i: usize| has_surface(surfaces, i);
     // Per tile: the states its pixels' probes are in, a bit per `State`.
     let mut states = vec![0u8; tiles.count()];
     for i in (0..texels.len()).filter(|&i| covered(i)) {
@@ -233,7 +233,12 @@ pub(super) fn refined(surfaces: &Surfaces, texels: &Texels) -> Vec<bool> {
 
 /// Every pixel with a surface: a frame refined everywhere.
 pub(super) fn covered(surfaces: &Surfaces) -> Vec<bool> {
-    surfaces.normals.par_iter().map(|&n| n != Vec3::ZERO).collect()
+    (0..surfaces.normals.len()).into_par_iter().map(|i| has_surface(surfaces, i)).collect()
+}
+
+/// Whether a surface covers pixel `i` (`Surfaces::normal` by index).
+fn has_surface(surfaces: &Surfaces, i: usize) -> bool {
+    surfaces.normals[i] != Vec3::ZERO
 }
 
 /// Filters the `refined` pixels' `texels` over `surfaces`, sized by `blockers` ([blockers

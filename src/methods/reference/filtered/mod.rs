@@ -123,8 +123,7 @@ impl ShadowMethod for Filtered {
             Engine::Auto => ctx.gpu.software,
         };
         let device = (!on_cpu).then(|| gpu::DeviceTests::new(ctx, &plan, params, &order));
-        let triangles = ctx.scene.indices().len() / 3;
-        let everywhere = u64::from(ctx.width) * u64::from(ctx.height) <= REFINE_EVERYWHERE_PIXELS_PER_TRIANGLE * triangles as u64;
+        let everywhere = u64::from(ctx.width) * u64::from(ctx.height) <= REFINE_EVERYWHERE_PIXELS_PER_TRIANGLE * ctx.scene.triangles;
         let shared = Shared {
             everywhere,
             probe_samples,
