@@ -909,10 +909,11 @@ fn a_redis_restart_mid_batch_loses_no_accepted_job() {
     }
     let base = |k: usize| format!("http://127.0.0.1:{}", ports[k % 2]);
     let job = r#"{"scene": {"builtin": "occluder"}, "method": {"name": "reference", "samples": 192, "resolution": 256}, "output": {"width": 96, "height": 64}}"#;
-    // One job ~30 times longer goes first, so that one replica still renders it when the
-    // other has finished two short ones and Redis is killed, however fast the renderer is (the
-    // short jobs alone once lasted long enough; a faster `reference` let them all finish).
-    let long = r#"{"scene": {"builtin": "occluder"}, "method": {"name": "reference", "samples": 4096, "resolution": 256}, "output": {"width": 320, "height": 240}}"#;
+    // One job some hundred times longer goes first (seconds on lavapipe, where a short one
+    // takes tens of milliseconds), so that one replica still renders it when the other has
+    // finished two short ones and Redis is killed. A margin of a few tenths of a second, as
+    // once here, was not enough for CI.
+    let long = r#"{"scene": {"builtin": "occluder"}, "method": {"name": "reference", "samples": 4096, "resolution": 256}, "output": {"width": 1280, "height": 960}}"#;
     let ids: Vec<String> = (0..13)
         .map(|k| {
             let body = if k == 0 { long } else { job };
