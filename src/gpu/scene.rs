@@ -2,13 +2,19 @@
 //! colours, and one bind group per material with its base-colour texture; the triangles also
 //! stay on the CPU for object-space methods, with their adjacency built on first use.
 
+use std::ops::Range;
+
 use glam::Vec3;
 use wgpu::util::DeviceExt;
 
 use super::GpuContext;
 use crate::light::AreaLight;
 use crate::scene::adjacency::{Casting, EdgeMesh};
+use crate::scene::bounding::BoundingTriangles;
 use crate::scene::{box_corners, DrawRange, Extent, OnFloor, Scene, SceneDefaults};
+
+/// Runs of the index buffer, three indices a triangle.
+pub type Runs = std::sync::Arc<[Range<u32>]>;
 
 /// A material's constant part as the G-buffer shader reads it.
 #[repr(C)]
@@ -49,6 +55,10 @@ pub struct GpuScene {
     /// The triangles casting from the last point asked (`casting_from`): the jobs that follow
     /// one another on a scene mostly share their light.
     casting: std::sync::Mutex<Option<([u32; 3], std::sync::Arc<Casting>)>>,
+    /// The triangles with the whole scene on one side (`BoundingTriangles`), found on first use.
+    bounding: std::sync::OnceLock<BoundingTriangles>,
+    /// The runs of triangles that can shadow from the last light asked (`casting_runs`).
+    casting_runs: std::sync::Mutex<Option<([u32; 12], Runs)>>,
 }
 
 impl GpuScene {
@@ -112,6 +122,8 @@ impl GpuScene {
             indices: scene.indices.clone(),
             edge_mesh: Default::default(),
             casting: Default::default(),
+            bounding: Default::default(),
+            casting_runs: Default::default(),
         }
     }
 
@@ -135,6 +147,28 @@ impl GpuScene {
                 let casting = std::sync::Arc::new(self.edge_mesh().casting(point));
                 *last = Some((key, casting.clone()));
                 casting
+            }
+        }
+    }
+
+    /// The runs of the index buffer (three indices a triangle) whose triangles can shadow some
+    /// point of the scene from `light`: all but the bounding triangles it lies beyond
+    /// (`BoundingTriangles::casting_runs`), which the sample maps of `reference` and
+    /// `filtered` leave out. Kept for the next job under the same light.
+    pub fn casting_runs(&self, light: &AreaLight) -> Runs {
+        let corners = [(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)].map(|(s, t)| light.image_point(s, t));
+        let mut key = [0; 12];
+        for (k, c) in corners.iter().enumerate() {
+            key[3 * k..3 * k + 3].copy_from_slice(&c.to_array().map(f32::to_bits));
+        }
+        let mut last = self.casting_runs.lock().unwrap_or_else(|p| p.into_inner());
+        match &*last {
+            Some((at, runs)) if *at == key => runs.clone(),
+            _ => {
+                let bounding = self.bounding.get_or_init(|| BoundingTriangles::find(&self.positions, &self.indices));
+                let runs: Runs = bounding.casting_runs(&corners).into();
+                *last = Some((key, runs.clone()));
+                runs
             }
         }
     }

@@ -5,6 +5,7 @@
 //! draw ranges grouped by material); `gpu::GpuScene` uploads it once and keeps it warm.
 
 pub mod adjacency;
+pub mod bounding;
 pub mod builtin;
 pub mod gltf;
 

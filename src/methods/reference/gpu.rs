@@ -112,6 +112,8 @@ impl DepthMaps {
     /// differently (`docs/performance-log.md`).
     pub(super) fn draw(&self, ctx: &mut MethodContext<'_>, pass: &'static str, first: usize, origins: &[Option<UVec2>]) {
         let scene = ctx.scene;
+        // The triangles that can shadow (`GpuScene::casting_runs`), as the CPU engine draws.
+        let runs = scene.casting_runs(&ctx.spec.light);
         ctx.timer.time_encoder(ctx.encoder, PhaseName::Method, pass, |encoder| {
             for (layer, origin) in origins.iter().enumerate() {
                 let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
@@ -133,7 +135,9 @@ impl DepthMaps {
                 pass.set_bind_group(0, &self.projections, &[layout::slot_offset(first + layer)]);
                 pass.set_vertex_buffer(0, scene.vertex_buffer.slice(..));
                 pass.set_index_buffer(scene.index_buffer.slice(..), wgpu::IndexFormat::Uint32);
-                pass.draw_indexed(0..scene.index_count, 0, 0..1);
+                for run in runs.iter() {
+                    pass.draw_indexed(run.clone(), 0, 0..1);
+                }
             }
         });
     }

@@ -114,7 +114,7 @@ impl ShadowMethod for Reference {
             }
         }
         let segments_tested = ctx.read_counters(&accumulation.segments_count)?[0];
-        let mut counters = plan.counters(segments_tested);
+        let mut counters = plan.counters(segments_tested, ctx);
         counters.insert("engine_cpu".to_owned(), 0.0);
         Ok(counters)
     }
@@ -151,11 +151,12 @@ fn record_on_cpu(ctx: &mut MethodContext<'_>, params: &Params, plan: &SamplePlan
     let (mut read_ms, mut write_ms, mut spent, mut segments) = (0.0, 0.0, cpu::Spent::default(), 0);
     let effective = plan.effective_samples();
     let mut penumbra = estimate::PenumbraMean::default();
+    let runs = ctx.scene.casting_runs(&ctx.spec.light);
     for (b, band) in bands.iter().enumerate() {
         let started = std::time::Instant::now();
         let receivers = cpu::Receivers::new(&ctx.read_surfaces(band.rows.clone())?, SEGMENT, &constants);
         read_ms += started.elapsed().as_secs_f64() * 1e3;
-        let geometry = (ctx.scene.positions(), ctx.scene.indices());
+        let geometry = cpu::Geometry { positions: ctx.scene.positions(), indices: ctx.scene.indices(), runs: &runs };
         let sums = &mut carried.bands[b];
         for half in sums.iter_mut() {
             half.resize(receivers.blocks());
@@ -187,7 +188,7 @@ fn record_on_cpu(ctx: &mut MethodContext<'_>, params: &Params, plan: &SamplePlan
     ctx.timer.cpu_pass(PhaseName::Method, "reference_cpu_maps", spent.maps_ms);
     ctx.timer.cpu_pass(PhaseName::Method, "reference_cpu_tests", spent.tests_ms);
     ctx.timer.cpu_pass(PhaseName::Method, "reference_cpu_visibility", write_ms);
-    let mut counters = plan.counters(segments);
+    let mut counters = plan.counters(segments, ctx);
     counters.extend([
         ("engine_cpu".to_owned(), 1.0),
         ("cpu_threads".to_owned(), spent.round as f64),

@@ -364,9 +364,13 @@ impl SamplePlan {
 
     /// The counters either engine reports: samples taken and left out, the row segments
     /// tested, the maps' resolution and the part of each map drawn.
-    pub(super) fn counters(&self, segments_tested: u32) -> Counters {
+    pub(super) fn counters(&self, segments_tested: u32, ctx: &MethodContext<'_>) -> Counters {
         let total = self.samples.len() as f64;
+        // The triangles each map draws: the bounding ones the light lies beyond are left out.
+        let runs = ctx.scene.casting_runs(&ctx.spec.light);
+        let map_triangles: u32 = runs.iter().map(|run| (run.end - run.start) / 3).sum();
         Counters::from([
+            ("map_triangles".to_owned(), f64::from(map_triangles)),
             ("samples".to_owned(), total),
             ("segments_tested".to_owned(), f64::from(segments_tested)),
             ("samples_skipped_black".to_owned(), f64::from(self.strata) - total),

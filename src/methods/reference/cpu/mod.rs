@@ -10,6 +10,8 @@
 //! maps in sample order. Every receiver's sums are so added in the same order whatever the
 //! number of threads, and the image is the same on every machine.
 
+use std::ops::Range;
+
 use glam::{Mat4, UVec2, Vec3};
 use rayon::prelude::*;
 
@@ -135,6 +137,24 @@ impl TestConstants {
     }
 }
 
+/// The triangles a sample's map is drawn from: the scene's vertices, its indices (three a
+/// triangle), and the runs of those that can shadow (`GpuScene::casting_runs`: the bounding
+/// triangles the light lies beyond are left out, by both engines).
+#[derive(Clone, Copy)]
+pub(super) struct Geometry<'a> {
+    pub positions: &'a [Vec3],
+    pub indices: &'a [u32],
+    pub runs: &'a [Range<u32>],
+}
+
+impl<'a> Geometry<'a> {
+    /// The triangles of the runs, in order.
+    pub(super) fn triangles(&self) -> impl Iterator<Item = &'a [u32]> + 'a {
+        let indices = self.indices;
+        self.runs.iter().flat_map(move |run| indices[run.start as usize..run.end as usize].chunks_exact(3))
+    }
+}
+
 /// One sample as its map is drawn and read.
 #[derive(Clone)]
 pub(super) struct CpuSample {
@@ -252,15 +272,14 @@ impl Spent {
     }
 }
 
-/// Estimates every receiver's sums over `samples` (drawn from the triangles `positions` /
-/// `indices`), `channels` of them (1: every weight gray, the red one stands for all), and with
+/// Estimates every receiver's sums over `samples` (their maps drawn from `geometry`), `channels` of them (1: every weight gray, the red one stands for all), and with
 /// `BLOCKERS` the blockers its tests met (else none are kept). `after` hears how many samples
 /// are done after each round and says whether to go on.
 pub(super) fn estimate_with<const BLOCKERS: bool>(
     receivers: &Receivers,
     samples: &[CpuSample],
     constants: &TestConstants,
-    geometry: (&[Vec3], &[u32]),
+    geometry: Geometry<'_>,
     channels: usize,
     crop_size: UVec2,
     after: impl FnMut(usize) -> bool,
@@ -277,7 +296,7 @@ pub(super) fn estimate_into<const BLOCKERS: bool>(
     receivers: &Receivers,
     samples: &[CpuSample],
     constants: &TestConstants,
-    (positions, indices): (&[Vec3], &[u32]),
+    geometry: Geometry<'_>,
     crop_size: UVec2,
     sums: &mut Sums,
     mut after: impl FnMut(usize) -> bool,
@@ -291,12 +310,12 @@ pub(super) fn estimate_into<const BLOCKERS: bool>(
     let map_bytes = crop_size.x as usize * crop_size.y as usize * 4;
     let round = threads.min((super::BATCH_MAP_BYTES as usize / map_bytes.max(1)).max(1));
     spent.round = round;
-    let mut maps: Vec<Map> = (0..round).map(|_| Map { size: crop_size, depths: Vec::new(), empty: true }).collect();
+    let mut maps: Vec<Map> = (0..round).map(|_| Map::new(crop_size)).collect();
     let avx2 = has_avx2();
     let mut done = 0;
     for chunk in samples.chunks(round) {
         let start = std::time::Instant::now();
-        maps.par_iter_mut().zip(chunk).for_each(|(map, sample)| map.draw(sample, positions, indices));
+        maps.par_iter_mut().zip(chunk).for_each(|(map, sample)| map.draw(sample, geometry));
         let drawn = std::time::Instant::now();
         let maps = &maps[..chunk.len()];
         // Each task's share of the blockers: empty without `BLOCKERS`.
@@ -342,14 +361,14 @@ pub(super) fn estimate_tiled(
     pixels: &[u32],
     samples: &[CpuSample],
     constants: &TestConstants,
-    (positions, indices): (&[Vec3], &[u32]),
+    geometry: Geometry<'_>,
     channels: usize,
     crop_size: UVec2,
     mut gather: impl FnMut(&[u32], &Sums, &[BlockerBlock]),
 ) -> Spent {
     let started = std::time::Instant::now();
-    let mut maps: Vec<Map> = samples.iter().map(|_| Map { size: crop_size, depths: Vec::new(), empty: true }).collect();
-    maps.par_iter_mut().zip(samples).for_each(|(map, sample)| map.draw(sample, positions, indices));
+    let mut maps: Vec<Map> = samples.iter().map(|_| Map::new(crop_size)).collect();
+    maps.par_iter_mut().zip(samples).for_each(|(map, sample)| map.draw(sample, geometry));
     let threads = rayon::current_num_threads().max(1);
     let mut spent = Spent { maps_ms: started.elapsed().as_secs_f64() * 1e3, tests_ms: 0.0, round: threads.min(samples.len()) };
     let (rotation, avx2) = (rotation_rows(constants), has_avx2());

@@ -7,7 +7,14 @@ use super::*;
 
 /// A map of `size`² texels with nothing drawn.
 fn blank(size: u32) -> Map {
-    Map { size: UVec2::splat(size), depths: vec![0.0; (size * size) as usize], empty: false }
+    Map::with_depths(UVec2::splat(size), vec![0.0; (size * size) as usize])
+}
+
+/// One triangle of `positions` (its first three) as a map's geometry.
+fn one_triangle(positions: &[Vec3]) -> Geometry<'_> {
+    #[allow(clippy::single_range_in_vec_init)] // A list of runs that holds one.
+    const RUNS: &[Range<u32>] = &[0..3];
+    Geometry { positions, indices: &[0, 1, 2], runs: RUNS }
 }
 
 /// Clip coordinates of the point at texel coordinates (x, y) (right and down from the
@@ -126,14 +133,32 @@ fn a_triangle_through_the_near_plane_is_drawn_in_front_of_it_only() {
     let view_proj = Mat4::perspective_infinite_reverse_rh(90f32.to_radians(), 1.0, near);
     let sample = CpuSample { view_proj, origin: [0.0; 2], texels_per_tan: 1.0, crop_origin: Some(UVec2::ZERO), weight: Vec3::ONE };
     let mut map = blank(32);
-    map.draw(&sample, &[Vec3::new(-1.0, -0.5, -1.0), Vec3::new(1.0, -0.5, -1.0), Vec3::new(0.0, -0.5, 0.5)], &[0, 1, 2]);
+    map.draw(&sample, one_triangle(&[Vec3::new(-1.0, -0.5, -1.0), Vec3::new(1.0, -0.5, -1.0), Vec3::new(0.0, -0.5, 0.5)]));
     let drawn = covered(&map);
     assert!(drawn.len() > 50, "{} texels", drawn.len());
     assert!(map.depths.iter().all(|&d| (0.0..=1.0).contains(&d)), "depths within the clip volume");
     // Entirely behind it: nothing.
     let mut map = blank(32);
-    map.draw(&sample, &[Vec3::new(-1.0, -0.5, 1.0), Vec3::new(1.0, -0.5, 1.0), Vec3::new(0.0, 0.5, 0.5)], &[0, 1, 2]);
+    map.draw(&sample, one_triangle(&[Vec3::new(-1.0, -0.5, 1.0), Vec3::new(1.0, -0.5, 1.0), Vec3::new(0.0, 0.5, 0.5)]));
     assert!(covered(&map).is_empty());
+}
+
+#[test]
+fn a_map_drawn_again_holds_only_its_new_triangles() {
+    // A map is cleared where its last drawing wrote, not whole: drawn over a large triangle,
+    // then over a small one elsewhere, it holds what a new map holds.
+    let view_proj = Mat4::perspective_infinite_reverse_rh(90f32.to_radians(), 1.0, 0.1);
+    let sample = CpuSample { view_proj, origin: [0.0; 2], texels_per_tan: 1.0, crop_origin: Some(UVec2::ZERO), weight: Vec3::ONE };
+    let large = [Vec3::new(-3.0, -3.0, -1.0), Vec3::new(3.0, -2.0, -1.0), Vec3::new(0.0, 3.0, -1.5)];
+    let small = [Vec3::new(0.5, 0.5, -1.0), Vec3::new(0.9, 0.5, -1.0), Vec3::new(0.7, 0.9, -1.2)];
+    let mut reused = Map::new(UVec2::splat(64));
+    reused.draw(&sample, one_triangle(&large));
+    assert!(covered(&reused).len() > 64 * 64 / 2, "{} texels", covered(&reused).len());
+    reused.draw(&sample, one_triangle(&small));
+    let mut fresh = Map::new(UVec2::splat(64));
+    fresh.draw(&sample, one_triangle(&small));
+    assert!(!covered(&fresh).is_empty());
+    assert_eq!(reused.depths, fresh.depths);
 }
 
 #[test]
@@ -258,7 +283,7 @@ fn receivers_made_a_task_at_a_time_sum_as_the_whole_frame_s_do() {
         })
         .collect();
     let positions = [Vec3::new(-1.0, 1.0, -1.0), Vec3::new(1.5, 1.0, -0.5), Vec3::new(0.0, 1.0, 1.5)];
-    let geometry = (&positions[..], &[0u32, 1, 2][..]);
+    let geometry = one_triangle(&positions);
     let crop = UVec2::splat(resolution);
     let (pixels, segments) = covered_pixels(&surfaces, 16, |_, _| true);
     assert!(pixels.len() > 8 * BLOCKS_PER_TASK * LANES, "several tasks");

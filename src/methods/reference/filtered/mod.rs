@@ -168,7 +168,7 @@ impl ShadowMethod for Filtered {
         }
         ctx.timer.cpu_pass(PhaseName::Method, "filtered_filter", done.filter_ms);
 
-        let mut counters = plan.counters(done.segments);
+        let mut counters = plan.counters(done.segments, ctx);
         counters.extend([
             ("probes".to_owned(), f64::from(probes)),
             ("samples_effective".to_owned(), f64::from(shared.filter.samples_effective)),
@@ -362,7 +362,8 @@ impl Round<'_, '_, '_> {
         let Some(device) = self.device else {
             let (pixels, segments) = cpu::covered_pixels(surfaces, SEGMENT, keep);
             let halves = if round == 0 { &shared.probe_samples } else { &shared.other_samples };
-            let geometry = (self.ctx.scene.positions(), self.ctx.scene.indices());
+            let runs = self.ctx.scene.casting_runs(&self.ctx.spec.light);
+            let geometry = cpu::Geometry { positions: self.ctx.scene.positions(), indices: self.ctx.scene.indices(), runs: &runs };
             let (channels, crop_size) = (shared.channels, shared.crop_size);
             // A half's maps held at once where they take fewer bytes than the frame-sized
             // receivers and sums would (the probes over a large frame): the same sums.
