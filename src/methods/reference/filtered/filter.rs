@@ -189,21 +189,40 @@ pub(super) struct FilterOutput {
 }
 
 impl FilterOutput {
-    /// The visibility of texels `range` (rgb, and w the estimated error), and the estimate's
-    /// sum over their penumbra added to `penumbra` (texel by texel, in order: the same mean
-    /// however the rows are cut).
-    pub fn visibility(&self, range: Range<usize>, penumbra: &mut PenumbraMean) -> Vec<[f32; 4]> {
-        let visibility: Vec<[f32; 4]> = range
-            .clone()
-            .into_par_iter()
-            .map(|i| {
-                let t = self.texels.get(i);
-                let [r, g, b] = t.visibility();
-                [r, g, b, t.error()]
+    /// The visibility of texels `range`, whole rows of `width` (rgb, and w the estimated
+    /// error), and the estimate's sum over their penumbra added to `penumbra` — row by row on
+    /// every core, the rows' sums added in order: the same mean however the rows are cut into
+    /// calls or bands.
+    pub fn visibility(&self, range: Range<usize>, width: usize, penumbra: &mut PenumbraMean) -> Vec<[f32; 4]> {
+        let mut visibility = vec![[0.0f32; 4]; range.len()];
+        let rows: Vec<PenumbraMean> = visibility
+            .par_chunks_mut(width)
+            .enumerate()
+            .map(|(r, row)| {
+                let mut mean = PenumbraMean::default();
+                for (x, out) in row.iter_mut().enumerate() {
+                    let t = self.texels.get(range.start + r * width + x);
+                    // Samples that all agree, in both halves (most pixels: those the probes
+                    // settled), say 1 or 0 with no error and no penumbra, to the bit as the
+                    // general case would.
+                    let lit = t.shadowed == t.unshadowed && t.half_shadowed == t.half_unshadowed;
+                    if lit || !t.lit_at_all() {
+                        *out = [1.0, 1.0, 1.0, 0.0];
+                        continue;
+                    }
+                    if t.shadowed == [0.0; 3] {
+                        *out = [0.0, 0.0, 0.0, 0.0];
+                        continue;
+                    }
+                    let ([red, green, blue], error) = (t.visibility(), t.error());
+                    *out = [red, green, blue, error];
+                    mean.add(&t, error, self.samples_effective);
+                }
+                mean
             })
             .collect();
-        for (i, v) in range.zip(&visibility) {
-            penumbra.add(&self.texels.get(i), v[3], self.samples_effective);
+        for row in rows {
+            penumbra.merge(row);
         }
         visibility
     }
@@ -217,18 +236,30 @@ impl FilterOutput {
 /// samples clear. A pixel without a surface counts for nothing.
 pub(super) fn refined(surfaces: &Surfaces, texels: &Texels) -> Vec<bool> {
     let tiles = Tiles::new(surfaces.width, surfaces.height);
+    let (width, height) = (surfaces.width as usize, surfaces.height as usize);
     let covered = |i: usize| has_surface(surfaces, i);
-    // Per tile: the states its pixels' probes are in, a bit per `State`.
-    let mut states = vec![0u8; tiles.count()];
-    for i in (0..texels.len()).filter(|&i| covered(i)) {
-        states[tiles.of(i)] |= 1 << state(&texels.get(i)) as u8;
-    }
+    // Per tile: the states its pixels' probes are in, a bit per `State` (a row of tiles a task).
+    let states: Vec<u8> = (0..tiles.rows as usize)
+        .into_par_iter()
+        .flat_map_iter(|ty| {
+            let mut row = vec![0u8; tiles.columns as usize];
+            for y in ty * TILE as usize..((ty + 1) * TILE as usize).min(height) {
+                for (x, i) in (y * width..(y + 1) * width).enumerate().filter(|&(_, i)| covered(i)) {
+                    row[x / TILE as usize] |= 1 << state(&texels.get(i)) as u8;
+                }
+            }
+            row
+        })
+        .collect();
     // A tile varies with a mixed pixel around it, or two of the states.
-    let varies = |i: usize| {
-        let seen = tiles.around(i).fold(0u8, |seen, t| seen | states[t]);
-        seen & (1 << State::Mixed as u8) != 0 || seen.count_ones() > 1
-    };
-    (0..texels.len()).map(|i| covered(i) && varies(i)).collect()
+    let varies: Vec<bool> = (0..tiles.count())
+        .into_par_iter()
+        .map(|t| {
+            let seen = tiles.around_tile(t).fold(0u8, |seen, t| seen | states[t]);
+            seen & (1 << State::Mixed as u8) != 0 || seen.count_ones() > 1
+        })
+        .collect();
+    (0..texels.len()).into_par_iter().map(|i| covered(i) && varies[tiles.of(i)]).collect()
 }
 
 /// Every pixel with a surface: a frame refined everywhere.
@@ -409,7 +440,12 @@ impl Tiles {
 
     /// The tiles around pixel `i`'s, its own included.
     fn around(&self, i: usize) -> impl Iterator<Item = usize> + '_ {
-        let (tx, ty) = ((i as u32 % self.width / TILE) as i64, (i as u32 / self.width / TILE) as i64);
+        self.around_tile(self.of(i))
+    }
+
+    /// The tiles around tile `t`, itself included.
+    fn around_tile(&self, t: usize) -> impl Iterator<Item = usize> + '_ {
+        let (tx, ty) = ((t as u32 % self.columns) as i64, (t as u32 / self.columns) as i64);
         (ty - 1..=ty + 1)
             .flat_map(move |j| (tx - 1..=tx + 1).map(move |i| (i, j)))
             .filter(|&(i, j)| i >= 0 && j >= 0 && i < self.columns as i64 && j < self.rows as i64)

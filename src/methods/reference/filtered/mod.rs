@@ -324,7 +324,7 @@ fn render_band(
     let row = width as usize;
     let mut penumbra = PenumbraMean::default();
     write_visibility_rows(ctx, band.rows.clone(), width, |rows, out| {
-        let texels = filtered.visibility(rows.start as usize * row..rows.end as usize * row, &mut penumbra);
+        let texels = filtered.visibility(rows.start as usize * row..rows.end as usize * row, row, &mut penumbra);
         out.copy_from_slice(bytemuck::cast_slice(&texels));
     });
     done.filter_ms += filtering.elapsed().as_secs_f64() * 1e3;
@@ -455,7 +455,9 @@ impl Round<'_, '_, '_> {
 
 /// Adds a round of tests of the receivers of `pixels` to the frame's pixels: per pixel its
 /// sums (the gray one standing for all three under a gray light), to its second half's too
-/// where `second_half`, and the count and summed depth of the blockers its tests met.
+/// where `second_half`, and the count and summed depth of the blockers its tests met. On one
+/// core: the first round touches the frame's texels first, and the kernel's faults of their
+/// pages, most of its time, took three times as long from two threads at once.
 fn gather(pixels: &[u32], sums: &Sums, met: &[BlockerBlock], second_half: bool, texels: &mut Texels, blockers: &mut [[f32; 2]]) {
     for (k, &pixel) in pixels.iter().enumerate() {
         let (block, lane) = (k / cpu::LANES, k % cpu::LANES);

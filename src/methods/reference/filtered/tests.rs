@@ -18,7 +18,7 @@ fn camera() -> Camera {
 /// Every texel's visibility (rgb and the error estimate) as written, and the estimate's mean.
 fn written(out: &FilterOutput) -> (Vec<[f32; 4]>, PenumbraMean) {
     let mut penumbra = PenumbraMean::default();
-    (out.visibility(0..out.texels.len(), &mut penumbra), penumbra)
+    (out.visibility(0..out.texels.len(), SIZE as usize, &mut penumbra), penumbra)
 }
 
 /// The floor y = `height(x)` under pixel (x, y), facing up.
