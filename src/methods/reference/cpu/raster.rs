@@ -32,6 +32,18 @@ pub(super) struct Map {
     /// last: none), so that the next one clears those alone: on a map of 2,048² a clear of
     /// the whole cost about a third of drawing a scene of figures over a floor.
     written: Vec<[u32; 2]>,
+    /// Per vertex of the scene, its clip coordinates and where it lands on this map: taken once
+    /// a map, not once for each of the (on a mesh, about six) triangles that share it.
+    clip: Vec<Vec4>,
+    projected: Vec<Projected>,
+}
+
+/// A vertex in front of the near plane, on a map: texels (x right, y down) and depth, and
+/// snapped to the rasteriser's fixed point where it fits (`FIXED_RANGE`).
+#[derive(Clone, Copy)]
+struct Projected {
+    screen: Vec3,
+    fixed: Option<[i64; 2]>,
 }
 
 /// A row no triangle wrote.
@@ -40,13 +52,13 @@ const UNWRITTEN: [u32; 2] = [u32::MAX, 0];
 impl Map {
     /// A map of `size` texels, not drawn yet (empty).
     pub(super) fn new(size: UVec2) -> Self {
-        Self { size, depths: Vec::new(), empty: true, written: Vec::new() }
+        Self { size, depths: Vec::new(), empty: true, written: Vec::new(), clip: Vec::new(), projected: Vec::new() }
     }
 
     /// A map of `size` texels holding `depths`, every texel counted as written.
     #[cfg(test)]
     pub(super) fn with_depths(size: UVec2, depths: Vec<f32>) -> Self {
-        Self { size, depths, empty: false, written: vec![[0, size.x - 1]; size.y as usize] }
+        Self { size, depths, empty: false, written: vec![[0, size.x - 1]; size.y as usize], clip: Vec::new(), projected: Vec::new() }
     }
 
     /// Draws `sample`'s map: every triangle of `geometry`'s runs, as lavapipe draws
@@ -57,24 +69,42 @@ impl Map {
             return;
         }
         self.clear();
-        let clip: Vec<Vec4> = geometry.positions.iter().map(|p| sample.view_proj * p.extend(1.0)).collect();
+        let (mut clip, mut projected) = (std::mem::take(&mut self.clip), std::mem::take(&mut self.projected));
+        clip.clear();
+        clip.extend(geometry.positions.iter().map(|p| sample.view_proj * p.extend(1.0)));
+        // A vertex behind the near plane is projected too, and never read.
+        projected.clear();
+        projected.extend(clip.iter().map(|&v| self.project(v)));
         // Every map's projection is reversed-Z with the far plane at infinity: clip z is the
         // near plane and w the view depth, so Vulkan's clip volume 0 ≤ z ≤ w leaves only the
         // near plane to clip against (w ≥ z); x and y are clipped by the map's bounds below.
         for triangle in geometry.triangles() {
-            let (a, b, c) = (clip[triangle[0] as usize], clip[triangle[1] as usize], clip[triangle[2] as usize]);
-            let inside = (a.w >= a.z, b.w >= b.z, c.w >= c.z);
+            let [a, b, c] = [0, 1, 2].map(|k| triangle[k] as usize);
+            let inside = (clip[a].w >= clip[a].z, clip[b].w >= clip[b].z, clip[c].w >= clip[c].z);
             match inside {
-                (true, true, true) => self.triangle([a, b, c]),
+                (true, true, true) => self.projected_triangle([projected[a], projected[b], projected[c]]),
                 (false, false, false) => {}
                 _ => {
-                    let polygon = clip_near([a, b, c]);
+                    let polygon = clip_near([clip[a], clip[b], clip[c]]);
                     for k in 1..polygon.len().saturating_sub(1) {
                         self.triangle([polygon[0], polygon[k], polygon[k + 1]]);
                     }
                 }
             }
         }
+        (self.clip, self.projected) = (clip, projected);
+    }
+
+    /// Where a vertex in clip coordinates lands on this map (viewport transform: x right and
+    /// y down from the top-left corner, in texels; depth z / w, as the rasteriser
+    /// interpolates it, affine across the screen), and its fixed point where it fits.
+    #[inline]
+    fn project(&self, v: Vec4) -> Projected {
+        let (w, h) = (self.size.x as f32, self.size.y as f32);
+        let inv = 1.0 / v.w;
+        let screen = Vec3::new((v.x * inv + 1.0) * 0.5 * w, (1.0 - v.y * inv) * 0.5 * h, v.z * inv);
+        let fits = screen.x.abs() < FIXED_RANGE && screen.y.abs() < FIXED_RANGE;
+        Projected { screen, fixed: fits.then(|| [round_to_i64(screen.x * SUBTEXEL), round_to_i64(screen.y * SUBTEXEL)]) }
     }
 
     /// Every texel 0: those the last drawing wrote, or all of them for a map of a new size.
@@ -104,33 +134,23 @@ impl Map {
 
     /// Rasterises one triangle in clip coordinates (every vertex in front of the near plane).
     pub(super) fn triangle(&mut self, vertices: [Vec4; 3]) {
-        let (w, h) = (self.size.x as f32, self.size.y as f32);
-        // Viewport transform: x right and y down from the top-left corner, in texels; depth
-        // z / w, as the rasteriser interpolates it (affine across the screen).
-        let to_screen = |v: Vec4| {
-            let inv = 1.0 / v.w;
-            Vec3::new((v.x * inv + 1.0) * 0.5 * w, (1.0 - v.y * inv) * 0.5 * h, v.z * inv)
-        };
-        let screen = [to_screen(vertices[0]), to_screen(vertices[1]), to_screen(vertices[2])];
-        let fits = screen.iter().all(|s| s.x.abs() < FIXED_RANGE && s.y.abs() < FIXED_RANGE);
-        if fits {
-            self.fixed(screen);
-        } else {
-            self.wide(screen);
+        self.projected_triangle(vertices.map(|v| self.project(v)));
+    }
+
+    /// Rasterises one triangle of projected vertices: in fixed point where every vertex fits.
+    fn projected_triangle(&mut self, vertices: [Projected; 3]) {
+        let screen = vertices.map(|v| v.screen);
+        match vertices.map(|v| v.fixed) {
+            [Some(a), Some(b), Some(c)] => self.fixed_spans_from(screen, [a, b, c], SPAN_FROM),
+            _ => self.wide(screen),
         }
     }
 
-    /// Vulkan's rules in exact fixed point: vertices snapped to 1/`SUBTEXEL`, a texel covered
-    /// when its centre is inside every edge, or on an edge that is a top or a left one.
-    fn fixed(&mut self, screen: [Vec3; 3]) {
-        self.fixed_spans_from(screen, SPAN_FROM);
-    }
-
-    /// `fixed`, finding the covered span of rows at least `span_from` texels wide by solving
-    /// the edges (`SPAN_FROM`) and testing every texel of narrower ones.
-    pub(super) fn fixed_spans_from(&mut self, screen: [Vec3; 3], span_from: i64) {
-        let snap = |s: Vec3| [round_to_i64(s.x * SUBTEXEL), round_to_i64(s.y * SUBTEXEL)];
-        let fixed = [snap(screen[0]), snap(screen[1]), snap(screen[2])];
+    /// Vulkan's rules in exact fixed point: vertices snapped to 1/`SUBTEXEL` (`fixed`), a
+    /// texel covered when its centre is inside every edge, or on an edge that is a top or a
+    /// left one. The covered span of rows at least `span_from` texels wide is found by solving
+    /// the edges (`SPAN_FROM`), every texel of narrower ones tested.
+    pub(super) fn fixed_spans_from(&mut self, screen: [Vec3; 3], fixed: [[i64; 2]; 3], span_from: i64) {
         let area = cross(fixed[0], fixed[1], fixed[2]);
         if area == 0 {
             return;
@@ -192,12 +212,13 @@ impl Map {
                 let line = &mut self.depths[y as usize * width..][..width];
                 let mut w = row;
                 let step = [edges[0].a * sub, edges[1].a * sub, edges[2].a * sub];
-                let mut px = px0;
-                for stored in &mut line[x0 as usize..=x1 as usize] {
-                    if (w[0] | w[1] | w[2]) >= 0 {
-                        *stored = stored.max(across.at(px));
-                    }
-                    px += 1.0;
+                // Without a branch (whether a texel of a small triangle's box is covered is
+                // as good as a coin toss) and with each centre from its index (a stepped one
+                // would carry a float add's latency from texel to texel): the same values.
+                for (i, stored) in line[x0 as usize..=x1 as usize].iter_mut().enumerate() {
+                    let covered = (w[0] | w[1] | w[2]) >= 0;
+                    let drawn = stored.max(across.at(px0 + i as f32));
+                    *stored = if covered { drawn } else { *stored };
                     w = [w[0] + step[0], w[1] + step[1], w[2] + step[2]];
                 }
             }

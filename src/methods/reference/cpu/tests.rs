@@ -2,7 +2,7 @@
 
 use glam::Vec4;
 
-use super::raster::clip_near;
+use super::raster::{clip_near, round_to_i64, SUBTEXEL};
 use super::*;
 
 /// A map of `size`² texels with nothing drawn.
@@ -86,8 +86,9 @@ fn rows_solved_for_their_span_cover_what_testing_every_texel_covers() {
         let screen = [a, b, c].map(|(x, y)| Vec3::new(x, y, 0.1 + 0.8 * (x + y) / 200.0));
         // One triangle a map: the nearest depth of another would hide a texel's difference.
         let (mut spans, mut texels) = (blank(size), blank(size));
-        spans.fixed_spans_from(screen, 0);
-        texels.fixed_spans_from(screen, i64::MAX);
+        let fixed = screen.map(|s| [round_to_i64(s.x * SUBTEXEL), round_to_i64(s.y * SUBTEXEL)]);
+        spans.fixed_spans_from(screen, fixed, 0);
+        texels.fixed_spans_from(screen, fixed, i64::MAX);
         assert!(spans.depths == texels.depths, "triangle {k} {screen:?}: the two ways draw different texels");
         drawn += covered(&spans).len();
     }
