@@ -152,6 +152,7 @@ fn record_on_cpu(ctx: &mut MethodContext<'_>, params: &Params, plan: &SamplePlan
     let effective = plan.effective_samples();
     let mut penumbra = estimate::PenumbraMean::default();
     let runs = ctx.scene.casting_runs(&ctx.spec.light);
+    let mut maps = cpu::Maps::new(plan.crop.size);
     for (b, band) in bands.iter().enumerate() {
         let started = std::time::Instant::now();
         let receivers = cpu::Receivers::new(&ctx.read_surfaces(band.rows.clone())?, SEGMENT, &constants);
@@ -168,7 +169,7 @@ fn record_on_cpu(ctx: &mut MethodContext<'_>, params: &Params, plan: &SamplePlan
                 break;
             }
             let (_, half_spent) =
-                cpu::estimate_into::<false>(&receivers, samples, &constants, geometry, plan.crop.size, &mut sums[half], |done| {
+                cpu::estimate_into::<false>(&receivers, samples, &constants, geometry, &mut maps, &mut sums[half], |done| {
                     progress.at(first + done as u64)
                 });
             first += samples.len() as u64;

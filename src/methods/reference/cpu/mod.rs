@@ -155,6 +155,29 @@ impl<'a> Geometry<'a> {
     }
 }
 
+/// The maps a job's calls draw into, `size` texels each, kept from call to call: a map's
+/// buffer (16 MB at 2,048²) is faulted in by the kernel once a job, not once a call (four calls
+/// a band for `filtered`, two for `reference`).
+pub(super) struct Maps {
+    size: UVec2,
+    maps: Vec<Map>,
+}
+
+impl Maps {
+    /// None yet, of `size` texels.
+    pub(super) fn new(size: UVec2) -> Self {
+        Self { size, maps: Vec::new() }
+    }
+
+    /// The first `count`, made where there are fewer.
+    fn first(&mut self, count: usize) -> &mut [Map] {
+        while self.maps.len() < count {
+            self.maps.push(Map::new(self.size));
+        }
+        &mut self.maps[..count]
+    }
+}
+
 /// One sample as its map is drawn and read.
 #[derive(Clone)]
 pub(super) struct CpuSample {
@@ -281,11 +304,11 @@ pub(super) fn estimate_with<const BLOCKERS: bool>(
     constants: &TestConstants,
     geometry: Geometry<'_>,
     channels: usize,
-    crop_size: UVec2,
+    maps: &mut Maps,
     after: impl FnMut(usize) -> bool,
 ) -> (Sums, Vec<BlockerBlock>, Spent) {
     let mut sums = Sums::new(receivers.blocks.len(), channels);
-    let (blockers, spent) = estimate_into::<BLOCKERS>(receivers, samples, constants, geometry, crop_size, &mut sums, after);
+    let (blockers, spent) = estimate_into::<BLOCKERS>(receivers, samples, constants, geometry, maps, &mut sums, after);
     (sums, blockers, spent)
 }
 
@@ -297,7 +320,7 @@ pub(super) fn estimate_into<const BLOCKERS: bool>(
     samples: &[CpuSample],
     constants: &TestConstants,
     geometry: Geometry<'_>,
-    crop_size: UVec2,
+    maps: &mut Maps,
     sums: &mut Sums,
     mut after: impl FnMut(usize) -> bool,
 ) -> (Vec<BlockerBlock>, Spent) {
@@ -307,10 +330,10 @@ pub(super) fn estimate_into<const BLOCKERS: bool>(
     let mut spent = Spent::default();
     let threads = rayon::current_num_threads().max(1);
     // One map per thread in flight, within the GPU engine's budget for a batch's maps.
-    let map_bytes = crop_size.x as usize * crop_size.y as usize * 4;
+    let map_bytes = maps.size.x as usize * maps.size.y as usize * 4;
     let round = threads.min((super::BATCH_MAP_BYTES as usize / map_bytes.max(1)).max(1));
     spent.round = round;
-    let mut maps: Vec<Map> = (0..round).map(|_| Map::new(crop_size)).collect();
+    let maps = maps.first(round);
     let avx2 = has_avx2();
     let mut done = 0;
     for chunk in samples.chunks(round) {
@@ -363,11 +386,11 @@ pub(super) fn estimate_tiled(
     constants: &TestConstants,
     geometry: Geometry<'_>,
     channels: usize,
-    crop_size: UVec2,
+    maps: &mut Maps,
     mut gather: impl FnMut(&[u32], &Sums, &[BlockerBlock]),
 ) -> Spent {
     let started = std::time::Instant::now();
-    let mut maps: Vec<Map> = samples.iter().map(|_| Map::new(crop_size)).collect();
+    let maps = maps.first(samples.len());
     maps.par_iter_mut().zip(samples).for_each(|(map, sample)| map.draw(sample, geometry));
     let threads = rayon::current_num_threads().max(1);
     let mut spent = Spent { maps_ms: started.elapsed().as_secs_f64() * 1e3, tests_ms: 0.0, round: threads.min(samples.len()) };

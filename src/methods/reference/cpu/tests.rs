@@ -322,9 +322,9 @@ fn receivers_made_a_task_at_a_time_sum_as_the_whole_frame_s_do() {
     let (pixels, segments) = covered_pixels(&surfaces, 16, |_, _| true);
     assert!(pixels.len() > 8 * BLOCKS_PER_TASK * LANES, "several tasks");
     let receivers = Receivers::of_list(&surfaces, pixels.clone(), segments, &constants);
-    let (sums, met, _) = estimate_with::<true>(&receivers, &samples, &constants, geometry, 3, crop, |_| true);
+    let (sums, met, _) = estimate_with::<true>(&receivers, &samples, &constants, geometry, 3, &mut Maps::new(crop), |_| true);
     let mut seen = 0;
-    estimate_tiled(&surfaces, &pixels, &samples, &constants, geometry, 3, crop, |task_pixels, task_sums, task_met| {
+    estimate_tiled(&surfaces, &pixels, &samples, &constants, geometry, 3, &mut Maps::new(crop), |task_pixels, task_sums, task_met| {
         assert_eq!(task_pixels, &pixels[seen..seen + task_pixels.len()], "tasks in order");
         for k in 0..task_pixels.len() {
             let (whole, task) = (seen + k, k);

@@ -288,7 +288,9 @@ fn render_band(
     let (probe_count, other_count) = (count(&shared.probe_samples), count(&shared.other_samples));
     let mut texels = Texels::new((width * height) as usize, shared.channels);
     let mut blockers = vec![[0.0f32; 2]; (width * height) as usize];
-    let mut round = Round { ctx, shared, device, band, surfaces: &surfaces, progress, done };
+    // The CPU engine's maps, kept from round to round and let go before the filter.
+    let maps = cpu::Maps::new(shared.crop_size);
+    let mut round = Round { ctx, shared, device, band, surfaces: &surfaces, progress, done, maps };
 
     // The probes, everywhere.
     round.test(0, before, |_, _| true, &mut texels, &mut blockers)?;
@@ -303,7 +305,8 @@ fn render_band(
     if !round.ctx.supervisor.cancelled() && other_count > 0 && refined.contains(&true) {
         round.test(1, before + probe_count, |x, y| refined[(y * width + x) as usize], &mut texels, &mut blockers)?;
     }
-    let Round { ctx, done, .. } = round;
+    let Round { ctx, done, maps, .. } = round;
+    drop(maps);
 
     // The filter, and the visibility of the band's rows with its error estimate written to the frame.
     let filtering = std::time::Instant::now();
@@ -342,6 +345,7 @@ struct Round<'r, 'c, 'p> {
     surfaces: &'r filter::Surfaces,
     progress: &'r mut Progress<'p>,
     done: &'r mut Done,
+    maps: cpu::Maps,
 }
 
 impl Round<'_, '_, '_> {
@@ -379,16 +383,22 @@ impl Round<'_, '_, '_> {
                 let second_half = half == 1;
                 let spent = match &receivers {
                     None => {
-                        let spent =
-                            cpu::estimate_tiled(surfaces, &pixels, samples, constants, geometry, channels, crop_size, |p, sums, met| {
-                                gather(p, sums, met, second_half, texels, blockers)
-                            });
+                        let spent = cpu::estimate_tiled(
+                            surfaces,
+                            &pixels,
+                            samples,
+                            constants,
+                            geometry,
+                            channels,
+                            &mut self.maps,
+                            |p, sums, met| gather(p, sums, met, second_half, texels, blockers),
+                        );
                         progress.at(first + samples.len() as u64);
                         spent
                     }
                     Some(receivers) => {
                         let (sums, met, spent) =
-                            cpu::estimate_with::<true>(receivers, samples, constants, geometry, channels, crop_size, |n| {
+                            cpu::estimate_with::<true>(receivers, samples, constants, geometry, channels, &mut self.maps, |n| {
                                 progress.at(first + n as u64)
                             });
                         gather(receivers.pixels(), &sums, &met, second_half, texels, blockers);
