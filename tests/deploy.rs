@@ -164,6 +164,13 @@ fn wait_until(limit: Duration, mut ready: impl FnMut() -> bool) -> Option<Durati
     None
 }
 
+/// A job that renders for seconds, for the tests that act while one renders (cancel it, fill the
+/// disk under it, read the backlog behind it): 4,096 maps of a 50,000-triangle terrain, whose
+/// cost is its triangles (no floor the maps leave out, few pixels to test) — ~4.7 s alone on
+/// the 2-core lavapipe machine. Scenes of a few triangles over a floor became too fast for
+/// this as the maps got cheaper (the `occluder` job these tests used went from 4.4 s to 0.5 s).
+const SLOW_JOB: &str = r#"{"scene": {"builtin": "terrain", "triangles": 50000}, "method": {"name": "reference", "samples": 4096, "resolution": 1024}, "output": {"width": 128, "height": 96}}"#;
+
 #[test]
 fn the_container_image_builds_serves_and_stops_gracefully() {
     run(Command::new(repo().join("deploy/build-image.sh")).arg("penumbra:test").env("PENUMBRA_BINARY", env!("CARGO_BIN_EXE_penumbra")));
@@ -431,8 +438,7 @@ fn three_replicas_behind_nginx_share_redis_and_survive_a_sigkill() {
 
     // A job running on one replica is cancelled by a DELETE that reaches another: the store
     // marks it, the worker's next heartbeat stops the render, the record ends `cancelled`.
-    let long = r#"{"scene": {"builtin": "occluder"}, "method": {"name": "reference", "samples": 4096, "resolution": 1024}, "output": {"width": 128, "height": 96}}"#;
-    let id = cluster.submit(long, "builtin:occluder");
+    let id = cluster.submit(SLOW_JOB, "builtin:terrain");
     let mut worker = String::new();
     let running = wait_until(Duration::from_secs(60), || {
         let r = cluster.record(&id);
@@ -1030,10 +1036,8 @@ fn a_full_data_disk_refuses_new_jobs_loses_none_and_recovers_without_a_restart()
     let (disk, _daemon, base) = daemon_on_small_disk("6m");
     let small = r#"{"scene": {"builtin": "torus"}, "output": {"width": 256, "height": 192}}"#;
     // Slow enough (several seconds alone, far more beside the other suites) that it cannot
-    // finish before the disk is full again, whatever the machine's load: 4.4 s alone on the
-    // 2-core lavapipe machine (at 512² maps the batched reference took 1.5 s, and under CI's
-    // load it finished before the disk filled).
-    let slow = r#"{"scene": {"builtin": "occluder"}, "method": {"name": "reference", "samples": 4096, "resolution": 1024}, "output": {"width": 128, "height": 96}}"#;
+    // finish before the disk is full again, whatever the machine's load (`SLOW_JOB`).
+    let slow = SLOW_JOB;
     let submit_running = |job: &str| {
         let (status, body) = http("POST", &format!("{base}/v1/jobs"), Some(job)).unwrap();
         assert_eq!(status, 202, "{}", String::from_utf8_lossy(&body));
@@ -1499,7 +1503,7 @@ fn every_replica_reads_the_same_backlog_and_the_autoscaler_rule_selects_it() {
     for &port in &ports {
         wait_ready(port);
     }
-    let slow = r#"{"scene": {"builtin": "crowd"}, "method": {"name": "reference", "samples": 4096, "resolution": 1024}, "output": {"width": 480, "height": 360}}"#;
+    let slow = SLOW_JOB;
     let ids: Vec<String> = (0..8)
         .map(|k| {
             let (status, body) = http("POST", &format!("http://127.0.0.1:{}/v1/jobs", ports[k % 2]), Some(slow)).unwrap();
