@@ -167,8 +167,8 @@ fn wait_until(limit: Duration, mut ready: impl FnMut() -> bool) -> Option<Durati
 /// A job that renders for seconds, for the tests that act while one renders (cancel it, fill the
 /// disk under it, read the backlog behind it): 4,096 maps of a 50,000-triangle terrain, whose
 /// cost is its triangles (no floor the maps leave out, few pixels to test) — ~4.7 s alone on
-/// the 2-core lavapipe machine. Scenes of a few triangles over a floor became too fast for
-/// this as the maps got cheaper (the `occluder` job these tests used went from 4.4 s to 0.5 s).
+/// the 2-core lavapipe machine, where a scene of a few triangles over a floor takes a tenth of
+/// that.
 const SLOW_JOB: &str = r#"{"scene": {"builtin": "terrain", "triangles": 50000}, "method": {"name": "reference", "samples": 4096, "resolution": 1024}, "output": {"width": 128, "height": 96}}"#;
 
 #[test]
@@ -917,8 +917,8 @@ fn a_redis_restart_mid_batch_loses_no_accepted_job() {
     let job = r#"{"scene": {"builtin": "occluder"}, "method": {"name": "reference", "samples": 192, "resolution": 256}, "output": {"width": 96, "height": 64}}"#;
     // One job some hundred times longer goes first (seconds on lavapipe, where a short one
     // takes tens of milliseconds), so that one replica still renders it when the other has
-    // finished two short ones and Redis is killed. A margin of a few tenths of a second, as
-    // once here, was not enough for CI.
+    // finished two short ones and Redis is killed: a margin of tenths of a second is not
+    // enough under CI's load.
     let long = r#"{"scene": {"builtin": "occluder"}, "method": {"name": "reference", "samples": 4096, "resolution": 256}, "output": {"width": 1280, "height": 960}}"#;
     let ids: Vec<String> = (0..13)
         .map(|k| {

@@ -1,7 +1,7 @@
 //! A scene's bounding triangles: large triangles with the whole scene on one side of their
 //! plane — a floor, the walls of a room. From a light on that side such a triangle shadows
-//! nothing, so the sample maps of `reference` and `filtered` leave it out (contract §4): the
-//! floor is the largest fill of every map.
+//! nothing, so the sample maps of `reference` and `filtered` leave it out (contract §1,
+//! *Reference*): the floor is the largest fill of every map.
 //!
 //! Why it shadows nothing: every point of the scene is a convex combination of its vertices,
 //! so it lies on the plane or on the scene's side. A segment from a point of the light,
@@ -93,13 +93,9 @@ impl BoundingTriangles {
     }
 
     /// How many were found.
-    pub fn len(&self) -> usize {
+    #[cfg(test)]
+    fn len(&self) -> usize {
         self.planes.len()
-    }
-
-    /// Whether none were.
-    pub fn is_empty(&self) -> bool {
-        self.planes.is_empty()
     }
 
     /// The runs of indices (three a triangle) of the triangles that can shadow some point of

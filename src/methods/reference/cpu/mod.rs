@@ -295,7 +295,8 @@ impl Spent {
     }
 }
 
-/// Estimates every receiver's sums over `samples` (their maps drawn from `geometry`), `channels` of them (1: every weight gray, the red one stands for all), and with
+/// Estimates every receiver's sums over `samples` (their maps drawn from `geometry` into
+/// `maps`), `channels` of them (1: every weight gray, the red one stands for all), and with
 /// `BLOCKERS` the blockers its tests met (else none are kept). `after` hears how many samples
 /// are done after each round and says whether to go on.
 pub(super) fn estimate_with<const BLOCKERS: bool>(

@@ -29,8 +29,9 @@ pub(super) struct Map {
     /// Nothing drawn (no receiver falls in this sample's map): every test lit.
     pub(super) empty: bool,
     /// Per row, the texels `[first, last]` that the last drawing may have written (first >
-    /// last: none), so that the next one clears those alone: on a map of 2,048² a clear of
-    /// the whole cost about a third of drawing a scene of figures over a floor.
+    /// last: none), so that the next one clears those alone: without the floor
+    /// (`scene::bounding`) most of a map is never written, and clearing all of it cost about
+    /// half as much as drawing the figures on it (docs/performance-log.md).
     written: Vec<[u32; 2]>,
     /// Per vertex of the scene, its clip coordinates and where it lands on this map: taken once
     /// a map, not once for each of the (on a mesh, about six) triangles that share it.
@@ -184,13 +185,15 @@ impl Map {
             return;
         }
         let edges = [edge(p1, p2), edge(p2, p0), edge(p0, p1)];
+        // Each edge function's step a texel along a row and a row down.
+        let (step_x, step_y) = (edges.each_ref().map(|e| e.a * sub), edges.each_ref().map(|e| e.b * sub));
         let centre = |i: i64| i * sub + sub / 2;
         let at = |e: &Edge| e.a * centre(x0) + e.b * centre(y0) + e.c;
         let mut row = [at(&edges[0]), at(&edges[1]), at(&edges[2])];
         let depth = DepthPlane::new([screen[order[0]], screen[order[1]], screen[order[2]]]);
         let width = self.size.x as usize;
-        // Texel centres as f32 are exact (integers and a half, far below 2²³): stepping them by
-        // one gives what converting each would.
+        // Texel centres as f32 are exact (integers and a half, far below 2²³): the first's plus
+        // i gives what converting each would.
         let px0 = x0 as f32 + 0.5;
         #[cfg(target_arch = "x86_64")]
         if self.avx2 && x1 - x0 < span_from.min(8) {
@@ -198,7 +201,6 @@ impl Map {
                 self.mark(y, x0, x1);
             }
             let plane = [depth.origin.z, depth.origin.x, depth.dx, depth.origin.y, depth.dy];
-            let (step_x, step_y) = (edges.each_ref().map(|e| e.a * sub), edges.each_ref().map(|e| e.b * sub));
             let (columns, rows) = ((x0 as usize, (x1 - x0 + 1) as usize), y0 as usize..y1 as usize + 1);
             // Safety: `avx2` says the CPU has AVX2 (`super::has_avx2`); the box lies in the map
             // and is at most eight texels wide.
@@ -210,7 +212,7 @@ impl Map {
             if x1 - x0 >= span_from {
                 let (mut from, mut to) = (x0, x1);
                 for k in 0..3 {
-                    let step = edges[k].a * sub;
+                    let step = step_x[k];
                     match step.signum() {
                         // w + step·(x − x0) ≥ 0 from x0 + ⌈−w / step⌉ on.
                         1 => from = from.max(x0 + (-row[k] + step - 1).div_euclid(step)),
@@ -235,7 +237,6 @@ impl Map {
                 self.mark(y, x0, x1);
                 let line = &mut self.depths[y as usize * width..][..width];
                 let mut w = row;
-                let step = [edges[0].a * sub, edges[1].a * sub, edges[2].a * sub];
                 // Without a branch (whether a texel of a small triangle's box is covered is
                 // as good as a coin toss) and with each centre from its index (a stepped one
                 // would carry a float add's latency from texel to texel): the same values.
@@ -243,11 +244,11 @@ impl Map {
                     let covered = (w[0] | w[1] | w[2]) >= 0;
                     let drawn = stored.max(across.at(px0 + i as f32));
                     *stored = if covered { drawn } else { *stored };
-                    w = [w[0] + step[0], w[1] + step[1], w[2] + step[2]];
+                    w = [w[0] + step_x[0], w[1] + step_x[1], w[2] + step_x[2]];
                 }
             }
             for k in 0..3 {
-                row[k] += edges[k].b * sub;
+                row[k] += step_y[k];
             }
         }
     }

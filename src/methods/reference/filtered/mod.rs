@@ -39,6 +39,7 @@ use super::{
     RESOLUTION, SEED, SLOPE_BIAS_TEXELS,
 };
 use crate::error::JobResult;
+use crate::gpu::scene::Runs;
 use crate::params::Cap;
 use crate::render::method::{CounterKey, ERROR_ESTIMATE};
 use crate::timing::PhaseName;
@@ -126,6 +127,7 @@ impl ShadowMethod for Filtered {
         let everywhere = u64::from(ctx.width) * u64::from(ctx.height) <= REFINE_EVERYWHERE_PIXELS_PER_TRIANGLE * ctx.scene.triangles;
         let shared = Shared {
             everywhere,
+            runs: ctx.scene.casting_runs(&spec.light),
             probe_samples,
             other_samples,
             constants,
@@ -189,11 +191,10 @@ impl ShadowMethod for Filtered {
 /// The most pixels a frame has, per triangle of its scene, for every covered pixel to be
 /// tested against every sample, not only those the probes find near a penumbra. The
 /// refinement saves tests, and every map is drawn anyway: a triangle set up and drawn into a
-/// map costs about as much as 50 to 150 tests of a pixel against one (the CPU engine at
-/// 1080p: `crowd` ~190 ns a triangle, `terrain` ~70; ~1.3 ns a test), so on a frame of at most
-/// ten pixels a triangle, testing every pixel adds at most about a fifth of the maps' time,
-/// and no small penumbra that all the probes happened to miss is left out (docs/methods.md).
-/// Counted on the frame, not a band, so that bands give the frame's pixels.
+/// map costs as much as a few dozen tests of a pixel against one, so on a frame of at most ten
+/// pixels a triangle testing every pixel adds at most a fraction of the maps' time (measured
+/// in docs/methods.md), and no small penumbra that all the probes happened to miss is left
+/// out. Counted on the frame, not a band, so that bands give the frame's pixels.
 const REFINE_EVERYWHERE_PIXELS_PER_TRIANGLE: u64 = 10;
 
 /// The rows a band reads beyond those it writes, either side: what a written pixel depends on —
@@ -226,6 +227,8 @@ struct Shared {
     /// Whether every covered pixel is tested against every sample
     /// (`REFINE_EVERYWHERE_PIXELS_PER_TRIANGLE`).
     everywhere: bool,
+    /// The triangles the CPU engine's maps draw (`GpuScene::casting_runs`).
+    runs: Runs,
     probe_samples: [Vec<CpuSample>; 2],
     other_samples: [Vec<CpuSample>; 2],
     constants: cpu::TestConstants,
@@ -366,8 +369,7 @@ impl Round<'_, '_, '_> {
         let Some(device) = self.device else {
             let (pixels, segments) = cpu::covered_pixels(surfaces, SEGMENT, keep);
             let halves = if round == 0 { &shared.probe_samples } else { &shared.other_samples };
-            let runs = self.ctx.scene.casting_runs(&self.ctx.spec.light);
-            let geometry = cpu::Geometry { positions: self.ctx.scene.positions(), indices: self.ctx.scene.indices(), runs: &runs };
+            let geometry = cpu::Geometry { positions: self.ctx.scene.positions(), indices: self.ctx.scene.indices(), runs: &shared.runs };
             let (channels, crop_size) = (shared.channels, shared.crop_size);
             // A half's maps held at once where they take fewer bytes than the frame-sized
             // receivers and sums would (the probes over a large frame): the same sums.
@@ -467,7 +469,7 @@ impl Round<'_, '_, '_> {
 /// sums (the gray one standing for all three under a gray light), to its second half's too
 /// where `second_half`, and the count and summed depth of the blockers its tests met. On one
 /// core: the first round touches the frame's texels first, and the kernel's faults of their
-/// pages, most of its time, took three times as long from two threads at once.
+/// pages, most of its time, took longer from two threads at once (docs/performance-log.md).
 fn gather(pixels: &[u32], sums: &Sums, met: &[BlockerBlock], second_half: bool, texels: &mut Texels, blockers: &mut [[f32; 2]]) {
     for (k, &pixel) in pixels.iter().enumerate() {
         let (block, lane) = (k / cpu::LANES, k % cpu::LANES);
