@@ -229,10 +229,12 @@ impl<'a> Progress<'a> {
         Self { supervisor, total, done: 0 }
     }
 
-    /// Notes `done` samples done; whether that is a point to report (and flush) at.
+    /// Notes `done` samples done; whether that is a point to report (and flush) at. Samples
+    /// done again (`filtered`'s probes of the pixels it tests late) report nothing: progress
+    /// never goes back.
     fn reaches(&mut self, done: u64) -> bool {
-        let report = done / BATCH > self.done / BATCH || done == self.total;
-        self.done = done;
+        let report = done / BATCH > self.done / BATCH || (done == self.total && self.done < done);
+        self.done = self.done.max(done);
         report
     }
 

@@ -18,8 +18,10 @@ use rayon::prelude::*;
 #[cfg(target_arch = "x86_64")]
 mod avx2;
 mod raster;
+mod settled;
 
 use raster::Map;
+pub(super) use settled::{cell_maxima, lit_tiles};
 
 use super::estimate::{PenumbraMean, Texel};
 use crate::render::method::Surfaces;

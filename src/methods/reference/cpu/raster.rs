@@ -4,6 +4,7 @@
 
 use glam::{UVec2, Vec3, Vec4};
 
+use super::settled::CellMaxima;
 use super::{CpuSample, Geometry};
 
 /// Fixed-point steps per texel of a map's vertex coordinates: llvmpipe's 8 bits of sub-texel
@@ -105,6 +106,20 @@ impl Map {
             }
         }
         (self.clip, self.projected) = (clip, projected);
+    }
+
+    /// The map's largest depth per cell (`settled::CellMaxima`), read from the texels the last
+    /// drawing wrote: the rest are 0.
+    pub(super) fn cell_maxima(&self) -> CellMaxima {
+        let mut cells = CellMaxima::new([self.size.x, self.size.y], self.empty);
+        if !self.empty {
+            let width = self.size.x as usize;
+            for (y, span) in self.written.iter().enumerate().filter(|(_, span)| span[0] <= span[1]) {
+                let row = &self.depths[y * width..][..width];
+                cells.add_row(y as u32, span[0], &row[span[0] as usize..=span[1] as usize]);
+            }
+        }
+        cells
     }
 
     /// Where a vertex in clip coordinates lands on this map (viewport transform: x right and

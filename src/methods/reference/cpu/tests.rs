@@ -279,19 +279,17 @@ fn snapping_rounds_as_f32_round_does() {
     }
 }
 
-#[test]
-fn receivers_made_a_task_at_a_time_sum_as_the_whole_frame_s_do() {
-    // A floor (y = 0) under a square light at y = 5 facing down, a triangle between them
-    // at y = 1, and pixels with no surface here and there; enough pixels for several waves of
-    // tasks.
-    let (width, height) = (240u32, 160u32);
+/// A floor (y = 0) under a square light at y = 5 facing down, a triangle between them at y =
+/// 1 (its vertices), and pixels with no surface here and there, `width` × `height` of them;
+/// three samples of the light with maps of `resolution`² texels.
+fn floor_under_a_triangle(width: u32, height: u32, resolution: u32) -> (Surfaces, TestConstants, Vec<CpuSample>, [Vec3; 3]) {
     let surfaces = Surfaces::from_fn(width, height, |x, y| {
         let position = Vec3::new(4.0 * x as f32 / width as f32 - 2.0, 0.0, 4.0 * y as f32 / height as f32 - 2.0);
         (position, if (x * 7 + y * 3) % 11 == 0 { Vec3::ZERO } else { Vec3::Y })
     });
     let rotation = Mat4::look_to_rh(Vec3::ZERO, -Vec3::Y, Vec3::Z);
     let center = Vec3::new(0.0, 5.0, 0.0);
-    let (resolution, near) = (64u32, 0.5f32);
+    let near = 0.5f32;
     let constants = TestConstants {
         rotation,
         plane: rotation.transform_point3(center).z,
@@ -317,6 +315,14 @@ fn receivers_made_a_task_at_a_time_sum_as_the_whole_frame_s_do() {
         })
         .collect();
     let positions = [Vec3::new(-1.0, 1.0, -1.0), Vec3::new(1.5, 1.0, -0.5), Vec3::new(0.0, 1.0, 1.5)];
+    (surfaces, constants, samples, positions)
+}
+
+#[test]
+fn receivers_made_a_task_at_a_time_sum_as_the_whole_frame_s_do() {
+    // Enough pixels for several waves of tasks.
+    let resolution = 64;
+    let (surfaces, constants, samples, positions) = floor_under_a_triangle(240, 160, resolution);
     let geometry = one_triangle(&positions);
     let crop = UVec2::splat(resolution);
     let (pixels, segments) = covered_pixels(&surfaces, 16, |_, _| true);
@@ -341,4 +347,41 @@ fn receivers_made_a_task_at_a_time_sum_as_the_whole_frame_s_do() {
     // The triangle shadows some receivers and not others.
     let shadowed = (0..pixels.len()).filter(|&k| met[k / LANES].count[k % LANES] > 0.0).count();
     assert!(shadowed > 0 && shadowed < pixels.len(), "{shadowed} of {}", pixels.len());
+}
+
+#[test]
+fn tiles_found_lit_without_a_test_are_lit_by_every_test_and_sum_as_maps_that_hold_nothing() {
+    let (mut surfaces, constants, samples, positions) = floor_under_a_triangle(240, 160, 512);
+    // A shelf of the floor raised to just under the triangle (y = 1): receivers whose
+    // blocker is a hair nearer the light.
+    for y in 40..120 {
+        for position in &mut surfaces.positions[y * 240..(y + 1) * 240] {
+            position.y = 0.95;
+        }
+    }
+    let geometry = one_triangle(&positions);
+    let crop = UVec2::splat(constants.resolution);
+    let (maxima, _) = settled::cell_maxima(&samples, geometry, &mut Maps::new(crop));
+    let tile = 8;
+    let lit = settled::lit_tiles(&surfaces, tile, &samples, &maxima, &constants, 3);
+    let columns = surfaces.width.div_ceil(tile);
+    let in_lit = |x: u32, y: u32| lit[(y / tile * columns + x / tile) as usize];
+    let (pixels, segments) = covered_pixels(&surfaces, 16, in_lit);
+    // Much of the floor is found lit, and the triangle's shadow is not.
+    let found = lit.iter().filter(|&&l| l).count();
+    assert!(found > lit.len() / 4 && found < lit.len(), "{found} of {} tiles", lit.len());
+    let receivers = Receivers::of_list(&surfaces, pixels.clone(), segments, &constants);
+    let (sums, met, _) = estimate_with::<true>(&receivers, &samples, &constants, geometry, 3, &mut Maps::new(crop), |_| true);
+    // The same samples with no map: every test lit.
+    let unmapped: Vec<CpuSample> = samples.iter().map(|s| CpuSample { crop_origin: None, ..s.clone() }).collect();
+    let (open, open_met, _) = estimate_with::<true>(&receivers, &unmapped, &constants, geometry, 3, &mut Maps::new(crop), |_| true);
+    let bits = |sums: [f32; 3]| sums.map(f32::to_bits);
+    for (k, pixel) in pixels.iter().enumerate() {
+        let (b, l) = (k / LANES, k % LANES);
+        let ((shadowed, unshadowed), (open_shadowed, open_unshadowed)) = (sums.lane(b, l), open.lane(b, l));
+        assert_eq!(bits(shadowed), bits(unshadowed), "pixel {pixel} lit by every test");
+        assert!(unshadowed.iter().sum::<f32>() > 0.0, "pixel {pixel} lit at all");
+        assert_eq!([bits(shadowed), bits(unshadowed)], [bits(open_shadowed), bits(open_unshadowed)], "pixel {pixel}");
+        assert_eq!([met[b].count[l], open_met[b].count[l]], [0.0, 0.0], "pixel {pixel}");
+    }
 }

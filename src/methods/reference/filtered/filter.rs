@@ -229,12 +229,12 @@ impl FilterOutput {
 }
 
 /// The pixels to test against every sample: the surfaces in the tiles that vary, by their
-/// probes.
+/// probes — or, in a `lit` tile (`cpu::lit_tiles`), lit by every probe without a test.
 ///
 /// A surface that no probe lights (`Dark`) counts as a state of its own: next to lit or
 /// shadowed pixels it is a terminator, where the probes may all lie below a horizon the other
 /// samples clear. A pixel without a surface counts for nothing.
-pub(super) fn refined(surfaces: &Surfaces, texels: &Texels) -> Vec<bool> {
+pub(super) fn refined(surfaces: &Surfaces, texels: &Texels, lit: Option<&[bool]>) -> Vec<bool> {
     let tiles = Tiles::new(surfaces.width, surfaces.height);
     let (width, height) = (surfaces.width as usize, surfaces.height as usize);
     let covered = |i: usize| has_surface(surfaces, i);
@@ -243,9 +243,11 @@ pub(super) fn refined(surfaces: &Surfaces, texels: &Texels) -> Vec<bool> {
         .into_par_iter()
         .flat_map_iter(|ty| {
             let mut row = vec![0u8; tiles.columns as usize];
+            let lit = |x: usize| lit.is_some_and(|lit| lit[ty * tiles.columns as usize + x / TILE as usize]);
             for y in ty * TILE as usize..((ty + 1) * TILE as usize).min(height) {
                 for (x, i) in (y * width..(y + 1) * width).enumerate().filter(|&(_, i)| covered(i)) {
-                    row[x / TILE as usize] |= 1 << state(&texels.get(i)) as u8;
+                    let state = if lit(x) { State::Lit } else { state(&texels.get(i)) };
+                    row[x / TILE as usize] |= 1 << state as u8;
                 }
             }
             row
@@ -260,6 +262,23 @@ pub(super) fn refined(surfaces: &Surfaces, texels: &Texels) -> Vec<bool> {
         })
         .collect();
     (0..texels.len()).into_par_iter().map(|i| covered(i) && varies[tiles.of(i)]).collect()
+}
+
+/// The tiles (rows of ⌈width / `TILE`⌉) whose texels the filter may read: those within its
+/// reach (`MAX_RADIUS`, along a row or a column) of a `refined` pixel, which it filters.
+pub(super) fn read_tiles(refined: &[bool], width: u32, height: u32) -> Vec<bool> {
+    let tiles = Tiles::new(width, height);
+    let (columns, rows) = (tiles.columns as usize, tiles.rows as usize);
+    let mut holds = vec![false; tiles.count()];
+    for (i, _) in refined.iter().enumerate().filter(|(_, &r)| r) {
+        holds[tiles.of(i)] = true;
+    }
+    // A pixel's reach ends at most this many tiles past its own; the square of tiles around
+    // each, a row's then a column's.
+    let reach = MAX_RADIUS.div_ceil(TILE) as usize;
+    let near = |at: usize, len: usize| at.saturating_sub(reach)..(at + reach + 1).min(len);
+    let across: Vec<bool> = (0..tiles.count()).map(|t| near(t % columns, columns).any(|x| holds[t - t % columns + x])).collect();
+    (0..tiles.count()).map(|t| near(t / columns, rows).any(|y| across[y * columns + t % columns])).collect()
 }
 
 /// Every pixel with a surface: a frame refined everywhere.

@@ -116,7 +116,7 @@ impl ShadowMethod for Filtered {
             order[usize::from(index >= probes)][usize::from(half_of_index(index))].push(k);
         }
         let cpu_samples = plan.cpu_samples();
-        let [probe_samples, other_samples] =
+        let [probe_samples, other_samples]: [[Vec<CpuSample>; 2]; 2] =
             order.clone().map(|halves| halves.map(|ks| ks.iter().map(|&k| cpu_samples[k].clone()).collect()));
         let on_cpu = match params.get(&ENGINE) {
             Engine::Cpu => true,
@@ -128,6 +128,8 @@ impl ShadowMethod for Filtered {
         let shared = Shared {
             everywhere,
             runs: ctx.scene.casting_runs(&spec.light),
+            // The probes with no map: each test lit, as it is in a tile they all see lit.
+            lit_probes: probe_samples.clone().map(|half| half.into_iter().map(|s| CpuSample { crop_origin: None, ..s }).collect()),
             probe_samples,
             other_samples,
             constants,
@@ -231,6 +233,9 @@ struct Shared {
     runs: Runs,
     probe_samples: [Vec<CpuSample>; 2],
     other_samples: [Vec<CpuSample>; 2],
+    /// The probes without their maps (`CpuSample::crop_origin` none): their sums in the tiles
+    /// they all see lit (`cpu::lit_tiles`), where every test is lit.
+    lit_probes: [Vec<CpuSample>; 2],
     constants: cpu::TestConstants,
     channels: usize,
     crop_size: glam::UVec2,
@@ -295,10 +300,25 @@ fn render_band(
     let maps = cpu::Maps::new(shared.crop_size);
     let mut round = Round { ctx, shared, device, band, surfaces: &surfaces, progress, done, maps };
 
-    // The probes, everywhere.
-    round.test(0, before, |_, _| true, &mut texels, &mut blockers)?;
+    // The probes, everywhere but in the tiles they all see lit as a whole (on the CPU's cores;
+    // every pixel where every pixel is refined): those pixels are lit, as their tests would say.
+    let columns = width.div_ceil(filter::TILE);
+    let tile = move |x: u32, y: u32| (y / filter::TILE * columns + x / filter::TILE) as usize;
+    let lit = (device.is_none() && !shared.everywhere).then(|| round.lit_tiles());
+    let settled = |x: u32, y: u32| lit.as_ref().is_some_and(|lit| lit[tile(x, y)]);
+    round.test(0, before, |x, y| !settled(x, y), &mut texels, &mut blockers)?;
     // With one set there is nothing more to test; its varying pixels are still filtered.
-    let refined = if shared.everywhere { filter::covered(&surfaces) } else { filter::refined(&surfaces, &texels) };
+    let refined = if shared.everywhere { filter::covered(&surfaces) } else { filter::refined(&surfaces, &texels, lit.as_deref()) };
+    // The lit tiles the filter reads get their probes' sums after all (it weighs a pixel's
+    // neighbours by them): the sums of tests that are all lit, with no map to read. The rest
+    // keep none, which the visibility writes as lit too.
+    if let Some(lit) = &lit {
+        let read = filter::read_tiles(&refined, width, height);
+        let late: Vec<bool> = lit.iter().zip(&read).map(|(&lit, &read)| lit && read).collect();
+        if late.contains(&true) {
+            round.test(2, before, |x, y| late[tile(x, y)], &mut texels, &mut blockers)?;
+        }
+    }
     let written = band.written();
     if other_count > 0 {
         let pixels = written.start as usize * width as usize..written.end as usize * width as usize;
@@ -352,8 +372,22 @@ struct Round<'r, 'c, 'p> {
 }
 
 impl Round<'_, '_, '_> {
+    /// The tiles (`filter::TILE`², by rows of them) whose every covered pixel the probes all
+    /// see lit (`cpu::lit_tiles`), from the probes' maps drawn for it.
+    fn lit_tiles(&mut self) -> Vec<bool> {
+        let shared = self.shared;
+        let probes = shared.probe_samples.concat();
+        let geometry = cpu::Geometry { positions: self.ctx.scene.positions(), indices: self.ctx.scene.indices(), runs: &shared.runs };
+        let (maxima, mut spent) = cpu::cell_maxima(&probes, geometry, &mut self.maps);
+        let testing = std::time::Instant::now();
+        let lit = cpu::lit_tiles(self.surfaces, filter::TILE, &probes, &maxima, &shared.constants, shared.channels);
+        spent.tests_ms += testing.elapsed().as_secs_f64() * 1e3;
+        self.done.spent.add(spent);
+        lit
+    }
+
     /// Tests the band's covered pixels (x, y) that `keep` keeps against round `round`'s
-    /// samples (0: the probes, 1: the rest), both halves, the first of them the frame's
+    /// samples (0: the probes, 1: the rest; on the CPU, 2: the probes without maps), both halves, the first of them the frame's
     /// `first`-th sample, and adds their sums and blockers to `texels` and `blockers`.
     fn test(
         &mut self,
@@ -368,7 +402,7 @@ impl Round<'_, '_, '_> {
         let started = std::time::Instant::now();
         let Some(device) = self.device else {
             let (pixels, segments) = cpu::covered_pixels(surfaces, SEGMENT, keep);
-            let halves = if round == 0 { &shared.probe_samples } else { &shared.other_samples };
+            let halves = [&shared.probe_samples, &shared.other_samples, &shared.lit_probes][round];
             let geometry = cpu::Geometry { positions: self.ctx.scene.positions(), indices: self.ctx.scene.indices(), runs: &shared.runs };
             let (channels, crop_size) = (shared.channels, shared.crop_size);
             // A half's maps held at once where they take fewer bytes than the frame-sized

@@ -83,7 +83,7 @@ fn a_straight_ramp_stays_where_it_was_and_steps_are_smoothed() {
     let halved = |x: u32| (steps(x, 16.0), steps(x, 14.0));
     let stepped = |x: u32| 0.5 * (halved(x).0 + halved(x).1);
     let surfaces = floor(|_| 0.0);
-    let refined = filter::refined(&surfaces, &halves(halved, 0.5));
+    let refined = filter::refined(&surfaces, &halves(halved, 0.5), None);
     assert!(refined[(32 * SIZE + 32) as usize] && !refined[(32 * SIZE + 2) as usize], "the penumbra is refined, the lit floor not");
     let out = filter::filter(&inputs(&camera, 1.0), &surfaces, halves(halved, 0.5), &blockers(2.0), &refined);
     let error = |v: &dyn Fn(u32) -> f32| (20..44).map(|x| (v(x) - ramp(x)).abs()).sum::<f32>() / 24.0;
