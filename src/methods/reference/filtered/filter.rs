@@ -106,6 +106,12 @@ struct Verdict {
 
 impl Verdict {
     fn of(texel: &Texel) -> Self {
+        // Samples that all agree, in both halves (a neighbour its probes settled), have no
+        // error, as `Texel::error` would find (each half's ratio the same 1, or 0).
+        let lit = texel.shadowed == texel.unshadowed && texel.half_shadowed == texel.half_unshadowed;
+        if lit || (texel.shadowed == [0.0; 3] && texel.half_shadowed == [0.0; 3]) {
+            return Self { gray: texel.gray(), error: 0.0 };
+        }
         Self { gray: texel.gray(), error: texel.error() }
     }
 }
@@ -119,9 +125,9 @@ struct Guide {
 
 impl Guide {
     /// Neighbour `q`'s weight, from 0 to 1, given its geometry's as exp(`exponent`) (one
-    /// exponential for both).
-    fn weight(&self, q: &Texel, verdict: Verdict, exponent: f32) -> f32 {
-        let seen = (0..3).fold(1.0f32, |least, c| {
+    /// exponential for both); its first `channels` are read (1: the gray one stands for all).
+    fn weight(&self, q: &Texel, verdict: Verdict, exponent: f32, channels: usize) -> f32 {
+        let seen = (0..channels).fold(1.0f32, |least, c| {
             let (a, b) = (self.unshadowed[c], q.unshadowed[c]);
             if a.max(b) > 0.0 {
                 least.min(a.min(b) / a.max(b))
@@ -393,8 +399,9 @@ pub(super) fn filter(
                     continue; // Off the pixel's tangent plane: another surface.
                 }
                 let facing = n.dot(surfaces.normals[j]).max(0.0).powi(NORMAL_POWER);
-                let w = guide.weight(&q, verdict(j), -d.length_squared() * inv_two_sigma2 - plane * plane * inv_two_tolerance2) * facing;
-                for c in 0..3 {
+                let exponent = -d.length_squared() * inv_two_sigma2 - plane * plane * inv_two_tolerance2;
+                let w = guide.weight(&q, verdict(j), exponent, channels) * facing;
+                for c in 0..channels {
                     sum.shadowed[c] += w * q.shadowed[c];
                     sum.unshadowed[c] += w * q.unshadowed[c];
                     sum.half_shadowed[c] += w * q.half_shadowed[c];
@@ -404,6 +411,12 @@ pub(super) fn filter(
             }
             if weights <= 0.0 {
                 return own;
+            }
+            if channels == 1 {
+                // The gray sums stand for all three.
+                for sums in [&mut sum.shadowed, &mut sum.unshadowed, &mut sum.half_shadowed, &mut sum.half_unshadowed] {
+                    *sums = [sums[0]; 3];
+                }
             }
             let mean = |sums: [f32; 3]| sums.map(|s| s / weights);
             Texel {

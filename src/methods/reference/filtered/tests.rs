@@ -181,3 +181,25 @@ fn the_kernel_stops_where_the_shadow_differs_by_more_than_its_noise() {
         assert!((v - own).abs() < 2e-3, "pixel {x}: {v}, not {own}");
     }
 }
+
+#[test]
+fn samples_that_all_agree_in_both_halves_estimate_no_error() {
+    // The filter takes such a neighbour's error as 0 without computing it: all lit, all
+    // shadowed, or unlit, whatever the sums and however the halves share the light (none in
+    // one half, or in one channel).
+    let mut texels = Vec::new();
+    for (whole, second) in [([0.7, 0.2, 0.1], [0.3, 0.0, 0.05]), ([1e-30, 2.0, 0.0], [0.0; 3]), ([0.0; 3], [0.0; 3]), ([5.0; 3], [5.0; 3])]
+    {
+        let first = [0, 1, 2].map(|c| whole[c] - second[c]);
+        let mut lit = Texel::UNCOVERED;
+        lit.add(first, first, false);
+        lit.add(second, second, true);
+        let mut shadowed = Texel::UNCOVERED;
+        shadowed.add([0.0; 3], first, false);
+        shadowed.add([0.0; 3], second, true);
+        texels.extend([lit, shadowed]);
+    }
+    for texel in texels {
+        assert_eq!(texel.error().to_bits(), 0.0f32.to_bits(), "{texel:?}");
+    }
+}
