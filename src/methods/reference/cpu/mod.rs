@@ -21,7 +21,7 @@ mod raster;
 mod settled;
 
 use raster::Map;
-pub(super) use settled::{cell_maxima, lit_tiles};
+pub(super) use settled::{cell_maxima, lit_tiles, CellMaxima};
 
 use super::estimate::{PenumbraMean, Texel};
 use crate::render::method::Surfaces;

@@ -195,33 +195,34 @@ pub(super) struct FilterOutput {
 }
 
 impl FilterOutput {
-    /// The visibility of texels `range`, whole rows of `width` (rgb, and w the estimated
-    /// error), and the estimate's sum over their penumbra added to `penumbra` — row by row on
-    /// every core, the rows' sums added in order: the same mean however the rows are cut into
-    /// calls or bands.
-    pub fn visibility(&self, range: Range<usize>, width: usize, penumbra: &mut PenumbraMean) -> Vec<[f32; 4]> {
-        let mut visibility = vec![[0.0f32; 4]; range.len()];
-        let rows: Vec<PenumbraMean> = visibility
-            .par_chunks_mut(width)
+    /// Writes the visibility of texels `range`, whole rows of `width`, into `out` as
+    /// `vec4<f32>` texels (rgb, and w the estimated error), and adds the estimate's sum over
+    /// their penumbra to `penumbra` — row by row on every core, the rows' sums added in order:
+    /// the same mean however the rows are cut into calls or bands.
+    pub fn write_visibility(&self, range: Range<usize>, width: usize, out: &mut [u8], penumbra: &mut PenumbraMean) {
+        debug_assert_eq!(out.len(), range.len() * 16);
+        let rows: Vec<PenumbraMean> = out
+            .par_chunks_mut(width * 16)
             .enumerate()
             .map(|(r, row)| {
                 let mut mean = PenumbraMean::default();
-                for (x, out) in row.iter_mut().enumerate() {
+                for (x, texel) in row.chunks_exact_mut(16).enumerate() {
+                    let mut write = |v: [f32; 4]| texel.copy_from_slice(bytemuck::bytes_of(&v));
                     let t = self.texels.get(range.start + r * width + x);
                     // Samples that all agree, in both halves (most pixels: those the probes
                     // settled), say 1 or 0 with no error and no penumbra, to the bit as the
                     // general case would.
                     let lit = t.shadowed == t.unshadowed && t.half_shadowed == t.half_unshadowed;
                     if lit || !t.lit_at_all() {
-                        *out = [1.0, 1.0, 1.0, 0.0];
+                        write([1.0, 1.0, 1.0, 0.0]);
                         continue;
                     }
                     if t.shadowed == [0.0; 3] {
-                        *out = [0.0, 0.0, 0.0, 0.0];
+                        write([0.0; 4]);
                         continue;
                     }
                     let ([red, green, blue], error) = (t.visibility(), t.error());
-                    *out = [red, green, blue, error];
+                    write([red, green, blue, error]);
                     mean.add(&t, error, self.samples_effective);
                 }
                 mean
@@ -230,7 +231,6 @@ impl FilterOutput {
         for row in rows {
             penumbra.merge(row);
         }
-        visibility
     }
 }
 

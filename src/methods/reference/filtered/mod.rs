@@ -128,6 +128,7 @@ impl ShadowMethod for Filtered {
         let shared = Shared {
             everywhere,
             runs: ctx.scene.casting_runs(&spec.light),
+            probes: probe_samples.concat(),
             // The probes with no map: each test lit, as it is in a tile they all see lit.
             lit_probes: probe_samples.clone().map(|half| half.into_iter().map(|s| CpuSample { crop_origin: None, ..s }).collect()),
             probe_samples,
@@ -233,6 +234,8 @@ struct Shared {
     runs: Runs,
     probe_samples: [Vec<CpuSample>; 2],
     other_samples: [Vec<CpuSample>; 2],
+    /// The probes of both halves, in order.
+    probes: Vec<CpuSample>,
     /// The probes without their maps (`CpuSample::crop_origin` none): their sums in the tiles
     /// they all see lit (`cpu::lit_tiles`), where every test is lit.
     lit_probes: [Vec<CpuSample>; 2],
@@ -287,24 +290,37 @@ fn render_band(
     (before, progress): (u64, &mut Progress<'_>),
     done: &mut Done,
 ) -> JobResult<()> {
-    let started = std::time::Instant::now();
     let width = ctx.width;
     let height = band.reach.len() as u32;
-    let surfaces = ctx.read_surfaces(band.reach.clone())?;
-    done.read_ms += started.elapsed().as_secs_f64() * 1e3;
+    // The CPU engine's maps, kept from round to round and let go before the filter.
+    let mut maps = cpu::Maps::new(shared.crop_size);
+    // The probes' maps as their cells' largest depths (for `cpu::lit_tiles`), drawn on the
+    // CPU's cores while this thread waits for the G-buffer to come back.
+    let mut maxima = None;
+    let scene = ctx.scene;
+    let surfaces = rayon::in_place_scope(|scope| {
+        if device.is_none() && !shared.everywhere {
+            scope.spawn(|_| {
+                let geometry = cpu::Geometry { positions: scene.positions(), indices: scene.indices(), runs: &shared.runs };
+                maxima = Some(cpu::cell_maxima(&shared.probes, geometry, &mut maps));
+            });
+        }
+        let started = std::time::Instant::now();
+        let surfaces = ctx.read_surfaces(band.reach.clone());
+        done.read_ms += started.elapsed().as_secs_f64() * 1e3;
+        surfaces
+    })?;
 
     let (probe_count, other_count) = (count(&shared.probe_samples), count(&shared.other_samples));
     let mut texels = Texels::new((width * height) as usize, shared.channels);
     let mut blockers = vec![[0.0f32; 2]; (width * height) as usize];
-    // The CPU engine's maps, kept from round to round and let go before the filter.
-    let maps = cpu::Maps::new(shared.crop_size);
     let mut round = Round { ctx, shared, device, band, surfaces: &surfaces, progress, done, maps };
 
     // The probes, everywhere but in the tiles they all see lit as a whole (on the CPU's cores;
     // every pixel where every pixel is refined): those pixels are lit, as their tests would say.
     let columns = width.div_ceil(filter::TILE);
     let tile = move |x: u32, y: u32| (y / filter::TILE * columns + x / filter::TILE) as usize;
-    let lit = (device.is_none() && !shared.everywhere).then(|| round.lit_tiles());
+    let lit = maxima.map(|maxima| round.lit_tiles(maxima));
     let settled = |x: u32, y: u32| lit.as_ref().is_some_and(|lit| lit[tile(x, y)]);
     round.test(0, before, |x, y| !settled(x, y), &mut texels, &mut blockers)?;
     // With one set there is nothing more to test; its varying pixels are still filtered.
@@ -350,8 +366,7 @@ fn render_band(
     let row = width as usize;
     let mut penumbra = PenumbraMean::default();
     write_visibility_rows(ctx, band.rows.clone(), width, |rows, out| {
-        let texels = filtered.visibility(rows.start as usize * row..rows.end as usize * row, row, &mut penumbra);
-        out.copy_from_slice(bytemuck::cast_slice(&texels));
+        filtered.write_visibility(rows.start as usize * row..rows.end as usize * row, row, out, &mut penumbra);
     });
     done.filter_ms += filtering.elapsed().as_secs_f64() * 1e3;
     done.pixels_filtered += filtered.pixels_filtered;
@@ -373,14 +388,11 @@ struct Round<'r, 'c, 'p> {
 
 impl Round<'_, '_, '_> {
     /// The tiles (`filter::TILE`², by rows of them) whose every covered pixel the probes all
-    /// see lit (`cpu::lit_tiles`), from the probes' maps drawn for it.
-    fn lit_tiles(&mut self) -> Vec<bool> {
+    /// see lit (`cpu::lit_tiles`), from their maps' `maxima` and what drawing them took.
+    fn lit_tiles(&mut self, (maxima, mut spent): (Vec<cpu::CellMaxima>, cpu::Spent)) -> Vec<bool> {
         let shared = self.shared;
-        let probes = shared.probe_samples.concat();
-        let geometry = cpu::Geometry { positions: self.ctx.scene.positions(), indices: self.ctx.scene.indices(), runs: &shared.runs };
-        let (maxima, mut spent) = cpu::cell_maxima(&probes, geometry, &mut self.maps);
         let testing = std::time::Instant::now();
-        let lit = cpu::lit_tiles(self.surfaces, filter::TILE, &probes, &maxima, &shared.constants, shared.channels);
+        let lit = cpu::lit_tiles(self.surfaces, filter::TILE, &shared.probes, &maxima, &shared.constants, shared.channels);
         spent.tests_ms += testing.elapsed().as_secs_f64() * 1e3;
         self.done.spent.add(spent);
         lit

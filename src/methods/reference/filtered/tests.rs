@@ -18,7 +18,9 @@ fn camera() -> Camera {
 /// Every texel's visibility (rgb and the error estimate) as written, and the estimate's mean.
 fn written(out: &FilterOutput) -> (Vec<[f32; 4]>, PenumbraMean) {
     let mut penumbra = PenumbraMean::default();
-    (out.visibility(0..out.texels.len(), SIZE as usize, &mut penumbra), penumbra)
+    let mut bytes = vec![0u8; out.texels.len() * 16];
+    out.write_visibility(0..out.texels.len(), SIZE as usize, &mut bytes, &mut penumbra);
+    (bytemuck::pod_collect_to_vec(&bytes), penumbra)
 }
 
 /// The floor y = `height(x)` under pixel (x, y), facing up.
