@@ -606,21 +606,23 @@ fn reference_converges_to_the_closed_form() {
 /// `filtered` without refinement or filter is the CPU engine of `reference` with its probes
 /// for samples: the same strata, maps and tests, pixel for pixel (to rounding); and the same as `reference`
 /// with `samples × refine²` samples where every pixel is refined (a light whose penumbra covers
-/// the view). A frame of more pixels than ten a triangle, so that the probes choose.
+/// the view). Frames of more pixels than ten a triangle, so that the probes choose; the probes
+/// alone on one of more than fifty, so that the tiles they all see lit are found without a test.
 #[test]
 fn filtered_is_the_reference_where_it_refines_and_its_probes_elsewhere() {
-    let render = |method: serde_json::Value| {
+    let render_at = |method: serde_json::Value, (width, height): (u32, u32)| {
         let value = json!({
             "scene": {"builtin": "crowd"},
             "light": {"image": {"builtin": "stripes"}},
             "method": method,
-            "output": {"width": 400, "height": 300, "format": "exr"}
+            "output": {"width": width, "height": height, "format": "exr"}
         });
         let (frame, _) = common::engine().render_frame(&job(value), &()).unwrap();
         (frame.visibility.unwrap(), frame.error_estimate, frame.counters)
     };
-    let (probes, _, counters) = render(json!({"name": "filtered", "samples": 16, "refine": 1, "filter": false}));
-    let (reference, estimate, _) = render(json!({"name": "reference", "samples": 16, "engine": "cpu"}));
+    let large = (960, 540);
+    let (probes, _, counters) = render_at(json!({"name": "filtered", "samples": 16, "refine": 1, "filter": false}), large);
+    let (reference, estimate, _) = render_at(json!({"name": "reference", "samples": 16, "engine": "cpu"}), large);
     let worst = |a: &[[f32; 3]], b: &[[f32; 3]]| {
         a.iter().zip(b).map(|(a, b)| (0..3).map(|c| (a[c] - b[c]).abs()).fold(0.0, f32::max)).fold(0.0, f32::max)
     };
@@ -629,6 +631,12 @@ fn filtered_is_the_reference_where_it_refines_and_its_probes_elsewhere() {
     assert!(probes_off < 1e-5, "one set of probes is the reference with those samples, to rounding: {probes_off}");
     assert!(estimate.is_some(), "the reference's CPU engine estimates its error too");
     assert_eq!(counters["pixels_refined"], 0.0, "nothing to refine with one set");
+    let tiles = f64::from(large.0.div_ceil(8) * large.1.div_ceil(8));
+    assert!(counters["tiles_found_lit"] > 0.3 * tiles, "the floor found lit: {counters:?}");
+
+    // Four probes can all miss a penumbra a few pixels wide at that size: the refinement is
+    // held to the reference at a smaller one.
+    let render = |method: serde_json::Value| render_at(method, (400, 300));
 
     let (refined, errors, counters) = render(json!({"name": "filtered", "samples": 4, "refine": 2, "filter": false}));
     let (full, _, _) = render(json!({"name": "reference", "samples": 16, "engine": "cpu"}));

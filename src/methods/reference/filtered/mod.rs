@@ -124,9 +124,12 @@ impl ShadowMethod for Filtered {
             Engine::Auto => ctx.gpu.software,
         };
         let device = (!on_cpu).then(|| gpu::DeviceTests::new(ctx, &plan, params, &order));
-        let everywhere = u64::from(ctx.width) * u64::from(ctx.height) <= REFINE_EVERYWHERE_PIXELS_PER_TRIANGLE * ctx.scene.triangles;
+        let pixels = u64::from(ctx.width) * u64::from(ctx.height);
+        let everywhere = pixels <= REFINE_EVERYWHERE_PIXELS_PER_TRIANGLE * ctx.scene.triangles;
+        let lit_tiles = !everywhere && pixels > LIT_TILES_PIXELS_PER_TRIANGLE * ctx.scene.triangles;
         let shared = Shared {
             everywhere,
+            lit_tiles,
             runs: ctx.scene.casting_runs(&spec.light),
             probes: probe_samples.concat(),
             // The probes with no map: each test lit, as it is in a tile they all see lit.
@@ -183,6 +186,7 @@ impl ShadowMethod for Filtered {
             ("cpu_threads".to_owned(), done.spent.round as f64),
             ("cpu_bands".to_owned(), bands.len() as f64),
             ("pixels_filtered".to_owned(), done.pixels_filtered as f64),
+            ("tiles_found_lit".to_owned(), done.tiles_found_lit as f64),
             ("penumbra_pixels_estimated".to_owned(), done.penumbra.pixels()),
         ]);
         PIXELS_REFINED.set(&mut counters, done.pixels_refined as f64);
@@ -199,6 +203,16 @@ impl ShadowMethod for Filtered {
 /// in docs/methods.md), and no small penumbra that all the probes happened to miss is left
 /// out. Counted on the frame, not a band, so that bands give the frame's pixels.
 const REFINE_EVERYWHERE_PIXELS_PER_TRIANGLE: u64 = 10;
+
+/// The fewest pixels a frame has, per triangle of its scene, for the CPU engine to look for the
+/// tiles every probe sees lit (`cpu::lit_tiles`): that draws the probes' maps once more, and a
+/// triangle drawn into a map costs about as much as 25 tests (docs/methods.md), so the 16 maps
+/// pay where the tests they spare — 16 a pixel, in the half or so of a frame found lit, and
+/// only their map reads where the filter still wants the pixels' sums — outnumber about 50 a
+/// triangle. Measured at 1080p: five in six tiles found lit on `crowd` (224 pixels a
+/// triangle) and 12 % off its request; even on 100k-triangle `terrain` (21), whose tiles found
+/// lit all lie within the filter's reach (docs/performance-log.md).
+const LIT_TILES_PIXELS_PER_TRIANGLE: u64 = 50;
 
 /// The rows a band reads beyond those it writes, either side: what a written pixel depends on —
 /// the column pass's reach (`MAX_RADIUS`, 24), the fallback σ of the tiles around the pixels it
@@ -230,6 +244,9 @@ struct Shared {
     /// Whether every covered pixel is tested against every sample
     /// (`REFINE_EVERYWHERE_PIXELS_PER_TRIANGLE`).
     everywhere: bool,
+    /// Whether the CPU engine looks for the tiles every probe sees lit
+    /// (`LIT_TILES_PIXELS_PER_TRIANGLE`).
+    lit_tiles: bool,
     /// The triangles the CPU engine's maps draw (`GpuScene::casting_runs`).
     runs: Runs,
     probe_samples: [Vec<CpuSample>; 2],
@@ -276,6 +293,8 @@ struct Done {
     segments: u32,
     pixels_refined: usize,
     pixels_filtered: usize,
+    /// Tiles every probe sees lit, found without a test (`cpu::lit_tiles`).
+    tiles_found_lit: usize,
     penumbra: PenumbraMean,
 }
 
@@ -299,7 +318,7 @@ fn render_band(
     let mut maxima = None;
     let scene = ctx.scene;
     let surfaces = rayon::in_place_scope(|scope| {
-        if device.is_none() && !shared.everywhere {
+        if device.is_none() && shared.lit_tiles {
             scope.spawn(|_| {
                 let geometry = cpu::Geometry { positions: scene.positions(), indices: scene.indices(), runs: &shared.runs };
                 maxima = Some(cpu::cell_maxima(&shared.probes, geometry, &mut maps));
@@ -393,6 +412,11 @@ impl Round<'_, '_, '_> {
         let shared = self.shared;
         let testing = std::time::Instant::now();
         let lit = cpu::lit_tiles(self.surfaces, filter::TILE, &shared.probes, &maxima, &shared.constants, shared.channels);
+        // The band's own tiles, not its halo's (a band's tiles are the frame's).
+        let columns = self.ctx.width.div_ceil(filter::TILE) as usize;
+        let written = self.band.written();
+        let own = (written.start / filter::TILE) as usize * columns..(written.end.div_ceil(filter::TILE) as usize * columns).min(lit.len());
+        self.done.tiles_found_lit += lit[own].iter().filter(|&&l| l).count();
         spent.tests_ms += testing.elapsed().as_secs_f64() * 1e3;
         self.done.spent.add(spent);
         lit
