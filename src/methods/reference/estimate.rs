@@ -46,6 +46,12 @@ impl Texel {
         (0..3).map(|c| halves_error(first(c), second(c)).unwrap_or(gray)).sum::<f32>() / 3.0
     }
 
+    /// Whether every sample, in both halves, that sees the light from here sees it unshadowed:
+    /// each sum of Σ L·G·V is its Σ L·G, so V is 1 with no error, to the bit.
+    pub fn lit_by_every_sample(&self) -> bool {
+        self.shadowed == self.unshadowed && self.half_shadowed == self.half_unshadowed
+    }
+
     /// Whether any sample saw the light from here (else V is undefined: 1).
     pub fn lit_at_all(&self) -> bool {
         self.unshadowed.iter().sum::<f32>() > 0.0

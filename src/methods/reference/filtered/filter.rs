@@ -108,8 +108,7 @@ impl Verdict {
     fn of(texel: &Texel) -> Self {
         // Samples that all agree, in both halves (a neighbour its probes settled), have no
         // error, as `Texel::error` would find (each half's ratio the same 1, or 0).
-        let lit = texel.shadowed == texel.unshadowed && texel.half_shadowed == texel.half_unshadowed;
-        if lit || (texel.shadowed == [0.0; 3] && texel.half_shadowed == [0.0; 3]) {
+        if texel.lit_by_every_sample() || (texel.shadowed == [0.0; 3] && texel.half_shadowed == [0.0; 3]) {
             return Self { gray: texel.gray(), error: 0.0 };
         }
         Self { gray: texel.gray(), error: texel.error() }
@@ -212,8 +211,7 @@ impl FilterOutput {
                     // Samples that all agree, in both halves (most pixels: those the probes
                     // settled), say 1 or 0 with no error and no penumbra, to the bit as the
                     // general case would.
-                    let lit = t.shadowed == t.unshadowed && t.half_shadowed == t.half_unshadowed;
-                    if lit || !t.lit_at_all() {
+                    if t.lit_by_every_sample() || !t.lit_at_all() {
                         write([1.0, 1.0, 1.0, 0.0]);
                         continue;
                     }

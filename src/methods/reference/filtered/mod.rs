@@ -423,8 +423,9 @@ impl Round<'_, '_, '_> {
     }
 
     /// Tests the band's covered pixels (x, y) that `keep` keeps against round `round`'s
-    /// samples (0: the probes, 1: the rest; on the CPU, 2: the probes without maps), both halves, the first of them the frame's
-    /// `first`-th sample, and adds their sums and blockers to `texels` and `blockers`.
+    /// samples (0: the probes, 1: the rest; on the CPU, 2: the probes without maps), both
+    /// halves, the first of them the frame's `first`-th sample, and adds their sums and
+    /// blockers to `texels` and `blockers`.
     fn test(
         &mut self,
         round: usize,
