@@ -37,13 +37,34 @@ impl Texel {
     /// The estimated error |V − Vref|, the channels' mean (module docs): per channel where both
     /// halves see its light, else from the gray sums.
     pub fn error(&self) -> f32 {
-        let first = |c: usize| (self.shadowed[c] - self.half_shadowed[c], self.unshadowed[c] - self.half_unshadowed[c]);
-        let second = |c: usize| (self.half_shadowed[c], self.half_unshadowed[c]);
+        // Three channels of the same bits (a gray light's texel, `Texels` of one channel): each
+        // channel's error is the first's, and the gray sums (three times each) have light in
+        // both halves exactly where the first channel has. One error, not four: the same bits.
+        let same = |sums: [f32; 3]| sums[0].to_bits() == sums[1].to_bits() && sums[1].to_bits() == sums[2].to_bits();
+        if [self.shadowed, self.unshadowed, self.half_shadowed, self.half_unshadowed].into_iter().all(same) {
+            let Some(error) = halves_error(self.first_half(0), self.second_half(0)) else { return 0.0 };
+            return [error; 3].iter().sum::<f32>() / 3.0;
+        }
+        self.error_by_channel()
+    }
+
+    /// `error` channel by channel, whatever the light.
+    pub(super) fn error_by_channel(&self) -> f32 {
         let gray = |sums: [(f32, f32); 3]| sums.iter().fold((0.0, 0.0), |(s, u), x| (s + x.0, u + x.1));
-        let Some(gray) = halves_error(gray([0, 1, 2].map(first)), gray([0, 1, 2].map(second))) else {
+        let Some(gray) = halves_error(gray([0, 1, 2].map(|c| self.first_half(c))), gray([0, 1, 2].map(|c| self.second_half(c)))) else {
             return 0.0; // One half has no light here: nothing to compare.
         };
-        (0..3).map(|c| halves_error(first(c), second(c)).unwrap_or(gray)).sum::<f32>() / 3.0
+        (0..3).map(|c| halves_error(self.first_half(c), self.second_half(c)).unwrap_or(gray)).sum::<f32>() / 3.0
+    }
+
+    /// Channel `c`'s sums (Σ L·G·V, Σ L·G) of the first half of the samples.
+    fn first_half(&self, c: usize) -> (f32, f32) {
+        (self.shadowed[c] - self.half_shadowed[c], self.unshadowed[c] - self.half_unshadowed[c])
+    }
+
+    /// Channel `c`'s sums of the second half.
+    fn second_half(&self, c: usize) -> (f32, f32) {
+        (self.half_shadowed[c], self.half_unshadowed[c])
     }
 
     /// Whether every sample, in both halves, that sees the light from here sees it unshadowed:

@@ -143,3 +143,38 @@ fn half_the_halves_difference_estimates_the_error() {
         assert!((0.7..1.3).contains(&ratio), "{n} samples: estimated ÷ measured = {ratio}");
     }
 }
+
+/// `Texel::error`'s shortcut for a gray light's texels gives what the channel-by-channel
+/// estimate gives, to the bit: sums of pixels in penumbra, lit, in umbra and with a half
+/// that sees no light, and zeros of both signs.
+#[test]
+fn a_gray_texels_error_is_its_channels_to_the_bit() {
+    use super::estimate::Texel;
+    let mut state = 0x9e37_79b9_7f4a_7c15u64;
+    let mut next = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 40) as f32 / (1u64 << 24) as f32
+    };
+    let mut checked = 0;
+    for k in 0..20_000 {
+        let (whole_light, half_light) = (next() * 40.0, next() * 20.0);
+        let pick = |value: f32, case: u32| match case {
+            0 => 0.0,
+            1 => -0.0,
+            _ => value,
+        };
+        let (u, hu) = (pick(whole_light + half_light, k % 7), pick(half_light, k % 5));
+        let (s, hs) = match k % 4 {
+            0 => (u, hu),    // lit by every sample
+            1 => (0.0, 0.0), // umbra
+            _ => (u * next(), hu * next()),
+        };
+        let texel = Texel { shadowed: [s; 3], unshadowed: [u; 3], half_shadowed: [hs; 3], half_unshadowed: [hu; 3] };
+        assert_eq!(texel.error().to_bits(), texel.error_by_channel().to_bits(), "{texel:?}");
+        checked += usize::from(texel.error() > 0.0);
+    }
+    // Most of them are in penumbra: the shortcut's arithmetic was exercised.
+    assert!(checked > 3_000, "{checked} with an error");
+}

@@ -313,7 +313,7 @@ pub(super) fn filter(
     }
     // A pixel's footprint in the world at its distance (the slant of its surface aside).
     let per_distance = 2.0 * (0.5 * inputs.camera.fov_y_deg.to_radians()).tan() / inputs.frame_height as f32;
-    let footprint = |i: usize| (surfaces.positions[i] - inputs.camera.eye).length() * per_distance;
+    let footprint = |i: usize| footprint(surfaces, inputs.camera.eye, per_distance, i);
     // σ from the pixel's own blockers, where it met any; else the mean of the tiles around.
     let own_sigma: Vec<f32> = listed
         .par_iter()
@@ -362,10 +362,57 @@ pub(super) fn filter(
     for (k, &i) in listed.iter().enumerate() {
         slot[i] = k as u32;
     }
-    // One pass over the listed pixels along `step`; a neighbour's sums are `read(j)`.
-    let channels = texels.channels();
-    // A pass reads texels by `read` and their verdicts by `verdict`.
-    let pass = |read: &(dyn Fn(usize) -> Texel + Sync), verdict: &(dyn Fn(usize) -> Verdict + Sync), step: (isize, isize)| -> Texels {
+    let pass = Pass {
+        listed: &listed,
+        kernels: &kernels,
+        surfaces,
+        width,
+        height,
+        channels: texels.channels(),
+        eye: inputs.camera.eye,
+        per_distance,
+    };
+    // The verdicts of what each pass reads, listed pixels' taken once; an unlisted neighbour's
+    // (its probes' 0 or 1) as it is read.
+    let verdict_of =
+        |listed: &[Verdict], j: usize| if slot[j] == u32::MAX { Verdict::of(&texels.get(j)) } else { listed[slot[j] as usize] };
+    let first: Vec<Verdict> = listed.par_iter().map(|&i| Verdict::of(&texels.get(i))).collect();
+    let rows = pass.run(|j| texels.get(j), |j| verdict_of(&first, j), (1, 0));
+    drop(first);
+    let second: Vec<Verdict> = (0..listed.len()).into_par_iter().map(|k| Verdict::of(&rows.get(k))).collect();
+    let both =
+        pass.run(|j| if slot[j] == u32::MAX { texels.get(j) } else { rows.get(slot[j] as usize) }, |j| verdict_of(&second, j), (0, 1));
+    for (k, &i) in listed.iter().enumerate() {
+        texels.set(i, both.get(k));
+    }
+    output(texels, written, pixels_filtered, inputs.samples_effective)
+}
+
+/// Pixel `i`'s footprint in the world at its distance from the `eye` (`per_distance` a unit
+/// of distance; the slant of its surface aside).
+#[inline]
+fn footprint(surfaces: &Surfaces, eye: Vec3, per_distance: f32, i: usize) -> f32 {
+    (surfaces.positions[i] - eye).length() * per_distance
+}
+
+/// One pass of the filter over the listed pixels, by their kernels.
+struct Pass<'a> {
+    listed: &'a [usize],
+    /// Each listed pixel's σ (world) and reach (pixels; 0: not filtered).
+    kernels: &'a [(f32, u32)],
+    surfaces: &'a Surfaces,
+    width: usize,
+    height: usize,
+    channels: usize,
+    eye: Vec3,
+    per_distance: f32,
+}
+
+impl Pass<'_> {
+    /// The listed pixels' texels averaged along `step` (a row: (1, 0); a column: (0, 1)); a
+    /// neighbour's sums are `read(j)` and its verdict `verdict(j)`.
+    fn run(&self, read: impl Fn(usize) -> Texel + Sync, verdict: impl Fn(usize) -> Verdict + Sync, step: (isize, isize)) -> Texels {
+        let Self { listed, kernels, surfaces, width, height, channels, eye, per_distance } = *self;
         Texels::par_from_fn(listed.len(), channels, |k| {
             let (i, (sigma, radius)) = (listed[k], kernels[k]);
             let own = read(i);
@@ -376,7 +423,7 @@ pub(super) fn filter(
             let (x, y) = ((i % width) as isize, (i / width) as isize);
             let (p, n) = (surfaces.positions[i], surfaces.normals[i]);
             let inv_two_sigma2 = 0.5 / (sigma * sigma);
-            let tolerance = 0.5 * sigma + footprint(i);
+            let tolerance = 0.5 * sigma + footprint(surfaces, eye, per_distance, i);
             let inv_two_tolerance2 = 0.5 / (tolerance * tolerance);
             let mut sum = Texel::UNCOVERED;
             let mut weights = 0.0f32;
@@ -424,20 +471,7 @@ pub(super) fn filter(
                 half_unshadowed: mean(sum.half_unshadowed),
             }
         })
-    };
-    // The verdicts of what each pass reads, listed pixels' taken once; an unlisted neighbour's
-    // (its probes' 0 or 1) as it is read.
-    let verdict_of =
-        |listed: &[Verdict], j: usize| if slot[j] == u32::MAX { Verdict::of(&texels.get(j)) } else { listed[slot[j] as usize] };
-    let first: Vec<Verdict> = listed.par_iter().map(|&i| Verdict::of(&texels.get(i))).collect();
-    let rows = pass(&|j| texels.get(j), &|j| verdict_of(&first, j), (1, 0));
-    drop(first);
-    let second: Vec<Verdict> = (0..listed.len()).into_par_iter().map(|k| Verdict::of(&rows.get(k))).collect();
-    let both = pass(&|j| if slot[j] == u32::MAX { texels.get(j) } else { rows.get(slot[j] as usize) }, &|j| verdict_of(&second, j), (0, 1));
-    for (k, &i) in listed.iter().enumerate() {
-        texels.set(i, both.get(k));
     }
-    output(texels, written, pixels_filtered, inputs.samples_effective)
 }
 
 /// The `written` texels (the rest let go).
@@ -446,15 +480,16 @@ fn output(mut texels: Texels, written: Range<usize>, pixels_filtered: usize, sam
     FilterOutput { texels, pixels_filtered, samples_effective }
 }
 
-/// The frame in tiles of `TILE`², for the refinement's classes and the fallback σ.
-struct Tiles {
+/// The frame in tiles of `TILE`², rows of them: the refinement's classes, the fallback σ and
+/// the tiles found lit (`cpu::lit_tiles`).
+pub(super) struct Tiles {
     width: u32,
     columns: u32,
     rows: u32,
 }
 
 impl Tiles {
-    fn new(width: u32, height: u32) -> Self {
+    pub(super) fn new(width: u32, height: u32) -> Self {
         Self { width, columns: width.div_ceil(TILE), rows: height.div_ceil(TILE) }
     }
 
@@ -463,7 +498,7 @@ impl Tiles {
     }
 
     /// The tile of pixel `i`.
-    fn of(&self, i: usize) -> usize {
+    pub(super) fn of(&self, i: usize) -> usize {
         let (x, y) = (i as u32 % self.width, i as u32 / self.width);
         ((y / TILE) * self.columns + x / TILE) as usize
     }

@@ -9,6 +9,7 @@ use glam::UVec2;
 use super::super::gpu::{batch_layers, maps_entry, BatchUniforms, DepthMaps, SEGMENT};
 use super::super::samples::SamplePlan;
 use super::super::{MethodContext, Params, Progress};
+use super::Tested;
 use crate::error::JobResult;
 use crate::gpu::layout;
 use crate::timing::PhaseName;
@@ -72,19 +73,24 @@ impl DeviceTests {
     }
 
     /// Tests the covered pixels of the row segments `segments` (each the frame's index of its
-    /// first pixel) against round `round`'s samples, the first of them the `before`-th of the
+    /// first pixel) against the `tested` samples, the first of them the `before`-th of the
     /// frame's for `progress`, and hands `read` each listed lane's record (`record_floats`
     /// each, lane `SEGMENT · s + l` the `l`-th pixel of segment `s`; an uncovered pixel's is
     /// 0). Stops between batches once the job is cancelled.
     pub(super) fn test(
         &self,
         ctx: &mut MethodContext<'_>,
-        round: usize,
+        tested: Tested,
         segments: &[u32],
         (before, progress): (u64, &mut Progress<'_>),
         read: impl FnOnce(&[f32]),
     ) -> JobResult<()> {
-        let batches = &self.rounds[round];
+        let batches = match tested {
+            Tested::Probes => &self.rounds[0],
+            Tested::Others => &self.rounds[1],
+            // `render_band` asks for it only where the CPU engine found tiles lit.
+            Tested::ProbesUnmapped => unreachable!("the device tests no unmapped probes"),
+        };
         if segments.is_empty() || batches.is_empty() {
             return Ok(());
         }

@@ -269,6 +269,18 @@ impl Shared {
     }
 }
 
+/// The samples a round of tests takes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Tested {
+    /// The first `samples` of the frame's sequence, over every pixel not found lit without them.
+    Probes,
+    /// The rest, over the pixels where the probes vary.
+    Others,
+    /// The probes with no map, every test lit: the sums of the tiles found lit that the filter
+    /// reads. The CPU engine's alone, since only it looks for such tiles.
+    ProbesUnmapped,
+}
+
 /// The samples of a round's two halves.
 fn count(halves: &[Vec<CpuSample>; 2]) -> u64 {
     (halves[0].len() + halves[1].len()) as u64
@@ -337,11 +349,11 @@ fn render_band(
 
     // The probes, everywhere but in the tiles they all see lit as a whole (on the CPU's cores;
     // every pixel where every pixel is refined): those pixels are lit, as their tests would say.
-    let columns = width.div_ceil(filter::TILE);
-    let tile = move |x: u32, y: u32| (y / filter::TILE * columns + x / filter::TILE) as usize;
+    let tiles = filter::Tiles::new(width, height);
+    let tile = |x: u32, y: u32| tiles.of((y * width + x) as usize);
     let lit = maxima.map(|maxima| round.lit_tiles(maxima));
     let settled = |x: u32, y: u32| lit.as_ref().is_some_and(|lit| lit[tile(x, y)]);
-    round.test(0, before, |x, y| !settled(x, y), &mut texels, &mut blockers)?;
+    round.test(Tested::Probes, before, |x, y| !settled(x, y), &mut texels, &mut blockers)?;
     // With one set there is nothing more to test; its varying pixels are still filtered.
     let refined = if shared.everywhere { filter::covered(&surfaces) } else { filter::refined(&surfaces, &texels, lit.as_deref()) };
     // The lit tiles the filter reads get their probes' sums after all (it weighs a pixel's
@@ -351,7 +363,7 @@ fn render_band(
         let read = filter::read_tiles(&refined, width, height);
         let late: Vec<bool> = lit.iter().zip(&read).map(|(&lit, &read)| lit && read).collect();
         if late.contains(&true) {
-            round.test(2, before, |x, y| late[tile(x, y)], &mut texels, &mut blockers)?;
+            round.test(Tested::ProbesUnmapped, before, |x, y| late[tile(x, y)], &mut texels, &mut blockers)?;
         }
     }
     let written = band.written();
@@ -361,7 +373,7 @@ fn render_band(
     }
     // The other strata, where a penumbra is.
     if !round.ctx.supervisor.cancelled() && other_count > 0 && refined.contains(&true) {
-        round.test(1, before + probe_count, |x, y| refined[(y * width + x) as usize], &mut texels, &mut blockers)?;
+        round.test(Tested::Others, before + probe_count, |x, y| refined[(y * width + x) as usize], &mut texels, &mut blockers)?;
     }
     let Round { ctx, done, maps, .. } = round;
     drop(maps);
@@ -422,13 +434,12 @@ impl Round<'_, '_, '_> {
         lit
     }
 
-    /// Tests the band's covered pixels (x, y) that `keep` keeps against round `round`'s
-    /// samples (0: the probes, 1: the rest; on the CPU, 2: the probes without maps), both
-    /// halves, the first of them the frame's `first`-th sample, and adds their sums and
+    /// Tests the band's covered pixels (x, y) that `keep` keeps against the `tested` samples,
+    /// both halves, the first of them the frame's `first`-th sample, and adds their sums and
     /// blockers to `texels` and `blockers`.
     fn test(
         &mut self,
-        round: usize,
+        tested: Tested,
         first: u64,
         keep: impl Fn(u32, u32) -> bool + Sync,
         texels: &mut Texels,
@@ -439,7 +450,11 @@ impl Round<'_, '_, '_> {
         let started = std::time::Instant::now();
         let Some(device) = self.device else {
             let (pixels, segments) = cpu::covered_pixels(surfaces, SEGMENT, keep);
-            let halves = [&shared.probe_samples, &shared.other_samples, &shared.lit_probes][round];
+            let halves = match tested {
+                Tested::Probes => &shared.probe_samples,
+                Tested::Others => &shared.other_samples,
+                Tested::ProbesUnmapped => &shared.lit_probes,
+            };
             let geometry = cpu::Geometry { positions: self.ctx.scene.positions(), indices: self.ctx.scene.indices(), runs: &shared.runs };
             let (channels, crop_size) = (shared.channels, shared.crop_size);
             // A half's maps held at once where they take fewer bytes than the frame-sized
@@ -502,7 +517,7 @@ impl Round<'_, '_, '_> {
         self.done.read_ms += started.elapsed().as_secs_f64() * 1e3;
         let (floats, channels) = (device.record_floats(), shared.channels);
         let mut gather_ms = 0.0;
-        device.test(self.ctx, round, &segments, (first, self.progress), |records| {
+        device.test(self.ctx, tested, &segments, (first, self.progress), |records| {
             let gathering = std::time::Instant::now();
             // Each half's sums as `Texel::add` takes them (the gray one standing for all three).
             let sums = |at: &[f32]| {
