@@ -499,6 +499,12 @@ impl Tiles {
         (self.columns * self.rows) as usize
     }
 
+    /// The tiles of pixel rows `rows` (whole rows of tiles: `rows` begins on a tile's edge).
+    pub(super) fn of_rows(&self, rows: Range<u32>) -> Range<usize> {
+        let columns = self.columns as usize;
+        (rows.start / TILE) as usize * columns..(rows.end.div_ceil(TILE) as usize * columns).min(self.count())
+    }
+
     /// The tile of pixel `i`.
     pub(super) fn of(&self, i: usize) -> usize {
         let (x, y) = (i as u32 % self.width, i as u32 / self.width);

@@ -425,9 +425,7 @@ impl Round<'_, '_, '_> {
         let testing = std::time::Instant::now();
         let lit = cpu::lit_tiles(self.surfaces, filter::TILE, &shared.probes, &maxima, &shared.constants, shared.channels);
         // The band's own tiles, not its halo's (a band's tiles are the frame's).
-        let columns = self.ctx.width.div_ceil(filter::TILE) as usize;
-        let written = self.band.written();
-        let own = (written.start / filter::TILE) as usize * columns..(written.end.div_ceil(filter::TILE) as usize * columns).min(lit.len());
+        let own = filter::Tiles::new(self.surfaces.width, self.surfaces.height).of_rows(self.band.written());
         self.done.tiles_found_lit += lit[own].iter().filter(|&&l| l).count();
         spent.tests_ms += testing.elapsed().as_secs_f64() * 1e3;
         self.done.spent.add(spent);
